@@ -1,0 +1,388 @@
+"""The misaligned hyperbolic catadioptric camera: a thin, validated, immutable value object.
+
+Model contract (the binding text is ``shared/reference/conventions.md``):
+
+* **Parameters**: pinhole ``K`` (3x3, skew allowed) and optional OpenCV distortion ``D``; a
+  :class:`~omnicam.mirror.HyperbolicMirror` ``(a, b, rim_radius)``; the mirror posture
+  ``rvec, tvec`` with ``X_cam = R(rvec) X_mirror + tvec`` (5 DOF: the rotation about the mirror
+  axis is fixed by the gauge below); ``image_size = (width, height)`` as metadata.
+* **Gauge**: ``rvec`` is always the smallest rotation taking the camera's +z axis to the mirror
+  axis, so an aligned rig (``rvec = 0``, ``tvec = (0, 0, c)``) keeps ``rvec = 0``.
+* **Methods**: ``unproject`` (pixel -> reflected ray, eqs. 6-19), ``project`` (scene point ->
+  pixel, the exact non-central inverse), ``project_directions`` (points at infinity).
+* **Pixels**: centres at integer coordinates; no clipping to ``image_size``.
+* **Failure**: a pixel that does not see the mirror, a point the rig cannot see and NaN input all
+  give NaN rows, never an exception.
+* **Shapes**: ``(N, 2)``/``(N, 1, 2)`` pixels and ``(N, 3)``/``(N, 1, 3)`` points, float32 or
+  float64; results are float64 in the matching layout.
+"""
+from __future__ import annotations
+
+import math
+
+import cv2
+import numpy as np
+
+from . import raytrace
+from .mirror import HyperbolicMirror
+
+__all__ = ["MisalignedHyperbolicCamera"]
+
+MODEL_NAME = "misaligned_hyperbolic"
+_D_LENGTHS = (4, 5, 8, 12, 14)
+
+
+# -- validation of parameters (used by the constructor and by io) -----------------------------
+def _finite_array(value, name, shape, expected):
+    try:
+        arr = np.array(value, dtype=np.float64)
+    except (TypeError, ValueError):
+        raise ValueError(f"{name} must be {expected}, got {value!r}") from None
+    if arr.size != int(np.prod(shape)):
+        raise ValueError(f"{name} must be {expected}, got shape {arr.shape}")
+    arr = arr.reshape(shape)
+    if not np.isfinite(arr).all():
+        raise ValueError(f"{name} must be finite, got {arr.ravel().tolist()}")
+    return arr
+
+
+def validate_K(K):
+    """Return ``K`` as a (3, 3) float64 array or raise ``ValueError``."""
+    arr = np.asarray(K, dtype=np.float64) if not isinstance(K, np.ndarray) else K.astype(np.float64)
+    if arr.shape != (3, 3):
+        raise ValueError(f"K must be a 3x3 camera matrix, got shape {arr.shape}")
+    if not np.isfinite(arr).all():
+        raise ValueError("K must be finite")
+    if not np.allclose(arr[2], (0.0, 0.0, 1.0)):
+        raise ValueError(f"K must have last row (0, 0, 1), got {arr[2].tolist()}")
+    if abs(np.linalg.det(arr)) < 1e-12 or arr[0, 0] == 0 or arr[1, 1] == 0:
+        raise ValueError("K must be non-singular (fx, fy non-zero)")
+    return arr
+
+
+def validate_D(D):
+    """Return ``D`` as a flat float64 array of an OpenCV length, or ``None``."""
+    if D is None:
+        return None
+    try:
+        arr = np.array(D, dtype=np.float64).ravel()
+    except (TypeError, ValueError):
+        raise ValueError(f"D must be None or 4, 5, 8, 12 or 14 numbers, got {D!r}") from None
+    if arr.size not in _D_LENGTHS:
+        raise ValueError(f"D must have 4, 5, 8, 12 or 14 coefficients (as cv2.projectPoints), "
+                         f"got {arr.size}")
+    if not np.isfinite(arr).all():
+        raise ValueError("D must be finite")
+    return arr
+
+
+def validate_image_size(image_size):
+    """Return ``(width, height)`` as a tuple of positive ints, or ``None``."""
+    if image_size is None:
+        return None
+    try:
+        w, h = (int(v) for v in image_size)
+        exact = all(float(v) == int(v) for v in image_size)
+    except (TypeError, ValueError):
+        raise ValueError(f"image_size must be (width, height), got {image_size!r}") from None
+    if not exact or w <= 0 or h <= 0:
+        raise ValueError(f"image_size must be two positive integers (width, height), "
+                         f"got {image_size!r}")
+    return (w, h)
+
+
+def canonical_rvec(rvec):
+    """The gauge of conventions.md: the smallest rotation taking +z to the mirror axis ``R e_z``.
+
+    Rotations about the mirror axis are unobservable (5 DOF); this picks the representative.
+    """
+    R, _ = cv2.Rodrigues(np.asarray(rvec, np.float64).reshape(3, 1))
+    m = R[:, 2]
+    axis = np.array([-m[1], m[0], 0.0])  # e_z x m
+    s = float(np.linalg.norm(axis))
+    angle = math.atan2(s, m[2])
+    if s < 1e-300:
+        return np.zeros(3) if m[2] > 0 else np.array([math.pi, 0.0, 0.0])
+    return axis / s * angle
+
+
+def _readonly(arr):
+    arr = np.array(arr, dtype=np.float64)
+    arr.flags.writeable = False
+    return arr
+
+
+class MisalignedHyperbolicCamera:
+    """A perspective camera looking at a hyperboloidal mirror in any 5-DOF posture.
+
+    Functional model (paper section 2.2): a pixel ``x`` gives the camera ray
+    ``V_C = K^-1 x~`` (eq. 6, after undoing ``D``), in the mirror frame ``V_M = R^T V_C`` from
+    ``F_M = -R^T tvec`` (eqs. 16-17); it meets the mirror at ``P_M`` (eqs. 8-12) and leaves as
+    ``V_Mout = V_M - 2 n (n, V_M)`` (eqs. 14-15). The rig has no single viewpoint.
+
+    Parameters
+    ----------
+    K : (3, 3) array_like
+        Camera matrix, skew allowed, last row ``(0, 0, 1)``.
+    mirror : HyperbolicMirror
+    rvec, tvec : (3,) array_like
+        Mirror posture in the camera frame, as ``cv2.solvePnP`` returns it with the mirror as
+        the object. ``rvec`` is stored in the gauge of conventions.md (see :func:`canonical_rvec`).
+    D : array_like or None
+        OpenCV distortion coefficients (4, 5, 8, 12 or 14 values).
+    image_size : (int, int) or None
+        ``(width, height)`` of the images, metadata only (needed by :meth:`scaled`).
+    """
+
+    __slots__ = ("_K", "_D", "_mirror", "_rvec", "_tvec", "_R", "_C", "_image_size", "_viewpoint")
+
+    def __init__(self, K, mirror, rvec, tvec, D=None, image_size=None):
+        if not isinstance(mirror, HyperbolicMirror):
+            raise ValueError(f"mirror must be a HyperbolicMirror, got {type(mirror).__name__}")
+        self._K = _readonly(validate_K(K))
+        D = validate_D(D)
+        self._D = None if D is None else _readonly(D)
+        self._mirror = mirror
+        rvec = _finite_array(rvec, "rvec", (3,), "a rotation vector of 3 numbers")
+        tvec = _finite_array(tvec, "tvec", (3,), "a translation vector of 3 numbers")
+        self._rvec = _readonly(canonical_rvec(rvec))
+        self._tvec = _readonly(tvec)
+        self._R = _readonly(cv2.Rodrigues(self._rvec.reshape(3, 1))[0])
+        self._C = _readonly(-self._R.T @ self._tvec)  # F_M of eq. 17
+        self._image_size = validate_image_size(image_size)
+        self._viewpoint = None
+
+    # -- constructors -------------------------------------------------------------------
+    @classmethod
+    def aligned(cls, mirror, f_C, x_c, y_c, image_size=None):
+        """The paper's aligned HyperOmni rig (eqs. 2-5), the "uncalibrated" baseline.
+
+        Camera at the lower focus with axes parallel to the mirror's: ``rvec = 0``,
+        ``tvec = (0, 0, c)``, ``K = [[f_C, 0, x_c], [0, f_C, y_c], [0, 0, 1]]``.
+        """
+        K = np.array([[f_C, 0.0, x_c], [0.0, f_C, y_c], [0.0, 0.0, 1.0]], dtype=np.float64)
+        return cls(K, mirror, np.zeros(3), np.array([0.0, 0.0, mirror.c]), image_size=image_size)
+
+    def scaled(self, image_size):
+        """The same rig imaged at another resolution of the same sensor.
+
+        ``K`` is scaled by ``sx = w'/w``, ``sy = h'/h`` about pixel centres at integer
+        coordinates: ``x' = sx (x + 0.5) - 0.5``. Needs ``image_size`` on this camera.
+        """
+        if self._image_size is None:
+            raise ValueError("scaled() needs the camera's image_size; construct it with image_size")
+        new = validate_image_size(image_size)
+        if new is None:
+            raise ValueError("image_size must be (width, height)")
+        sx = new[0] / self._image_size[0]
+        sy = new[1] / self._image_size[1]
+        S = np.array([[sx, 0.0, 0.5 * (sx - 1.0)], [0.0, sy, 0.5 * (sy - 1.0)], [0.0, 0.0, 1.0]])
+        return type(self)(S @ self._K, self._mirror, self._rvec, self._tvec, self._D, new)
+
+    def replace(self, **changes):
+        """A copy with some of ``K, mirror, rvec, tvec, D, image_size`` changed."""
+        args = dict(K=self._K, mirror=self._mirror, rvec=self._rvec, tvec=self._tvec,
+                    D=self._D, image_size=self._image_size)
+        unknown = set(changes) - set(args)
+        if unknown:
+            raise ValueError(f"unknown parameter(s) {sorted(unknown)}")
+        args.update(changes)
+        return type(self)(**args)
+
+    # -- properties ---------------------------------------------------------------------
+    K = property(lambda self: self._K, doc="(3, 3) camera matrix.")
+    D = property(lambda self: self._D, doc="Distortion coefficients, or None.")
+    mirror = property(lambda self: self._mirror, doc="The HyperbolicMirror.")
+    rvec = property(lambda self: self._rvec, doc="(3,) mirror rotation (mirror -> camera), gauge-fixed.")
+    tvec = property(lambda self: self._tvec, doc="(3,) mirror origin in the camera frame.")
+    R = property(lambda self: self._R, doc="(3, 3) ``cv2.Rodrigues(rvec)``: R of eq. 29.")
+    image_size = property(lambda self: self._image_size, doc="(width, height) or None.")
+
+    @property
+    def camera_center(self):
+        """(3,) camera centre in the mirror frame, ``-R^T tvec`` (``F_M`` of eq. 17)."""
+        return self._C
+
+    def __repr__(self):
+        return (f"MisalignedHyperbolicCamera(K={self._K.tolist()}, mirror={self._mirror!r}, "
+                f"rvec={self._rvec.tolist()}, tvec={self._tvec.tolist()}, "
+                f"D={None if self._D is None else self._D.tolist()}, image_size={self._image_size})")
+
+    def __eq__(self, other):
+        if not isinstance(other, MisalignedHyperbolicCamera):
+            return NotImplemented
+        same_D = (self._D is None and other._D is None) or (
+            self._D is not None and other._D is not None and np.array_equal(self._D, other._D))
+        return (same_D and self._mirror == other._mirror and self._image_size == other._image_size
+                and all(np.array_equal(getattr(self, n), getattr(other, n))
+                        for n in ("_K", "_rvec", "_tvec")))
+
+    __hash__ = None
+
+    # -- the model ----------------------------------------------------------------------
+    def unproject(self, image_points):
+        """Reflected rays of pixels by ray tracing (eqs. 6-19).
+
+        Parameters
+        ----------
+        image_points : (N, 2) or (N, 1, 2) array_like, float32 or float64
+            Pixel coordinates (centres at integers), distorted as the camera sees them.
+
+        Returns
+        -------
+        origins : (N, 3) or (N, 1, 3) float64 ndarray
+            Reflection points on the mirror, mirror frame.
+        directions : same shape
+            Unit reflected directions pointing into the scene, mirror frame.
+            Rows are NaN for pixels whose ray misses the mirror (outside the rim) and NaN input.
+        """
+        pts, restore = raytrace.as_points(image_points, "image_points", 2)
+        origins, directions = raytrace.trace(pts, self._K, self._D, self._R, self._C, self._mirror)
+        return restore(origins), restore(directions)
+
+    def project(self, object_points, rvec=None, tvec=None):
+        """Exact non-central projection of 3-D points to pixels.
+
+        For each point the pixel whose traced ray (:meth:`unproject`) passes through it, to
+        better than 1e-6 px: the reflection point is found by Newton's method on Fermat's path
+        length, started from the aligned model (eqs. 2-5).
+
+        Parameters
+        ----------
+        object_points : (N, 3) or (N, 1, 3) array_like
+            Points, in the mirror frame unless ``rvec, tvec`` are given.
+        rvec, tvec : (3,) array_like, optional
+            Move the points into the mirror frame first, ``X_M = R(rvec) X + tvec``, as in
+            ``cv2.projectPoints``.
+
+        Returns
+        -------
+        image_points : (N, 2) or (N, 1, 2) float64 ndarray
+            NaN for points the rig cannot see: behind or inside the mirror, outside the field
+            of view the rim allows, and NaN input.
+        """
+        pts, restore = raytrace.as_points(object_points, "object_points", 3)
+        if (rvec is None) != (tvec is None):
+            raise ValueError("give both rvec and tvec, or neither")
+        if rvec is not None:
+            Rm = cv2.Rodrigues(_finite_array(rvec, "rvec", (3,), "3 numbers").reshape(3, 1))[0]
+            pts = np.ascontiguousarray(pts @ Rm.T + _finite_array(tvec, "tvec", (3,), "3 numbers"))
+        return restore(raytrace.project(pts, False, self._K, self._D, self._R, self._tvec,
+                                        self._C, self._mirror))
+
+    def project_directions(self, directions):
+        """Project points at infinity: the pixel whose reflected ray has the given direction.
+
+        Parameters
+        ----------
+        directions : (N, 3) or (N, 1, 3) array_like
+            Directions in the mirror frame (need not be unit).
+
+        Returns
+        -------
+        image_points : (N, 2) or (N, 1, 2) float64 ndarray
+            NaN for directions the mirror does not show (above its horizon, zero vectors, NaN).
+        """
+        pts, restore = raytrace.as_points(directions, "directions", 3)
+        return restore(raytrace.project(pts, True, self._K, self._D, self._R, self._tvec,
+                                        self._C, self._mirror))
+
+    # -- the rim and the viewpoint ------------------------------------------------------
+    def rim_image_points(self, n=360):
+        """Pixels of ``n`` points of the rim circle, ``(n, 2)``: the ellipse of section 3.1."""
+        rim = self._mirror.rim_points(n)
+        xc = rim @ self._R.T + self._tvec
+        xn = xc[:, :2] / xc[:, 2:3]
+        if self._D is None:
+            return xn @ self._K[:2, :2].T + self._K[:2, 2]
+        return raytrace.distort_normalized(xn, self._K, self._D)
+
+    def mirror_pixels(self):
+        """All integer pixels that see the mirror (inside the rim ellipse, in the frame or not).
+
+        Returns
+        -------
+        pixels : (M, 2) float64 ndarray
+        """
+        rim = self.rim_image_points(720)
+        lo = np.floor(rim.min(axis=0)) - 2
+        hi = np.ceil(rim.max(axis=0)) + 2
+        xs = np.arange(lo[0], hi[0] + 1)
+        out = []
+        for y0 in np.arange(lo[1], hi[1] + 1, 256):
+            ys = np.arange(y0, min(y0 + 256, hi[1] + 1))
+            gx, gy = np.meshgrid(xs, ys)
+            pix = np.stack([gx.ravel(), gy.ravel()], axis=1)
+            _, d = raytrace.trace(pix, self._K, self._D, self._R, self._C, self._mirror)
+            out.append(pix[np.isfinite(d[:, 0])])
+        return np.concatenate(out)
+
+    def best_fit_viewpoint(self):
+        """The point closest, in mean squared distance, to the rays of all mirror pixels.
+
+        Closed-form least squares (section 4.1): with ``M_i = I - d_i d_i^T``,
+        ``(sum M_i) p = sum M_i P_i``. The rays are those of every integer pixel inside the rim
+        ellipse (:meth:`mirror_pixels`). For the aligned rig ``p`` is the outer focus
+        ``(0, 0, c)`` and ``rms`` is 0.
+
+        Returns
+        -------
+        point : (3,) float64 ndarray
+            Viewpoint, mirror frame.
+        rms : float
+            Root mean squared distance from ``point`` to the rays.
+        """
+        if self._viewpoint is None:
+            pix = self.mirror_pixels()
+            P, d = raytrace.trace(pix, self._K, self._D, self._R, self._C, self._mirror)
+            # sum of (I - d d^T) and of (I - d d^T) P
+            A = len(d) * np.eye(3) - d.T @ d
+            rhs = P.sum(axis=0) - d.T @ np.einsum("ij,ij->i", d, P)
+            p = np.linalg.solve(A, rhs)
+            w = p - P
+            perp = w - d * np.einsum("ij,ij->i", w, d)[:, None]
+            rms = float(np.sqrt(np.mean(np.einsum("ij,ij->i", perp, perp))))
+            p.flags.writeable = False
+            self._viewpoint = (p, rms)
+        return self._viewpoint
+
+    # -- calibration and views (implemented in omnicam.calibration and omnicam.views) ----
+    @classmethod
+    def calibrate(cls, K, mirror, image=None, boundary_points=None, far_lines=None, D=None,
+                  image_size=None, refine=True):
+        """Mirror posture from one image: rim ellipse, Chen's method, far-line selection.
+
+        See :func:`omnicam.calibration.calibrate`. Returns ``(camera, report)``.
+        """
+        from .calibration import calibrate
+        return calibrate(K, mirror, image=image, boundary_points=boundary_points,
+                         far_lines=far_lines, D=D, image_size=image_size, refine=refine,
+                         camera_cls=cls)
+
+    def init_panorama_maps(self, size, elevation_range=None, projection="cylindrical", R=None,
+                           m1type=cv2.CV_16SC2, depth=None, viewpoint=None):
+        """``cv2.remap`` tables of a panorama; see :func:`omnicam.views.init_panorama_maps`."""
+        from .views import init_panorama_maps
+        return init_panorama_maps(self, size, elevation_range=elevation_range,
+                                  projection=projection, R=R, m1type=m1type, depth=depth,
+                                  viewpoint=viewpoint)
+
+    def init_perspective_maps(self, K_new, size, R=None, m1type=cv2.CV_16SC2, depth=None,
+                              viewpoint=None):
+        """``cv2.remap`` tables of a virtual perspective view; see
+        :func:`omnicam.views.init_perspective_maps`."""
+        from .views import init_perspective_maps
+        return init_perspective_maps(self, K_new, size, R=R, m1type=m1type, depth=depth,
+                                     viewpoint=viewpoint)
+
+    # -- files ----------------------------------------------------------------------------
+    def save(self, path):
+        """Write the calibration with ``cv2.FileStorage`` (yaml, yml, xml or json), atomically."""
+        from .io import save_camera
+        save_camera(self, path)
+
+    @classmethod
+    def load(cls, path):
+        """Read a calibration file written by :meth:`save`, validating every field."""
+        from .io import load_camera
+        return load_camera(path, cls)

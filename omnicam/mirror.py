@@ -1,0 +1,204 @@
+"""The hyperboloidal mirror: surface, normal, ray intersection and reflection.
+
+Mirror frame (``conventions.md``): origin at the centre of the hyperboloid
+
+    (X^2 + Y^2) / a^2 - Z^2 / b^2 = -1                         (eq. 1)
+
+mirror sheet ``Z > 0``, foci ``(0, 0, +c)`` and ``(0, 0, -c)`` with ``c = sqrt(a^2 + b^2)``.
+The physical mirror is the cap of that sheet inside the rim, the circle of radius
+``rim_radius`` at height ``z_rim = b * sqrt(1 + rim_radius^2 / a^2)``.
+
+These are vectorised numpy functions: the readable reference of the model. The per-pixel
+hot loops use the same formulas in :mod:`omnicam._kernels`.
+"""
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+__all__ = ["HyperbolicMirror"]
+
+
+def _positive_finite(name, value):
+    try:
+        value = float(value)
+    except (TypeError, ValueError):
+        raise ValueError(f"{name} must be a positive finite number, got {value!r}") from None
+    if not (math.isfinite(value) and value > 0):
+        raise ValueError(f"{name} must be a positive finite number, got {value!r}")
+    return value
+
+
+class HyperbolicMirror:
+    """Hyperboloidal mirror ``(X^2+Y^2)/a^2 - Z^2/b^2 = -1``, sheet ``Z > 0`` (eq. 1).
+
+    Parameters
+    ----------
+    a, b : float
+        Hyperboloid parameters (the paper's ``a_h, b_h``), in the length unit of the rig
+        (millimetres by convention).
+    rim_radius : float
+        Radius of the circular mirror boundary (the rim), same unit.
+
+    Attributes
+    ----------
+    c : float
+        Focal distance ``sqrt(a^2 + b^2)``: the foci are ``(0, 0, +-c)``.
+    z_rim : float
+        Height of the rim plane, ``b * sqrt(1 + rim_radius^2 / a^2)``.
+
+    Notes
+    -----
+    Immutable: the parameters are read-only properties, and equal mirrors compare equal.
+    """
+
+    __slots__ = ("_a", "_b", "_rim_radius")
+
+    def __init__(self, a, b, rim_radius):
+        self._a = _positive_finite("a", a)
+        self._b = _positive_finite("b", b)
+        self._rim_radius = _positive_finite("rim_radius", rim_radius)
+
+    # -- parameters -------------------------------------------------------------------
+    a = property(lambda self: self._a, doc="Hyperboloid parameter a.")
+    b = property(lambda self: self._b, doc="Hyperboloid parameter b.")
+    rim_radius = property(lambda self: self._rim_radius, doc="Radius of the rim circle.")
+
+    @property
+    def c(self) -> float:
+        """Focal distance ``sqrt(a^2 + b^2)``."""
+        return math.hypot(self._a, self._b)
+
+    @property
+    def z_rim(self) -> float:
+        """Height of the rim, ``b * sqrt(1 + rim_radius^2 / a^2)``."""
+        return self._b * math.sqrt(1.0 + (self._rim_radius / self._a) ** 2)
+
+    def __eq__(self, other):
+        if not isinstance(other, HyperbolicMirror):
+            return NotImplemented
+        return (self._a, self._b, self._rim_radius) == (other._a, other._b, other._rim_radius)
+
+    def __hash__(self):
+        return hash((self._a, self._b, self._rim_radius))
+
+    def __repr__(self):
+        return f"HyperbolicMirror(a={self._a!r}, b={self._b!r}, rim_radius={self._rim_radius!r})"
+
+    # -- geometry ---------------------------------------------------------------------
+    def surface_z(self, X, Y):
+        """Height of the mirror sheet, ``Z = b * sqrt((X^2 + Y^2) / a^2 + 1)`` (eq. 13).
+
+        Parameters
+        ----------
+        X, Y : array_like
+            Coordinates in the mirror frame (broadcast together).
+
+        Returns
+        -------
+        Z : ndarray
+            Height of the sheet ``Z > 0`` above ``(X, Y)``; defined beyond the rim too.
+        """
+        X = np.asarray(X, dtype=np.float64)
+        Y = np.asarray(Y, dtype=np.float64)
+        return self._b * np.sqrt((X * X + Y * Y) / self._a**2 + 1.0)
+
+    def normal(self, points):
+        """Unnormalised surface normal ``N = (f_X, f_Y, -1)`` at points of the sheet (eq. 14).
+
+        ``N`` points down and out of the mirror, towards the camera. Eq. 15 needs it normalised
+        (paper erratum in ``conventions.md``); use :meth:`unit_normal` for that.
+
+        Parameters
+        ----------
+        points : (..., 3) array_like
+            Points on the sheet, mirror frame.
+
+        Returns
+        -------
+        N : (..., 3) ndarray
+        """
+        P = np.asarray(points, dtype=np.float64)
+        # f = b sqrt(1 + (X^2+Y^2)/a^2)  =>  f_X = b^2 X / (a^2 f)   (eqs. 13-14)
+        k = self._b**2 / (self._a**2 * P[..., 2])
+        return np.stack([k * P[..., 0], k * P[..., 1], -np.ones_like(P[..., 2])], axis=-1)
+
+    def unit_normal(self, points):
+        """Unit normal of eq. 14, pointing out of the mirror (towards the camera)."""
+        N = self.normal(points)
+        return N / np.linalg.norm(N, axis=-1, keepdims=True)
+
+    def intersect(self, origins, directions):
+        """First hit of rays ``F + k V`` with the mirror cap (eqs. 8-12).
+
+        The root of ``alpha k^2 + 2 beta k + gamma = 0`` (eqs. 8-11) kept is the smallest ``k > 0``
+        on the sheet ``Z > 0``; it is a hit only if the ray enters the mirror there
+        (``(N, V) < 0``, eq. 12) and the point lies inside the rim (``X^2 + Y^2 <= rim_radius^2``).
+
+        Parameters
+        ----------
+        origins : (..., 3) array_like
+            Ray origins ``F_M`` (mirror frame).
+        directions : (..., 3) array_like
+            Ray directions ``V_M`` (need not be unit).
+
+        Returns
+        -------
+        points : (..., 3) ndarray
+            The hit ``P_M``; NaN where the ray misses the mirror cap.
+        """
+        F = np.asarray(origins, dtype=np.float64)
+        V = np.asarray(directions, dtype=np.float64)
+        F, V = np.broadcast_arrays(F, V)
+        ia2, ib2 = 1.0 / self._a**2, 1.0 / self._b**2
+        # eqs. 9-11
+        alpha = (V[..., 0] ** 2 + V[..., 1] ** 2) * ia2 - V[..., 2] ** 2 * ib2
+        beta = (V[..., 0] * F[..., 0] + V[..., 1] * F[..., 1]) * ia2 - V[..., 2] * F[..., 2] * ib2
+        gamma = (F[..., 0] ** 2 + F[..., 1] ** 2) * ia2 - F[..., 2] ** 2 * ib2 + 1.0
+        disc = beta * beta - alpha * gamma
+        with np.errstate(invalid="ignore", divide="ignore"):
+            sq = np.sqrt(disc)
+            # eq. 8, both roots, written without cancellation
+            q = -(beta + np.copysign(sq, beta))
+            k1 = q / alpha
+            k2 = gamma / q
+            big = np.full_like(k1, np.inf)
+            z1 = F[..., 2] + k1 * V[..., 2]
+            z2 = F[..., 2] + k2 * V[..., 2]
+            k1 = np.where((k1 > 0) & (z1 > 0), k1, big)
+            k2 = np.where((k2 > 0) & (z2 > 0), k2, big)
+            k = np.minimum(k1, k2)
+            k = np.where(np.isfinite(k) & (disc >= 0), k, np.nan)
+        P = F + k[..., None] * V
+        N = self.normal(P)
+        ok = (np.einsum("...i,...i->...", N, V) < 0) & (
+            P[..., 0] ** 2 + P[..., 1] ** 2 <= self._rim_radius**2
+        )
+        return np.where(ok[..., None], P, np.nan)
+
+    @staticmethod
+    def reflect(directions, unit_normals):
+        """Reflection law ``V_out = V - 2 n (n, V)`` with a unit normal (eq. 15).
+
+        Parameters
+        ----------
+        directions : (..., 3) array_like
+            Incoming directions ``V_M``.
+        unit_normals : (..., 3) array_like
+            Unit surface normals at the reflection points.
+
+        Returns
+        -------
+        V_out : (..., 3) ndarray
+            Reflected directions, with the length of ``directions``.
+        """
+        V = np.asarray(directions, dtype=np.float64)
+        n = np.asarray(unit_normals, dtype=np.float64)
+        return V - 2.0 * n * np.einsum("...i,...i->...", n, V)[..., None]
+
+    def rim_points(self, n=360):
+        """``n`` points evenly spaced on the rim circle, ``(n, 3)``, mirror frame."""
+        t = np.linspace(0.0, 2.0 * np.pi, int(n), endpoint=False)
+        r = self._rim_radius
+        return np.stack([r * np.cos(t), r * np.sin(t), np.full_like(t, self.z_rim)], axis=1)

@@ -1,0 +1,134 @@
+"""Pixel -> ray by ray tracing, and point -> pixel by the exact non-central inverse (eqs. 6-19).
+
+Pure functions over validated arrays: the camera class (:mod:`omnicam.camera`) checks its
+parameters once and calls these. Distortion is handled here with OpenCV's point functions;
+the per-point work runs in the numba kernels of :mod:`omnicam._kernels`.
+"""
+from __future__ import annotations
+
+import cv2
+import numpy as np
+
+from . import _kernels
+
+__all__ = ["as_points", "undistort_normalized", "distort_normalized", "trace", "project"]
+
+# conventions.md: OpenCV's default 5 iterations of undistortPoints leave up to 0.1 px of error
+_UNDISTORT_CRITERIA = (cv2.TERM_CRITERIA_COUNT | cv2.TERM_CRITERIA_EPS, 200, 1e-15)
+
+
+def as_points(points, name, dim):
+    """Validate a point array and return ``(pts, restore)``.
+
+    Parameters
+    ----------
+    points : (N, dim) or (N, 1, dim) array_like, float32 or float64
+    name : str
+        Argument name used in error messages.
+    dim : int
+        2 for pixels, 3 for points.
+
+    Returns
+    -------
+    pts : (N, dim) float64 C-contiguous ndarray
+    restore : callable
+        Maps an ``(N, k)`` result back to the caller's layout: ``(N, k)`` or ``(N, 1, k)``.
+    """
+    arr = np.asarray(points)
+    if arr.dtype == object or not (np.issubdtype(arr.dtype, np.floating)
+                                   or np.issubdtype(arr.dtype, np.integer)):
+        raise ValueError(f"{name} must be a float array of shape (N, {dim}) or (N, 1, {dim}), "
+                         f"got dtype {arr.dtype}")
+    if arr.ndim == 2 and arr.shape[1] == dim:
+        layout = 2
+    elif arr.ndim == 3 and arr.shape[1] == 1 and arr.shape[2] == dim:
+        layout = 3
+    else:
+        raise ValueError(f"{name} must have shape (N, {dim}) or (N, 1, {dim}), got {arr.shape}")
+    pts = np.ascontiguousarray(arr.reshape(-1, dim), dtype=np.float64)
+
+    def restore(result):
+        return result.reshape(-1, 1, result.shape[-1]) if layout == 3 else result
+
+    return pts, restore
+
+
+def undistort_normalized(pixels, K, D):
+    """Pixels -> undistorted normalised coordinates ``(x, y)`` with ``(x, y, 1) ~ X_C``.
+
+    ``inv(K)`` is applied here (so skew counts) and OpenCV undoes ``D`` on an identity camera with
+    tight criteria. NaN pixels stay NaN.
+    """
+    Kinv = np.linalg.inv(K)
+    xd = pixels @ Kinv[:2, :2].T + Kinv[:2, 2]
+    ok = np.isfinite(xd).all(axis=1)
+    out = np.full_like(xd, np.nan)
+    if ok.any():
+        und = cv2.undistortPointsIter(xd[ok].reshape(-1, 1, 2), np.eye(3), np.asarray(D, np.float64),
+                                      None, None, _UNDISTORT_CRITERIA)
+        out[ok] = und.reshape(-1, 2)
+    return out
+
+
+def distort_normalized(xn, K, D):
+    """Undistorted normalised coordinates -> pixels (OpenCV's distortion, then ``K`` with skew)."""
+    ok = np.isfinite(xn).all(axis=1)
+    out = np.full_like(xn, np.nan)
+    if ok.any():
+        obj = np.concatenate([xn[ok], np.ones((int(ok.sum()), 1))], axis=1)
+        xd, _ = cv2.projectPoints(obj.reshape(-1, 1, 3), np.zeros(3), np.zeros(3), np.eye(3),
+                                  np.asarray(D, np.float64))
+        xd = xd.reshape(-1, 2)
+        out[ok] = xd @ K[:2, :2].T + K[:2, 2]
+    return out
+
+
+def trace(pixels, K, D, R, C, mirror):
+    """Reflected rays of pixels (eqs. 6-19): ``(origins, directions)``, each ``(N, 3)``.
+
+    Parameters
+    ----------
+    pixels : (N, 2) float64 ndarray
+    K : (3, 3) ndarray
+        Camera matrix (skew allowed).
+    D : ndarray or None
+        OpenCV distortion coefficients.
+    R : (3, 3) ndarray
+        Mirror -> camera rotation (eq. 29).
+    C : (3,) ndarray
+        Camera centre in the mirror frame (``F_M`` of eq. 17).
+    mirror : HyperbolicMirror
+
+    Returns
+    -------
+    origins : (N, 3) ndarray
+        Reflection points ``P_M`` on the mirror.
+    directions : (N, 3) ndarray
+        Unit reflected directions ``V_Mout``. Rows of pixels that do not see the mirror are NaN.
+    """
+    if D is None:
+        uv, Kinv = pixels, np.linalg.inv(K)
+    else:
+        uv, Kinv = undistort_normalized(pixels, K, D), np.eye(3)
+    n = uv.shape[0]
+    origins = np.empty((n, 3))
+    directions = np.empty((n, 3))
+    _kernels.trace_rays(np.ascontiguousarray(uv), np.ascontiguousarray(Kinv), R, C,
+                        mirror.a, mirror.b, mirror.rim_radius, origins, directions)
+    return origins, directions
+
+
+def project(points, at_infinity, K, D, R, t, C, mirror):
+    """Exact non-central projection of points (or directions) to pixels, ``(N, 2)``.
+
+    For each point the reflection point on the mirror is found by Newton's method on Fermat's
+    path length (see :func:`omnicam._kernels._reflection_point`) and imaged by the pinhole
+    (eq. 6) and OpenCV's distortion. Points the rig cannot see give NaN.
+    """
+    out = np.empty((points.shape[0], 2))
+    Kk = K if D is None else np.eye(3)
+    _kernels.project_points(points, bool(at_infinity), R, t, C, mirror.a, mirror.b,
+                            mirror.rim_radius, np.ascontiguousarray(Kk), out)
+    if D is not None:
+        out = distort_normalized(out, K, D)
+    return out
