@@ -1,0 +1,1 @@
+"""Calibration of the mirror posture from one image (paper section 3)."""
