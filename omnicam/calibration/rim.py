@@ -1,0 +1,444 @@
+"""The mirror boundary (rim) in the image: a robust, geometrically accurate ellipse (eqs. 20-22).
+
+The rim of the mirror is a circle; the camera sees it as the conic
+
+    a x^2 + b y^2 + 2 f x + 2 g y + 2 h x y + c = 0                (eq. 20)
+    x~^T Q_I x~ = 0,  x~ = (x, y, 1)^T                               (eq. 21)
+    Q_I = [[a, h, f], [h, b, g], [f, g, c]]                          (eq. 22)
+
+in pixel coordinates (centres at integers, distorted pixels as the camera sees them). Chen's
+method (eqs. 23-42) starts from ``Q_I``, so its accuracy is that of this fit: an algebraic fit is
+biased, so :func:`fit_rim` starts with a normalised direct ellipse fit and then minimises the
+*orthogonal* (geometric) distances of the points to the ellipse.
+
+:func:`fit_rim` fits given boundary points (RANSAC against outliers, then geometric refinement);
+:func:`detect_rim` finds the boundary in an image automatically.
+"""
+from __future__ import annotations
+
+import dataclasses
+import math
+
+import numpy as np
+
+__all__ = ["RimFit", "fit_rim", "detect_rim", "conic_from_ellipse", "ellipse_from_conic"]
+
+
+# -- the result ----------------------------------------------------------------------------------
+@dataclasses.dataclass(frozen=True, eq=False)
+class RimFit:
+    """An ellipse fitted to the mirror rim in the image.
+
+    The ellipse is ``x(t) = center + S (cos t, sin t)^T`` with ``S`` symmetric positive definite;
+    equivalently ``x~^T Q_I x~ = 0`` (eqs. 20-22).
+
+    Attributes
+    ----------
+    conic : (3, 3) float64 ndarray
+        ``Q_I`` of eq. 22 in pixel coordinates: symmetric, unit Frobenius norm, sign fixed so that
+        ``x~^T Q_I x~ < 0`` inside the ellipse (so ``Q_I[:2, :2]`` is positive definite and
+        ``Q_I`` has exactly one negative eigenvalue).
+    points : (N, 2) float64 ndarray
+        The boundary points used for the final fit (the inliers).
+    rms : float
+        Root mean square orthogonal (geometric) distance of ``points`` to the ellipse, px.
+    center : (2,) float64 ndarray
+        Centre of the ellipse, px.
+    axes : (2,) float64 ndarray
+        Semi-axes ``(major, minor)``, px.
+    angle : float
+        Direction of the major axis, radians from +x towards +y (image y points down), in
+        ``[0, pi)``.
+    inliers : (M,) bool ndarray
+        Which of the input points (of :func:`fit_rim`; the edge points for :func:`detect_rim`)
+        were used.
+    """
+
+    conic: np.ndarray
+    points: np.ndarray
+    rms: float
+    center: np.ndarray
+    axes: np.ndarray
+    angle: float
+    inliers: np.ndarray
+
+    def __post_init__(self):
+        for name in ("conic", "points", "center", "axes", "inliers"):
+            arr = np.array(getattr(self, name))
+            arr.flags.writeable = False
+            object.__setattr__(self, name, arr)
+
+    @property
+    def shape_matrix(self):
+        """(2, 2) symmetric positive definite ``S`` of ``x(t) = center + S (cos t, sin t)``."""
+        c, s = math.cos(self.angle), math.sin(self.angle)
+        R = np.array([[c, -s], [s, c]])
+        return R @ np.diag(self.axes) @ R.T
+
+    @property
+    def diameter(self):
+        """Mean diameter ``axes[0] + axes[1]``, px."""
+        return float(self.axes[0] + self.axes[1])
+
+    def distance(self, points):
+        """Signed orthogonal distance of points to the ellipse (positive outside), px.
+
+        Parameters
+        ----------
+        points : (N, 2) or (N, 1, 2) array_like
+
+        Returns
+        -------
+        (N,) float64 ndarray
+        """
+        pts = np.asarray(points, dtype=np.float64).reshape(-1, 2)
+        d, _, _ = _orthogonal_residuals(pts, self.center, self.shape_matrix)
+        return d
+
+    def sample(self, n=360):
+        """``n`` points evenly spaced in the ellipse parameter, ``(n, 2)`` float64 (for drawing)."""
+        t = np.linspace(0.0, 2.0 * np.pi, int(n), endpoint=False)
+        return self.center + np.stack([np.cos(t), np.sin(t)], axis=1) @ self.shape_matrix.T
+
+
+# -- conic <-> ellipse ---------------------------------------------------------------------------
+def conic_from_ellipse(center, S):
+    """``Q_I`` (eq. 22) of the ellipse ``center + S (cos t, sin t)``, unit norm, interior negative.
+
+    ``(x - c)^T S^-2 (x - c) - 1 = 0`` written as ``x~^T Q_I x~ = 0`` (eq. 21).
+    """
+    c = np.asarray(center, dtype=np.float64)
+    Sinv = np.linalg.inv(np.asarray(S, dtype=np.float64))
+    A = Sinv.T @ Sinv
+    A = 0.5 * (A + A.T)
+    Q = np.empty((3, 3))
+    Q[:2, :2] = A
+    Q[:2, 2] = Q[2, :2] = -A @ c
+    Q[2, 2] = c @ A @ c - 1.0
+    return Q / np.linalg.norm(Q)
+
+
+def ellipse_from_conic(Q):
+    """Centre and shape ``S`` (symmetric positive definite) of the real ellipse ``Q_I``.
+
+    Raises ``ValueError`` if ``Q`` is not a real, non-degenerate ellipse.
+    """
+    Q = np.asarray(Q, dtype=np.float64)
+    Q = 0.5 * (Q + Q.T)
+    A = Q[:2, :2]
+    if not np.isfinite(Q).all() or np.linalg.det(A) <= 0.0:
+        raise ValueError("the fitted conic is not an ellipse (degenerate, hyperbola or parabola); "
+                         "give points spread along a clearly elliptic boundary")
+    center = np.linalg.solve(A, -Q[:2, 2])
+    F = Q[2, 2] + Q[:2, 2] @ center  # value of the conic at the centre
+    M = A / -F
+    w, V = np.linalg.eigh(M)
+    if not (np.isfinite(w).all() and w[0] > 0.0):
+        raise ValueError("the fitted conic is an imaginary ellipse; give points along the rim")
+    S = V @ np.diag(1.0 / np.sqrt(w)) @ V.T
+    return center, 0.5 * (S + S.T)
+
+
+def _axes_angle(S):
+    w, V = np.linalg.eigh(S)
+    major = V[:, 1]
+    angle = math.atan2(major[1], major[0]) % math.pi
+    return np.array([w[1], w[0]]), angle
+
+
+# -- validation ----------------------------------------------------------------------------------
+def _as_points(points, min_points):
+    try:
+        pts = np.asarray(points, dtype=np.float64)
+    except (TypeError, ValueError):
+        raise ValueError("points must be an (N, 2) or (N, 1, 2) array of pixel coordinates") \
+            from None
+    if pts.ndim == 3 and pts.shape[1:] == (1, 2):
+        pts = pts.reshape(-1, 2)
+    if pts.ndim != 2 or pts.shape[1] != 2:
+        raise ValueError(f"points must be an (N, 2) or (N, 1, 2) array of pixel coordinates, "
+                         f"got shape {pts.shape}")
+    if not np.isfinite(pts).all():
+        raise ValueError("points must be finite; drop NaN/inf rows before fitting the rim")
+    if len(pts) < min_points:
+        raise ValueError(f"need at least {min_points} boundary points to fit the rim ellipse, "
+                         f"got {len(pts)}; give more points spread along the rim")
+    return pts
+
+
+# -- algebraic fits (normalised) -----------------------------------------------------------------
+def _hartley(pts):
+    """Similarity ``N`` moving the centroid to 0 and the mean distance to sqrt(2)."""
+    m = pts.mean(axis=0)
+    d = np.sqrt(((pts - m) ** 2).sum(axis=1)).mean()
+    s = math.sqrt(2.0) / d if d > 0 else 1.0
+    return np.array([[s, 0.0, -s * m[0]], [0.0, s, -s * m[1]], [0.0, 0.0, 1.0]])
+
+
+def _coeffs_to_Q(v):
+    A, B, C, D, E, F = v
+    return np.array([[A, B / 2, D / 2], [B / 2, C, E / 2], [D / 2, E / 2, F]])
+
+
+def _direct_ellipse(pts):
+    """Fitzgibbon's direct least-squares ellipse fit, Halir-Flusser's stable form.
+
+    ``pts`` should be normalised. Returns ``Q`` (3, 3) or ``None`` if no ellipse solution.
+    """
+    x, y = pts[:, 0], pts[:, 1]
+    D1 = np.stack([x * x, x * y, y * y], axis=1)
+    D2 = np.stack([x, y, np.ones_like(x)], axis=1)
+    S1, S2, S3 = D1.T @ D1, D1.T @ D2, D2.T @ D2
+    try:
+        T = -np.linalg.solve(S3, S2.T)
+    except np.linalg.LinAlgError:
+        return None
+    M = S1 + S2 @ T
+    # premultiply by inv(C1), C1 = [[0, 0, 2], [0, -1, 0], [2, 0, 0]]
+    M = np.stack([M[2] / 2.0, -M[1], M[0] / 2.0])
+    w, V = np.linalg.eig(M)
+    V = np.real(V)
+    cond = 4.0 * V[0] * V[2] - V[1] ** 2
+    ok = np.flatnonzero(cond > 0)
+    if ok.size == 0:
+        return None
+    a1 = V[:, ok[np.argmin(np.abs(np.real(w[ok])))]]
+    return _coeffs_to_Q(np.concatenate([a1, T @ a1]))
+
+
+def _is_ellipse(Q):
+    A = Q[:2, :2]
+    if np.linalg.det(A) <= 0:
+        return False
+    try:
+        center = np.linalg.solve(A, -Q[:2, 2])
+    except np.linalg.LinAlgError:
+        return False
+    F = Q[2, 2] + Q[:2, 2] @ center
+    return bool(F * A[0, 0] < 0)
+
+
+# -- geometric distance and refinement -----------------------------------------------------------
+def _orthogonal_residuals(pts, center, S, iters=12):
+    """Signed orthogonal distances of ``pts`` to ``center + S u(t)``, their feet and outer normals.
+
+    The foot parameter ``t`` solves ``(x(t) - p) . x'(t) = 0`` by safeguarded Newton iterations
+    from the angle of ``S^-1 (p - center)``.
+    """
+    q = pts - center
+    u0 = q @ np.linalg.inv(S).T
+    t = np.arctan2(u0[:, 1], u0[:, 0])
+    s11, s12, s22 = S[0, 0], S[0, 1], S[1, 1]
+    for _ in range(iters):
+        c, s = np.cos(t), np.sin(t)
+        xx, xy = s11 * c + s12 * s, s12 * c + s22 * s        # S u
+        dx, dy = -s11 * s + s12 * c, -s12 * s + s22 * c      # S u'
+        ex, ey = xx - q[:, 0], xy - q[:, 1]
+        f = ex * dx + ey * dy
+        tt = dx * dx + dy * dy
+        fp = np.maximum(tt - (ex * xx + ey * xy), 0.2 * tt)  # x'' = -S u
+        step = f / fp
+        t = t - np.clip(step, -0.5, 0.5)
+        if np.max(np.abs(step)) < 1e-13:
+            break
+    c, s = np.cos(t), np.sin(t)
+    foot = np.stack([s11 * c + s12 * s, s12 * c + s22 * s], axis=1)
+    dx, dy = -s11 * s + s12 * c, -s12 * s + s22 * c
+    nrm = np.hypot(dx, dy)
+    normal = np.stack([dy / nrm, -dx / nrm], axis=1)  # outward for det S > 0
+    d = np.einsum("ij,ij->i", q - foot, normal)
+    return d, np.stack([c, s], axis=1), normal
+
+
+def _refine_geometric(pts, center, S, iters=50):
+    """Levenberg-Marquardt on the orthogonal distances over (cx, cy, s11, s12, s22).
+
+    The symmetric ``S`` parametrisation has no singularity at circles. With the foot parameter
+    fixed, ``d r / d theta = -n . d x / d theta`` (the foot moves along the tangent).
+    """
+    p = np.array([center[0], center[1], S[0, 0], S[0, 1], S[1, 1]])
+
+    def unpack(p):
+        return p[:2], np.array([[p[2], p[3]], [p[3], p[4]]])
+
+    def evaluate(p):
+        c, Sm = unpack(p)
+        if np.linalg.det(Sm) <= 0 or Sm[0, 0] <= 0:
+            return None, None
+        r, u, n = _orthogonal_residuals(pts, c, Sm)
+        J = -np.stack([n[:, 0], n[:, 1], n[:, 0] * u[:, 0],
+                       n[:, 0] * u[:, 1] + n[:, 1] * u[:, 0], n[:, 1] * u[:, 1]], axis=1)
+        return r, J
+
+    r, J = evaluate(p)
+    cost = r @ r
+    lam = 1e-6
+    for _ in range(iters):
+        g = J.T @ r
+        H = J.T @ J
+        improved = False
+        for _ in range(20):
+            Hd = H + lam * np.diag(np.diag(H) + 1e-12 * np.trace(H))
+            try:
+                step = -np.linalg.solve(Hd, g)
+            except np.linalg.LinAlgError:
+                lam *= 10.0
+                continue
+            r_new, J_new = evaluate(p + step)
+            if r_new is not None and r_new @ r_new <= cost:
+                p, r, J = p + step, r_new, J_new
+                new_cost = r @ r
+                converged = cost - new_cost <= 1e-14 * max(cost, 1e-30) or \
+                    np.max(np.abs(step)) < 1e-11 * max(1.0, np.abs(p).max())
+                cost = new_cost
+                lam = max(lam / 10.0, 1e-12)
+                improved = True
+                break
+            lam *= 10.0
+        if not improved or converged:
+            break
+    c, Sm = unpack(p)
+    return c, Sm, r
+
+
+# -- RANSAC --------------------------------------------------------------------------------------
+def _conics_through_5(samples):
+    """Conics through 5 points each: the null vectors of (B, 5, 6) design matrices."""
+    x, y = samples[..., 0], samples[..., 1]
+    D = np.stack([x * x, x * y, y * y, x, y, np.ones_like(x)], axis=-1)
+    _, _, Vt = np.linalg.svd(D)
+    v = Vt[:, -1, :]
+    A, B, C, Dc, E, F = v.T
+    Q = np.empty((len(v), 3, 3))
+    Q[:, 0, 0], Q[:, 1, 1], Q[:, 2, 2] = A, C, F
+    Q[:, 0, 1] = Q[:, 1, 0] = B / 2
+    Q[:, 0, 2] = Q[:, 2, 0] = Dc / 2
+    Q[:, 1, 2] = Q[:, 2, 1] = E / 2
+    return Q
+
+
+def _sampson(Qs, ph):
+    """Sampson (first-order geometric) distances, (B, N), of homogeneous points ``ph`` (N, 3)."""
+    Qp = np.einsum("bij,nj->bni", Qs, ph)
+    alg = np.einsum("bni,ni->bn", Qp, ph)
+    grad = 2.0 * np.sqrt(Qp[..., 0] ** 2 + Qp[..., 1] ** 2)
+    return np.abs(alg) / np.maximum(grad, 1e-300)
+
+
+def _ransac(pts_n, thr_n, rng, max_trials, confidence=0.999, batch=64):
+    """Consensus ellipse of normalised points: returns the inlier mask of the best hypothesis."""
+    n = len(pts_n)
+    ph = np.concatenate([pts_n, np.ones((n, 1))], axis=1)
+    best_count, best_mask = 0, None
+    needed, trials = max_trials, 0
+    while trials < min(needed, max_trials):
+        b = min(batch, max_trials - trials)
+        idx = np.argsort(rng.random((b, n)), axis=1)[:, :5] if n <= 64 else \
+            rng.integers(0, n, size=(b, 5))
+        Qs = _conics_through_5(pts_n[idx])
+        A = Qs[:, :2, :2]
+        ell = (A[:, 0, 0] * A[:, 1, 1] - A[:, 0, 1] ** 2) > 0
+        trials += b
+        if not ell.any():
+            continue
+        Qs = Qs[ell]
+        masks = _sampson(Qs, ph) < thr_n
+        counts = masks.sum(axis=1)
+        k = int(np.argmax(counts))
+        if counts[k] > best_count:
+            best_count, best_mask = int(counts[k]), masks[k]
+            w = best_count / n
+            denom = math.log(max(1e-12, 1.0 - w ** 5)) if w < 1.0 else -np.inf
+            needed = 0 if w >= 1.0 else int(math.ceil(math.log(1.0 - confidence) / denom))
+    return best_mask
+
+
+# -- public fit ----------------------------------------------------------------------------------
+def fit_rim(points, robust=True, threshold=2.0, max_trials=2000, rng=0):
+    """Fit the rim ellipse ``Q_I`` (eqs. 20-22) to boundary points, robustly and geometrically.
+
+    1. Hartley normalisation (centroid to 0, mean distance sqrt(2)).
+    2. With ``robust``: RANSAC over 5-point conics, inliers by Sampson distance < ``threshold``.
+    3. Fitzgibbon's direct ellipse fit (Halir-Flusser form) on the (inlier) points.
+    4. Levenberg-Marquardt on the orthogonal point-to-ellipse distances.
+    5. With ``robust``: points are re-classified with the cut ``max(threshold, 3.5 sigma)``,
+       ``sigma = 1.4826 MAD`` of the residuals, and the fit is repeated until the set is stable.
+
+    Parameters
+    ----------
+    points : (N, 2) or (N, 1, 2) array_like
+        Boundary points in pixels (distorted, as seen). At least 5 (6 with ``robust``).
+    robust : bool
+        Reject outliers (RANSAC, then a robust scale cut). Without it every point is used.
+    threshold : float
+        Minimum inlier cut, px (the cut grows with the noise level of the consensus set).
+    max_trials : int
+        Cap on RANSAC hypotheses.
+    rng : int or numpy.random.Generator
+        Seed or generator for RANSAC (deterministic by default).
+
+    Returns
+    -------
+    RimFit
+
+    Raises
+    ------
+    ValueError
+        Too few or non-finite points, or no ellipse fits them (collinear points, a hyperbola, ...).
+    """
+    pts = _as_points(points, 6 if robust else 5)
+    if not (np.isfinite(threshold) and threshold > 0):
+        raise ValueError(f"threshold must be a positive number of pixels, got {threshold!r}")
+    N = _hartley(pts)
+    s = N[0, 0]
+    pts_n = pts * s + N[:2, 2]
+    mask = np.ones(len(pts), bool)
+    if robust:
+        rng = rng if isinstance(rng, np.random.Generator) else np.random.default_rng(rng)
+        m = _ransac(pts_n, threshold * s, rng, int(max_trials))
+        if m is None or m.sum() < 5:
+            raise ValueError("no ellipse found among the boundary points; give points along the "
+                             "rim (at least 5 on a common ellipse)")
+        mask = m
+    return _fit_with_mask(pts, pts_n, N, mask, robust, threshold)
+
+
+def _fit_with_mask(pts, pts_n, N, mask, robust, threshold):
+    Qn = _direct_ellipse(pts_n[mask])
+    if Qn is None or not _is_ellipse(Qn):
+        raise ValueError("the boundary points do not determine an ellipse (collinear, too few or "
+                         "a non-elliptic curve); give points spread along the rim")
+    Q = N.T @ Qn @ N  # back to pixels
+    center, S = ellipse_from_conic(Q)
+    for _ in range(10):
+        center, S, _ = _refine_geometric(pts[mask], center, S)
+        if not robust:
+            break
+        d, _, _ = _orthogonal_residuals(pts, center, S)
+        ad = np.abs(d)
+        sigma = 1.4826 * np.median(ad[mask])
+        new = ad <= max(threshold, 3.5 * sigma)
+        if new.sum() < 5:
+            raise ValueError("no ellipse found among the boundary points; give points along the "
+                             "rim (at least 5 on a common ellipse)")
+        if np.array_equal(new, mask):
+            break
+        mask = new
+    if not (np.isfinite(S).all() and np.linalg.det(S) > 0):
+        raise ValueError("the fitted rim is not an ellipse; give points spread along the rim")
+    used = pts[mask]
+    axes, angle = _axes_angle(S)
+    extent = float(np.ptp(used, axis=0).max())
+    if not (axes[1] > 1e-3 * axes[0] and axes[0] < 20.0 * extent):
+        raise ValueError(f"the boundary points fit only a degenerate ellipse (semi-axes "
+                         f"{axes[0]:.3g} and {axes[1]:.3g} px for points spanning {extent:.3g} px: "
+                         f"collinear or nearly flat); give points spread along the rim")
+    d, _, _ = _orthogonal_residuals(used, center, S)
+    return RimFit(conic=conic_from_ellipse(center, S), points=used,
+                  rms=float(np.sqrt(np.mean(d * d))), center=center, axes=axes, angle=angle,
+                  inliers=mask)
+
+
+def detect_rim(image, **kwargs):
+    """Find the mirror rim in a catadioptric image (work in progress: not implemented yet)."""
+    raise NotImplementedError("detect_rim is not implemented yet; use fit_rim(boundary_points)")
