@@ -121,6 +121,8 @@ class _Reader:
         if mat is None:
             raise self.fail(field, "must be an OpenCV matrix (!!opencv-matrix)")
         mat = np.asarray(mat, dtype=np.float64)
+        if shape is not None and len(shape) == 2 and mat.shape != shape:
+            raise self.fail(field, f"must be a {shape[0]}x{shape[1]} matrix, got {mat.shape}")
         if shape is not None and mat.size != int(np.prod(shape)):
             raise self.fail(field, f"must have {int(np.prod(shape))} values, got shape {mat.shape}")
         if not np.isfinite(mat).all():

@@ -64,8 +64,12 @@ def undistort_normalized(pixels, K, D):
     ok = np.isfinite(xd).all(axis=1)
     out = np.full_like(xd, np.nan)
     if ok.any():
-        und = cv2.undistortPointsIter(xd[ok].reshape(-1, 1, 2), np.eye(3), np.asarray(D, np.float64),
-                                      None, None, _UNDISTORT_CRITERIA)
+        src, D = xd[ok].reshape(-1, 1, 2), np.asarray(D, np.float64)
+        if hasattr(cv2, "undistortPointsIter"):  # OpenCV 4
+            und = cv2.undistortPointsIter(src, np.eye(3), D, None, None, _UNDISTORT_CRITERIA)
+        else:  # OpenCV 5 takes the criteria in undistortPoints
+            und = cv2.undistortPoints(src, np.eye(3), D, R=None, P=None,
+                                      criteria=_UNDISTORT_CRITERIA)
         out[ok] = und.reshape(-1, 2)
     return out
 

@@ -1,0 +1,127 @@
+"""Calibration files: cv2.FileStorage round trips, strict validation, atomic saves."""
+import os
+
+import cv2
+import numpy as np
+import pytest
+
+from conftest import RIGS
+from omnicam import MisalignedHyperbolicCamera
+
+
+@pytest.mark.parametrize("ext", [".yaml", ".yml", ".xml", ".json"])
+@pytest.mark.parametrize("name", ["aligned", "misaligned", "skew", "rational"])
+def test_save_load_round_trip_is_exact(tmp_path, ext, name):
+    cam = RIGS[name]
+    path = tmp_path / f"calib{ext}"
+    cam.save(path)
+    loaded = MisalignedHyperbolicCamera.load(path)
+    assert loaded == cam
+    text = path.read_text()
+    assert "misaligned_hyperbolic" in text and "format_version" in text
+
+
+def test_loaded_camera_is_in_the_gauge(tmp_path):
+    cam = RIGS["misaligned"]
+    path = tmp_path / "c.yaml"
+    cam.save(path)
+    # rewrite rvec with an extra spin about the mirror axis: same rig, other gauge
+    spun = cv2.Rodrigues(cam.R @ cv2.Rodrigues(np.array([0.0, 0.0, 1.1]))[0])[0]
+    path.write_text(path.read_text().replace(
+        _yaml_matrix(cam.rvec.reshape(3, 1)), _yaml_matrix(spun)))
+    assert "1.1" not in _yaml_matrix(cam.rvec.reshape(3, 1))
+    np.testing.assert_allclose(MisalignedHyperbolicCamera.load(path).rvec, cam.rvec, atol=1e-12)
+
+
+def _yaml_matrix(m):
+    fs = cv2.FileStorage(".yaml", cv2.FILE_STORAGE_WRITE | cv2.FILE_STORAGE_MEMORY)
+    fs.write("x", np.asarray(m, np.float64))
+    text = fs.releaseAndGetString()
+    return text.split("x:", 1)[1].strip()
+
+
+def test_missing_file_raises_file_not_found(tmp_path):
+    with pytest.raises(FileNotFoundError, match="nope.yaml"):
+        MisalignedHyperbolicCamera.load(tmp_path / "nope.yaml")
+
+
+def _saved(tmp_path, ext=".yaml"):
+    path = tmp_path / f"c{ext}"
+    RIGS["distorted"].save(path)
+    return path, path.read_text()
+
+
+@pytest.mark.parametrize("edit, field", [
+    (lambda t: "", "readable"),
+    (lambda t: "{{{ not yaml", "readable"),
+    (lambda t: t.replace("format_version: 1", "format_version: 7"), "format_version"),
+    (lambda t: t.replace("format_version: 1", "format_version: one"), "format_version"),
+    (lambda t: t.replace("misaligned_hyperbolic", "parabolic"), "model"),
+    (lambda t: t.replace("   a: ", "   aa: "), "mirror.a"),
+    (lambda t: t.replace("   b: ", "   b: -"), "mirror"),
+    (lambda t: t.replace("rows: 3\n   cols: 3", "rows: 1\n   cols: 9"), None),
+    (lambda t: t.replace("K: !!opencv-matrix", "Kx: !!opencv-matrix"), "'K'"),
+    (lambda t: t.replace("K: !!opencv-matrix", "K: 3\nKold: !!opencv-matrix"), "'K'"),
+    (lambda t: t.replace("data: [ 582.64687717031461,", "data: [ .nan,"), "finite"),
+    (lambda t: t.replace("tvec:", "tvecs:"), "'tvec'"),
+    (lambda t: t.replace("   - 500\n   - 500", "   - 500\n   - 0"), "image_size"),
+    (lambda t: t.replace("   - 500\n   - 500", "   - 500"), "image_size"),
+])
+def test_malformed_file_raises_value_error_naming_file_and_field(tmp_path, edit, field):
+    path, text = _saved(tmp_path)
+    new = edit(text)
+    assert new != text, "the edit must change the file"
+    path.write_text(new)
+    with pytest.raises(ValueError) as err:
+        MisalignedHyperbolicCamera.load(path)
+    assert str(path) in str(err.value)
+    if field:
+        assert field in str(err.value)
+
+
+def test_distortion_of_wrong_length_in_file_is_rejected(tmp_path):
+    path, text = _saved(tmp_path)
+    new = text.replace("cols: 5", "cols: 3").replace("-0.12, 0.050000000000000003, 0.001,", "")
+    assert "cols: 3\n   dt: d\n   data: [ -0.0015, -0.01 ]" not in text
+    path.write_text(new.replace("[  -0.0015, -0.01 ]", "[ 0.1, -0.0015, -0.01 ]"))
+    with pytest.raises(ValueError, match="'D'"):
+        MisalignedHyperbolicCamera.load(path)
+
+
+def test_unknown_extension_is_rejected(tmp_path):
+    with pytest.raises(ValueError, match="extension"):
+        RIGS["aligned"].save(tmp_path / "c.txt")
+    with pytest.raises(ValueError, match="extension"):
+        MisalignedHyperbolicCamera.load(tmp_path / "c.txt")
+
+
+def test_failed_save_leaves_the_old_file_and_no_temporary(tmp_path, monkeypatch):
+    path = tmp_path / "c.yaml"
+    RIGS["aligned"].save(path)
+    before = path.read_bytes()
+    real = cv2.FileStorage
+
+    class Broken:
+        def __init__(self, *args):
+            self.fs = real(*args)
+
+        def isOpened(self):
+            return True
+
+        def __getattr__(self, name):
+            if name == "endWriteStruct":
+                raise RuntimeError("disk full")
+            return getattr(self.fs, name)
+
+    import omnicam.io
+    monkeypatch.setattr(omnicam.io.cv2, "FileStorage", Broken)
+    with pytest.raises(RuntimeError, match="disk full"):
+        RIGS["misaligned"].save(path)
+    monkeypatch.undo()
+    assert path.read_bytes() == before
+    assert os.listdir(tmp_path) == ["c.yaml"]
+
+
+def test_save_into_missing_folder_raises_value_error(tmp_path):
+    with pytest.raises(ValueError, match="does not exist"):
+        RIGS["aligned"].save(tmp_path / "no" / "c.yaml")
