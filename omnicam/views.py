@@ -1,0 +1,412 @@
+"""Remap tables for ``cv2.remap``: panoramas and virtual perspective views (paper section 4.1).
+
+A misaligned rig has no single viewpoint (paper section 2.2), so a panorama or a perspective
+view is an approximation made from one chosen point: for ``depth=None`` the scene is at
+infinity and each output pixel shows the *direction* it looks along (the viewpoint plays no
+part); for a finite ``depth`` it shows the point at that Euclidean distance along its ray from
+the viewpoint, by default the best-fit viewpoint of section 4.1 (least mean squared distance to
+the rays of all mirror pixels, :meth:`MisalignedHyperbolicCamera.best_fit_viewpoint`).
+Each table entry is the *exact* non-central projection of that direction or point
+(:meth:`~omnicam.camera.MisalignedHyperbolicCamera.project_directions` /
+:meth:`~omnicam.camera.MisalignedHyperbolicCamera.project`) to better than 0.01 px.
+
+The paper's uncalibrated baseline (eqs. 2-5, Fig. 7 (a), (b)) is the same function on
+``MisalignedHyperbolicCamera.aligned(mirror, f_C, x_c, y_c)``.
+
+The view conventions (azimuth, row order, ``R``, yaw/pitch/roll) are those of
+``shared/reference/conventions.md``, section "Views".
+"""
+from __future__ import annotations
+
+import math
+import numbers
+
+import cv2
+import numpy as np
+
+__all__ = ["init_panorama_maps", "init_perspective_maps", "rotation_from_ypr", "K_from_fov",
+           "visible_elevation_range", "UNSEEN", "PROJECTIONS", "M1TYPES"]
+
+#: Source coordinate written for output pixels whose direction the mirror does not see: well
+#: outside any image (at least 2 px) and inside the range of ``CV_16SC2``.
+UNSEEN = -10.0
+
+#: Panorama row layouts: rows linear in ``tan(elevation)`` or in elevation.
+PROJECTIONS = ("cylindrical", "equirectangular")
+
+#: Accepted ``m1type`` values, as ``cv2.convertMaps`` names them.
+M1TYPES = {cv2.CV_16SC2: "CV_16SC2", cv2.CV_32FC1: "CV_32FC1", cv2.CV_32FC2: "CV_32FC2"}
+
+#: ``R = None`` of a perspective view: looking horizontally at azimuth 0, image-up along +Z.
+R0 = np.array([[0.0, -1.0, 0.0], [0.0, 0.0, -1.0], [1.0, 0.0, 0.0]])
+
+#: The default band of a cylindrical panorama stops here: its rows are linear in
+#: ``tan(elevation)``, which the nadir (-90 deg) would send to infinity.
+CYLINDRICAL_MIN_ELEVATION = -60.0
+
+
+# -- helpers for view specs ----------------------------------------------------------------------
+def rotation_from_ypr(yaw=0.0, pitch=0.0, roll=0.0):
+    """``R`` of a virtual view from yaw, pitch and roll in degrees (conventions.md, "Views").
+
+    The optical axis looks at azimuth ``-yaw`` (positive yaw turns right, as a panorama does
+    when its column grows) and elevation ``pitch`` (positive looks up); image-up is as close to
+    the mirror axis +Z as possible (image-right is horizontal); then the virtual camera turns by
+    ``roll`` about its optical axis, clockwise as seen from behind it (image-right tilts towards
+    image-down), so the scene appears turned counter-clockwise in the view.
+    All zero gives ``R0 = [[0, -1, 0], [0, 0, -1], [1, 0, 0]]``.
+
+    Parameters
+    ----------
+    yaw, pitch, roll : float
+        Degrees. ``pitch = +-90`` is allowed (looking straight up or down); image-right then
+        stays the horizontal direction ``yaw`` gives.
+
+    Returns
+    -------
+    R : (3, 3) float64 ndarray
+        Rotation taking mirror-frame directions into the virtual camera's frame (x right,
+        y down, z forward), as the ``R`` of ``cv2.initUndistortRectifyMap``.
+    """
+    vals = []
+    for name, v in (("yaw", yaw), ("pitch", pitch), ("roll", roll)):
+        try:
+            v = float(v)
+        except (TypeError, ValueError):
+            raise ValueError(f"{name} must be a finite number of degrees, got {v!r}") from None
+        if not math.isfinite(v):
+            raise ValueError(f"{name} must be a finite number of degrees, got {v!r}")
+        vals.append(math.radians(v))
+    y, p, r = vals
+    az = -y
+    forward = np.array([math.cos(p) * math.cos(az), math.cos(p) * math.sin(az), math.sin(p)])
+    right = np.array([math.sin(az), -math.cos(az), 0.0])  # horizontal, forward x e_z at p = 0
+    down = np.cross(forward, right)
+    right_r = math.cos(r) * right + math.sin(r) * down
+    down_r = -math.sin(r) * right + math.cos(r) * down
+    return np.stack([right_r, down_r, forward])
+
+
+def K_from_fov(fov_deg, size):
+    """Camera matrix of a virtual perspective view with horizontal field of view ``fov_deg``.
+
+    Square pixels, no skew, principal point at the image centre with pixel centres at integers:
+    ``f = (w / 2) / tan(fov / 2)``, ``c = ((w - 1) / 2, (h - 1) / 2)``.
+
+    Parameters
+    ----------
+    fov_deg : float
+        Horizontal field of view across the full width, in degrees, in (0, 180).
+    size : (int, int)
+        ``(width, height)`` of the view.
+
+    Returns
+    -------
+    K : (3, 3) float64 ndarray
+    """
+    w, h = _check_size(size)
+    try:
+        fov = float(fov_deg)
+    except (TypeError, ValueError):
+        raise ValueError(f"fov_deg must be a number of degrees in (0, 180), got {fov_deg!r}") from None
+    if not (0.0 < fov < 180.0):
+        raise ValueError(f"fov_deg must be in (0, 180) degrees, got {fov_deg!r}")
+    f = 0.5 * w / math.tan(math.radians(fov) / 2.0)
+    return np.array([[f, 0.0, (w - 1) / 2.0], [0.0, f, (h - 1) / 2.0], [0.0, 0.0, 1.0]])
+
+
+# -- validation ----------------------------------------------------------------------------------
+def _check_size(size, min_height=1):
+    try:
+        w, h = size
+        exact = all(isinstance(v, numbers.Integral) or float(v) == int(v) for v in (w, h))
+        w, h = int(w), int(h)
+    except (TypeError, ValueError):
+        raise ValueError(f"size must be (width, height), two positive integers, got {size!r}") from None
+    if not exact or w < 1 or h < min_height:
+        raise ValueError(f"size must be (width, height), two integers with width >= 1 and "
+                         f"height >= {min_height}, got {size!r}")
+    if w > 32767 or h > 32767:
+        raise ValueError(f"size must be at most 32767 x 32767 (cv2.remap), got {size!r}")
+    return w, h
+
+
+def _check_m1type(m1type):
+    if isinstance(m1type, bool) or not isinstance(m1type, numbers.Integral) \
+            or int(m1type) not in M1TYPES:
+        raise ValueError(f"m1type must be cv2.CV_16SC2, cv2.CV_32FC1 or cv2.CV_32FC2, "
+                         f"got {m1type!r}")
+    return int(m1type)
+
+
+def _check_rotation(R, name="R"):
+    try:
+        arr = np.array(R, dtype=np.float64)
+    except (TypeError, ValueError):
+        raise ValueError(f"{name} must be a 3x3 rotation matrix, got {R!r}") from None
+    if arr.shape != (3, 3) or not np.isfinite(arr).all():
+        raise ValueError(f"{name} must be a finite 3x3 rotation matrix, got shape {arr.shape}")
+    if not np.allclose(arr @ arr.T, np.eye(3), atol=1e-6) or np.linalg.det(arr) < 0:
+        raise ValueError(f"{name} must be a rotation matrix (orthonormal, det +1)")
+    return arr
+
+
+def _check_K_new(K_new):
+    try:
+        arr = np.array(K_new, dtype=np.float64)
+    except (TypeError, ValueError):
+        raise ValueError(f"K_new must be a 3x3 camera matrix, got {K_new!r}") from None
+    if arr.shape != (3, 3) or not np.isfinite(arr).all():
+        raise ValueError(f"K_new must be a finite 3x3 camera matrix, got shape {arr.shape}")
+    if not np.allclose(arr[2], (0.0, 0.0, 1.0)):
+        raise ValueError(f"K_new must have last row (0, 0, 1), got {arr[2].tolist()}")
+    if abs(arr[0, 0] * arr[1, 1]) < 1e-12:
+        raise ValueError("K_new must be non-singular (fx, fy non-zero)")
+    return arr
+
+
+def _check_depth(depth):
+    if depth is None:
+        return None
+    try:
+        d = float(depth)
+    except (TypeError, ValueError):
+        raise ValueError(f"depth must be None or a positive finite distance, got {depth!r}") from None
+    if not (math.isfinite(d) and d > 0.0):
+        raise ValueError(f"depth must be None or a positive finite distance, got {depth!r}")
+    return d
+
+
+def _check_viewpoint(camera, viewpoint, depth):
+    if depth is None:
+        return None  # directions: the viewpoint plays no part (do not compute the best fit)
+    if viewpoint is None:
+        return np.asarray(camera.best_fit_viewpoint()[0], dtype=np.float64)
+    try:
+        vp = np.array(viewpoint, dtype=np.float64).reshape(3)
+    except (TypeError, ValueError):
+        raise ValueError(f"viewpoint must be None or 3 numbers (mirror frame), "
+                         f"got {viewpoint!r}") from None
+    if not np.isfinite(vp).all():
+        raise ValueError(f"viewpoint must be finite, got {vp.tolist()}")
+    return vp
+
+
+def _check_elevation_range(elevation_range, projection):
+    try:
+        lo, hi = (float(v) for v in elevation_range)
+    except (TypeError, ValueError):
+        raise ValueError(f"elevation_range must be None or (lo, hi) in degrees, "
+                         f"got {elevation_range!r}") from None
+    if not (math.isfinite(lo) and math.isfinite(hi)) or lo >= hi:
+        raise ValueError(f"elevation_range must be (lo, hi) with lo < hi, got {elevation_range!r}")
+    if projection == "cylindrical":
+        if not (-90.0 < lo and hi < 90.0):
+            raise ValueError(f"elevation_range must lie inside (-90, 90) degrees for a cylindrical "
+                             f"panorama, got {elevation_range!r}")
+    elif not (-90.0 <= lo and hi <= 90.0):
+        raise ValueError(f"elevation_range must lie inside [-90, 90] degrees, got {elevation_range!r}")
+    return lo, hi
+
+
+# -- the band a mirror sees ---------------------------------------------------------------------
+def _rim_directions(camera, n=3600):
+    """Reflected directions of ``n`` rim points (eqs. 14-15 at the rim), mirror frame."""
+    m = camera.mirror
+    P = m.rim_points(n)
+    V = P - camera.camera_center
+    V /= np.linalg.norm(V, axis=1, keepdims=True)
+    nrm = m.unit_normal(P)
+    return m.reflect(V, nrm)
+
+
+def _elevation_deg(d):
+    return np.degrees(np.arctan2(d[..., 2], np.hypot(d[..., 0], d[..., 1])))
+
+
+def _nadir_seen(camera):
+    """Whether the straight-down direction (0, 0, -1) is seen by the mirror."""
+    p = camera.project_directions(np.array([[0.0, 0.0, -1.0]]))
+    return bool(np.isfinite(p).all())
+
+
+def visible_elevation_range(camera):
+    """The band of elevations the mirror sees, ``(lo, hi)`` in degrees, mirror frame.
+
+    ``hi`` is the highest elevation of the rays of the rim (the reflected directions of the rim
+    circle, eqs. 14-15): the map from the mirror cap to directions has no interior maximum of
+    elevation, so the highest direction seen is a rim ray. ``lo`` is -90 when the nadir is
+    seen (it is, for any rig with the camera below the mirror near its axis), else the lowest
+    rim ray. For a misaligned rig the upper edge of what is seen varies with azimuth; the band
+    is the union over azimuths, so some pixels near ``hi`` are unseen at some azimuths.
+    """
+    el = _elevation_deg(_rim_directions(camera))
+    hi = float(np.nanmax(el))
+    lo = -90.0 if _nadir_seen(camera) else float(np.nanmin(el))
+    return lo, hi
+
+
+# -- output directions ----------------------------------------------------------------------------
+def _panorama_directions(size, lo, hi, projection, Rt):
+    w, h = size
+    az = -2.0 * np.pi * np.arange(w) / w
+    lo_r, hi_r = math.radians(lo), math.radians(hi)
+    t = np.arange(h) / (h - 1)
+    if projection == "cylindrical":
+        tz = math.tan(hi_r) + (math.tan(lo_r) - math.tan(hi_r)) * t
+        d = np.empty((h, w, 3))
+        d[..., 0] = np.cos(az)[None, :]
+        d[..., 1] = np.sin(az)[None, :]
+        d[..., 2] = tz[:, None]
+    else:
+        el = hi_r + (lo_r - hi_r) * t
+        d = np.empty((h, w, 3))
+        d[..., 0] = np.cos(el)[:, None] * np.cos(az)[None, :]
+        d[..., 1] = np.cos(el)[:, None] * np.sin(az)[None, :]
+        d[..., 2] = np.sin(el)[:, None]
+    return d @ Rt.T
+
+
+def _perspective_directions(size, M):
+    w, h = size
+    u, v = np.meshgrid(np.arange(w, dtype=np.float64), np.arange(h, dtype=np.float64))
+    return np.stack([u, v, np.ones_like(u)], axis=-1) @ M.T
+
+
+def _exact_table(camera, dirs, depth, viewpoint):
+    """Exact non-central projection of every output pixel (the slow reference)."""
+    h, w = dirs.shape[:2]
+    d = dirs.reshape(-1, 3)
+    d = d / np.linalg.norm(d, axis=1, keepdims=True)
+    if depth is None:
+        xy = camera.project_directions(d)
+    else:
+        xy = camera.project(viewpoint + depth * d)
+    return xy.reshape(h, w, 2)
+
+
+def _finish(xy, m1type):
+    """Float table (h, w, 2) float64 with NaN for unseen -> the requested map pair."""
+    bad = ~np.isfinite(xy).all(axis=2)
+    xy = xy.astype(np.float32)
+    xy[bad] = UNSEEN
+    if m1type == cv2.CV_32FC2:
+        return xy, None
+    mapx = np.ascontiguousarray(xy[..., 0])
+    mapy = np.ascontiguousarray(xy[..., 1])
+    if m1type == cv2.CV_32FC1:
+        return mapx, mapy
+    return cv2.convertMaps(mapx, mapy, cv2.CV_16SC2)
+
+
+# -- public API ---------------------------------------------------------------------------------
+def init_panorama_maps(camera, size, elevation_range=None, projection="cylindrical", R=None,
+                       m1type=cv2.CV_16SC2, depth=None, viewpoint=None):
+    """``cv2.remap`` tables of a 360-degree panorama (paper section 4.1, Fig. 7).
+
+    Column ``j`` looks at azimuth ``-360 j / W`` degrees (measured in the panorama frame from +X
+    towards +Y, so the panorama turns right as ``j`` grows); row 0 is elevation ``hi``, row
+    ``H - 1`` is ``lo``; rows are linear in ``tan(elevation)`` (``"cylindrical"``) or in
+    elevation (``"equirectangular"``). A panorama direction ``d`` is ``R^T d`` in the mirror
+    frame. Each entry is the exact non-central projection (to 0.01 px) of that direction
+    (``depth=None``) or of the point at distance ``depth`` from ``viewpoint`` along it.
+
+    Parameters
+    ----------
+    camera : MisalignedHyperbolicCamera
+        The calibrated rig, or ``MisalignedHyperbolicCamera.aligned(...)`` for the paper's
+        uncalibrated baseline (eqs. 2-5).
+    size : (int, int)
+        ``(W, H)`` of the panorama, ``H >= 2``.
+    elevation_range : (float, float) or None
+        ``(lo, hi)`` in degrees, ``lo < hi``, inside (-90, 90) for ``"cylindrical"`` and
+        [-90, 90] for ``"equirectangular"``. ``None``: the band the mirror sees
+        (:func:`visible_elevation_range`), its lower end raised to
+        ``CYLINDRICAL_MIN_ELEVATION`` (-60 deg) for ``"cylindrical"``.
+    projection : {"cylindrical", "equirectangular"}
+    R : (3, 3) array_like or None
+        Rotation of the panorama frame (as for perspective views); ``None`` is the identity,
+        which puts the panorama's up axis on the mirror axis.
+    m1type : int
+        ``cv2.CV_16SC2`` (default), ``cv2.CV_32FC1`` or ``cv2.CV_32FC2``.
+    depth : float or None
+        ``None``: scene at infinity. A positive number: the sphere of that radius about
+        ``viewpoint`` (same length unit as the mirror).
+    viewpoint : (3,) array_like or None
+        Mirror frame; ``None`` is the best-fit viewpoint (section 4.1). Unused when
+        ``depth`` is None.
+
+    Returns
+    -------
+    map1, map2 : ndarray
+        As ``cv2.initUndistortRectifyMap`` returns them for ``m1type`` (``map2`` is None for
+        ``CV_32FC2``). Output pixels the mirror does not see map to ``(UNSEEN, UNSEEN)``.
+
+    Raises
+    ------
+    ValueError
+        Naming the argument: malformed ``size``, unknown ``projection``, bad
+        ``elevation_range``, ``R``, ``m1type``, ``depth`` or ``viewpoint``.
+    """
+    w, h = _check_size(size, min_height=2)
+    if projection not in PROJECTIONS:
+        raise ValueError(f"projection must be one of {PROJECTIONS}, got {projection!r}")
+    m1type = _check_m1type(m1type)
+    Rm = np.eye(3) if R is None else _check_rotation(R)
+    depth = _check_depth(depth)
+    if elevation_range is None:
+        lo, hi = visible_elevation_range(camera)
+        if projection == "cylindrical":
+            lo = max(lo, CYLINDRICAL_MIN_ELEVATION)
+            hi = min(hi, 89.0)
+    else:
+        lo, hi = _check_elevation_range(elevation_range, projection)
+    vp = _check_viewpoint(camera, viewpoint, depth)
+    dirs = _panorama_directions((w, h), lo, hi, projection, Rm.T)
+    return _finish(_exact_table(camera, dirs, depth, vp), m1type)
+
+
+def init_perspective_maps(camera, K_new, size, R=None, m1type=cv2.CV_16SC2, depth=None,
+                          viewpoint=None):
+    """``cv2.remap`` tables of a virtual perspective view (paper section 4.1, Fig. 8).
+
+    Output pixel ``u`` looks along ``d = R^T K_new^-1 (u, v, 1)`` in the mirror frame; each
+    entry is the exact non-central projection (to 0.01 px) of that direction (``depth=None``)
+    or of the point at distance ``depth`` from ``viewpoint`` along it.
+
+    Parameters
+    ----------
+    camera : MisalignedHyperbolicCamera
+        The calibrated rig, or ``MisalignedHyperbolicCamera.aligned(...)`` for the paper's
+        uncalibrated baseline (eqs. 2-5).
+    K_new : (3, 3) array_like
+        Camera matrix of the view (see :func:`K_from_fov`); skew allowed.
+    size : (int, int)
+        ``(width, height)`` of the view.
+    R : (3, 3) array_like or None
+        Rotation from the mirror frame into the view's camera frame, as the ``R`` of
+        ``cv2.initUndistortRectifyMap`` (see :func:`rotation_from_ypr`); ``None`` is ``R0``,
+        looking horizontally at azimuth 0 with image-up along +Z.
+    m1type, depth, viewpoint
+        As for :func:`init_panorama_maps`.
+
+    Returns
+    -------
+    map1, map2 : ndarray
+        As for :func:`init_panorama_maps`.
+
+    Raises
+    ------
+    ValueError
+        Naming the argument: malformed or singular ``K_new``, bad ``size``, ``R``,
+        ``m1type``, ``depth`` or ``viewpoint``.
+    """
+    K_new = _check_K_new(K_new)
+    w, h = _check_size(size)
+    m1type = _check_m1type(m1type)
+    Rm = R0 if R is None else _check_rotation(R)
+    depth = _check_depth(depth)
+    vp = _check_viewpoint(camera, viewpoint, depth)
+    M = Rm.T @ np.linalg.inv(K_new)
+    dirs = _perspective_directions((w, h), M)
+    return _finish(_exact_table(camera, dirs, depth, vp), m1type)
