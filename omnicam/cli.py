@@ -1,0 +1,843 @@
+"""The ``omnicam`` console script: ``calibrate``, ``unwarp``, ``info`` and ``demo``.
+
+::
+
+    omnicam calibrate IMAGE --mirror A B RIM --intrinsics K.yaml [--far-lines LINES.json]
+                      -o CALIB [--no-refine] [--overlay PATH] [--overwrite]
+    omnicam unwarp INPUT -c CALIB (--panorama WxH [--elevation LO HI] [--projection P]
+                   | --perspective WxH --fov DEG [--yaw Y] [--pitch P] [--roll R])
+                   [--depth MM] -o OUTPUT [--overwrite] [--max-frames N] [--fourcc CODE] [--quiet]
+    omnicam info CALIB
+    omnicam demo [-o OUTDIR]
+
+Contract (py360convert style): :func:`main` takes ``argv`` and returns the exit status, so tests
+call ``main([...])`` directly. Every failure the user can cause is one line on stderr,
+``omnicam: error: ...``, with exit status 2 for a malformed command line and 1 for the rest
+(130 after Ctrl-C). Nothing existing is overwritten unless ``--overwrite`` says so, and outputs
+are written to a temporary file in the destination folder (same extension, so the same format)
+that is renamed into place, so a good file is never replaced by a half-written one. A video
+output is also renamed into place when the input ends early (a truncated file) or on Ctrl-C: the
+frames written so far are kept in a valid, finalised file. Set ``OMNICAM_DEBUG=1`` to get the
+traceback of an unexpected error instead of its one-line summary.
+"""
+from __future__ import annotations
+
+import argparse
+import contextlib
+import json
+import math
+import os
+import re
+import sys
+import tempfile
+import time
+
+import cv2
+import numpy as np
+
+__all__ = ["main"]
+
+PROG = "omnicam"
+
+# Exit statuses
+EXIT_OK, EXIT_FAILURE, EXIT_USAGE, EXIT_INTERRUPTED = 0, 1, 2, 130
+
+# Video containers we write, with the codec used unless --fourcc says otherwise. MJPG in AVI is
+# written by OpenCV itself on every build; the others need the FFmpeg backend of the wheels.
+VIDEO_FOURCC = {".avi": "MJPG", ".mp4": "mp4v", ".m4v": "mp4v", ".mov": "mp4v", ".mkv": "MJPG"}
+
+# Field names accepted in an intrinsics file, first match wins: ours (also those of an omnicam
+# calibration file and of calibrate_intrinsics), then the names of OpenCV's calibration sample.
+K_FIELDS = ("K", "camera_matrix", "cameraMatrix")
+D_FIELDS = ("D", "dist_coeffs", "distortion_coefficients", "distCoeffs")
+
+
+class CliError(Exception):
+    """A failure the user can act on: printed as one line, never as a traceback."""
+
+    def __init__(self, message, status=EXIT_FAILURE):
+        super().__init__(message)
+        self.status = status
+
+
+class _Parser(argparse.ArgumentParser):
+    """argparse with one-line errors: usage problems become a :class:`CliError` (status 2)."""
+
+    def error(self, message):
+        where = self.prog[len(PROG):].strip()
+        raise CliError(f"{where + ': ' if where else ''}{message} (see '{self.prog} --help')",
+                       EXIT_USAGE)
+
+
+# -- argument types ---------------------------------------------------------------------------
+def _size(text):
+    """``WxH`` -> ``(W, H)`` positive ints."""
+    m = re.fullmatch(r"\s*(\d+)\s*[xX]\s*(\d+)\s*", text)
+    if not m:
+        raise argparse.ArgumentTypeError(f"expected WIDTHxHEIGHT such as 1024x256, got {text!r}")
+    w, h = int(m.group(1)), int(m.group(2))
+    if not (0 < w <= 32767 and 0 < h <= 32767):
+        raise argparse.ArgumentTypeError(f"width and height must be 1..32767, got {text!r}")
+    return w, h
+
+
+def _finite(text):
+    try:
+        value = float(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected a number, got {text!r}") from None
+    if not math.isfinite(value):
+        raise argparse.ArgumentTypeError(f"expected a finite number, got {text!r}")
+    return value
+
+
+def _positive(text):
+    value = _finite(text)
+    if value <= 0:
+        raise argparse.ArgumentTypeError(f"expected a positive number, got {text!r}")
+    return value
+
+
+def _count(text):
+    try:
+        value = int(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected a positive integer, got {text!r}") from None
+    if value <= 0:
+        raise argparse.ArgumentTypeError(f"expected a positive integer, got {text!r}")
+    return value
+
+
+def _fourcc(text):
+    if len(text) != 4:
+        raise argparse.ArgumentTypeError(f"a FourCC has 4 characters, got {text!r}")
+    return text
+
+
+# -- the parser -------------------------------------------------------------------------------
+def build_parser():
+    """The ``argparse`` parser of the ``omnicam`` command (one sub-parser per command)."""
+    parser = _Parser(prog=PROG, description="Calibrate and unwarp misaligned hyperbolic-mirror "
+                     "catadioptric cameras.")
+    from . import __version__
+    parser.add_argument("--version", action="version", version=f"%(prog)s {__version__}")
+    sub = parser.add_subparsers(dest="command", metavar="COMMAND", required=True)
+
+    p = sub.add_parser("calibrate", help="mirror posture from one image of the mirror",
+                       description="Estimate the mirror posture from one image: rim ellipse, "
+                       "Chen's method, far-line selection and refinement. Prints the report, "
+                       "saves an overlay image and writes the calibration file.")
+    p.add_argument("image", metavar="IMAGE", help="image of the mirror (any format cv2.imread reads)")
+    p.add_argument("--mirror", nargs=3, type=_positive, required=True, metavar=("A", "B", "RIM"),
+                   help="hyperboloid parameters a, b and rim radius (mm)")
+    p.add_argument("--intrinsics", required=True, metavar="K.yaml",
+                   help="cv2.FileStorage file (yaml/yml/xml/json) with the camera matrix 'K' "
+                   "(or 'camera_matrix'), optional distortion 'D' (or 'dist_coeffs', "
+                   "'distortion_coefficients') and optional 'image_size' [w, h] (or "
+                   "'image_width' and 'image_height'); K is rescaled if image_size differs "
+                   "from IMAGE's size. An omnicam calibration file also works.")
+    p.add_argument("--far-lines", metavar="LINES.json",
+                   help="JSON list of lines, each a list of [x, y] pixels of a straight scene "
+                   "line far from the camera; used to pick the right posture candidate")
+    p.add_argument("-o", "--output", required=True, metavar="CALIB",
+                   help="calibration file to write (.yaml, .yml, .xml or .json)")
+    p.add_argument("--no-refine", dest="refine", action="store_false",
+                   help="keep the closed-form posture, skip the refinement")
+    p.add_argument("--overlay", metavar="PATH",
+                   help="overlay image to write (default: CALIB's stem + '_overlay.png', next to CALIB)")
+    p.add_argument("--overwrite", action="store_true", help="replace existing output files")
+    p.set_defaults(func=cmd_calibrate)
+
+    p = sub.add_parser("unwarp", help="panorama or perspective view of an image or a video",
+                       description="Unwarp an image, a video file, a camera index or a stream "
+                       "URL into a panorama or a virtual perspective view.")
+    p.add_argument("input", metavar="INPUT",
+                   help="image or video file, camera index (0, 1, ...) or stream URL")
+    p.add_argument("-c", "--calibration", required=True, metavar="CALIB",
+                   help="calibration file written by 'omnicam calibrate'")
+    view = p.add_mutually_exclusive_group(required=True)
+    view.add_argument("--panorama", type=_size, metavar="WxH", help="panorama of this size")
+    view.add_argument("--perspective", type=_size, metavar="WxH",
+                      help="virtual perspective view of this size (needs --fov)")
+    p.add_argument("--elevation", nargs=2, type=_finite, metavar=("LO", "HI"),
+                   help="panorama elevation range in degrees (default: what the mirror sees)")
+    p.add_argument("--projection", choices=("cylindrical", "equirectangular"),
+                   help="panorama rows linear in tan(elevation) or in elevation "
+                   "(default cylindrical)")
+    p.add_argument("--fov", type=_finite, metavar="DEG",
+                   help="horizontal field of view of the perspective view, degrees")
+    p.add_argument("--yaw", type=_finite, metavar="Y",
+                   help="perspective view: turn right by Y degrees (default 0)")
+    p.add_argument("--pitch", type=_finite, metavar="P",
+                   help="perspective view: look up by P degrees (default 0)")
+    p.add_argument("--roll", type=_finite, metavar="R",
+                   help="perspective view: turn the image clockwise by R degrees (default 0)")
+    p.add_argument("--depth", type=_positive, metavar="MM",
+                   help="map the scene at this distance from the best-fit viewpoint "
+                   "(default: at infinity)")
+    p.add_argument("-o", "--output", required=True, metavar="OUTPUT",
+                   help="output image, or video (.avi, .mp4, .m4v, .mov, .mkv) for a video input")
+    p.add_argument("--overwrite", action="store_true", help="replace OUTPUT if it exists")
+    p.add_argument("--max-frames", type=_count, metavar="N",
+                   help="video: stop after N frames (useful with a camera)")
+    p.add_argument("--fourcc", type=_fourcc, metavar="CODE",
+                   help="video codec FourCC (default MJPG for .avi/.mkv, mp4v for .mp4/.mov)")
+    p.add_argument("-q", "--quiet", action="store_true", help="no progress bar")
+    p.set_defaults(func=cmd_unwarp)
+
+    p = sub.add_parser("info", help="print a calibration file",
+                       description="Print the mirror, K, D, the mirror posture, the best-fit "
+                       "viewpoint and its RMS distance to the rays.")
+    p.add_argument("calibration", metavar="CALIB")
+    p.set_defaults(func=cmd_info)
+
+    p = sub.add_parser("demo", help="the whole pipeline on built-in synthetic data",
+                       description="Render a misaligned rig, calibrate it from the rendered "
+                       "image, compare with the truth, and write the calibration, the mirror "
+                       "image, the overlay, a panorama and a perspective view. The demo's own "
+                       "files in OUTDIR are replaced.")
+    p.add_argument("-o", "--output", default="omnicam-demo", metavar="OUTDIR",
+                   help="folder for the results (default ./omnicam-demo)")
+    p.set_defaults(func=cmd_demo)
+    return parser
+
+
+def main(argv=None) -> int:
+    """Run the ``omnicam`` command line; return the exit status."""
+    # OpenCV's and FFmpeg's own log lines are not for the user: our errors say it in one line.
+    # (FFmpeg reads its level when the first capture opens, so this works after import cv2.)
+    os.environ.setdefault("OPENCV_FFMPEG_LOGLEVEL", "-8")
+    os.environ.setdefault("OPENCV_LOG_LEVEL", "SILENT")
+    with contextlib.suppress(Exception):
+        cv2.utils.logging.setLogLevel(cv2.utils.logging.LOG_LEVEL_SILENT)
+    try:
+        args = build_parser().parse_args(argv)
+        return args.func(args) or EXIT_OK
+    except CliError as e:
+        _error(str(e))
+        return e.status
+    except SystemExit as e:  # --help, --version
+        return e.code if isinstance(e.code, int) else EXIT_OK
+    except KeyboardInterrupt:
+        _error("interrupted")
+        return EXIT_INTERRUPTED
+    except Exception as e:  # a bug: still one line, unless asked for the traceback
+        if os.environ.get("OMNICAM_DEBUG"):
+            raise
+        _error(f"unexpected {type(e).__name__}: {_one_line(e)} (set OMNICAM_DEBUG=1 for the traceback)")
+        return EXIT_FAILURE
+
+
+def _one_line(e):
+    text = " ".join(str(e).split())
+    return text or type(e).__name__
+
+
+def _error(message):
+    print(f"{PROG}: error: {_one_line(message)}", file=sys.stderr, flush=True)
+
+
+def _warn(message):
+    print(f"{PROG}: warning: {_one_line(message)}", file=sys.stderr, flush=True)
+
+
+# -- files ------------------------------------------------------------------------------------
+def _load_camera(path):
+    from .camera import MisalignedHyperbolicCamera
+    try:
+        return MisalignedHyperbolicCamera.load(path)
+    except (FileNotFoundError, ValueError) as e:
+        raise CliError(_one_line(e)) from None
+
+
+def _check_output(path, overwrite, what="output"):
+    """Refuse an output we must not or cannot write, before doing any work."""
+    path = os.fspath(path)
+    folder = os.path.dirname(os.path.abspath(path))
+    if os.path.isdir(path):
+        raise CliError(f"{what} {path} is a folder")
+    if os.path.lexists(path) and not overwrite:
+        raise CliError(f"{what} {path} exists; pass --overwrite to replace it")
+    if not os.path.isdir(folder):
+        raise CliError(f"{what} {path}: folder {folder} does not exist")
+    if not os.access(folder, os.W_OK | os.X_OK):
+        raise CliError(f"{what} {path}: folder {folder} is not writable")
+
+
+def _temp_beside(path):
+    """A new empty temporary file next to ``path`` with the same extension (so the same format)."""
+    folder = os.path.dirname(os.path.abspath(path))
+    stem, ext = os.path.splitext(os.path.basename(path))
+    try:
+        fd, tmp = tempfile.mkstemp(prefix=f".{stem}.", suffix=ext, dir=folder)
+    except OSError as e:
+        raise CliError(f"cannot write in {folder}: {e.strerror or e}") from None
+    os.close(fd)
+    return tmp
+
+
+def _remove_quietly(path):
+    with contextlib.suppress(OSError):
+        os.remove(path)
+
+
+def _publish(tmp, path, overwrite):
+    """Rename the finished temporary file to ``path`` (never replacing a file without overwrite)."""
+    if not overwrite and os.path.lexists(path):
+        _remove_quietly(tmp)
+        raise CliError(f"output {path} appeared while writing; pass --overwrite to replace it")
+    try:
+        os.replace(tmp, path)
+    except OSError as e:
+        _remove_quietly(tmp)
+        raise CliError(f"cannot write {path}: {e.strerror or e}") from None
+
+
+def _write_image(path, image, overwrite=True):
+    """``cv2.imwrite`` through a temporary file renamed into place."""
+    path = os.fspath(path)
+    if not cv2.haveImageWriter(path):
+        raise CliError(f"output {path}: no image writer for extension "
+                       f"{os.path.splitext(path)[1] or '(none)'!r}; use .png, .jpg, .tif, ...")
+    tmp = _temp_beside(path)
+    try:
+        ok = cv2.imwrite(tmp, image)
+    except cv2.error as e:
+        ok = False
+        detail = _cv_message(e)
+    else:
+        detail = "cv2.imwrite failed"
+    if not ok:
+        _remove_quietly(tmp)
+        raise CliError(f"cannot write {path}: {detail}")
+    _publish(tmp, path, overwrite)
+
+
+def _cv_message(e):
+    """The useful part of a ``cv2.error`` message."""
+    lines = [ln for ln in str(e).splitlines() if ln.strip()]
+    text = lines[-1] if lines else str(e)
+    return re.sub(r"^.*?error: \(-?\d+:[^)]*\)\s*", "", text).strip() or text
+
+
+def _read_image(path, flags=cv2.IMREAD_UNCHANGED):
+    if not os.path.isfile(path):
+        raise CliError(f"image {path} does not exist" if not os.path.exists(path)
+                       else f"image {path} is not a file")
+    try:
+        image = cv2.imread(path, flags)
+    except cv2.error as e:
+        raise CliError(f"cannot read image {path}: {_cv_message(e)}") from None
+    if image is None or image.size == 0:
+        raise CliError(f"cannot read image {path}: not an image format OpenCV reads")
+    return image
+
+
+# -- calibrate --------------------------------------------------------------------------------
+def _fs_node(fs, names):
+    for name in names:
+        node = fs.getNode(name)
+        if not node.empty() and not node.isNone():
+            return name, node
+    return None, None
+
+
+def read_intrinsics(path):
+    """Read ``K``, ``D`` and ``image_size`` from a ``cv2.FileStorage`` file.
+
+    Fields: the camera matrix ``K`` (or ``camera_matrix``, ``cameraMatrix``), optional
+    distortion ``D`` (or ``dist_coeffs``, ``distortion_coefficients``, ``distCoeffs``; all zeros
+    means none), optional ``image_size`` as ``[w, h]`` (or ``image_width`` and ``image_height``).
+    These are the names ``fs.write`` users of ``cv2.calibrateCamera`` and OpenCV's calibration
+    sample use, and those of omnicam's own files.
+
+    Returns
+    -------
+    K : (3, 3) float64 ndarray
+    D : float64 ndarray or None
+    image_size : (int, int) or None
+    """
+    from .camera import validate_D, validate_image_size, validate_K
+
+    if not os.path.isfile(path):
+        raise CliError(f"intrinsics file {path} does not exist")
+    try:
+        fs = cv2.FileStorage(path, cv2.FILE_STORAGE_READ)
+        opened = fs.isOpened()
+    except (cv2.error, SystemError):
+        opened = False
+    if not opened:
+        raise CliError(f"intrinsics file {path}: not a readable OpenCV FileStorage file "
+                       f"(yaml, yml, xml or json)")
+
+    def fail(field, what):
+        return CliError(f"intrinsics file {path}: field {field!r} {what}")
+
+    def matrix(names, required):
+        name, node = _fs_node(fs, names)
+        if node is None:
+            if required:
+                raise fail(names[0], f"is missing (also looked for {', '.join(names[1:])})")
+            return None, None
+        try:
+            mat = node.mat() if node.isMap() else None
+        except cv2.error:
+            mat = None
+        if mat is None and node.isSeq():  # a plain list of numbers
+            try:
+                mat = np.array([node.at(i).real() for i in range(node.size())])
+            except cv2.error:
+                mat = None
+        if mat is None:
+            raise fail(name, "must be an OpenCV matrix (!!opencv-matrix) or a list of numbers")
+        return name, np.asarray(mat, dtype=np.float64)
+
+    try:
+        name, K = matrix(K_FIELDS, True)
+        try:
+            K = validate_K(K.reshape(3, 3) if K.size == 9 else K)
+        except ValueError as e:
+            raise fail(name, f"is not a camera matrix: {e}") from None
+        name, D = matrix(D_FIELDS, False)
+        if D is not None:
+            try:
+                D = validate_D(D)
+            except ValueError as e:
+                raise fail(name, f"is not a distortion vector: {e}") from None
+            if not np.any(D):
+                D = None
+        size = None
+        name, node = _fs_node(fs, ("image_size",))
+        if node is not None:
+            try:
+                if node.isSeq():
+                    values = [node.at(i).real() for i in range(node.size())]
+                else:
+                    values = np.asarray(node.mat()).ravel().tolist()
+                size = validate_image_size(values)
+            except (ValueError, TypeError, cv2.error):
+                raise fail("image_size", "must be [width, height], two positive integers") from None
+        else:
+            _, wn = _fs_node(fs, ("image_width",))
+            _, hn = _fs_node(fs, ("image_height",))
+            if wn is not None and hn is not None:
+                try:
+                    size = validate_image_size((wn.real(), hn.real()))
+                except ValueError:
+                    raise fail("image_width", "and 'image_height' must be positive integers") from None
+    except cv2.error as e:
+        raise CliError(f"intrinsics file {path}: malformed ({_cv_message(e)})") from None
+    finally:
+        fs.release()
+    return K, D, size
+
+
+def scale_K(K, from_size, to_size):
+    """``K`` of the same sensor at another resolution (pixel centres at integers)."""
+    sx = to_size[0] / from_size[0]
+    sy = to_size[1] / from_size[1]
+    S = np.array([[sx, 0.0, 0.5 * (sx - 1.0)], [0.0, sy, 0.5 * (sy - 1.0)], [0.0, 0.0, 1.0]])
+    return S @ K
+
+
+def read_far_lines(path):
+    """LINES.json -> list of ``(N, 2)`` float64 arrays (each line at least 2 points)."""
+    if not os.path.isfile(path):
+        raise CliError(f"far-lines file {path} does not exist")
+    try:
+        with open(path, encoding="utf-8") as f:
+            data = json.load(f)
+    except json.JSONDecodeError as e:
+        raise CliError(f"far-lines file {path}: not valid JSON ({e})") from None
+    except (OSError, UnicodeDecodeError) as e:
+        raise CliError(f"far-lines file {path}: cannot read ({e})") from None
+    expected = "a list of lines, each a list of [x, y] pixels"
+    if not isinstance(data, list) or not data:
+        raise CliError(f"far-lines file {path}: expected {expected}")
+    lines = []
+    for i, line in enumerate(data):
+        ok = isinstance(line, list) and len(line) >= 2 and all(
+            isinstance(p, list) and len(p) == 2
+            and all(isinstance(v, (int, float)) and not isinstance(v, bool) for v in p)
+            for p in line)
+        if not ok:
+            raise CliError(f"far-lines file {path}: line {i} must be a list of at least 2 "
+                           f"[x, y] pixels ({expected})")
+        arr = np.array(line, dtype=np.float64)
+        if not np.isfinite(arr).all():
+            raise CliError(f"far-lines file {path}: line {i} has non-finite coordinates")
+        lines.append(arr)
+    return lines
+
+
+def cmd_calibrate(args):
+    from .camera import MisalignedHyperbolicCamera
+    from .io import SUFFIXES
+    from .mirror import HyperbolicMirror
+
+    calib = args.output
+    if os.path.splitext(calib)[1].lower() not in SUFFIXES:
+        raise CliError(f"calibration file {calib}: extension must be one of {', '.join(SUFFIXES)}")
+    overlay = args.overlay or _overlay_path(calib)
+    _check_output(calib, args.overwrite, "calibration file")
+    _check_output(overlay, args.overwrite, "overlay")
+    if not cv2.haveImageWriter(overlay):
+        raise CliError(f"overlay {overlay}: no image writer for its extension; use .png or .jpg")
+    try:
+        mirror = HyperbolicMirror(*args.mirror)
+    except ValueError as e:
+        raise CliError(f"--mirror: {e}") from None
+    K, D, size = read_intrinsics(args.intrinsics)
+    far_lines = read_far_lines(args.far_lines) if args.far_lines else None
+    image = _read_image(args.image, cv2.IMREAD_COLOR | cv2.IMREAD_IGNORE_ORIENTATION)
+    image_size = (image.shape[1], image.shape[0])
+    if size is not None and size != image_size:
+        _warn(f"intrinsics are for {size[0]}x{size[1]}, image is {image_size[0]}x{image_size[1]}: "
+              f"K rescaled")
+        K = scale_K(K, size, image_size)
+
+    try:
+        camera, report = MisalignedHyperbolicCamera.calibrate(
+            K, mirror, image=image, far_lines=far_lines, D=D, image_size=image_size,
+            refine=args.refine)
+    except (ValueError, RuntimeError, np.linalg.LinAlgError) as e:
+        raise CliError(f"calibration failed: {_one_line(e)}") from None
+    print(_report_text(report), flush=True)
+    _write_image(overlay, report.draw(image), args.overwrite)
+    _save_camera(camera, calib, args.overwrite)
+    print(f"wrote {calib} and {overlay}")
+    return EXIT_OK
+
+
+def _overlay_path(calib):
+    stem = os.path.splitext(os.path.basename(calib))[0]
+    return os.path.join(os.path.dirname(calib), f"{stem}_overlay.png")
+
+
+def _report_text(report):
+    summary = getattr(report, "summary", None)
+    return str(summary() if callable(summary) else summary if summary is not None else report)
+
+
+def _save_camera(camera, path, overwrite):
+    if not overwrite and os.path.lexists(path):
+        raise CliError(f"calibration file {path} exists; pass --overwrite to replace it")
+    try:
+        camera.save(path)
+    except (ValueError, OSError) as e:
+        raise CliError(f"cannot write {path}: {_one_line(e)}") from None
+
+
+# -- info -------------------------------------------------------------------------------------
+def posture(camera):
+    """Readable posture: tilt of the mirror axis and camera offset from the lower focus.
+
+    Returns
+    -------
+    tilt_deg : float
+        Angle between the camera's optical axis and the mirror axis.
+    tilt_azimuth_deg : float
+        Direction of the tilt in the camera's x-y plane (``atan2`` of the axis' y and x).
+    offset : (3,) float64 ndarray
+        Camera centre minus the lower focus ``(0, 0, -c)``, mirror frame (mm).
+    """
+    axis = camera.R[:, 2]  # the mirror's +Z in the camera frame
+    tilt = math.degrees(math.atan2(math.hypot(axis[0], axis[1]), axis[2]))
+    azimuth = math.degrees(math.atan2(axis[1], axis[0])) if tilt > 0 else 0.0
+    offset = np.asarray(camera.camera_center) - np.array([0.0, 0.0, -camera.mirror.c])
+    return tilt, azimuth, offset
+
+
+def _vec(v, fmt="{:.4f}"):
+    return "(" + ", ".join(fmt.format(float(x)) for x in np.ravel(v)) + ")"
+
+
+def describe_camera(camera):
+    """Multi-line text of a calibration: mirror, K, D, posture, best-fit viewpoint."""
+    m = camera.mirror
+    K = camera.K
+    tilt, az, offset = posture(camera)
+    viewpoint, rms = camera.best_fit_viewpoint()
+    size = camera.image_size
+    rows = [
+        ("mirror", f"a = {m.a:g} mm, b = {m.b:g} mm, rim radius = {m.rim_radius:g} mm "
+                   f"(c = {m.c:.4f} mm, rim at Z = {m.z_rim:.4f} mm)"),
+        ("image size", "unknown" if size is None else f"{size[0]} x {size[1]}"),
+        ("K", f"fx = {K[0, 0]:.4f}, fy = {K[1, 1]:.4f}, cx = {K[0, 2]:.4f}, cy = {K[1, 2]:.4f}, "
+              f"skew = {K[0, 1]:.4g}"),
+        ("D", "none" if camera.D is None else _vec(camera.D, "{:.6g}")),
+        ("rvec", _vec(camera.rvec, "{:.6f}") + "  (mirror -> camera, rad)"),
+        ("tvec", _vec(camera.tvec) + "  (mm)"),
+        ("axis tilt", f"{tilt:.4f} deg, towards {az:.2f} deg in the camera's x-y plane"),
+        ("camera offset", f"{_vec(offset)} mm from the lower focus (mirror frame), "
+                          f"|offset| = {np.linalg.norm(offset):.4f} mm"),
+        ("viewpoint", f"{_vec(viewpoint)} mm, best fit to all mirror rays (mirror frame; "
+                      f"the outer focus is (0, 0, {m.c:.4f}))"),
+        ("viewpoint RMS", f"{rms:.4f} mm (RMS distance from the rays; 0 for a central rig)"),
+    ]
+    width = max(len(k) for k, _ in rows)
+    return "\n".join(f"{k:<{width}}  {v}" for k, v in rows)
+
+
+def cmd_info(args):
+    camera = _load_camera(args.calibration)
+    print(f"{'calibration':<13}  {args.calibration}")
+    print(describe_camera(camera))
+    return EXIT_OK
+
+
+# -- unwarp -----------------------------------------------------------------------------------
+class ViewSpec:
+    """What to unwarp to, checked against the command line once; builds tables per camera."""
+
+    def __init__(self, args):
+        if args.panorama is not None:
+            bad = [o for o, v in (("--fov", args.fov), ("--yaw", args.yaw),
+                                  ("--pitch", args.pitch), ("--roll", args.roll)) if v is not None]
+            if bad:
+                raise CliError(f"{', '.join(bad)} {'only apply' if len(bad) > 1 else 'only applies'} "
+                               f"to --perspective", EXIT_USAGE)
+            self.kind, self.size = "panorama", args.panorama
+            self.projection = args.projection or "cylindrical"
+            self.elevation = None
+            if args.elevation is not None:
+                lo, hi = args.elevation
+                if not (-90.0 <= lo < hi <= 90.0):
+                    raise CliError(f"--elevation: need -90 <= LO < HI <= 90 degrees, "
+                                   f"got {lo:g} {hi:g}", EXIT_USAGE)
+                self.elevation = (lo, hi)
+        else:
+            bad = [o for o, v in (("--elevation", args.elevation),
+                                  ("--projection", args.projection)) if v is not None]
+            if bad:
+                raise CliError(f"{', '.join(bad)} {'only apply' if len(bad) > 1 else 'only applies'} "
+                               f"to --panorama", EXIT_USAGE)
+            if args.fov is None:
+                raise CliError("--perspective needs --fov DEG (horizontal field of view)",
+                               EXIT_USAGE)
+            if not 0.0 < args.fov < 180.0:
+                raise CliError(f"--fov must be between 0 and 180 degrees, got {args.fov:g}",
+                               EXIT_USAGE)
+            self.kind, self.size, self.fov = "perspective", args.perspective, args.fov
+            self.ypr = (args.yaw or 0.0, args.pitch or 0.0, args.roll or 0.0)
+        self.depth = args.depth
+
+    def maps(self, camera, m1type=cv2.CV_16SC2):
+        """``(map1, map2)`` for ``cv2.remap`` of this view of ``camera``."""
+        try:
+            if self.kind == "panorama":
+                return camera.init_panorama_maps(self.size, elevation_range=self.elevation,
+                                                 projection=self.projection, m1type=m1type,
+                                                 depth=self.depth)
+            from .views import K_from_fov, rotation_from_ypr
+            return camera.init_perspective_maps(K_from_fov(self.fov, self.size), self.size,
+                                                R=rotation_from_ypr(*self.ypr), m1type=m1type,
+                                                depth=self.depth)
+        except ValueError as e:
+            raise CliError(f"cannot build the {self.kind} view: {_one_line(e)}") from None
+
+
+def _camera_for(camera, frame_size):
+    if camera.image_size is None or camera.image_size == frame_size:
+        return camera
+    return camera.scaled(frame_size)
+
+
+def _is_device_or_url(spec):
+    return spec.isdigit() or "://" in spec
+
+
+def cmd_unwarp(args):
+    view = ViewSpec(args)
+    source, output = args.input, args.output
+    if not _is_device_or_url(source):
+        if not os.path.exists(source):
+            raise CliError(f"input {source} does not exist")
+        if not os.path.isfile(source):
+            raise CliError(f"input {source} is not a file")
+        if os.path.exists(output) and os.path.samefile(source, output):
+            raise CliError(f"output {output} is the input")
+    _check_output(output, args.overwrite)
+    camera = _load_camera(args.calibration)
+
+    if not _is_device_or_url(source) and cv2.haveImageReader(source):
+        return _unwarp_image(args, view, camera)
+    return _unwarp_video(args, view, camera)
+
+
+def _unwarp_image(args, view, camera):
+    if not cv2.haveImageWriter(args.output):
+        ext = os.path.splitext(args.output)[1]
+        hint = " (the input is an image)" if ext.lower() in VIDEO_FOURCC else ""
+        raise CliError(f"output {args.output}: no image writer for extension "
+                       f"{ext or '(none)'!r}{hint}")
+    image = _read_image(args.input)
+    camera = _camera_for(camera, (image.shape[1], image.shape[0]))
+    map1, map2 = view.maps(camera)
+    out = cv2.remap(image, map1, map2, cv2.INTER_LINEAR, borderMode=cv2.BORDER_CONSTANT)
+    _write_image(args.output, out, args.overwrite)
+    if not args.quiet:
+        print(f"wrote {args.output} ({out.shape[1]}x{out.shape[0]})")
+    return EXIT_OK
+
+
+class Progress:
+    """A one-line progress bar on stderr (``\\r`` text): frames, percentage, frames per second."""
+
+    def __init__(self, total=None, stream=None, enabled=True, interval=0.25):
+        self.total = total if total and total > 0 else None
+        self.stream = stream or sys.stderr
+        self.enabled = enabled
+        self.interval = interval
+        self.start = time.perf_counter()
+        self.last = -math.inf
+        self.frames = 0
+        self.width = 0
+
+    def fps(self):
+        elapsed = time.perf_counter() - self.start
+        return self.frames / elapsed if elapsed > 0 else 0.0
+
+    def update(self, frames, force=False):
+        self.frames = frames
+        now = time.perf_counter()
+        if not self.enabled or (not force and now - self.last < self.interval):
+            return
+        self.last = now
+        if self.total:
+            bar_len = 24
+            done = min(frames / self.total, 1.0)
+            fill = int(round(done * bar_len))
+            text = (f"[{'#' * fill}{'.' * (bar_len - fill)}] {frames}/{self.total} frames "
+                    f"{100 * done:3.0f}%  {self.fps():6.1f} fps")
+        else:
+            text = f"{frames} frames  {self.fps():6.1f} fps"
+        self.stream.write("\r" + text.ljust(self.width))
+        self.width = len(text)
+        self.stream.flush()
+
+    def close(self):
+        if self.enabled:
+            self.update(self.frames, force=True)
+            self.stream.write("\n")
+            self.stream.flush()
+
+
+def _open_capture(source):
+    target = int(source) if source.isdigit() else source
+    try:
+        cap = cv2.VideoCapture(target)
+        opened = cap.isOpened()
+    except cv2.error:
+        opened = False
+    if not opened:
+        what = "camera" if source.isdigit() else "input"
+        raise CliError(f"cannot open {what} {source}: not an image or video OpenCV can read")
+    return cap
+
+
+def _unwarp_video(args, view, camera):
+    output = args.output
+    ext = os.path.splitext(output)[1].lower()
+    fourcc = args.fourcc or VIDEO_FOURCC.get(ext)
+    if fourcc is None:
+        raise CliError(f"output {output}: the input is a video; use a video extension "
+                       f"({', '.join(VIDEO_FOURCC)})")
+    cap = _open_capture(args.input)
+    try:
+        ok, frame = cap.read()
+        if not ok or frame is None:
+            raise CliError(f"cannot read a frame from {args.input}")
+        count = cap.get(cv2.CAP_PROP_FRAME_COUNT)
+        declared = int(count) if math.isfinite(count) and count > 0 else 0  # 0: unknown
+        fps = cap.get(cv2.CAP_PROP_FPS)
+        if not (math.isfinite(fps) and 0 < fps < 1000):
+            fps = 30.0
+        camera = _camera_for(camera, (frame.shape[1], frame.shape[0]))
+        unwarp = _make_unwarper(view, camera)
+        tmp = _temp_beside(output)
+        try:
+            written, stop = _stream(cap, frame, unwarp, tmp, fourcc, fps, view.size, declared,
+                                    args)
+        except BaseException:
+            _remove_quietly(tmp)
+            raise
+    finally:
+        cap.release()
+    _publish(tmp, output, args.overwrite)
+    if stop == "interrupted":
+        _warn(f"interrupted: kept the {written} frames written so far in {output}")
+        return EXIT_INTERRUPTED
+    if stop == "truncated":
+        _warn(f"input ended after {written} of its {declared} frames (truncated, or a "
+              f"frame it cannot decode); kept them in {output}")
+    elif not args.quiet:
+        print(f"wrote {output} ({written} frames, {view.size[0]}x{view.size[1]})")
+    return EXIT_OK
+
+
+def _make_unwarper(view, camera):
+    """A callable ``frame -> view image`` (tables built once, output buffer reused)."""
+    map1, map2 = view.maps(camera)
+    out = None
+
+    def unwarp(frame):
+        nonlocal out
+        out = cv2.remap(frame, map1, map2, cv2.INTER_LINEAR, dst=out,
+                        borderMode=cv2.BORDER_CONSTANT)
+        return out
+
+    return unwarp
+
+
+def _stream(cap, first, unwarp, tmp, fourcc, fps, size, declared, args):
+    """Unwarp frames into ``tmp`` until the input ends, ``--max-frames`` or Ctrl-C.
+
+    ``declared`` is the input's frame count (0 if unknown): ending before it is a truncation.
+
+    Returns ``(frames_written, how)`` with ``how`` one of ``"end"``, ``"truncated"``,
+    ``"interrupted"``; the writer is released (the file finalised) in every case.
+    """
+    try:
+        writer = cv2.VideoWriter(tmp, cv2.VideoWriter_fourcc(*fourcc), fps, size,
+                                 first.ndim == 3)
+        opened = writer.isOpened()
+    except cv2.error:
+        opened = False
+    if not opened:
+        raise CliError(f"cannot write video {args.output} with codec {fourcc} "
+                       f"(try --fourcc or another extension)")
+    total = min(declared or args.max_frames or 0, args.max_frames or declared)
+    progress = Progress(total, enabled=not args.quiet)
+    written, how = 0, "end"
+    frame = first
+    try:
+        while True:
+            writer.write(unwarp(frame))
+            written += 1
+            progress.update(written)
+            if args.max_frames and written >= args.max_frames:
+                break
+            ok, frame = cap.read()
+            if not ok or frame is None:
+                if written < declared:
+                    how = "truncated"
+                break
+    except KeyboardInterrupt:
+        how = "interrupted"
+    finally:
+        writer.release()
+        progress.close()
+    if written == 0:
+        raise CliError(f"no frame written to {args.output}")
+    return written, how
+
+
+# -- demo -------------------------------------------------------------------------------------
+def cmd_demo(args):
+    raise CliError("demo: not available yet (needs omnicam.synthetic's renderer and "
+                   "omnicam.calibration)")
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -1,0 +1,516 @@
+"""The ``omnicam`` command line, called as ``main([...])`` (py360convert style), on small inputs."""
+from __future__ import annotations
+
+import importlib.util
+import json
+import os
+import sys
+
+import cv2
+import numpy as np
+import pytest
+
+from omnicam import synthetic
+from omnicam.cli import main, read_intrinsics
+
+SIZE = (200, 200)  # frames of the small test videos and images
+
+
+def _have(module):
+    try:
+        return importlib.util.find_spec(module) is not None
+    except ModuleNotFoundError:
+        return False
+
+
+needs_views = pytest.mark.skipif(not _have("omnicam.views"), reason="omnicam.views has not landed")
+needs_calibrate = pytest.mark.skipif(
+    not hasattr(importlib.import_module("omnicam.calibration"), "calibrate")
+    or not hasattr(synthetic, "render_room"),
+    reason="omnicam.calibration.calibrate or omnicam.synthetic.render_room has not landed")
+
+
+# -- helpers ----------------------------------------------------------------------------------
+def frames_of(path):
+    """(count, (width, height)) of a video as OpenCV decodes it."""
+    cap = cv2.VideoCapture(str(path))
+    assert cap.isOpened(), f"{path} is not a readable video"
+    n, size = 0, None
+    while True:
+        ok, frame = cap.read()
+        if not ok:
+            break
+        n += 1
+        size = (frame.shape[1], frame.shape[0])
+    cap.release()
+    return n, size
+
+
+def test_frame(i, size=SIZE):
+    """A textured frame with a moving bright square, so frames differ and compress honestly."""
+    w, h = size
+    y, x = np.mgrid[0:h, 0:w]
+    img = np.stack([(x * 255 // w), (y * 255 // h), np.full_like(x, 40 * (i % 6))], axis=-1)
+    img = img.astype(np.uint8)
+    s = 10 * i % (w - 20)
+    img[s:s + 20, s:s + 20] = 255
+    return img
+
+
+test_frame.__test__ = False  # a helper, not a test
+
+
+def write_video(path, n, size=SIZE, fps=10):
+    writer = cv2.VideoWriter(str(path), cv2.VideoWriter_fourcc(*"MJPG"), fps, size)
+    assert writer.isOpened()
+    for i in range(n):
+        writer.write(test_frame(i, size))
+    writer.release()
+    return path
+
+
+def one_error_line(err):
+    """The stderr of a failed command: exactly one line, ours."""
+    lines = [ln for ln in err.splitlines() if ln.strip()]
+    assert len(lines) == 1, err
+    assert lines[0].startswith("omnicam: error: "), err
+    assert "Traceback" not in err
+    return lines[0]
+
+
+def leftovers(folder):
+    """Temporary files the CLI may have left behind."""
+    return sorted(p.name for p in folder.iterdir() if p.name.startswith("."))
+
+
+# -- fixtures ---------------------------------------------------------------------------------
+@pytest.fixture(scope="module")
+def rig():
+    return synthetic.misaligned_rig(image_size=SIZE)
+
+
+@pytest.fixture(scope="module")
+def data(tmp_path_factory, rig):
+    """A calibration file, a 10-frame MJPG video and a PNG image, all 200x200."""
+    folder = tmp_path_factory.mktemp("cli-data")
+    calib = folder / "rig.yaml"
+    rig.save(calib)
+    video = write_video(folder / "clip.avi", 10)
+    image = folder / "frame.png"
+    cv2.imwrite(str(image), test_frame(3))
+    return {"calib": calib, "video": video, "image": image, "folder": folder}
+
+
+# -- unwarp -----------------------------------------------------------------------------------
+@needs_views
+def test_unwarp_video_panorama_keeps_frame_count_and_size(data, tmp_path, capsys):
+    out = tmp_path / "pano.avi"
+    code = main(["unwarp", str(data["video"]), "-c", str(data["calib"]), "--panorama", "96x24",
+                 "-o", str(out)])
+    captured = capsys.readouterr()
+    assert code == 0, captured.err
+    assert frames_of(out) == (10, (96, 24))
+    assert "fps" in captured.err and "10/10" in captured.err  # the progress bar
+    assert leftovers(tmp_path) == []
+
+
+@needs_views
+def test_unwarp_video_perspective_keeps_frame_count_and_size(data, tmp_path, capsys):
+    out = tmp_path / "view.avi"
+    code = main(["unwarp", str(data["video"]), "-c", str(data["calib"]), "--perspective", "48x32",
+                 "--fov", "90", "--yaw", "30", "--pitch", "-10", "--roll", "5", "--quiet",
+                 "-o", str(out)])
+    assert code == 0, capsys.readouterr().err
+    assert frames_of(out) == (10, (48, 32))
+
+
+@needs_views
+def test_unwarp_video_max_frames(data, tmp_path, capsys):
+    out = tmp_path / "short.avi"
+    code = main(["unwarp", str(data["video"]), "-c", str(data["calib"]), "--panorama", "64x16",
+                 "--max-frames", "3", "-o", str(out)])
+    assert code == 0, capsys.readouterr().err
+    assert frames_of(out) == (3, (64, 16))
+
+
+@needs_views
+def test_unwarp_image_is_cv2_remap_with_the_calibration_tables(data, rig, tmp_path, capsys):
+    out = tmp_path / "pano.png"
+    code = main(["unwarp", str(data["image"]), "-c", str(data["calib"]), "--panorama", "120x30",
+                 "--elevation", "-60", "10", "--projection", "equirectangular", "-o", str(out)])
+    assert code == 0, capsys.readouterr().err
+    got = cv2.imread(str(out))
+    m1, m2 = rig.init_panorama_maps((120, 30), elevation_range=(-60, 10),
+                                    projection="equirectangular")
+    expected = cv2.remap(cv2.imread(str(data["image"])), m1, m2, cv2.INTER_LINEAR)
+    assert got.shape == (30, 120, 3)
+    np.testing.assert_array_equal(got, expected)
+
+
+@needs_views
+def test_unwarp_image_with_depth_builds_finite_depth_tables(data, rig, tmp_path, capsys):
+    out = tmp_path / "near.png"
+    code = main(["unwarp", str(data["image"]), "-c", str(data["calib"]), "--perspective", "40x30",
+                 "--fov", "70", "--depth", "500", "-o", str(out)])
+    assert code == 0, capsys.readouterr().err
+    from omnicam.views import K_from_fov, rotation_from_ypr
+    m1, m2 = rig.init_perspective_maps(K_from_fov(70, (40, 30)), (40, 30),
+                                       R=rotation_from_ypr(0, 0, 0), depth=500.0)
+    expected = cv2.remap(cv2.imread(str(data["image"])), m1, m2, cv2.INTER_LINEAR)
+    np.testing.assert_array_equal(cv2.imread(str(out)), expected)
+
+
+@needs_views
+def test_unwarp_scales_the_calibration_to_the_frame_size(rig, tmp_path, capsys):
+    calib = tmp_path / "big.yaml"
+    rig.scaled((400, 400)).save(calib)  # calibrated at twice the resolution of the frames
+    image = tmp_path / "small.png"
+    cv2.imwrite(str(image), test_frame(1))
+    out = tmp_path / "pano.png"
+    code = main(["unwarp", str(image), "-c", str(calib), "--panorama", "80x20", "-o", str(out)])
+    assert code == 0, capsys.readouterr().err
+    m1, m2 = rig.scaled((400, 400)).scaled(SIZE).init_panorama_maps((80, 20))
+    expected = cv2.remap(test_frame(1), m1, m2, cv2.INTER_LINEAR)
+    np.testing.assert_array_equal(cv2.imread(str(out)), expected)
+
+
+@needs_views
+@pytest.mark.parametrize("kind", ["image", "video"])
+def test_existing_output_is_replaced_only_with_overwrite(data, tmp_path, capsys, kind):
+    out = tmp_path / ("out.png" if kind == "image" else "out.avi")
+    out.write_bytes(b"precious")
+    argv = ["unwarp", str(data[kind]), "-c", str(data["calib"]), "--panorama", "64x16",
+            "-o", str(out)]
+    assert main(argv) != 0
+    line = one_error_line(capsys.readouterr().err)
+    assert "exists" in line and "--overwrite" in line
+    assert out.read_bytes() == b"precious"
+
+    assert main(argv + ["--overwrite"]) == 0, capsys.readouterr().err
+    if kind == "image":
+        assert cv2.imread(str(out)).shape == (16, 64, 3)
+    else:
+        assert frames_of(out) == (10, (64, 16))
+    assert leftovers(tmp_path) == []
+
+
+@needs_views
+def test_truncated_video_keeps_the_frames_so_far(data, tmp_path, capsys):
+    full = write_video(tmp_path / "full.avi", 10)
+    truncated = tmp_path / "truncated.avi"
+    raw = full.read_bytes()
+    truncated.write_bytes(raw[: len(raw) * 6 // 10])
+    n_in, _ = frames_of(truncated)
+    assert 0 < n_in < 10  # the fixture really is truncated, and OpenCV still decodes the start
+    out = tmp_path / "out.avi"
+    code = main(["unwarp", str(truncated), "-c", str(data["calib"]), "--panorama", "64x16",
+                 "-o", str(out)])
+    err = capsys.readouterr().err
+    assert code == 0, err
+    assert "warning" in err and "truncated" in err
+    assert frames_of(out) == (n_in, (64, 16))  # a valid, finalised file
+    assert leftovers(tmp_path) == []
+
+
+@needs_views
+def test_ctrl_c_keeps_the_frames_so_far(data, tmp_path, capsys, monkeypatch):
+    import omnicam.cli as cli
+
+    real_update = cli.Progress.update
+
+    def interrupt_after_4(self, frames, force=False):
+        real_update(self, frames, force)
+        if frames == 4 and not force:  # once, as the user's Ctrl-C
+            raise KeyboardInterrupt
+
+    monkeypatch.setattr(cli.Progress, "update", interrupt_after_4)
+    out = tmp_path / "out.avi"
+    code = main(["unwarp", str(data["video"]), "-c", str(data["calib"]), "--panorama", "64x16",
+                 "-o", str(out)])
+    err = capsys.readouterr().err
+    assert code == 130
+    assert "interrupted" in err and "Traceback" not in err
+    assert frames_of(out) == (4, (64, 16))
+    assert leftovers(tmp_path) == []
+
+
+# -- bad input: one line, non-zero exit, nothing written ---------------------------------------
+BAD_UNWARP = {
+    "malformed panorama size": ["--panorama", "12x"],
+    "zero panorama size": ["--panorama", "0x16"],
+    "unknown view spec": ["--cube", "64x64"],
+    "both views": ["--panorama", "64x16", "--perspective", "64x64", "--fov", "90"],
+    "no view": [],
+    "perspective without fov": ["--perspective", "64x48"],
+    "fov out of range": ["--perspective", "64x48", "--fov", "180"],
+    "elevation reversed": ["--panorama", "64x16", "--elevation", "10", "-40"],
+    "elevation with perspective": ["--perspective", "64x48", "--fov", "90", "--elevation", "-40",
+                                   "10"],
+    "fov with panorama": ["--panorama", "64x16", "--fov", "90"],
+    "unknown projection": ["--panorama", "64x16", "--projection", "fisheye"],
+    "negative depth": ["--panorama", "64x16", "--depth", "-5"],
+    "non-numeric yaw": ["--perspective", "64x48", "--fov", "90", "--yaw", "left"],
+}
+
+
+@pytest.mark.parametrize("view", BAD_UNWARP.values(), ids=BAD_UNWARP.keys())
+def test_bad_view_spec_is_one_line_and_writes_nothing(data, tmp_path, capsys, view):
+    out = tmp_path / "out.avi"
+    code = main(["unwarp", str(data["video"]), "-c", str(data["calib"]), *view, "-o", str(out)])
+    assert code == 2
+    one_error_line(capsys.readouterr().err)
+    assert list(tmp_path.iterdir()) == []
+
+
+def test_missing_calibration_file(data, tmp_path, capsys):
+    code = main(["unwarp", str(data["video"]), "-c", str(tmp_path / "nope.yaml"), "--panorama",
+                 "64x16", "-o", str(tmp_path / "out.avi")])
+    assert code == 1
+    assert "nope.yaml" in one_error_line(capsys.readouterr().err)
+    assert list(tmp_path.iterdir()) == []
+
+
+def test_malformed_calibration_file(data, tmp_path, capsys):
+    bad = tmp_path / "bad.yaml"
+    bad.write_text("%YAML:1.0\n---\nformat_version: 1\nmodel: misaligned_hyperbolic\n")
+    code = main(["unwarp", str(data["video"]), "-c", str(bad), "--panorama", "64x16",
+                 "-o", str(tmp_path / "out.avi")])
+    assert code == 1
+    assert "bad.yaml" in one_error_line(capsys.readouterr().err)
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["bad.yaml"]
+
+
+@pytest.mark.parametrize("content", [b"", b"RIFF\x00\x00\x00\x00AVI garbage" * 20],
+                         ids=["empty", "garbage"])
+def test_unreadable_video(data, tmp_path, capsys, content):
+    src = tmp_path / "broken.avi"
+    src.write_bytes(content)
+    code = main(["unwarp", str(src), "-c", str(data["calib"]), "--panorama", "64x16",
+                 "-o", str(tmp_path / "out.avi")])
+    assert code == 1
+    assert "broken.avi" in one_error_line(capsys.readouterr().err)
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["broken.avi"]
+
+
+def test_missing_input(data, tmp_path, capsys):
+    code = main(["unwarp", str(tmp_path / "nope.mp4"), "-c", str(data["calib"]), "--panorama",
+                 "64x16", "-o", str(tmp_path / "out.avi")])
+    assert code == 1
+    assert "does not exist" in one_error_line(capsys.readouterr().err)
+
+
+def test_output_folder_missing(data, tmp_path, capsys):
+    code = main(["unwarp", str(data["video"]), "-c", str(data["calib"]), "--panorama", "64x16",
+                 "-o", str(tmp_path / "no" / "such" / "out.avi")])
+    assert code == 1
+    assert "does not exist" in one_error_line(capsys.readouterr().err)
+
+
+@pytest.mark.skipif(sys.platform == "win32" or os.geteuid() == 0,
+                    reason="needs POSIX permissions as a normal user")
+def test_output_folder_not_writable(data, tmp_path, capsys):
+    folder = tmp_path / "ro"
+    folder.mkdir()
+    folder.chmod(0o500)
+    try:
+        code = main(["unwarp", str(data["video"]), "-c", str(data["calib"]), "--panorama",
+                     "64x16", "-o", str(folder / "out.avi")])
+    finally:
+        folder.chmod(0o700)
+    assert code == 1
+    assert "not writable" in one_error_line(capsys.readouterr().err)
+    assert list(folder.iterdir()) == []
+
+
+@needs_views
+@pytest.mark.parametrize("kind, name", [("image", "out.nope"), ("video", "out.png"),
+                                        ("video", "out.nope")])
+def test_output_extension_that_cannot_be_written(data, tmp_path, capsys, kind, name):
+    code = main(["unwarp", str(data[kind]), "-c", str(data["calib"]), "--panorama", "64x16",
+                 "-o", str(tmp_path / name)])
+    assert code == 1
+    assert name in one_error_line(capsys.readouterr().err)
+    assert list(tmp_path.iterdir()) == []
+
+
+def test_output_same_as_input_is_refused(data, tmp_path, capsys):
+    src = write_video(tmp_path / "clip.avi", 2)
+    before = src.read_bytes()
+    code = main(["unwarp", str(src), "-c", str(data["calib"]), "--panorama", "64x16",
+                 "-o", str(src), "--overwrite"])
+    assert code == 1
+    one_error_line(capsys.readouterr().err)
+    assert src.read_bytes() == before
+
+
+def test_no_command_and_unknown_command(capsys):
+    assert main([]) == 2
+    one_error_line(capsys.readouterr().err)
+    assert main(["explode"]) == 2
+    one_error_line(capsys.readouterr().err)
+
+
+def test_help_exits_zero(capsys):
+    assert main(["unwarp", "--help"]) == 0
+    assert "--panorama" in capsys.readouterr().out
+
+
+# -- info -------------------------------------------------------------------------------------
+def test_info_prints_mirror_intrinsics_posture_and_viewpoint(data, rig, capsys):
+    assert main(["info", str(data["calib"])]) == 0
+    out = capsys.readouterr().out
+    assert "a = 23.4 mm, b = 28.1 mm, rim radius = 30 mm" in out
+    assert f"fx = {rig.K[0, 0]:.4f}" in out
+    assert "axis tilt      3.0000 deg, towards 30.00 deg" in out
+    offset = rig.camera_center - np.array([0.0, 0.0, -rig.mirror.c])
+    assert f"|offset| = {np.linalg.norm(offset):.4f} mm" in out
+    viewpoint, rms = rig.best_fit_viewpoint()
+    assert f"{rms:.4f} mm" in out
+    assert f"{viewpoint[2]:.4f}" in out
+
+
+def test_info_of_aligned_rig_has_zero_tilt_offset_and_rms(tmp_path, capsys):
+    calib = tmp_path / "aligned.json"
+    synthetic.aligned_rig(image_size=(120, 120)).save(calib)
+    assert main(["info", str(calib)]) == 0
+    out = capsys.readouterr().out
+    assert "axis tilt      0.0000 deg" in out
+    assert "|offset| = 0.0000 mm" in out
+    assert "viewpoint RMS  0.0000 mm" in out
+
+
+def test_info_missing_file(tmp_path, capsys):
+    assert main(["info", str(tmp_path / "nope.yaml")]) == 1
+    assert "nope.yaml" in one_error_line(capsys.readouterr().err)
+
+
+# -- calibrate: inputs ------------------------------------------------------------------------
+def write_intrinsics(path, K, D=None, image_size=None, names=("K", "D")):
+    fs = cv2.FileStorage(str(path), cv2.FILE_STORAGE_WRITE)
+    fs.write(names[0], np.asarray(K, np.float64))
+    if D is not None:
+        fs.write(names[1], np.asarray(D, np.float64).reshape(1, -1))
+    if image_size is not None:
+        if names[0] == "camera_matrix":  # OpenCV's calibration sample
+            fs.write("image_width", int(image_size[0]))
+            fs.write("image_height", int(image_size[1]))
+        else:
+            fs.startWriteStruct("image_size", cv2.FileNode_SEQ)
+            for v in image_size:
+                fs.write("", int(v))
+            fs.endWriteStruct()
+    fs.release()
+    return path
+
+
+def test_read_intrinsics_accepts_our_names_and_opencv_sample_names(tmp_path, rig):
+    D = [0.01, -0.002, 0.0, 0.0, 0.0]
+    ours = write_intrinsics(tmp_path / "k.yaml", rig.K, D, (640, 480))
+    K, got_D, size = read_intrinsics(str(ours))
+    np.testing.assert_array_equal(K, rig.K)
+    np.testing.assert_array_equal(got_D, D)
+    assert size == (640, 480)
+    sample = write_intrinsics(tmp_path / "k.xml", rig.K, D, (640, 480),
+                              names=("camera_matrix", "distortion_coefficients"))
+    K, got_D, size = read_intrinsics(str(sample))
+    np.testing.assert_array_equal(K, rig.K)
+    np.testing.assert_array_equal(got_D, D)
+    assert size == (640, 480)
+    bare = write_intrinsics(tmp_path / "bare.json", rig.K, np.zeros(5))
+    assert read_intrinsics(str(bare))[1:] == (None, None)  # all-zero D is no distortion
+    rig.save(tmp_path / "calib.yaml")  # an omnicam calibration file works too
+    K, D, size = read_intrinsics(str(tmp_path / "calib.yaml"))
+    np.testing.assert_array_equal(K, rig.K)
+    assert size == rig.image_size
+
+
+@pytest.fixture()
+def calib_inputs(tmp_path, rig, data):
+    """IMAGE, K.yaml, LINES.json for the calibrate command (image: any readable picture)."""
+    k = write_intrinsics(tmp_path / "k.yaml", rig.K, image_size=SIZE)
+    lines = tmp_path / "lines.json"
+    lines.write_text(json.dumps([[[10, 20], [30, 40], [50, 55]], [[100.5, 10], [120, 12.25]]]))
+    return {"image": str(data["image"]), "k": str(k), "lines": str(lines)}
+
+
+BAD_CALIBRATE = {
+    "mirror with 2 numbers": ["--mirror", "23.4", "28.1"],
+    "negative mirror": ["--mirror", "23.4", "-28.1", "30"],
+    "missing intrinsics": ["--intrinsics", "{tmp}/nope.yaml"],
+    "intrinsics without K": ["--intrinsics", "{tmp}/empty.yaml"],
+    "intrinsics not a FileStorage": ["--intrinsics", "{tmp}/junk.yaml"],
+    "far lines not JSON": ["--far-lines", "{tmp}/junk.json"],
+    "far lines wrong shape": ["--far-lines", "{tmp}/shape.json"],
+    "missing far lines": ["--far-lines", "{tmp}/nope.json"],
+    "missing image": ["IMAGE={tmp}/nope.png"],
+    "bad calibration extension": ["-o", "{tmp}/calib.txt"],
+}
+
+
+@pytest.mark.parametrize("change", BAD_CALIBRATE.values(), ids=BAD_CALIBRATE.keys())
+def test_calibrate_bad_input_is_one_line_and_writes_nothing(calib_inputs, tmp_path, capsys,
+                                                           change):
+    (tmp_path / "empty.yaml").write_text("%YAML:1.0\n---\nD: [0, 0, 0, 0]\n")
+    (tmp_path / "junk.yaml").write_text("this: is: not: a: FileStorage\n\t-")
+    (tmp_path / "junk.json").write_text("[[1, 2], ")
+    (tmp_path / "shape.json").write_text("[[[1, 2, 3], [4, 5, 6]]]")
+    before = sorted(p.name for p in tmp_path.iterdir())
+    opts = {"--mirror": ["23.4", "28.1", "30"], "--intrinsics": [calib_inputs["k"]],
+            "--far-lines": [calib_inputs["lines"]], "-o": [str(tmp_path / "calib.yaml")]}
+    image = calib_inputs["image"]
+    change = [c.format(tmp=tmp_path) for c in change]
+    if change[0].startswith("IMAGE="):
+        image = change[0][len("IMAGE="):]
+    else:
+        opts[change[0]] = change[1:]
+    argv = ["calibrate", image] + [x for k, v in opts.items() for x in (k, *v)]
+    code = main(argv)
+    assert code != 0
+    one_error_line(capsys.readouterr().err)
+    assert sorted(p.name for p in tmp_path.iterdir()) == before
+
+
+def test_calibrate_refuses_existing_output_without_overwrite(calib_inputs, tmp_path, capsys):
+    calib = tmp_path / "calib.yaml"
+    calib.write_text("precious")
+    code = main(["calibrate", calib_inputs["image"], "--mirror", "23.4", "28.1", "30",
+                 "--intrinsics", calib_inputs["k"], "-o", str(calib)])
+    assert code == 1
+    assert "--overwrite" in one_error_line(capsys.readouterr().err)
+    assert calib.read_text() == "precious"
+
+
+# -- calibrate and demo: the whole pipeline ---------------------------------------------------
+@needs_calibrate
+def test_calibrate_writes_calibration_and_overlay(tmp_path, capsys):
+    truth = synthetic.misaligned_rig(image_size=(300, 300))
+    image = tmp_path / "mirror.png"
+    cv2.imwrite(str(image), synthetic.render_room(truth))
+    k = write_intrinsics(tmp_path / "k.yaml", truth.K, image_size=truth.image_size)
+    calib = tmp_path / "calib.yaml"
+    code = main(["calibrate", str(image), "--mirror", "23.4", "28.1", "30", "--intrinsics",
+                 str(k), "-o", str(calib)])
+    captured = capsys.readouterr()
+    assert code == 0, captured.err
+    assert captured.out.strip()
+    assert (tmp_path / "calib_overlay.png").is_file()
+    from omnicam import MisalignedHyperbolicCamera
+    cam = MisalignedHyperbolicCamera.load(calib)
+    assert cam.image_size == (300, 300)
+    tilt = np.degrees(np.arccos(np.clip(cam.R[:, 2] @ truth.R[:, 2], -1, 1)))
+    assert tilt < 1.0
+
+
+@pytest.mark.slow
+@needs_calibrate
+def test_demo_writes_every_output(tmp_path, capsys):
+    out = tmp_path / "demo"
+    code = main(["demo", "-o", str(out)])
+    captured = capsys.readouterr()
+    assert code == 0, captured.err
+    names = sorted(p.name for p in out.iterdir())
+    for expected in ("calibration.yaml", "mirror.png", "overlay.png", "panorama.png",
+                     "perspective.png"):
+        assert expected in names
+    assert "posture error" in captured.out
+    assert main(["info", str(out / "calibration.yaml")]) == 0
