@@ -21,6 +21,7 @@ _LAZY = {
     "rotation_from_ypr": "omnicam.views",
     "K_from_fov": "omnicam.views",
     "synthetic": "omnicam.synthetic",
+    "samples": "omnicam.samples",
 }
 
 __all__ = ["HyperbolicMirror", "MisalignedHyperbolicCamera", *_LAZY]
