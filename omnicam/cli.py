@@ -441,7 +441,7 @@ def scale_K(K, from_size, to_size):
 
 
 def read_far_lines(path):
-    """LINES.json -> list of ``(N, 2)`` float64 arrays (each line at least 2 points)."""
+    """LINES.json -> list of ``(N, 2)`` float64 arrays (each line at least 3 points)."""
     if not os.path.isfile(path):
         raise CliError(f"far-lines file {path} does not exist")
     try:
@@ -456,12 +456,12 @@ def read_far_lines(path):
         raise CliError(f"far-lines file {path}: expected {expected}")
     lines = []
     for i, line in enumerate(data):
-        ok = isinstance(line, list) and len(line) >= 2 and all(
+        ok = isinstance(line, list) and len(line) >= 3 and all(
             isinstance(p, list) and len(p) == 2
             and all(isinstance(v, (int, float)) and not isinstance(v, bool) for v in p)
             for p in line)
         if not ok:
-            raise CliError(f"far-lines file {path}: line {i} must be a list of at least 2 "
+            raise CliError(f"far-lines file {path}: line {i} must be a list of at least 3 "
                            f"[x, y] pixels ({expected})")
         arr = np.array(line, dtype=np.float64)
         if not np.isfinite(arr).all():
@@ -500,7 +500,7 @@ def cmd_calibrate(args):
         camera, report = MisalignedHyperbolicCamera.calibrate(
             K, mirror, image=image, far_lines=far_lines, D=D, image_size=image_size,
             refine=args.refine)
-    except (ValueError, RuntimeError, np.linalg.LinAlgError) as e:
+    except (ValueError, RuntimeError, NotImplementedError, np.linalg.LinAlgError) as e:
         raise CliError(f"calibration failed: {_one_line(e)}") from None
     print(_report_text(report), flush=True)
     _write_image(overlay, report.draw(image), args.overwrite)
@@ -602,7 +602,10 @@ class ViewSpec:
             self.elevation = None
             if args.elevation is not None:
                 lo, hi = args.elevation
-                if not (-90.0 <= lo < hi <= 90.0):
+                if self.projection == "cylindrical" and not -90.0 < lo < hi < 90.0:
+                    raise CliError(f"--elevation: a cylindrical panorama needs "
+                                   f"-90 < LO < HI < 90 degrees, got {lo:g} {hi:g}", EXIT_USAGE)
+                if not -90.0 <= lo < hi <= 90.0:
                     raise CliError(f"--elevation: need -90 <= LO < HI <= 90 degrees, "
                                    f"got {lo:g} {hi:g}", EXIT_USAGE)
                 self.elevation = (lo, hi)
@@ -834,10 +837,138 @@ def _stream(cap, first, unwarp, tmp, fourcc, fps, size, declared, args):
 
 
 # -- demo -------------------------------------------------------------------------------------
-def cmd_demo(args):
-    raise CliError("demo: not available yet (needs omnicam.synthetic's renderer and "
-                   "omnicam.calibration)")
+DEMO_POLES_DEG = (0.0, 120.0, 240.0)  # azimuths of the far vertical poles used as far lines
+DEMO_CLICK_NOISE_PX = 0.2              # as if a user had clicked along them
 
+
+def demo_far_lines(camera, azimuths_deg=DEMO_POLES_DEG, elevations_deg=(-70.0, 5.0), n=30,
+                   noise_px=DEMO_CLICK_NOISE_PX, seed=0):
+    """Pixels along the images of far vertical lines (great circles through the zenith).
+
+    The vertical poles of :func:`omnicam.synthetic.make_environment` stand at every 30 deg of
+    azimuth; these are the pixels of the poles at ``azimuths_deg`` between ``elevations_deg``,
+    projected exactly by ``camera`` (directions at infinity), plus seeded Gaussian click noise.
+    """
+    rng = np.random.default_rng(seed)
+    el = np.radians(np.linspace(*elevations_deg, n))
+    lines = []
+    for az in np.radians(azimuths_deg):
+        dirs = np.stack([np.cos(el) * math.cos(az), np.cos(el) * math.sin(az), np.sin(el)], axis=1)
+        px = camera.project_directions(dirs)
+        px = px[np.isfinite(px).all(axis=1)]
+        lines.append(px + rng.normal(scale=noise_px, size=px.shape))
+    return lines
+
+
+def _table_rms(cam_a, cam_b, size):
+    """RMS distance (px) between two cameras' float panorama tables where both see the mirror."""
+    from .views import UNSEEN
+    a = cam_a.init_panorama_maps(size, m1type=cv2.CV_32FC2)[0]
+    b = cam_b.init_panorama_maps(size, m1type=cv2.CV_32FC2)[0]
+    ok = (a[..., 0] != UNSEEN) & (b[..., 0] != UNSEEN)
+    d = (a - b)[ok]
+    return float(np.sqrt(np.mean(np.sum(d * d, axis=-1)))) if d.size else float("nan")
+
+
+def cmd_demo(args):
+    from . import synthetic
+    from .camera import MisalignedHyperbolicCamera
+
+    t_start = time.perf_counter()
+    out = args.output
+    if os.path.exists(out) and not os.path.isdir(out):
+        raise CliError(f"output folder {out} is a file")
+    try:
+        os.makedirs(out, exist_ok=True)
+    except OSError as e:
+        raise CliError(f"cannot create output folder {out}: {e.strerror or e}") from None
+    if not os.access(out, os.W_OK | os.X_OK):
+        raise CliError(f"output folder {out} is not writable")
+
+    def path(name):
+        return os.path.join(out, name)
+
+    truth = synthetic.misaligned_rig()
+    m = truth.mirror
+    print(f"1. a misaligned rig: mirror a = {m.a:g}, b = {m.b:g}, rim {m.rim_radius:g} mm, "
+          f"{truth.image_size[0]}x{truth.image_size[1]} camera; the truth:")
+    tilt, az, offset = posture(truth)
+    print(f"   axis tilt {tilt:.3f} deg towards {az:.1f} deg, camera offset {_vec(offset, '{:.3f}')}"
+          f" mm from the lower focus")
+    image = synthetic.render_environment(truth, supersample=2)
+    _write_image(path("mirror.png"), image)
+    _write_intrinsics(path("intrinsics.yaml"), truth.K, truth.image_size)
+    lines = demo_far_lines(truth)
+    with open(path("far_lines.json"), "w", encoding="utf-8") as f:
+        json.dump([np.round(line, 2).tolist() for line in lines], f)
+    print(f"2. rendered what it sees ({path('mirror.png')}); {len(lines)} far vertical lines "
+          f"clicked along the poles ({path('far_lines.json')})")
+
+    print("3. calibration from that image (rim ellipse, Chen's method, far-line selection):")
+    try:
+        camera, report = MisalignedHyperbolicCamera.calibrate(
+            truth.K, m, image=image, far_lines=lines, image_size=truth.image_size)
+    except (ValueError, RuntimeError, NotImplementedError, np.linalg.LinAlgError) as e:
+        raise CliError(f"demo: calibration failed: {_one_line(e)}") from None
+    print(_indent(_report_text(report)))
+    _write_image(path("overlay.png"), report.draw(image))
+    _save_camera(camera, path("calibration.yaml"), overwrite=True)
+
+    e_tilt, e_az, e_offset = posture(camera)
+    axis_error = math.degrees(math.acos(float(np.clip(camera.R[:, 2] @ truth.R[:, 2], -1, 1))))
+    baseline = MisalignedHyperbolicCamera.aligned(m, truth.K[0, 0], truth.K[0, 2], truth.K[1, 2],
+                                                  truth.image_size)
+    pano_size = (1024, 256)
+    print("4. posture error vs the truth:")
+    print(f"   axis tilt      {e_tilt:.3f} deg (true {tilt:.3f}); axis direction off by "
+          f"{axis_error:.3f} deg")
+    print(f"   camera offset  {_vec(e_offset, '{:.3f}')} mm (true {_vec(offset, '{:.3f}')}); off by "
+          f"{np.linalg.norm(e_offset - offset):.3f} mm")
+    print(f"   panorama tables vs the true rig's, RMS: calibrated "
+          f"{_table_rms(camera, truth, (256, 64)):.2f} px, uncalibrated aligned model (eqs. 2-5) "
+          f"{_table_rms(baseline, truth, (256, 64)):.2f} px")
+
+    from .views import K_from_fov, rotation_from_ypr
+    views = {
+        "panorama.png": camera.init_panorama_maps(pano_size),
+        "panorama_uncalibrated.png": baseline.init_panorama_maps(pano_size),
+        "perspective.png": camera.init_perspective_maps(
+            K_from_fov(90.0, (640, 480)), (640, 480), R=rotation_from_ypr(0.0, -20.0, 0.0)),
+    }
+    for name, (map1, map2) in views.items():
+        _write_image(path(name), cv2.remap(image, map1, map2, cv2.INTER_LINEAR))
+    print(f"5. wrote {', '.join(['calibration.yaml', 'overlay.png', *views])} in {out}")
+    print(f"   try: omnicam info {path('calibration.yaml')}")
+    print(f"        omnicam calibrate {path('mirror.png')} --mirror {m.a:g} {m.b:g} "
+          f"{m.rim_radius:g} --intrinsics {path('intrinsics.yaml')} --far-lines "
+          f"{path('far_lines.json')} -o my_calibration.yaml")
+    print(f"        omnicam unwarp {path('mirror.png')} -c {path('calibration.yaml')} "
+          f"--perspective 640x480 --fov 70 --yaw 45 -o view.png")
+    print(f"done in {time.perf_counter() - t_start:.1f} s")
+    return EXIT_OK
+
+
+def _indent(text, prefix="   "):
+    return "\n".join(prefix + line for line in text.splitlines())
+
+
+def _write_intrinsics(path, K, image_size, D=None):
+    """An intrinsics file as ``omnicam calibrate --intrinsics`` reads it (atomic)."""
+    tmp = _temp_beside(path)
+    try:
+        fs = cv2.FileStorage(tmp, cv2.FILE_STORAGE_WRITE)
+        fs.write("K", np.asarray(K, np.float64))
+        if D is not None:
+            fs.write("D", np.asarray(D, np.float64).reshape(1, -1))
+        fs.startWriteStruct("image_size", cv2.FileNode_SEQ)
+        for v in image_size:
+            fs.write("", int(v))
+        fs.endWriteStruct()
+        fs.release()
+    except BaseException:
+        _remove_quietly(tmp)
+        raise
+    _publish(tmp, path, overwrite=True)
 
 if __name__ == "__main__":
     sys.exit(main())

@@ -429,7 +429,7 @@ def calib_inputs(tmp_path, rig, data):
     """IMAGE, K.yaml, LINES.json for the calibrate command (image: any readable picture)."""
     k = write_intrinsics(tmp_path / "k.yaml", rig.K, image_size=SIZE)
     lines = tmp_path / "lines.json"
-    lines.write_text(json.dumps([[[10, 20], [30, 40], [50, 55]], [[100.5, 10], [120, 12.25]]]))
+    lines.write_text(json.dumps([[[10, 20], [30, 40], [50, 55]], [[100.5, 10], [120, 12.25], [140, 15]]]))
     return {"image": str(data["image"]), "k": str(k), "lines": str(lines)}
 
 
@@ -441,6 +441,7 @@ BAD_CALIBRATE = {
     "intrinsics not a FileStorage": ["--intrinsics", "{tmp}/junk.yaml"],
     "far lines not JSON": ["--far-lines", "{tmp}/junk.json"],
     "far lines wrong shape": ["--far-lines", "{tmp}/shape.json"],
+    "far line of 2 points": ["--far-lines", "{tmp}/short.json"],
     "missing far lines": ["--far-lines", "{tmp}/nope.json"],
     "missing image": ["IMAGE={tmp}/nope.png"],
     "bad calibration extension": ["-o", "{tmp}/calib.txt"],
@@ -454,6 +455,7 @@ def test_calibrate_bad_input_is_one_line_and_writes_nothing(calib_inputs, tmp_pa
     (tmp_path / "junk.yaml").write_text("this: is: not: a: FileStorage\n\t-")
     (tmp_path / "junk.json").write_text("[[1, 2], ")
     (tmp_path / "shape.json").write_text("[[[1, 2, 3], [4, 5, 6]]]")
+    (tmp_path / "short.json").write_text("[[[1, 2], [4, 5]]]")
     before = sorted(p.name for p in tmp_path.iterdir())
     opts = {"--mirror": ["23.4", "28.1", "30"], "--intrinsics": [calib_inputs["k"]],
             "--far-lines": [calib_inputs["lines"]], "-o": [str(tmp_path / "calib.yaml")]}
