@@ -439,6 +439,239 @@ def _fit_with_mask(pts, pts_n, N, mask, robust, threshold):
                   inliers=mask)
 
 
-def detect_rim(image, **kwargs):
-    """Find the mirror rim in a catadioptric image (work in progress: not implemented yet)."""
-    raise NotImplementedError("detect_rim is not implemented yet; use fit_rim(boundary_points)")
+# -- detection in an image ----------------------------------------------------------------------
+_COARSE_SIZE = 256  # longer side of the image used to find the rim roughly
+
+
+def _as_gray(image):
+    """Grey float32 image scaled to about [0, 1]; BGR(A) is converted with OpenCV's weights."""
+    import cv2
+
+    if not isinstance(image, np.ndarray):
+        raise ValueError(f"image must be a numpy array (grey or BGR), got {type(image).__name__}")
+    if image.ndim == 3 and image.shape[2] == 1:
+        image = image[:, :, 0]
+    if image.ndim not in (2, 3) or (image.ndim == 3 and image.shape[2] not in (3, 4)):
+        raise ValueError(f"image must be grey (H, W) or BGR/BGRA (H, W, 3|4), got shape "
+                         f"{image.shape}")
+    if min(image.shape[:2]) < 32:
+        raise ValueError(f"image is too small to hold a mirror rim: {image.shape[1]}x"
+                         f"{image.shape[0]} px (need at least 32x32)")
+    if image.dtype == np.bool_ or not (np.issubdtype(image.dtype, np.integer)
+                                       or np.issubdtype(image.dtype, np.floating)):
+        raise ValueError(f"image must be uint8, uint16 or float, got dtype {image.dtype}")
+    img = image.astype(np.float32, copy=False)
+    if img.ndim == 3:
+        img = cv2.cvtColor(img, cv2.COLOR_BGRA2GRAY if img.shape[2] == 4 else cv2.COLOR_BGR2GRAY)
+    if not np.isfinite(img).all():
+        img = np.nan_to_num(img, nan=0.0, posinf=0.0, neginf=0.0)
+    lo, hi = float(img.min()), float(img.max())
+    if not hi > lo:
+        raise ValueError("no ellipse found: the image is uniform (no mirror rim visible)")
+    return (img - lo) * np.float32(1.0 / (hi - lo))
+
+
+def _coarse_circle(gray):
+    """Centre and radius (full-resolution px) of the most prominent bright-inside circle.
+
+    On a copy whose longer side is ``_COARSE_SIZE`` px: edge pixels (Canny) vote for a centre
+    along their gradient direction (towards the brighter side: the inside of a bright mirror in a
+    dark housing; a dark blob such as the camera's reflection votes away from its centre). For the
+    strongest centres, the radius with the longest arc of edge pixels whose gradient points at the
+    centre wins: a long rim beats a small complete circle, and clipping only shortens the arc.
+    """
+    import cv2
+
+    h, w = gray.shape
+    s = min(1.0, _COARSE_SIZE / max(h, w))
+    small = cv2.resize(gray, (max(8, round(w * s)), max(8, round(h * s))),
+                       interpolation=cv2.INTER_AREA) if s < 1.0 else gray
+    sy, sx = small.shape[0] / h, small.shape[1] / w
+    small = cv2.GaussianBlur(small, (0, 0), 1.0)
+    gx = cv2.Sobel(small, cv2.CV_32F, 1, 0, ksize=3)
+    gy = cv2.Sobel(small, cv2.CV_32F, 0, 1, ksize=3)
+    mag = np.hypot(gx, gy)
+    hi = float(np.percentile(mag, 92))
+    if not hi > 0:
+        raise ValueError("no ellipse found: the image has no edges")
+    scale = 255.0 / float(mag.max())
+    edges = cv2.Canny((gx * scale).astype(np.int16), (gy * scale).astype(np.int16),
+                      0.5 * hi * scale, hi * scale, L2gradient=True)
+    edges[:2, :] = edges[-2:, :] = 0  # the image border is not the rim
+    edges[:, :2] = edges[:, -2:] = 0
+    ys, xs = np.nonzero(edges)
+    if len(xs) < 20:
+        raise ValueError("no ellipse found: too few edges in the image; is the mirror in view?")
+    g = np.stack([gx[ys, xs], gy[ys, xs]], axis=1)
+    g /= np.linalg.norm(g, axis=1, keepdims=True)
+    p = np.stack([xs, ys], axis=1).astype(np.float64)
+    H, W = small.shape
+    # centre votes along +g, centres up to a quarter of the image outside it
+    rmin, rmax = 0.08 * max(H, W), 0.8 * max(H, W)
+    m = max(H, W) // 4
+    acc_w, acc_h = W + 2 * m, H + 2 * m
+    t = np.arange(rmin, rmax, 1.0)
+    cx = np.rint(p[:, :1] + g[:, :1] * t).astype(np.int64) + m
+    cy = np.rint(p[:, 1:] + g[:, 1:] * t).astype(np.int64) + m
+    ok = (cx >= 0) & (cx < acc_w) & (cy >= 0) & (cy < acc_h)
+    acc = np.bincount((cy[ok] * acc_w + cx[ok]), minlength=acc_w * acc_h).astype(np.float32)
+    acc = cv2.GaussianBlur(acc.reshape(acc_h, acc_w), (0, 0), 1.5)
+    # a few strongest centres (non-maximum suppression)
+    peaks = []
+    work = acc.copy()
+    for _ in range(4):
+        j = int(np.argmax(work))
+        v = work.flat[j]
+        if v <= 0 or (peaks and v < 0.2 * peaks[0][2]):
+            break
+        y0, x0 = divmod(j, acc_w)
+        peaks.append((x0 - m, y0 - m, v))
+        work[max(0, y0 - 6):y0 + 7, max(0, x0 - 6):x0 + 7] = 0
+    best = None
+    for x0, y0, _ in peaks:
+        # refine the centre peak to subpixel by the weighted mean around it
+        c = np.array([x0, y0], np.float64)
+        d = p - c
+        r = np.linalg.norm(d, axis=1)
+        inward = -(d * g).sum(axis=1) / np.maximum(r, 1e-9)  # gradient towards the centre
+        sel = (inward > 0.9) & (r > rmin) & (r < rmax)
+        if sel.sum() < 10:
+            continue
+        rr, ang = r[sel], np.arctan2(d[sel, 1], d[sel, 0])
+        # arc length covered at each radius (1 px radius bins, +-1.5 px, 1 px of arc per bin)
+        nb = int(rmax) + 3
+        rbin = np.rint(rr).astype(np.int64)
+        abin = np.rint((ang + np.pi) * rr).astype(np.int64)  # position along the arc, px
+        keys = np.unique(rbin * 100000 + abin)
+        arc = np.bincount(keys // 100000, minlength=nb).astype(np.float64)
+        arc3 = np.convolve(arc, np.ones(3), mode="same")
+        k = int(np.argmax(arc3))
+        if best is None or arc3[k] > best[0]:
+            rk = rr[np.abs(rr - k) <= 2.0]
+            best = (arc3[k], c, float(np.median(rk)) if rk.size else float(k))
+    if best is None or best[0] < 0.5 * best[2]:  # less than ~5 % of the circumference
+        raise ValueError("no ellipse found: no bright-inside circular boundary in the image; is "
+                         "the mirror rim in view (bright mirror against a darker housing)?")
+    c = best[1]
+    centre = np.array([(c[0] + 0.5) / sx - 0.5, (c[1] + 0.5) / sy - 0.5])
+    return centre, best[2] / min(sx, sy) if sx == sy else best[2] / np.sqrt(sx * sy)
+
+
+def _edge_points_along_normals(G, center, S, half_width, step=0.25, outermost=False):
+    """Subpixel rim points: strongest outward intensity drop along the ellipse normals.
+
+    The ellipse is sampled every pixel of arc length; along each outward normal the smoothed
+    image ``G`` is sampled (bilinear) over ``+-half_width`` px, differentiated, and the maximum of
+    the outward drop located to subpixel precision by a parabola through the log of the three
+    samples around it (exact for a Gaussian-blurred step). Profiles that leave the image, whose
+    maximum lies at the window ends or whose drop is weak are dropped.
+    """
+    import cv2
+
+    h, w = G.shape
+    axes, _ = _axes_angle(S)
+    n_pts = int(max(64, min(20000, 2 * np.pi * axes[0])))
+    tt = np.linspace(0.0, 2 * np.pi, n_pts, endpoint=False)
+    u = np.stack([np.cos(tt), np.sin(tt)], axis=1)
+    e = center + u @ S.T
+    der = np.stack([-np.sin(tt), np.cos(tt)], axis=1) @ S.T
+    nrm = np.stack([der[:, 1], -der[:, 0]], axis=1)
+    nrm /= np.linalg.norm(nrm, axis=1, keepdims=True)
+    tau = np.arange(-half_width - step, half_width + 1.5 * step, step)
+    P = e[:, None, :] + tau[None, :, None] * nrm[:, None, :]
+    margin = 2.0
+    inside = ((P[..., 0] >= margin) & (P[..., 0] <= w - 1 - margin) &
+              (P[..., 1] >= margin) & (P[..., 1] <= h - 1 - margin)).all(axis=1)
+    if inside.sum() < 6:
+        return np.empty((0, 2)), np.empty(0)
+    P, e, nrm = P[inside], e[inside], nrm[inside]
+    prof = cv2.remap(G, P[..., 0].astype(np.float32), P[..., 1].astype(np.float32),
+                     cv2.INTER_LINEAR).astype(np.float64)
+    drop = (prof[:, :-2] - prof[:, 2:]) / (2 * step)  # outward drop at tau[1:-1]
+    if outermost:
+        # the outermost local maximum at least half as strong as the strongest one
+        dmax = drop.max(axis=1, keepdims=True)
+        locmax = np.zeros_like(drop, bool)
+        locmax[:, 1:-1] = (drop[:, 1:-1] >= drop[:, :-2]) & (drop[:, 1:-1] > drop[:, 2:])
+        cand = locmax & (drop >= 0.5 * dmax)
+        k = np.where(cand.any(axis=1), drop.shape[1] - 1 - np.argmax(cand[:, ::-1], axis=1),
+                     np.argmax(drop, axis=1))
+    else:
+        k = np.argmax(drop, axis=1)
+    rows = np.arange(len(k))
+    ok = (k > 0) & (k < drop.shape[1] - 1)
+    k = np.clip(k, 1, drop.shape[1] - 2)
+    d0, d1, d2 = drop[rows, k - 1], drop[rows, k], drop[rows, k + 1]
+    strength = d1
+    pos = d0 > 0
+    pos &= d2 > 0
+    l0, l1, l2 = (np.log(np.where(pos, v, 1.0)) for v in (d0, d1, d2))
+    den_log = l0 - 2 * l1 + l2
+    den_lin = d0 - 2 * d1 + d2
+    off = np.where(pos & (den_log < 0), 0.5 * (l0 - l2) / np.where(den_log < 0, den_log, -1.0),
+                   0.5 * (d0 - d2) / np.where(den_lin < 0, den_lin, -1.0))
+    off = np.clip(off, -1.0, 1.0)
+    where = tau[1:-1][k] + off * step
+    ok &= strength > 0
+    return e[ok] + where[ok, None] * nrm[ok], strength[ok]
+
+
+def detect_rim(image, *, sigma=1.0, threshold=2.0, rng=0):
+    """Find the mirror rim (its outer bright-mirror / dark-housing boundary) in an image.
+
+    1. Coarse: on a copy ~256 px wide, Canny edge pixels vote along their gradient for the
+       centre of a bright-inside circle; the radius with the longest supported arc wins (the
+       camera's dark reflection in the middle has the opposite polarity; a long clipped rim
+       beats a small full circle).
+    2. Fine, at full resolution: along the normals of the current ellipse, the strongest
+       outward intensity drop of the image smoothed by ``sigma`` is located to subpixel
+       precision (profiles leaving the image are dropped, so a clipped rim gives an arc), and
+       :func:`fit_rim` (RANSAC, then orthogonal-distance refinement) fits ``Q_I``
+       (eqs. 20-22). Three rounds with shrinking search windows.
+
+    Parameters
+    ----------
+    image : (H, W) or (H, W, 3|4) ndarray, uint8, uint16 or float
+        Grey or BGR(A) catadioptric image with the mirror brighter than its housing.
+    sigma : float
+        Gaussian smoothing before locating the edge, px.
+    threshold : float
+        Minimum inlier cut of the robust fit, px (see :func:`fit_rim`).
+    rng : int or numpy.random.Generator
+        Seed of the RANSAC sampling (the result is deterministic by default).
+
+    Returns
+    -------
+    RimFit
+        ``points`` are the subpixel edge points used; ``inliers`` flags them among all the edge
+        points found in the last round.
+
+    Raises
+    ------
+    ValueError
+        Not an image, or no elliptic bright-inside boundary found.
+    """
+    import cv2
+
+    gray = _as_gray(image)
+    center, radius = _coarse_circle(gray)
+    h, w = gray.shape
+    G = cv2.GaussianBlur(gray, (0, 0), float(sigma)) if sigma > 0 else gray
+    S = radius * np.eye(2)
+    s = min(1.0, _COARSE_SIZE / max(h, w))
+    windows = (max(8.0, 3.0 / s + 0.03 * radius), None, None)
+    fit = None
+    for i, hw in enumerate(windows):
+        if hw is None:
+            hw = max(3.0, 3.0 * sigma, 4.0 * fit.rms) if i == 1 else max(2.5, 2.5 * sigma,
+                                                                           3.0 * fit.rms)
+        pts, _ = _edge_points_along_normals(G, center, S, hw, outermost=(i == 0))
+        if len(pts) < 6:
+            raise ValueError("no ellipse found: the rim is not visible along enough of its length "
+                             "(too much of it outside the image?)")
+        try:
+            fit = fit_rim(pts, threshold=threshold, rng=rng)
+        except ValueError as err:
+            raise ValueError(f"no ellipse found in the image: {err}") from None
+        center, S = fit.center, fit.shape_matrix
+    return fit
