@@ -224,13 +224,17 @@ def main(argv=None) -> int:
     except Exception as e:  # a bug: still one line, unless asked for the traceback
         if os.environ.get("OMNICAM_DEBUG"):
             raise
-        _error(f"unexpected {type(e).__name__}: {_one_line(e)} (set OMNICAM_DEBUG=1 for the traceback)")
+        _error(f"unexpected {type(e).__name__}: {_one_line(e, 300)} "
+               f"(set OMNICAM_DEBUG=1 for the traceback)")
         return EXIT_FAILURE
 
 
-def _one_line(e):
-    text = " ".join(str(e).split())
-    return text or type(e).__name__
+def _one_line(e, limit=None):
+    """``str(e)`` on one line, without terminal colour codes, optionally shortened."""
+    text = " ".join(re.sub(r"\x1b\[[0-9;]*m", "", str(e)).split()) or type(e).__name__
+    if limit and len(text) > limit:
+        text = text[:limit - 3] + "..."
+    return text
 
 
 def _error(message):
@@ -734,8 +738,11 @@ def _open_capture(source):
     except cv2.error:
         opened = False
     if not opened:
-        what = "camera" if source.isdigit() else "input"
-        raise CliError(f"cannot open {what} {source}: not an image or video OpenCV can read")
+        if source.isdigit():
+            raise CliError(f"cannot open camera {source}")
+        if "://" in source:
+            raise CliError(f"cannot open stream {source}")
+        raise CliError(f"cannot open input {source}: not an image or video OpenCV can read")
     return cap
 
 

@@ -5,6 +5,7 @@ import importlib.util
 import json
 import os
 import sys
+import tempfile
 
 import cv2
 import numpy as np
@@ -297,6 +298,47 @@ def test_missing_input(data, tmp_path, capsys):
                  "64x16", "-o", str(tmp_path / "out.avi")])
     assert code == 1
     assert "does not exist" in one_error_line(capsys.readouterr().err)
+
+
+@pytest.mark.parametrize("source, words", [("7", "camera 7"),
+                                           ("http://127.0.0.1:9/x.mjpg", "stream")],
+                         ids=["camera index", "stream URL"])
+def test_camera_or_stream_that_cannot_be_opened(data, tmp_path, capsys, source, words):
+    code = main(["unwarp", source, "-c", str(data["calib"]), "--panorama", "64x16",
+                 "-o", str(tmp_path / "out.avi")])
+    assert code == 1
+    assert words in one_error_line(capsys.readouterr().err)
+    assert list(tmp_path.iterdir()) == []
+
+
+def test_output_is_a_folder(data, tmp_path, capsys):
+    (tmp_path / "out.avi").mkdir()
+    code = main(["unwarp", str(data["video"]), "-c", str(data["calib"]), "--panorama", "64x16",
+                 "-o", str(tmp_path / "out.avi"), "--overwrite"])
+    assert code == 1
+    assert "folder" in one_error_line(capsys.readouterr().err)
+    assert [p.name for p in tmp_path.iterdir()] == ["out.avi"]
+
+
+@needs_views
+@pytest.mark.parametrize("kind", ["image", "video"])
+def test_output_file_that_cannot_be_created(data, tmp_path, capsys, monkeypatch, kind):
+    import omnicam.cli as cli
+
+    real_mkstemp = cli.tempfile.mkstemp
+
+    def refuse_in_tmp_path(*args, **kwargs):  # e.g. a read-only mount, even for root
+        if os.path.samefile(kwargs.get("dir") or tempfile.gettempdir(), tmp_path):
+            raise PermissionError(13, "Permission denied")
+        return real_mkstemp(*args, **kwargs)
+
+    monkeypatch.setattr(cli.tempfile, "mkstemp", refuse_in_tmp_path)
+    out = tmp_path / ("out.png" if kind == "image" else "out.avi")
+    code = main(["unwarp", str(data[kind]), "-c", str(data["calib"]), "--panorama", "64x16",
+                 "-q", "-o", str(out)])
+    assert code == 1
+    assert "Permission denied" in one_error_line(capsys.readouterr().err)
+    assert list(tmp_path.iterdir()) == []
 
 
 def test_output_folder_missing(data, tmp_path, capsys):
