@@ -305,15 +305,15 @@ def _write_image(path, image, overwrite=True):
                        f"{os.path.splitext(path)[1] or '(none)'!r}; use .png, .jpg, .tif, ...")
     tmp = _temp_beside(path)
     try:
-        ok = cv2.imwrite(tmp, image)
-    except cv2.error as e:
-        ok = False
-        detail = _cv_message(e)
-    else:
-        detail = "cv2.imwrite failed"
-    if not ok:
+        try:
+            ok, detail = cv2.imwrite(tmp, image), "cv2.imwrite failed"
+        except cv2.error as e:
+            ok, detail = False, _cv_message(e)
+        if not ok:
+            raise CliError(f"cannot write {path}: {detail}")
+    except BaseException:
         _remove_quietly(tmp)
-        raise CliError(f"cannot write {path}: {detail}")
+        raise
     _publish(tmp, path, overwrite)
 
 
@@ -487,6 +487,9 @@ def cmd_calibrate(args):
     _check_output(overlay, args.overwrite, "overlay")
     if not cv2.haveImageWriter(overlay):
         raise CliError(f"overlay {overlay}: no image writer for its extension; use .png or .jpg")
+    if os.path.exists(overlay) and os.path.exists(args.image) and os.path.samefile(overlay,
+                                                                                    args.image):
+        raise CliError(f"overlay {overlay} is the input image")
     try:
         mirror = HyperbolicMirror(*args.mirror)
     except ValueError as e:
