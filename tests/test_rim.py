@@ -1,9 +1,13 @@
 """The rim ellipse Q_I (eqs. 20-22): fit to given points, and detection in images."""
+import pathlib
+
+import cv2
 import numpy as np
 import pytest
 
 from omnicam import synthetic
-from omnicam.calibration.rim import RimFit, conic_from_ellipse, ellipse_from_conic, fit_rim
+from omnicam.calibration.rim import (RimFit, conic_distance, conic_from_ellipse, detect_rim,
+                                     ellipse_from_conic, fit_rim)
 
 
 def _conic_residual(Q, pts):
@@ -99,3 +103,213 @@ def test_fit_rim_too_few_points_non_robust():
     assert fit_rim(pts, robust=False).rms < 1e-9
     with pytest.raises(ValueError, match="at least 5"):
         fit_rim(pts[:4], robust=False)
+
+
+# -- detect_rim on images ------------------------------------------------------------------------
+# the shared data folder next to the repository (see shared/data/real/README.md)
+REAL_PHOTO = (pathlib.Path(__file__).resolve().parents[2]
+              / "shared" / "data" / "real" / "office_catadioptric_1920x1080.jpg")
+
+# A careful manual fit of the real photograph's rim (the outer edge of the bright mirror against
+# the black holder). How it was made: radial intensity profiles (grey, averaged over 5 px across)
+# and 20x magnified crops were inspected every 5-10 deg around the guess centre (981, 554),
+# radius 595 px of the data README, and at each angle the edge was read by eye as the level
+# half-way between the mirror just inside the edge and the holder just outside it. Angles where
+# the rim is out of frame (top, bottom), where the mirror content next to the rim is as dark as
+# the holder (40-55 deg, 245-300 deg) or where a specular streak or a two-step edge made the
+# reading ambiguous (20, -50, 235, 240 deg) were left out. Angle (deg, image y down) -> offset
+# (px) from radius 595:
+MANUAL_PICKS = {-65: 4.1, -60: 4.1, -55: 4.4, -40: -0.5, -30: 0.1, -20: -0.6, -10: 0.3, 0: -1.6,
+                10: -0.9, 30: -0.6, 60: 2.3, 120: 2.4, 125: 1.85, 130: 1.35, 140: 0.25, 150: 0.07,
+                160: -1.1, 170: -1.85, 180: -2.3, 190: -1.55, 200: -0.5, 210: -0.6, 220: 0.6,
+                230: 1.0}
+# fit_rim(manual points, robust=False): centre, semi-axes, mean diameter (px); residual RMS 0.65 px
+MANUAL_CENTER = (981.31, 553.52)
+MANUAL_AXES = (599.22, 593.39)
+MANUAL_DIAMETER = 1192.61
+
+
+def _manual_points():
+    a = np.deg2rad(np.array(list(MANUAL_PICKS), float))
+    r = 595.0 + np.array(list(MANUAL_PICKS.values()))
+    return np.array([981.0, 554.0]) + r[:, None] * np.c_[np.cos(a), np.sin(a)]
+
+
+def _texture(d):
+    """Smooth bright texture of the scene by direction: grey levels 115..235."""
+    az = np.arctan2(d[:, 1], d[:, 0])
+    el = np.arcsin(np.clip(d[:, 2], -1, 1))
+    return 175 + 45 * np.sin(7 * az) * np.cos(5 * el) + 15 * np.cos(23 * az + 3 * el)
+
+
+def _render(cam, supersample=8, housing=30.0, lens_frac=0.25, clutter=False, noise=0.0, seed=0):
+    """A rendered catadioptric image with an exact rim (float64 grey, 0..255).
+
+    Pixels whose ray (``cam.unproject``) is finite see the textured scene, the others the dark
+    housing; pixels within 1.5 px of the rim are averaged over ``supersample**2`` subpixels, so the
+    edge is area-true. A dark disk about the rim centre stands for the camera's reflection;
+    ``clutter`` adds bright boxes outside the rim (the room behind the housing).
+    """
+    w, h = cam.image_size
+    truth = fit_rim(cam.rim_image_points(4000), robust=False)
+    gx, gy = np.meshgrid(np.arange(w, dtype=float), np.arange(h, dtype=float))
+    pix = np.stack([gx.ravel(), gy.ravel()], 1)
+    _, d = cam.unproject(pix)
+    inside = np.isfinite(d[:, 0])
+    val = np.full(len(pix), housing)
+    val[inside] = _texture(d[inside])
+    band = np.abs(truth.distance(pix)) < 1.5
+    sub = (np.arange(supersample) + 0.5) / supersample - 0.5
+    sx, sy = np.meshgrid(sub, sub)
+    bp = (pix[band][:, None, :] + np.stack([sx.ravel(), sy.ravel()], 1)[None]).reshape(-1, 2)
+    _, db = cam.unproject(bp)
+    vb = np.full(len(bp), housing)
+    ok = np.isfinite(db[:, 0])
+    vb[ok] = _texture(db[ok])
+    val[band] = vb.reshape(-1, supersample ** 2).mean(1)
+    img = val.reshape(h, w)
+    img[np.hypot(gx - truth.center[0], gy - truth.center[1]) < lens_frac * truth.axes.mean()] = 12
+    rng = np.random.default_rng(seed)
+    if clutter:
+        far = truth.distance(pix).reshape(h, w) > 6
+        for _ in range(12):
+            x0, y0 = rng.uniform(0, w), rng.uniform(0, h)
+            ww, hh = rng.uniform(5, 60, 2)
+            img[(np.abs(gx - x0) < ww) & (np.abs(gy - y0) < hh) & far] = rng.uniform(120, 255)
+    if noise:
+        img = img + rng.normal(0, noise, img.shape)
+    return np.clip(img, 0, 255)
+
+
+def _rms_to_conic(Q, pts):
+    """RMS geometric distance of points to the ellipse of the conic ``Q`` (eqs. 20-22), px."""
+    return float(np.sqrt(np.mean(conic_distance(Q, pts) ** 2)))
+
+
+RIGS = {
+    "aligned": lambda: synthetic.aligned_rig(),
+    "misaligned": lambda: synthetic.misaligned_rig(),
+    "random": lambda: synthetic.random_misaligned_rig(np.random.default_rng(3)),
+    "tilted_far": lambda: synthetic.misaligned_rig(5.0, 250.0, (-4.0, 3.0, 2.5)),
+}
+
+
+@pytest.mark.parametrize("rig", sorted(RIGS))
+def test_detect_rim_rendered_image_within_0p05px(rig):
+    cam = RIGS[rig]()
+    img = np.round(_render(cam)).astype(np.uint8)
+    fit = detect_rim(img)
+    truth = cam.rim_image_points(2000)
+    assert _rms_to_conic(fit.conic, truth) < 0.05
+    assert np.abs(fit.distance(truth)).max() < 0.1
+    assert fit.rms < 0.5 and len(fit.points) > 1000
+
+
+def test_detect_rim_ignores_lens_reflection_and_clipping():
+    """Rim clipped by three image borders, a big dark lens blob, bright clutter outside."""
+    cam = synthetic.misaligned_rig(5.0, 0.0, (5.0, 0.0, 0.0), image_size=(640, 400), fill=1.2)
+    rim = cam.rim_image_points(2000)
+    assert rim[:, 1].min() < 0 and rim[:, 1].max() > 399 and rim[:, 0].max() > 639  # clipped
+    img = np.round(_render(cam, lens_frac=0.45, clutter=True, seed=1)).astype(np.uint8)
+    fit = detect_rim(img)
+    assert _rms_to_conic(fit.conic, rim) < 0.05
+    # every point used is on the rim, in the frame, none on the border, the lens or the clutter
+    true_conic = fit_rim(rim, robust=False).conic
+    assert np.abs(conic_distance(true_conic, fit.points)).max() < 1.0
+    assert (fit.points[:, 0] > 1).all() and (fit.points[:, 0] < 638).all()
+    assert (fit.points[:, 1] > 1).all() and (fit.points[:, 1] < 398).all()
+
+
+def test_detect_rim_same_result_for_grey_bgr_uint8_uint16_float():
+    cam = synthetic.misaligned_rig()
+    img = _render(cam)
+    ref = detect_rim(np.round(img).astype(np.uint8))
+    variants = {
+        "bgr": np.round(np.dstack([img, 0.9 * img, 0.8 * img])).astype(np.uint8),
+        "bgra": np.round(np.dstack([img, img, img, np.full_like(img, 255)])).astype(np.uint8),
+        "uint16": np.round(img * 257).astype(np.uint16),
+        "float32_unit": (img / 255).astype(np.float32),
+        "float64": img,
+        "grey_hw1": np.round(img).astype(np.uint8)[:, :, None],
+    }
+    truth = cam.rim_image_points(1000)
+    for name, im in variants.items():
+        fit = detect_rim(im)
+        assert _rms_to_conic(fit.conic, truth) < 0.05, name
+        np.testing.assert_allclose(fit.center, ref.center, atol=0.02, err_msg=name)
+
+
+def test_detect_rim_noisy_image_degrades_gracefully():
+    cam = synthetic.misaligned_rig()
+    img = np.round(_render(cam, noise=10.0, seed=4)).astype(np.uint8)
+    fit = detect_rim(img)
+    assert _rms_to_conic(fit.conic, cam.rim_image_points(1000)) < 0.1
+
+
+def test_detect_rim_any_circular_rim_strongly_oblique_ellipse():
+    """Not tied to the hyperbolic model: an area-true bright ellipse (axis ratio 0.75, any mirror
+    seen obliquely) on a dark background with a dark blob off centre."""
+    h, w = 420, 560
+    center, S = np.array([291.3, 205.8]), np.array([[190.0, 25.0], [25.0, 150.0]])
+    Q = conic_from_ellipse(center, S)
+    n = 8
+    sub = (np.arange(n) + 0.5) / n - 0.5
+    ys, xs = np.mgrid[0:h, 0:w].astype(float)
+    cover = np.zeros((h, w))
+    Sinv = np.linalg.inv(S)
+    for dy in sub:
+        for dx in sub:
+            q = np.stack([xs + dx - center[0], ys + dy - center[1]], -1) @ Sinv.T
+            cover += (q ** 2).sum(-1) < 1
+    cover /= n * n
+    img = 40 + 160 * cover + 30 * cover * np.sin(xs / 9.0) * np.cos(ys / 13.0)
+    img[np.hypot(xs - 270, ys - 215) < 45] = 10
+    fit = detect_rim(np.round(img).astype(np.uint8))
+    t = np.linspace(0, 2 * np.pi, 720, endpoint=False)
+    assert np.abs(fit.distance(center + np.c_[np.cos(t), np.sin(t)] @ S.T)).max() < 0.1
+    np.testing.assert_allclose(fit.conic, Q, atol=1e-4)
+    np.testing.assert_allclose(fit.center, center, atol=0.05)
+
+
+@pytest.mark.skipif(not REAL_PHOTO.exists(), reason="shared real photograph not available")
+def test_detect_rim_real_photo_matches_manual_fit():
+    manual = fit_rim(_manual_points(), robust=False)  # the constants are what this gives
+    np.testing.assert_allclose(manual.center, MANUAL_CENTER, atol=0.01)
+    np.testing.assert_allclose(manual.axes, MANUAL_AXES, atol=0.01)
+    img = cv2.imread(str(REAL_PHOTO))
+    fit = detect_rim(img)  # no hints
+    assert np.linalg.norm(fit.center - np.array(MANUAL_CENTER)) < 4.0
+    assert abs(fit.diameter / MANUAL_DIAMETER - 1.0) < 0.01
+    # the rim is clipped top and bottom: the detector only used points inside the frame
+    assert fit.points[:, 1].min() > 1 and fit.points[:, 1].max() < 1078
+
+
+def test_detect_rim_on_synthetic_renderer_images():
+    """The project's renderer (paper Fig. 6), when present: environment at infinity."""
+    render = getattr(synthetic, "render_environment", None)
+    if render is None:
+        pytest.skip("omnicam.synthetic.render_environment not available yet")
+    cam = synthetic.misaligned_rig(4.0, 200.0, (-3.0, 3.0, -3.0))
+    fit = detect_rim(render(cam))
+    assert _rms_to_conic(fit.conic, cam.rim_image_points(1000)) < 0.05
+
+
+@pytest.mark.parametrize("image, match", [
+    (np.zeros((200, 200), np.uint8), "no ellipse"),
+    (np.random.default_rng(0).integers(0, 255, (200, 200)).astype(np.uint8), "no ellipse"),
+    (np.zeros((10, 10), np.uint8), "too small"),
+    (np.zeros((200, 200, 2), np.uint8), "grey"),
+    (np.zeros((200, 200), bool), "dtype"),
+    ([[0, 1], [1, 0]], "numpy array"),
+])
+def test_detect_rim_bad_input_raises_value_error(image, match):
+    with pytest.raises(ValueError, match=match):
+        detect_rim(image)
+
+
+def test_detect_rim_no_circle_in_image_raises():
+    """A bright square on dark: edges but no elliptic rim."""
+    img = np.full((300, 300), 20, np.uint8)
+    img[60:240, 60:240] = 200
+    with pytest.raises(ValueError, match="no ellipse"):
+        detect_rim(img)

@@ -21,7 +21,8 @@ import math
 
 import numpy as np
 
-__all__ = ["RimFit", "fit_rim", "detect_rim", "conic_from_ellipse", "ellipse_from_conic"]
+__all__ = ["RimFit", "fit_rim", "detect_rim", "conic_from_ellipse", "ellipse_from_conic",
+           "conic_distance"]
 
 
 # -- the result ----------------------------------------------------------------------------------
@@ -137,6 +138,26 @@ def ellipse_from_conic(Q):
         raise ValueError("the fitted conic is an imaginary ellipse; give points along the rim")
     S = V @ np.diag(1.0 / np.sqrt(w)) @ V.T
     return center, 0.5 * (S + S.T)
+
+
+def conic_distance(Q, points):
+    """Signed orthogonal distance of points to the ellipse ``x~^T Q x~ = 0`` (eq. 21), px.
+
+    Positive outside. ``Q`` may have any scale and sign; it must be a real ellipse.
+
+    Parameters
+    ----------
+    Q : (3, 3) array_like
+    points : (N, 2) or (N, 1, 2) array_like
+
+    Returns
+    -------
+    (N,) float64 ndarray
+    """
+    center, S = ellipse_from_conic(Q)
+    pts = np.asarray(points, dtype=np.float64).reshape(-1, 2)
+    d, _, _ = _orthogonal_residuals(pts, center, S)
+    return d
 
 
 def _axes_angle(S):
@@ -319,8 +340,8 @@ def _conics_through_5(samples):
 
 def _sampson(Qs, ph):
     """Sampson (first-order geometric) distances, (B, N), of homogeneous points ``ph`` (N, 3)."""
-    Qp = np.einsum("bij,nj->bni", Qs, ph)
-    alg = np.einsum("bni,ni->bn", Qp, ph)
+    Qp = ph @ Qs  # (B, N, 3); Q symmetric
+    alg = (Qp * ph).sum(axis=-1)
     grad = 2.0 * np.sqrt(Qp[..., 0] ** 2 + Qp[..., 1] ** 2)
     return np.abs(alg) / np.maximum(grad, 1e-300)
 
@@ -328,8 +349,11 @@ def _sampson(Qs, ph):
 def _ransac(pts_n, thr_n, rng, max_trials, confidence=0.999, batch=64):
     """Consensus ellipse of normalised points: returns the inlier mask of the best hypothesis."""
     n = len(pts_n)
-    ph = np.concatenate([pts_n, np.ones((n, 1))], axis=1)
-    best_count, best_mask = 0, None
+    ph_all = np.concatenate([pts_n, np.ones((n, 1))], axis=1)
+    # hypotheses are scored on at most 1000 points (plenty to rank them), the winner on all
+    ph = ph_all if n <= 1000 else ph_all[rng.choice(n, 1000, replace=False)]
+    m_eval = len(ph)
+    best_count, best_Q = 0, None
     needed, trials = max_trials, 0
     while trials < min(needed, max_trials):
         b = min(batch, max_trials - trials)
@@ -346,11 +370,13 @@ def _ransac(pts_n, thr_n, rng, max_trials, confidence=0.999, batch=64):
         counts = masks.sum(axis=1)
         k = int(np.argmax(counts))
         if counts[k] > best_count:
-            best_count, best_mask = int(counts[k]), masks[k]
-            w = best_count / n
+            best_count, best_Q = int(counts[k]), Qs[k]
+            w = best_count / m_eval
             denom = math.log(max(1e-12, 1.0 - w ** 5)) if w < 1.0 else -np.inf
             needed = 0 if w >= 1.0 else int(math.ceil(math.log(1.0 - confidence) / denom))
-    return best_mask
+    if best_Q is None:
+        return None
+    return _sampson(best_Q[None], ph_all)[0] < thr_n
 
 
 # -- public fit ----------------------------------------------------------------------------------
@@ -400,10 +426,12 @@ def fit_rim(points, robust=True, threshold=2.0, max_trials=2000, rng=0):
             raise ValueError("no ellipse found among the boundary points; give points along the "
                              "rim (at least 5 on a common ellipse)")
         mask = m
-    return _fit_with_mask(pts, pts_n, N, mask, robust, threshold)
+    return _fit_with_mask(pts, N, mask, robust, threshold)
 
 
-def _fit_with_mask(pts, pts_n, N, mask, robust, threshold):
+def _fit_with_mask(pts, N, mask, robust, threshold):
+    """Steps 3-5 of :func:`fit_rim` from an initial inlier ``mask``; ``N`` normalises ``pts``."""
+    pts_n = pts * N[0, 0] + N[:2, 2]
     Qn = _direct_ellipse(pts_n[mask])
     if Qn is None or not _is_ellipse(Qn):
         raise ValueError("the boundary points do not determine an ellipse (collinear, too few or "
@@ -502,17 +530,21 @@ def _coarse_circle(gray):
     ys, xs = np.nonzero(edges)
     if len(xs) < 20:
         raise ValueError("no ellipse found: too few edges in the image; is the mirror in view?")
-    g = np.stack([gx[ys, xs], gy[ys, xs]], axis=1)
+    g = np.stack([gx[ys, xs], gy[ys, xs]], axis=1).astype(np.float64)
     g /= np.linalg.norm(g, axis=1, keepdims=True)
     p = np.stack([xs, ys], axis=1).astype(np.float64)
+    vote = np.arange(len(p))
+    if len(vote) > 4000:  # enough votes for a clear peak; keeps the time bounded
+        vote = np.random.default_rng(0).choice(len(p), 4000, replace=False)
     H, W = small.shape
     # centre votes along +g, centres up to a quarter of the image outside it
     rmin, rmax = 0.08 * max(H, W), 0.8 * max(H, W)
     m = max(H, W) // 4
     acc_w, acc_h = W + 2 * m, H + 2 * m
-    t = np.arange(rmin, rmax, 1.0)
-    cx = np.rint(p[:, :1] + g[:, :1] * t).astype(np.int64) + m
-    cy = np.rint(p[:, 1:] + g[:, 1:] * t).astype(np.int64) + m
+    t = np.arange(rmin, rmax, 1.0, dtype=np.float32)
+    pv, gv = p[vote].astype(np.float32), g[vote].astype(np.float32)
+    cx = (pv[:, :1] + gv[:, :1] * t + (m + 0.5)).astype(np.int32)
+    cy = (pv[:, 1:] + gv[:, 1:] * t + (m + 0.5)).astype(np.int32)
     ok = (cx >= 0) & (cx < acc_w) & (cy >= 0) & (cy < acc_h)
     acc = np.bincount((cy[ok] * acc_w + cx[ok]), minlength=acc_w * acc_h).astype(np.float32)
     acc = cv2.GaussianBlur(acc.reshape(acc_h, acc_w), (0, 0), 1.5)
@@ -578,15 +610,19 @@ def _edge_points_along_normals(G, center, S, half_width, step=0.25, outermost=Fa
     nrm = np.stack([der[:, 1], -der[:, 0]], axis=1)
     nrm /= np.linalg.norm(nrm, axis=1, keepdims=True)
     tau = np.arange(-half_width - step, half_width + 1.5 * step, step)
-    P = e[:, None, :] + tau[None, :, None] * nrm[:, None, :]
     margin = 2.0
-    inside = ((P[..., 0] >= margin) & (P[..., 0] <= w - 1 - margin) &
-              (P[..., 1] >= margin) & (P[..., 1] <= h - 1 - margin)).all(axis=1)
+    inside = np.ones(len(e), bool)
+    for end in (tau[0], tau[-1]):  # a segment is inside the (convex) frame iff its ends are
+        q = e + end * nrm
+        inside &= ((q[:, 0] >= margin) & (q[:, 0] <= w - 1 - margin) &
+                   (q[:, 1] >= margin) & (q[:, 1] <= h - 1 - margin))
     if inside.sum() < 6:
-        return np.empty((0, 2)), np.empty(0)
-    P, e, nrm = P[inside], e[inside], nrm[inside]
-    prof = cv2.remap(G, P[..., 0].astype(np.float32), P[..., 1].astype(np.float32),
-                     cv2.INTER_LINEAR).astype(np.float64)
+        return np.empty((0, 2)), 0
+    e, nrm = e[inside], nrm[inside]
+    tau32 = tau.astype(np.float32)
+    mx = e[:, :1].astype(np.float32) + nrm[:, :1].astype(np.float32) * tau32
+    my = e[:, 1:].astype(np.float32) + nrm[:, 1:].astype(np.float32) * tau32
+    prof = cv2.remap(G, mx, my, cv2.INTER_LINEAR).astype(np.float64)
     drop = (prof[:, :-2] - prof[:, 2:]) / (2 * step)  # outward drop at tau[1:-1]
     if outermost:
         # the outermost local maximum at least half as strong as the strongest one
@@ -613,7 +649,7 @@ def _edge_points_along_normals(G, center, S, half_width, step=0.25, outermost=Fa
     off = np.clip(off, -1.0, 1.0)
     where = tau[1:-1][k] + off * step
     ok &= strength > 0
-    return e[ok] + where[ok, None] * nrm[ok], strength[ok]
+    return e[ok] + where[ok, None] * nrm[ok], int(inside.sum())
 
 
 def detect_rim(image, *, sigma=1.0, threshold=2.0, rng=0):
@@ -665,13 +701,27 @@ def detect_rim(image, *, sigma=1.0, threshold=2.0, rng=0):
         if hw is None:
             hw = max(3.0, 3.0 * sigma, 4.0 * fit.rms) if i == 1 else max(2.5, 2.5 * sigma,
                                                                            3.0 * fit.rms)
-        pts, _ = _edge_points_along_normals(G, center, S, hw, outermost=(i == 0))
+        pts, n_tried = _edge_points_along_normals(G, center, S, hw, outermost=(i == 0))
         if len(pts) < 6:
             raise ValueError("no ellipse found: the rim is not visible along enough of its length "
                              "(too much of it outside the image?)")
         try:
-            fit = fit_rim(pts, threshold=threshold, rng=rng)
+            if fit is None:
+                fit = fit_rim(pts, threshold=threshold, rng=rng)
+            else:  # seeded by the previous ellipse instead of RANSAC
+                d = np.abs(fit.distance(pts))
+                mask = d <= max(threshold, 3.5 * 1.4826 * float(np.median(d)))
+                if mask.sum() < 6:
+                    raise ValueError("too few edge points near the rim found in the last round")
+                fit = _fit_with_mask(pts, _hartley(pts), mask, True, threshold)
         except ValueError as err:
             raise ValueError(f"no ellipse found in the image: {err}") from None
         center, S = fit.center, fit.shape_matrix
+    # a rim is a long, clean ellipse: most normals in the frame find it, and it fits tightly
+    support = fit.inliers.sum() / max(n_tried, 1)
+    if support < 0.3 or fit.rms > max(1.5, 0.005 * fit.axes[0]):
+        raise ValueError(f"no ellipse found: the best elliptic boundary is supported along "
+                         f"{100 * support:.0f} % of its visible length with {fit.rms:.2f} px RMS "
+                         f"(a rim needs >= 30 % and <= {max(1.5, 0.005 * fit.axes[0]):.2f} px); is "
+                         f"the whole mirror in view, brighter than its housing and in focus?")
     return fit
