@@ -444,8 +444,12 @@ def _body_hits(camera, P, d, radius):
     return hit, col.astype(np.float32)
 
 
-def _render(camera, shade, supersample, noise, seed, housing_color, body_radius):
-    """Shared loop: trace subpixels in chunks of rows, shade, average, add noise, round."""
+def _render(camera, shade, supersample, noise, seed, housing_color, body_radius, background):
+    """Shared loop: trace subpixels in chunks of rows, shade, average, add noise, round.
+
+    A pixel is ``sum(mirror samples) / s^2 + (1 - coverage) * housing``, so pixels wholly
+    outside the rim keep the housing (or ``background``) value exactly.
+    """
     w, h = _check_camera(camera)
     s = _check_supersample(supersample)
     housing = _bgr(housing_color, "housing_color").astype(np.float32)
@@ -455,8 +459,14 @@ def _render(camera, shade, supersample, noise, seed, housing_color, body_radius)
         raise ValueError(f"noise must be a non-negative number (grey levels), got {noise!r}")
     if body_radius is not None and not (np.isfinite(body_radius) and body_radius > 0):
         raise ValueError(f"body_radius must be positive or None, got {body_radius!r}")
-    img = np.empty((h, w, 3), np.float32)
-    img[:] = housing
+    if background is None:
+        img = np.empty((h, w, 3), np.float32)
+        img[:] = housing
+    else:
+        img = np.array(background, dtype=np.float32)
+        if img.shape != (h, w, 3) or not np.isfinite(img).all():
+            raise ValueError(f"background must be a finite ({h}, {w}, 3) image (the camera's "
+                             f"image_size), got shape {img.shape}")
     # only the rim's bounding box can see the mirror
     rim = camera.rim_image_points(1440)
     x_lo = max(0, int(np.floor(np.nanmin(rim[:, 0]))) - 2)
@@ -464,36 +474,42 @@ def _render(camera, shade, supersample, noise, seed, housing_color, body_radius)
     y_lo = max(0, int(np.floor(np.nanmin(rim[:, 1]))) - 2)
     y_hi = min(h - 1, int(np.ceil(np.nanmax(rim[:, 1]))) + 2)
     if x_lo <= x_hi and y_lo <= y_hi:
-        off = (np.arange(s) + 0.5) / s - 0.5
+        off = (np.arange(s) + 0.5) / s - 0.5          # subpixel offsets about the centre
         xs = (np.arange(x_lo, x_hi + 1)[:, None] + off[None, :]).ravel()
         nx = x_hi - x_lo + 1
         rows_per_chunk = max(1, _CHUNK_RAYS // (nx * s * s))
         for y0 in range(y_lo, y_hi + 1, rows_per_chunk):
             y1 = min(y_hi + 1, y0 + rows_per_chunk)
+            ny = y1 - y0
             ys = (np.arange(y0, y1)[:, None] + off[None, :]).ravel()
             pix = np.empty((len(ys), len(xs), 2))
             pix[..., 0] = xs
             pix[..., 1] = ys[:, None]
             P, d = camera.unproject(pix.reshape(-1, 2))
-            col = np.empty((len(P), 3), np.float32)
-            col[:] = housing
-            ok = np.flatnonzero(np.isfinite(d[:, 0]))
+            seen = np.isfinite(d[:, 0])
+            if not seen.any():
+                continue
+            col = np.zeros((len(P), 3), np.float32)
+            ok = np.flatnonzero(seen)
+            Pk, dk = P[ok], d[ok]
+            if body_radius is not None:
+                hit, body_col = _body_hits(camera, Pk, dk, body_radius)
+                col[ok[hit]] = body_col
+                ok, Pk, dk = ok[~hit], Pk[~hit], dk[~hit]
             if len(ok):
-                Pk, dk = P[ok], d[ok]
-                if body_radius is not None:
-                    hit, body_col = _body_hits(camera, Pk, dk, body_radius)
-                    col[ok[hit]] = body_col
-                    ok, Pk, dk = ok[~hit], Pk[~hit], dk[~hit]
-                if len(ok):
-                    col[ok] = shade(Pk, dk)
-            img[y0:y1, x_lo:x_hi + 1] = col.reshape(y1 - y0, s, nx, s, 3).mean(axis=(1, 3))
+                col[ok] = shade(Pk, dk)
+            mirror = col.reshape(ny, s, nx, s, 3).sum(axis=(1, 3)) / (s * s)
+            coverage = seen.reshape(ny, s, nx, s).sum(axis=(1, 3)) / (s * s)
+            block = img[y0:y1, x_lo:x_hi + 1]
+            block *= (1.0 - coverage)[..., None].astype(np.float32)
+            block += mirror
     if noise > 0:
         img += np.random.default_rng(seed).normal(0.0, noise, img.shape).astype(np.float32)
     return np.clip(np.round(img), 0, 255).astype(np.uint8)
 
 
 def render_environment(camera, environment=None, supersample=4, noise=0.0, seed=None,
-                       housing_color=HOUSING_COLOR, body_radius=10.0):
+                       housing_color=HOUSING_COLOR, body_radius=10.0, background=None):
     """What the rig sees of a scene at infinity (paper Fig. 6).
 
     Every subpixel is traced to its reflected ray (:meth:`MisalignedHyperbolicCamera.unproject`)
@@ -520,6 +536,9 @@ def render_environment(camera, environment=None, supersample=4, noise=0.0, seed=
         Radius (mirror units) of the dark ball about :attr:`camera_center` standing for the
         camera: reflected rays that hit it show the camera body, with a near-black lens on the
         side facing the mirror. ``None``: no camera reflection.
+    background : (h, w, 3) array_like or None
+        An image shown where rays miss the mirror, in place of the flat ``housing_color``
+        (a textured holder, clutter around the mirror); rim pixels mix it by coverage.
 
     Returns
     -------
@@ -537,11 +556,11 @@ def render_environment(camera, environment=None, supersample=4, noise=0.0, seed=
     if not np.isfinite(env).all():
         raise ValueError("environment must be finite")
     return _render(camera, lambda P, d: _sample_equirect(env, d), supersample, noise, seed,
-                   housing_color, body_radius)
+                   housing_color, body_radius, background)
 
 
 def render_room(camera, room=None, supersample=4, noise=0.0, seed=None,
-                housing_color=HOUSING_COLOR, body_radius=10.0):
+                housing_color=HOUSING_COLOR, body_radius=10.0, background=None):
     """What the rig sees of a room at finite distance: checker box and a cube (:class:`Room`).
 
     Every subpixel is traced to its reflected ray ``P + t d`` (mirror point ``P``, unit
@@ -556,7 +575,7 @@ def render_room(camera, room=None, supersample=4, noise=0.0, seed=None,
         Must have ``image_size``.
     room : Room or None
         ``None`` uses ``Room()``. The mirror and the camera must be inside the room box.
-    supersample, noise, seed, housing_color, body_radius
+    supersample, noise, seed, housing_color, body_radius, background
         As for :func:`render_environment`.
 
     Returns
@@ -567,16 +586,14 @@ def render_room(camera, room=None, supersample=4, noise=0.0, seed=None,
     room = Room() if room is None else room
     if not isinstance(room, Room):
         raise ValueError(f"room must be a Room, got {type(room).__name__}")
-    lo = np.asarray(room.box_min, np.float64)
-    hi = np.asarray(room.box_max, np.float64)
     m = camera.mirror
-    for name, p in (("camera centre", camera.camera_center),
-                    ("mirror rim", np.array([0.0, 0.0, m.z_rim]))):
-        if (np.abs(p[:2]) + (m.rim_radius if name == "mirror rim" else 0) > np.maximum(
-                np.abs(lo[:2]), np.abs(hi[:2]))).any() or not (lo < p).all() or not (p < hi).all():
-            raise ValueError(f"the {name} must be inside the room box")
+    # the camera and the whole mirror cap (rim circle and apex) must be inside the box
+    rig = np.vstack([camera.camera_center, m.rim_points(16), [0.0, 0.0, m.b]])
+    if not ((rig > np.asarray(room.box_min)) & (rig < np.asarray(room.box_max))).all():
+        raise ValueError("the camera and the mirror must be inside the room box "
+                         f"(box_min={room.box_min}, box_max={room.box_max})")
     return _render(camera, lambda P, d: _shade_room(room, P, d), supersample, noise, seed,
-                   housing_color, body_radius)
+                   housing_color, body_radius, background)
 
 
 def rim_conic(camera):

@@ -67,6 +67,23 @@ def test_housing_is_dark_exactly_outside_rim_ellipse(rigs, environment, name):
     assert np.median(img[ring]) > 150        # (poles and a line cross it too)
 
 
+def test_background_replaces_housing_outside_the_rim_only(rigs, environment):
+    cam = rigs["misaligned"]
+    rng = np.random.default_rng(3)
+    clutter = rng.integers(0, 256, (SMALL[1], SMALL[0], 3), dtype=np.uint8)
+    plain = synthetic.render_environment(cam, environment, supersample=2)
+    img = synthetic.render_environment(cam, environment, supersample=2, background=clutter)
+    housing = (plain == synthetic.HOUSING_COLOR).all(axis=-1)
+    assert np.array_equal(img[housing], clutter[housing])
+    inside = synthetic.render_environment(cam, environment, supersample=2,
+                                          housing_color=(200, 0, 200))
+    mirror = ~housing & (inside == plain).all(axis=-1)   # no housing share: untouched
+    assert mirror.sum() > 0.5 * SMALL[0] * SMALL[1]
+    assert np.array_equal(img[mirror], plain[mirror])
+    with pytest.raises(ValueError, match="background"):
+        synthetic.render_environment(cam, environment, background=clutter[:, :100])
+
+
 def test_rim_conic_passes_through_rim_points(rigs):
     for cam in rigs.values():
         Q = synthetic.rim_conic(cam)
