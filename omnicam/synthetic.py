@@ -193,6 +193,11 @@ def make_environment(size=(2048, 1024), pole_spacing_deg=30.0,
     from -85 to +15 deg elevation, the one at azimuth 0 red and wider, the others alternately
     near-black and white, so the orientation of a panorama can be read off.
 
+    Far straight lines (section 3.2): the poles (vertical great circles, the pole at azimuth
+    ``phi`` holds the directions ``(cos el cos phi, cos el sin phi, sin el)``) and the horizon
+    line at elevation 0 are images of straight lines at infinity; the other horizontal lines
+    are circles of constant elevation, straight only in a panorama.
+
     Parameters
     ----------
     size : (int, int)
