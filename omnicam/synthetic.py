@@ -45,7 +45,7 @@ __all__ = ["default_mirror", "aligned_rig", "misaligned_rig", "random_misaligned
 #: BGR colour of the housing (mirror holder) outside the rim.
 HOUSING_COLOR = (18, 18, 18)
 _BODY_COLOR = (58, 56, 54)   # camera body seen in the mirror
-_LENS_COLOR = (8, 8, 10)     # its lens, facing the mirror
+_LENS_COLOR = (14, 6, 4)     # its lens (dark bluish glass), facing the mirror
 _LENS_COS = 0.6              # lens = the part of the ball within ~53 deg of the optical axis
 _CHUNK_RAYS = 1 << 18        # rays traced per chunk (memory stays at a few tens of MB)
 

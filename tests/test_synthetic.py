@@ -84,6 +84,20 @@ def test_background_replaces_housing_outside_the_rim_only(rigs, environment):
         synthetic.render_environment(cam, environment, background=clutter[:, :100])
 
 
+def test_distorted_rig_housing_follows_the_distorted_rim(environment):
+    cam = synthetic.misaligned_rig(image_size=SMALL, D=[-0.12, 0.05, 0.001, -0.0015, -0.01])
+    img = synthetic.render_environment(cam, environment, supersample=2)
+    rim = cam.rim_image_points(2000).astype(np.float32)
+    housing = (img == synthetic.HOUSING_COLOR).all(axis=-1)
+    for y in range(SMALL[1]):
+        for x in range(0, SMALL[0], 3):
+            dist = cv2.pointPolygonTest(rim, (float(x), float(y)), True)  # > 0 inside
+            if dist < -0.75:
+                assert housing[y, x], (x, y)
+            elif dist > 0.75:
+                assert not housing[y, x], (x, y)
+
+
 def test_rim_conic_passes_through_rim_points(rigs):
     for cam in rigs.values():
         Q = synthetic.rim_conic(cam)
