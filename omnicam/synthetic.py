@@ -314,7 +314,7 @@ class Room:
             raise ValueError("checker_size and cube_size must be positive")
         c = np.asarray(self.cube_center, np.float64)
         r = np.asarray(self.cube_rvec, np.float64)
-        if c.shape != (3,) or r.shape != (3,) or not (np.isfinite(c).all() and np.isfinite(r).all()):
+        if c.shape != (3,) or r.shape != (3,) or not np.isfinite(np.r_[c, r]).all():
             raise ValueError("cube_center and cube_rvec must be 3 finite numbers each")
         if _bgr(self.wall_colors, "wall_colors").shape != (6, 2, 3):
             raise ValueError("wall_colors must be (6, 2, 3): two BGR colours for -X, +X, -Y, +Y, "
@@ -355,7 +355,8 @@ class Room:
         return self.cube_corners()[idx]
 
     def face_normals(self):
-        """Outward unit normals of the faces ``+X, -X, +Y, -Y, +Z, -Z``, ``(6, 3)``, mirror frame."""
+        """Outward unit normals of the faces ``+X, -X, +Y, -Y, +Z, -Z``, ``(6, 3)``, mirror
+        frame."""
         R = self.cube_R
         return np.concatenate([R.T, -R.T], axis=0)[[0, 3, 1, 4, 2, 5]]
 
@@ -421,7 +422,8 @@ def _shade_room(room, P, d):
 # -- rendering --------------------------------------------------------------------------------
 def _check_camera(camera):
     if not isinstance(camera, MisalignedHyperbolicCamera):
-        raise ValueError(f"camera must be a MisalignedHyperbolicCamera, got {type(camera).__name__}")
+        raise ValueError("camera must be a MisalignedHyperbolicCamera, "
+                         f"got {type(camera).__name__}")
     if camera.image_size is None:
         raise ValueError("camera has no image_size; construct it with image_size=(width, height)")
     return camera.image_size
@@ -619,7 +621,8 @@ def rim_conic(camera):
         :meth:`MisalignedHyperbolicCamera.rim_image_points`).
     """
     if not isinstance(camera, MisalignedHyperbolicCamera):
-        raise ValueError(f"camera must be a MisalignedHyperbolicCamera, got {type(camera).__name__}")
+        raise ValueError("camera must be a MisalignedHyperbolicCamera, "
+                         f"got {type(camera).__name__}")
     if camera.D is not None:
         raise ValueError("rim_conic needs a camera without distortion D; use rim_image_points")
     R, t, m = camera.R, camera.tvec, camera.mirror

@@ -5,7 +5,7 @@ import cv2
 import numpy as np
 import pytest
 
-from omnicam import MisalignedHyperbolicCamera, synthetic
+from omnicam import synthetic
 
 SMALL = (200, 200)
 
