@@ -304,3 +304,18 @@ def test_cube_face_edges_are_subpixel_true():
         perimeter = np.linalg.norm(p - np.roll(p, 1, axis=0), axis=1).sum()
         assert area > 100
         assert abs((img[..., channel].sum() / 255.0 - area) / perimeter) < 0.01, face
+
+
+def test_true_equirectangular_panorama_reproduces_the_environment(rigs, environment):
+    # the environment's mapping is the panorama convention of conventions.md over (-90, 90)
+    cam = rigs["misaligned"]
+    img = synthetic.render_environment(cam, environment, supersample=4)
+    h, w = environment.shape[:2]
+    m1, m2 = cam.init_panorama_maps((w, h), elevation_range=(-90.0, 90.0),
+                                    projection="equirectangular", m1type=cv2.CV_32FC1)
+    pano = cv2.remap(img, m1, m2, cv2.INTER_LINEAR)
+    el = 90.0 - 180.0 * np.arange(h) / (h - 1)
+    band = (el > -60) & (el < 5)                           # seen all around, lens excluded
+    diff = np.abs(pano[band].astype(int) - environment[band]).max(axis=-1)
+    assert np.median(diff) <= 2
+    assert np.mean(diff > 40) < 0.1                     # only near edges (200 px image)
