@@ -276,3 +276,490 @@ def project_points(X, at_infinity, R, t, C, a, b, rim_radius, K, out):
         yn = yc / zc
         out[i, 0] = K[0, 0] * xn + K[0, 1] * yn + K[0, 2]
         out[i, 1] = K[1, 0] * xn + K[1, 1] * yn + K[1, 2]
+
+
+# -- view tables (omnicam.views): exact nodes, cubic interpolation with a verified error ----------
+#
+# A remap table entry is the exact projection (project_points) of the direction, or the point at
+# a given distance from a viewpoint, that an output pixel looks along. ``view_table`` solves the
+# reflection point exactly (``_reflection_point``, the same Newton as project_points) on a coarse
+# grid of nodes every ``step`` output pixels, on the mirror sheet extended beyond the rim, so the
+# mirror point s = (s1, s2) is a smooth function of the output pixel even across the edge of what
+# the mirror sees. Each cell is interpolated by the tensor-product cubic Lagrange polynomial of its
+# 4x4 nodes; its error (~ h^4 f'''' w(t), largest mid-cell) is measured against the exact answer at
+# the cell centre and the middle of its four edges, and a cell whose estimate exceeds ``tol / 2``
+# (or that has a node without a solution) is computed exactly pixel by pixel. Visibility (rim,
+# eqs. 12 and 15, in front of the camera) is decided per pixel from the interpolated s with a
+# margin; pixels inside the margin are solved exactly.
+
+_VIEW_RIM_MARGIN = 2e-3    # relative margin on s1^2 + s2^2 against rim_radius^2
+_VIEW_COS_MARGIN = 1e-3    # margin on the cosines of the other visibility tests
+_UNSEEN = -10.0            # omnicam.views.UNSEEN
+
+
+@njit(cache=True)
+def _view_direction(kind, A, p0, p1, az_step, u, v):
+    """Unit mirror-frame direction of output pixel (u, v) (conventions.md, "Views").
+
+    kind 0: perspective, ``d = A (u, v, 1)`` with ``A = R^T K_new^-1``.
+    kind 1: cylindrical panorama, azimuth ``az_step u``, ``tan(elevation) = p0 + p1 v``.
+    kind 2: equirectangular panorama, elevation ``p0 + p1 v`` (radians). For panoramas ``A = R^T``.
+    """
+    if kind == 0:
+        x = A[0, 0] * u + A[0, 1] * v + A[0, 2]
+        y = A[1, 0] * u + A[1, 1] * v + A[1, 2]
+        z = A[2, 0] * u + A[2, 1] * v + A[2, 2]
+    else:
+        az = az_step * u
+        ca = math.cos(az)
+        sa = math.sin(az)
+        if kind == 1:
+            x0 = ca
+            y0 = sa
+            z0 = p0 + p1 * v
+        else:
+            el = p0 + p1 * v
+            ce = math.cos(el)
+            x0 = ce * ca
+            y0 = ce * sa
+            z0 = math.sin(el)
+        x = A[0, 0] * x0 + A[0, 1] * y0 + A[0, 2] * z0
+        y = A[1, 0] * x0 + A[1, 1] * y0 + A[1, 2] * z0
+        z = A[2, 0] * x0 + A[2, 1] * y0 + A[2, 2] * z0
+    n = math.sqrt(x * x + y * y + z * z)
+    return x / n, y / n, z / n
+
+
+@njit(cache=True)
+def _view_target(dx, dy, dz, at_infinity, depth, vp):
+    """The scene target of a unit direction: itself at infinity, else ``vp + depth d``."""
+    if at_infinity:
+        return dx, dy, dz
+    return vp[0] + depth * dx, vp[1] + depth * dy, vp[2] + depth * dz
+
+
+@njit(cache=True)
+def _view_pixel(s1, s2, Xx, Xy, Xz, at_infinity, C, Rc, tc, a, b, K, dist, tilt, has_dist):
+    """Pixel of the mirror point (s1, s2, f(s)) and the smallest visibility cosine.
+
+    The pixel is the pinhole image (eq. 6) of the mirror point, with OpenCV's distortion model
+    (``cv2.projectPoints``: k1..k6, p1, p2, s1..s4, tilt), then ``K`` with skew, as
+    :func:`omnicam.raytrace.project` does. The cosine is the least of: camera on the outer side
+    of the tangent plane (eq. 12), target on the outer side (eq. 15), mirror point in front of
+    the camera; all positive means project_points' tests pass. NaN pixel behind the camera.
+    """
+    a2 = a * a
+    b2 = b * b
+    z = b * math.sqrt(1.0 + (s1 * s1 + s2 * s2) / a2)
+    Nx = b2 * s1 / (a2 * z)
+    Ny = b2 * s2 / (a2 * z)
+    nn2 = Nx * Nx + Ny * Ny + 1.0
+    wx = C[0] - s1
+    wy = C[1] - s2
+    wz = C[2] - z
+    mc = (Nx * wx + Ny * wy - wz) / math.sqrt(nn2 * (wx * wx + wy * wy + wz * wz))
+    if at_infinity:
+        ms = (Nx * Xx + Ny * Xy - Xz) / math.sqrt(nn2)
+    else:
+        ex = Xx - s1
+        ey = Xy - s2
+        ez = Xz - z
+        ms = (Nx * ex + Ny * ey - ez) / math.sqrt(nn2 * (ex * ex + ey * ey + ez * ez))
+    xc = Rc[0, 0] * s1 + Rc[0, 1] * s2 + Rc[0, 2] * z + tc[0]
+    yc = Rc[1, 0] * s1 + Rc[1, 1] * s2 + Rc[1, 2] * z + tc[1]
+    zc = Rc[2, 0] * s1 + Rc[2, 1] * s2 + Rc[2, 2] * z + tc[2]
+    mz = zc / math.sqrt(xc * xc + yc * yc + zc * zc)
+    m = min(mc, min(ms, mz))
+    if not zc > 0.0:
+        return _NAN, _NAN, m
+    xn = xc / zc
+    yn = yc / zc
+    if has_dist:
+        r2 = xn * xn + yn * yn
+        r4 = r2 * r2
+        r6 = r4 * r2
+        cdist = 1.0 + dist[0] * r2 + dist[1] * r4 + dist[4] * r6
+        icdist = 1.0 / (1.0 + dist[5] * r2 + dist[6] * r4 + dist[7] * r6)
+        a1 = 2.0 * xn * yn
+        a2_ = r2 + 2.0 * xn * xn
+        a3 = r2 + 2.0 * yn * yn
+        xd = xn * cdist * icdist + dist[2] * a1 + dist[3] * a2_ + dist[8] * r2 + dist[9] * r4
+        yd = yn * cdist * icdist + dist[2] * a3 + dist[3] * a1 + dist[10] * r2 + dist[11] * r4
+        vx = tilt[0, 0] * xd + tilt[0, 1] * yd + tilt[0, 2]
+        vy = tilt[1, 0] * xd + tilt[1, 1] * yd + tilt[1, 2]
+        vz = tilt[2, 0] * xd + tilt[2, 1] * yd + tilt[2, 2]
+        ip = 1.0 / vz if vz != 0.0 else 1.0
+        xn = ip * vx
+        yn = ip * vy
+    return K[0, 0] * xn + K[0, 1] * yn + K[0, 2], K[1, 0] * xn + K[1, 1] * yn + K[1, 2], m
+
+
+@njit(cache=True)
+def _view_solve(C, Xx, Xy, Xz, at_infinity, a, b, rim_radius, tol):
+    """``_reflection_point`` for the camera centre C (compiled once, called from three places)."""
+    return _reflection_point(C[0], C[1], C[2], Xx, Xy, Xz, at_infinity, a, b, rim_radius, tol, 50)
+
+
+@njit(cache=True)
+def _view_exact(dx, dy, dz, sin_reject, at_infinity, depth, vp, C, Rc, tc, a, b, rim_radius,
+                K, dist, tilt, has_dist, tol):
+    """Exact table entry of a unit direction: project_points' answer (NaN if unseen).
+
+    ``dz > sin_reject`` is above every elevation the rig can see (proved in omnicam.views):
+    unseen without solving.
+    """
+    if not dz <= sin_reject:
+        return _NAN, _NAN
+    Xx, Xy, Xz = _view_target(dx, dy, dz, at_infinity, depth, vp)
+    if not at_infinity and Xz > 0.0 and (Xx * Xx + Xy * Xy) / (a * a) - Xz * Xz / (b * b) + 1.0 < 0.0:
+        return _NAN, _NAN  # inside the mirror body
+    s1, s2, ok = _view_solve(C, Xx, Xy, Xz, at_infinity, a, b, rim_radius, tol)
+    if not ok or s1 * s1 + s2 * s2 > rim_radius * rim_radius:
+        return _NAN, _NAN
+    x, y, m = _view_pixel(s1, s2, Xx, Xy, Xz, at_infinity, C, Rc, tc, a, b, K, dist, tilt,
+                          has_dist)
+    if not m > 0.0:
+        return _NAN, _NAN
+    return x, y
+
+
+@njit(cache=True)
+def _lagrange4(t):
+    """Cubic Lagrange weights of nodes at -1, 0, 1, 2 for 0 <= t <= 1."""
+    return (-t * (t - 1.0) * (t - 2.0) / 6.0, (t + 1.0) * (t - 1.0) * (t - 2.0) / 2.0,
+            -(t + 1.0) * t * (t - 2.0) / 2.0, (t + 1.0) * t * (t - 1.0) / 6.0)
+
+
+@njit(cache=True)
+def _interp_cell(S, r, k, tv, tu):
+    """Tensor cubic Lagrange interpolation of node values S (NY, NX, 2) in cell (r, k)."""
+    v0, v1, v2, v3 = _lagrange4(tv)
+    u0, u1, u2, u3 = _lagrange4(tu)
+    o1 = 0.0
+    o2 = 0.0
+    for m in range(4):
+        wv = v0 if m == 0 else (v1 if m == 1 else (v2 if m == 2 else v3))
+        row1 = u0 * S[r + m, k, 0] + u1 * S[r + m, k + 1, 0] + u2 * S[r + m, k + 2, 0] \
+            + u3 * S[r + m, k + 3, 0]
+        row2 = u0 * S[r + m, k, 1] + u1 * S[r + m, k + 1, 1] + u2 * S[r + m, k + 2, 1] \
+            + u3 * S[r + m, k + 3, 1]
+        o1 += wv * row1
+        o2 += wv * row2
+    return o1, o2
+
+
+@njit(cache=True, inline="always")
+def _view_store(i, j, x, y, mode, outx, outy, out16, outf16):
+    """Write one entry: float maps (mode 0) or cv2.convertMaps' CV_16SC2 fixed point (mode 1)."""
+    if not (x == x and y == y):
+        x = _UNSEEN
+        y = _UNSEEN
+    fx = np.float32(x)
+    fy = np.float32(y)
+    if mode == 0:
+        outx[i, j] = fx
+        outy[i, j] = fy
+    else:
+        # cv2.convertMaps: cvRound(x * 32) (to nearest, ties to even), integer part >> 5 and
+        # the fraction & 31; the float32 entry times 32 is exact in float64
+        ix = int(np.rint(np.float64(fx) * 32.0))
+        iy = int(np.rint(np.float64(fy) * 32.0))
+        out16[i, j, 0] = max(-32768, min(32767, ix >> 5))
+        out16[i, j, 1] = max(-32768, min(32767, iy >> 5))
+        outf16[i, j] = (iy & 31) * 32 + (ix & 31)
+
+
+_VIEW_CLEAR = 0.05         # margins (relative rim, cosines, body) of cells wholly seen or unseen
+_CELL_BAD = 0              # computed exactly pixel by pixel
+_CELL_SEEN = 1             # pixels interpolated directly from the nodes' pixels
+_CELL_UNSEEN = 2           # every pixel unseen
+_CELL_EDGE = 3             # mirror point interpolated, visibility decided per pixel
+
+
+@njit(cache=True)
+def _view_eval(kind, A, p0, p1, az_step, u, v, sin_try, at_infinity, depth, vp, C, Rc, tc, a, b,
+               rim_radius, K, dist, tilt, has_dist, tol):
+    """Exact solution at output position (u, v) on the extended sheet, with its margins.
+
+    Returns ``ok, s1, s2, x, y, vis, rim_m``: the mirror point, its (geometric) pixel,
+    ``vis`` = the least of the visibility margins (relative rim, cosines of
+    :func:`_view_pixel`, the body test of finite targets) over ``_VIEW_CLEAR`` (>= 1: clearly
+    seen) and ``rim_m = 1 - |s|^2 / rim_radius^2``. ``ok`` is False when not solved.
+    """
+    dx, dy, dz = _view_direction(kind, A, p0, p1, az_step, u, v)
+    if not dz <= sin_try:
+        return False, _NAN, _NAN, _NAN, _NAN, _NAN, _NAN
+    Xx, Xy, Xz = _view_target(dx, dy, dz, at_infinity, depth, vp)
+    s1, s2, ok = _view_solve(C, Xx, Xy, Xz, at_infinity, a, b, rim_radius, tol)
+    if not ok:
+        return False, _NAN, _NAN, _NAN, _NAN, _NAN, _NAN
+    x, y, m = _view_pixel(s1, s2, Xx, Xy, Xz, at_infinity, C, Rc, tc, a, b, K, dist, tilt,
+                          has_dist)
+    if not (x == x and y == y):
+        return False, _NAN, _NAN, _NAN, _NAN, _NAN, _NAN
+    rim_m = 1.0 - (s1 * s1 + s2 * s2) / (rim_radius * rim_radius)
+    vis = min(rim_m, m)
+    if not at_infinity:
+        rx = (Xx * Xx + Xy * Xy) / (a * a)
+        rz = Xz * Xz / (b * b)
+        if Xz > -_VIEW_CLEAR * math.sqrt(Xx * Xx + Xy * Xy + Xz * Xz):
+            vis = min(vis, (rx - rz + 1.0) / (rx + rz + 1.0))
+    return True, s1, s2, x, y, vis / _VIEW_CLEAR, rim_m
+
+
+@njit(cache=True, parallel=True)
+def view_table(kind, A, p0, p1, az_step, W, H, step, at_infinity, depth, vp, sin_reject,
+               sin_try, C, Rc, tc, a, b, rim_radius, K, dist, tilt, has_dist, tol, mode,
+               outx, outy, out16, outf16, stats):
+    """Remap table of a view (see the section comment above); unseen entries are -10.
+
+    Parameters are prepared by :mod:`omnicam.views`: ``kind, A, p0, p1, az_step`` define the
+    output directions (:func:`_view_direction`), ``W, H`` the size, ``step`` the node spacing,
+    ``at_infinity, depth, vp`` the targets, ``sin_reject`` the sine of an elevation above which
+    nothing is seen, ``sin_try`` the sine above which nodes are not solved, ``C, Rc, tc`` the
+    camera centre (mirror frame) and mirror -> camera motion, ``K, dist (14), tilt (3x3),
+    has_dist`` the pinhole and distortion, ``tol`` the entry tolerance in pixels. ``mode`` 0
+    writes float32 ``outx, outy`` (H, W); mode 1 writes ``out16`` (H, W, 2) int16 and
+    ``outf16`` (H, W) uint16 as ``cv2.convertMaps(.., CV_16SC2)`` does. ``stats`` (6,) int64
+    receives: nodes solved, check points solved, cells seen, unseen, edge, computed exactly,
+    and (7th) pixels solved exactly.
+    """
+    h = step
+    ny = (H + h - 1) // h
+    nx = (W + h - 1) // h
+    NY = ny + 3
+    NX = nx + 3
+    newton_tol = 1e-10 * (a + b)
+    rim2 = rim_radius * rim_radius
+    # 1. nodes at output pixel ((q - 1) h, (p - 1) h): exact mirror point, pixel and margins
+    S = np.empty((NY, NX, 2))
+    P = np.empty((NY, NX, 2))
+    NV = np.empty((NY, NX, 2))  # vis, rim_m
+    for p_ in prange(NY):
+        p = np.int64(p_)  # prange indices may be unsigned
+        for q in range(NX):
+            ok, s1, s2, x, y, vis, rim_m = _view_eval(
+                kind, A, p0, p1, az_step, (q - 1.0) * h, (p - 1.0) * h, sin_try, at_infinity,
+                depth, vp, C, Rc, tc, a, b, rim_radius, K, dist, tilt, has_dist, newton_tol)
+            S[p, q, 0] = s1
+            S[p, q, 1] = s2
+            P[p, q, 0] = x
+            P[p, q, 1] = y
+            NV[p, q, 0] = vis if ok else -np.inf
+            NV[p, q, 1] = rim_m if ok else np.inf
+    # 2. the interpolants against the exact answer at cell centres (which 0), middles of
+    #    horizontal edges (which 1, rows 0..ny) and of vertical edges (which 2, columns 0..nx):
+    #    error of interpolating the pixel (EP) and the mirror point (ES), margins (CV)
+    EP = np.full((3, ny + 1, nx + 1), np.inf)
+    ES = np.full((3, ny + 1, nx + 1), np.inf)
+    CV = np.empty((3, ny + 1, nx + 1, 2))
+    for r_ in prange(ny + 1):
+        r = np.int64(r_)  # prange indices may be unsigned
+        for k in range(nx + 1):
+            for which in range(3):
+                CV[which, r, k, 0] = -np.inf
+                CV[which, r, k, 1] = np.inf
+                if which == 0 and (r == ny or k == nx):
+                    continue
+                if which == 1 and k == nx:
+                    continue
+                if which == 2 and r == ny:
+                    continue
+                cr = r
+                ck = k
+                tv = 0.5
+                tu = 0.5
+                if which == 1:
+                    tv = 0.0
+                    if cr == ny:
+                        cr = ny - 1
+                        tv = 1.0
+                elif which == 2:
+                    tu = 0.0
+                    if ck == nx:
+                        ck = nx - 1
+                        tu = 1.0
+                ok, s1, s2, xe, ye, vis, rim_m = _view_eval(
+                    kind, A, p0, p1, az_step, (ck + tu) * h, (cr + tv) * h, sin_try,
+                    at_infinity, depth, vp, C, Rc, tc, a, b, rim_radius, K, dist, tilt,
+                    has_dist, newton_tol)
+                if not ok:
+                    continue
+                CV[which, r, k, 0] = vis
+                CV[which, r, k, 1] = rim_m
+                xi, yi = _interp_cell(P, cr, ck, tv, tu)
+                err = math.sqrt((xe - xi) ** 2 + (ye - yi) ** 2)
+                if err == err:
+                    EP[which, r, k] = err
+                si1, si2 = _interp_cell(S, cr, ck, tv, tu)
+                dx, dy, dz = _view_direction(kind, A, p0, p1, az_step, (ck + tu) * h,
+                                             (cr + tv) * h)
+                Xx, Xy, Xz = _view_target(dx, dy, dz, at_infinity, depth, vp)
+                xi, yi, _m = _view_pixel(si1, si2, Xx, Xy, Xz, at_infinity, C, Rc, tc, a, b, K,
+                                         dist, tilt, has_dist)
+                err = math.sqrt((xe - xi) ** 2 + (ye - yi) ** 2)
+                if err == err:
+                    ES[which, r, k] = err
+    # 3. classify cells. The tensor cubic's error ~ A(v) w(t) + B(u) w(s) peaks mid-cell and is
+    #    bounded by the sum of its mid-edge values: within tol / 2 at the five check points.
+    cls = np.empty((ny, nx), dtype=np.int64)
+    half = 0.5 * tol
+    for r_ in prange(ny):
+        r = np.int64(r_)  # prange indices may be unsigned
+        for k in range(nx):
+            vmin = np.inf
+            rmax = -np.inf
+            for m in range(4):
+                for n in range(4):
+                    vmin = min(vmin, NV[r + m, k + n, 0])
+                    rmax = max(rmax, NV[r + m, k + n, 1])
+            solved = vmin > -np.inf
+            for e_ in range(5):
+                w_ = 0 if e_ == 0 else (1 if e_ <= 2 else 2)
+                rr_ = r + 1 if e_ == 2 else r
+                kk_ = k + 1 if e_ == 4 else k
+                vmin = min(vmin, CV[w_, rr_, kk_, 0])
+                rmax = max(rmax, CV[w_, rr_, kk_, 1])
+            ep = max(EP[0, r, k], max(EP[1, r, k], EP[1, r + 1, k])
+                     + max(EP[2, r, k], EP[2, r, k + 1]))
+            es = max(ES[0, r, k], max(ES[1, r, k], ES[1, r + 1, k])
+                     + max(ES[2, r, k], ES[2, r, k + 1]))
+            c = _CELL_BAD
+            if solved:
+                if vmin >= 1.0 and ep <= half:
+                    c = _CELL_SEEN
+                elif rmax <= -_VIEW_CLEAR:
+                    c = _CELL_UNSEEN
+                elif es <= half:
+                    c = _CELL_EDGE
+            cls[r, k] = c
+    # 4. pixels, rows interleaved over blocks so that threads share the exact work evenly
+    colc = np.empty(W)
+    cols = np.empty(W)
+    if kind != 0:
+        for j in range(W):
+            colc[j] = math.cos(az_step * j)
+            cols[j] = math.sin(az_step * j)
+    wu = np.empty((h, 4))
+    for t in range(h):
+        w0, w1, w2, w3 = _lagrange4(t / h)
+        wu[t, 0] = w0
+        wu[t, 1] = w1
+        wu[t, 2] = w2
+        wu[t, 3] = w3
+    nblk = 16
+    blk = (H + nblk - 1) // nblk
+    n_exact_rows = np.zeros(nblk * blk, dtype=np.int64)
+    for rr_ in prange(nblk * blk):
+        rr = np.int64(rr_)  # prange indices may be unsigned
+        i = (rr % nblk) * blk + rr // nblk
+        if i >= H:
+            continue
+        r = i // h
+        v0, v1, v2, v3 = _lagrange4((i - r * h) / h)
+        rp = np.empty((NX, 2))
+        rs = np.empty((NX, 2))
+        for q in range(NX):
+            for c in range(2):
+                rp[q, c] = v0 * P[r, q, c] + v1 * P[r + 1, q, c] + v2 * P[r + 2, q, c] \
+                    + v3 * P[r + 3, q, c]
+                rs[q, c] = v0 * S[r, q, c] + v1 * S[r + 1, q, c] + v2 * S[r + 2, q, c] \
+                    + v3 * S[r + 3, q, c]
+        rowz = 0.0
+        rowc = 0.0
+        if kind == 1:
+            rowz = p0 + p1 * i
+            rowc = 1.0
+        elif kind == 2:
+            el = p0 + p1 * i
+            rowz = math.sin(el)
+            rowc = math.cos(el)
+        n_ex = 0
+        for k in range(nx):
+            j0 = k * h
+            j1 = min(W, j0 + h)
+            c = cls[r, k]
+            if c == _CELL_SEEN:
+                for j in range(j0, j1):
+                    tu = j - j0
+                    x = wu[tu, 0] * rp[k, 0] + wu[tu, 1] * rp[k + 1, 0] + wu[tu, 2] * rp[k + 2, 0] \
+                        + wu[tu, 3] * rp[k + 3, 0]
+                    y = wu[tu, 0] * rp[k, 1] + wu[tu, 1] * rp[k + 1, 1] + wu[tu, 2] * rp[k + 2, 1] \
+                        + wu[tu, 3] * rp[k + 3, 1]
+                    _view_store(i, j, x, y, mode, outx, outy, out16, outf16)
+                continue
+            if c == _CELL_UNSEEN:
+                for j in range(j0, j1):
+                    _view_store(i, j, _NAN, _NAN, mode, outx, outy, out16, outf16)
+                continue
+            for j in range(j0, j1):
+                if kind == 0:
+                    x0 = A[0, 0] * j + A[0, 1] * i + A[0, 2]
+                    y0 = A[1, 0] * j + A[1, 1] * i + A[1, 2]
+                    z0 = A[2, 0] * j + A[2, 1] * i + A[2, 2]
+                else:
+                    px = rowc * colc[j]
+                    py = rowc * cols[j]
+                    x0 = A[0, 0] * px + A[0, 1] * py + A[0, 2] * rowz
+                    y0 = A[1, 0] * px + A[1, 1] * py + A[1, 2] * rowz
+                    z0 = A[2, 0] * px + A[2, 1] * py + A[2, 2] * rowz
+                nrm = math.sqrt(x0 * x0 + y0 * y0 + z0 * z0)
+                dx = x0 / nrm
+                dy = y0 / nrm
+                dz = z0 / nrm
+                x = _NAN
+                y = _NAN
+                decided = not dz <= sin_reject  # above every elevation the rig sees
+                if c == _CELL_EDGE and not decided:
+                    tu = j - j0
+                    s1 = wu[tu, 0] * rs[k, 0] + wu[tu, 1] * rs[k + 1, 0] + wu[tu, 2] * rs[k + 2, 0] \
+                        + wu[tu, 3] * rs[k + 3, 0]
+                    s2 = wu[tu, 0] * rs[k, 1] + wu[tu, 1] * rs[k + 1, 1] + wu[tu, 2] * rs[k + 2, 1] \
+                        + wu[tu, 3] * rs[k + 3, 1]
+                    Xx, Xy, Xz = _view_target(dx, dy, dz, at_infinity, depth, vp)
+                    if (not at_infinity) and Xz > 0.0 and \
+                            (Xx * Xx + Xy * Xy) / (a * a) - Xz * Xz / (b * b) + 1.0 < 0.0:
+                        decided = True  # inside the mirror body, as project_points
+                    else:
+                        rim_m = (rim2 - (s1 * s1 + s2 * s2)) / rim2
+                        xi, yi, m = _view_pixel(s1, s2, Xx, Xy, Xz, at_infinity, C, Rc, tc, a,
+                                                b, K, dist, tilt, has_dist)
+                        if rim_m < -_VIEW_RIM_MARGIN or m < -_VIEW_COS_MARGIN:
+                            decided = True  # clearly unseen
+                        elif rim_m > _VIEW_RIM_MARGIN and m > _VIEW_COS_MARGIN \
+                                and xi == xi and yi == yi:
+                            decided = True
+                            x = xi
+                            y = yi
+                if not decided:
+                    x, y = _view_exact(dx, dy, dz, sin_reject, at_infinity, depth, vp, C, Rc, tc,
+                                       a, b, rim_radius, K, dist, tilt, has_dist, newton_tol)
+                    n_ex += 1
+                _view_store(i, j, x, y, mode, outx, outy, out16, outf16)
+        n_exact_rows[rr] = n_ex
+    n_nodes = 0
+    for p in range(NY):
+        for q in range(NX):
+            if NV[p, q, 0] > -np.inf:
+                n_nodes += 1
+    stats[0] = n_nodes
+    n_checks = 0
+    for w_ in range(3):
+        for r in range(ny + 1):
+            for k in range(nx + 1):
+                if CV[w_, r, k, 0] > -np.inf:
+                    n_checks += 1
+    stats[1] = n_checks
+    for c in range(4):
+        stats[2 + c] = 0
+    for r in range(ny):
+        for k in range(nx):
+            if cls[r, k] == _CELL_SEEN:
+                stats[2] += 1
+            elif cls[r, k] == _CELL_UNSEEN:
+                stats[3] += 1
+            elif cls[r, k] == _CELL_EDGE:
+                stats[4] += 1
+            else:
+                stats[5] += 1
+    stats[6] = n_exact_rows.sum()

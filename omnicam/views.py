@@ -224,10 +224,21 @@ def _elevation_deg(d):
     return np.degrees(np.arctan2(d[..., 2], np.hypot(d[..., 0], d[..., 1])))
 
 
-def _nadir_seen(camera):
-    """Whether the straight-down direction (0, 0, -1) is seen by the mirror."""
-    p = camera.project_directions(np.array([[0.0, 0.0, -1.0]]))
-    return bool(np.isfinite(p).all())
+def _nadir_seen(camera, rim_dirs):
+    """Whether the straight-down direction (0, 0, -1) is among those the mirror shows.
+
+    The cap maps one-to-one onto the directions it shows, so these are the region bounded by
+    the closed curve of rim rays that contains the ray of the apex. The nadir is in it when that
+    curve winds around the mirror axis and the apex ray lies below the whole curve.
+    """
+    m = camera.mirror
+    V = np.array([0.0, 0.0, m.b]) - camera.camera_center
+    apex_ray = np.array([V[0], V[1], -V[2]])  # reflection about the apex normal (0, 0, -1)
+    az = np.arctan2(rim_dirs[:, 1], rim_dirs[:, 0])
+    turns = np.diff(np.append(az, az[0]))
+    turns = (turns + np.pi) % (2.0 * np.pi) - np.pi
+    winding = int(round(float(turns.sum()) / (2.0 * np.pi)))
+    return abs(winding) == 1 and _elevation_deg(apex_ray) < float(np.min(_elevation_deg(rim_dirs)))
 
 
 def visible_elevation_range(camera):
@@ -240,9 +251,10 @@ def visible_elevation_range(camera):
     rim ray. For a misaligned rig the upper edge of what is seen varies with azimuth; the band
     is the union over azimuths, so some pixels near ``hi`` are unseen at some azimuths.
     """
-    el = _elevation_deg(_rim_directions(camera))
-    hi = float(np.nanmax(el))
-    lo = -90.0 if _nadir_seen(camera) else float(np.nanmin(el))
+    rim_dirs = _rim_directions(camera)
+    el = _elevation_deg(rim_dirs)
+    hi = float(np.max(el))
+    lo = -90.0 if _nadir_seen(camera, rim_dirs) else float(np.min(el))
     return lo, hi
 
 
@@ -297,6 +309,113 @@ def _finish(xy, m1type):
     if m1type == cv2.CV_32FC1:
         return mapx, mapy
     return cv2.convertMaps(mapx, mapy, cv2.CV_16SC2)
+
+
+# -- the fast path: one numba kernel (omnicam._kernels.view_table) -------------------------------
+#: Node spacing of the exact coarse grid, output pixels. Cells whose measured interpolation
+#: error exceeds TOLERANCE / 2 are computed exactly pixel by pixel, whatever the spacing.
+STEP = 16
+
+#: Every float table entry is within this many pixels of the exact non-central projection.
+TOLERANCE = 0.01
+
+_KIND = {"perspective": 0, "cylindrical": 1, "equirectangular": 2}
+
+
+def _tilt_matrix(tau_x, tau_y):
+    """OpenCV's ``computeTiltProjectionMatrix`` (the tau_x, tau_y of a 14-value ``D``)."""
+    cx, sx, cy, sy = math.cos(tau_x), math.sin(tau_x), math.cos(tau_y), math.sin(tau_y)
+    rot_x = np.array([[1.0, 0.0, 0.0], [0.0, cx, sx], [0.0, -sx, cx]])
+    rot_y = np.array([[cy, 0.0, -sy], [0.0, 1.0, 0.0], [sy, 0.0, cy]])
+    rot_xy = rot_y @ rot_x
+    proj_z = np.array([[rot_xy[2, 2], 0.0, -rot_xy[0, 2]], [0.0, rot_xy[2, 2], -rot_xy[1, 2]],
+                       [0.0, 0.0, 1.0]])
+    return proj_z @ rot_xy
+
+
+def _cap_radius(camera, viewpoint):
+    """An upper bound of the distance from ``viewpoint`` to any point of the mirror cap."""
+    m = camera.mirror
+    r = np.linspace(0.0, m.rim_radius, 33)[:, None]
+    t = np.linspace(0.0, 2.0 * np.pi, 96, endpoint=False)[None, :]
+    X, Y = r * np.cos(t), r * np.sin(t)
+    P = np.stack([X, Y, m.surface_z(X, Y)], axis=-1).reshape(-1, 3)
+    # grid spacing <= rim_radius * 2 pi / 96 along the rim: add it as slack
+    return float(np.linalg.norm(P - viewpoint, axis=1).max()) + m.rim_radius * 0.07
+
+
+def _reject_sines(camera, depth, viewpoint):
+    """Sines of the elevation above which nothing is seen, and above which nodes are not solved.
+
+    At infinity nothing above the highest rim ray is seen (:func:`visible_elevation_range`).
+    A point at distance ``depth > rho`` from the viewpoint, ``rho`` bounding the distance to any
+    mirror point, is seen along a ray within ``asin(rho / depth)`` of its direction from the
+    viewpoint, so its elevation from there is at most ``hi + asin(rho / depth)``.
+    """
+    hi = float(np.max(_elevation_deg(_rim_directions(camera))))
+    limit = hi + 0.5  # slack for the rim sampling
+    if depth is not None:
+        rho = _cap_radius(camera, viewpoint)
+        if depth <= rho * 1.001:
+            return 2.0, 2.0
+        limit += math.degrees(math.asin(rho / depth))
+    if limit >= 90.0:
+        return 2.0, 2.0
+    return math.sin(math.radians(limit)), math.sin(math.radians(min(limit + 30.0, 89.5)))
+
+
+def _table(camera, kind, A, p0, p1, az_step, size, depth, viewpoint, m1type, step=STEP,
+           stats=None):
+    """Run :func:`omnicam._kernels.view_table` and return the maps for ``m1type``."""
+    from . import _kernels
+
+    w, h = size
+    D = camera.D
+    dist = np.zeros(14)
+    tilt = np.eye(3)
+    if D is not None:
+        dist[:D.size] = D
+        if D.size == 14:
+            tilt = _tilt_matrix(D[12], D[13])
+    sin_reject, sin_try = _reject_sines(camera, depth, viewpoint)
+    at_infinity = depth is None
+    vp = np.zeros(3) if viewpoint is None else np.ascontiguousarray(viewpoint, dtype=np.float64)
+    m = camera.mirror
+    if m1type == cv2.CV_16SC2:
+        mode = 1
+        outx = outy = np.empty((1, 1), np.float32)
+        out16 = np.empty((h, w, 2), np.int16)
+        outf16 = np.empty((h, w), np.uint16)
+    else:
+        mode = 0
+        outx = np.empty((h, w), np.float32)
+        outy = np.empty((h, w), np.float32)
+        out16 = np.empty((1, 1, 2), np.int16)
+        outf16 = np.empty((1, 1), np.uint16)
+    st = np.zeros(7, np.int64) if stats is None else stats
+    _kernels.view_table(
+        kind, np.ascontiguousarray(A, dtype=np.float64), float(p0), float(p1), float(az_step),
+        w, h, int(step), at_infinity, 0.0 if depth is None else float(depth), vp,
+        float(sin_reject), float(sin_try), np.ascontiguousarray(camera.camera_center),
+        np.ascontiguousarray(camera.R), np.ascontiguousarray(camera.tvec), m.a, m.b,
+        m.rim_radius, np.ascontiguousarray(camera.K), dist, tilt, D is not None,
+        float(TOLERANCE), mode, outx, outy, out16, outf16, st)
+    if mode == 1:
+        return out16, outf16
+    if m1type == cv2.CV_32FC2:
+        return cv2.merge([outx, outy]), None
+    return outx, outy
+
+
+def _panorama_params(size, lo, hi, projection):
+    w, h = size
+    if projection == "cylindrical":
+        p0 = math.tan(math.radians(hi))
+        p1 = (math.tan(math.radians(lo)) - p0) / (h - 1)
+    else:
+        p0 = math.radians(hi)
+        p1 = (math.radians(lo) - p0) / (h - 1)
+    return p0, p1, -2.0 * math.pi / w
 
 
 # -- public API ---------------------------------------------------------------------------------
@@ -362,8 +481,8 @@ def init_panorama_maps(camera, size, elevation_range=None, projection="cylindric
     else:
         lo, hi = _check_elevation_range(elevation_range, projection)
     vp = _check_viewpoint(camera, viewpoint, depth)
-    dirs = _panorama_directions((w, h), lo, hi, projection, Rm.T)
-    return _finish(_exact_table(camera, dirs, depth, vp), m1type)
+    p0, p1, az_step = _panorama_params((w, h), lo, hi, projection)
+    return _table(camera, _KIND[projection], Rm.T, p0, p1, az_step, (w, h), depth, vp, m1type)
 
 
 def init_perspective_maps(camera, K_new, size, R=None, m1type=cv2.CV_16SC2, depth=None,
@@ -408,5 +527,4 @@ def init_perspective_maps(camera, K_new, size, R=None, m1type=cv2.CV_16SC2, dept
     depth = _check_depth(depth)
     vp = _check_viewpoint(camera, viewpoint, depth)
     M = Rm.T @ np.linalg.inv(K_new)
-    dirs = _perspective_directions((w, h), M)
-    return _finish(_exact_table(camera, dirs, depth, vp), m1type)
+    return _table(camera, 0, M, 0.0, 0.0, 0.0, (w, h), depth, vp, m1type)
