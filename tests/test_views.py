@@ -1,0 +1,393 @@
+"""Remap tables against the exact non-central projection, and the view conventions.
+
+The reference is the camera's own exact projection (``project_directions`` / ``project``,
+Newton on Fermat's path length) of the direction each output pixel looks along, with the
+directions written here from conventions.md ("Views"), independently of ``omnicam.views``.
+"""
+import math
+
+import cv2
+import numpy as np
+import pytest
+
+from omnicam import K_from_fov, MisalignedHyperbolicCamera, rotation_from_ypr, synthetic, views
+
+TOL = 0.01  # px, the accuracy every float table entry keeps (issue 4, item 2)
+
+RIGS = {
+    "aligned": synthetic.aligned_rig,
+    "misaligned": synthetic.misaligned_rig,
+    "distorted": lambda: synthetic.misaligned_rig(
+        tilt_deg=4.0, tilt_azimuth_deg=-70.0, offset_mm=(-2.0, 1.0, -1.5),
+        D=[-0.05, 0.01, 0.001, -0.0015, 0.002]),
+    "tilted_sensor": lambda: synthetic.misaligned_rig(
+        D=[-0.03, 0.004, 0.0005, 0.0002, 0.0, 0.01, 0.0, 0.0, 0.001, 0.0, -0.001, 0.0, 0.01,
+           -0.02]),
+}
+
+
+@pytest.fixture(scope="module", params=sorted(RIGS))
+def rig(request):
+    return RIGS[request.param]()
+
+
+# -- directions written from conventions.md -----------------------------------------------------
+def panorama_dirs(size, lo, hi, projection, R=np.eye(3)):
+    w, h = size
+    az = np.radians(-360.0 * np.arange(w) / w)
+    if projection == "cylindrical":
+        tz = np.linspace(math.tan(math.radians(hi)), math.tan(math.radians(lo)), h)
+        el = np.arctan(tz)
+    else:
+        el = np.radians(np.linspace(hi, lo, h))
+    el, az = np.meshgrid(el, az, indexing="ij")
+    d = np.stack([np.cos(el) * np.cos(az), np.cos(el) * np.sin(az), np.sin(el)], axis=-1)
+    return d @ R  # R^T d for row vectors
+
+
+def perspective_dirs(K, size, R):
+    w, h = size
+    u, v = np.meshgrid(np.arange(w, dtype=float), np.arange(h, dtype=float))
+    d = np.stack([u, v, np.ones_like(u)], axis=-1) @ np.linalg.inv(K).T @ R
+    return d / np.linalg.norm(d, axis=-1, keepdims=True)
+
+
+def exact(cam, dirs, depth=None, viewpoint=None):
+    d = dirs.reshape(-1, 3)
+    if depth is None:
+        xy = cam.project_directions(d)
+    else:
+        vp = cam.best_fit_viewpoint()[0] if viewpoint is None else np.asarray(viewpoint, float)
+        xy = cam.project(vp + depth * d)
+    return xy.reshape(dirs.shape[:-1] + (2,))
+
+
+def rim_distance(cam, xy):
+    """Distance of pixels to the image of the rim (a dense polyline of it)."""
+    rim = cam.rim_image_points(20000)
+    d = np.full(len(xy), np.inf)
+    for i in range(0, len(xy), 256):
+        chunk = xy[i:i + 256]
+        d[i:i + 256] = np.min(np.linalg.norm(chunk[:, None, :] - rim[None], axis=2), axis=1)
+    return d
+
+
+def assert_matches_exact(cam, mapx, mapy, ref):
+    """Every seen entry within TOL of the exact answer; unseen exactly where the exact model
+    has NaN, except ties on the rim itself (within the rim polyline's resolution)."""
+    got = np.stack([mapx, mapy], axis=-1).astype(np.float64)
+    seen = ~((mapx == views.UNSEEN) & (mapy == views.UNSEEN))
+    fin = np.isfinite(ref).all(axis=-1)
+    both = seen & fin
+    assert both.any()
+    err = np.linalg.norm(got[both] - ref[both], axis=1)
+    assert err.max() <= TOL, f"max error {err.max():.4g} px"
+    only_table = seen & ~fin
+    only_exact = fin & ~seen
+    if only_table.any():
+        assert rim_distance(cam, got[only_table]).max() < 0.1
+    if only_exact.any():
+        assert rim_distance(cam, ref[only_exact]).max() < 0.1
+    assert only_table.sum() + only_exact.sum() <= max(4, 0.01 * both.sum())
+    return err.max()
+
+
+# -- accuracy ---------------------------------------------------------------------------------
+@pytest.mark.parametrize("projection", ["cylindrical", "equirectangular"])
+@pytest.mark.parametrize("depth", [None, 600.0])
+@pytest.mark.parametrize("size", [(256, 64), (1024, 256)])
+def test_panorama_table_within_tolerance_of_exact_projection(rig, projection, depth, size):
+    mapx, mapy = rig.init_panorama_maps(size, projection=projection, m1type=cv2.CV_32FC1,
+                                        depth=depth)
+    lo, hi = views.visible_elevation_range(rig)
+    if projection == "cylindrical":
+        lo = max(lo, views.CYLINDRICAL_MIN_ELEVATION)
+    ref = exact(rig, panorama_dirs(size, lo, hi, projection), depth)
+    assert_matches_exact(rig, mapx, mapy, ref)
+
+
+@pytest.mark.parametrize("depth", [None, 600.0])
+@pytest.mark.parametrize("size, fov, ypr", [((160, 120), 90.0, (0.0, 0.0, 0.0)),
+                                            ((640, 480), 110.0, (25.0, -20.0, 10.0)),
+                                            ((320, 240), 60.0, (-100.0, 8.0, -5.0))])
+def test_perspective_table_within_tolerance_of_exact_projection(rig, depth, size, fov, ypr):
+    K = K_from_fov(fov, size)
+    R = rotation_from_ypr(*ypr)
+    mapx, mapy = rig.init_perspective_maps(K, size, R=R, m1type=cv2.CV_32FC1, depth=depth)
+    ref = exact(rig, perspective_dirs(K, size, R), depth)
+    assert_matches_exact(rig, mapx, mapy, ref)
+
+
+def test_explicit_viewpoint_is_used_for_finite_depth():
+    cam = synthetic.misaligned_rig()
+    vp = np.array([1.0, -2.0, 30.0])
+    K = K_from_fov(90.0, (160, 120))
+    R = rotation_from_ypr(40.0, -30.0, 0.0)
+    mapx, mapy = cam.init_perspective_maps(K, (160, 120), R=R, m1type=cv2.CV_32FC1, depth=80.0,
+                                           viewpoint=vp)
+    ref = exact(cam, perspective_dirs(K, (160, 120), R), 80.0, vp)
+    assert_matches_exact(cam, mapx, mapy, ref)
+
+
+def test_large_tables_are_interpolated_and_keep_the_bound():
+    """The fast path (nodes every STEP px, cubic cells) is what big tables use."""
+    cam = synthetic.misaligned_rig()
+    size = (1024, 256)
+    lo, hi = views.visible_elevation_range(cam)
+    p0, p1, az = views._panorama_params(size, lo, hi, "equirectangular")
+    stats = np.zeros(7, np.int64)
+    mapx, mapy = views._table(cam, 2, np.eye(3), p0, p1, az, size, None, None, cv2.CV_32FC1,
+                              stats=stats)
+    n_cells = stats[2:6].sum()
+    assert stats[2] > 0.5 * n_cells          # most cells interpolated from the nodes
+    assert stats[6] < 0.2 * size[0] * size[1]  # few pixels solved one by one
+    ref = exact(cam, panorama_dirs(size, lo, hi, "equirectangular"))
+    assert_matches_exact(cam, mapx, mapy, ref)
+
+
+# -- conventions ------------------------------------------------------------------------------
+def test_panorama_column_quarter_looks_towards_minus_Y():
+    cam = synthetic.misaligned_rig()
+    W, H = 400, 51
+    mapx, mapy = cam.init_panorama_maps((W, H), elevation_range=(-50.0, 0.0),
+                                        projection="equirectangular", m1type=cv2.CV_32FC1)
+    for row, el in ((0, 0.0), (25, -25.0), (50, -50.0)):
+        e = math.radians(el)
+        for col, d in ((0, (math.cos(e), 0.0, math.sin(e))),
+                       (W // 4, (0.0, -math.cos(e), math.sin(e))),
+                       (W // 2, (-math.cos(e), 0.0, math.sin(e))),
+                       (3 * W // 4, (0.0, math.cos(e), math.sin(e)))):
+            ref = cam.project_directions(np.array([d]))[0]
+            assert np.hypot(mapx[row, col] - ref[0], mapy[row, col] - ref[1]) < TOL
+
+
+def test_panorama_turns_right_and_is_not_mirrored():
+    """Aligned rig: azimuth 0 (+X) is image right of centre, -90 deg (-Y) is image up."""
+    cam = synthetic.aligned_rig()
+    mapx, mapy = cam.init_panorama_maps((400, 40), elevation_range=(-40.0, 0.0),
+                                        m1type=cv2.CV_32FC1)
+    cx, cy = cam.K[0, 2], cam.K[1, 2]
+    assert mapx[20, 0] > cx + 50 and abs(mapy[20, 0] - cy) < 1
+    assert mapy[20, 100] < cy - 50 and abs(mapx[20, 100] - cx) < 1
+
+
+@pytest.mark.parametrize("projection", ["cylindrical", "equirectangular"])
+def test_panorama_rows_from_hi_to_lo_with_the_projection_spacing(projection):
+    cam = synthetic.misaligned_rig()
+    lo, hi = -50.0, 10.0
+    H = 41
+    mapx, mapy = cam.init_panorama_maps((64, H), elevation_range=(lo, hi), projection=projection,
+                                        m1type=cv2.CV_32FC1)
+    if projection == "cylindrical":
+        mid = math.degrees(math.atan(0.5 * (math.tan(math.radians(lo))
+                                            + math.tan(math.radians(hi)))))
+    else:
+        mid = 0.5 * (lo + hi)
+    for row, el in ((0, hi), (H // 2, mid), (H - 1, lo)):
+        e = math.radians(el)
+        ref = cam.project_directions(np.array([[math.cos(e), 0.0, math.sin(e)]]))[0]
+        assert np.hypot(mapx[row, 0] - ref[0], mapy[row, 0] - ref[1]) < TOL
+
+
+def test_panorama_R_rotates_the_panorama_frame():
+    cam = synthetic.misaligned_rig()
+    R = rotation_from_ypr(0.0, 0.0, 0.0) @ cv2.Rodrigues(np.array([0.1, -0.2, 0.3]))[0]
+    size = (128, 32)
+    mapx, mapy = cam.init_panorama_maps(size, elevation_range=(-60.0, 5.0), R=R,
+                                        m1type=cv2.CV_32FC1)
+    ref = exact(cam, panorama_dirs(size, -60.0, 5.0, "cylindrical", R))
+    assert_matches_exact(cam, mapx, mapy, ref)
+
+
+def test_default_elevation_range_is_the_band_the_mirror_sees():
+    cam = synthetic.aligned_rig()
+    m = cam.mirror
+    # aligned: every rim ray passes through the outer focus (0, 0, c)
+    hi = math.degrees(math.atan2(m.z_rim - m.c, m.rim_radius))
+    lo, hi_got = views.visible_elevation_range(cam)
+    assert lo == -90.0
+    assert hi_got == pytest.approx(hi, abs=1e-9)
+    lo_m, hi_m = views.visible_elevation_range(synthetic.misaligned_rig())
+    assert lo_m == -90.0 and 10.0 < hi_m < 30.0
+    # the highest seen row is seen somewhere, and nothing above hi is seen
+    mapx, _ = cam.init_panorama_maps((360, 90), projection="equirectangular",
+                                     m1type=cv2.CV_32FC1)
+    assert (mapx[1] != views.UNSEEN).all()
+    assert (mapx[-1] != views.UNSEEN).all()
+
+
+def test_rotation_from_ypr_signs():
+    R0 = np.array([[0, -1, 0], [0, 0, -1], [1, 0, 0]], dtype=float)
+    np.testing.assert_allclose(rotation_from_ypr(0, 0, 0), R0, atol=1e-15)
+    np.testing.assert_allclose(views.R0, R0)
+    # yaw 90: optical axis at azimuth -90 (towards -Y), turning right
+    np.testing.assert_allclose(rotation_from_ypr(90, 0, 0)[2], [0, -1, 0], atol=1e-12)
+    # pitch 30: looking up
+    f = rotation_from_ypr(0, 30, 0)[2]
+    assert math.degrees(math.asin(f[2])) == pytest.approx(30.0)
+    # image-up (-y row) stays as close to +Z as possible: image-right is horizontal
+    R = rotation_from_ypr(37, -25, 0)
+    assert abs(R[0, 2]) < 1e-12 and -R[1, 2] > 0
+    # roll clockwise: image-right tilts towards image-down (-Z), optical axis unchanged
+    Rr = rotation_from_ypr(0, 0, 10)
+    np.testing.assert_allclose(Rr[2], R0[2], atol=1e-12)
+    assert Rr[0, 2] < 0
+    for ypr in ((10, 20, 30), (-170, 89, -45), (0, -90, 0)):
+        R = rotation_from_ypr(*ypr)
+        np.testing.assert_allclose(R @ R.T, np.eye(3), atol=1e-12)
+        assert np.linalg.det(R) == pytest.approx(1.0)
+
+
+def test_default_R_is_R0_and_looks_at_azimuth_zero():
+    cam = synthetic.misaligned_rig()
+    size = (161, 121)
+    K = K_from_fov(90.0, size)
+    mapx, mapy = cam.init_perspective_maps(K, size, m1type=cv2.CV_32FC1)
+    centre = cam.project_directions(np.array([[1.0, 0.0, 0.0]]))[0]
+    assert np.hypot(mapx[60, 80] - centre[0], mapy[60, 80] - centre[1]) < TOL
+    # the right edge at 45 deg looks towards -Y (right turn), the top edge up
+    right = cam.project_directions(np.array([[1.0, -80.0 / K[0, 0], 0.0]]))[0]
+    assert np.hypot(mapx[60, 160] - right[0], mapy[60, 160] - right[1]) < TOL
+
+
+def test_K_from_fov_is_horizontal_with_centred_principal_point():
+    K = K_from_fov(90.0, (640, 480))
+    assert K[0, 2] == 319.5 and K[1, 2] == 239.5 and K[0, 0] == K[1, 1]
+    # the left edge of the image (u = -0.5) is 45 deg off the axis
+    assert math.degrees(math.atan((K[0, 2] + 0.5) / K[0, 0])) == pytest.approx(45.0)
+
+
+def test_aligned_baseline_differs_from_calibrated_on_a_misaligned_rig():
+    """Paper Fig. 7: the uncalibrated model (eqs. 2-5) warps a misaligned rig's panorama."""
+    cam = synthetic.misaligned_rig()
+    base = MisalignedHyperbolicCamera.aligned(cam.mirror, cam.K[0, 0], cam.K[0, 2], cam.K[1, 2])
+    kw = dict(elevation_range=(-60.0, 5.0), m1type=cv2.CV_32FC1)
+    a = np.stack(cam.init_panorama_maps((256, 64), **kw), axis=-1)
+    b = np.stack(base.init_panorama_maps((256, 64), **kw), axis=-1)
+    ok = (a != views.UNSEEN).all(-1) & (b != views.UNSEEN).all(-1)
+    assert np.linalg.norm(a - b, axis=-1)[ok].max() > 5.0
+
+
+# -- m1type variants and unseen entries -------------------------------------------------------
+@pytest.mark.parametrize("kind", ["panorama", "perspective"])
+def test_m1type_variants_agree(kind):
+    cam = synthetic.misaligned_rig()
+    if kind == "panorama":
+        make = lambda t: cam.init_panorama_maps((300, 80), m1type=t)  # noqa: E731
+    else:
+        K = K_from_fov(100.0, (200, 150))
+        make = lambda t: cam.init_perspective_maps(K, (200, 150), R=rotation_from_ypr(5, 10, 0),
+                                                   m1type=t)  # noqa: E731
+    fx, fy = make(cv2.CV_32FC1)
+    assert fx.dtype == np.float32 and fx.shape == (fx.shape[0], fx.shape[1])
+    xy, none = make(cv2.CV_32FC2)
+    assert none is None and xy.dtype == np.float32 and xy.shape == fx.shape + (2,)
+    np.testing.assert_array_equal(xy[..., 0], fx)
+    np.testing.assert_array_equal(xy[..., 1], fy)
+    m1, m2 = make(cv2.CV_16SC2)
+    assert m1.dtype == np.int16 and m1.shape == fx.shape + (2,)
+    assert m2.dtype == np.uint16 and m2.shape == fx.shape
+    ref1, ref2 = cv2.convertMaps(fx, fy, cv2.CV_16SC2)
+    np.testing.assert_array_equal(m1, ref1)
+    np.testing.assert_array_equal(m2, ref2)
+    back_x = m1[..., 0] + (m2 & 31) / 32.0
+    back_y = m1[..., 1] + (m2 >> 5) / 32.0
+    assert np.abs(back_x - fx).max() <= 1 / 64 + 1e-6
+    assert np.abs(back_y - fy).max() <= 1 / 64 + 1e-6
+
+
+def test_default_m1type_is_fixed_point():
+    cam = synthetic.aligned_rig()
+    m1, m2 = cam.init_panorama_maps((64, 16))
+    assert m1.dtype == np.int16 and m2.dtype == np.uint16
+
+
+def test_unseen_directions_map_outside_and_remap_to_the_border():
+    cam = synthetic.misaligned_rig()
+    size = (120, 90)
+    K = K_from_fov(60.0, size)
+    up = rotation_from_ypr(0.0, 85.0, 0.0)  # looking at the zenith: nothing is seen
+    for m1type in (cv2.CV_32FC1, cv2.CV_32FC2, cv2.CV_16SC2):
+        m1, m2 = cam.init_perspective_maps(K, size, R=up, m1type=m1type)
+        img = np.full((500, 500, 3), 200, np.uint8)
+        out = cv2.remap(img, m1, m2, cv2.INTER_LINEAR, borderMode=cv2.BORDER_CONSTANT,
+                        borderValue=(7, 7, 7))
+        assert (out == 7).all()
+    mapx, mapy = cam.init_perspective_maps(K, size, R=up, m1type=cv2.CV_32FC1)
+    assert (mapx == views.UNSEEN).all() and (mapy == views.UNSEEN).all()
+    assert views.UNSEEN <= -2.0 and views.UNSEEN > -32768 / 32
+    # a horizontal view sees the lower half and not the top rows
+    mapx, mapy = cam.init_perspective_maps(K, size, m1type=cv2.CV_32FC1)
+    assert (mapx[0] == views.UNSEEN).all() and (mapx[-1] != views.UNSEEN).all()
+
+
+# -- bad input --------------------------------------------------------------------------------
+@pytest.mark.parametrize("size", [(0, 10), (10,), "ab", (10.5, 3), (10, -1), None, (10, 1)])
+def test_panorama_bad_size_raises(size):
+    with pytest.raises(ValueError, match="size"):
+        synthetic.aligned_rig().init_panorama_maps(size)
+
+
+@pytest.mark.parametrize("kwargs, name", [
+    (dict(projection="spherical"), "projection"),
+    (dict(projection=None), "projection"),
+    (dict(m1type=cv2.CV_8UC1), "m1type"),
+    (dict(m1type=5.0), "m1type"),
+    (dict(m1type=True), "m1type"),
+    (dict(elevation_range=(10.0, 10.0)), "elevation_range"),
+    (dict(elevation_range=(20.0, -10.0)), "elevation_range"),
+    (dict(elevation_range=(-95.0, 10.0)), "elevation_range"),
+    (dict(elevation_range=(-10.0, 91.0)), "elevation_range"),
+    (dict(elevation_range=(-90.0, 10.0)), "elevation_range"),  # cylindrical: tan(-90)
+    (dict(elevation_range=(float("nan"), 10.0)), "elevation_range"),
+    (dict(elevation_range=(1.0, 2.0, 3.0)), "elevation_range"),
+    (dict(R=np.eye(2)), "R"),
+    (dict(R=2 * np.eye(3)), "R"),
+    (dict(depth=0.0), "depth"),
+    (dict(depth=-5.0), "depth"),
+    (dict(depth="far"), "depth"),
+    (dict(depth=100.0, viewpoint=(1.0, 2.0)), "viewpoint"),
+])
+def test_panorama_bad_arguments_raise_naming_them(kwargs, name):
+    with pytest.raises(ValueError, match=name):
+        synthetic.aligned_rig().init_panorama_maps((64, 16), **kwargs)
+
+
+@pytest.mark.parametrize("K_new", [np.zeros((3, 3)), np.diag([0.0, 100.0, 1.0]), np.eye(2),
+                                   [[100, 0, 50], [0, 100, 50], [0, 0, 2]],
+                                   np.full((3, 3), np.nan)])
+def test_perspective_bad_K_new_raises(K_new):
+    with pytest.raises(ValueError, match="K_new"):
+        synthetic.aligned_rig().init_perspective_maps(K_new, (64, 48))
+
+
+@pytest.mark.parametrize("kwargs, name", [
+    (dict(size=(0, 48)), "size"),
+    (dict(m1type=cv2.CV_16UC1), "m1type"),
+    (dict(R=np.diag([1.0, 1.0, -1.0])), "R"),
+])
+def test_perspective_bad_arguments_raise_naming_them(kwargs, name):
+    args = dict(size=(64, 48))
+    args.update(kwargs)
+    with pytest.raises(ValueError, match=name):
+        synthetic.aligned_rig().init_perspective_maps(K_from_fov(90.0, (64, 48)), **args)
+
+
+def test_equirectangular_accepts_the_poles():
+    cam = synthetic.aligned_rig()
+    mapx, mapy = cam.init_panorama_maps((64, 33), elevation_range=(-90.0, 0.0),
+                                        projection="equirectangular", m1type=cv2.CV_32FC1)
+    nadir = cam.project_directions(np.array([[0.0, 0.0, -1.0]]))[0]
+    assert np.abs(mapx[-1] - nadir[0]).max() < TOL and np.abs(mapy[-1] - nadir[1]).max() < TOL
+
+
+@pytest.mark.parametrize("bad", [(float("inf"), 0, 0), ("a", 0, 0)])
+def test_rotation_from_ypr_bad_input(bad):
+    with pytest.raises(ValueError, match="yaw"):
+        rotation_from_ypr(*bad)
+
+
+@pytest.mark.parametrize("fov", [0.0, 180.0, -10.0, "wide"])
+def test_K_from_fov_bad_input(fov):
+    with pytest.raises(ValueError, match="fov"):
+        K_from_fov(fov, (64, 48))
