@@ -264,7 +264,8 @@ class Room:
     300 mm cube standing on the floor inside one floor square, its centre ``(1250, 250, -700)``
     about 1.47 m from the viewpoint (29.5 deg below the horizon, azimuth 11.3 deg), turned about
     the vertical so that its two visible side faces are seen at 45 deg; from the mirror three
-    faces are visible (``+Z`` on top, ``-X`` and ``+Y`` of the cube frame).
+    faces are visible (``+Z`` on top, pale yellow; ``-X``, near-black navy; ``+Y``, green;
+    cube frame): :meth:`cube_faces` and :meth:`face_normals` give the ground truth.
 
     Attributes
     ----------
@@ -528,9 +529,10 @@ def render_environment(camera, environment=None, supersample=4, noise=0.0, seed=
     camera : MisalignedHyperbolicCamera
         Must have ``image_size``; the image is ``image_size`` (w, h).
     environment : (H, W, 3) array_like or None
-        Equirectangular BGR image (uint8 or float in 0..255), with the module's mapping: column
-        ``x`` at azimuth ``-360 x / W`` deg (azimuth from +X towards +Y, mirror frame), row ``y``
-        at elevation ``90 - 180 y / (H - 1)`` deg. ``None`` uses :func:`make_environment`.
+        Equirectangular BGR image (values in 0..255, any numeric dtype; results are clipped to
+        uint8) with the module's mapping: column ``x`` at azimuth ``-360 x / W`` deg (azimuth
+        from +X towards +Y, mirror frame), row ``y`` at elevation ``90 - 180 y / (H - 1)`` deg.
+        ``None`` uses :func:`make_environment`.
     supersample : int
         ``s``: ``s x s`` samples per pixel, averaged (1 = pixel centres only).
     noise : float
