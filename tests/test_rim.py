@@ -284,6 +284,30 @@ def test_detect_rim_real_photo_matches_manual_fit():
     assert fit.points[:, 1].min() > 1 and fit.points[:, 1].max() < 1078
 
 
+@pytest.mark.skipif(not REAL_PHOTO.exists(), reason="shared real photograph not available")
+@pytest.mark.parametrize("variant", ["half_size_grey", "cropped_more", "flipped_jpeg_q40"])
+def test_detect_rim_real_photo_variants_match_manual_fit(variant):
+    """The same photograph halved, clipped harder (100 px off top and bottom, 300 px off the
+    left), or flipped and recompressed: the rim still matches the manual fit."""
+    img = cv2.imread(str(REAL_PHOTO))
+    center, diameter = np.array(MANUAL_CENTER), MANUAL_DIAMETER
+    if variant == "half_size_grey":
+        img = cv2.cvtColor(cv2.resize(img, (960, 540), interpolation=cv2.INTER_AREA),
+                           cv2.COLOR_BGR2GRAY)
+        center, diameter = (center + 0.5) / 2 - 0.5, diameter / 2
+    elif variant == "cropped_more":
+        img = img[100:-100, 300:]
+        center = center - (300, 100)
+    else:
+        _, buf = cv2.imencode(".jpg", img[::-1, ::-1], [cv2.IMWRITE_JPEG_QUALITY, 40])
+        img = cv2.imdecode(buf, cv2.IMREAD_COLOR)
+        center = np.array([1919.0, 1079.0]) - center
+    fit = detect_rim(img)
+    scale = diameter / MANUAL_DIAMETER
+    assert np.linalg.norm(fit.center - center) < 4.0 * scale
+    assert abs(fit.diameter / diameter - 1.0) < 0.01
+
+
 def test_detect_rim_on_synthetic_renderer_images():
     """The project's renderer (paper Fig. 6), when present: environment at infinity."""
     render = getattr(synthetic, "render_environment", None)

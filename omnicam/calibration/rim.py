@@ -19,6 +19,7 @@ from __future__ import annotations
 import dataclasses
 import math
 
+import cv2
 import numpy as np
 
 __all__ = ["RimFit", "fit_rim", "detect_rim", "conic_from_ellipse", "ellipse_from_conic",
@@ -473,8 +474,6 @@ _COARSE_SIZE = 256  # longer side of the image used to find the rim roughly
 
 def _as_gray(image):
     """Grey float32 image scaled to about [0, 1]; BGR(A) is converted with OpenCV's weights."""
-    import cv2
-
     if not isinstance(image, np.ndarray):
         raise ValueError(f"image must be a numpy array (grey or BGR), got {type(image).__name__}")
     if image.ndim == 3 and image.shape[2] == 1:
@@ -499,17 +498,20 @@ def _as_gray(image):
     return (img - lo) * np.float32(1.0 / (hi - lo))
 
 
-def _coarse_circle(gray):
-    """Centre and radius (full-resolution px) of the most prominent bright-inside circle.
+def _coarse_ellipse(gray):
+    """The rim roughly: centre and shape ``S`` (full-resolution px) of the best bright-inside
+    ellipse found on a copy whose longer side is ``_COARSE_SIZE`` px.
 
-    On a copy whose longer side is ``_COARSE_SIZE`` px: edge pixels (Canny) vote for a centre
-    along their gradient direction (towards the brighter side: the inside of a bright mirror in a
-    dark housing; a dark blob such as the camera's reflection votes away from its centre). For the
-    strongest centres, the radius with the longest arc of edge pixels whose gradient points at the
-    centre wins: a long rim beats a small complete circle, and clipping only shortens the arc.
+    1. Canny edge pixels vote for a centre along their gradient direction (towards the brighter
+       side: the inside of a bright mirror in a dark housing; a dark blob such as the camera's
+       reflection votes away from its own centre).
+    2. For the strongest centres, radii are ranked by the arc length of edge pixels at that
+       distance whose gradient points at the centre: a long rim beats a small complete circle,
+       and clipping only shortens the arc.
+    3. The best few circles are refined to ellipses (RANSAC on the edge pixels near them with the
+       right polarity, then again on those near the ellipse and aligned with its normal); the
+       ellipse supported by the longest arc wins.
     """
-    import cv2
-
     h, w = gray.shape
     s = min(1.0, _COARSE_SIZE / max(h, w))
     small = cv2.resize(gray, (max(8, round(w * s)), max(8, round(h * s))),
@@ -519,7 +521,9 @@ def _coarse_circle(gray):
     gx = cv2.Sobel(small, cv2.CV_32F, 1, 0, ksize=3)
     gy = cv2.Sobel(small, cv2.CV_32F, 0, 1, ksize=3)
     mag = np.hypot(gx, gy)
-    hi = float(np.percentile(mag, 92))
+    # Canny's high threshold: the strongest 8 % of the gradients, but at least a tenth of the
+    # strong ones (a small rim on a flat background has few edge pixels)
+    hi = max(float(np.percentile(mag, 92)), 0.1 * float(np.percentile(mag, 99.9)))
     if not hi > 0:
         raise ValueError("no ellipse found: the image has no edges")
     scale = 255.0 / float(mag.max())
@@ -533,12 +537,13 @@ def _coarse_circle(gray):
     g = np.stack([gx[ys, xs], gy[ys, xs]], axis=1).astype(np.float64)
     g /= np.linalg.norm(g, axis=1, keepdims=True)
     p = np.stack([xs, ys], axis=1).astype(np.float64)
+    H, W = small.shape
+
+    # 1. centre votes along +g, centres up to a quarter of the image outside it
+    rmin, rmax = 0.08 * max(H, W), 0.8 * max(H, W)
     vote = np.arange(len(p))
     if len(vote) > 4000:  # enough votes for a clear peak; keeps the time bounded
         vote = np.random.default_rng(0).choice(len(p), 4000, replace=False)
-    H, W = small.shape
-    # centre votes along +g, centres up to a quarter of the image outside it
-    rmin, rmax = 0.08 * max(H, W), 0.8 * max(H, W)
     m = max(H, W) // 4
     acc_w, acc_h = W + 2 * m, H + 2 * m
     t = np.arange(rmin, rmax, 1.0, dtype=np.float32)
@@ -548,21 +553,19 @@ def _coarse_circle(gray):
     ok = (cx >= 0) & (cx < acc_w) & (cy >= 0) & (cy < acc_h)
     acc = np.bincount((cy[ok] * acc_w + cx[ok]), minlength=acc_w * acc_h).astype(np.float32)
     acc = cv2.GaussianBlur(acc.reshape(acc_h, acc_w), (0, 0), 1.5)
-    # a few strongest centres (non-maximum suppression)
     peaks = []
-    work = acc.copy()
-    for _ in range(4):
-        j = int(np.argmax(work))
-        v = work.flat[j]
-        if v <= 0 or (peaks and v < 0.2 * peaks[0][2]):
+    for _ in range(4):  # the strongest centres, with non-maximum suppression
+        j = int(np.argmax(acc))
+        v = acc.flat[j]
+        if v <= 0 or (peaks and v < 0.2 * peaks[0][1]):
             break
         y0, x0 = divmod(j, acc_w)
-        peaks.append((x0 - m, y0 - m, v))
-        work[max(0, y0 - 6):y0 + 7, max(0, x0 - 6):x0 + 7] = 0
-    best = None
-    for x0, y0, _ in peaks:
-        # refine the centre peak to subpixel by the weighted mean around it
-        c = np.array([x0, y0], np.float64)
+        peaks.append((np.array([x0 - m, y0 - m], np.float64), v))
+        acc[max(0, y0 - 6):y0 + 7, max(0, x0 - 6):x0 + 7] = 0
+
+    # 2. radii by supported arc length (1 px radius bins, +-1 bin; 1 px of arc per bin)
+    candidates = []
+    for c, _ in peaks:
         d = p - c
         r = np.linalg.norm(d, axis=1)
         inward = -(d * g).sum(axis=1) / np.maximum(r, 1e-9)  # gradient towards the centre
@@ -570,23 +573,65 @@ def _coarse_circle(gray):
         if sel.sum() < 10:
             continue
         rr, ang = r[sel], np.arctan2(d[sel, 1], d[sel, 0])
-        # arc length covered at each radius (1 px radius bins, +-1.5 px, 1 px of arc per bin)
-        nb = int(rmax) + 3
         rbin = np.rint(rr).astype(np.int64)
         abin = np.rint((ang + np.pi) * rr).astype(np.int64)  # position along the arc, px
         keys = np.unique(rbin * 100000 + abin)
-        arc = np.bincount(keys // 100000, minlength=nb).astype(np.float64)
+        arc = np.bincount(keys // 100000, minlength=int(rmax) + 3).astype(np.float64)
         arc3 = np.convolve(arc, np.ones(3), mode="same")
-        k = int(np.argmax(arc3))
-        if best is None or arc3[k] > best[0]:
-            rk = rr[np.abs(rr - k) <= 2.0]
-            best = (arc3[k], c, float(np.median(rk)) if rk.size else float(k))
-    if best is None or best[0] < 0.5 * best[2]:  # less than ~5 % of the circumference
-        raise ValueError("no ellipse found: no bright-inside circular boundary in the image; is "
+        for k in np.argsort(arc3)[::-1][:6]:
+            if arc3[k] >= 0.5 * k and all(abs(k - k2) > 4 or np.any(c != c2)
+                                           for _, c2, k2 in candidates):
+                candidates.append((arc3[k], c, int(k)))
+    candidates.sort(key=lambda item: -item[0])
+
+    # 3. refine the best few to ellipses; the longest supported arc wins
+    best = None
+    for _, c, k in candidates[:3]:
+        refined = _refine_coarse(p, g, c, float(k))
+        if refined is not None and (best is None or refined[0] > best[0]):
+            best = refined
+    if best is None or best[0] < 0.5 * np.linalg.eigvalsh(best[2])[1]:  # arc < ~8 % of the rim
+        raise ValueError("no ellipse found: no bright-inside elliptic boundary in the image; is "
                          "the mirror rim in view (bright mirror against a darker housing)?")
-    c = best[1]
-    centre = np.array([(c[0] + 0.5) / sx - 0.5, (c[1] + 0.5) / sy - 0.5])
-    return centre, best[2] / min(sx, sy) if sx == sy else best[2] / np.sqrt(sx * sy)
+    _, c, S = best
+    # to full resolution: x = (x_small + 0.5) / s - 0.5 per axis
+    A = np.diag([1.0 / sx, 1.0 / sy])
+    center = A @ (c + 0.5) - 0.5
+    AS = A @ S
+    wv, V = np.linalg.eigh(AS @ AS.T)
+    return center, V @ np.diag(np.sqrt(wv)) @ V.T, 1.0 / min(sx, sy)
+
+
+def _refine_coarse(p, g, c, r):
+    """Ellipse through the edge pixels ``p`` (gradients ``g``) near the circle ``(c, r)``.
+
+    Returns ``(support, center, S)`` with ``support`` the number of edge pixels (about the arc
+    length, px) within 1.5 px of the ellipse with a gradient along its inward normal, or ``None``.
+    """
+    d = p - c
+    rr = np.linalg.norm(d, axis=1)
+    inward = -(d * g).sum(axis=1) / np.maximum(rr, 1e-9)
+    sel = (inward > 0.8) & (np.abs(rr - r) < max(4.0, 0.08 * r))
+    rng = np.random.default_rng(0)
+    for thr in (1.5, 1.0):  # algebraic fits are plenty at this scale
+        if sel.sum() < 12:
+            return None
+        q = p[sel]
+        N = _hartley(q)
+        q_n = q * N[0, 0] + N[:2, 2]
+        mask = _ransac(q_n, thr * N[0, 0], rng, 300)
+        if mask is None or mask.sum() < 6:
+            return None
+        Qn = _direct_ellipse(q_n[mask])
+        if Qn is None or not _is_ellipse(Qn):
+            return None
+        try:
+            center, S = ellipse_from_conic(N.T @ Qn @ N)
+        except ValueError:
+            return None
+        dist, _, nrm = _orthogonal_residuals(p, center, S)
+        sel = (np.abs(dist) < 2.0 * thr) & (-(g * nrm).sum(axis=1) > 0.8)
+    return int(sel.sum()), center, S
 
 
 def _edge_points_along_normals(G, center, S, half_width, step=0.25, outermost=False):
@@ -596,10 +641,11 @@ def _edge_points_along_normals(G, center, S, half_width, step=0.25, outermost=Fa
     image ``G`` is sampled (bilinear) over ``+-half_width`` px, differentiated, and the maximum of
     the outward drop located to subpixel precision by a parabola through the log of the three
     samples around it (exact for a Gaussian-blurred step). Profiles that leave the image, whose
-    maximum lies at the window ends or whose drop is weak are dropped.
-    """
-    import cv2
+    maximum lies at the window ends or that find no drop are dropped.
 
+    Returns ``(points, n_tried)``: the (M, 2) edge points and the number of normals whose whole
+    profile was inside the image.
+    """
     h, w = G.shape
     axes, _ = _axes_angle(S)
     n_pts = int(max(64, min(20000, 2 * np.pi * axes[0])))
@@ -655,15 +701,23 @@ def _edge_points_along_normals(G, center, S, half_width, step=0.25, outermost=Fa
 def detect_rim(image, *, sigma=1.0, threshold=2.0, rng=0):
     """Find the mirror rim (its outer bright-mirror / dark-housing boundary) in an image.
 
-    1. Coarse: on a copy ~256 px wide, Canny edge pixels vote along their gradient for the
-       centre of a bright-inside circle; the radius with the longest supported arc wins (the
-       camera's dark reflection in the middle has the opposite polarity; a long clipped rim
-       beats a small full circle).
+    1. Coarse, on a copy 256 px wide (:func:`_coarse_ellipse`): Canny edge pixels vote along
+       their gradient for the centre of a bright-inside circle, radii are ranked by the arc
+       length they gather, and the best circles are refined to ellipses; the longest supported
+       arc wins. The camera's dark reflection in the middle has the opposite polarity, and a long
+       clipped rim beats a small complete circle (lens rings, horizon circles).
     2. Fine, at full resolution: along the normals of the current ellipse, the strongest
        outward intensity drop of the image smoothed by ``sigma`` is located to subpixel
        precision (profiles leaving the image are dropped, so a clipped rim gives an arc), and
        :func:`fit_rim` (RANSAC, then orthogonal-distance refinement) fits ``Q_I``
-       (eqs. 20-22). Three rounds with shrinking search windows.
+       (eqs. 20-22). Three rounds with shrinking search windows; the first takes the
+       outermost strong drop of each profile (the mirror's edge rather than scene edges inside).
+    3. Check: the ellipse must be found along at least 30 % of its in-frame length and fit its
+       points to ``max(1.5 px, 0.5 % of the major semi-axis)`` RMS, otherwise ``ValueError``.
+
+    Assumes the mirror is brighter than the housing around it along most of the rim (true of
+    every catadioptric image we know: a mirror reflects the lit scene, the holder is black), and
+    a rim at least ~8 % of the image's longer side in radius.
 
     Parameters
     ----------
@@ -687,15 +741,12 @@ def detect_rim(image, *, sigma=1.0, threshold=2.0, rng=0):
     ValueError
         Not an image, or no elliptic bright-inside boundary found.
     """
-    import cv2
-
+    if not (np.isfinite(sigma) and sigma >= 0):
+        raise ValueError(f"sigma must be a non-negative number of pixels, got {sigma!r}")
     gray = _as_gray(image)
-    center, radius = _coarse_circle(gray)
-    h, w = gray.shape
+    center, S, coarse_px = _coarse_ellipse(gray)
     G = cv2.GaussianBlur(gray, (0, 0), float(sigma)) if sigma > 0 else gray
-    S = radius * np.eye(2)
-    s = min(1.0, _COARSE_SIZE / max(h, w))
-    windows = (max(8.0, 3.0 / s + 0.03 * radius), None, None)
+    windows = (max(6.0, 3.0 * coarse_px), None, None)
     fit = None
     for i, hw in enumerate(windows):
         if hw is None:
