@@ -1,1 +1,193 @@
-"""Calibration of the mirror posture from one image (paper section 3)."""
+"""Calibration of the mirror posture from one image (paper section 3).
+
+Pipeline of :func:`calibrate`:
+
+1. the rim ellipse ``Q_I`` (eqs. 20-22): :func:`omnicam.calibration.rim.detect_rim` on an image
+   or :func:`omnicam.calibration.rim.fit_rim` on given boundary points (with ``D`` the points
+   are undistorted first and the conic is fitted to undistorted pixels ``K x_n``);
+2. Chen's method (:mod:`.chen`, eqs. 23-29, 32-42): four candidate postures, the physically
+   impossible ones marked;
+3. selection by far lines (:mod:`.selection`, section 3.2, eq. 31);
+4. optional non-linear refinement (:mod:`.refine`, beyond the paper);
+5. a :class:`~.report.CalibrationReport`.
+
+Modules: ``rim`` (ellipse), ``chen`` (posture), ``selection`` (choice), ``refine``
+(refinement), ``report`` (report and overlay), ``intrinsics`` (the camera alone).
+"""
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+__all__ = ["calibrate", "CalibrationReport"]
+
+
+def __getattr__(name):
+    if name == "CalibrationReport":  # lazily, so ``import omnicam`` stays light
+        from .report import CalibrationReport
+        return CalibrationReport
+    raise AttributeError(f"module 'omnicam.calibration' has no attribute {name!r}")
+
+
+def _as_pixels(points, name):
+    try:
+        arr = np.asarray(points, dtype=np.float64)
+    except (TypeError, ValueError):
+        raise ValueError(f"{name} must be an (N, 2) or (N, 1, 2) array of pixels") from None
+    if arr.ndim == 3 and arr.shape[1:] == (1, 2):
+        arr = arr.reshape(-1, 2)
+    if arr.ndim != 2 or arr.shape[1] != 2:
+        raise ValueError(f"{name} must be an (N, 2) or (N, 1, 2) array of pixels, "
+                         f"got shape {arr.shape}")
+    return arr
+
+
+def _normalize(pixels, K, D):
+    """Pixels -> undistorted normalised coordinates (``inv(K)`` with skew, tight undistortion)."""
+    from ..raytrace import undistort_normalized
+    if D is None:
+        Ki = np.linalg.inv(K)
+        return pixels @ Ki[:2, :2].T + Ki[:2, 2]
+    return undistort_normalized(np.ascontiguousarray(pixels), K, D)
+
+
+def calibrate(K, mirror, image=None, boundary_points=None, far_lines=None, D=None,
+              image_size=None, refine=True, camera_cls=None):
+    """Mirror posture from one image: rim ellipse, Chen's method, far-line selection, refinement.
+
+    Parameters
+    ----------
+    K : (3, 3) array_like
+        Camera matrix of the calibrated camera (skew allowed), non-singular.
+    mirror : HyperbolicMirror
+        Known mirror (``a``, ``b``, ``rim_radius``).
+    image : ndarray, optional
+        Grey or BGR image (uint8, uint16 or float); the rim is found by ``detect_rim``.
+    boundary_points : (N, 2) or (N, 1, 2) array_like, optional
+        Pixels on the rim (as seen, distorted), instead of ``image``; fitted by ``fit_rim``
+        (robust). Takes precedence over ``image`` for the rim when both are given.
+    far_lines : sequence of (N_i, 2) or (N_i, 1, 2) array_like, optional
+        Pixels along the images of far straight lines (>= 3 each, inside the rim), used as given
+        to choose between the postures (eq. 31) and, with ``refine``, as 3-D lines.
+    D : array_like, optional
+        OpenCV distortion coefficients of the camera.
+    image_size : (int, int), optional
+        ``(width, height)``; defaults to the image's size.
+    refine : bool
+        Refine the chosen posture non-linearly (kept only if it lowers the cost).
+    camera_cls : type, optional
+        Camera class to build (default :class:`omnicam.MisalignedHyperbolicCamera`).
+
+    Returns
+    -------
+    camera : MisalignedHyperbolicCamera
+    report : CalibrationReport
+
+    Raises
+    ------
+    ValueError
+        Neither image nor boundary points, too few points, no ellipse, a degenerate or
+        non-elliptic conic, ``K`` singular, a far line with fewer than 3 points or outside the
+        mirror, or no physically possible posture; the message says what to do.
+    """
+    from ..camera import MisalignedHyperbolicCamera, validate_D, validate_image_size, validate_K
+    from ..mirror import HyperbolicMirror
+    from . import chen, selection
+    from .refine import posture_uncertainty, refine_posture
+    from .report import CalibrationReport
+    from .rim import detect_rim, fit_rim
+
+    camera_cls = MisalignedHyperbolicCamera if camera_cls is None else camera_cls
+    K = validate_K(K)
+    D = validate_D(D)
+    if not isinstance(mirror, HyperbolicMirror):
+        raise ValueError(f"mirror must be a HyperbolicMirror, got {type(mirror).__name__}")
+    if image is None and boundary_points is None:
+        raise ValueError("give the image (the rim is detected) or boundary_points (pixels on the "
+                         "mirror rim)")
+    if image_size is None and image is not None:
+        shape = np.shape(image)
+        if len(shape) >= 2:
+            image_size = (int(shape[1]), int(shape[0]))
+    image_size = validate_image_size(image_size)
+    warnings = []
+
+    # 1. the rim ellipse (eqs. 20-22); with D fitted to undistorted pixels K x_n
+    if boundary_points is not None:
+        seen = _as_pixels(boundary_points, "boundary_points")
+        if len(seen) < 6:
+            raise ValueError(f"boundary_points has {len(seen)} point(s); give at least 6 points "
+                             f"spread along the mirror rim (dozens are better)")
+        if not np.isfinite(seen).all():
+            raise ValueError("boundary_points has non-finite values; drop them")
+        if image is not None:
+            warnings.append("both image and boundary_points given: the rim was fitted to the "
+                            "boundary points, the image only gave the size")
+    else:
+        detected = detect_rim(image)
+        seen = np.asarray(detected.points, np.float64)
+        if D is None:
+            fit = detected
+    if boundary_points is not None or D is not None:
+        xn = _normalize(seen, K, D)
+        ideal = xn @ K[:2, :2].T + K[:2, 2]  # undistorted pixels, same K
+        if not np.isfinite(ideal).all():
+            raise ValueError("some boundary points cannot be undistorted with D; check D")
+        fit = fit_rim(ideal)
+        seen = seen[np.asarray(fit.inliers, bool)]
+    rim_px = np.asarray(fit.points, np.float64)
+    if fit.rms > 1.0:
+        warnings.append(f"the rim fit is poor (RMS {fit.rms:.2f} px): check the boundary points "
+                        f"(the posture error grows by about 1 deg per px of rim noise)")
+
+    # 2. Chen's method (eqs. 23-29, 32-42)
+    # Q_e = K^T Q_I K  (eq. 24)
+    Qe = chen.normalized_conic(fit.conic, K)
+    candidates = chen.chen_candidates(Qe, mirror)
+
+    # 3. selection with far lines (section 3.2)
+    lines = selection.validate_far_lines(far_lines)
+    lines_xn = [_normalize(line, K, D) for line in lines]
+    selection.check_lines_inside_rim(lines_xn, Qe)
+
+    def make_camera(c):
+        return camera_cls(K, mirror, c.rvec, c.tvec, D=D, image_size=image_size)
+
+    candidates, chosen, confidence, sel_warnings = selection.select_candidate(
+        candidates, make_camera, lines, (0.0, 0.0, -mirror.c))
+    warnings.extend(sel_warnings)
+    phys = [i for i, c in enumerate(candidates) if c.physical]
+    others = [i for i in phys if i != chosen]
+    if others:
+        a, b = candidates[chosen], candidates[others[0]]
+        d_axis = math.degrees(math.atan2(np.linalg.norm(np.cross(a.axis, b.axis)),
+                                         float(a.axis @ b.axis)))
+        d_origin = float(np.linalg.norm(a.tvec - b.tvec))
+        if lines and confidence < selection.AMBIGUOUS_CONFIDENCE:
+            if d_axis > 0.01 or d_origin > 0.01 * mirror.rim_radius / 30.0:
+                warnings.append(f"the far lines barely separate the two physical postures "
+                                f"(confidence {confidence:.3f}; they differ by {d_axis:.3f} deg "
+                                f"and {d_origin:.3f} in origin): the choice may be wrong; give "
+                                f"more or longer far lines, far from the image centre")
+
+    # 4. refinement (beyond the paper)
+    cand = candidates[chosen]
+    rvec, tvec = cand.rvec, cand.tvec
+    refinement = None
+    if refine:
+        refinement = refine_posture(K, mirror, rvec, tvec, rim_px, lines_xn)
+        rvec, tvec = refinement.rvec, refinement.tvec
+    camera = camera_cls(K, mirror, rvec, tvec, D=D, image_size=image_size)
+    axis_std, origin_std = posture_uncertainty(K, mirror, camera.rvec, camera.tvec, rim_px,
+                                               max(fit.rms, 1e-12))
+    if axis_std > 0.5:
+        warnings.append(f"the rim determines the posture poorly: about {axis_std:.2f} deg "
+                        f"(1 sigma) on the mirror axis and {origin_std:.2f} on the origin; "
+                        f"improve the boundary points (more of the rim, less noise)")
+    report = CalibrationReport(conic=np.asarray(fit.conic, np.float64), boundary_points=seen,
+                               rim_rms=float(fit.rms), candidates=candidates, chosen=chosen,
+                               confidence=float(confidence), warnings=warnings, camera=camera,
+                               refinement=refinement, axis_std_deg=axis_std,
+                               origin_std_mm=origin_std, far_lines=lines)
+    return camera, report

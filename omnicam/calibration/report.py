@@ -1,0 +1,227 @@
+"""What a calibration did: the rim, the four candidates, the choice, warnings, and an overlay."""
+from __future__ import annotations
+
+import dataclasses
+import math
+
+import cv2
+import numpy as np
+
+__all__ = ["CalibrationReport"]
+
+# BGR colours of the overlay
+_RIM = (0, 200, 0)
+_POINTS = (255, 200, 0)
+_LINES = (0, 220, 255)
+_CHOSEN = (0, 0, 255)
+_OTHER = (255, 80, 0)
+
+
+@dataclasses.dataclass(frozen=True, eq=False)
+class CalibrationReport:
+    """Everything :func:`omnicam.calibration.calibrate` found, for inspection and logging.
+
+    Attributes
+    ----------
+    conic : (3, 3) float64 ndarray
+        ``Q_I`` of the rim (eq. 22) in pixels; with ``D`` in undistorted pixels ``K x_n``.
+    boundary_points : (N, 2) float64 ndarray
+        The boundary points the rim fit used (inliers), in image pixels as given/detected.
+    rim_rms : float
+        RMS orthogonal distance of those points to the fitted ellipse, px.
+    candidates : list of Candidate
+        The four postures of Chen's method, each with ``rvec, tvec, score, physical`` (and the
+        reasons when not physical).
+    chosen : int
+        Index of the chosen candidate (the analytic posture; see ``refinement`` for the final).
+    confidence : float
+        ``1 - best / second best`` score among the physical candidates (section 3.2); 0 when the
+        choice was made without far lines, 1 with a single physical candidate.
+    warnings : list of str
+        Everything a user should know before trusting the result.
+    camera : MisalignedHyperbolicCamera
+        The calibrated camera (the one returned).
+    refinement : RefineResult or None
+        The non-linear refinement (None with ``refine=False``).
+    axis_std_deg, origin_std_mm : float
+        First-order uncertainty of the posture from the rim's RMS alone.
+    far_lines : list of (N_i, 2) ndarray
+        The far-line pixels used.
+    """
+
+    conic: np.ndarray
+    boundary_points: np.ndarray
+    rim_rms: float
+    candidates: list
+    chosen: int
+    confidence: float
+    warnings: list
+    camera: object
+    refinement: object = None
+    axis_std_deg: float = math.nan
+    origin_std_mm: float = math.nan
+    far_lines: list = dataclasses.field(default_factory=list)
+
+    @property
+    def rvec(self):
+        """(3,) final mirror rotation (after refinement if any)."""
+        return self.camera.rvec
+
+    @property
+    def tvec(self):
+        """(3,) final mirror origin in the camera frame."""
+        return self.camera.tvec
+
+    @property
+    def physical(self):
+        """Indices of the physically possible candidates."""
+        return [i for i, c in enumerate(self.candidates) if c.physical]
+
+    def summary(self):
+        """A readable multi-line summary (what the CLI prints)."""
+        cam = self.camera
+        axis = cam.R[:, 2]
+        tilt = math.degrees(math.atan2(math.hypot(axis[0], axis[1]), axis[2]))
+        lines = [
+            "omnicam mirror posture calibration",
+            f"  rim: {len(self.boundary_points)} boundary points, RMS {self.rim_rms:.4f} px",
+            f"  rvec = [{', '.join(f'{v:.9f}' for v in cam.rvec)}]",
+            f"  tvec = [{', '.join(f'{v:.6f}' for v in cam.tvec)}]",
+            f"  mirror axis tilt from the optical axis: {tilt:.4f} deg; camera centre in the "
+            f"mirror frame: [{', '.join(f'{v:.4f}' for v in cam.camera_center)}]",
+            f"  uncertainty from the rim alone (1 sigma): axis {self.axis_std_deg:.3g} deg, "
+            f"origin {self.origin_std_mm:.3g}",
+            f"  candidates (Chen's method, section 3.1; score of eq. 31 with "
+            f"{len(self.far_lines)} far line(s)):",
+        ]
+        for i, c in enumerate(self.candidates):
+            mark = "*" if i == self.chosen else " "
+            state = "physical" if c.physical else "impossible: " + "; ".join(c.reasons)
+            score = "-" if not np.isfinite(c.score) else f"{c.score:.3e}"
+            lines.append(f"   {mark}[{i}] l={c.l} m={c.m} score {score:>10}  "
+                         f"tvec [{', '.join(f'{v:.4f}' for v in c.tvec)}]  {state}")
+        lines.append(f"  chosen: {self.chosen}, confidence {self.confidence:.4f}")
+        if self.refinement is not None:
+            r = self.refinement
+            lines.append(f"  refinement: {'accepted' if r.accepted else 'kept the analytic posture'}"
+                         f" (cost {r.cost_initial:.4g} -> {r.cost_final:.4g} px^2, rim RMS "
+                         f"{r.rim_rms:.4f} px"
+                         + ("" if not np.isfinite(r.line_rms) else
+                            f", far-line RMS {r.line_rms:.4f} px") + ")")
+        else:
+            lines.append("  refinement: off")
+        if self.warnings:
+            lines.append("  WARNINGS:")
+            lines.extend(f"   - {w}" for w in self.warnings)
+        else:
+            lines.append("  no warnings")
+        return "\n".join(lines)
+
+    __str__ = summary
+
+    def __repr__(self):
+        return (f"CalibrationReport(chosen={self.chosen}, confidence={self.confidence:.4f}, "
+                f"rim_rms={self.rim_rms:.4f}, warnings={len(self.warnings)})")
+
+    # -- overlay --------------------------------------------------------------------------
+    def draw(self, image=None):
+        """An overlay to inspect the calibration.
+
+        Draws the boundary points (light blue dots), the rim of the calibrated camera (green),
+        the far-line pixels (yellow), and for each physical candidate the image of the far
+        lines it implies (the great circle of the plane of its rays, eq. 31) or, without far
+        lines, its horizon (elevation 0): red for the chosen one, blue for the other. Text at
+        the top left gives the choice and the confidence.
+
+        Parameters
+        ----------
+        image : ndarray or None
+            Grey or BGR, uint8, uint16 or float; None draws on black of ``camera.image_size``.
+
+        Returns
+        -------
+        overlay : (H, W, 3) uint8 ndarray
+        """
+        canvas = _to_bgr8(image, self.camera.image_size)
+        h, w = canvas.shape[:2]
+        scale = max(1.0, min(w, h) / 500.0)
+        thick = max(1, int(round(scale)))
+        shift = 4
+        f = float(1 << shift)
+
+        def poly(pts, colour, closed=False):
+            pts = np.asarray(pts, np.float64).reshape(-1, 2)
+            ok = np.isfinite(pts).all(axis=1)
+            # split at invisible samples so a curve never jumps across the image
+            runs = np.split(np.arange(len(pts)), np.flatnonzero(np.diff(ok.astype(int)) != 0) + 1)
+            for run in runs:
+                if len(run) >= 2 and ok[run[0]]:
+                    p = np.round(pts[run] * f).astype(np.int32).reshape(-1, 1, 2)
+                    cv2.polylines(canvas, [p], closed and len(run) == len(pts), colour, thick,
+                                  cv2.LINE_AA, shift)
+
+        for p in self.boundary_points[:: max(1, len(self.boundary_points) // 720)]:
+            if np.isfinite(p).all():
+                cv2.circle(canvas, (int(round(p[0] * f)), int(round(p[1] * f))),
+                           int(1.5 * scale * f), _POINTS, -1, cv2.LINE_AA, shift)
+        poly(self.camera.rim_image_points(720), _RIM, closed=True)
+        for line in self.far_lines:
+            for p in line:
+                cv2.circle(canvas, (int(round(p[0] * f)), int(round(p[1] * f))),
+                           int(2 * scale * f), _LINES, thick, cv2.LINE_AA, shift)
+        for i in self.physical:
+            cand = self.candidates[i]
+            cam = self.camera if i == self.chosen else self.camera.replace(
+                rvec=cand.rvec, tvec=cand.tvec)
+            colour = _CHOSEN if i == self.chosen else _OTHER
+            for normal in _curve_normals(cam, self.far_lines):
+                poly(_great_circle_pixels(cam, normal), colour)
+        text = f"chosen {self.chosen}  confidence {self.confidence:.3f}"
+        if self.warnings:
+            text += f"  ({len(self.warnings)} warning(s))"
+        cv2.putText(canvas, text, (int(8 * scale), int(20 * scale)), cv2.FONT_HERSHEY_SIMPLEX,
+                    0.5 * scale, (255, 255, 255), thick, cv2.LINE_AA)
+        return canvas
+
+
+def _to_bgr8(image, image_size):
+    if image is None:
+        if image_size is None:
+            raise ValueError("draw() needs an image when the camera has no image_size")
+        return np.zeros((image_size[1], image_size[0], 3), np.uint8)
+    img = np.asarray(image)
+    if img.ndim == 3 and img.shape[2] == 1:
+        img = img[:, :, 0]
+    if img.ndim not in (2, 3) or (img.ndim == 3 and img.shape[2] not in (3, 4)):
+        raise ValueError(f"image must be grey (H, W) or BGR (H, W, 3), got shape {img.shape}")
+    if img.dtype != np.uint8:
+        x = np.nan_to_num(img.astype(np.float64))
+        hi = 65535.0 if img.dtype == np.uint16 else (1.0 if x.max() <= 1.0 else 255.0)
+        img = np.clip(x / hi * 255.0, 0, 255).astype(np.uint8)
+    if img.ndim == 2:
+        return cv2.cvtColor(img, cv2.COLOR_GRAY2BGR)
+    if img.shape[2] == 4:
+        return cv2.cvtColor(img, cv2.COLOR_BGRA2BGR)
+    return img.copy()
+
+
+def _curve_normals(cam, far_lines):
+    """Plane normals of the rays of each far line under ``cam`` (eq. 31), or the horizon's."""
+    if not far_lines:
+        return [np.array([0.0, 0.0, 1.0])]
+    out = []
+    for line in far_lines:
+        _, V = cam.unproject(line)
+        V = V[np.isfinite(V).all(axis=1)]
+        if len(V) >= 2:
+            out.append(np.linalg.eigh(V.T @ V)[1][:, 0])
+    return out
+
+
+def _great_circle_pixels(cam, normal, n=720):
+    a = np.array([1.0, 0.0, 0.0]) if abs(normal[0]) < 0.9 else np.array([0.0, 1.0, 0.0])
+    u = np.cross(normal, a)
+    u /= np.linalg.norm(u)
+    v = np.cross(normal, u)
+    t = np.linspace(0.0, 2 * np.pi, n)
+    return cam.project_directions(np.outer(np.cos(t), u) + np.outer(np.sin(t), v))
