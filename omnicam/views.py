@@ -25,7 +25,8 @@ import cv2
 import numpy as np
 
 __all__ = ["init_panorama_maps", "init_perspective_maps", "rotation_from_ypr", "K_from_fov",
-           "visible_elevation_range", "UNSEEN", "PROJECTIONS", "M1TYPES"]
+           "visible_elevation_range", "PanoramaView", "PerspectiveView", "UNSEEN", "PROJECTIONS",
+           "M1TYPES", "TOLERANCE"]
 
 #: Source coordinate written for output pixels whose direction the mirror does not see: well
 #: outside any image (at least 2 px) and inside the range of ``CV_16SC2``.
@@ -528,3 +529,77 @@ def init_perspective_maps(camera, K_new, size, R=None, m1type=cv2.CV_16SC2, dept
     vp = _check_viewpoint(camera, viewpoint, depth)
     M = Rm.T @ np.linalg.inv(K_new)
     return _table(camera, 0, M, 0.0, 0.0, 0.0, (w, h), depth, vp, m1type)
+
+
+# -- view specs (what the Unwarper and the CLI hold) ----------------------------------------------
+class PanoramaView:
+    """A panorama spec, validated once: the arguments of :func:`init_panorama_maps`.
+
+    Parameters
+    ----------
+    size : (int, int)
+        ``(W, H)``, ``H >= 2``.
+    elevation_range, projection, R, depth, viewpoint
+        As for :func:`init_panorama_maps`.
+    """
+
+    __slots__ = ("size", "elevation_range", "projection", "R", "depth", "viewpoint")
+
+    def __init__(self, size, elevation_range=None, projection="cylindrical", R=None, depth=None,
+                 viewpoint=None):
+        self.size = _check_size(size, min_height=2)
+        if projection not in PROJECTIONS:
+            raise ValueError(f"projection must be one of {PROJECTIONS}, got {projection!r}")
+        self.projection = projection
+        self.elevation_range = (None if elevation_range is None
+                                else _check_elevation_range(elevation_range, projection))
+        self.R = None if R is None else _check_rotation(R)
+        self.depth = _check_depth(depth)
+        self.viewpoint = (None if viewpoint is None
+                          else _check_viewpoint(None, viewpoint, 1.0 if depth is None else depth))
+
+    def maps(self, camera, m1type=cv2.CV_16SC2):
+        """``(map1, map2)`` of this view for ``camera``."""
+        return init_panorama_maps(camera, self.size, self.elevation_range, self.projection,
+                                  self.R, m1type, self.depth, self.viewpoint)
+
+    def __repr__(self):
+        return (f"PanoramaView(size={self.size}, elevation_range={self.elevation_range}, "
+                f"projection={self.projection!r}, depth={self.depth})")
+
+
+class PerspectiveView:
+    """A virtual perspective view spec, validated once (see :func:`init_perspective_maps`).
+
+    Parameters
+    ----------
+    size : (int, int)
+        ``(width, height)``.
+    fov : float
+        Horizontal field of view in degrees (:func:`K_from_fov`); ignored if ``K_new`` is given.
+    yaw, pitch, roll : float
+        Degrees (:func:`rotation_from_ypr`); ignored if ``R`` is given.
+    K_new, R : (3, 3) array_like, optional
+        Explicit camera matrix and rotation instead.
+    depth, viewpoint
+        As for :func:`init_perspective_maps`.
+    """
+
+    __slots__ = ("size", "K_new", "R", "depth", "viewpoint")
+
+    def __init__(self, size, fov=90.0, yaw=0.0, pitch=0.0, roll=0.0, K_new=None, R=None,
+                 depth=None, viewpoint=None):
+        self.size = _check_size(size)
+        self.K_new = K_from_fov(fov, self.size) if K_new is None else _check_K_new(K_new)
+        self.R = rotation_from_ypr(yaw, pitch, roll) if R is None else _check_rotation(R)
+        self.depth = _check_depth(depth)
+        self.viewpoint = (None if viewpoint is None
+                          else _check_viewpoint(None, viewpoint, 1.0 if depth is None else depth))
+
+    def maps(self, camera, m1type=cv2.CV_16SC2):
+        """``(map1, map2)`` of this view for ``camera``."""
+        return init_perspective_maps(camera, self.K_new, self.size, self.R, m1type, self.depth,
+                                     self.viewpoint)
+
+    def __repr__(self):
+        return f"PerspectiveView(size={self.size}, K_new={self.K_new.tolist()}, depth={self.depth})"

@@ -1,0 +1,160 @@
+"""Unwarper: the views of frames equal bare cv2.remap with the same tables; video in and out."""
+import contextlib
+
+import cv2
+import numpy as np
+import pytest
+
+from omnicam import Unwarper, synthetic
+from omnicam.stream import open_capture
+from omnicam.views import UNSEEN, PanoramaView, PerspectiveView
+
+VIEWS = {"pano": PanoramaView((256, 64)), "front": PerspectiveView((96, 72), fov=90.0, yaw=30.0)}
+
+
+@pytest.fixture(scope="module")
+def cam():
+    return synthetic.misaligned_rig()
+
+
+@pytest.fixture(scope="module")
+def unwarper(cam):
+    return Unwarper.from_camera(cam, VIEWS)
+
+
+def frames(n, size=(500, 500), seed=0):
+    rng = np.random.default_rng(seed)
+    w, h = size
+    base = cv2.resize(rng.integers(0, 256, (h // 10, w // 10, 3), dtype=np.uint8), (w, h))
+    return [np.roll(base, 7 * i, axis=1) for i in range(n)]
+
+
+def write_video(path, imgs, fps=10.0):
+    h, w = imgs[0].shape[:2]
+    wr = cv2.VideoWriter(str(path), cv2.VideoWriter_fourcc(*"MJPG"), fps, (w, h))
+    assert wr.isOpened()
+    for im in imgs:
+        wr.write(im)
+    wr.release()
+
+
+def test_unwarp_equals_bare_remap_into_preallocated_outputs(unwarper):
+    first = None
+    for frame in frames(3):
+        out = unwarper.unwarp(frame)
+        assert list(out) == ["pano", "front"]
+        for name, img in out.items():
+            m1, m2 = unwarper.maps[name]
+            ref = cv2.remap(frame, m1, m2, cv2.INTER_LINEAR, borderMode=cv2.BORDER_CONSTANT)
+            np.testing.assert_array_equal(img, ref)
+        if first is None:
+            first = out["pano"]
+        assert out["pano"] is first  # the same buffer every frame
+    assert unwarper.view_size("pano") == (256, 64) and unwarper(frame)["front"].shape == (72, 96, 3)
+
+
+def test_unseen_pixels_get_the_border_value(cam):
+    u = Unwarper.from_camera(cam, {"up": PerspectiveView((40, 30), fov=60.0, pitch=85.0)},
+                             border_value=(1, 2, 3))
+    out = u.unwarp(frames(1)[0])["up"]
+    assert (out == (1, 2, 3)).all()
+
+
+def test_grey_and_float_frames_and_interpolation_options(cam):
+    u = Unwarper.from_camera(cam, VIEWS, m1type=cv2.CV_32FC1, interpolation=cv2.INTER_NEAREST)
+    grey = cv2.cvtColor(frames(1)[0], cv2.COLOR_BGR2GRAY)
+    out = u.unwarp(grey)
+    assert out["pano"].shape == (64, 256) and out["pano"].dtype == np.uint8
+    m1, m2 = u.maps["pano"]
+    np.testing.assert_array_equal(out["pano"], cv2.remap(grey, m1, m2, cv2.INTER_NEAREST))
+    out = u.unwarp(grey.astype(np.float32))  # reallocated for the new dtype
+    assert out["pano"].dtype == np.float32
+
+
+def test_given_maps_and_bad_maps():
+    mx = np.full((4, 5), UNSEEN, np.float32)
+    u = Unwarper({"v": (mx, mx.copy())})
+    assert u.source_size is None and u.unwarp(np.zeros((9, 9), np.uint8))["v"].shape == (4, 5)
+    with pytest.raises(ValueError, match="maps"):
+        Unwarper({})
+    with pytest.raises(ValueError, match="'v'"):
+        Unwarper({"v": (mx, None)})
+    with pytest.raises(ValueError, match="'v'"):
+        Unwarper({"v": (mx.astype(np.float64), mx)})
+    with pytest.raises(ValueError, match="interpolation"):
+        Unwarper({"v": (mx, mx)}, interpolation=99)
+
+
+def test_frame_of_another_size_raises_and_frame_size_rescales(cam):
+    u = Unwarper.from_camera(cam, VIEWS)
+    assert u.source_size == (500, 500)
+    with pytest.raises(ValueError, match="frame_size"):
+        u.unwarp(np.zeros((250, 250, 3), np.uint8))
+    half = Unwarper.from_camera(cam, VIEWS, frame_size=(250, 250))
+    assert half.source_size == (250, 250)
+    ref = Unwarper.from_camera(cam.scaled((250, 250)), VIEWS)
+    for name in VIEWS:
+        np.testing.assert_array_equal(half.maps[name][0], ref.maps[name][0])
+
+
+def test_from_camera_rejects_bad_view_specs(cam):
+    with pytest.raises(ValueError, match="'x'"):
+        Unwarper.from_camera(cam, {"x": (256, 64)})
+    with pytest.raises(ValueError, match="projection"):
+        PanoramaView((256, 64), projection="fisheye")
+    with pytest.raises(ValueError, match="fov"):
+        PerspectiveView((64, 48), fov=200.0)
+
+
+def test_stream_over_a_video_writes_every_view(tmp_path, unwarper):
+    src = tmp_path / "in.avi"
+    imgs = frames(6)
+    write_video(src, imgs)
+    outs = {"pano": tmp_path / "pano.avi", "front": tmp_path / "front.avi"}
+    seen = []
+    for i, views in unwarper.stream(src, outs, fourcc="MJPG"):
+        seen.append(i)
+        assert views["pano"].shape == (64, 256, 3)
+    assert seen == list(range(6))
+    for name, path in outs.items():
+        cap = cv2.VideoCapture(str(path))
+        n = 0
+        while True:
+            ok, fr = cap.read()
+            if not ok:
+                break
+            n += 1
+            assert fr.shape[1::-1] == unwarper.view_size(name)
+        cap.release()
+        assert n == 6
+    assert unwarper.run(str(src), {"pano": tmp_path / "again.avi"}, fourcc="MJPG",
+                        max_frames=4) == 4
+
+
+def test_stopping_early_keeps_a_valid_file(tmp_path, unwarper):
+    src = tmp_path / "in.avi"
+    write_video(src, frames(8))
+    out = tmp_path / "partial.avi"
+    with contextlib.closing(unwarper.stream(src, {"front": out}, fourcc="MJPG")) as gen:
+        for i, _ in gen:
+            if i == 2:
+                break
+    cap = cv2.VideoCapture(str(out))
+    n = 0
+    while cap.read()[0]:
+        n += 1
+    cap.release()
+    assert n == 3
+
+
+def test_stream_bad_sources_and_outputs(tmp_path, unwarper):
+    with pytest.raises(ValueError, match="no such file"):
+        next(unwarper.stream(tmp_path / "missing.mp4"))
+    junk = tmp_path / "junk.avi"
+    junk.write_bytes(b"not a video")
+    with pytest.raises(ValueError, match="source"):
+        next(unwarper.stream(junk))
+    with pytest.raises(ValueError, match="unknown view"):
+        next(unwarper.stream(junk, {"nope": tmp_path / "o.avi"}))
+    with pytest.raises(ValueError, match="source"):
+        open_capture(3.5)
