@@ -634,14 +634,19 @@ def _refine_coarse(p, g, c, r):
     return int(sel.sum()), center, S
 
 
-def _edge_points_along_normals(G, center, S, half_width, step=0.25, outermost=False):
+def _edge_points_along_normals(G, center, S, half_width, step=0.25, outermost=False,
+                               centroid=0.0):
     """Subpixel rim points: strongest outward intensity drop along the ellipse normals.
 
     The ellipse is sampled every pixel of arc length; along each outward normal the smoothed
-    image ``G`` is sampled (bilinear) over ``+-half_width`` px, differentiated, and the maximum of
-    the outward drop located to subpixel precision by a parabola through the log of the three
-    samples around it (exact for a Gaussian-blurred step). Profiles that leave the image, whose
-    maximum lies at the window ends or that find no drop are dropped.
+    image ``G`` is sampled (bilinear) over ``+-half_width`` px and differentiated; the maximum of
+    the outward drop is located by a parabola through the log of the three samples around it.
+    With ``centroid > 0`` that position is then refined to the centroid of the drop under a
+    triangular window of that half-width centred on it (four fixed-point steps): the drop of an
+    edge blurred by any symmetric kernel is symmetric about the edge, so the centroid is unbiased,
+    whereas the peak of a bilinearly interpolated profile is pulled towards pixel centres
+    (~0.15 px per point against ~0.02 px with the centroid on rendered rims). Profiles that
+    leave the image, whose maximum lies at the window ends or that find no drop are dropped.
 
     Returns ``(points, n_tried)``: the (M, 2) edge points and the number of normals whose whole
     profile was inside the image.
@@ -695,6 +700,14 @@ def _edge_points_along_normals(G, center, S, half_width, step=0.25, outermost=Fa
     off = np.clip(off, -1.0, 1.0)
     where = tau[1:-1][k] + off * step
     ok &= strength > 0
+    if centroid > 0:
+        tc = tau[1:-1]
+        pos_drop = np.maximum(drop, 0.0)
+        for _ in range(4):
+            wgt = np.maximum(0.0, 1.0 - np.abs(tc[None, :] - where[:, None]) / centroid) * pos_drop
+            total = wgt.sum(axis=1)
+            where = np.where(total > 0, (wgt @ tc) / np.where(total > 0, total, 1.0), where)
+        ok &= (where - centroid >= tc[0]) & (where + centroid <= tc[-1])
     return e[ok] + where[ok, None] * nrm[ok], int(inside.sum())
 
 
@@ -746,13 +759,13 @@ def detect_rim(image, *, sigma=1.0, threshold=2.0, rng=0):
     gray = _as_gray(image)
     center, S, coarse_px = _coarse_ellipse(gray)
     G = cv2.GaussianBlur(gray, (0, 0), float(sigma)) if sigma > 0 else gray
-    windows = (max(6.0, 3.0 * coarse_px), None, None)
+    cw = 3.0 * max(sigma, 0.5)  # half-width of the centroid window
     fit = None
-    for i, hw in enumerate(windows):
-        if hw is None:
-            hw = max(3.0, 3.0 * sigma, 4.0 * fit.rms) if i == 1 else max(2.5, 2.5 * sigma,
-                                                                           3.0 * fit.rms)
-        pts, n_tried = _edge_points_along_normals(G, center, S, hw, outermost=(i == 0))
+    for i in range(3):
+        # search window: the coarse ellipse's uncertainty, then the spread of the last fit
+        hw = max(6.0, 3.0 * coarse_px) if i == 0 else cw + max(1.5, 3.0 * fit.rms)
+        pts, n_tried = _edge_points_along_normals(G, center, S, hw, outermost=(i == 0),
+                                                  centroid=0.0 if i == 0 else cw)
         if len(pts) < 6:
             raise ValueError("no ellipse found: the rim is not visible along enough of its length "
                              "(too much of it outside the image?)")
