@@ -156,42 +156,58 @@ class _Problem:
 
     # rim --------------------------------------------------------------------------------
     def _curve(self, R, t, phi):
-        """Rim image ``c(phi)`` and its first two derivatives, each (N, 2)."""
+        """Rim image ``c(phi)`` and its first two derivatives, as component pairs of (N,)."""
         r, zr = self.mirror.rim_radius, self.mirror.z_rim
         cp, sp = np.cos(phi), np.sin(phi)
-        rho = np.stack([r * cp, r * sp, np.full_like(phi, zr)], axis=1)
-        d1 = np.stack([-r * sp, r * cp, np.zeros_like(phi)], axis=1)
-        d2 = np.stack([-r * cp, -r * sp, np.zeros_like(phi)], axis=1)
-        X, X1, X2 = rho @ R.T + t, d1 @ R.T, d2 @ R.T
-        z, z1, z2 = X[:, 2:3], X1[:, 2:3], X2[:, 2:3]
-        p = X[:, :2] / z
-        p1 = (X1[:, :2] * z - X[:, :2] * z1) / z**2
-        p2 = (X2[:, :2] * z - X[:, :2] * z2) / z**2 - 2.0 * z1 * p1 / z
-        return p @ self.A.T + self.k, p1 @ self.A.T, p2 @ self.A.T
+        X, X1, X2 = [], [], []
+        for i in range(3):
+            a, b = R[i, 0] * cp, R[i, 1] * sp
+            X.append(r * (a + b) + (R[i, 2] * zr + t[i]))  # R rho + t
+            X1.append(r * (R[i, 1] * cp - R[i, 0] * sp))   # R rho'
+            X2.append(-r * (a + b))                          # R rho''
+        iz = 1.0 / X[2]
+        A, k = self.A, self.k
+        p = [X[0] * iz, X[1] * iz]
+        p1 = [(X1[0] - p[0] * X1[2]) * iz, (X1[1] - p[1] * X1[2]) * iz]
+        p2 = [(X2[0] - p[0] * X2[2] - 2.0 * p1[0] * X1[2]) * iz,
+              (X2[1] - p[1] * X2[2] - 2.0 * p1[1] * X1[2]) * iz]
 
-    def _foot_points(self, R, t, init=False, phi=None, iters=6):
-        u = self.rim_px
+        def img(q, off):
+            return (A[0, 0] * q[0] + A[0, 1] * q[1] + off[0], A[1, 0] * q[0] + A[1, 1] * q[1] + off[1])
+
+        return img(p, k), img(p1, (0.0, 0.0)), img(p2, (0.0, 0.0))
+
+    def _foot_points(self, R, t, init=False, phi=None, iters=5):
+        ux, uy = self.rim_px[:, 0], self.rim_px[:, 1]
         if init:
-            grid = np.linspace(0.0, 2 * np.pi, 720, endpoint=False)
-            c, _, _ = self._curve(R, t, grid)
-            d2 = ((u[:, None, :] - c[None, :, :]) ** 2).sum(axis=2)
-            phi = grid[np.argmin(d2, axis=1)]
-            iters = 12
+            # start at the rim point on the pixel's ray (exact for exact data)
+            Ki = np.linalg.inv(self.K)
+            xh = np.concatenate([self.rim_px, np.ones((len(ux), 1))], axis=1) @ Ki.T
+            a = xh @ R  # R^T x~
+            b = R.T @ t
+            with np.errstate(divide="ignore", invalid="ignore"):
+                s = (self.mirror.z_rim + b[2]) / a[:, 2]
+            phi = np.arctan2(s * a[:, 1] - b[1], s * a[:, 0] - b[0])
+            phi = np.where(np.isfinite(phi), phi, 0.0)
+            iters = 10
         for _ in range(iters):
-            c, c1, c2 = self._curve(R, t, phi)
-            e = c - u
-            g = (e * c1).sum(axis=1)
-            h = (c1 * c1).sum(axis=1) + (e * c2).sum(axis=1)
-            h = np.where(h > 0, h, (c1 * c1).sum(axis=1))
-            phi = phi - g / h
+            (cx, cy), (dx, dy), (ex, ey) = self._curve(R, t, phi)
+            wx, wy = cx - ux, cy - uy
+            g = wx * dx + wy * dy
+            h1 = dx * dx + dy * dy
+            h = h1 + wx * ex + wy * ey
+            phi = phi - g / np.where(h > 0, h, h1)
         return phi
+
+    def _rim_normals(self, R, t, phi):
+        (cx, cy), (dx, dy), _ = self._curve(R, t, phi)
+        nn = np.hypot(dx, dy)
+        return cx, cy, dy / nn, -dx / nn
 
     def rim_residuals(self, R, t):
         phi = self._foot_points(R, t, phi=self.phi0)
-        c, c1, _ = self._curve(R, t, phi)
-        n = np.stack([c1[:, 1], -c1[:, 0]], axis=1)
-        n /= np.linalg.norm(n, axis=1, keepdims=True)
-        return ((self.rim_px - c) * n).sum(axis=1)
+        cx, cy, nx, ny = self._rim_normals(R, t, phi)
+        return (self.rim_px[:, 0] - cx) * nx + (self.rim_px[:, 1] - cy) * ny
 
     # lines ------------------------------------------------------------------------------
     def rays(self, R, t, xn):
@@ -293,9 +309,7 @@ class _Problem:
         differences, posture columns one by one, line columns in 4 groups."""
         R, t = self.posture(x[:_N_POSTURE])
         phi = self._foot_points(R, t, phi=self.phi0)
-        c, c1, _ = self._curve(R, t, phi)
-        n = np.stack([c1[:, 1], -c1[:, 0]], axis=1)
-        n /= np.linalg.norm(n, axis=1, keepdims=True)
+        cx, cy, nx, ny = self._rim_normals(R, t, phi)
         n_rim = len(self.rim_px)
         n_line = sum(len(xn) for xn in self.lines_xn)
         J = np.zeros((n_rim + n_line, len(x)))
@@ -303,17 +317,18 @@ class _Problem:
             xk = x[:_N_POSTURE].copy()
             xk[k] += steps[k]
             Rk, _ = self.posture(xk)
-            ck, _, _ = self._curve(Rk, t, phi)
-            J[:n_rim, k] = -((ck - c) * n).sum(axis=1) / steps[k]
+            (ckx, cky), _, _ = self._curve(Rk, t, phi)
+            J[:n_rim, k] = -((ckx - cx) * nx + (cky - cy) * ny) / steps[k]
         r, zr = self.mirror.rim_radius, self.mirror.z_rim
         rho = np.stack([r * np.cos(phi), r * np.sin(phi), np.full_like(phi, zr)], axis=1)
         X = rho @ R.T + t
         z = X[:, 2]
-        m = n @ self.A  # n^T A, (N, 2)
-        # d pi / d t = [[1/z, 0, -x/z^2], [0, 1/z, -y/z^2]]
-        J[:n_rim, 2] = -m[:, 0] / z
-        J[:n_rim, 3] = -m[:, 1] / z
-        J[:n_rim, 4] = (m[:, 0] * X[:, 0] + m[:, 1] * X[:, 1]) / z**2
+        # n^T A, then d pi / d t = [[1/z, 0, -x/z^2], [0, 1/z, -y/z^2]]
+        m0 = nx * self.A[0, 0] + ny * self.A[1, 0]
+        m1 = nx * self.A[0, 1] + ny * self.A[1, 1]
+        J[:n_rim, 2] = -m0 / z
+        J[:n_rim, 3] = -m1 / z
+        J[:n_rim, 4] = (m0 * X[:, 0] + m1 * X[:, 1]) / z**2
         if n_line:
             y = x[_N_POSTURE:]
             base = self.line_residuals(R, t, y)
@@ -365,7 +380,7 @@ def refine_posture(K, mirror, rvec, tvec, rim_points, far_lines_normalized=(), l
     steps = np.array([1e-7, 1e-7, 1e-6, 1e-6, 1e-6] + [1e-7] * 4 * n_lines)
     x0 = np.zeros(_N_POSTURE + 4 * n_lines)
 
-    opts = dict(method="trf", x_scale="jac", xtol=1e-10, ftol=1e-9, gtol=1e-10)
+    opts = dict(method="lm", x_scale="jac", xtol=1e-10, ftol=1e-9, gtol=1e-10)
     # stage 1: the line parameters alone at the analytic posture (its fair cost)
     nfev = 0
     if n_lines:
