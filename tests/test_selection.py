@@ -1,0 +1,127 @@
+"""Selection of the posture with far lines (paper section 3.2, eq. 31)."""
+import math
+
+import numpy as np
+import pytest
+
+from omnicam import synthetic
+from omnicam.calibration import chen, selection
+from test_chen import RIGS, candidates_of
+
+
+def far_line_pixels(cam, rng, n_lines=3, n_points=30):
+    """Pixels of far straight lines (10-50 m away, mirror frame), by exact projection.
+
+    Each line passes at a random distance and elevation (-60..5 deg) with a random direction;
+    points spread over a stretch as long as the distance; the finite pixels are kept.
+    """
+    lines = []
+    while len(lines) < n_lines:
+        dist = rng.uniform(10e3, 50e3)
+        az = rng.uniform(0.0, 2 * np.pi)
+        el = math.radians(rng.uniform(-60.0, 5.0))
+        p = dist * np.array([math.cos(el) * math.cos(az), math.cos(el) * math.sin(az),
+                             math.sin(el)])
+        d = rng.normal(size=3)
+        d -= d @ p / (p @ p) * p
+        d /= np.linalg.norm(d)
+        s = np.linspace(-0.5, 0.5, n_points) * dist
+        px = cam.project(p + s[:, None] * d)
+        px = px[np.isfinite(px).all(axis=1)]
+        if len(px) >= 5:
+            lines.append(px)
+    return lines
+
+
+def _select(cam, lines):
+    def make(c):
+        return cam.replace(rvec=c.rvec, tvec=c.tvec)
+    return selection.select_candidate(candidates_of(cam), make, lines,
+                                      (0.0, 0.0, -cam.mirror.c))
+
+
+def test_far_lines_select_the_true_candidate_on_100_random_rigs():
+    rng = np.random.default_rng(7)
+    right, confidences = 0, []
+    for cam in RIGS:
+        cands, chosen, conf, warnings = _select(cam, far_line_pixels(cam, rng))
+        right += np.linalg.norm(cands[chosen].tvec - cam.tvec) < 1e-6
+        confidences.append(conf)
+        assert not warnings
+    assert right == len(RIGS)
+    assert min(confidences) > 0.9
+
+
+def test_scores_only_for_physical_candidates():
+    cam = RIGS[3]
+    cands, chosen, conf, _ = _select(cam, far_line_pixels(cam, np.random.default_rng(1)))
+    for c in cands:
+        assert np.isfinite(c.score) == c.physical
+    phys = sorted(c.score for c in cands if c.physical)
+    assert math.isclose(conf, 1.0 - phys[0] / phys[1])
+
+
+def test_true_posture_makes_far_line_rays_nearly_coplanar():
+    cam = RIGS[5]
+    lines = far_line_pixels(cam, np.random.default_rng(2), n_lines=1)
+    s_true, n = selection.line_score(cam, lines[0])
+    assert n == len(lines[0])
+    cands = [c for c in candidates_of(cam) if c.physical]
+    wrong = max(cands, key=lambda c: np.linalg.norm(c.tvec - cam.tvec))
+    s_wrong, _ = selection.line_score(cam.replace(rvec=wrong.rvec, tvec=wrong.tvec), lines[0])
+    assert s_true < 1e-3 * s_wrong
+
+
+def test_without_lines_the_fallback_warns_that_the_choice_is_ambiguous():
+    cam = RIGS[0]
+    cands, chosen, conf, warnings = _select(cam, [])
+    assert cands[chosen].physical and conf == 0.0
+    assert len(warnings) == 1 and "ambiguous" in warnings[0]
+    # the fallback: the camera nearest the lower focus
+    dist = {i: np.linalg.norm(-c.R.T @ c.tvec - [0, 0, -cam.mirror.c])
+            for i, c in enumerate(cands) if c.physical}
+    assert chosen == min(dist, key=dist.get)
+
+
+def test_far_line_with_two_points_raises():
+    with pytest.raises(ValueError, match="at least 3 pixels"):
+        selection.validate_far_lines([np.zeros((2, 2))])
+
+
+def test_far_lines_accept_opencv_shapes_and_reject_bad_ones():
+    lines = selection.validate_far_lines([np.zeros((4, 1, 2), np.float32), [[0, 0], [1, 1],
+                                                                           [2, 2]]])
+    assert [x.shape for x in lines] == [(4, 2), (3, 2)]
+    assert selection.validate_far_lines(None) == []
+    with pytest.raises(ValueError, match=r"\(N, 2\)"):
+        selection.validate_far_lines([np.zeros((4, 3))])
+    with pytest.raises(ValueError, match="non-finite"):
+        selection.validate_far_lines([np.array([[0.0, 0.0], [1.0, np.nan], [2.0, 2.0]])])
+
+
+def test_far_line_outside_the_rim_raises():
+    cam = RIGS[0]
+    Qe = chen.normalized_conic(chen.rim_conic(cam.K, cam.R, cam.tvec, cam.mirror), cam.K)
+    Ki = np.linalg.inv(cam.K)
+    inside = np.array([[250.0, 250.0], [260.0, 250.0], [270.0, 250.0]])
+    selection.check_lines_inside_rim([inside @ Ki[:2, :2].T + Ki[:2, 2]], Qe)
+    outside = np.array([[250.0, 250.0], [260.0, 250.0], [499.0, 2.0]])
+    with pytest.raises(ValueError, match="outside the mirror rim"):
+        selection.check_lines_inside_rim([outside @ Ki[:2, :2].T + Ki[:2, 2]], Qe)
+
+
+def test_no_physical_candidate_raises():
+    cam = RIGS[0]
+    cands = [c.__class__(**{**c.__dict__, "physical": False}) for c in candidates_of(cam)]
+    with pytest.raises(ValueError, match="physically possible"):
+        selection.select_candidate(cands, None, [], (0, 0, -cam.mirror.c))
+
+
+def test_single_physical_candidate_has_full_confidence():
+    cam = synthetic.misaligned_rig()
+    cands = candidates_of(cam)
+    first = next(i for i, c in enumerate(cands) if c.physical)
+    cands = [c if i == first else c.__class__(**{**c.__dict__, "physical": False})
+             for i, c in enumerate(cands)]
+    _, chosen, conf, warnings = selection.select_candidate(cands, None, [], (0, 0, -cam.mirror.c))
+    assert chosen == first and conf == 1.0 and not warnings
