@@ -774,10 +774,13 @@ def detect_rim(image, *, sigma=1.0, threshold=2.0, rng=0):
                 fit = fit_rim(pts, threshold=threshold, rng=rng)
             else:  # seeded by the previous ellipse instead of RANSAC
                 d = np.abs(fit.distance(pts))
-                mask = d <= max(threshold, 3.5 * 1.4826 * float(np.median(d)))
+                # the points are now precise: a tighter floor for the cut (0.5 px) drops
+                # partial edges, e.g. where a holder arm meets the rim
+                cut_floor = min(threshold, 0.5)
+                mask = d <= max(cut_floor, 3.5 * 1.4826 * float(np.median(d)))
                 if mask.sum() < 6:
                     raise ValueError("too few edge points near the rim found in the last round")
-                fit = _fit_with_mask(pts, _hartley(pts), mask, True, threshold)
+                fit = _fit_with_mask(pts, _hartley(pts), mask, True, cut_floor)
         except ValueError as err:
             raise ValueError(f"no ellipse found in the image: {err}") from None
         center, S = fit.center, fit.shape_matrix
