@@ -70,6 +70,12 @@ class RimFit:
             arr.flags.writeable = False
             object.__setattr__(self, name, arr)
 
+    def __repr__(self):
+        return (f"RimFit(center=({self.center[0]:.3f}, {self.center[1]:.3f}), "
+                f"axes=({self.axes[0]:.3f}, {self.axes[1]:.3f}), "
+                f"angle={math.degrees(self.angle):.2f} deg, rms={self.rms:.4f} px, "
+                f"points={len(self.points)} of {len(self.inliers)})")
+
     @property
     def shape_matrix(self):
         """(2, 2) symmetric positive definite ``S`` of ``x(t) = center + S (cos t, sin t)``."""
@@ -606,7 +612,7 @@ def _refine_coarse(p, g, c, r):
     """Ellipse through the edge pixels ``p`` (gradients ``g``) near the circle ``(c, r)``.
 
     Returns ``(support, center, S)`` with ``support`` the number of edge pixels (about the arc
-    length, px) within 1.5 px of the ellipse with a gradient along its inward normal, or ``None``.
+    length, px) within 2 px of the ellipse with a gradient along its inward normal, or ``None``.
     """
     d = p - c
     rr = np.linalg.norm(d, axis=1)
