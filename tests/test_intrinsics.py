@@ -119,6 +119,14 @@ def test_calibrate_intrinsics_uint16_and_float_images():
     np.testing.assert_allclose(np.diag(K)[:2], np.diag(K_TRUE)[:2], rtol=0.01)
 
 
+def test_calibrate_intrinsics_accepts_a_stack_and_reports_a_single_image():
+    views = _render_views(4, seed=3)
+    rms, K, _ = calibrate_intrinsics(np.stack(views), PATTERN, SQUARE)
+    assert rms < 0.1 and abs(K[0, 0] / K_TRUE[0, 0] - 1) < 0.02
+    with pytest.raises(ValueError, match="found in 1 of 1 images, need at least 3"):
+        calibrate_intrinsics(views[0], PATTERN, SQUARE)
+
+
 def test_find_chessboard_subpixel_corners_match_projection():
     tex, T = _board_texture()
     R = cv2.Rodrigues(np.deg2rad([10.0, -15.0, 5.0]))[0]

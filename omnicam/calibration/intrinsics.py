@@ -96,7 +96,7 @@ def calibrate_intrinsics(images, pattern_size, square_size, flags=0, min_views=3
 
     Parameters
     ----------
-    images : sequence of ndarray or path
+    images : sequence of ndarray or path, or (N, H, W[, C]) ndarray
         Grey or BGR images (uint8, uint16 or float) or image files, all of the same size.
     pattern_size : (int, int)
         Inner corners ``(columns, rows)`` of the board, as ``cv2.findChessboardCorners``.
@@ -132,9 +132,11 @@ def calibrate_intrinsics(images, pattern_size, square_size, flags=0, min_views=3
         raise ValueError(f"square_size must be a positive number, got {square_size!r}")
     if int(min_views) != min_views or min_views < 3:
         raise ValueError(f"min_views must be an integer >= 3, got {min_views!r}")
-    if isinstance(images, (str, os.PathLike, np.ndarray)) and not (
-            isinstance(images, np.ndarray) and images.ndim == 4):
-        images = [images]  # one image given alone
+    if isinstance(images, (str, os.PathLike)):
+        images = [images]  # one image file given alone
+    elif isinstance(images, np.ndarray) and (images.ndim == 2 or (
+            images.ndim == 3 and images.shape[2] in (1, 3, 4))):
+        images = [images]  # one image given alone; (N, H, W) and (N, H, W, C) are stacks
     try:
         images = list(images)
     except TypeError:
