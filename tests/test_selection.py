@@ -5,7 +5,7 @@ import numpy as np
 import pytest
 
 from omnicam import synthetic
-from omnicam.calibration import chen, selection
+from omnicam.calibration import selection
 from test_chen import RIGS, candidates_of
 
 
@@ -100,14 +100,12 @@ def test_far_lines_accept_opencv_shapes_and_reject_bad_ones():
 
 
 def test_far_line_outside_the_rim_raises():
-    cam = RIGS[0]
-    Qe = chen.normalized_conic(chen.rim_conic(cam.K, cam.R, cam.tvec, cam.mirror), cam.K)
-    Ki = np.linalg.inv(cam.K)
-    inside = np.array([[250.0, 250.0], [260.0, 250.0], [270.0, 250.0]])
-    selection.check_lines_inside_rim([inside @ Ki[:2, :2].T + Ki[:2, 2]], Qe)
-    outside = np.array([[250.0, 250.0], [260.0, 250.0], [499.0, 2.0]])
+    selection.check_lines_inside_rim([np.array([-5.0, -0.1, 1.9])], 2.0)
     with pytest.raises(ValueError, match="outside the mirror rim"):
-        selection.check_lines_inside_rim([outside @ Ki[:2, :2].T + Ki[:2, 2]], Qe)
+        selection.check_lines_inside_rim([np.array([-5.0, -0.1, 1.9]),
+                                          np.array([-3.0, 2.5, -1.0])], 2.0)
+    with pytest.raises(ValueError, match="outside the mirror rim"):
+        selection.check_lines_inside_rim([np.array([-5.0, np.nan, -1.0])], 2.0)
 
 
 def test_no_physical_candidate_raises():

@@ -149,7 +149,9 @@ def calibrate(K, mirror, image=None, boundary_points=None, far_lines=None, D=Non
     # 3. selection with far lines (section 3.2)
     lines = selection.validate_far_lines(far_lines)
     lines_xn = [_normalize(line, K, D) for line in lines]
-    selection.check_lines_inside_rim(lines_xn, Qe)
+    # pixels outside the fitted rim by more than its noise cannot see the mirror
+    selection.check_lines_inside_rim(
+        [fit.distance(x @ K[:2, :2].T + K[:2, 2]) for x in lines_xn], max(2.0, 3.0 * fit.rms))
 
     def make_camera(c):
         return camera_cls(K, mirror, c.rvec, c.tvec, D=D, image_size=image_size)
@@ -157,20 +159,6 @@ def calibrate(K, mirror, image=None, boundary_points=None, far_lines=None, D=Non
     candidates, chosen, confidence, sel_warnings = selection.select_candidate(
         candidates, make_camera, lines, (0.0, 0.0, -mirror.c))
     warnings.extend(sel_warnings)
-    phys = [i for i, c in enumerate(candidates) if c.physical]
-    others = [i for i in phys if i != chosen]
-    if others:
-        a, b = candidates[chosen], candidates[others[0]]
-        d_axis = math.degrees(math.atan2(np.linalg.norm(np.cross(a.axis, b.axis)),
-                                         float(a.axis @ b.axis)))
-        d_origin = float(np.linalg.norm(a.tvec - b.tvec))
-        if lines and confidence < selection.AMBIGUOUS_CONFIDENCE:
-            if d_axis > 0.01 or d_origin > 0.01 * mirror.rim_radius / 30.0:
-                warnings.append(f"the far lines barely separate the two physical postures "
-                                f"(confidence {confidence:.3f}; they differ by {d_axis:.3f} deg "
-                                f"and {d_origin:.3f} in origin): the choice may be wrong; give "
-                                f"more or longer far lines, far from the image centre")
-
     # 4. refinement (beyond the paper)
     cand = candidates[chosen]
     rvec, tvec = cand.rvec, cand.tvec
@@ -183,8 +171,25 @@ def calibrate(K, mirror, image=None, boundary_points=None, far_lines=None, D=Non
                                                max(fit.rms, 1e-12))
     if axis_std > 0.5:
         warnings.append(f"the rim determines the posture poorly: about {axis_std:.2f} deg "
-                        f"(1 sigma) on the mirror axis and {origin_std:.2f} on the origin; "
+                        f"(RMS) on the mirror axis and {origin_std:.2f} on the origin; "
                         f"improve the boundary points (more of the rim, less noise)")
+    # never a doubtful posture without a warning
+    others = [i for i, c in enumerate(candidates) if c.physical and i != chosen]
+    if others:
+        a, b = candidates[chosen], candidates[others[0]]
+        d_axis = math.degrees(math.atan2(np.linalg.norm(np.cross(a.axis, b.axis)),
+                                         float(a.axis @ b.axis)))
+        d_origin = float(np.linalg.norm(a.tvec - b.tvec))
+        distinct = d_axis > 0.01 or d_origin > 1e-3 * mirror.rim_radius
+        if lines and distinct and confidence < selection.AMBIGUOUS_CONFIDENCE:
+            warnings.append(f"the far lines barely separate the two physical postures "
+                            f"(confidence {confidence:.3f}; they differ by {d_axis:.3f} deg "
+                            f"and {d_origin:.3f} in origin): the choice may be wrong; give "
+                            f"more or longer far lines, far from the image centre")
+        elif lines and distinct and d_axis < 3.0 * axis_std:
+            warnings.append(f"the rim noise ({axis_std:.3f} deg on the axis) is comparable "
+                            f"with the separation of the two physical postures ({d_axis:.3f} "
+                            f"deg): the choice may be wrong; improve the boundary points")
     report = CalibrationReport(conic=np.asarray(fit.conic, np.float64), boundary_points=seen,
                                rim_rms=float(fit.rms), candidates=candidates, chosen=chosen,
                                confidence=float(confidence), warnings=warnings, camera=camera,

@@ -425,7 +425,8 @@ def posture_uncertainty(K, mirror, rvec, tvec, rim_points, rms):
     Returns
     -------
     axis_std_deg : float
-        Standard deviation of the axis direction (the larger of the two angles), degrees.
+        RMS error of the axis direction (square root of the summed variances of the two
+        angles), degrees.
     origin_std_mm : float
         Standard deviation of the origin (square root of the covariance's trace), length unit.
     """
@@ -437,6 +438,6 @@ def posture_uncertainty(K, mirror, rvec, tvec, rim_points, rms):
         cov = np.linalg.inv(J.T @ J) * float(rms) ** 2
     except np.linalg.LinAlgError:
         return math.inf, math.inf
-    axis_std = math.degrees(math.sqrt(max(cov[0, 0], cov[1, 1], 0.0)))
+    axis_std = math.degrees(math.sqrt(max(cov[0, 0] + cov[1, 1], 0.0)))
     origin_std = math.sqrt(max(float(np.trace(cov[2:, 2:])), 0.0))
     return axis_std, origin_std

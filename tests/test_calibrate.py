@@ -1,0 +1,290 @@
+"""calibrate(): rim -> Chen -> selection -> refinement -> report, end to end."""
+import math
+
+import numpy as np
+import pytest
+
+import omnicam
+from omnicam import MisalignedHyperbolicCamera, synthetic
+from omnicam.calibration import calibrate
+from test_chen import RIGS, axis_angle_deg
+from test_selection import far_line_pixels
+
+
+def posture_errors(cam, truth):
+    """(axis angle error in degrees, origin error in mm)."""
+    return (axis_angle_deg(cam.R[:, 2], truth.R[:, 2]),
+            float(np.linalg.norm(cam.tvec - truth.tvec)))
+
+
+def chose_true_candidate(report, truth):
+    phys = report.physical
+    dist = {i: np.linalg.norm(report.candidates[i].tvec - truth.tvec) for i in phys}
+    return report.chosen == min(dist, key=dist.get)
+
+
+# -- exact data -----------------------------------------------------------------------------------
+def test_exact_rim_points_give_the_posture_with_refine_off_and_on():
+    rng = np.random.default_rng(11)
+    worst = {False: [0.0, 0.0], True: [0.0, 0.0]}
+    for truth in RIGS:  # 100 random rigs, lateral offset >= 0.1 mm
+        lines = far_line_pixels(truth, rng)
+        for refine in (False, True):
+            cam, report = MisalignedHyperbolicCamera.calibrate(
+                truth.K, truth.mirror, boundary_points=truth.rim_image_points(360),
+                far_lines=lines, image_size=(500, 500), refine=refine)
+            assert chose_true_candidate(report, truth)
+            assert report.warnings == []
+            axis, origin = posture_errors(cam, truth)
+            worst[refine] = [max(worst[refine][0], axis), max(worst[refine][1], origin)]
+            assert np.allclose(cam.rvec, truth.rvec, atol=1e-8)  # same gauge
+    for refine in (False, True):
+        assert worst[refine][0] < 1e-6, (refine, worst)   # degrees
+        assert worst[refine][1] < 1e-6, (refine, worst)   # mm
+
+
+def test_refinement_is_never_worse_than_the_analytic_result_on_exact_data():
+    rng = np.random.default_rng(12)
+    for truth in RIGS[:20]:
+        lines = far_line_pixels(truth, rng)
+        pts = truth.rim_image_points(360)
+        a, _ = calibrate(truth.K, truth.mirror, boundary_points=pts, far_lines=lines,
+                         refine=False)
+        b, rep = calibrate(truth.K, truth.mirror, boundary_points=pts, far_lines=lines)
+        assert rep.refinement.cost_final <= rep.refinement.cost_initial + 1e-20
+        ea, eb = posture_errors(a, truth), posture_errors(b, truth)
+        assert eb[0] <= ea[0] + 1e-9 and eb[1] <= ea[1] + 1e-9
+
+
+@pytest.mark.parametrize("D", [[-0.12, 0.05, 0.001, -0.0015, -0.01],
+                               [0.05, -0.02, 0.0, 0.0, 0.0, 0.02, -0.01, 0.003]],
+                         ids=["5-coeff", "rational"])
+@pytest.mark.parametrize("refine", [False, True])
+def test_distorted_rim_points_give_the_posture(D, refine):
+    truth = synthetic.misaligned_rig(4.0, 100.0, (-2.0, 1.0, 2.0)).replace(D=D)
+    lines = far_line_pixels(truth, np.random.default_rng(3))
+    cam, report = calibrate(truth.K, truth.mirror, boundary_points=truth.rim_image_points(360),
+                            far_lines=lines, D=D, refine=refine)
+    axis, origin = posture_errors(cam, truth)
+    assert axis < 1e-6 and origin < 1e-6
+    assert np.array_equal(cam.D, truth.D)
+    assert chose_true_candidate(report, truth) and report.warnings == []
+
+
+def test_skewed_K_and_opencv_point_layout():
+    base = synthetic.misaligned_rig(4.0, 100.0, (-2.0, 1.0, 2.0))
+    K = base.K.copy()
+    K[0, 1] = 0.8
+    K[1, 1] *= 1.02
+    truth = base.replace(K=K)
+    pts = truth.rim_image_points(200).reshape(-1, 1, 2).astype(np.float32)
+    lines = [x.reshape(-1, 1, 2) for x in far_line_pixels(truth, np.random.default_rng(4))]
+    cam, report = calibrate(truth.K, truth.mirror, boundary_points=pts, far_lines=lines)
+    axis, origin = posture_errors(cam, truth)
+    assert axis < 1e-3 and origin < 1e-3  # float32 pixels: ~1e-5 px rounding
+    assert chose_true_candidate(report, truth)
+
+
+# -- noise and outliers ---------------------------------------------------------------------------
+SIGMAS = (0.05, 0.1, 0.2, 0.4, 0.8)
+
+
+def _noise_sweep(n_rigs=12, seed=21):
+    rng = np.random.default_rng(seed)
+    out = {}
+    for sigma in SIGMAS:
+        rows = []
+        for truth in RIGS[:n_rigs]:
+            pts = truth.rim_image_points(360) + rng.normal(size=(360, 2)) * sigma
+            lines = far_line_pixels(truth, rng)
+            a, ra = calibrate(truth.K, truth.mirror, boundary_points=pts, far_lines=lines,
+                              refine=False)
+            b, rb = calibrate(truth.K, truth.mirror, boundary_points=pts, far_lines=lines)
+            rows.append((posture_errors(a, truth), posture_errors(b, truth), ra, rb, truth))
+        out[sigma] = rows
+    return out
+
+
+@pytest.fixture(scope="module")
+def sweep():
+    return _noise_sweep()
+
+
+def _rms(values):
+    return float(np.sqrt(np.mean(np.square(values))))
+
+
+def test_noise_sweep_degrades_gracefully(sweep):
+    axis = [_rms([r[1][0] for r in sweep[s]]) for s in SIGMAS]
+    origin = [_rms([r[1][1] for r in sweep[s]]) for s in SIGMAS]
+    # errors grow with the noise, and smoothly: no more than 4x per doubling of the noise
+    assert all(b > a for a, b in zip(axis, axis[1:])), axis
+    assert all(b < 4.0 * a for a, b in zip(axis, axis[1:])), axis
+    assert all(b < 4.0 * a for a, b in zip(origin, origin[1:])), origin
+    # and stay in proportion to it: about 1 deg of axis per px of rim noise at most
+    assert all(e < 4.0 * s for e, s in zip(axis, SIGMAS)), axis
+
+
+def test_refinement_never_hurts_on_noisy_rims(sweep):
+    for s in SIGMAS:
+        ea = _rms([r[0][0] for r in sweep[s]])
+        er = _rms([r[1][0] for r in sweep[s]])
+        assert er <= 1.01 * ea, (s, ea, er)
+        for _, _, _, rb, _ in sweep[s]:
+            assert rb.refinement.cost_final <= rb.refinement.cost_initial or \
+                not rb.refinement.accepted
+
+
+def test_reported_uncertainty_matches_the_errors(sweep):
+    ratios = [r[1][0] / r[3].axis_std_deg for s in SIGMAS for r in sweep[s]]
+    # the RMS of error / predicted RMS is about 1 (first-order propagation of the rim noise)
+    assert 0.5 < _rms(ratios) < 2.0, _rms(ratios)
+
+
+def test_no_wrong_choice_without_a_warning(sweep):
+    for s in SIGMAS:
+        for _, (axis, _), _, rb, truth in sweep[s]:
+            if not chose_true_candidate(rb, truth) or axis > 4 * rb.axis_std_deg:
+                assert rb.warnings, (s, axis, rb)
+
+
+def test_outliers_on_the_rim_are_ignored():
+    rng = np.random.default_rng(5)
+    for truth in RIGS[:5]:
+        pts = truth.rim_image_points(360)
+        lines = far_line_pixels(truth, rng)
+        bad = rng.choice(360, 36, replace=False)
+        centre = pts.mean(axis=0)
+        noisy = pts.copy()
+        dirs = (pts[bad] - centre) / np.linalg.norm(pts[bad] - centre, axis=1, keepdims=True)
+        # 10 % of the points moved 5-40 px in or out (reflections, the holder, clutter)
+        noisy[bad] += dirs * rng.uniform(5, 40, size=(36, 1)) * rng.choice([-1, 1], (36, 1))
+        cam, report = calibrate(truth.K, truth.mirror, boundary_points=noisy, far_lines=lines)
+        axis, origin = posture_errors(cam, truth)
+        assert axis < 1e-6 and origin < 1e-6
+        assert len(report.boundary_points) <= 360 - 30
+
+
+# -- the report -------------------------------------------------------------------------------------
+@pytest.fixture(scope="module")
+def calibrated():
+    truth = synthetic.misaligned_rig()
+    lines = far_line_pixels(truth, np.random.default_rng(6))
+    cam, report = calibrate(truth.K, truth.mirror, boundary_points=truth.rim_image_points(360),
+                            far_lines=lines, image_size=(500, 500))
+    return truth, cam, report
+
+
+def test_report_holds_the_four_candidates_and_the_choice(calibrated):
+    truth, cam, report = calibrated
+    assert isinstance(report, omnicam.CalibrationReport)
+    assert len(report.candidates) == 4 and len(report.physical) == 2
+    for c in report.candidates:
+        assert c.rvec.shape == (3,) and c.tvec.shape == (3,) and isinstance(c.physical, bool)
+        assert np.isfinite(c.score) == c.physical
+    assert report.chosen in report.physical and report.confidence > 0.9
+    assert report.conic.shape == (3, 3) and report.boundary_points.shape == (360, 2)
+    assert report.rim_rms < 1e-6 and report.warnings == []
+    assert report.camera is cam and np.array_equal(report.rvec, cam.rvec)
+    assert cam.image_size == (500, 500)
+
+
+def test_report_summary_is_readable(calibrated):
+    _, cam, report = calibrated
+    text = str(report)
+    assert "rvec" in text and "tvec" in text and "confidence" in text
+    assert text.count("\n") > 8 and "impossible" in text and "physical" in text
+    assert "no warnings" in text
+
+
+@pytest.mark.parametrize("kind", ["none", "grey8", "bgr8", "uint16", "float"])
+def test_report_draw_gives_an_overlay(calibrated, kind):
+    _, cam, report = calibrated
+    images = {"none": None, "grey8": np.zeros((500, 500), np.uint8),
+              "bgr8": np.zeros((500, 500, 3), np.uint8),
+              "uint16": np.full((500, 500), 1000, np.uint16),
+              "float": np.full((500, 500), 0.25, np.float32)}
+    out = report.draw(images[kind])
+    assert out.shape == (500, 500, 3) and out.dtype == np.uint8
+    assert (out != out[0, 0]).any(axis=2).sum() > 1000  # something was drawn
+    rim = np.round(cam.rim_image_points(8)).astype(int)
+    near = [out[max(y - 1, 0):y + 2, max(x - 1, 0):x + 2].reshape(-1, 3) for x, y in rim
+            if 0 <= x < 500 and 0 <= y < 500]
+    assert all((n[:, 1] > 100).any() for n in near)  # the green rim is there
+
+
+def test_without_far_lines_the_report_warns_of_ambiguity():
+    truth = RIGS[0]
+    cam, report = calibrate(truth.K, truth.mirror, boundary_points=truth.rim_image_points(360))
+    assert report.confidence == 0.0
+    assert any("ambiguous" in w for w in report.warnings)
+
+
+def test_image_size_defaults_to_the_image(monkeypatch):
+    truth = synthetic.misaligned_rig()
+    from omnicam.calibration import rim
+
+    def fake_detect(image):
+        return rim.fit_rim(truth.rim_image_points(360))
+
+    monkeypatch.setattr(rim, "detect_rim", fake_detect)
+    cam, report = calibrate(truth.K, truth.mirror, image=np.zeros((480, 640), np.uint8))
+    assert cam.image_size == (640, 480)
+    assert posture_errors(cam, truth)[1] < 1e-6 or not chose_true_candidate(report, truth)
+
+
+# -- bad input ------------------------------------------------------------------------------------
+def test_neither_image_nor_points_raises():
+    truth = RIGS[0]
+    with pytest.raises(ValueError, match="image .* or boundary_points"):
+        calibrate(truth.K, truth.mirror)
+
+
+def test_too_few_boundary_points_raises():
+    truth = RIGS[0]
+    with pytest.raises(ValueError, match="at least 6"):
+        calibrate(truth.K, truth.mirror, boundary_points=truth.rim_image_points(5))
+
+
+def test_singular_K_raises():
+    truth = RIGS[0]
+    K = truth.K.copy()
+    K[1, 1] = 0.0
+    with pytest.raises(ValueError, match="non-singular"):
+        calibrate(K, truth.mirror, boundary_points=truth.rim_image_points(60))
+
+
+def test_collinear_boundary_points_raise():
+    truth = RIGS[0]
+    pts = np.stack([np.linspace(0, 400, 50), np.linspace(10, 300, 50)], axis=1)
+    with pytest.raises(ValueError, match="ellipse"):
+        calibrate(truth.K, truth.mirror, boundary_points=pts)
+
+
+def test_far_line_with_two_points_or_outside_the_mirror_raises():
+    truth = RIGS[0]
+    pts = truth.rim_image_points(360)
+    with pytest.raises(ValueError, match="at least 3"):
+        calibrate(truth.K, truth.mirror, boundary_points=pts, far_lines=[pts.mean(0)[None] + [[0,
+                                                                                         0], [1, 1]]])
+    centre = pts.mean(axis=0)
+    outside = np.stack([centre, centre + 5, pts[0] + 3 * (pts[0] - centre)])
+    with pytest.raises(ValueError, match="outside the mirror rim"):
+        calibrate(truth.K, truth.mirror, boundary_points=pts, far_lines=[outside])
+
+
+def test_bad_mirror_and_D_raise():
+    truth = RIGS[0]
+    pts = truth.rim_image_points(60)
+    with pytest.raises(ValueError, match="HyperbolicMirror"):
+        calibrate(truth.K, "mirror", boundary_points=pts)
+    with pytest.raises(ValueError, match="coefficients"):
+        calibrate(truth.K, truth.mirror, boundary_points=pts, D=[0.1, 0.2])
+
+
+def test_wrong_rim_radius_for_the_camera_still_gives_a_warning_or_a_posture():
+    # a rim 3x too small for K: the posture is far from the truth but still physical
+    truth = RIGS[0]
+    mirror = omnicam.HyperbolicMirror(truth.mirror.a, truth.mirror.b, 10.0)
+    cam, report = calibrate(truth.K, mirror, boundary_points=truth.rim_image_points(90))
+    assert math.isfinite(cam.tvec[2]) and report.warnings
