@@ -316,13 +316,15 @@ def test_detect_rim_real_photo_variants_match_manual_fit(variant):
     assert abs(fit.diameter / diameter - 1.0) < 0.01
 
 
-def test_detect_rim_on_synthetic_renderer_images():
-    """The project's renderer (paper Fig. 6), when present: environment at infinity."""
-    render = getattr(synthetic, "render_environment", None)
+@pytest.mark.parametrize("scene, noise", [("environment", 0.0), ("room", 8.0)])
+def test_detect_rim_on_synthetic_renderer_images(scene, noise):
+    """The project's renderer (paper Fig. 6): environment at infinity, and a checker room with
+    sensor noise; dark housing and the camera's own reflection in both."""
+    render = getattr(synthetic, f"render_{scene}", None)
     if render is None:
-        pytest.skip("omnicam.synthetic.render_environment not available yet")
+        pytest.skip(f"omnicam.synthetic.render_{scene} not available")
     cam = synthetic.misaligned_rig(4.0, 200.0, (-3.0, 3.0, -3.0))
-    fit = detect_rim(render(cam))
+    fit = detect_rim(render(cam, noise=noise, seed=7))
     assert _rms_to_conic(fit.conic, cam.rim_image_points(1000)) < 0.05
 
 
