@@ -132,6 +132,8 @@ def ellipse_from_conic(Q):
     Raises ``ValueError`` if ``Q`` is not a real, non-degenerate ellipse.
     """
     Q = np.asarray(Q, dtype=np.float64)
+    if Q.shape != (3, 3):
+        raise ValueError(f"a conic must be a 3x3 matrix, got shape {Q.shape}")
     Q = 0.5 * (Q + Q.T)
     A = Q[:2, :2]
     if not np.isfinite(Q).all() or np.linalg.det(A) <= 0.0:
@@ -139,6 +141,9 @@ def ellipse_from_conic(Q):
                          "give points spread along a clearly elliptic boundary")
     center = np.linalg.solve(A, -Q[:2, 2])
     F = Q[2, 2] + Q[:2, 2] @ center  # value of the conic at the centre
+    if not F < 0.0 < A[0, 0] and not F > 0.0 > A[0, 0]:
+        raise ValueError("the fitted conic is a point or an imaginary ellipse; give points along "
+                         "the rim")
     M = A / -F
     w, V = np.linalg.eigh(M)
     if not (np.isfinite(w).all() and w[0] > 0.0):
