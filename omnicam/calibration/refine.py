@@ -177,7 +177,7 @@ class _Problem:
 
         return img(p, k), img(p1, (0.0, 0.0)), img(p2, (0.0, 0.0))
 
-    def _foot_points(self, R, t, init=False, phi=None, iters=5):
+    def _foot_points(self, R, t, init=False, phi=None, iters=3):
         ux, uy = self.rim_px[:, 0], self.rim_px[:, 1]
         if init:
             # start at the rim point on the pixel's ray (exact for exact data)
@@ -342,7 +342,7 @@ class _Problem:
 
 
 def refine_posture(K, mirror, rvec, tvec, rim_points, far_lines_normalized=(), line_depth=None,
-                   max_nfev=20):
+                   max_nfev=15):
     """Refine a mirror posture by non-linear least squares (rim and far lines).
 
     Parameters
@@ -380,7 +380,7 @@ def refine_posture(K, mirror, rvec, tvec, rim_points, far_lines_normalized=(), l
     steps = np.array([1e-7, 1e-7, 1e-6, 1e-6, 1e-6] + [1e-7] * 4 * n_lines)
     x0 = np.zeros(_N_POSTURE + 4 * n_lines)
 
-    opts = dict(method="lm", x_scale="jac", xtol=1e-10, ftol=1e-9, gtol=1e-10)
+    opts = dict(method="lm", x_scale="jac", xtol=1e-8, ftol=1e-6, gtol=1e-10)
     # stage 1: the line parameters alone at the analytic posture (its fair cost)
     nfev = 0
     if n_lines:
