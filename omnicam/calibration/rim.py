@@ -454,7 +454,7 @@ def _fit_with_mask(pts, N, mask, robust, threshold):
         center, S, _ = _refine_geometric(pts[mask], center, S)
         if not robust:
             break
-        d, _, _ = _orthogonal_residuals(pts, center, S)
+        d, _, _ = _orthogonal_residuals(pts, center, S, iters=6)  # to classify
         ad = np.abs(d)
         sigma = 1.4826 * np.median(ad[mask])
         new = ad <= max(threshold, 3.5 * sigma)
@@ -640,7 +640,7 @@ def _refine_coarse(p, g, c, r):
             center, S = ellipse_from_conic(N.T @ Qn @ N)
         except ValueError:
             return None
-        dist, _, nrm = _orthogonal_residuals(p, center, S)
+        dist, _, nrm = _orthogonal_residuals(p, center, S, iters=4)
         sel = (np.abs(dist) < 2.0 * thr) & (-(g * nrm).sum(axis=1) > 0.8)
     return int(sel.sum()), center, S
 
