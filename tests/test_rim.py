@@ -98,6 +98,14 @@ def test_fit_rim_bad_input_raises_value_error(points, match):
         fit_rim(points)
 
 
+@pytest.mark.parametrize("kwargs, match", [({"threshold": 0.0}, "threshold"),
+                                            ({"threshold": float("nan")}, "threshold"),
+                                            ({"max_trials": 0}, "max_trials")])
+def test_fit_rim_bad_parameters_raise_value_error(kwargs, match):
+    with pytest.raises(ValueError, match=match):
+        fit_rim(synthetic.aligned_rig().rim_image_points(20), **kwargs)
+
+
 def test_fit_rim_too_few_points_non_robust():
     pts = synthetic.aligned_rig().rim_image_points(5)
     assert fit_rim(pts, robust=False).rms < 1e-9

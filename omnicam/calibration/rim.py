@@ -427,6 +427,8 @@ def fit_rim(points, robust=True, threshold=2.0, max_trials=2000, rng=0):
     pts = _as_points(points, 6 if robust else 5)
     if not (np.isfinite(threshold) and threshold > 0):
         raise ValueError(f"threshold must be a positive number of pixels, got {threshold!r}")
+    if robust and not (int(max_trials) == max_trials and max_trials >= 1):
+        raise ValueError(f"max_trials must be a positive integer, got {max_trials!r}")
     N = _hartley(pts)
     s = N[0, 0]
     pts_n = pts * s + N[:2, 2]
