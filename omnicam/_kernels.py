@@ -286,11 +286,14 @@ def project_points(X, at_infinity, R, t, C, a, b, rim_radius, K, out):
 # grid of nodes every ``step`` output pixels, on the mirror sheet extended beyond the rim, so the
 # mirror point s = (s1, s2) is a smooth function of the output pixel even across the edge of what
 # the mirror sees. Each cell is interpolated by the tensor-product cubic Lagrange polynomial of its
-# 4x4 nodes; its error (~ h^4 f'''' w(t), largest mid-cell) is measured against the exact answer at
-# the cell centre and the middle of its four edges, and a cell whose estimate exceeds ``tol / 2``
-# (or that has a node without a solution) is computed exactly pixel by pixel. Visibility (rim,
-# eqs. 12 and 15, in front of the camera) is decided per pixel from the interpolated s with a
-# margin; pixels inside the margin are solved exactly.
+# 4x4 nodes; its error (~ h^4 f^(4) w(t), largest mid-cell) is measured against the exact answer at
+# the cell centre and the middle of its four edges. A cell whose estimate exceeds ``tol / 2`` (or
+# that has a node without a solution) is refined once: the same construction on a grid ``_FINE``
+# times finer inside it; a sub-cell that still fails is computed exactly pixel by pixel.
+# Cells wholly and clearly seen interpolate the pixel itself; cells wholly and clearly unseen are
+# written unseen; in the others visibility (rim, eqs. 12 and 15, in front of the camera) is
+# decided per pixel from the interpolated mirror point with a margin, and pixels inside the
+# margin are solved exactly.
 
 _VIEW_RIM_MARGIN = 2e-3    # relative margin on s1^2 + s2^2 against rim_radius^2
 _VIEW_COS_MARGIN = 1e-3    # margin on the cosines of the other visibility tests
@@ -470,7 +473,8 @@ def _view_store(i, j, x, y, mode, outx, outy, out16, outf16):
 
 
 _VIEW_CLEAR = 0.05         # margins (relative rim, cosines, body) of cells wholly seen or unseen
-_CELL_BAD = 0              # computed exactly pixel by pixel
+_FINE = 4                  # refinement factor of failing cells
+_CELL_BAD = 0              # refined, else computed exactly pixel by pixel
 _CELL_SEEN = 1             # pixels interpolated directly from the nodes' pixels
 _CELL_UNSEEN = 2           # every pixel unseen
 _CELL_EDGE = 3             # mirror point interpolated, visibility decided per pixel
@@ -507,6 +511,136 @@ def _view_eval(kind, A, p0, p1, az_step, u, v, sin_try, at_infinity, depth, vp, 
     return True, s1, s2, x, y, vis / _VIEW_CLEAR, rim_m
 
 
+@njit(cache=True)
+def _grid_node_row(p, S, P, NV, u0, v0, g, kind, A, p0, p1, az_step, sin_try, at_infinity,
+                   depth, vp, C, Rc, tc, a, b, rim_radius, K, dist, tilt, has_dist, tol):
+    """Row ``p`` of a node grid: node (p, q) at output pixel (u0 + (q-1) g, v0 + (p-1) g)."""
+    for q in range(S.shape[1]):
+        ok, s1, s2, x, y, vis, rim_m = _view_eval(
+            kind, A, p0, p1, az_step, u0 + (q - 1.0) * g, v0 + (p - 1.0) * g, sin_try,
+            at_infinity, depth, vp, C, Rc, tc, a, b, rim_radius, K, dist, tilt, has_dist, tol)
+        S[p, q, 0] = s1
+        S[p, q, 1] = s2
+        P[p, q, 0] = x
+        P[p, q, 1] = y
+        NV[p, q, 0] = vis if ok else -np.inf
+        NV[p, q, 1] = rim_m if ok else np.inf
+
+
+@njit(cache=True)
+def _grid_check_row(r, S, P, CV, EP, ES, u0, v0, g, kind, A, p0, p1, az_step, sin_try,
+                    at_infinity, depth, vp, C, Rc, tc, a, b, rim_radius, K, dist, tilt, has_dist,
+                    tol):
+    """Check points of row ``r`` of a grid of ny x nx cells (CV, EP, ES are (3, ny+1, nx+1)).
+
+    which 0: cell centres; 1: middles of horizontal edges (rows 0..ny); 2: middles of vertical
+    edges (columns 0..nx). EP / ES: error of interpolating the pixel / the mirror point against
+    the exact answer there; CV: the exact margins (vis, rim_m).
+    """
+    ny = EP.shape[1] - 1
+    nx = EP.shape[2] - 1
+    for k in range(nx + 1):
+        for which in range(3):
+            CV[which, r, k, 0] = -np.inf
+            CV[which, r, k, 1] = np.inf
+            EP[which, r, k] = np.inf
+            ES[which, r, k] = np.inf
+            if which == 0 and (r == ny or k == nx):
+                continue
+            if which == 1 and k == nx:
+                continue
+            if which == 2 and r == ny:
+                continue
+            cr = r
+            ck = k
+            tv = 0.5
+            tu = 0.5
+            if which == 1:
+                tv = 0.0
+                if cr == ny:
+                    cr = ny - 1
+                    tv = 1.0
+            elif which == 2:
+                tu = 0.0
+                if ck == nx:
+                    ck = nx - 1
+                    tu = 1.0
+            ok, s1, s2, xe, ye, vis, rim_m = _view_eval(
+                kind, A, p0, p1, az_step, u0 + (ck + tu) * g, v0 + (cr + tv) * g, sin_try,
+                at_infinity, depth, vp, C, Rc, tc, a, b, rim_radius, K, dist, tilt, has_dist, tol)
+            if not ok:
+                continue
+            CV[which, r, k, 0] = vis
+            CV[which, r, k, 1] = rim_m
+            xi, yi = _interp_cell(P, cr, ck, tv, tu)
+            err = math.sqrt((xe - xi) ** 2 + (ye - yi) ** 2)
+            if err == err:
+                EP[which, r, k] = err
+            si1, si2 = _interp_cell(S, cr, ck, tv, tu)
+            # the pixel of a mirror point does not depend on the target (margins only)
+            xi, yi, _m = _view_pixel(si1, si2, 1.0, 0.0, 0.0, True, C, Rc, tc, a, b, K, dist,
+                                     tilt, has_dist)
+            err = math.sqrt((xe - xi) ** 2 + (ye - yi) ** 2)
+            if err == err:
+                ES[which, r, k] = err
+
+
+@njit(cache=True)
+def _grid_classify_row(r, cls, NV, CV, EP, ES, half, allow_edge):
+    """Classes of the cells of row ``r`` (see the _CELL_* constants); without ``allow_edge``
+    a cell on the edge of what the mirror sees is refined instead (``_CELL_BAD``).
+
+    The tensor cubic's error ~ A(v) w(t) + B(u) w(s) peaks mid-cell and is bounded by the sum of
+    its mid-edge values: both that sum and the centre's error must be within ``half``.
+    """
+    for k in range(cls.shape[1]):
+        vmin = np.inf
+        rmax = -np.inf
+        for m in range(4):
+            for n in range(4):
+                vmin = min(vmin, NV[r + m, k + n, 0])
+                rmax = max(rmax, NV[r + m, k + n, 1])
+        solved = vmin > -np.inf
+        for e_ in range(5):
+            w_ = 0 if e_ == 0 else (1 if e_ <= 2 else 2)
+            rr_ = r + 1 if e_ == 2 else r
+            kk_ = k + 1 if e_ == 4 else k
+            vmin = min(vmin, CV[w_, rr_, kk_, 0])
+            rmax = max(rmax, CV[w_, rr_, kk_, 1])
+        ep = max(EP[0, r, k], max(EP[1, r, k], EP[1, r + 1, k])
+                 + max(EP[2, r, k], EP[2, r, k + 1]))
+        es = max(ES[0, r, k], max(ES[1, r, k], ES[1, r + 1, k])
+                 + max(ES[2, r, k], ES[2, r, k + 1]))
+        c = _CELL_BAD
+        if solved:
+            if vmin >= 1.0 and ep <= half:
+                c = _CELL_SEEN
+            elif rmax <= -_VIEW_CLEAR:
+                c = _CELL_UNSEEN
+            elif es <= half and allow_edge:
+                c = _CELL_EDGE
+        cls[r, k] = c
+
+
+@njit(cache=True)
+def _edge_pixel(s1, s2, dx, dy, dz, at_infinity, depth, vp, C, Rc, tc, a, b, rim_radius, K, dist,
+                tilt, has_dist):
+    """Entry from an interpolated mirror point: ``(x, y, decided)``; undecided near the edge."""
+    Xx, Xy, Xz = _view_target(dx, dy, dz, at_infinity, depth, vp)
+    if (not at_infinity) and Xz > 0.0 and \
+            (Xx * Xx + Xy * Xy) / (a * a) - Xz * Xz / (b * b) + 1.0 < 0.0:
+        return _NAN, _NAN, True  # inside the mirror body, as project_points
+    rim2 = rim_radius * rim_radius
+    rim_m = (rim2 - (s1 * s1 + s2 * s2)) / rim2
+    xi, yi, m = _view_pixel(s1, s2, Xx, Xy, Xz, at_infinity, C, Rc, tc, a, b, K, dist, tilt,
+                            has_dist)
+    if rim_m < -_VIEW_RIM_MARGIN or m < -_VIEW_COS_MARGIN:
+        return _NAN, _NAN, True  # clearly unseen
+    if rim_m > _VIEW_RIM_MARGIN and m > _VIEW_COS_MARGIN and xi == xi and yi == yi:
+        return xi, yi, True
+    return _NAN, _NAN, False
+
+
 @njit(cache=True, parallel=True)
 def view_table(kind, A, p0, p1, az_step, W, H, step, at_infinity, depth, vp, sin_reject,
                sin_try, C, Rc, tc, a, b, rim_radius, K, dist, tilt, has_dist, tol, mode,
@@ -514,15 +648,16 @@ def view_table(kind, A, p0, p1, az_step, W, H, step, at_infinity, depth, vp, sin
     """Remap table of a view (see the section comment above); unseen entries are -10.
 
     Parameters are prepared by :mod:`omnicam.views`: ``kind, A, p0, p1, az_step`` define the
-    output directions (:func:`_view_direction`), ``W, H`` the size, ``step`` the node spacing,
-    ``at_infinity, depth, vp`` the targets, ``sin_reject`` the sine of an elevation above which
-    nothing is seen, ``sin_try`` the sine above which nodes are not solved, ``C, Rc, tc`` the
-    camera centre (mirror frame) and mirror -> camera motion, ``K, dist (14), tilt (3x3),
-    has_dist`` the pinhole and distortion, ``tol`` the entry tolerance in pixels. ``mode`` 0
-    writes float32 ``outx, outy`` (H, W); mode 1 writes ``out16`` (H, W, 2) int16 and
-    ``outf16`` (H, W) uint16 as ``cv2.convertMaps(.., CV_16SC2)`` does. ``stats`` (6,) int64
-    receives: nodes solved, check points solved, cells seen, unseen, edge, computed exactly,
-    and (7th) pixels solved exactly.
+    output directions (:func:`_view_direction`), ``W, H`` the size, ``step`` the node spacing
+    (a multiple of ``_FINE``), ``at_infinity, depth, vp`` the targets, ``sin_reject`` the sine
+    of an elevation above which nothing is seen, ``sin_try`` the sine above which nodes are not
+    solved, ``C, Rc, tc`` the camera centre (mirror frame) and mirror -> camera motion,
+    ``K, dist (14), tilt (3x3), has_dist`` the pinhole and distortion, ``tol`` the entry
+    tolerance in pixels. ``mode`` 0 writes float32 ``outx, outy`` (H, W); mode 1 writes
+    ``out16`` (H, W, 2) int16 and ``outf16`` (H, W) uint16 as
+    ``cv2.convertMaps(.., CV_16SC2)`` does. ``stats`` (8,) int64 receives: nodes and check
+    points solved, coarse cells seen / unseen / edge / refined, fine cells computed exactly,
+    pixels solved exactly.
     """
     h = step
     ny = (H + h - 1) // h
@@ -530,110 +665,73 @@ def view_table(kind, A, p0, p1, az_step, W, H, step, at_infinity, depth, vp, sin
     NY = ny + 3
     NX = nx + 3
     newton_tol = 1e-10 * (a + b)
-    rim2 = rim_radius * rim_radius
-    # 1. nodes at output pixel ((q - 1) h, (p - 1) h): exact mirror point, pixel and margins
+    half = 0.5 * tol
+    # 1. coarse nodes, 2. check points, 3. classes
     S = np.empty((NY, NX, 2))
     P = np.empty((NY, NX, 2))
-    NV = np.empty((NY, NX, 2))  # vis, rim_m
+    NV = np.empty((NY, NX, 2))
     for p_ in prange(NY):
         p = np.int64(p_)  # prange indices may be unsigned
-        for q in range(NX):
-            ok, s1, s2, x, y, vis, rim_m = _view_eval(
-                kind, A, p0, p1, az_step, (q - 1.0) * h, (p - 1.0) * h, sin_try, at_infinity,
-                depth, vp, C, Rc, tc, a, b, rim_radius, K, dist, tilt, has_dist, newton_tol)
-            S[p, q, 0] = s1
-            S[p, q, 1] = s2
-            P[p, q, 0] = x
-            P[p, q, 1] = y
-            NV[p, q, 0] = vis if ok else -np.inf
-            NV[p, q, 1] = rim_m if ok else np.inf
-    # 2. the interpolants against the exact answer at cell centres (which 0), middles of
-    #    horizontal edges (which 1, rows 0..ny) and of vertical edges (which 2, columns 0..nx):
-    #    error of interpolating the pixel (EP) and the mirror point (ES), margins (CV)
-    EP = np.full((3, ny + 1, nx + 1), np.inf)
-    ES = np.full((3, ny + 1, nx + 1), np.inf)
+        _grid_node_row(p, S, P, NV, 0.0, 0.0, float(h), kind, A, p0, p1, az_step, sin_try,
+                       at_infinity, depth, vp, C, Rc, tc, a, b, rim_radius, K, dist, tilt,
+                       has_dist, newton_tol)
+    EP = np.empty((3, ny + 1, nx + 1))
+    ES = np.empty((3, ny + 1, nx + 1))
     CV = np.empty((3, ny + 1, nx + 1, 2))
     for r_ in prange(ny + 1):
-        r = np.int64(r_)  # prange indices may be unsigned
-        for k in range(nx + 1):
-            for which in range(3):
-                CV[which, r, k, 0] = -np.inf
-                CV[which, r, k, 1] = np.inf
-                if which == 0 and (r == ny or k == nx):
-                    continue
-                if which == 1 and k == nx:
-                    continue
-                if which == 2 and r == ny:
-                    continue
-                cr = r
-                ck = k
-                tv = 0.5
-                tu = 0.5
-                if which == 1:
-                    tv = 0.0
-                    if cr == ny:
-                        cr = ny - 1
-                        tv = 1.0
-                elif which == 2:
-                    tu = 0.0
-                    if ck == nx:
-                        ck = nx - 1
-                        tu = 1.0
-                ok, s1, s2, xe, ye, vis, rim_m = _view_eval(
-                    kind, A, p0, p1, az_step, (ck + tu) * h, (cr + tv) * h, sin_try,
-                    at_infinity, depth, vp, C, Rc, tc, a, b, rim_radius, K, dist, tilt,
-                    has_dist, newton_tol)
-                if not ok:
-                    continue
-                CV[which, r, k, 0] = vis
-                CV[which, r, k, 1] = rim_m
-                xi, yi = _interp_cell(P, cr, ck, tv, tu)
-                err = math.sqrt((xe - xi) ** 2 + (ye - yi) ** 2)
-                if err == err:
-                    EP[which, r, k] = err
-                si1, si2 = _interp_cell(S, cr, ck, tv, tu)
-                dx, dy, dz = _view_direction(kind, A, p0, p1, az_step, (ck + tu) * h,
-                                             (cr + tv) * h)
-                Xx, Xy, Xz = _view_target(dx, dy, dz, at_infinity, depth, vp)
-                xi, yi, _m = _view_pixel(si1, si2, Xx, Xy, Xz, at_infinity, C, Rc, tc, a, b, K,
-                                         dist, tilt, has_dist)
-                err = math.sqrt((xe - xi) ** 2 + (ye - yi) ** 2)
-                if err == err:
-                    ES[which, r, k] = err
-    # 3. classify cells. The tensor cubic's error ~ A(v) w(t) + B(u) w(s) peaks mid-cell and is
-    #    bounded by the sum of its mid-edge values: within tol / 2 at the five check points.
+        r = np.int64(r_)
+        _grid_check_row(r, S, P, CV, EP, ES, 0.0, 0.0, float(h), kind, A, p0, p1, az_step,
+                        sin_try, at_infinity, depth, vp, C, Rc, tc, a, b, rim_radius, K, dist,
+                        tilt, has_dist, newton_tol)
     cls = np.empty((ny, nx), dtype=np.int64)
-    half = 0.5 * tol
-    for r_ in prange(ny):
-        r = np.int64(r_)  # prange indices may be unsigned
+    for r in range(ny):
+        _grid_classify_row(r, cls, NV, CV, EP, ES, half, False)
+    # 4. refine failing cells on a grid _FINE times finer (its own nodes, checks and classes)
+    F = _FINE
+    g = h // F
+    ref = np.full((ny, nx), -1, dtype=np.int64)
+    nbad = 0
+    for r in range(ny):
         for k in range(nx):
-            vmin = np.inf
-            rmax = -np.inf
-            for m in range(4):
-                for n in range(4):
-                    vmin = min(vmin, NV[r + m, k + n, 0])
-                    rmax = max(rmax, NV[r + m, k + n, 1])
-            solved = vmin > -np.inf
-            for e_ in range(5):
-                w_ = 0 if e_ == 0 else (1 if e_ <= 2 else 2)
-                rr_ = r + 1 if e_ == 2 else r
-                kk_ = k + 1 if e_ == 4 else k
-                vmin = min(vmin, CV[w_, rr_, kk_, 0])
-                rmax = max(rmax, CV[w_, rr_, kk_, 1])
-            ep = max(EP[0, r, k], max(EP[1, r, k], EP[1, r + 1, k])
-                     + max(EP[2, r, k], EP[2, r, k + 1]))
-            es = max(ES[0, r, k], max(ES[1, r, k], ES[1, r + 1, k])
-                     + max(ES[2, r, k], ES[2, r, k + 1]))
-            c = _CELL_BAD
-            if solved:
-                if vmin >= 1.0 and ep <= half:
-                    c = _CELL_SEEN
-                elif rmax <= -_VIEW_CLEAR:
-                    c = _CELL_UNSEEN
-                elif es <= half:
-                    c = _CELL_EDGE
-            cls[r, k] = c
-    # 4. pixels, rows interleaved over blocks so that threads share the exact work evenly
+            if cls[r, k] == _CELL_BAD:
+                ref[r, k] = nbad
+                nbad += 1
+    cells = np.empty((nbad, 2), dtype=np.int64)
+    for r in range(ny):
+        for k in range(nx):
+            if ref[r, k] >= 0:
+                cells[ref[r, k], 0] = r
+                cells[ref[r, k], 1] = k
+    fS = np.empty((nbad, F + 3, F + 3, 2))
+    fP = np.empty((nbad, F + 3, F + 3, 2))
+    fNV = np.empty((nbad, F + 3, F + 3, 2))
+    fcls = np.empty((nbad, F, F), dtype=np.int64)
+    n_fine_checks = np.zeros(max(nbad, 1), dtype=np.int64)
+    for c_ in prange(nbad):
+        c = np.int64(c_)
+        u0 = float(cells[c, 1] * h)
+        v0 = float(cells[c, 0] * h)
+        for p in range(F + 3):
+            _grid_node_row(p, fS[c], fP[c], fNV[c], u0, v0, float(g), kind, A, p0, p1, az_step,
+                           sin_try, at_infinity, depth, vp, C, Rc, tc, a, b, rim_radius, K,
+                           dist, tilt, has_dist, newton_tol)
+        fEP = np.empty((3, F + 1, F + 1))
+        fES = np.empty((3, F + 1, F + 1))
+        fCV = np.empty((3, F + 1, F + 1, 2))
+        for r in range(F + 1):
+            _grid_check_row(r, fS[c], fP[c], fCV, fEP, fES, u0, v0, float(g), kind, A, p0, p1,
+                            az_step, sin_try, at_infinity, depth, vp, C, Rc, tc, a, b,
+                            rim_radius, K, dist, tilt, has_dist, newton_tol)
+        for r in range(F):
+            _grid_classify_row(r, fcls[c], fNV[c], fCV, fEP, fES, half, True)
+        nc = 0
+        for r in range(F + 1):
+            for k in range(F + 1):
+                for w_ in range(3):
+                    if fCV[w_, r, k, 0] > -np.inf:
+                        nc += 1
+        n_fine_checks[c] = nc
+    # 5. pixels, rows interleaved over blocks so that threads share the exact work evenly
     colc = np.empty(W)
     cols = np.empty(W)
     if kind != 0:
@@ -651,7 +749,7 @@ def view_table(kind, A, p0, p1, az_step, W, H, step, at_infinity, depth, vp, sin
     blk = (H + nblk - 1) // nblk
     n_exact_rows = np.zeros(nblk * blk, dtype=np.int64)
     for rr_ in prange(nblk * blk):
-        rr = np.int64(rr_)  # prange indices may be unsigned
+        rr = np.int64(rr_)
         i = (rr % nblk) * blk + rr // nblk
         if i >= H:
             continue
@@ -660,11 +758,11 @@ def view_table(kind, A, p0, p1, az_step, W, H, step, at_infinity, depth, vp, sin
         rp = np.empty((NX, 2))
         rs = np.empty((NX, 2))
         for q in range(NX):
-            for c in range(2):
-                rp[q, c] = v0 * P[r, q, c] + v1 * P[r + 1, q, c] + v2 * P[r + 2, q, c] \
-                    + v3 * P[r + 3, q, c]
-                rs[q, c] = v0 * S[r, q, c] + v1 * S[r + 1, q, c] + v2 * S[r + 2, q, c] \
-                    + v3 * S[r + 3, q, c]
+            for cc in range(2):
+                rp[q, cc] = v0 * P[r, q, cc] + v1 * P[r + 1, q, cc] + v2 * P[r + 2, q, cc] \
+                    + v3 * P[r + 3, q, cc]
+                rs[q, cc] = v0 * S[r, q, cc] + v1 * S[r + 1, q, cc] + v2 * S[r + 2, q, cc] \
+                    + v3 * S[r + 3, q, cc]
         rowz = 0.0
         rowc = 0.0
         if kind == 1:
@@ -674,6 +772,8 @@ def view_table(kind, A, p0, p1, az_step, W, H, step, at_infinity, depth, vp, sin
             el = p0 + p1 * i
             rowz = math.sin(el)
             rowc = math.cos(el)
+        fa = (i - r * h) // g       # fine row of refined cells
+        ftv = (i - r * h - fa * g) / g
         n_ex = 0
         for k in range(nx):
             j0 = k * h
@@ -692,6 +792,7 @@ def view_table(kind, A, p0, p1, az_step, W, H, step, at_infinity, depth, vp, sin
                 for j in range(j0, j1):
                     _view_store(i, j, _NAN, _NAN, mode, outx, outy, out16, outf16)
                 continue
+            ci = ref[r, k]
             for j in range(j0, j1):
                 if kind == 0:
                     x0 = A[0, 0] * j + A[0, 1] * i + A[0, 2]
@@ -710,47 +811,57 @@ def view_table(kind, A, p0, p1, az_step, W, H, step, at_infinity, depth, vp, sin
                 x = _NAN
                 y = _NAN
                 decided = not dz <= sin_reject  # above every elevation the rig sees
-                if c == _CELL_EDGE and not decided:
-                    tu = j - j0
-                    s1 = wu[tu, 0] * rs[k, 0] + wu[tu, 1] * rs[k + 1, 0] + wu[tu, 2] * rs[k + 2, 0] \
-                        + wu[tu, 3] * rs[k + 3, 0]
-                    s2 = wu[tu, 0] * rs[k, 1] + wu[tu, 1] * rs[k + 1, 1] + wu[tu, 2] * rs[k + 2, 1] \
-                        + wu[tu, 3] * rs[k + 3, 1]
-                    Xx, Xy, Xz = _view_target(dx, dy, dz, at_infinity, depth, vp)
-                    if (not at_infinity) and Xz > 0.0 and \
-                            (Xx * Xx + Xy * Xy) / (a * a) - Xz * Xz / (b * b) + 1.0 < 0.0:
-                        decided = True  # inside the mirror body, as project_points
-                    else:
-                        rim_m = (rim2 - (s1 * s1 + s2 * s2)) / rim2
-                        xi, yi, m = _view_pixel(s1, s2, Xx, Xy, Xz, at_infinity, C, Rc, tc, a,
-                                                b, K, dist, tilt, has_dist)
-                        if rim_m < -_VIEW_RIM_MARGIN or m < -_VIEW_COS_MARGIN:
-                            decided = True  # clearly unseen
-                        elif rim_m > _VIEW_RIM_MARGIN and m > _VIEW_COS_MARGIN \
-                                and xi == xi and yi == yi:
+                if not decided:
+                    if c == _CELL_EDGE:
+                        tu = j - j0
+                        s1 = wu[tu, 0] * rs[k, 0] + wu[tu, 1] * rs[k + 1, 0] \
+                            + wu[tu, 2] * rs[k + 2, 0] + wu[tu, 3] * rs[k + 3, 0]
+                        s2 = wu[tu, 0] * rs[k, 1] + wu[tu, 1] * rs[k + 1, 1] \
+                            + wu[tu, 2] * rs[k + 2, 1] + wu[tu, 3] * rs[k + 3, 1]
+                        x, y, decided = _edge_pixel(s1, s2, dx, dy, dz, at_infinity, depth, vp,
+                                                    C, Rc, tc, a, b, rim_radius, K, dist, tilt,
+                                                    has_dist)
+                    else:  # refined cell
+                        fb = (j - j0) // g
+                        ftu = (j - j0 - fb * g) / g
+                        fc = fcls[ci, fa, fb]
+                        if fc == _CELL_SEEN:
+                            x, y = _interp_cell(fP[ci], fa, fb, ftv, ftu)
                             decided = True
-                            x = xi
-                            y = yi
+                        elif fc == _CELL_UNSEEN:
+                            decided = True
+                        elif fc == _CELL_EDGE:
+                            s1, s2 = _interp_cell(fS[ci], fa, fb, ftv, ftu)
+                            x, y, decided = _edge_pixel(s1, s2, dx, dy, dz, at_infinity, depth,
+                                                        vp, C, Rc, tc, a, b, rim_radius, K,
+                                                        dist, tilt, has_dist)
                 if not decided:
                     x, y = _view_exact(dx, dy, dz, sin_reject, at_infinity, depth, vp, C, Rc, tc,
                                        a, b, rim_radius, K, dist, tilt, has_dist, newton_tol)
                     n_ex += 1
                 _view_store(i, j, x, y, mode, outx, outy, out16, outf16)
         n_exact_rows[rr] = n_ex
-    n_nodes = 0
+    n = 0
     for p in range(NY):
         for q in range(NX):
             if NV[p, q, 0] > -np.inf:
-                n_nodes += 1
-    stats[0] = n_nodes
-    n_checks = 0
+                n += 1
+    for c in range(nbad):
+        for p in range(F + 3):
+            for q in range(F + 3):
+                if fNV[c, p, q, 0] > -np.inf:
+                    n += 1
+    stats[0] = n
+    n = 0
+    for c in range(nbad):
+        n += n_fine_checks[c]
     for w_ in range(3):
         for r in range(ny + 1):
             for k in range(nx + 1):
                 if CV[w_, r, k, 0] > -np.inf:
-                    n_checks += 1
-    stats[1] = n_checks
-    for c in range(4):
+                    n += 1
+    stats[1] = n
+    for c in range(6):
         stats[2 + c] = 0
     for r in range(ny):
         for k in range(nx):
@@ -762,4 +873,9 @@ def view_table(kind, A, p0, p1, az_step, W, H, step, at_infinity, depth, vp, sin
                 stats[4] += 1
             else:
                 stats[5] += 1
-    stats[6] = n_exact_rows.sum()
+    for c in range(nbad):
+        for r in range(F):
+            for k in range(F):
+                if fcls[c, r, k] == _CELL_BAD:
+                    stats[6] += 1
+    stats[7] = n_exact_rows.sum()

@@ -20,9 +20,16 @@ from __future__ import annotations
 
 import math
 import numbers
+import os
 
 import cv2
 import numpy as np
+
+# numba's OpenMP threads spin after each parallel region by default; on a loaded machine the
+# spinning thread competes with the one still working and a table takes several times longer.
+# Passive waiting costs a few microseconds per region. libgomp reads this once, when numba first
+# launches a parallel kernel; a value the user set wins.
+os.environ.setdefault("OMP_WAIT_POLICY", "PASSIVE")
 
 __all__ = ["init_panorama_maps", "init_perspective_maps", "rotation_from_ypr", "K_from_fov",
            "visible_elevation_range", "PanoramaView", "PerspectiveView", "UNSEEN", "PROJECTIONS",
@@ -313,9 +320,18 @@ def _finish(xy, m1type):
 
 
 # -- the fast path: one numba kernel (omnicam._kernels.view_table) -------------------------------
-#: Node spacing of the exact coarse grid, output pixels. Cells whose measured interpolation
-#: error exceeds TOLERANCE / 2 are computed exactly pixel by pixel, whatever the spacing.
-STEP = 16
+#: Angular size of a coarse cell, degrees: the node spacing is the multiple of 4 output pixels
+#: (between 8 and 64) closest to it. Cells whose measured interpolation error exceeds
+#: TOLERANCE / 2 are refined on a grid 4 times finer, and sub-cells that still fail are computed
+#: exactly pixel by pixel, so this only trades speed, never accuracy.
+CELL_DEGREES = 5.0
+
+
+def _step_for(deg_per_px):
+    """Node spacing (pixels, a multiple of 4 in [8, 64]) of cells about CELL_DEGREES wide."""
+    n = CELL_DEGREES / max(float(deg_per_px), 1e-9)
+    return int(min(64, max(8, 4 * round(n / 4))))
+
 
 #: Every float table entry is within this many pixels of the exact non-central projection.
 TOLERANCE = 0.01
@@ -365,12 +381,21 @@ def _reject_sines(camera, depth, viewpoint):
     return math.sin(math.radians(limit)), math.sin(math.radians(min(limit + 30.0, 89.5)))
 
 
-def _table(camera, kind, A, p0, p1, az_step, size, depth, viewpoint, m1type, step=STEP,
+def _table(camera, kind, A, p0, p1, az_step, size, depth, viewpoint, m1type, step=None,
            stats=None):
     """Run :func:`omnicam._kernels.view_table` and return the maps for ``m1type``."""
     from . import _kernels
 
     w, h = size
+    if step is None:
+        if kind == 0:
+            deg = CELL_DEGREES / 32.0  # callers pass the step of a perspective view
+        else:  # p1: tan(elevation) or elevation per row, the largest angle per row either way
+            deg = max(360.0 / w, math.degrees(abs(p1)))
+        step = _step_for(deg)
+    step = int(step)
+    if step < 4 or step % 4:
+        raise ValueError(f"step must be a multiple of 4, got {step}")
     D = camera.D
     dist = np.zeros(14)
     tilt = np.eye(3)
@@ -393,10 +418,10 @@ def _table(camera, kind, A, p0, p1, az_step, size, depth, viewpoint, m1type, ste
         outy = np.empty((h, w), np.float32)
         out16 = np.empty((1, 1, 2), np.int16)
         outf16 = np.empty((1, 1), np.uint16)
-    st = np.zeros(7, np.int64) if stats is None else stats
+    st = np.zeros(8, np.int64) if stats is None else stats
     _kernels.view_table(
         kind, np.ascontiguousarray(A, dtype=np.float64), float(p0), float(p1), float(az_step),
-        w, h, int(step), at_infinity, 0.0 if depth is None else float(depth), vp,
+        w, h, step, at_infinity, 0.0 if depth is None else float(depth), vp,
         float(sin_reject), float(sin_try), np.ascontiguousarray(camera.camera_center),
         np.ascontiguousarray(camera.R), np.ascontiguousarray(camera.tvec), m.a, m.b,
         m.rim_radius, np.ascontiguousarray(camera.K), dist, tilt, D is not None,
@@ -528,7 +553,9 @@ def init_perspective_maps(camera, K_new, size, R=None, m1type=cv2.CV_16SC2, dept
     depth = _check_depth(depth)
     vp = _check_viewpoint(camera, viewpoint, depth)
     M = Rm.T @ np.linalg.inv(K_new)
-    return _table(camera, 0, M, 0.0, 0.0, 0.0, (w, h), depth, vp, m1type)
+    # a pixel at the principal point spans 1 / f radians (the most of any pixel of the view)
+    step = _step_for(math.degrees(1.0 / min(abs(K_new[0, 0]), abs(K_new[1, 1]))))
+    return _table(camera, 0, M, 0.0, 0.0, 0.0, (w, h), depth, vp, m1type, step=step)
 
 
 # -- view specs (what the Unwarper and the CLI hold) ----------------------------------------------
