@@ -594,63 +594,45 @@ def cmd_info(args):
 
 
 # -- unwarp -----------------------------------------------------------------------------------
-class ViewSpec:
-    """What to unwarp to, checked against the command line once; builds tables per camera."""
+def view_from_args(args):
+    """The view the command line asks for: a ``PanoramaView`` or ``PerspectiveView``.
 
-    def __init__(self, args):
+    Options of the other kind of view are refused rather than ignored; the view classes check
+    the values (sizes, angle ranges, depth), and what they refuse is a usage error too.
+    """
+    from .views import PanoramaView, PerspectiveView
+
+    def refuse(given, kind):
+        if given:
+            verb = "only apply" if len(given) > 1 else "only applies"
+            raise CliError(f"{', '.join(given)} {verb} to --{kind}", EXIT_USAGE)
+
+    try:
         if args.panorama is not None:
-            bad = [o for o, v in (("--fov", args.fov), ("--yaw", args.yaw),
-                                  ("--pitch", args.pitch), ("--roll", args.roll)) if v is not None]
-            if bad:
-                raise CliError(f"{', '.join(bad)} {'only apply' if len(bad) > 1 else 'only applies'} "
-                               f"to --perspective", EXIT_USAGE)
-            self.kind, self.size = "panorama", args.panorama
-            self.projection = args.projection or "cylindrical"
-            self.elevation = None
-            if args.elevation is not None:
-                lo, hi = args.elevation
-                if self.projection == "cylindrical" and not -90.0 < lo < hi < 90.0:
-                    raise CliError(f"--elevation: a cylindrical panorama needs "
-                                   f"-90 < LO < HI < 90 degrees, got {lo:g} {hi:g}", EXIT_USAGE)
-                if not -90.0 <= lo < hi <= 90.0:
-                    raise CliError(f"--elevation: need -90 <= LO < HI <= 90 degrees, "
-                                   f"got {lo:g} {hi:g}", EXIT_USAGE)
-                self.elevation = (lo, hi)
-        else:
-            bad = [o for o, v in (("--elevation", args.elevation),
-                                  ("--projection", args.projection)) if v is not None]
-            if bad:
-                raise CliError(f"{', '.join(bad)} {'only apply' if len(bad) > 1 else 'only applies'} "
-                               f"to --panorama", EXIT_USAGE)
-            if args.fov is None:
-                raise CliError("--perspective needs --fov DEG (horizontal field of view)",
-                               EXIT_USAGE)
-            if not 0.0 < args.fov < 180.0:
-                raise CliError(f"--fov must be between 0 and 180 degrees, got {args.fov:g}",
-                               EXIT_USAGE)
-            self.kind, self.size, self.fov = "perspective", args.perspective, args.fov
-            self.ypr = (args.yaw or 0.0, args.pitch or 0.0, args.roll or 0.0)
-        self.depth = args.depth
-
-    def maps(self, camera, m1type=cv2.CV_16SC2):
-        """``(map1, map2)`` for ``cv2.remap`` of this view of ``camera``."""
-        try:
-            if self.kind == "panorama":
-                return camera.init_panorama_maps(self.size, elevation_range=self.elevation,
-                                                 projection=self.projection, m1type=m1type,
-                                                 depth=self.depth)
-            from .views import K_from_fov, rotation_from_ypr
-            return camera.init_perspective_maps(K_from_fov(self.fov, self.size), self.size,
-                                                R=rotation_from_ypr(*self.ypr), m1type=m1type,
-                                                depth=self.depth)
-        except ValueError as e:
-            raise CliError(f"cannot build the {self.kind} view: {_one_line(e)}") from None
+            refuse([o for o, v in (("--fov", args.fov), ("--yaw", args.yaw),
+                                   ("--pitch", args.pitch), ("--roll", args.roll))
+                    if v is not None], "perspective")
+            return PanoramaView(args.panorama, elevation_range=args.elevation,
+                                projection=args.projection or "cylindrical", depth=args.depth)
+        refuse([o for o, v in (("--elevation", args.elevation),
+                               ("--projection", args.projection)) if v is not None], "panorama")
+        if args.fov is None:
+            raise CliError("--perspective needs --fov DEG (horizontal field of view)", EXIT_USAGE)
+        return PerspectiveView(args.perspective, fov=args.fov, yaw=args.yaw or 0.0,
+                               pitch=args.pitch or 0.0, roll=args.roll or 0.0, depth=args.depth)
+    except ValueError as e:
+        option = "--panorama" if args.panorama is not None else "--perspective"
+        raise CliError(f"{option}: {_one_line(e)}", EXIT_USAGE) from None
 
 
-def _camera_for(camera, frame_size):
-    if camera.image_size is None or camera.image_size == frame_size:
-        return camera
-    return camera.scaled(frame_size)
+def _unwarper(camera, view, frame_size):
+    """An :class:`~omnicam.stream.Unwarper` of ``view``, its tables for frames of ``frame_size``
+    (``camera.scaled`` when the calibration was made at another resolution)."""
+    from .stream import Unwarper
+    try:
+        return Unwarper.from_camera(camera, {"view": view}, frame_size=frame_size)
+    except ValueError as e:
+        raise CliError(f"cannot build the view: {_one_line(e)}") from None
 
 
 def _is_device_or_url(spec):
@@ -658,7 +640,7 @@ def _is_device_or_url(spec):
 
 
 def cmd_unwarp(args):
-    view = ViewSpec(args)
+    view = view_from_args(args)
     source, output = args.input, args.output
     if not _is_device_or_url(source):
         if not os.path.exists(source):
@@ -682,9 +664,7 @@ def _unwarp_image(args, view, camera):
         raise CliError(f"output {args.output}: no image writer for extension "
                        f"{ext or '(none)'!r}{hint}")
     image = _read_image(args.input)
-    camera = _camera_for(camera, (image.shape[1], image.shape[0]))
-    map1, map2 = view.maps(camera)
-    out = cv2.remap(image, map1, map2, cv2.INTER_LINEAR, borderMode=cv2.BORDER_CONSTANT)
+    out = _unwarper(camera, view, (image.shape[1], image.shape[0])).unwarp(image)["view"]
     _write_image(args.output, out, args.overwrite)
     if not args.quiet:
         print(f"wrote {args.output} ({out.shape[1]}x{out.shape[0]})")
@@ -758,20 +738,17 @@ def _unwarp_video(args, view, camera):
                        f"({', '.join(VIDEO_FOURCC)})")
     cap = _open_capture(args.input)
     try:
-        ok, frame = cap.read()
-        if not ok or frame is None:
-            raise CliError(f"cannot read a frame from {args.input}")
+        frame_size = _frame_size(cap, args.input)
         count = cap.get(cv2.CAP_PROP_FRAME_COUNT)
         declared = int(count) if math.isfinite(count) and count > 0 else 0  # 0: unknown
         fps = cap.get(cv2.CAP_PROP_FPS)
         if not (math.isfinite(fps) and 0 < fps < 1000):
             fps = 30.0
-        camera = _camera_for(camera, (frame.shape[1], frame.shape[0]))
-        unwarp = _make_unwarper(view, camera)
+        unwarper = _unwarper(camera, view, frame_size)
         tmp = _temp_beside(output)
         try:
-            written, stop = _stream(cap, frame, unwarp, tmp, fourcc, fps, view.size, declared,
-                                    args)
+            _check_writer(tmp, fourcc, fps, unwarper.view_size("view"), output)
+            written, stop = _stream(unwarper, cap, tmp, fourcc, fps, declared, args)
         except BaseException:
             _remove_quietly(tmp)
             raise
@@ -785,89 +762,120 @@ def _unwarp_video(args, view, camera):
         _warn(f"input ended after {written} of its {declared} frames (truncated, or a "
               f"frame it cannot decode); kept them in {output}")
     elif not args.quiet:
-        print(f"wrote {output} ({written} frames, {view.size[0]}x{view.size[1]})")
+        w, h = unwarper.view_size("view")
+        print(f"wrote {output} ({written} frames, {w}x{h})")
     return EXIT_OK
 
 
-def _make_unwarper(view, camera):
-    """A callable ``frame -> view image`` (tables built once, output buffer reused)."""
-    map1, map2 = view.maps(camera)
-    out = None
+def _frame_size(cap, source):
+    """``(width, height)`` of the frames, from the capture's properties or, if it has none, from
+    one frame read (a live source drops it; a file is reopened to start again)."""
+    w, h = cap.get(cv2.CAP_PROP_FRAME_WIDTH), cap.get(cv2.CAP_PROP_FRAME_HEIGHT)
+    if math.isfinite(w) and math.isfinite(h) and w >= 1 and h >= 1:
+        return int(w), int(h)
+    ok, frame = cap.read()
+    if not ok or frame is None:
+        raise CliError(f"cannot read a frame from {source}")
+    if not _is_device_or_url(source):
+        cap.open(source)
+    return frame.shape[1], frame.shape[0]
 
-    def unwarp(frame):
-        nonlocal out
-        out = cv2.remap(frame, map1, map2, cv2.INTER_LINEAR, dst=out,
-                        borderMode=cv2.BORDER_CONSTANT)
-        return out
 
-    return unwarp
+def _check_writer(tmp, fourcc, fps, size, output):
+    """Fail early, with a clear message, if ``cv2.VideoWriter`` cannot write this output."""
+    try:
+        writer = cv2.VideoWriter(tmp, cv2.VideoWriter_fourcc(*fourcc), fps, size)
+        ok = writer.isOpened()
+        writer.release()
+    except cv2.error:
+        ok = False
+    if not ok:
+        raise CliError(f"cannot write video {output} with codec {fourcc}; try --fourcc or "
+                       f"another extension")
 
 
-def _stream(cap, first, unwarp, tmp, fourcc, fps, size, declared, args):
+def _stream(unwarper, cap, tmp, fourcc, fps, declared, args):
     """Unwarp frames into ``tmp`` until the input ends, ``--max-frames`` or Ctrl-C.
 
     ``declared`` is the input's frame count (0 if unknown): ending before it is a truncation.
-
     Returns ``(frames_written, how)`` with ``how`` one of ``"end"``, ``"truncated"``,
-    ``"interrupted"``; the writer is released (the file finalised) in every case.
+    ``"interrupted"``; the writer is released (the file finalised) in every case, by
+    :meth:`Unwarper.stream` when its generator ends or is closed.
     """
-    try:
-        writer = cv2.VideoWriter(tmp, cv2.VideoWriter_fourcc(*fourcc), fps, size,
-                                 first.ndim == 3)
-        opened = writer.isOpened()
-    except cv2.error:
-        opened = False
-    if not opened:
-        raise CliError(f"cannot write video {args.output} with codec {fourcc} "
-                       f"(try --fourcc or another extension)")
     total = min(declared or args.max_frames or 0, args.max_frames or declared)
     progress = Progress(total, enabled=not args.quiet)
+    frames = unwarper.stream(cap, outputs={"view": tmp}, fourcc=fourcc, fps=fps,
+                             max_frames=args.max_frames)
     written, how = 0, "end"
-    frame = first
     try:
-        while True:
-            writer.write(unwarp(frame))
-            written += 1
-            progress.update(written)
-            if args.max_frames and written >= args.max_frames:
-                break
-            ok, frame = cap.read()
-            if not ok or frame is None:
-                if written < declared:
-                    how = "truncated"
-                break
+        with contextlib.closing(frames):
+            for index, _ in frames:
+                written = index + 1
+                progress.update(written)
     except KeyboardInterrupt:
         how = "interrupted"
+    except ValueError as e:  # e.g. a frame of another size than the capture announced
+        raise CliError(f"cannot unwarp {args.input}: {_one_line(e)}") from None
     finally:
-        writer.release()
         progress.close()
     if written == 0:
-        raise CliError(f"no frame written to {args.output}")
+        raise CliError(f"cannot read a frame from {args.input}")
+    if how == "end" and written < declared and not (args.max_frames and written >= args.max_frames):
+        how = "truncated"
     return written, how
 
 
 # -- demo -------------------------------------------------------------------------------------
-DEMO_POLES_DEG = (0.0, 120.0, 240.0)  # azimuths of the far vertical poles used as far lines
-DEMO_CLICK_NOISE_PX = 0.2              # as if a user had clicked along them
+#: Far straight lines of the demo scene: lines at infinity, i.e. great circles of directions,
+#: each given by its plane's normal as (tilt from the mirror axis, azimuth) in degrees. Tilted
+#: circles separate Chen's two physical postures far better than the vertical poles do.
+DEMO_FAR_LINES = ((30.0, 0.0), (30.0, 120.0), (30.0, 240.0))
+DEMO_CLICK_NOISE_PX = 0.2  # as if a user had clicked along them
+DEMO_LINE_COLOR = (0, 160, 255)  # BGR orange
 
 
-def demo_far_lines(camera, azimuths_deg=DEMO_POLES_DEG, elevations_deg=(-70.0, 5.0), n=30,
+def great_circle(tilt_deg, azimuth_deg, n=720):
+    """``(n, 3)`` unit directions of the line at infinity whose plane has the given normal."""
+    t, a = math.radians(tilt_deg), math.radians(azimuth_deg)
+    normal = np.array([math.sin(t) * math.cos(a), math.sin(t) * math.sin(a), math.cos(t)])
+    u = np.cross(normal, (0.0, 0.0, 1.0)) if t > 1e-9 else np.array([1.0, 0.0, 0.0])
+    u /= np.linalg.norm(u)
+    v = np.cross(normal, u)
+    th = np.linspace(0.0, 2.0 * np.pi, n, endpoint=False)
+    return np.outer(np.cos(th), u) + np.outer(np.sin(th), v)
+
+
+def demo_environment(lines=DEMO_FAR_LINES):
+    """:func:`omnicam.synthetic.make_environment` with the demo's far lines drawn in."""
+    from . import synthetic
+    env = synthetic.make_environment()
+    h, w = env.shape[:2]
+    radius = max(1, int(round(0.3 * w / 360.0)))  # lines 0.6 deg wide, as the environment's
+    for tilt, az in lines:
+        x, y = synthetic.equirect_coords(great_circle(tilt, az, 8 * w), (w, h))
+        for xi, yi in zip(np.round(x).astype(int), np.round(y).astype(int)):
+            cv2.circle(env, (int(xi) % w, int(yi)), radius, DEMO_LINE_COLOR, -1)
+    return env
+
+
+def demo_far_lines(camera, lines=DEMO_FAR_LINES, max_elevation_deg=10.0, n=60,
                    noise_px=DEMO_CLICK_NOISE_PX, seed=0):
-    """Pixels along the images of far vertical lines (great circles through the zenith).
+    """Pixels along the images of the demo's far lines, as a user would click them.
 
-    The vertical poles of :func:`omnicam.synthetic.make_environment` stand at every 30 deg of
-    azimuth; these are the pixels of the poles at ``azimuths_deg`` between ``elevations_deg``,
-    projected exactly by ``camera`` (directions at infinity), plus seeded Gaussian click noise.
+    The directions of each great circle up to ``max_elevation_deg`` (well inside the rim),
+    projected exactly by ``camera`` (points at infinity), ``n`` per line, plus seeded Gaussian
+    click noise of ``noise_px``.
     """
     rng = np.random.default_rng(seed)
-    el = np.radians(np.linspace(*elevations_deg, n))
-    lines = []
-    for az in np.radians(azimuths_deg):
-        dirs = np.stack([np.cos(el) * math.cos(az), np.cos(el) * math.sin(az), np.sin(el)], axis=1)
-        px = camera.project_directions(dirs)
+    out = []
+    for tilt, az in lines:
+        d = great_circle(tilt, az, 16 * n)
+        d = d[d[:, 2] <= math.sin(math.radians(max_elevation_deg))]
+        px = camera.project_directions(d)
         px = px[np.isfinite(px).all(axis=1)]
-        lines.append(px + rng.normal(scale=noise_px, size=px.shape))
-    return lines
+        px = px[np.linspace(0, len(px) - 1, min(n, len(px))).astype(int)]
+        out.append(px + rng.normal(scale=noise_px, size=px.shape))
+    return out
 
 
 def _table_rms(cam_a, cam_b, size):
@@ -905,14 +913,15 @@ def cmd_demo(args):
     tilt, az, offset = posture(truth)
     print(f"   axis tilt {tilt:.3f} deg towards {az:.1f} deg, camera offset {_vec(offset, '{:.3f}')}"
           f" mm from the lower focus")
-    image = synthetic.render_environment(truth, supersample=2)
+    image = synthetic.render_environment(truth, demo_environment(), supersample=2)
     _write_image(path("mirror.png"), image)
     _write_intrinsics(path("intrinsics.yaml"), truth.K, truth.image_size)
     lines = demo_far_lines(truth)
     with open(path("far_lines.json"), "w", encoding="utf-8") as f:
         json.dump([np.round(line, 2).tolist() for line in lines], f)
-    print(f"2. rendered what it sees ({path('mirror.png')}); {len(lines)} far vertical lines "
-          f"clicked along the poles ({path('far_lines.json')})")
+    print(f"2. rendered what it sees of a scene at infinity ({path('mirror.png')}); "
+          f"{sum(map(len, lines))} pixels 'clicked' (+-{DEMO_CLICK_NOISE_PX} px) along its "
+          f"{len(lines)} orange far straight lines ({path('far_lines.json')})")
 
     print("3. calibration from that image (rim ellipse, Chen's method, far-line selection):")
     try:

@@ -1,7 +1,6 @@
 """The ``omnicam`` command line, called as ``main([...])`` (py360convert style), on small inputs."""
 from __future__ import annotations
 
-import importlib.util
 import json
 import os
 import sys
@@ -15,20 +14,6 @@ from omnicam import synthetic
 from omnicam.cli import main, read_intrinsics
 
 SIZE = (200, 200)  # frames of the small test videos and images
-
-
-def _have(module):
-    try:
-        return importlib.util.find_spec(module) is not None
-    except ModuleNotFoundError:
-        return False
-
-
-needs_views = pytest.mark.skipif(not _have("omnicam.views"), reason="omnicam.views has not landed")
-needs_calibrate = pytest.mark.skipif(
-    not hasattr(importlib.import_module("omnicam.calibration"), "calibrate")
-    or not hasattr(synthetic, "render_room"),
-    reason="omnicam.calibration.calibrate or omnicam.synthetic.render_room has not landed")
 
 
 # -- helpers ----------------------------------------------------------------------------------
@@ -103,7 +88,6 @@ def data(tmp_path_factory, rig):
 
 
 # -- unwarp -----------------------------------------------------------------------------------
-@needs_views
 def test_unwarp_video_panorama_keeps_frame_count_and_size(data, tmp_path, capsys):
     out = tmp_path / "pano.avi"
     code = main(["unwarp", str(data["video"]), "-c", str(data["calib"]), "--panorama", "96x24",
@@ -115,7 +99,6 @@ def test_unwarp_video_panorama_keeps_frame_count_and_size(data, tmp_path, capsys
     assert leftovers(tmp_path) == []
 
 
-@needs_views
 def test_unwarp_video_perspective_keeps_frame_count_and_size(data, tmp_path, capsys):
     out = tmp_path / "view.avi"
     code = main(["unwarp", str(data["video"]), "-c", str(data["calib"]), "--perspective", "48x32",
@@ -125,7 +108,6 @@ def test_unwarp_video_perspective_keeps_frame_count_and_size(data, tmp_path, cap
     assert frames_of(out) == (10, (48, 32))
 
 
-@needs_views
 def test_unwarp_video_max_frames(data, tmp_path, capsys):
     out = tmp_path / "short.avi"
     code = main(["unwarp", str(data["video"]), "-c", str(data["calib"]), "--panorama", "64x16",
@@ -134,7 +116,6 @@ def test_unwarp_video_max_frames(data, tmp_path, capsys):
     assert frames_of(out) == (3, (64, 16))
 
 
-@needs_views
 def test_unwarp_image_is_cv2_remap_with_the_calibration_tables(data, rig, tmp_path, capsys):
     out = tmp_path / "pano.png"
     code = main(["unwarp", str(data["image"]), "-c", str(data["calib"]), "--panorama", "120x30",
@@ -148,7 +129,6 @@ def test_unwarp_image_is_cv2_remap_with_the_calibration_tables(data, rig, tmp_pa
     np.testing.assert_array_equal(got, expected)
 
 
-@needs_views
 def test_unwarp_image_with_depth_builds_finite_depth_tables(data, rig, tmp_path, capsys):
     out = tmp_path / "near.png"
     code = main(["unwarp", str(data["image"]), "-c", str(data["calib"]), "--perspective", "40x30",
@@ -161,7 +141,6 @@ def test_unwarp_image_with_depth_builds_finite_depth_tables(data, rig, tmp_path,
     np.testing.assert_array_equal(cv2.imread(str(out)), expected)
 
 
-@needs_views
 def test_unwarp_scales_the_calibration_to_the_frame_size(rig, tmp_path, capsys):
     calib = tmp_path / "big.yaml"
     rig.scaled((400, 400)).save(calib)  # calibrated at twice the resolution of the frames
@@ -175,7 +154,6 @@ def test_unwarp_scales_the_calibration_to_the_frame_size(rig, tmp_path, capsys):
     np.testing.assert_array_equal(cv2.imread(str(out)), expected)
 
 
-@needs_views
 @pytest.mark.parametrize("kind", ["image", "video"])
 def test_existing_output_is_replaced_only_with_overwrite(data, tmp_path, capsys, kind):
     out = tmp_path / ("out.png" if kind == "image" else "out.avi")
@@ -195,7 +173,6 @@ def test_existing_output_is_replaced_only_with_overwrite(data, tmp_path, capsys,
     assert leftovers(tmp_path) == []
 
 
-@needs_views
 def test_truncated_video_keeps_the_frames_so_far(data, tmp_path, capsys):
     full = write_video(tmp_path / "full.avi", 10)
     truncated = tmp_path / "truncated.avi"
@@ -213,7 +190,6 @@ def test_truncated_video_keeps_the_frames_so_far(data, tmp_path, capsys):
     assert leftovers(tmp_path) == []
 
 
-@needs_views
 def test_ctrl_c_keeps_the_frames_so_far(data, tmp_path, capsys, monkeypatch):
     import omnicam.cli as cli
 
@@ -320,7 +296,6 @@ def test_output_is_a_folder(data, tmp_path, capsys):
     assert [p.name for p in tmp_path.iterdir()] == ["out.avi"]
 
 
-@needs_views
 @pytest.mark.parametrize("kind", ["image", "video"])
 def test_output_file_that_cannot_be_created(data, tmp_path, capsys, monkeypatch, kind):
     import omnicam.cli as cli
@@ -364,7 +339,6 @@ def test_output_folder_not_writable(data, tmp_path, capsys):
     assert list(folder.iterdir()) == []
 
 
-@needs_views
 @pytest.mark.parametrize("kind, name", [("image", "out.nope"), ("video", "out.png"),
                                         ("video", "out.nope")])
 def test_output_extension_that_cannot_be_written(data, tmp_path, capsys, kind, name):
@@ -525,15 +499,19 @@ def test_calibrate_refuses_existing_output_without_overwrite(calib_inputs, tmp_p
 
 
 # -- calibrate and demo: the whole pipeline ---------------------------------------------------
-@needs_calibrate
 def test_calibrate_writes_calibration_and_overlay(tmp_path, capsys):
+    from omnicam.cli import demo_environment, demo_far_lines
+
     truth = synthetic.misaligned_rig(image_size=(300, 300))
     image = tmp_path / "mirror.png"
-    cv2.imwrite(str(image), synthetic.render_room(truth))
+    cv2.imwrite(str(image), synthetic.render_environment(truth, demo_environment(),
+                                                         supersample=2))
     k = write_intrinsics(tmp_path / "k.yaml", truth.K, image_size=truth.image_size)
+    lines = tmp_path / "lines.json"  # pixels along the scene's far straight lines
+    lines.write_text(json.dumps([line.tolist() for line in demo_far_lines(truth)]))
     calib = tmp_path / "calib.yaml"
     code = main(["calibrate", str(image), "--mirror", "23.4", "28.1", "30", "--intrinsics",
-                 str(k), "-o", str(calib)])
+                 str(k), "--far-lines", str(lines), "-o", str(calib)])
     captured = capsys.readouterr()
     assert code == 0, captured.err
     assert captured.out.strip()
@@ -546,7 +524,6 @@ def test_calibrate_writes_calibration_and_overlay(tmp_path, capsys):
 
 
 @pytest.mark.slow
-@needs_calibrate
 def test_demo_writes_every_output(tmp_path, capsys):
     out = tmp_path / "demo"
     code = main(["demo", "-o", str(out)])
@@ -557,4 +534,11 @@ def test_demo_writes_every_output(tmp_path, capsys):
                      "perspective.png"):
         assert expected in names
     assert "posture error" in captured.out
+    from omnicam import MisalignedHyperbolicCamera
+    cam = MisalignedHyperbolicCamera.load(out / "calibration.yaml")
+    truth = synthetic.misaligned_rig()
+    assert np.degrees(np.arccos(min(1.0, cam.R[:, 2] @ truth.R[:, 2]))) < 0.2
+    assert np.linalg.norm(cam.camera_center - truth.camera_center) < 0.5
+    assert cv2.imread(str(out / "panorama.png")).shape == (256, 1024, 3)
+    assert cv2.imread(str(out / "perspective.png")).shape == (480, 640, 3)
     assert main(["info", str(out / "calibration.yaml")]) == 0
