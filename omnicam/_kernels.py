@@ -481,20 +481,97 @@ _CELL_EDGE = 3             # mirror point interpolated, visibility decided per p
 
 
 @njit(cache=True)
+def _newton_warm(s1, s2, C, Xx, Xy, Xz, at_infinity, a, b, tol, max_iter):
+    """Newton's full steps of ``_reflection_point`` from a start already in its basin.
+
+    The start comes from the interpolated neighbours, so the step is small from the first
+    iteration; the same gradient and Hessian of the path length and the same stopping rule as
+    ``_reflection_point``. Returns ``(s1, s2, ok)``; not ok (the caller then solves from the
+    aligned start) if a step is not a full Newton step of that basin or ``max_iter`` pass.
+    """
+    a2 = a * a
+    b2 = b * b
+    Cx = C[0]
+    Cy = C[1]
+    Cz = C[2]
+    for _ in range(max_iter):
+        z = b * math.sqrt(1.0 + (s1 * s1 + s2 * s2) / a2)
+        fx = b2 * s1 / (a2 * z)
+        fy = b2 * s2 / (a2 * z)
+        kk = b2 / (a2 * z)
+        fxx = kk * (1.0 - s1 * fx / z)
+        fyy = kk * (1.0 - s2 * fy / z)
+        fxy = -kk * s1 * fy / z
+        u1x = Cx - s1
+        u1y = Cy - s2
+        u1z = Cz - z
+        r1 = math.sqrt(u1x * u1x + u1y * u1y + u1z * u1z)
+        e1x = u1x / r1
+        e1y = u1y / r1
+        e1z = u1z / r1
+        if at_infinity:
+            e2x, e2y, e2z = Xx, Xy, Xz
+            ir2 = 0.0
+        else:
+            u2x = Xx - s1
+            u2y = Xy - s2
+            u2z = Xz - z
+            r2 = math.sqrt(u2x * u2x + u2y * u2y + u2z * u2z)
+            e2x = u2x / r2
+            e2y = u2y / r2
+            e2z = u2z / r2
+            ir2 = 1.0 / r2
+        hx = e1x + e2x
+        hy = e1y + e2y
+        hz = e1z + e2z
+        g1 = -(hx + fx * hz)
+        g2 = -(hy + fy * hz)
+        t1e1 = e1x + fx * e1z
+        t2e1 = e1y + fy * e1z
+        t1e2 = e2x + fx * e2z
+        t2e2 = e2y + fy * e2z
+        t11 = 1.0 + fx * fx
+        t22 = 1.0 + fy * fy
+        t12 = fx * fy
+        ir1 = 1.0 / r1
+        H11 = -fxx * hz + (t11 - t1e1 * t1e1) * ir1 + (t11 - t1e2 * t1e2) * ir2
+        H22 = -fyy * hz + (t22 - t2e1 * t2e1) * ir1 + (t22 - t2e2 * t2e2) * ir2
+        H12 = -fxy * hz + (t12 - t1e1 * t2e1) * ir1 + (t12 - t1e2 * t2e2) * ir2
+        det = H11 * H22 - H12 * H12
+        if not (H11 > 0.0 and det > 0.0):
+            return s1, s2, False
+        d1 = -(H22 * g1 - H12 * g2) / det
+        d2 = -(H11 * g2 - H12 * g1) / det
+        dn = math.sqrt(d1 * d1 + d2 * d2)
+        if not dn < 1e-4 * (a + b):
+            return s1, s2, False
+        s1 += d1
+        s2 += d2
+        if dn < tol:
+            return s1, s2, True
+    return s1, s2, False
+
+
+@njit(cache=True)
 def _view_eval(kind, A, p0, p1, az_step, u, v, sin_try, at_infinity, depth, vp, C, Rc, tc, a, b,
-               rim_radius, K, dist, tilt, has_dist, tol):
+               rim_radius, K, dist, tilt, has_dist, tol, g1, g2):
     """Exact solution at output position (u, v) on the extended sheet, with its margins.
 
     Returns ``ok, s1, s2, x, y, vis, rim_m``: the mirror point, its (geometric) pixel,
     ``vis`` = the least of the visibility margins (relative rim, cosines of
     :func:`_view_pixel`, the body test of finite targets) over ``_VIEW_CLEAR`` (>= 1: clearly
     seen) and ``rim_m = 1 - |s|^2 / rim_radius^2``. ``ok`` is False when not solved.
+    ``(g1, g2)``: a start for Newton from interpolated neighbours, or NaN.
     """
     dx, dy, dz = _view_direction(kind, A, p0, p1, az_step, u, v)
     if not dz <= sin_try:
         return False, _NAN, _NAN, _NAN, _NAN, _NAN, _NAN
     Xx, Xy, Xz = _view_target(dx, dy, dz, at_infinity, depth, vp)
-    s1, s2, ok = _view_solve(C, Xx, Xy, Xz, at_infinity, a, b, rim_radius, tol)
+    ok = False
+    if g1 == g1 and g2 == g2:
+        s1, s2, ok = _newton_warm(g1, g2, C, Xx, Xy, Xz, at_infinity, a, b, tol, 8)
+    if not ok:
+        s1, s2, ok = _view_solve(C, Xx, Xy, Xz, at_infinity, a, b, rim_radius, tol)
     if not ok:
         return False, _NAN, _NAN, _NAN, _NAN, _NAN, _NAN
     x, y, m = _view_pixel(s1, s2, Xx, Xy, Xz, at_infinity, C, Rc, tc, a, b, K, dist, tilt,
@@ -512,13 +589,23 @@ def _view_eval(kind, A, p0, p1, az_step, u, v, sin_try, at_infinity, depth, vp, 
 
 
 @njit(cache=True)
-def _grid_node_row(p, S, P, NV, u0, v0, g, kind, A, p0, p1, az_step, sin_try, at_infinity,
-                   depth, vp, C, Rc, tc, a, b, rim_radius, K, dist, tilt, has_dist, tol):
-    """Row ``p`` of a node grid: node (p, q) at output pixel (u0 + (q-1) g, v0 + (p-1) g)."""
+def _grid_node_row(p, S, P, NV, u0, v0, g, SG, gr, gk, gf, kind, A, p0, p1, az_step, sin_try,
+                   at_infinity, depth, vp, C, Rc, tc, a, b, rim_radius, K, dist, tilt, has_dist,
+                   tol):
+    """Row ``p`` of a node grid: node (p, q) at output pixel (u0 + (q-1) g, v0 + (p-1) g).
+
+    With ``gf > 0`` the grid refines cell (gr, gk) of the coarser grid ``SG`` ``gf`` times,
+    whose interpolation starts Newton.
+    """
     for q in range(S.shape[1]):
+        g1 = _NAN
+        g2 = _NAN
+        if gf > 0:
+            g1, g2 = _interp_cell(SG, gr, gk, (p - 1.0) / gf, (q - 1.0) / gf)
         ok, s1, s2, x, y, vis, rim_m = _view_eval(
             kind, A, p0, p1, az_step, u0 + (q - 1.0) * g, v0 + (p - 1.0) * g, sin_try,
-            at_infinity, depth, vp, C, Rc, tc, a, b, rim_radius, K, dist, tilt, has_dist, tol)
+            at_infinity, depth, vp, C, Rc, tc, a, b, rim_radius, K, dist, tilt, has_dist, tol,
+            g1, g2)
         S[p, q, 0] = s1
         S[p, q, 1] = s2
         P[p, q, 0] = x
@@ -565,9 +652,11 @@ def _grid_check_row(r, S, P, CV, EP, ES, u0, v0, g, kind, A, p0, p1, az_step, si
                 if ck == nx:
                     ck = nx - 1
                     tu = 1.0
+            si1, si2 = _interp_cell(S, cr, ck, tv, tu)
             ok, s1, s2, xe, ye, vis, rim_m = _view_eval(
                 kind, A, p0, p1, az_step, u0 + (ck + tu) * g, v0 + (cr + tv) * g, sin_try,
-                at_infinity, depth, vp, C, Rc, tc, a, b, rim_radius, K, dist, tilt, has_dist, tol)
+                at_infinity, depth, vp, C, Rc, tc, a, b, rim_radius, K, dist, tilt, has_dist, tol,
+                si1, si2)
             if not ok:
                 continue
             CV[which, r, k, 0] = vis
@@ -576,7 +665,6 @@ def _grid_check_row(r, S, P, CV, EP, ES, u0, v0, g, kind, A, p0, p1, az_step, si
             err = math.sqrt((xe - xi) ** 2 + (ye - yi) ** 2)
             if err == err:
                 EP[which, r, k] = err
-            si1, si2 = _interp_cell(S, cr, ck, tv, tu)
             # the pixel of a mirror point does not depend on the target (margins only)
             xi, yi, _m = _view_pixel(si1, si2, 1.0, 0.0, 0.0, True, C, Rc, tc, a, b, K, dist,
                                      tilt, has_dist)
@@ -672,9 +760,9 @@ def view_table(kind, A, p0, p1, az_step, W, H, step, at_infinity, depth, vp, sin
     NV = np.empty((NY, NX, 2))
     for p_ in prange(NY):
         p = np.int64(p_)  # prange indices may be unsigned
-        _grid_node_row(p, S, P, NV, 0.0, 0.0, float(h), kind, A, p0, p1, az_step, sin_try,
-                       at_infinity, depth, vp, C, Rc, tc, a, b, rim_radius, K, dist, tilt,
-                       has_dist, newton_tol)
+        _grid_node_row(p, S, P, NV, 0.0, 0.0, float(h), S, 0, 0, 0, kind, A, p0, p1, az_step,
+                       sin_try, at_infinity, depth, vp, C, Rc, tc, a, b, rim_radius, K, dist,
+                       tilt, has_dist, newton_tol)
     EP = np.empty((3, ny + 1, nx + 1))
     ES = np.empty((3, ny + 1, nx + 1))
     CV = np.empty((3, ny + 1, nx + 1, 2))
@@ -712,9 +800,10 @@ def view_table(kind, A, p0, p1, az_step, W, H, step, at_infinity, depth, vp, sin
         u0 = float(cells[c, 1] * h)
         v0 = float(cells[c, 0] * h)
         for p in range(F + 3):
-            _grid_node_row(p, fS[c], fP[c], fNV[c], u0, v0, float(g), kind, A, p0, p1, az_step,
-                           sin_try, at_infinity, depth, vp, C, Rc, tc, a, b, rim_radius, K,
-                           dist, tilt, has_dist, newton_tol)
+            _grid_node_row(p, fS[c], fP[c], fNV[c], u0, v0, float(g), S, cells[c, 0],
+                           cells[c, 1], F, kind, A, p0, p1, az_step, sin_try, at_infinity,
+                           depth, vp, C, Rc, tc, a, b, rim_radius, K, dist, tilt, has_dist,
+                           newton_tol)
         fEP = np.empty((3, F + 1, F + 1))
         fES = np.empty((3, F + 1, F + 1))
         fCV = np.empty((3, F + 1, F + 1, 2))
