@@ -238,9 +238,9 @@ def chen_candidates(Qe, mirror):
             tvec = C - mirror.z_rim * axis  # mirror origin = rim centre - z_rim * axis
             rvec = canonical_rvec(cv2.Rodrigues(R)[0].ravel())
             Rg = cv2.Rodrigues(rvec.reshape(3, 1))[0]
+            reasons = physical_reasons(Rg, tvec, mirror, C)
             out.append(Candidate(rvec=rvec, tvec=tvec, axis=axis, rim_centre=C,
-                                 physical=not physical_reasons(Rg, tvec, mirror, C),
-                                 reasons=physical_reasons(Rg, tvec, mirror, C), l=l, m=m))
+                                 physical=not reasons, reasons=reasons, l=l, m=m))
     return out
 
 

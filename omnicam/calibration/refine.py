@@ -173,7 +173,8 @@ class _Problem:
               (X2[1] - p[1] * X2[2] - 2.0 * p1[1] * X1[2]) * iz]
 
         def img(q, off):
-            return (A[0, 0] * q[0] + A[0, 1] * q[1] + off[0], A[1, 0] * q[0] + A[1, 1] * q[1] + off[1])
+            return (A[0, 0] * q[0] + A[0, 1] * q[1] + off[0],
+                    A[1, 0] * q[0] + A[1, 1] * q[1] + off[1])
 
         return img(p, k), img(p1, (0.0, 0.0)), img(p2, (0.0, 0.0))
 
@@ -300,7 +301,8 @@ class _Problem:
         for k in range(4):
             yk = y.copy()
             yk[k::4] += steps[k]
-            J[np.arange(len(base)), 4 * rows + k] = (self.line_residuals(R, t, yk) - base) / steps[k]
+            d = (self.line_residuals(R, t, yk) - base) / steps[k]
+            J[np.arange(len(base)), 4 * rows + k] = d
         return J
 
     def jacobian(self, x, steps):

@@ -103,7 +103,8 @@ class CalibrationReport:
         lines.append(f"  chosen: {self.chosen}, confidence {self.confidence:.4f}")
         if self.refinement is not None:
             r = self.refinement
-            lines.append(f"  refinement: {'accepted' if r.accepted else 'kept the analytic posture'}"
+            kept = "accepted" if r.accepted else "kept the analytic posture"
+            lines.append(f"  refinement: {kept}"
                          f" (cost {r.cost_initial:.4g} -> {r.cost_final:.4g} px^2, rim RMS "
                          f"{r.rim_rms:.4f} px"
                          + ("" if not np.isfinite(r.line_rms) else
