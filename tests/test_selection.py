@@ -93,6 +93,10 @@ def test_far_lines_accept_opencv_shapes_and_reject_bad_ones():
                                                                            [2, 2]]])
     assert [x.shape for x in lines] == [(4, 2), (3, 2)]
     assert selection.validate_far_lines(None) == []
+    # a bare array is one line; an (L, N, 2) array is L lines
+    assert [x.shape for x in selection.validate_far_lines(np.zeros((5, 2)))] == [(5, 2)]
+    assert [x.shape for x in selection.validate_far_lines(np.zeros((5, 1, 2)))] == [(5, 2)]
+    assert [x.shape for x in selection.validate_far_lines(np.zeros((2, 4, 2)))] == [(4, 2)] * 2
     with pytest.raises(ValueError, match=r"\(N, 2\)"):
         selection.validate_far_lines([np.zeros((4, 3))])
     with pytest.raises(ValueError, match="non-finite"):

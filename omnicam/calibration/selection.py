@@ -42,8 +42,9 @@ def validate_far_lines(far_lines):
     """
     if far_lines is None:
         return []
-    if isinstance(far_lines, np.ndarray) and far_lines.ndim in (2, 3) and far_lines.dtype != object:
-        far_lines = [far_lines]  # one line given as a bare array
+    if isinstance(far_lines, np.ndarray) and far_lines.dtype != object and (
+            far_lines.ndim == 2 or (far_lines.ndim == 3 and far_lines.shape[1] == 1)):
+        far_lines = [far_lines]  # one line given as a bare (N, 2) or (N, 1, 2) array
     out = []
     for i, line in enumerate(far_lines):
         try:
