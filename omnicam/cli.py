@@ -277,6 +277,11 @@ def _temp_beside(path):
     except OSError as e:
         raise CliError(f"cannot write in {folder}: {e.strerror or e}") from None
     os.close(fd)
+    # mkstemp makes the file private (0600); the output gets the mode a new file would get
+    umask = os.umask(0)
+    os.umask(umask)
+    with contextlib.suppress(OSError):
+        os.chmod(tmp, 0o666 & ~umask)
     return tmp
 
 
@@ -754,6 +759,8 @@ def _unwarp_video(args, view, camera):
             raise
     finally:
         cap.release()
+    if stop == "interrupted":  # Ctrl-C may have come between a frame's write and its count
+        written = max(written, _frame_count(tmp))
     _publish(tmp, output, args.overwrite)
     if stop == "interrupted":
         _warn(f"interrupted: kept the {written} frames written so far in {output}")
@@ -779,6 +786,16 @@ def _frame_size(cap, source):
     if not _is_device_or_url(source):
         cap.open(source)
     return frame.shape[1], frame.shape[0]
+
+
+def _frame_count(path):
+    """Frames a finished video file declares (0 if it cannot say)."""
+    cap = cv2.VideoCapture(path)
+    try:
+        n = cap.get(cv2.CAP_PROP_FRAME_COUNT) if cap.isOpened() else 0
+    finally:
+        cap.release()
+    return int(n) if math.isfinite(n) and n > 0 else 0
 
 
 def _check_writer(tmp, fourcc, fps, size, output):

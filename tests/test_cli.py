@@ -190,25 +190,51 @@ def test_truncated_video_keeps_the_frames_so_far(data, tmp_path, capsys):
     assert leftovers(tmp_path) == []
 
 
-def test_ctrl_c_keeps_the_frames_so_far(data, tmp_path, capsys, monkeypatch):
+@pytest.mark.parametrize("where", ["between frames", "while reading"])
+def test_ctrl_c_keeps_the_frames_so_far(data, tmp_path, capsys, monkeypatch, where):
     import omnicam.cli as cli
+    import omnicam.stream as stream
 
-    real_update = cli.Progress.update
+    if where == "between frames":  # in the CLI's loop, while the Unwarper's generator waits
+        real_update = cli.Progress.update
 
-    def interrupt_after_4(self, frames, force=False):
-        real_update(self, frames, force)
-        if frames == 4 and not force:  # once, as the user's Ctrl-C
-            raise KeyboardInterrupt
+        def interrupt(self, frames, force=False):
+            real_update(self, frames, force)
+            if frames == 4 and not force:  # once, as the user's Ctrl-C
+                raise KeyboardInterrupt
 
-    monkeypatch.setattr(cli.Progress, "update", interrupt_after_4)
+        monkeypatch.setattr(cli.Progress, "update", interrupt)
+    else:  # inside the Unwarper's generator, before the 5th frame is written
+        real_unwarp = stream.Unwarper.unwarp
+        calls = []
+
+        def interrupt(self, frame):
+            calls.append(1)
+            if len(calls) == 5:
+                raise KeyboardInterrupt
+            return real_unwarp(self, frame)
+
+        monkeypatch.setattr(stream.Unwarper, "unwarp", interrupt)
     out = tmp_path / "out.avi"
     code = main(["unwarp", str(data["video"]), "-c", str(data["calib"]), "--panorama", "64x16",
                  "-o", str(out)])
     err = capsys.readouterr().err
     assert code == 130
-    assert "interrupted" in err and "Traceback" not in err
+    assert "interrupted: kept the 4 frames" in err and "Traceback" not in err
     assert frames_of(out) == (4, (64, 16))
     assert leftovers(tmp_path) == []
+
+
+def test_outputs_get_the_mode_of_a_new_file_not_the_temp_file_mode(data, tmp_path, capsys):
+    umask = os.umask(0o022)
+    try:
+        for name in ("out.png", "out.avi"):
+            src = data["image"] if name.endswith(".png") else data["video"]
+            assert main(["unwarp", str(src), "-c", str(data["calib"]), "--panorama", "64x16",
+                         "-q", "-o", str(tmp_path / name)]) == 0
+            assert (tmp_path / name).stat().st_mode & 0o777 == 0o644
+    finally:
+        os.umask(umask)
 
 
 # -- bad input: one line, non-zero exit, nothing written ---------------------------------------
