@@ -634,6 +634,12 @@ def _unwarper(camera, view, frame_size):
     """An :class:`~omnicam.stream.Unwarper` of ``view``, its tables for frames of ``frame_size``
     (``camera.scaled`` when the calibration was made at another resolution)."""
     from .stream import Unwarper
+    size = camera.image_size
+    if size is not None and size != tuple(frame_size):
+        if abs(frame_size[0] * size[1] - frame_size[1] * size[0]) > 0.01 * size[0] * size[1]:
+            _warn(f"frames are {frame_size[0]}x{frame_size[1]} but the calibration is for "
+                  f"{size[0]}x{size[1]}, another aspect ratio: assuming the same sensor "
+                  f"rescaled (not a crop)")
     try:
         return Unwarper.from_camera(camera, {"view": view}, frame_size=frame_size)
     except ValueError as e:

@@ -32,7 +32,7 @@ def frames_of(path):
     return n, size
 
 
-def test_frame(i, size=SIZE):
+def make_frame(i, size=SIZE):
     """A textured frame with a moving bright square, so frames differ and compress honestly."""
     w, h = size
     y, x = np.mgrid[0:h, 0:w]
@@ -43,14 +43,11 @@ def test_frame(i, size=SIZE):
     return img
 
 
-test_frame.__test__ = False  # a helper, not a test
-
-
 def write_video(path, n, size=SIZE, fps=10):
     writer = cv2.VideoWriter(str(path), cv2.VideoWriter_fourcc(*"MJPG"), fps, size)
     assert writer.isOpened()
     for i in range(n):
-        writer.write(test_frame(i, size))
+        writer.write(make_frame(i, size))
     writer.release()
     return path
 
@@ -83,7 +80,7 @@ def data(tmp_path_factory, rig):
     rig.save(calib)
     video = write_video(folder / "clip.avi", 10)
     image = folder / "frame.png"
-    cv2.imwrite(str(image), test_frame(3))
+    cv2.imwrite(str(image), make_frame(3))
     return {"calib": calib, "video": video, "image": image, "folder": folder}
 
 
@@ -145,13 +142,25 @@ def test_unwarp_scales_the_calibration_to_the_frame_size(rig, tmp_path, capsys):
     calib = tmp_path / "big.yaml"
     rig.scaled((400, 400)).save(calib)  # calibrated at twice the resolution of the frames
     image = tmp_path / "small.png"
-    cv2.imwrite(str(image), test_frame(1))
+    cv2.imwrite(str(image), make_frame(1))
     out = tmp_path / "pano.png"
     code = main(["unwarp", str(image), "-c", str(calib), "--panorama", "80x20", "-o", str(out)])
     assert code == 0, capsys.readouterr().err
     m1, m2 = rig.scaled((400, 400)).scaled(SIZE).init_panorama_maps((80, 20))
-    expected = cv2.remap(test_frame(1), m1, m2, cv2.INTER_LINEAR)
+    expected = cv2.remap(make_frame(1), m1, m2, cv2.INTER_LINEAR)
     np.testing.assert_array_equal(cv2.imread(str(out)), expected)
+
+
+def test_unwarp_warns_when_the_frames_have_another_aspect_ratio(rig, data, tmp_path, capsys):
+    calib = tmp_path / "wide.yaml"
+    rig.scaled((400, 300)).save(calib)
+    out = tmp_path / "pano.avi"
+    code = main(["unwarp", str(data["video"]), "-c", str(calib), "--panorama", "64x16", "-q",
+                 "-o", str(out)])
+    err = capsys.readouterr().err
+    assert code == 0, err
+    assert "warning" in err and "aspect ratio" in err and len(err.splitlines()) == 1
+    assert frames_of(out) == (10, (64, 16))
 
 
 @pytest.mark.parametrize("kind", ["image", "video"])
