@@ -18,7 +18,10 @@
   In each view the three visible faces are found by their flat colours, each edge is located to
   subpixel precision (the 50 % point of the face/neighbour colour blend along profiles across
   the edge) and fitted with a line, and the corners are the intersections of adjacent edges --
-  detected in the rendered view, never taken from exact projections. The pose of each square
+  detected in the rendered view, never taken from exact projections. (``cv2.cornerSubPix`` on
+  the view was tried first: the edges are ~15 view px wide after upsampling and checker edges of
+  the floor lie inside any useful window, so its corners were 1-5 px off and the normals up to
+  1 deg off even with the true rig; the edge-line fit puts the corners within ~0.3 px.) The pose of each square
   face comes from its four corners with ``cv2.solvePnP(..., SOLVEPNP_IPPE_SQUARE)`` and the
   view's ``K_new`` (in place of Abidi's method); the table gives the angles between the normals.
 
@@ -48,7 +51,7 @@ from omnicam import synthetic
 PAPER_TABLE1 = {"Uncalibrated": (58.4, 88.1, 126.9), "Hand adjusted": (81.4, 79.3, 134.8),
                 "Calibrated": (84.9, 89.9, 82.9)}
 #: Gaussian noise (px, seeded) added to the far-line pixels. 0: exact projections of the lines.
-#: (With 0.2 px the two physical candidates of this rig are not told apart reliably; see README.)
+#: (With 0.2 px the eq. 31 choice between this rig's two physical postures is a coin flip.)
 CLICK_NOISE_PX = 0.0
 POLE_AZIMUTHS_DEG = (0.0, 120.0, 240.0)   # far vertical poles of make_environment used as lines
 
