@@ -20,7 +20,7 @@
   the edge) and fitted with a line, and the corners are the intersections of adjacent edges --
   detected in the rendered view, never taken from exact projections. (``cv2.cornerSubPix`` on
   the view was tried first: the edges are ~15 view px wide after upsampling and checker edges of
-  the floor lie inside any useful window, so its corners were 1-5 px off and the normals up to
+  the floor lie inside any useful window, so its corners were 0.7-13 px off and the normals up to
   1 deg off even with the true rig; the edge-line fit puts the corners within ~0.3 px.) The pose of each square
   face comes from its four corners with ``cv2.solvePnP(..., SOLVEPNP_IPPE_SQUARE)`` and the
   view's ``K_new`` (in place of Abidi's method); the table gives the angles between the normals.
