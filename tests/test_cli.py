@@ -534,28 +534,62 @@ def test_calibrate_refuses_existing_output_without_overwrite(calib_inputs, tmp_p
 
 
 # -- calibrate and demo: the whole pipeline ---------------------------------------------------
-def test_calibrate_writes_calibration_and_overlay(tmp_path, capsys):
+@pytest.fixture(scope="module")
+def scene(tmp_path_factory):
+    """A 300x300 render of the demo scene by a misaligned rig, and its far-line pixels."""
     from omnicam.cli import demo_environment, demo_far_lines
 
+    folder = tmp_path_factory.mktemp("calibrate")
     truth = synthetic.misaligned_rig(image_size=(300, 300))
-    image = tmp_path / "mirror.png"
+    image = folder / "mirror.png"
     cv2.imwrite(str(image), synthetic.render_environment(truth, demo_environment(),
                                                          supersample=2))
-    k = write_intrinsics(tmp_path / "k.yaml", truth.K, image_size=truth.image_size)
-    lines = tmp_path / "lines.json"  # pixels along the scene's far straight lines
+    lines = folder / "lines.json"  # pixels along the scene's far straight lines
     lines.write_text(json.dumps([line.tolist() for line in demo_far_lines(truth)]))
+    return {"truth": truth, "image": str(image), "lines": str(lines)}
+
+
+def axis_error_deg(cam, truth):
+    return float(np.degrees(np.arccos(np.clip(cam.R[:, 2] @ truth.R[:, 2], -1.0, 1.0))))
+
+
+def test_calibrate_writes_calibration_and_overlay(scene, tmp_path, capsys):
+    from omnicam import MisalignedHyperbolicCamera
+
+    truth = scene["truth"]
+    k = write_intrinsics(tmp_path / "k.yaml", truth.K, image_size=truth.image_size)
     calib = tmp_path / "calib.yaml"
-    code = main(["calibrate", str(image), "--mirror", "23.4", "28.1", "30", "--intrinsics",
-                 str(k), "--far-lines", str(lines), "-o", str(calib)])
+    code = main(["calibrate", scene["image"], "--mirror", "23.4", "28.1", "30", "--intrinsics",
+                 str(k), "--far-lines", scene["lines"], "-o", str(calib)])
     captured = capsys.readouterr()
     assert code == 0, captured.err
-    assert captured.out.strip()
-    assert (tmp_path / "calib_overlay.png").is_file()
-    from omnicam import MisalignedHyperbolicCamera
+    assert "confidence" in captured.out  # the report
+    assert cv2.imread(str(tmp_path / "calib_overlay.png")).shape == (300, 300, 3)
     cam = MisalignedHyperbolicCamera.load(calib)
     assert cam.image_size == (300, 300)
-    tilt = np.degrees(np.arccos(np.clip(cam.R[:, 2] @ truth.R[:, 2], -1, 1)))
-    assert tilt < 1.0
+    assert axis_error_deg(cam, truth) < 0.2
+    assert np.linalg.norm(cam.camera_center - truth.camera_center) < 0.5
+
+
+def test_calibrate_rescales_K_given_at_another_resolution(scene, tmp_path, capsys):
+    from omnicam import MisalignedHyperbolicCamera
+
+    truth = scene["truth"]
+    big = truth.scaled((600, 600))  # intrinsics calibrated at twice the resolution
+    k = write_intrinsics(tmp_path / "k.xml", big.K, image_size=(600, 600),
+                         names=("camera_matrix", "distortion_coefficients"))
+    calib = tmp_path / "calib.json"
+    overlay = tmp_path / "look.jpg"
+    code = main(["calibrate", scene["image"], "--mirror", "23.4", "28.1", "30", "--intrinsics",
+                 str(k), "--far-lines", scene["lines"], "--no-refine", "--overlay", str(overlay),
+                 "-o", str(calib)])
+    captured = capsys.readouterr()
+    assert code == 0, captured.err
+    assert "K rescaled" in captured.err
+    assert overlay.is_file() and not (tmp_path / "calib_overlay.png").exists()
+    cam = MisalignedHyperbolicCamera.load(calib)
+    np.testing.assert_allclose(cam.K, truth.K, atol=1e-9)
+    assert axis_error_deg(cam, truth) < 0.3
 
 
 @pytest.mark.slow
@@ -572,7 +606,7 @@ def test_demo_writes_every_output(tmp_path, capsys):
     from omnicam import MisalignedHyperbolicCamera
     cam = MisalignedHyperbolicCamera.load(out / "calibration.yaml")
     truth = synthetic.misaligned_rig()
-    assert np.degrees(np.arccos(min(1.0, cam.R[:, 2] @ truth.R[:, 2]))) < 0.2
+    assert axis_error_deg(cam, truth) < 0.2
     assert np.linalg.norm(cam.camera_center - truth.camera_center) < 0.5
     assert cv2.imread(str(out / "panorama.png")).shape == (256, 1024, 3)
     assert cv2.imread(str(out / "perspective.png")).shape == (480, 640, 3)
