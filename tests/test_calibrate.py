@@ -234,6 +234,23 @@ def test_image_size_defaults_to_the_image(monkeypatch):
     assert min(np.linalg.norm(c.tvec - truth.tvec) for c in report.candidates) < 1e-6
 
 
+def test_image_path_with_distortion_refits_the_undistorted_rim(monkeypatch):
+    D = [-0.12, 0.05, 0.001, -0.0015, -0.01]
+    truth = synthetic.misaligned_rig(4.0, 100.0, (-2.0, 1.0, 2.0)).replace(D=D)
+    from omnicam.calibration import rim
+
+    def fake_detect(image):  # the detector sees the distorted rim
+        return rim.fit_rim(truth.rim_image_points(360))
+
+    monkeypatch.setattr(rim, "detect_rim", fake_detect)
+    lines = far_line_pixels(truth, np.random.default_rng(8))
+    cam, report = calibrate(truth.K, truth.mirror, image=np.zeros((500, 500, 3), np.uint8),
+                            far_lines=lines, D=D)
+    axis, origin = posture_errors(cam, truth)
+    assert axis < 1e-6 and origin < 1e-6 and chose_true_candidate(report, truth)
+    assert np.allclose(report.boundary_points, truth.rim_image_points(360))
+
+
 # -- bad input ------------------------------------------------------------------------------------
 def test_neither_image_nor_points_raises():
     truth = RIGS[0]
