@@ -724,7 +724,7 @@ def _edge_points_along_normals(G, center, S, half_width, step=0.25, outermost=Fa
     return e[ok] + where[ok, None] * nrm[ok], int(inside.sum())
 
 
-def detect_rim(image, *, sigma=1.0, threshold=2.0, rng=0):
+def detect_rim(image, *, sigma=0.7, threshold=2.0, rng=0):
     """Find the mirror rim (its outer bright-mirror / dark-housing boundary) in an image.
 
     1. Coarse, on a copy 256 px wide (:func:`_coarse_ellipse`): Canny edge pixels vote along
