@@ -119,14 +119,14 @@ REAL_PHOTO = (pathlib.Path(__file__).resolve().parents[2]
               / "shared" / "data" / "real" / "office_catadioptric_1920x1080.jpg")
 
 # A careful manual fit of the real photograph's rim (the outer edge of the bright mirror against
-# the black holder). How it was made: radial intensity profiles (grey, averaged over 5 px across)
-# and 20x magnified crops were inspected every 5-10 deg around the guess centre (981, 554),
-# radius 595 px of the data README, and at each angle the edge was read by eye as the level
-# half-way between the mirror just inside the edge and the holder just outside it. Angles where
-# the rim is out of frame (top, bottom), where the mirror content next to the rim is as dark as
-# the holder (40-55 deg, 245-300 deg) or where a specular streak or a two-step edge made the
-# reading ambiguous (20, -50, 235, 240 deg) were left out. Angle (deg, image y down) -> offset
-# (px) from radius 595:
+# the black holder), made before detect_rim was written. How it was made: radial intensity
+# profiles (grey, averaged over 5 px across) and 12-20x magnified crops were inspected every
+# 5-10 deg around the guess centre (981, 554), radius 595 px of the data README, and at each
+# angle the edge was read by eye as the level half-way between the mirror just inside the edge
+# and the holder just outside it. Angles where the rim is out of frame (top, bottom), where the
+# mirror content next to the rim is as dark as the holder (40-55 deg, 245-300 deg) or where a
+# specular streak or a two-step edge made the reading ambiguous (20, -50, 235, 240 deg) were left
+# out. Angle (deg, image y down) -> offset (px) from radius 595:
 MANUAL_PICKS = {-65: 4.1, -60: 4.1, -55: 4.4, -40: -0.5, -30: 0.1, -20: -0.6, -10: 0.3, 0: -1.6,
                 10: -0.9, 30: -0.6, 60: 2.3, 120: 2.4, 125: 1.85, 130: 1.35, 140: 0.25, 150: 0.07,
                 160: -1.1, 170: -1.85, 180: -2.3, 190: -1.55, 200: -0.5, 210: -0.6, 220: 0.6,
