@@ -682,13 +682,19 @@ def _grid_classify_row(r, cls, NV, CV, EP, ES, half, allow_edge):
     its mid-edge values: both that sum and the centre's error must be within ``half``.
     """
     for k in range(cls.shape[1]):
-        vmin = np.inf
-        rmax = -np.inf
+        solved = True
         for m in range(4):
             for n in range(4):
+                if not NV[r + m, k + n, 0] > -np.inf:
+                    solved = False
+        # visibility of the cell's own area: its corners and its five check points (the
+        # margins are smooth; "clearly" means beyond _VIEW_CLEAR at all nine)
+        vmin = np.inf
+        rmax = -np.inf
+        for m in range(1, 3):
+            for n in range(1, 3):
                 vmin = min(vmin, NV[r + m, k + n, 0])
                 rmax = max(rmax, NV[r + m, k + n, 1])
-        solved = vmin > -np.inf
         for e_ in range(5):
             w_ = 0 if e_ == 0 else (1 if e_ <= 2 else 2)
             rr_ = r + 1 if e_ == 2 else r

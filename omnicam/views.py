@@ -405,7 +405,9 @@ def _table(camera, kind, A, p0, p1, az_step, size, depth, viewpoint, m1type, ste
             tilt = _tilt_matrix(D[12], D[13])
     sin_reject, sin_try = _reject_sines(camera, depth, viewpoint)
     at_infinity = depth is None
-    vp = np.zeros(3) if viewpoint is None else np.ascontiguousarray(viewpoint, dtype=np.float64)
+    # writable C-contiguous float64 copies everywhere: one kernel signature (numba types
+    # read-only arrays apart, and the camera's arrays are read-only), so one cache entry
+    vp = np.zeros(3) if viewpoint is None else _arg(viewpoint)
     m = camera.mirror
     if m1type == cv2.CV_16SC2:
         mode = 1
@@ -420,17 +422,22 @@ def _table(camera, kind, A, p0, p1, az_step, size, depth, viewpoint, m1type, ste
         outf16 = np.empty((1, 1), np.uint16)
     st = np.zeros(8, np.int64) if stats is None else stats
     _kernels.view_table(
-        kind, np.ascontiguousarray(A, dtype=np.float64), float(p0), float(p1), float(az_step),
+        kind, _arg(A), float(p0), float(p1), float(az_step),
         w, h, step, at_infinity, 0.0 if depth is None else float(depth), vp,
-        float(sin_reject), float(sin_try), np.ascontiguousarray(camera.camera_center),
-        np.ascontiguousarray(camera.R), np.ascontiguousarray(camera.tvec), m.a, m.b,
-        m.rim_radius, np.ascontiguousarray(camera.K), dist, tilt, D is not None,
+        float(sin_reject), float(sin_try), _arg(camera.camera_center), _arg(camera.R),
+        _arg(camera.tvec), float(m.a), float(m.b), float(m.rim_radius), _arg(camera.K), dist,
+        tilt, D is not None,
         float(TOLERANCE), mode, outx, outy, out16, outf16, st)
     if mode == 1:
         return out16, outf16
     if m1type == cv2.CV_32FC2:
         return cv2.merge([outx, outy]), None
     return outx, outy
+
+
+def _arg(x):
+    """A writable C-contiguous float64 copy (the kernel's one signature)."""
+    return np.array(x, dtype=np.float64, order="C", copy=True)
 
 
 def _panorama_params(size, lo, hi, projection):
