@@ -204,15 +204,10 @@ def build_parser():
 
 def main(argv=None) -> int:
     """Run the ``omnicam`` command line; return the exit status."""
-    # OpenCV's and FFmpeg's own log lines are not for the user: our errors say it in one line.
-    # (FFmpeg reads its level when the first capture opens, so this works after import cv2.)
-    os.environ.setdefault("OPENCV_FFMPEG_LOGLEVEL", "-8")
-    os.environ.setdefault("OPENCV_LOG_LEVEL", "SILENT")
-    with contextlib.suppress(Exception):
-        cv2.utils.logging.setLogLevel(cv2.utils.logging.LOG_LEVEL_SILENT)
     try:
-        args = build_parser().parse_args(argv)
-        return args.func(args) or EXIT_OK
+        with _opencv_quiet():
+            args = build_parser().parse_args(argv)
+            return args.func(args) or EXIT_OK
     except CliError as e:
         _error(str(e))
         return e.status
@@ -227,6 +222,28 @@ def main(argv=None) -> int:
         _error(f"unexpected {type(e).__name__}: {_one_line(e, 300)} "
                f"(set OMNICAM_DEBUG=1 for the traceback)")
         return EXIT_FAILURE
+
+
+@contextlib.contextmanager
+def _opencv_quiet():
+    """OpenCV's and FFmpeg's own log lines are not for the user: our errors say it in one line.
+
+    FFmpeg takes its level from ``OPENCV_FFMPEG_LOGLEVEL`` when a capture opens (so setting it
+    after ``import cv2`` works; a value the user set is kept). OpenCV's level is restored after.
+    """
+    os.environ.setdefault("OPENCV_FFMPEG_LOGLEVEL", "-8")  # AV_LOG_QUIET
+    logging = getattr(getattr(cv2, "utils", None), "logging", None)
+    previous = None
+    if logging is not None:
+        with contextlib.suppress(Exception):
+            previous = logging.getLogLevel()
+            logging.setLogLevel(logging.LOG_LEVEL_SILENT)
+    try:
+        yield
+    finally:
+        if previous is not None:
+            with contextlib.suppress(Exception):
+                logging.setLogLevel(previous)
 
 
 def _one_line(e, limit=None):
