@@ -97,8 +97,9 @@ def main(argv=None):
             frames = [cv2.GaussianBlur(rng.integers(0, 256, (h, w, 3), dtype=np.uint8), (5, 5), 0)
                       for _ in range(args.frames)]
             mb, mo, nb, no = measure(u, frames, args.rounds)
+            over, over_min = (mo - mb) / mb * 100, (no - nb) / nb * 100
             print(f"{name:55s} {tname}: bare remap {mb * 1e3:6.2f} ms, Unwarper {mo * 1e3:6.2f} ms,"
-                  f" overhead {(mo - mb) / mb * 100:+5.1f}% (min-based {(no - nb) / nb * 100:+5.1f}%,"
+                  f" overhead {over:+5.1f}% (min-based {over_min:+5.1f}%,"
                   f" {(mo - mb) * 1e6:+.0f} us/frame)")
     return 0
 

@@ -110,7 +110,8 @@ class Unwarper:
             try:
                 w, h = (int(v) for v in source_size)
             except (TypeError, ValueError):
-                raise ValueError(f"source_size must be (width, height), got {source_size!r}") from None
+                raise ValueError(f"source_size must be (width, height), "
+                                 f"got {source_size!r}") from None
             if w <= 0 or h <= 0:
                 raise ValueError(f"source_size must be positive, got {source_size!r}")
             source_size = (w, h)
@@ -149,7 +150,8 @@ class Unwarper:
             ``interpolation``, ``border_mode``, ``border_value`` of :class:`Unwarper`.
         """
         if not isinstance(views, dict) or not views:
-            raise ValueError("views must be a non-empty dict of name -> PanoramaView/PerspectiveView")
+            raise ValueError("views must be a non-empty dict of name -> PanoramaView or "
+                             "PerspectiveView")
         for name, spec in views.items():
             if not isinstance(spec, (PanoramaView, PerspectiveView)):
                 raise ValueError(f"view {name!r} must be a PanoramaView or PerspectiveView, "
@@ -246,10 +248,10 @@ class Unwarper:
 
         Notes
         -----
-        The writers, and the capture if this opened it, are released when the source ends, when the caller stops
-        iterating and closes the generator (``gen.close()``, or ``contextlib.closing``), or on
-        an exception, so the frames written so far stay a valid file. Writing to temporary
-        files and renaming them is the caller's business.
+        The writers, and the capture if this opened it, are released when the source ends,
+        when the caller stops iterating and closes the generator (``gen.close()``, or
+        ``contextlib.closing``), or on an exception, so the frames written so far stay a valid
+        file. Writing to temporary files and renaming them is the caller's business.
         """
         outputs = {} if outputs is None else dict(outputs)
         unknown = set(outputs) - set(self._maps)

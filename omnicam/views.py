@@ -13,6 +13,17 @@ Each table entry is the *exact* non-central projection of that direction or poin
 The paper's uncalibrated baseline (eqs. 2-5, Fig. 7 (a), (b)) is the same function on
 ``MisalignedHyperbolicCamera.aligned(mirror, f_C, x_c, y_c)``.
 
+How a table is built (one numba kernel, :func:`omnicam._kernels.view_table`): the reflection
+point is solved exactly (Newton on Fermat's path length, the solver of ``project``) on a grid of
+nodes about ``CELL_DEGREES`` apart, on the mirror sheet extended past the rim so that it is
+smooth across the edge of what the mirror sees. Each cell is interpolated by the cubic Lagrange
+polynomial of its 4x4 nodes, and its error is *measured* against the exact answer at the cell
+centre and the middles of its edges (where the error of that interpolant peaks); a cell whose
+estimate exceeds ``TOLERANCE / 2`` is refined on a grid 4 times finer, and what still fails is
+solved pixel by pixel. Visibility is decided per cell when all of it is clearly seen or clearly
+unseen, else per pixel with a margin, and exactly inside the margin. ``tests/test_views.py``
+compares whole tables with the exact projection of every pixel.
+
 The view conventions (azimuth, row order, ``R``, yaw/pitch/roll) are those of
 ``shared/reference/conventions.md``, section "Views".
 """
@@ -116,7 +127,8 @@ def K_from_fov(fov_deg, size):
     try:
         fov = float(fov_deg)
     except (TypeError, ValueError):
-        raise ValueError(f"fov_deg must be a number of degrees in (0, 180), got {fov_deg!r}") from None
+        raise ValueError(f"fov_deg must be a number of degrees in (0, 180), "
+                         f"got {fov_deg!r}") from None
     if not (0.0 < fov < 180.0):
         raise ValueError(f"fov_deg must be in (0, 180) degrees, got {fov_deg!r}")
     f = 0.5 * w / math.tan(math.radians(fov) / 2.0)
@@ -130,7 +142,8 @@ def _check_size(size, min_height=1):
         exact = all(isinstance(v, numbers.Integral) or float(v) == int(v) for v in (w, h))
         w, h = int(w), int(h)
     except (TypeError, ValueError):
-        raise ValueError(f"size must be (width, height), two positive integers, got {size!r}") from None
+        raise ValueError(f"size must be (width, height), two positive integers, "
+                         f"got {size!r}") from None
     if not exact or w < 1 or h < min_height:
         raise ValueError(f"size must be (width, height), two integers with width >= 1 and "
                          f"height >= {min_height}, got {size!r}")
@@ -179,7 +192,8 @@ def _check_depth(depth):
     try:
         d = float(depth)
     except (TypeError, ValueError):
-        raise ValueError(f"depth must be None or a positive finite distance, got {depth!r}") from None
+        raise ValueError(f"depth must be None or a positive finite distance, "
+                         f"got {depth!r}") from None
     if not (math.isfinite(d) and d > 0.0):
         raise ValueError(f"depth must be None or a positive finite distance, got {depth!r}")
     return d
@@ -213,7 +227,8 @@ def _check_elevation_range(elevation_range, projection):
             raise ValueError(f"elevation_range must lie inside (-90, 90) degrees for a cylindrical "
                              f"panorama, got {elevation_range!r}")
     elif not (-90.0 <= lo and hi <= 90.0):
-        raise ValueError(f"elevation_range must lie inside [-90, 90] degrees, got {elevation_range!r}")
+        raise ValueError(f"elevation_range must lie inside [-90, 90] degrees, "
+                         f"got {elevation_range!r}")
     return lo, hi
 
 
@@ -264,59 +279,6 @@ def visible_elevation_range(camera):
     hi = float(np.max(el))
     lo = -90.0 if _nadir_seen(camera, rim_dirs) else float(np.min(el))
     return lo, hi
-
-
-# -- output directions ----------------------------------------------------------------------------
-def _panorama_directions(size, lo, hi, projection, Rt):
-    w, h = size
-    az = -2.0 * np.pi * np.arange(w) / w
-    lo_r, hi_r = math.radians(lo), math.radians(hi)
-    t = np.arange(h) / (h - 1)
-    if projection == "cylindrical":
-        tz = math.tan(hi_r) + (math.tan(lo_r) - math.tan(hi_r)) * t
-        d = np.empty((h, w, 3))
-        d[..., 0] = np.cos(az)[None, :]
-        d[..., 1] = np.sin(az)[None, :]
-        d[..., 2] = tz[:, None]
-    else:
-        el = hi_r + (lo_r - hi_r) * t
-        d = np.empty((h, w, 3))
-        d[..., 0] = np.cos(el)[:, None] * np.cos(az)[None, :]
-        d[..., 1] = np.cos(el)[:, None] * np.sin(az)[None, :]
-        d[..., 2] = np.sin(el)[:, None]
-    return d @ Rt.T
-
-
-def _perspective_directions(size, M):
-    w, h = size
-    u, v = np.meshgrid(np.arange(w, dtype=np.float64), np.arange(h, dtype=np.float64))
-    return np.stack([u, v, np.ones_like(u)], axis=-1) @ M.T
-
-
-def _exact_table(camera, dirs, depth, viewpoint):
-    """Exact non-central projection of every output pixel (the slow reference)."""
-    h, w = dirs.shape[:2]
-    d = dirs.reshape(-1, 3)
-    d = d / np.linalg.norm(d, axis=1, keepdims=True)
-    if depth is None:
-        xy = camera.project_directions(d)
-    else:
-        xy = camera.project(viewpoint + depth * d)
-    return xy.reshape(h, w, 2)
-
-
-def _finish(xy, m1type):
-    """Float table (h, w, 2) float64 with NaN for unseen -> the requested map pair."""
-    bad = ~np.isfinite(xy).all(axis=2)
-    xy = xy.astype(np.float32)
-    xy[bad] = UNSEEN
-    if m1type == cv2.CV_32FC2:
-        return xy, None
-    mapx = np.ascontiguousarray(xy[..., 0])
-    mapy = np.ascontiguousarray(xy[..., 1])
-    if m1type == cv2.CV_32FC1:
-        return mapx, mapy
-    return cv2.convertMaps(mapx, mapy, cv2.CV_16SC2)
 
 
 # -- the fast path: one numba kernel (omnicam._kernels.view_table) -------------------------------
@@ -499,6 +461,14 @@ def init_panorama_maps(camera, size, elevation_range=None, projection="cylindric
     ValueError
         Naming the argument: malformed ``size``, unknown ``projection``, bad
         ``elevation_range``, ``R``, ``m1type``, ``depth`` or ``viewpoint``.
+
+    Notes
+    -----
+    Float entries are within ``TOLERANCE`` (0.01 px) of the exact projection; ``CV_16SC2`` is
+    that table rounded to OpenCV's 1/32 px grid exactly as ``cv2.convertMaps`` does. A pixel
+    whose direction grazes the rim (its exact mirror point on the rim to ~1e-12) may be called
+    seen or unseen either way. For the aligned rig the default ``hi`` is exactly the rim's
+    elevation, so row 0 lies on the rim.
     """
     w, h = _check_size(size, min_height=2)
     if projection not in PROJECTIONS:
@@ -552,6 +522,10 @@ def init_perspective_maps(camera, K_new, size, R=None, m1type=cv2.CV_16SC2, dept
     ValueError
         Naming the argument: malformed or singular ``K_new``, bad ``size``, ``R``,
         ``m1type``, ``depth`` or ``viewpoint``.
+
+    Notes
+    -----
+    Accuracy and ``CV_16SC2`` as for :func:`init_panorama_maps`.
     """
     K_new = _check_K_new(K_new)
     w, h = _check_size(size)
