@@ -153,6 +153,7 @@ class _Problem:
         self.rim_px = rim_px
         self.lines_xn = lines_xn
         self.phi0 = self._foot_points(R0, t0, init=True)
+        self.rim_w = np.ones(len(rim_px))  # sqrt of the robust weights of the rim rows
         self.line0 = []
         self.line_scale = []
         self._ray_cache = (None,)
@@ -216,7 +217,16 @@ class _Problem:
     def rim_residuals(self, R, t):
         phi = self._foot_points(R, t, phi=self.phi0)
         cx, cy, nx, ny = self._rim_normals(R, t, phi)
-        return (self.rim_px[:, 0] - cx) * nx + (self.rim_px[:, 1] - cy) * ny
+        return ((self.rim_px[:, 0] - cx) * nx + (self.rim_px[:, 1] - cy) * ny) * self.rim_w
+
+    def set_robust_weights(self, R, t, k=2.0):
+        """Huber weights of the rim rows from their residuals at ``(R, t)``, fixed thereafter
+        (one reweighting step): ``w = min(1, k s / |r|)``, ``s = 1.4826 MAD``."""
+        self.rim_w = np.ones(len(self.rim_px))
+        r = np.abs(self.rim_residuals(R, t))
+        s = 1.4826 * float(np.median(r))
+        if s > 0:
+            self.rim_w = np.sqrt(np.minimum(1.0, k * s / np.maximum(r, 1e-300)))
 
     # lines ------------------------------------------------------------------------------
     def rays(self, R, t, xn):
@@ -332,7 +342,7 @@ class _Problem:
             xk[k] += steps[k]
             Rk, _ = self.posture(xk)
             (ckx, cky), _, _ = self._curve(Rk, t, phi)
-            J[:n_rim, k] = -((ckx - cx) * nx + (cky - cy) * ny) / steps[k]
+            J[:n_rim, k] = -((ckx - cx) * nx + (cky - cy) * ny) / steps[k] * self.rim_w
         r, zr = self.mirror.rim_radius, self.mirror.z_rim
         rho = np.stack([r * np.cos(phi), r * np.sin(phi), np.full_like(phi, zr)], axis=1)
         X = rho @ R.T + t
@@ -340,9 +350,9 @@ class _Problem:
         # n^T A, then d pi / d t = [[1/z, 0, -x/z^2], [0, 1/z, -y/z^2]]
         m0 = nx * self.A[0, 0] + ny * self.A[1, 0]
         m1 = nx * self.A[0, 1] + ny * self.A[1, 1]
-        J[:n_rim, 2] = -m0 / z
-        J[:n_rim, 3] = -m1 / z
-        J[:n_rim, 4] = (m0 * X[:, 0] + m1 * X[:, 1]) / z**2
+        J[:n_rim, 2] = -m0 / z * self.rim_w
+        J[:n_rim, 3] = -m1 / z * self.rim_w
+        J[:n_rim, 4] = (m0 * X[:, 0] + m1 * X[:, 1]) / z**2 * self.rim_w
         if n_line:
             y = x[_N_POSTURE:]
             base = self.line_residuals(R, t, y)
@@ -356,7 +366,7 @@ class _Problem:
 
 
 def refine_posture(K, mirror, rvec, tvec, rim_points, far_lines_normalized=(), line_depth=None,
-                   max_nfev=15):
+                   max_nfev=15, robust=True):
     """Refine a mirror posture by non-linear least squares (rim and far lines).
 
     Parameters
@@ -373,7 +383,12 @@ def refine_posture(K, mirror, rvec, tvec, rim_points, far_lines_normalized=(), l
     line_depth : float, optional
         Starting distance of the 3-D lines; default ``1000 * rim_radius``.
     max_nfev : int
-        Cap on solver iterations (each costs ``10`` residual evaluations).
+        Cap on residual evaluations of each of the two solver stages.
+    robust : bool
+        Weight the rim rows by Huber weights (``k = 2`` robust standard deviations) computed
+        from the residuals of the starting posture: boundary points that the rim fit kept but
+        that sit off the rim (reflections, holder edges, clipped borders) then count less.
+        The costs compared to accept the result use the same weights.
 
     Returns
     -------
@@ -391,6 +406,8 @@ def refine_posture(K, mirror, rvec, tvec, rim_points, far_lines_normalized=(), l
     probe = _Problem(K, mirror, R0, t0, rim_px[:5], [])
     lines_xn = [x for x in lines_xn if np.isfinite(probe.rays(R0, t0, x)[1]).all(axis=1).sum() >= 3]
     prob = _Problem(K, mirror, R0, t0, rim_px, lines_xn)
+    if robust:
+        prob.set_robust_weights(R0, t0)
     n_lines = len(lines_xn)
     if n_lines:
         prob.init_lines(R0, t0, depth)
@@ -422,7 +439,7 @@ def refine_posture(K, mirror, rvec, tvec, rim_points, far_lines_normalized=(), l
             x, r, accepted = sol.x, r_fin, True
     R, t = prob.posture(x[:_N_POSTURE])
     n_rim = len(rim_px)
-    rim_rms = float(np.sqrt(np.mean(r[:n_rim] ** 2)))
+    rim_rms = float(np.sqrt(np.mean((r[:n_rim] / prob.rim_w) ** 2)))
     line_rms = float(np.sqrt(np.mean(r[n_rim:] ** 2))) if n_lines else math.nan
     lines = [prob.line(i, x[_N_POSTURE + 4 * i:_N_POSTURE + 4 * i + 4]) for i in range(n_lines)]
     rvec_out = cv2.Rodrigues(R)[0].ravel()
