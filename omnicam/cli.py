@@ -152,7 +152,8 @@ def build_parser():
                        description="Unwarp an image, a video file, a camera index or a stream "
                        "URL into a panorama or a virtual perspective view.")
     p.add_argument("input", metavar="INPUT",
-                   help="image or video file, camera index (0, 1, ...) or stream URL")
+                   help="image or video file, image sequence (img_%%04d.png), camera index "
+                   "(0, 1, ...) or stream URL")
     p.add_argument("-c", "--calibration", required=True, metavar="CALIB",
                    help="calibration file written by 'omnicam calibrate'")
     view = p.add_mutually_exclusive_group(required=True)
@@ -667,10 +668,15 @@ def _is_device_or_url(spec):
     return spec.isdigit() or "://" in spec
 
 
+def _is_sequence(spec):
+    """An image sequence pattern such as ``frames/img_%04d.png`` (read by cv2.VideoCapture)."""
+    return re.search(r"%0?\d*d", spec) is not None and not os.path.exists(spec)
+
+
 def cmd_unwarp(args):
     view = view_from_args(args)
     source, output = args.input, args.output
-    if not _is_device_or_url(source):
+    if not (_is_device_or_url(source) or _is_sequence(source)):
         if not os.path.exists(source):
             raise CliError(f"input {source} does not exist")
         if not os.path.isfile(source):
@@ -680,7 +686,7 @@ def cmd_unwarp(args):
     _check_output(output, args.overwrite)
     camera = _load_camera(args.calibration)
 
-    if not _is_device_or_url(source) and cv2.haveImageReader(source):
+    if not (_is_device_or_url(source) or _is_sequence(source)) and cv2.haveImageReader(source):
         return _unwarp_image(args, view, camera)
     return _unwarp_video(args, view, camera)
 

@@ -105,6 +105,16 @@ def test_unwarp_video_perspective_keeps_frame_count_and_size(data, tmp_path, cap
     assert frames_of(out) == (10, (48, 32))
 
 
+def test_unwarp_image_sequence_pattern(data, tmp_path, capsys):
+    for i in range(5):
+        cv2.imwrite(str(tmp_path / f"img_{i:03d}.png"), make_frame(i))
+    out = tmp_path / "seq.avi"
+    code = main(["unwarp", str(tmp_path / "img_%03d.png"), "-c", str(data["calib"]),
+                 "--panorama", "64x16", "-q", "-o", str(out)])
+    assert code == 0, capsys.readouterr().err
+    assert frames_of(out) == (5, (64, 16))
+
+
 def test_unwarp_video_max_frames(data, tmp_path, capsys):
     out = tmp_path / "short.avi"
     code = main(["unwarp", str(data["video"]), "-c", str(data["calib"]), "--panorama", "64x16",
