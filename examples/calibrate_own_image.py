@@ -48,6 +48,9 @@ import numpy as np
 import omnicam
 from omnicam import synthetic
 
+#: Default output folder: examples/out/ (git-ignored), wherever the script is run from.
+OUT = os.path.join(os.path.dirname(os.path.abspath(__file__)), "out")
+
 
 def read_intrinsics(path):
     """``K``, ``D`` (or None) and ``image_size`` (or None) from a ``cv2.FileStorage`` file."""
@@ -113,7 +116,7 @@ def room_example(out):
 
 def main(argv=None):
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
-    parser.add_argument("--out", default=os.path.join("examples", "out", "own_image"),
+    parser.add_argument("--out", default=os.path.join(OUT, "own_image"),
                         help="output folder (default %(default)s)")
     parser.add_argument("--image", help="your mirror image (default: a rendered room)")
     parser.add_argument("--intrinsics", help="YAML with K (and D, image_size) of your camera")

@@ -29,6 +29,9 @@ import numpy as np
 import omnicam
 from omnicam import synthetic
 
+#: Default output folder: examples/out/ (git-ignored), wherever the script is run from.
+OUT = os.path.join(os.path.dirname(os.path.abspath(__file__)), "out")
+
 
 def segment_bows(gray, min_length):
     """Long straight-edge candidates and their bow.
@@ -63,7 +66,7 @@ def segment_bows(gray, min_length):
 
 def main(argv=None):
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
-    parser.add_argument("--out", default=os.path.join("examples", "out", "opencv"),
+    parser.add_argument("--out", default=os.path.join(OUT, "opencv"),
                         help="output folder (default %(default)s)")
     parser.add_argument("--size", type=int, default=1000,
                         help="mirror image width = height in px (default %(default)s)")

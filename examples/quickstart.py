@@ -26,6 +26,9 @@ import numpy as np
 import omnicam
 from omnicam import synthetic
 
+#: Default output folder: examples/out/ (git-ignored), wherever the script is run from.
+OUT = os.path.join(os.path.dirname(os.path.abspath(__file__)), "out")
+
 
 def far_vertical_lines(camera, azimuths_deg=(0.0, 120.0, 240.0), n=30):
     """Pixels along the images of far vertical lines (the poles of the synthetic scene).
@@ -44,7 +47,7 @@ def far_vertical_lines(camera, azimuths_deg=(0.0, 120.0, 240.0), n=30):
 
 def main(argv=None):
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
-    parser.add_argument("--out", default=os.path.join("examples", "out", "quickstart"),
+    parser.add_argument("--out", default=os.path.join(OUT, "quickstart"),
                         help="output folder (default %(default)s)")
     parser.add_argument("--size", type=int, default=800,
                         help="mirror image width = height in px (default %(default)s)")

@@ -26,6 +26,9 @@ import numpy as np
 import omnicam
 from omnicam import synthetic
 
+#: Default output folder: examples/out/ (git-ignored), wherever the script is run from.
+OUT = os.path.join(os.path.dirname(os.path.abspath(__file__)), "out")
+
 
 def make_video(path, camera, frames, fps=15.0, degrees_per_frame=4.0, supersample=2):
     """Write a video of ``camera`` watching the synthetic environment turn about the vertical."""
@@ -45,7 +48,7 @@ def make_video(path, camera, frames, fps=15.0, degrees_per_frame=4.0, supersampl
 
 def main(argv=None):
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
-    parser.add_argument("--out", default=os.path.join("examples", "out", "video"),
+    parser.add_argument("--out", default=os.path.join(OUT, "video"),
                         help="output folder (default %(default)s)")
     parser.add_argument("--input", help="your mirror video (default: make a synthetic one)")
     parser.add_argument("--calib", help="calibration file of --input (default: the misaligned "

@@ -74,10 +74,10 @@ def test_calibrate_own_image_reads_far_lines_json_and_saves_the_calibration(tmp_
 def test_calibrate_own_image_on_a_given_image(tmp_path):
     example = load_example("calibrate_own_image")
     first = example.main(["--out", str(tmp_path / "a")])
-    again = example.main(["--out", str(tmp_path / "b"), "--image", str(tmp_path / "a" / "mirror.png"),
-                          "--intrinsics", str(tmp_path / "a" / "camera.yaml"),
-                          "--mirror", "23.4", "28.1", "30",
-                          "--far-lines", str(tmp_path / "a" / "lines.json")])
+    a = tmp_path / "a"
+    again = example.main(["--out", str(tmp_path / "b"), "--image", str(a / "mirror.png"),
+                          "--intrinsics", str(a / "camera.yaml"), "--mirror", "23.4", "28.1", "30",
+                          "--far-lines", str(a / "lines.json")])
     assert again["camera"] == first["camera"]
 
 
