@@ -127,7 +127,8 @@ def build_parser():
                        description="Estimate the mirror posture from one image: rim ellipse, "
                        "Chen's method, far-line selection and refinement. Prints the report, "
                        "saves an overlay image and writes the calibration file.")
-    p.add_argument("image", metavar="IMAGE", help="image of the mirror (any format cv2.imread reads)")
+    p.add_argument("image", metavar="IMAGE",
+                   help="image of the mirror (any format cv2.imread reads)")
     p.add_argument("--mirror", nargs=3, type=_positive, required=True, metavar=("A", "B", "RIM"),
                    help="hyperboloid parameters a, b and rim radius (mm)")
     p.add_argument("--intrinsics", required=True, metavar="K.yaml",
@@ -144,7 +145,8 @@ def build_parser():
     p.add_argument("--no-refine", dest="refine", action="store_false",
                    help="keep the closed-form posture, skip the refinement")
     p.add_argument("--overlay", metavar="PATH",
-                   help="overlay image to write (default: CALIB's stem + '_overlay.png', next to CALIB)")
+                   help="overlay image to write (default: CALIB's stem + '_overlay.png', "
+                   "next to CALIB)")
     p.add_argument("--overwrite", action="store_true", help="replace existing output files")
     p.set_defaults(func=cmd_calibrate)
 
@@ -451,7 +453,8 @@ def read_intrinsics(path):
                 try:
                     size = validate_image_size((wn.real(), hn.real()))
                 except ValueError:
-                    raise fail("image_width", "and 'image_height' must be positive integers") from None
+                    raise fail("image_width",
+                               "and 'image_height' must be positive integers") from None
     except cv2.error as e:
         raise CliError(f"intrinsics file {path}: malformed ({_cv_message(e)})") from None
     finally:
@@ -957,8 +960,8 @@ def cmd_demo(args):
     print(f"1. a misaligned rig: mirror a = {m.a:g}, b = {m.b:g}, rim {m.rim_radius:g} mm, "
           f"{truth.image_size[0]}x{truth.image_size[1]} camera; the truth:")
     tilt, az, offset = posture(truth)
-    print(f"   axis tilt {tilt:.3f} deg towards {az:.1f} deg, camera offset {_vec(offset, '{:.3f}')}"
-          f" mm from the lower focus")
+    print(f"   axis tilt {tilt:.3f} deg towards {az:.1f} deg, camera offset "
+          f"{_vec(offset, '{:.3f}')} mm from the lower focus")
     image = synthetic.render_environment(truth, demo_environment(), supersample=2)
     _write_image(path("mirror.png"), image)
     _write_intrinsics(path("intrinsics.yaml"), truth.K, truth.image_size)
@@ -987,8 +990,8 @@ def cmd_demo(args):
     print("4. posture error vs the truth:")
     print(f"   axis tilt      {e_tilt:.3f} deg (true {tilt:.3f}); axis direction off by "
           f"{axis_error:.3f} deg")
-    print(f"   camera offset  {_vec(e_offset, '{:.3f}')} mm (true {_vec(offset, '{:.3f}')}); off by "
-          f"{np.linalg.norm(e_offset - offset):.3f} mm")
+    print(f"   camera offset  {_vec(e_offset, '{:.3f}')} mm (true {_vec(offset, '{:.3f}')}); "
+          f"off by {np.linalg.norm(e_offset - offset):.3f} mm")
     print(f"   panorama tables vs the true rig's, RMS: calibrated "
           f"{_table_rms(camera, truth, (256, 64)):.2f} px, uncalibrated aligned model (eqs. 2-5) "
           f"{_table_rms(baseline, truth, (256, 64)):.2f} px")

@@ -490,7 +490,8 @@ def calib_inputs(tmp_path, rig, data):
     """IMAGE, K.yaml, LINES.json for the calibrate command (image: any readable picture)."""
     k = write_intrinsics(tmp_path / "k.yaml", rig.K, image_size=SIZE)
     lines = tmp_path / "lines.json"
-    lines.write_text(json.dumps([[[10, 20], [30, 40], [50, 55]], [[100.5, 10], [120, 12.25], [140, 15]]]))
+    lines.write_text(json.dumps([[[10, 20], [30, 40], [50, 55]],
+                                 [[100.5, 10], [120, 12.25], [140, 15]]]))
     return {"image": str(data["image"]), "k": str(k), "lines": str(lines)}
 
 
