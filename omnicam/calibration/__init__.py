@@ -69,7 +69,9 @@ def calibrate(K, mirror, image=None, boundary_points=None, far_lines=None, D=Non
         (robust). Takes precedence over ``image`` for the rim when both are given.
     far_lines : sequence of (N_i, 2) or (N_i, 1, 2) array_like, optional
         Pixels along the images of far straight lines (>= 3 each, inside the rim), used as given
-        to choose between the postures (eq. 31) and, with ``refine``, as 3-D lines.
+        to choose between the postures (eq. 31) and, with ``refine``, as 3-D lines. A pixel
+        more than ``max(2, 3 * rim RMS)`` px outside the fitted rim is an error; one just
+        outside whose ray misses the mirror is left out with a warning.
     D : array_like, optional
         OpenCV distortion coefficients of the camera.
     image_size : (int, int), optional

@@ -229,6 +229,9 @@ def chen_candidates(Qe, mirror):
             x0z, y0z = -M[0, 2] / k, -M[1, 2] / k
             q = M[2, 2] / k  # (x0^2 + y0^2 - r^2) / z0^2
             rz2 = x0z * x0z + y0z * y0z - q  # r^2 / z0^2
+            if not (np.isfinite(rz2) and rz2 > 0):
+                raise ValueError("the rim conic does not fit a circle seen by this camera "
+                                 "(numerically degenerate); check K and the boundary points")
             z0 = r / math.sqrt(rz2)
             R = V @ U  # eq. 29
             C = R @ (z0 * np.array([x0z, y0z, 1.0]))  # C_C = R C_0
