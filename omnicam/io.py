@@ -52,6 +52,9 @@ def save_camera(camera, path):
         raise ValueError(f"calibration file {path}: folder {folder} does not exist")
     fd, tmp = tempfile.mkstemp(prefix=".omnicam-", suffix=ext, dir=folder)
     os.close(fd)
+    umask = os.umask(0)
+    os.umask(umask)
+    os.chmod(tmp, 0o666 & ~umask)  # mkstemp makes 0600; a saved file gets the usual mode
     try:
         fs = cv2.FileStorage(tmp, cv2.FILE_STORAGE_WRITE)
         if not fs.isOpened():

@@ -125,3 +125,12 @@ def test_failed_save_leaves_the_old_file_and_no_temporary(tmp_path, monkeypatch)
 def test_save_into_missing_folder_raises_value_error(tmp_path):
     with pytest.raises(ValueError, match="does not exist"):
         RIGS["aligned"].save(tmp_path / "no" / "c.yaml")
+
+
+def test_saved_file_has_the_usual_permissions(tmp_path):
+    umask = os.umask(0o022)
+    try:
+        RIGS["aligned"].save(tmp_path / "c.yaml")
+    finally:
+        os.umask(umask)
+    assert (tmp_path / "c.yaml").stat().st_mode & 0o777 == 0o644
