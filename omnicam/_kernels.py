@@ -833,13 +833,13 @@ def view_table(kind, A, p0, p1, az_step, W, H, step, at_infinity, depth, vp, sin
         for j in range(W):
             colc[j] = math.cos(az_step * j)
             cols[j] = math.sin(az_step * j)
-    wu = np.empty((h, 4))
+    wu = np.empty((4, h))  # weights of the four node columns, per column offset
     for t in range(h):
         w0, w1, w2, w3 = _lagrange4(t / h)
-        wu[t, 0] = w0
-        wu[t, 1] = w1
-        wu[t, 2] = w2
-        wu[t, 3] = w3
+        wu[0, t] = w0
+        wu[1, t] = w1
+        wu[2, t] = w2
+        wu[3, t] = w3
     nblk = 16
     blk = (H + nblk - 1) // nblk
     n_exact_rows = np.zeros(nblk * blk, dtype=np.int64)
@@ -875,13 +875,27 @@ def view_table(kind, A, p0, p1, az_step, W, H, step, at_infinity, depth, vp, sin
             j1 = min(W, j0 + h)
             c = cls[r, k]
             if c == _CELL_SEEN:
-                for j in range(j0, j1):
-                    tu = j - j0
-                    x = wu[tu, 0] * rp[k, 0] + wu[tu, 1] * rp[k + 1, 0] + wu[tu, 2] * rp[k + 2, 0] \
-                        + wu[tu, 3] * rp[k + 3, 0]
-                    y = wu[tu, 0] * rp[k, 1] + wu[tu, 1] * rp[k + 1, 1] + wu[tu, 2] * rp[k + 2, 1] \
-                        + wu[tu, 3] * rp[k + 3, 1]
-                    _view_store(i, j, x, y, mode, outx, outy, out16, outf16)
+                a0 = rp[k, 0]
+                a1 = rp[k + 1, 0]
+                a2 = rp[k + 2, 0]
+                a3 = rp[k + 3, 0]
+                b0 = rp[k, 1]
+                b1 = rp[k + 1, 1]
+                b2 = rp[k + 2, 1]
+                b3 = rp[k + 3, 1]
+                if mode == 0:  # the bulk of a table: a tight loop the compiler can vectorise
+                    for j in range(j0, j1):
+                        tu = j - j0
+                        outx[i, j] = np.float32(wu[0, tu] * a0 + wu[1, tu] * a1 + wu[2, tu] * a2
+                                                + wu[3, tu] * a3)
+                        outy[i, j] = np.float32(wu[0, tu] * b0 + wu[1, tu] * b1 + wu[2, tu] * b2
+                                                + wu[3, tu] * b3)
+                else:
+                    for j in range(j0, j1):
+                        tu = j - j0
+                        x = wu[0, tu] * a0 + wu[1, tu] * a1 + wu[2, tu] * a2 + wu[3, tu] * a3
+                        y = wu[0, tu] * b0 + wu[1, tu] * b1 + wu[2, tu] * b2 + wu[3, tu] * b3
+                        _view_store(i, j, x, y, 1, outx, outy, out16, outf16)
                 continue
             if c == _CELL_UNSEEN:
                 for j in range(j0, j1):
@@ -889,6 +903,21 @@ def view_table(kind, A, p0, p1, az_step, W, H, step, at_infinity, depth, vp, sin
                 continue
             ci = ref[r, k]
             for j in range(j0, j1):
+                x = _NAN
+                y = _NAN
+                decided = False
+                fc = _CELL_BAD
+                if c == _CELL_BAD:  # refined cell: its sub-cell's class first
+                    fb = (j - j0) // g
+                    fc = fcls[ci, fa, fb]
+                    if fc == _CELL_SEEN:
+                        x, y = _interp_cell(fP[ci], fa, fb, ftv, (j - j0 - fb * g) / g)
+                        decided = True
+                    elif fc == _CELL_UNSEEN:
+                        decided = True
+                if decided:
+                    _view_store(i, j, x, y, mode, outx, outy, out16, outf16)
+                    continue
                 if kind == 0:
                     x0 = A[0, 0] * j + A[0, 1] * i + A[0, 2]
                     y0 = A[1, 0] * j + A[1, 1] * i + A[1, 2]
@@ -903,33 +932,23 @@ def view_table(kind, A, p0, p1, az_step, W, H, step, at_infinity, depth, vp, sin
                 dx = x0 / nrm
                 dy = y0 / nrm
                 dz = z0 / nrm
-                x = _NAN
-                y = _NAN
                 decided = not dz <= sin_reject  # above every elevation the rig sees
                 if not decided:
                     if c == _CELL_EDGE:
                         tu = j - j0
-                        s1 = wu[tu, 0] * rs[k, 0] + wu[tu, 1] * rs[k + 1, 0] \
-                            + wu[tu, 2] * rs[k + 2, 0] + wu[tu, 3] * rs[k + 3, 0]
-                        s2 = wu[tu, 0] * rs[k, 1] + wu[tu, 1] * rs[k + 1, 1] \
-                            + wu[tu, 2] * rs[k + 2, 1] + wu[tu, 3] * rs[k + 3, 1]
+                        s1 = wu[0, tu] * rs[k, 0] + wu[1, tu] * rs[k + 1, 0] \
+                            + wu[2, tu] * rs[k + 2, 0] + wu[3, tu] * rs[k + 3, 0]
+                        s2 = wu[0, tu] * rs[k, 1] + wu[1, tu] * rs[k + 1, 1] \
+                            + wu[2, tu] * rs[k + 2, 1] + wu[3, tu] * rs[k + 3, 1]
                         x, y, decided = _edge_pixel(s1, s2, dx, dy, dz, at_infinity, depth, vp,
                                                     C, Rc, tc, a, b, rim_radius, K, dist, tilt,
                                                     has_dist)
-                    else:  # refined cell
+                    elif fc == _CELL_EDGE:
                         fb = (j - j0) // g
-                        ftu = (j - j0 - fb * g) / g
-                        fc = fcls[ci, fa, fb]
-                        if fc == _CELL_SEEN:
-                            x, y = _interp_cell(fP[ci], fa, fb, ftv, ftu)
-                            decided = True
-                        elif fc == _CELL_UNSEEN:
-                            decided = True
-                        elif fc == _CELL_EDGE:
-                            s1, s2 = _interp_cell(fS[ci], fa, fb, ftv, ftu)
-                            x, y, decided = _edge_pixel(s1, s2, dx, dy, dz, at_infinity, depth,
-                                                        vp, C, Rc, tc, a, b, rim_radius, K,
-                                                        dist, tilt, has_dist)
+                        s1, s2 = _interp_cell(fS[ci], fa, fb, ftv, (j - j0 - fb * g) / g)
+                        x, y, decided = _edge_pixel(s1, s2, dx, dy, dz, at_infinity, depth, vp,
+                                                    C, Rc, tc, a, b, rim_radius, K, dist, tilt,
+                                                    has_dist)
                 if not decided:
                     x, y = _view_exact(dx, dy, dz, sin_reject, at_infinity, depth, vp, C, Rc, tc,
                                        a, b, rim_radius, K, dist, tilt, has_dist, newton_tol)
