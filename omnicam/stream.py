@@ -143,7 +143,8 @@ class Unwarper:
         views : dict of str -> PanoramaView or PerspectiveView
         frame_size : (int, int) or None
             Size of the frames to unwarp. ``None``: ``camera.image_size``. Another size than
-            ``camera.image_size``: the tables are built for ``camera.scaled(frame_size)``.
+            ``camera.image_size``: the tables are built for ``camera.scaled(frame_size)``. A
+            camera without ``image_size`` is used as it is, for frames of ``frame_size``.
         m1type : int
             Table type (``cv2.CV_16SC2`` is the fastest to remap).
         **kwargs

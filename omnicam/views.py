@@ -481,6 +481,9 @@ def init_panorama_maps(camera, size, elevation_range=None, projection="cylindric
         if projection == "cylindrical":
             lo = max(lo, CYLINDRICAL_MIN_ELEVATION)
             hi = min(hi, 89.0)
+        if not (math.isfinite(lo) and math.isfinite(hi) and lo < hi):
+            raise ValueError(f"elevation_range: the band this camera sees, ({lo}, {hi}) deg, "
+                             f"is not a usable default for a {projection} panorama; give one")
     else:
         lo, hi = _check_elevation_range(elevation_range, projection)
     vp = _check_viewpoint(camera, viewpoint, depth)
