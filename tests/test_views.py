@@ -392,3 +392,22 @@ def test_rotation_from_ypr_bad_input(bad):
 def test_K_from_fov_bad_input(fov):
     with pytest.raises(ValueError, match="fov"):
         K_from_fov(fov, (64, 48))
+
+
+@pytest.mark.parametrize("seed", [1, 2, 3])
+def test_random_rigs_keep_the_bound(seed):
+    """Random 5-DOF misalignments (up to 5 deg, 5 mm), random views and depths."""
+    rng = np.random.default_rng(seed)
+    cam = synthetic.random_misaligned_rig(rng, max_tilt_deg=5.0, max_offset_mm=5.0)
+    depth = None if seed % 2 else float(rng.uniform(200.0, 3000.0))
+    size = (768, 192)
+    mapx, mapy = cam.init_panorama_maps(size, projection="equirectangular",
+                                        m1type=cv2.CV_32FC1, depth=depth)
+    lo, hi = views.visible_elevation_range(cam)
+    assert_matches_exact(cam, mapx, mapy,
+                         exact(cam, panorama_dirs(size, lo, hi, "equirectangular"), depth))
+    size = (400, 300)
+    K = K_from_fov(rng.uniform(40.0, 140.0), size)
+    R = rotation_from_ypr(rng.uniform(-180, 180), rng.uniform(-80, 10), rng.uniform(-30, 30))
+    mapx, mapy = cam.init_perspective_maps(K, size, R=R, m1type=cv2.CV_32FC1, depth=depth)
+    assert_matches_exact(cam, mapx, mapy, exact(cam, perspective_dirs(K, size, R), depth))
