@@ -71,6 +71,20 @@ def test_distorted_rim_points_give_the_posture(D, refine):
     assert chose_true_candidate(report, truth) and report.warnings == []
 
 
+def test_rim_clipped_by_the_frame_gives_the_posture():
+    # real rims are often cut by the top and bottom of the sensor: only 2 arcs remain
+    rng = np.random.default_rng(9)
+    for truth in RIGS[:10]:
+        pts = truth.rim_image_points(720)
+        y0, y1 = np.percentile(pts[:, 1], [20, 80])
+        arcs = pts[(pts[:, 1] > y0) & (pts[:, 1] < y1)]
+        cam, report = calibrate(truth.K, truth.mirror, boundary_points=arcs,
+                                far_lines=far_line_pixels(truth, rng))
+        axis, origin = posture_errors(cam, truth)
+        assert axis < 1e-6 and origin < 1e-6
+        assert chose_true_candidate(report, truth)
+
+
 def test_skewed_K_and_opencv_point_layout():
     base = synthetic.misaligned_rig(4.0, 100.0, (-2.0, 1.0, 2.0))
     K = base.K.copy()
