@@ -4,7 +4,15 @@ Public names only; the contract is README.md and ``shared/reference/conventions.
 Modules that pull in scikit-image or build views load on first use, so ``import omnicam``
 stays fast.
 """
+import os
 from importlib import import_module
+
+# numba's OpenMP threads spin after each parallel region by default; on a loaded 2-core machine
+# the spinning thread competes with the one still working and a remap table takes several times
+# longer. Passive waiting costs microseconds per region. libgomp reads this once, when numba
+# first launches a parallel kernel, so it is set before any omnicam kernel exists; a value the
+# user set wins.
+os.environ.setdefault("OMP_WAIT_POLICY", "PASSIVE")
 
 from .camera import MisalignedHyperbolicCamera
 from .mirror import HyperbolicMirror
@@ -20,6 +28,9 @@ _LAZY = {
     "Unwarper": "omnicam.stream",
     "rotation_from_ypr": "omnicam.views",
     "K_from_fov": "omnicam.views",
+    "PanoramaView": "omnicam.views",
+    "PerspectiveView": "omnicam.views",
+    "visible_elevation_range": "omnicam.views",
     "synthetic": "omnicam.synthetic",
     "samples": "omnicam.samples",
 }

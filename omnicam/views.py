@@ -31,16 +31,9 @@ from __future__ import annotations
 
 import math
 import numbers
-import os
 
 import cv2
 import numpy as np
-
-# numba's OpenMP threads spin after each parallel region by default; on a loaded machine the
-# spinning thread competes with the one still working and a table takes several times longer.
-# Passive waiting costs a few microseconds per region. libgomp reads this once, when numba first
-# launches a parallel kernel; a value the user set wins.
-os.environ.setdefault("OMP_WAIT_POLICY", "PASSIVE")
 
 __all__ = ["init_panorama_maps", "init_perspective_maps", "rotation_from_ypr", "K_from_fov",
            "visible_elevation_range", "PanoramaView", "PerspectiveView", "UNSEEN", "PROJECTIONS",
