@@ -106,6 +106,66 @@ def _path_length(s1, s2, Cx, Cy, Cz, Xx, Xy, Xz, at_infinity, a, b):
 
 
 @njit(cache=True, inline="always")
+def _newton_step(s1, s2, Cx, Cy, Cz, Xx, Xy, Xz, at_infinity, a, b):
+    """Newton step on Fermat's path length ``L(s) = |C - P(s)| + |X - P(s)|`` at ``s``.
+
+    ``P(s) = (s1, s2, f(s))`` on the sheet (eq. 13); for a direction at infinity ``|X - P|``
+    reads ``-(X, P)``. Returns ``(d1, d2, g1, g2, r1, convex)``: the step ``-H^-1 g`` (valid when
+    ``convex``, i.e. H positive definite), the gradient ``g`` and the distance ``|C - P|``.
+    """
+    a2 = a * a
+    b2 = b * b
+    z = b * math.sqrt(1.0 + (s1 * s1 + s2 * s2) / a2)
+    fx = b2 * s1 / (a2 * z)
+    fy = b2 * s2 / (a2 * z)
+    kk = b2 / (a2 * z)
+    fxx = kk * (1.0 - s1 * fx / z)
+    fyy = kk * (1.0 - s2 * fy / z)
+    fxy = -kk * s1 * fy / z
+    u1x = Cx - s1
+    u1y = Cy - s2
+    u1z = Cz - z
+    r1 = math.sqrt(u1x * u1x + u1y * u1y + u1z * u1z)
+    e1x = u1x / r1
+    e1y = u1y / r1
+    e1z = u1z / r1
+    if at_infinity:
+        e2x, e2y, e2z = Xx, Xy, Xz
+        ir2 = 0.0
+    else:
+        u2x = Xx - s1
+        u2y = Xy - s2
+        u2z = Xz - z
+        r2 = math.sqrt(u2x * u2x + u2y * u2y + u2z * u2z)
+        e2x = u2x / r2
+        e2y = u2y / r2
+        e2z = u2z / r2
+        ir2 = 1.0 / r2
+    hx = e1x + e2x
+    hy = e1y + e2y
+    hz = e1z + e2z
+    # tangents t1 = (1, 0, f_X), t2 = (0, 1, f_Y); gradient g_i = -(t_i, h)
+    g1 = -(hx + fx * hz)
+    g2 = -(hy + fy * hz)
+    t1e1 = e1x + fx * e1z
+    t2e1 = e1y + fy * e1z
+    t1e2 = e2x + fx * e2z
+    t2e2 = e2y + fy * e2z
+    t11 = 1.0 + fx * fx
+    t22 = 1.0 + fy * fy
+    t12 = fx * fy
+    ir1 = 1.0 / r1
+    # Hessian H_ij = -f_ij h_z + t_i^T [(I - e1 e1^T)/r1 + (I - e2 e2^T)/r2] t_j
+    H11 = -fxx * hz + (t11 - t1e1 * t1e1) * ir1 + (t11 - t1e2 * t1e2) * ir2
+    H22 = -fyy * hz + (t22 - t2e1 * t2e1) * ir1 + (t22 - t2e2 * t2e2) * ir2
+    H12 = -fxy * hz + (t12 - t1e1 * t2e1) * ir1 + (t12 - t1e2 * t2e2) * ir2
+    det = H11 * H22 - H12 * H12
+    if H11 > 0.0 and det > 0.0:
+        return -(H22 * g1 - H12 * g2) / det, -(H11 * g2 - H12 * g1) / det, g1, g2, r1, True
+    return 0.0, 0.0, g1, g2, r1, False
+
+
+@njit(cache=True, inline="always")
 def _reflection_point(Cx, Cy, Cz, Xx, Xy, Xz, at_infinity, a, b, rim_radius, tol, max_iter):
     """Mirror point whose reflection joins the camera centre C and the scene point X.
 
@@ -136,62 +196,16 @@ def _reflection_point(Cx, Cy, Cz, Xx, Xy, Xz, at_infinity, a, b, rim_radius, tol
         s2 = rim_radius * Wy / h
     converged = False
     for _ in range(max_iter):
-        z = b * math.sqrt(1.0 + (s1 * s1 + s2 * s2) / a2)
-        fx = b2 * s1 / (a2 * z)
-        fy = b2 * s2 / (a2 * z)
-        kk = b2 / (a2 * z)
-        fxx = kk * (1.0 - s1 * fx / z)
-        fyy = kk * (1.0 - s2 * fy / z)
-        fxy = -kk * s1 * fy / z
-        u1x = Cx - s1
-        u1y = Cy - s2
-        u1z = Cz - z
-        r1 = math.sqrt(u1x * u1x + u1y * u1y + u1z * u1z)
-        e1x = u1x / r1
-        e1y = u1y / r1
-        e1z = u1z / r1
-        if at_infinity:
-            e2x, e2y, e2z = Xx, Xy, Xz
-            ir2 = 0.0
-        else:
-            u2x = Xx - s1
-            u2y = Xy - s2
-            u2z = Xz - z
-            r2 = math.sqrt(u2x * u2x + u2y * u2y + u2z * u2z)
-            e2x = u2x / r2
-            e2y = u2y / r2
-            e2z = u2z / r2
-            ir2 = 1.0 / r2
-        hx = e1x + e2x
-        hy = e1y + e2y
-        hz = e1z + e2z
-        # tangents t1 = (1, 0, f_X), t2 = (0, 1, f_Y); gradient g_i = -(t_i, h)
-        g1 = -(hx + fx * hz)
-        g2 = -(hy + fy * hz)
-        t1e1 = e1x + fx * e1z
-        t2e1 = e1y + fy * e1z
-        t1e2 = e2x + fx * e2z
-        t2e2 = e2y + fy * e2z
-        t11 = 1.0 + fx * fx
-        t22 = 1.0 + fy * fy
-        t12 = fx * fy
-        ir1 = 1.0 / r1
-        # Hessian H_ij = -f_ij h_z + t_i^T [(I - e1 e1^T)/r1 + (I - e2 e2^T)/r2] t_j
-        H11 = -fxx * hz + (t11 - t1e1 * t1e1) * ir1 + (t11 - t1e2 * t1e2) * ir2
-        H22 = -fyy * hz + (t22 - t2e1 * t2e1) * ir1 + (t22 - t2e2 * t2e2) * ir2
-        H12 = -fxy * hz + (t12 - t1e1 * t2e1) * ir1 + (t12 - t1e2 * t2e2) * ir2
-        det = H11 * H22 - H12 * H12
-        if H11 > 0.0 and det > 0.0:
-            d1 = -(H22 * g1 - H12 * g2) / det
-            d2 = -(H11 * g2 - H12 * g1) / det
-        else:  # not convex here: a gradient step of the local length scale
+        d1, d2, g1, g2, r1, convex = _newton_step(s1, s2, Cx, Cy, Cz, Xx, Xy, Xz, at_infinity,
+                                                  a, b)
+        if not convex:  # not convex here: a gradient step of the local length scale
             gn = math.sqrt(g1 * g1 + g2 * g2) + 1e-300
             step = 0.1 * min(r1, rim_radius)
             d1 = -g1 / gn * step
             d2 = -g2 / gn * step
         t = 1.0
         dn = math.sqrt(d1 * d1 + d2 * d2)
-        if H11 > 0.0 and det > 0.0 and dn < 1e-4 * (a + b):
+        if convex and dn < 1e-4 * (a + b):
             # in Newton's basin: full steps (L changes below float precision here)
             s1 += d1
             s2 += d2
@@ -489,59 +503,14 @@ def _newton_warm(s1, s2, C, Xx, Xy, Xz, at_infinity, a, b, tol, max_iter):
     ``_reflection_point``. Returns ``(s1, s2, ok)``; not ok (the caller then solves from the
     aligned start) if a step is not a full Newton step of that basin or ``max_iter`` pass.
     """
-    a2 = a * a
-    b2 = b * b
     Cx = C[0]
     Cy = C[1]
     Cz = C[2]
     for _ in range(max_iter):
-        z = b * math.sqrt(1.0 + (s1 * s1 + s2 * s2) / a2)
-        fx = b2 * s1 / (a2 * z)
-        fy = b2 * s2 / (a2 * z)
-        kk = b2 / (a2 * z)
-        fxx = kk * (1.0 - s1 * fx / z)
-        fyy = kk * (1.0 - s2 * fy / z)
-        fxy = -kk * s1 * fy / z
-        u1x = Cx - s1
-        u1y = Cy - s2
-        u1z = Cz - z
-        r1 = math.sqrt(u1x * u1x + u1y * u1y + u1z * u1z)
-        e1x = u1x / r1
-        e1y = u1y / r1
-        e1z = u1z / r1
-        if at_infinity:
-            e2x, e2y, e2z = Xx, Xy, Xz
-            ir2 = 0.0
-        else:
-            u2x = Xx - s1
-            u2y = Xy - s2
-            u2z = Xz - z
-            r2 = math.sqrt(u2x * u2x + u2y * u2y + u2z * u2z)
-            e2x = u2x / r2
-            e2y = u2y / r2
-            e2z = u2z / r2
-            ir2 = 1.0 / r2
-        hx = e1x + e2x
-        hy = e1y + e2y
-        hz = e1z + e2z
-        g1 = -(hx + fx * hz)
-        g2 = -(hy + fy * hz)
-        t1e1 = e1x + fx * e1z
-        t2e1 = e1y + fy * e1z
-        t1e2 = e2x + fx * e2z
-        t2e2 = e2y + fy * e2z
-        t11 = 1.0 + fx * fx
-        t22 = 1.0 + fy * fy
-        t12 = fx * fy
-        ir1 = 1.0 / r1
-        H11 = -fxx * hz + (t11 - t1e1 * t1e1) * ir1 + (t11 - t1e2 * t1e2) * ir2
-        H22 = -fyy * hz + (t22 - t2e1 * t2e1) * ir1 + (t22 - t2e2 * t2e2) * ir2
-        H12 = -fxy * hz + (t12 - t1e1 * t2e1) * ir1 + (t12 - t1e2 * t2e2) * ir2
-        det = H11 * H22 - H12 * H12
-        if not (H11 > 0.0 and det > 0.0):
+        d1, d2, _g1, _g2, _r1, convex = _newton_step(s1, s2, Cx, Cy, Cz, Xx, Xy, Xz, at_infinity,
+                                                     a, b)
+        if not convex:
             return s1, s2, False
-        d1 = -(H22 * g1 - H12 * g2) / det
-        d2 = -(H11 * g2 - H12 * g1) / det
         dn = math.sqrt(d1 * d1 + d2 * d2)
         if not dn < 1e-4 * (a + b):
             return s1, s2, False
