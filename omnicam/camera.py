@@ -106,6 +106,18 @@ def canonical_rvec(rvec):
     return axis / s * angle
 
 
+def scale_K(K, from_size, to_size):
+    """``K`` of the same sensor imaged at another resolution.
+
+    Pixel centres sit at integer coordinates, so ``x' = sx (x + 0.5) - 0.5`` with
+    ``sx = w'/w`` (and likewise in y): ``K' = S K``.
+    """
+    sx = to_size[0] / from_size[0]
+    sy = to_size[1] / from_size[1]
+    S = np.array([[sx, 0.0, 0.5 * (sx - 1.0)], [0.0, sy, 0.5 * (sy - 1.0)], [0.0, 0.0, 1.0]])
+    return S @ np.asarray(K, dtype=np.float64)
+
+
 def _readonly(arr):
     arr = np.array(arr, dtype=np.float64)
     arr.flags.writeable = False
@@ -174,10 +186,8 @@ class MisalignedHyperbolicCamera:
         new = validate_image_size(image_size)
         if new is None:
             raise ValueError("image_size must be (width, height)")
-        sx = new[0] / self._image_size[0]
-        sy = new[1] / self._image_size[1]
-        S = np.array([[sx, 0.0, 0.5 * (sx - 1.0)], [0.0, sy, 0.5 * (sy - 1.0)], [0.0, 0.0, 1.0]])
-        return type(self)(S @ self._K, self._mirror, self._rvec, self._tvec, self._D, new)
+        return type(self)(scale_K(self._K, self._image_size, new), self._mirror, self._rvec,
+                          self._tvec, self._D, new)
 
     def replace(self, **changes):
         """A copy with some of ``K, mirror, rvec, tvec, D, image_size`` changed."""

@@ -46,10 +46,6 @@ EXIT_OK, EXIT_FAILURE, EXIT_USAGE, EXIT_INTERRUPTED = 0, 1, 2, 130
 # written by OpenCV itself on every build; the others need the FFmpeg backend of the wheels.
 VIDEO_FOURCC = {".avi": "MJPG", ".mp4": "mp4v", ".m4v": "mp4v", ".mov": "mp4v", ".mkv": "MJPG"}
 
-# Field names accepted in an intrinsics file, first match wins: ours (also those of an omnicam
-# calibration file and of calibrate_intrinsics), then the names of OpenCV's calibration sample.
-K_FIELDS = ("K", "camera_matrix", "cameraMatrix")
-D_FIELDS = ("D", "dist_coeffs", "distortion_coefficients", "distCoeffs")
 
 
 class CliError(Exception):
@@ -363,111 +359,13 @@ def _read_image(path, flags=cv2.IMREAD_UNCHANGED):
 
 
 # -- calibrate --------------------------------------------------------------------------------
-def _fs_node(fs, names):
-    for name in names:
-        node = fs.getNode(name)
-        if not node.empty() and not node.isNone():
-            return name, node
-    return None, None
-
-
 def read_intrinsics(path):
-    """Read ``K``, ``D`` and ``image_size`` from a ``cv2.FileStorage`` file.
-
-    Fields: the camera matrix ``K`` (or ``camera_matrix``, ``cameraMatrix``), optional
-    distortion ``D`` (or ``dist_coeffs``, ``distortion_coefficients``, ``distCoeffs``; all zeros
-    means none), optional ``image_size`` as ``[w, h]`` (or ``image_width`` and ``image_height``).
-    These are the names ``fs.write`` users of ``cv2.calibrateCamera`` and OpenCV's calibration
-    sample use, and those of omnicam's own files.
-
-    Returns
-    -------
-    K : (3, 3) float64 ndarray
-    D : float64 ndarray or None
-    image_size : (int, int) or None
-    """
-    from .camera import validate_D, validate_image_size, validate_K
-
-    if not os.path.isfile(path):
-        raise CliError(f"intrinsics file {path} does not exist")
+    """:func:`omnicam.io.read_intrinsics` with its errors as one-line CLI errors."""
+    from .io import read_intrinsics as read
     try:
-        fs = cv2.FileStorage(path, cv2.FILE_STORAGE_READ)
-        opened = fs.isOpened()
-    except (cv2.error, SystemError):
-        opened = False
-    if not opened:
-        raise CliError(f"intrinsics file {path}: not a readable OpenCV FileStorage file "
-                       f"(yaml, yml, xml or json)")
-
-    def fail(field, what):
-        return CliError(f"intrinsics file {path}: field {field!r} {what}")
-
-    def matrix(names, required):
-        name, node = _fs_node(fs, names)
-        if node is None:
-            if required:
-                raise fail(names[0], f"is missing (also looked for {', '.join(names[1:])})")
-            return None, None
-        try:
-            mat = node.mat() if node.isMap() else None
-        except cv2.error:
-            mat = None
-        if mat is None and node.isSeq():  # a plain list of numbers
-            try:
-                mat = np.array([node.at(i).real() for i in range(node.size())])
-            except cv2.error:
-                mat = None
-        if mat is None:
-            raise fail(name, "must be an OpenCV matrix (!!opencv-matrix) or a list of numbers")
-        return name, np.asarray(mat, dtype=np.float64)
-
-    try:
-        name, K = matrix(K_FIELDS, True)
-        try:
-            K = validate_K(K.reshape(3, 3) if K.size == 9 else K)
-        except ValueError as e:
-            raise fail(name, f"is not a camera matrix: {e}") from None
-        name, D = matrix(D_FIELDS, False)
-        if D is not None:
-            try:
-                D = validate_D(D)
-            except ValueError as e:
-                raise fail(name, f"is not a distortion vector: {e}") from None
-            if not np.any(D):
-                D = None
-        size = None
-        name, node = _fs_node(fs, ("image_size",))
-        if node is not None:
-            try:
-                if node.isSeq():
-                    values = [node.at(i).real() for i in range(node.size())]
-                else:
-                    values = np.asarray(node.mat()).ravel().tolist()
-                size = validate_image_size(values)
-            except (ValueError, TypeError, cv2.error):
-                raise fail("image_size", "must be [width, height], two positive integers") from None
-        else:
-            _, wn = _fs_node(fs, ("image_width",))
-            _, hn = _fs_node(fs, ("image_height",))
-            if wn is not None and hn is not None:
-                try:
-                    size = validate_image_size((wn.real(), hn.real()))
-                except ValueError:
-                    raise fail("image_width",
-                               "and 'image_height' must be positive integers") from None
-    except cv2.error as e:
-        raise CliError(f"intrinsics file {path}: malformed ({_cv_message(e)})") from None
-    finally:
-        fs.release()
-    return K, D, size
-
-
-def scale_K(K, from_size, to_size):
-    """``K`` of the same sensor at another resolution (pixel centres at integers)."""
-    sx = to_size[0] / from_size[0]
-    sy = to_size[1] / from_size[1]
-    S = np.array([[sx, 0.0, 0.5 * (sx - 1.0)], [0.0, sy, 0.5 * (sy - 1.0)], [0.0, 0.0, 1.0]])
-    return S @ K
+        return read(path)
+    except (FileNotFoundError, ValueError) as e:
+        raise CliError(_one_line(e)) from None
 
 
 def read_far_lines(path):
@@ -501,7 +399,7 @@ def read_far_lines(path):
 
 
 def cmd_calibrate(args):
-    from .camera import MisalignedHyperbolicCamera
+    from .camera import MisalignedHyperbolicCamera, scale_K
     from .io import SUFFIXES
     from .mirror import HyperbolicMirror
 
@@ -940,6 +838,7 @@ def _table_rms(cam_a, cam_b, size):
 def cmd_demo(args):
     from . import synthetic
     from .camera import MisalignedHyperbolicCamera
+    from .io import write_intrinsics
 
     t_start = time.perf_counter()
     out = args.output
@@ -964,7 +863,7 @@ def cmd_demo(args):
           f"{_vec(offset, '{:.3f}')} mm from the lower focus")
     image = synthetic.render_environment(truth, demo_environment(), supersample=2)
     _write_image(path("mirror.png"), image)
-    _write_intrinsics(path("intrinsics.yaml"), truth.K, truth.image_size)
+    write_intrinsics(path("intrinsics.yaml"), truth.K, image_size=truth.image_size)
     lines = demo_far_lines(truth)
     with open(path("far_lines.json"), "w", encoding="utf-8") as f:
         json.dump([np.round(line, 2).tolist() for line in lines], f)
@@ -1019,24 +918,6 @@ def cmd_demo(args):
 def _indent(text, prefix="   "):
     return "\n".join(prefix + line for line in text.splitlines())
 
-
-def _write_intrinsics(path, K, image_size, D=None):
-    """An intrinsics file as ``omnicam calibrate --intrinsics`` reads it (atomic)."""
-    tmp = _temp_beside(path)
-    try:
-        fs = cv2.FileStorage(tmp, cv2.FILE_STORAGE_WRITE)
-        fs.write("K", np.asarray(K, np.float64))
-        if D is not None:
-            fs.write("D", np.asarray(D, np.float64).reshape(1, -1))
-        fs.startWriteStruct("image_size", cv2.FileNode_SEQ)
-        for v in image_size:
-            fs.write("", int(v))
-        fs.endWriteStruct()
-        fs.release()
-    except BaseException:
-        _remove_quietly(tmp)
-        raise
-    _publish(tmp, path, overwrite=True)
 
 if __name__ == "__main__":
     sys.exit(main())

@@ -13,6 +13,7 @@ Layout (format_version 1)::
 """
 from __future__ import annotations
 
+import contextlib
 import os
 import tempfile
 
@@ -21,18 +22,58 @@ import numpy as np
 
 from .mirror import HyperbolicMirror
 
-__all__ = ["save_camera", "load_camera", "FORMAT_VERSION", "SUFFIXES"]
+__all__ = ["save_camera", "load_camera", "read_intrinsics", "write_intrinsics", "FORMAT_VERSION",
+           "SUFFIXES"]
 
 FORMAT_VERSION = 1
 SUFFIXES = (".yaml", ".yml", ".xml", ".json")
+# field names of an intrinsics file, first match wins: omnicam's, then OpenCV's calibration sample
+K_FIELDS = ("K", "camera_matrix", "cameraMatrix")
+D_FIELDS = ("D", "dist_coeffs", "distortion_coefficients", "distCoeffs")
 
 
-def _suffix(path):
+def _suffix(path, what="calibration file"):
     ext = os.path.splitext(str(path))[1].lower()
     if ext not in SUFFIXES:
-        raise ValueError(f"calibration file {path!s}: extension must be one of {', '.join(SUFFIXES)}"
+        raise ValueError(f"{what} {path!s}: extension must be one of {', '.join(SUFFIXES)}"
                          f" (the format follows it), got {ext or 'none'!r}")
     return ext
+
+
+def _atomic_filestorage(path, what, write):
+    """Write a ``cv2.FileStorage`` file through a temporary file renamed into place.
+
+    ``write(fs)`` fills the open storage. The temporary file lives in the same folder with the
+    same extension (the format follows it), so a good file is never replaced by a broken one.
+    """
+    path = os.fspath(path)
+    ext = _suffix(path, what)
+    folder = os.path.dirname(os.path.abspath(path))
+    if not os.path.isdir(folder):
+        raise ValueError(f"{what} {path}: folder {folder} does not exist")
+    fd, tmp = tempfile.mkstemp(prefix=".omnicam-", suffix=ext, dir=folder)
+    os.close(fd)
+    umask = os.umask(0)
+    os.umask(umask)
+    os.chmod(tmp, 0o666 & ~umask)  # mkstemp makes 0600; a saved file gets the usual mode
+    try:
+        fs = cv2.FileStorage(tmp, cv2.FILE_STORAGE_WRITE)
+        if not fs.isOpened():
+            raise ValueError(f"{what} {path}: cannot write in {folder}")
+        write(fs)
+        fs.release()
+        os.replace(tmp, path)
+    except BaseException:
+        if os.path.exists(tmp):
+            os.remove(tmp)
+        raise
+
+
+def _write_seq(fs, name, values):
+    fs.startWriteStruct(name, cv2.FileNode_SEQ)
+    for v in values:
+        fs.write("", int(v))
+    fs.endWriteStruct()
 
 
 def save_camera(camera, path):
@@ -45,20 +86,7 @@ def save_camera(camera, path):
     """
     from .camera import MODEL_NAME
 
-    path = os.fspath(path)
-    ext = _suffix(path)
-    folder = os.path.dirname(os.path.abspath(path))
-    if not os.path.isdir(folder):
-        raise ValueError(f"calibration file {path}: folder {folder} does not exist")
-    fd, tmp = tempfile.mkstemp(prefix=".omnicam-", suffix=ext, dir=folder)
-    os.close(fd)
-    umask = os.umask(0)
-    os.umask(umask)
-    os.chmod(tmp, 0o666 & ~umask)  # mkstemp makes 0600; a saved file gets the usual mode
-    try:
-        fs = cv2.FileStorage(tmp, cv2.FILE_STORAGE_WRITE)
-        if not fs.isOpened():
-            raise ValueError(f"calibration file {path}: cannot write in {folder}")
+    def write(fs):
         fs.write("format_version", FORMAT_VERSION)
         fs.write("model", MODEL_NAME)
         fs.startWriteStruct("mirror", cv2.FileNode_MAP)
@@ -72,26 +100,35 @@ def save_camera(camera, path):
         fs.write("rvec", np.asarray(camera.rvec).reshape(3, 1))
         fs.write("tvec", np.asarray(camera.tvec).reshape(3, 1))
         if camera.image_size is not None:
-            fs.startWriteStruct("image_size", cv2.FileNode_SEQ)
-            for v in camera.image_size:
-                fs.write("", int(v))
-            fs.endWriteStruct()
-        fs.release()
-        os.replace(tmp, path)
-    except BaseException:
-        if os.path.exists(tmp):
-            os.remove(tmp)
-        raise
+            _write_seq(fs, "image_size", camera.image_size)
+
+    _atomic_filestorage(path, "calibration file", write)
+
+
+def write_intrinsics(path, K, D=None, image_size=None):
+    """Write a pinhole's ``K``, ``D`` and ``image_size`` (what :func:`read_intrinsics` reads)."""
+    from .camera import validate_D, validate_image_size, validate_K
+
+    K, D, image_size = validate_K(K), validate_D(D), validate_image_size(image_size)
+
+    def write(fs):
+        fs.write("K", K)
+        if D is not None:
+            fs.write("D", D.reshape(1, -1))
+        if image_size is not None:
+            _write_seq(fs, "image_size", image_size)
+
+    _atomic_filestorage(path, "intrinsics file", write)
 
 
 class _Reader:
     """Typed access to the nodes of an open FileStorage, every failure a ValueError."""
 
-    def __init__(self, fs, path):
-        self.fs, self.path = fs, path
+    def __init__(self, fs, path, what):
+        self.fs, self.path, self.what = fs, path, what
 
     def fail(self, field, what):
-        return ValueError(f"calibration file {self.path}: field {field!r} {what}")
+        return ValueError(f"{self.what} {self.path}: field {field!r} {what}")
 
     def node(self, field, parent=None, required=True):
         try:
@@ -104,6 +141,15 @@ class _Reader:
             return None
         return node
 
+    def first(self, fields, required=False):
+        """The first of ``fields`` present (aliases), or None."""
+        for field in fields:
+            if self.node(field, required=False) is not None:
+                return field
+        if required:
+            raise self.fail(fields[0], f"is missing (also looked for {', '.join(fields[1:])})")
+        return None
+
     def number(self, field, parent=None):
         node = self.node(field, parent)
         if not (node.isReal() or node.isInt()):
@@ -113,24 +159,73 @@ class _Reader:
             raise self.fail(field, f"must be finite, got {value}")
         return value
 
-    def matrix(self, field, shape=None, required=True):
+    def matrix(self, field, shape=None, required=True, allow_list=False):
+        """An ``!!opencv-matrix`` (or, with ``allow_list``, a plain list of numbers)."""
         node = self.node(field, required=required)
         if node is None:
             return None
+        mat = None
         try:
-            mat = node.mat() if node.isMap() else None
+            if node.isMap():
+                mat = node.mat()
+            elif allow_list and node.isSeq():
+                mat = np.array([node.at(i).real() for i in range(node.size())])
         except cv2.error:
             mat = None
         if mat is None:
-            raise self.fail(field, "must be an OpenCV matrix (!!opencv-matrix)")
+            raise self.fail(field, "must be an OpenCV matrix (!!opencv-matrix)"
+                            + (" or a list of numbers" if allow_list else ""))
         mat = np.asarray(mat, dtype=np.float64)
-        if shape is not None and len(shape) == 2 and mat.shape != shape:
+        if shape is not None and len(shape) == 2 and mat.shape != shape and not (
+                allow_list and mat.size == shape[0] * shape[1] and mat.ndim == 1):
             raise self.fail(field, f"must be a {shape[0]}x{shape[1]} matrix, got {mat.shape}")
         if shape is not None and mat.size != int(np.prod(shape)):
             raise self.fail(field, f"must have {int(np.prod(shape))} values, got shape {mat.shape}")
         if not np.isfinite(mat).all():
             raise self.fail(field, "must be finite")
         return mat if shape is None else mat.reshape(shape)
+
+    def image_size(self):
+        """``image_size: [w, h]`` (or OpenCV sample's ``image_width``/``image_height``), or None."""
+        node = self.node("image_size", required=False)
+        if node is not None:
+            if not node.isSeq() or node.size() != 2 or not all(
+                    node.at(i).isInt() for i in range(2)):
+                raise self.fail("image_size", "must be a sequence [width, height] of integers")
+            return (int(node.at(0).real()), int(node.at(1).real()))
+        if self.node("image_width", required=False) is not None:
+            return (self.number("image_width"), self.number("image_height"))
+        return None
+
+    def check(self, field, validate, value):
+        """``validate(value)``, its ValueError re-raised naming the file and ``field``."""
+        try:
+            return validate(value)
+        except ValueError as e:
+            raise self.fail(field, str(e)) from None
+
+
+@contextlib.contextmanager
+def _reading(path, what):
+    """Open ``path`` for reading as a :class:`_Reader`; OpenCV's errors become ValueError."""
+    path = os.fspath(path)
+    _suffix(path, what)
+    if not os.path.isfile(path):
+        raise FileNotFoundError(f"{what} {path} does not exist")
+    try:
+        fs = cv2.FileStorage(path, cv2.FILE_STORAGE_READ)
+        opened = fs.isOpened()
+    except (cv2.error, SystemError):  # cv2 5 raises SystemError on an empty file
+        opened = False
+    if not opened:
+        raise ValueError(f"{what} {path}: not a readable OpenCV FileStorage file "
+                         f"(yaml, yml, xml or json)")
+    try:
+        yield _Reader(fs, path, what)
+    except cv2.error as e:
+        raise ValueError(f"{what} {path}: malformed ({str(e).splitlines()[-1]})") from None
+    finally:
+        fs.release()
 
 
 def load_camera(path, cls=None):
@@ -146,19 +241,7 @@ def load_camera(path, cls=None):
     from .camera import MODEL_NAME, MisalignedHyperbolicCamera
 
     cls = cls or MisalignedHyperbolicCamera
-    path = os.fspath(path)
-    _suffix(path)
-    if not os.path.isfile(path):
-        raise FileNotFoundError(f"calibration file {path} does not exist")
-    try:
-        fs = cv2.FileStorage(path, cv2.FILE_STORAGE_READ)
-        opened = fs.isOpened()
-    except (cv2.error, SystemError):
-        opened = False
-    if not opened:
-        raise ValueError(f"calibration file {path}: not a readable OpenCV FileStorage file")
-    try:
-        r = _Reader(fs, path)
+    with _reading(path, "calibration file") as r:
         version = r.number("format_version")
         if version != FORMAT_VERSION:
             raise r.fail("format_version", f"is {version:g}; this omnicam reads {FORMAT_VERSION}")
@@ -169,27 +252,47 @@ def load_camera(path, cls=None):
         if not mnode.isMap():
             raise r.fail("mirror", "must be a map with a, b, rim_radius")
         ab = [r.number(f"mirror.{k}", mnode) for k in ("a", "b", "rim_radius")]
+        mirror = r.check("mirror", lambda v: HyperbolicMirror(*v), ab)
         K = r.matrix("K", (3, 3))
         D = r.matrix("D", required=False)
         rvec = r.matrix("rvec", (3,))
         tvec = r.matrix("tvec", (3,))
-        size = None
-        snode = r.node("image_size", required=False)
-        if snode is not None:
-            if not snode.isSeq() or snode.size() != 2 or not all(
-                    snode.at(i).isInt() for i in range(2)):
-                raise r.fail("image_size", "must be a sequence [width, height] of integers")
-            size = (int(snode.at(0).real()), int(snode.at(1).real()))
-        try:
-            mirror = HyperbolicMirror(*ab)
-        except ValueError as e:
-            raise r.fail("mirror", str(e)) from None
+        size = r.image_size()
         try:
             return cls(K, mirror, rvec, tvec, D=None if D is None else D.ravel(), image_size=size)
         except ValueError as e:
-            field = str(e).split(" ", 1)[0]
-            raise r.fail(field, str(e)) from None
-    except cv2.error as e:
-        raise ValueError(f"calibration file {path}: malformed ({str(e).splitlines()[-1]})") from None
-    finally:
-        fs.release()
+            raise r.fail(str(e).split(" ", 1)[0], str(e)) from None
+
+
+def read_intrinsics(path):
+    """Read a pinhole's ``K``, ``D`` and ``image_size`` from a ``cv2.FileStorage`` file.
+
+    Fields (first match wins): the camera matrix ``K`` (or ``camera_matrix``, ``cameraMatrix``),
+    optional distortion ``D`` (or ``dist_coeffs``, ``distortion_coefficients``, ``distCoeffs``;
+    all zeros means none), optional ``image_size: [w, h]`` (or ``image_width``, ``image_height``):
+    omnicam's names (also an omnicam calibration file) and those of OpenCV's calibration sample.
+
+    Returns
+    -------
+    K : (3, 3) float64 ndarray
+    D : (n,) float64 ndarray or None
+    image_size : (int, int) or None
+
+    Raises
+    ------
+    FileNotFoundError, ValueError
+        As :func:`load_camera`, naming the file and the field.
+    """
+    from .camera import validate_D, validate_image_size, validate_K
+
+    with _reading(path, "intrinsics file") as r:
+        name = r.first(K_FIELDS, required=True)
+        K = r.check(name, validate_K, r.matrix(name, (3, 3), allow_list=True))
+        name = r.first(D_FIELDS)
+        D = None
+        if name is not None:
+            D = r.check(name, validate_D, r.matrix(name, allow_list=True))
+            if not np.any(D):
+                D = None
+        size = r.check("image_size", validate_image_size, r.image_size())
+    return K, D, size

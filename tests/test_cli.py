@@ -11,7 +11,8 @@ import numpy as np
 import pytest
 
 from omnicam import synthetic
-from omnicam.cli import main, read_intrinsics
+from omnicam.cli import main
+from omnicam.io import read_intrinsics
 
 SIZE = (200, 200)  # frames of the small test videos and images
 

@@ -134,3 +134,28 @@ def test_saved_file_has_the_usual_permissions(tmp_path):
     finally:
         os.umask(umask)
     assert (tmp_path / "c.yaml").stat().st_mode & 0o777 == 0o644
+
+
+def test_intrinsics_file_round_trip(tmp_path):
+    cam = RIGS["rational"]
+    from omnicam.io import read_intrinsics, write_intrinsics
+    write_intrinsics(tmp_path / "k.json", cam.K, cam.D, cam.image_size)
+    K, D, size = read_intrinsics(tmp_path / "k.json")
+    np.testing.assert_array_equal(K, cam.K)
+    np.testing.assert_array_equal(D, cam.D)
+    assert size == cam.image_size
+
+
+@pytest.mark.parametrize("text, field", [
+    ("%YAML:1.0\nD: [0.1, 0.2]\n", "'K'"),
+    ("%YAML:1.0\nK: [1, 0, 0, 0, 1, 0, 0, 0, 1]\nD: [0.1, 0.2, 0.3]\n", "'D'"),
+    ("%YAML:1.0\nK: [0, 0, 0, 0, 1, 0, 0, 0, 1]\n", "'K'"),
+    ("%YAML:1.0\nK: [1, 0, 0, 0, 1, 0, 0, 0, 1]\nimage_size: [640]\n", "image_size"),
+])
+def test_bad_intrinsics_file_raises_value_error_naming_the_field(tmp_path, text, field):
+    from omnicam.io import read_intrinsics
+    path = tmp_path / "k.yaml"
+    path.write_text(text)
+    with pytest.raises(ValueError, match=field) as err:
+        read_intrinsics(path)
+    assert str(path) in str(err.value)
