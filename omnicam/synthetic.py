@@ -40,7 +40,7 @@ from .mirror import HyperbolicMirror
 
 __all__ = ["default_mirror", "aligned_rig", "misaligned_rig", "random_misaligned_rig",
            "equirect_directions", "equirect_coords", "make_environment", "render_environment",
-           "Room", "render_room", "rim_conic", "HOUSING_COLOR"]
+           "Room", "render_room", "HOUSING_COLOR"]
 
 #: BGR colour of the housing (mirror holder) outside the rim.
 HOUSING_COLOR = (18, 18, 18)
@@ -603,33 +603,3 @@ def render_room(camera, room=None, supersample=4, noise=0.0, seed=None,
                          f"(box_min={room.box_min}, box_max={room.box_max})")
     return _render(camera, lambda P, d: _shade_room(room, P, d), supersample, noise, seed,
                    housing_color, body_radius, background)
-
-
-def rim_conic(camera):
-    """The exact rim ellipse in pixels: the conic ``Q_I`` of eqs. 20-22 for a camera without ``D``.
-
-    The rim circle ``X^2 + Y^2 = r^2`` on ``Z = z_rim`` is imaged by the homography
-    ``H = K [r1  r2  z_rim r3 + tvec]``, so ``Q_I = H^-T diag(1, 1, -r^2) H^-1``.
-
-    Returns
-    -------
-    Q : (3, 3) float64 ndarray
-        Symmetric, unit Frobenius norm, with ``(x, y, 1) Q (x, y, 1)^T < 0`` inside the rim.
-
-    Raises
-    ------
-    ValueError
-        If the camera has distortion ``D`` (the rim image is then not a conic; use
-        :meth:`MisalignedHyperbolicCamera.rim_image_points`).
-    """
-    if not isinstance(camera, MisalignedHyperbolicCamera):
-        raise ValueError("camera must be a MisalignedHyperbolicCamera, "
-                         f"got {type(camera).__name__}")
-    if camera.D is not None:
-        raise ValueError("rim_conic needs a camera without distortion D; use rim_image_points")
-    R, t, m = camera.R, camera.tvec, camera.mirror
-    H = camera.K @ np.column_stack([R[:, 0], R[:, 1], m.z_rim * R[:, 2] + t])
-    Hinv = np.linalg.inv(H)
-    Q = Hinv.T @ np.diag([1.0, 1.0, -m.rim_radius ** 2]) @ Hinv
-    Q = 0.5 * (Q + Q.T)
-    return Q / np.linalg.norm(Q)
