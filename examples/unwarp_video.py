@@ -2,7 +2,8 @@
 
 1. makes a short synthetic video: the misaligned sample rig (``omnicam.samples``) watching a
    scene at infinity that turns about the vertical (a camera on a turntable);
-2. builds the remap tables once for the sample calibration, a panorama and a perspective view;
+2. builds the remap tables of a panorama and a perspective view once, for the sample
+   calibration (``Unwarper.from_camera`` with ``omnicam.PanoramaView``/``PerspectiveView``);
 3. ``Unwarper.stream`` reads the video with ``cv2.VideoCapture``, unwarps every frame with
    ``cv2.remap`` into preallocated outputs and writes both views with ``cv2.VideoWriter``.
 
@@ -75,27 +76,22 @@ def main(argv=None):
         raise SystemExit(f"cannot open {source}")
     frame_size = (int(cap.get(cv2.CAP_PROP_FRAME_WIDTH)), int(cap.get(cv2.CAP_PROP_FRAME_HEIGHT)))
     cap.release()
-    if camera.image_size is not None and tuple(camera.image_size) != frame_size:
-        camera = camera.scaled(frame_size)        # the same sensor at the video's resolution
 
-    # the tables, built once: a panorama and a perspective view looking 30 deg down
-    # (even sizes: some codecs, MJPG among them, drop an odd last row or column)
-    w = 2 * frame_size[0]
-    view = (frame_size[0] // 2 * 2, frame_size[0] * 3 // 8 * 2)
-    maps = {
-        "panorama": camera.init_panorama_maps((w, w // 8 * 2)),
-        "perspective": camera.init_perspective_maps(
-            omnicam.K_from_fov(80.0, view), view, R=omnicam.rotation_from_ypr(0.0, -30.0, 0.0)),
-    }
-    unwarper = omnicam.Unwarper(maps, source_size=frame_size)
-    outputs = {name: os.path.join(args.out, f"{name}.avi") for name in maps}
+    # the tables, built once for the video's frame size (camera.scaled if it differs from the
+    # calibration's): a panorama and a perspective view looking 30 deg down. Even sizes: some
+    # codecs, MJPG among them, silently drop an odd last row or column.
+    width, height = frame_size[0] // 2 * 2, frame_size[0] * 3 // 8 * 2
+    specs = {"panorama": omnicam.PanoramaView((2 * width, width // 4 * 2)),
+             "perspective": omnicam.PerspectiveView((width, height), fov=80.0, pitch=-30.0)}
+    unwarper = omnicam.Unwarper.from_camera(camera, specs, frame_size=frame_size)
+    outputs = {name: os.path.join(args.out, f"{name}.avi") for name in unwarper.names}
     t = time.perf_counter()
     n = 0
-    for n, views in unwarper.stream(source, outputs, fourcc="MJPG"):
-        if n == 0:                                 # keep the first frame's views as pictures
+    for i, views in unwarper.stream(source, outputs, fourcc="MJPG"):
+        if i == 0:                                 # keep the first frame's views as pictures
             for name, img in views.items():
                 cv2.imwrite(os.path.join(args.out, f"{name}_first.png"), img)
-    n += 1
+        n = i + 1
     dt = time.perf_counter() - t
     print(f"unwarped {n} frames in {dt:.2f} s ({n / dt:.1f} fps, decode and encode included) "
           f"into {', '.join(outputs.values())}")
