@@ -40,7 +40,7 @@ from .mirror import HyperbolicMirror
 
 __all__ = ["default_mirror", "aligned_rig", "misaligned_rig", "random_misaligned_rig",
            "equirect_directions", "equirect_coords", "make_environment", "render_environment",
-           "Room", "render_room", "HOUSING_COLOR"]
+           "Room", "render_room", "HOUSING_COLOR", "line_pixels", "far_line_pixels"]
 
 #: BGR colour of the housing (mirror holder) outside the rim.
 HOUSING_COLOR = (18, 18, 18)
@@ -603,3 +603,50 @@ def render_room(camera, room=None, supersample=4, noise=0.0, seed=None,
                          f"(box_min={room.box_min}, box_max={room.box_max})")
     return _render(camera, lambda P, d: _shade_room(room, P, d), supersample, noise, seed,
                    housing_color, body_radius, background)
+
+
+def line_pixels(camera, start, end, n=30):
+    """Pixels of ``n`` points evenly spaced on the 3-D segment ``start``-``end`` (mirror frame).
+
+    Exact non-central projection (:meth:`MisalignedHyperbolicCamera.project`); points the rig
+    cannot see are left out, so fewer than ``n`` rows may come back.
+
+    Returns
+    -------
+    pixels : (M, 2) float64 ndarray
+    """
+    t = np.linspace(0.0, 1.0, int(n))[:, None]
+    start = np.asarray(start, dtype=np.float64)
+    pts = start + t * (np.asarray(end, dtype=np.float64) - start)
+    px = camera.project(pts)
+    return px[np.isfinite(px).all(axis=1)]
+
+
+def far_line_pixels(camera, n_lines=3, n_points=30, distance=(10e3, 50e3),
+                    elevation_deg=(-60.0, 5.0), seed=0):
+    """Pixels of far straight lines, as a user would click them for section 3.2's selection.
+
+    Each line passes at a random distance in ``distance`` (mm) from the mirror origin, at a
+    random azimuth and an elevation in ``elevation_deg``, along a random direction across the
+    line of sight; its ``n_points`` points span a stretch as long as that distance. Lines with
+    fewer than 5 visible points are drawn again.
+
+    Returns
+    -------
+    list of (N_i, 2) float64 ndarray
+        One array per line, the ``far_lines`` argument of ``calibrate``.
+    """
+    rng = np.random.default_rng(seed)
+    lines = []
+    while len(lines) < n_lines:
+        dist = rng.uniform(*distance)
+        az = rng.uniform(0.0, 2.0 * np.pi)
+        el = np.deg2rad(rng.uniform(*elevation_deg))
+        p = dist * np.array([np.cos(el) * np.cos(az), np.cos(el) * np.sin(az), np.sin(el)])
+        d = rng.normal(size=3)
+        d -= d @ p / (p @ p) * p
+        d *= 0.5 * dist / np.linalg.norm(d)
+        px = line_pixels(camera, p - d, p + d, n_points)
+        if len(px) >= 5:
+            lines.append(px)
+    return lines
