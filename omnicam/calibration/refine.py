@@ -68,6 +68,11 @@ class RefineResult:
         The fitted 3-D lines ``(Q, e)`` in the mirror frame.
     nfev : int
         Residual evaluations of the solver.
+    lens_rms : float
+        RMS outline residual of the camera's reflection for the kept posture, px (NaN without
+        the lens).
+    rho : float
+        Fitted radius of the ball that models the camera body (NaN without the lens).
     """
 
     rvec: np.ndarray
@@ -79,6 +84,8 @@ class RefineResult:
     line_rms: float
     lines: list
     nfev: int
+    lens_rms: float = math.nan
+    rho: float = math.nan
 
 
 def gauge_rotation(axis):
@@ -142,7 +149,7 @@ def _rotate(v, w):
 class _Problem:
     """Residuals of the refinement; see the module docstring."""
 
-    def __init__(self, K, mirror, R0, t0, rim_px, lines_xn):
+    def __init__(self, K, mirror, R0, t0, rim_px, lines_xn, lens_xn=None):
         self.K = K
         self.A = K[:2, :2]
         self.k = K[:2, 2]
@@ -157,6 +164,16 @@ class _Problem:
         self.line0 = []
         self.line_scale = []
         self._ray_cache = (None,)
+        self.lens_xn = None if lens_xn is None or len(lens_xn) == 0 else lens_xn
+        self.n_y = 4 * len(lines_xn)  # line parameters follow the posture; then rho
+        if self.lens_xn is not None:
+            from .lens import fit_rho, ray_distances
+            self.Kinv2 = np.linalg.inv(K)[:2, :2]
+            d, g = ray_distances(mirror, R0, t0, self.lens_xn, self.Kinv2)
+            ok = np.isfinite(d) & np.isfinite(g) & (g > 0)
+            # pixel scale of each outline row: 1 / |grad_u d| at the starting posture
+            self.lens_scale = np.where(ok, 1.0 / np.where(ok, g, 1.0), 0.0)
+            self.rho0 = fit_rho(d, g)
 
     # posture ----------------------------------------------------------------------------
     def posture(self, x):
@@ -306,13 +323,24 @@ class _Problem:
         r = np.where(np.isfinite(r), r, 0.0)
         return r * self.line_scale if scaled else r
 
+    # lens ---------------------------------------------------------------------------------
+    def lens_residuals(self, R, t, rho):
+        """``(d - rho) / |grad d|`` of the blob outline (px); rays that miss give 0."""
+        if self.lens_xn is None:
+            return np.zeros(0)
+        from .lens import ray_distances
+        r = (ray_distances(self.mirror, R, t, self.lens_xn) - rho) * self.lens_scale
+        return np.where(np.isfinite(r), r, 0.0)
+
     # all --------------------------------------------------------------------------------
     def residuals(self, x):
         R, t = self.posture(x[:_N_POSTURE])
-        rr = self.rim_residuals(R, t)
-        if not self.lines_xn:
-            return rr
-        return np.concatenate([rr, self.line_residuals(R, t, x[_N_POSTURE:])])
+        parts = [self.rim_residuals(R, t)]
+        if self.lines_xn:
+            parts.append(self.line_residuals(R, t, x[_N_POSTURE:_N_POSTURE + self.n_y]))
+        if self.lens_xn is not None:
+            parts.append(self.lens_residuals(R, t, x[_N_POSTURE + self.n_y]))
+        return parts[0] if len(parts) == 1 else np.concatenate(parts)
 
     def line_jacobian(self, R, t, y, steps):
         """Line rows and line columns only (the posture fixed): 4 grouped forward differences."""
@@ -336,7 +364,8 @@ class _Problem:
         cx, cy, nx, ny = self._rim_normals(R, t, phi)
         n_rim = len(self.rim_px)
         n_line = sum(len(xn) for xn in self.lines_xn)
-        J = np.zeros((n_rim + n_line, len(x)))
+        n_lens = 0 if self.lens_xn is None else len(self.lens_xn)
+        J = np.zeros((n_rim + n_line + n_lens, len(x)))
         for k in range(2):
             xk = x[:_N_POSTURE].copy()
             xk[k] += steps[k]
@@ -354,19 +383,29 @@ class _Problem:
         J[:n_rim, 3] = -m1 / z * self.rim_w
         J[:n_rim, 4] = (m0 * X[:, 0] + m1 * X[:, 1]) / z**2 * self.rim_w
         if n_line:
-            y = x[_N_POSTURE:]
+            y = x[_N_POSTURE:_N_POSTURE + self.n_y]
             base = self.line_residuals(R, t, y)
             for k in range(_N_POSTURE):
                 xk = x[:_N_POSTURE].copy()
                 xk[k] += steps[k]
                 Rk, tk = self.posture(xk)
-                J[n_rim:, k] = (self.line_residuals(Rk, tk, y) - base) / steps[k]
-            J[n_rim:, _N_POSTURE:] = self.line_jacobian(R, t, y, steps[_N_POSTURE:])
+                J[n_rim:n_rim + n_line, k] = (self.line_residuals(Rk, tk, y) - base) / steps[k]
+            J[n_rim:n_rim + n_line, _N_POSTURE:_N_POSTURE + self.n_y] = self.line_jacobian(
+                R, t, y, steps[_N_POSTURE:_N_POSTURE + self.n_y])
+        if n_lens:
+            rho = x[_N_POSTURE + self.n_y]
+            base = self.lens_residuals(R, t, rho)
+            for k in range(_N_POSTURE):
+                xk = x[:_N_POSTURE].copy()
+                xk[k] += steps[k]
+                Rk, tk = self.posture(xk)
+                J[n_rim + n_line:, k] = (self.lens_residuals(Rk, tk, rho) - base) / steps[k]
+            J[n_rim + n_line:, -1] = -self.lens_scale
         return J
 
 
 def refine_posture(K, mirror, rvec, tvec, rim_points, far_lines_normalized=(), line_depth=None,
-                   max_nfev=15, robust=True):
+                   max_nfev=15, robust=True, lens_normalized=None):
     """Refine a mirror posture by non-linear least squares (rim and far lines).
 
     Parameters
@@ -384,6 +423,10 @@ def refine_posture(K, mirror, rvec, tvec, rim_points, far_lines_normalized=(), l
         Starting distance of the 3-D lines; default ``1000 * rim_radius``.
     max_nfev : int
         Cap on residual evaluations of each of the two solver stages.
+    lens_normalized : (M, 2) ndarray, optional
+        Undistorted normalised coordinates of the outline of the camera's reflection
+        (:mod:`.lens`); adds the rows ``(d - rho) / |grad d|`` (px) and ``rho`` as one more
+        parameter (started at its closed-form best fit, :func:`.lens.fit_rho`).
     robust : bool
         Weight the rim rows by Huber weights (``k = 2`` robust standard deviations) computed
         from the residuals of the starting posture: boundary points that the rim fit kept but
@@ -405,23 +448,32 @@ def refine_posture(K, mirror, rvec, tvec, rim_points, far_lines_normalized=(), l
     # lines whose rays mostly miss the mirror under this posture are left out
     probe = _Problem(K, mirror, R0, t0, rim_px[:5], [])
     lines_xn = [x for x in lines_xn if np.isfinite(probe.rays(R0, t0, x)[1]).all(axis=1).sum() >= 3]
-    prob = _Problem(K, mirror, R0, t0, rim_px, lines_xn)
+    lens_xn = None
+    if lens_normalized is not None and len(lens_normalized):
+        lens_xn = np.ascontiguousarray(np.asarray(lens_normalized, np.float64).reshape(-1, 2))
+    prob = _Problem(K, mirror, R0, t0, rim_px, lines_xn, lens_xn)
+    if prob.lens_xn is not None and not np.isfinite(prob.rho0):
+        prob = _Problem(K, mirror, R0, t0, rim_px, lines_xn)  # the outline misses the camera
+    has_lens = prob.lens_xn is not None
     if robust:
         prob.set_robust_weights(R0, t0)
     n_lines = len(lines_xn)
     if n_lines:
         prob.init_lines(R0, t0, depth)
-    steps = np.array([1e-7, 1e-7, 1e-6, 1e-6, 1e-6] + [1e-7] * 4 * n_lines)
-    x0 = np.zeros(_N_POSTURE + 4 * n_lines)
+    steps = np.array([1e-7, 1e-7, 1e-6, 1e-6, 1e-6] + [1e-7] * 4 * n_lines + [1e-6] * has_lens)
+    x0 = np.zeros(_N_POSTURE + 4 * n_lines + has_lens)
+    if has_lens:
+        x0[-1] = prob.rho0  # closed-form best rho at the analytic posture (its fair cost)
 
     opts = dict(method="lm", x_scale="jac", xtol=1e-8, ftol=1e-6, gtol=1e-10)
     # stage 1: the line parameters alone at the analytic posture (its fair cost)
     nfev = 0
     if n_lines:
-        s1 = least_squares(lambda y: prob.line_residuals(R0, t0, y), x0[_N_POSTURE:],
-                           jac=lambda y: prob.line_jacobian(R0, t0, y, steps[_N_POSTURE:]),
+        sl = slice(_N_POSTURE, _N_POSTURE + 4 * n_lines)
+        s1 = least_squares(lambda y: prob.line_residuals(R0, t0, y), x0[sl],
+                           jac=lambda y: prob.line_jacobian(R0, t0, y, steps[sl]),
                            max_nfev=max_nfev, **opts)
-        x0[_N_POSTURE:] = s1.x
+        x0[sl] = s1.x
         nfev += s1.nfev
     r_init = prob.residuals(x0)
     cost_init = 0.5 * float(r_init @ r_init)
@@ -440,12 +492,16 @@ def refine_posture(K, mirror, rvec, tvec, rim_points, far_lines_normalized=(), l
     R, t = prob.posture(x[:_N_POSTURE])
     n_rim = len(rim_px)
     rim_rms = float(np.sqrt(np.mean((r[:n_rim] / prob.rim_w) ** 2)))
-    line_rms = float(np.sqrt(np.mean(r[n_rim:] ** 2))) if n_lines else math.nan
+    n_line = sum(len(xn) for xn in lines_xn)
+    line_rms = float(np.sqrt(np.mean(r[n_rim:n_rim + n_line] ** 2))) if n_lines else math.nan
+    lens_rms = float(np.sqrt(np.mean(r[n_rim + n_line:] ** 2))) if has_lens else math.nan
+    rho = float(x[-1]) if has_lens else math.nan
     lines = [prob.line(i, x[_N_POSTURE + 4 * i:_N_POSTURE + 4 * i + 4]) for i in range(n_lines)]
     rvec_out = cv2.Rodrigues(R)[0].ravel()
     return RefineResult(rvec=rvec_out, tvec=np.asarray(t, np.float64), accepted=accepted,
                         cost_initial=cost_init, cost_final=cost_fin, rim_rms=rim_rms,
-                        line_rms=line_rms, lines=lines, nfev=int(nfev))
+                        line_rms=line_rms, lines=lines, nfev=int(nfev), lens_rms=lens_rms,
+                        rho=rho)
 
 
 def posture_uncertainty(K, mirror, rvec, tvec, rim_points, rms):
