@@ -49,6 +49,18 @@ class CalibrationReport:
         image are correlated, so real errors run about 1.5x larger).
     far_lines : list of (N_i, 2) ndarray
         The far-line pixels used.
+    lens_points : (M, 2) ndarray or None
+        Outline pixels of the camera's own reflection that were used (None: lens not used).
+    lens_fit : LensFit or None
+        What :func:`.lens.detect_lens` found (``lens="auto"`` with an image).
+    lens_scores : dict or None
+        ``{index: RMS outline residual (px)}`` of the physical candidates (selection).
+    lens_rms : float
+        RMS outline residual of the returned posture, px, with ``rho`` fitted (NaN: not used).
+    rho : float
+        Radius of the ball about the camera centre that models the body (NaN: not used).
+    lens_note : str
+        Whether the lens was used, and why not.
     """
 
     conic: np.ndarray
@@ -63,6 +75,17 @@ class CalibrationReport:
     axis_std_deg: float = math.nan
     origin_std_mm: float = math.nan
     far_lines: list = dataclasses.field(default_factory=list)
+    lens_points: object = None
+    lens_fit: object = None
+    lens_scores: object = None
+    lens_rms: float = math.nan
+    rho: float = math.nan
+    lens_note: str = "not used"
+
+    @property
+    def lens_used(self):
+        """Whether the camera's reflection took part in the selection and refinement."""
+        return self.lens_points is not None
 
     @property
     def rvec(self):
@@ -93,13 +116,17 @@ class CalibrationReport:
             f"mirror frame: [{', '.join(f'{v:.4f}' for v in cam.camera_center)}]",
             f"  RMS uncertainty from the rim noise alone (first order, independent point "
             f"errors): axis {self.axis_std_deg:.3g} deg, origin {self.origin_std_mm:.3g}",
+            f"  camera reflection (lens): {self.lens_note}",
             f"  candidates (Chen's method, section 3.1; score of eq. 31 with "
-            f"{len(self.far_lines)} far line(s)):",
+            f"{len(self.far_lines)} far line(s)"
+            + (", lens outline RMS in px" if self.lens_scores else "") + "):",
         ]
         for i, c in enumerate(self.candidates):
             mark = "*" if i == self.chosen else " "
             state = "physical" if c.physical else "impossible: " + "; ".join(c.reasons)
             score = "-" if not np.isfinite(c.score) else f"{c.score:.3e}"
+            if self.lens_scores and i in self.lens_scores:
+                score += f" lens {self.lens_scores[i]:.3f}"
             lines.append(f"   {mark}[{i}] l={c.l} m={c.m} score {score:>10}  "
                          f"tvec [{', '.join(f'{v:.4f}' for v in c.tvec)}]  {state}")
         lines.append(f"  chosen: {self.chosen}, confidence {self.confidence:.4f}")
@@ -110,7 +137,9 @@ class CalibrationReport:
                          f" (cost {r.cost_initial:.4g} -> {r.cost_final:.4g} px^2, rim RMS "
                          f"{r.rim_rms:.4f} px"
                          + ("" if not np.isfinite(r.line_rms) else
-                            f", far-line RMS {r.line_rms:.4f} px") + ")")
+                            f", far-line RMS {r.line_rms:.4f} px")
+                         + ("" if not np.isfinite(r.lens_rms) else
+                            f", lens RMS {r.lens_rms:.4f} px, rho {r.rho:.4f}") + ")")
         else:
             lines.append("  refinement: off")
         if self.warnings:

@@ -18,6 +18,12 @@ circular sections of the same cone). The fallback then picks the candidate whose
 is nearest to the mirror's lower focus ``(0, 0, -c)`` (where a rig's camera is meant to be), and
 says that the choice is ambiguous: on random misalignments this is right only about half of the
 time.
+
+The camera's own reflection (:mod:`.lens`) separates them without lines: under each physical
+candidate the outline of the dark blob must be the set of pixels whose rays pass at one distance
+``rho`` from the camera centre; its score is the RMS of ``(d - rho) / |grad d|`` in px with
+``rho`` fitted in closed form. Alone it chooses by the least score; with far lines each kind of
+score is divided by its largest value over the physical candidates and the sums are compared.
 """
 from __future__ import annotations
 
@@ -29,6 +35,7 @@ __all__ = ["validate_far_lines", "check_lines_inside_rim", "line_score", "select
 
 AMBIGUOUS_CONFIDENCE = 0.8  # below this a selection by far lines comes with a warning
 # (exact far lines give > 0.99; with rim noise the wrong choices seen had 0.07-0.74)
+LENS_AMBIGUOUS_CONFIDENCE = 0.5  # below this a selection by the lens alone comes with a warning
 
 
 def validate_far_lines(far_lines):
@@ -102,7 +109,20 @@ def line_score(camera, line_pixels):
     return float(max(lam[0], 0.0)) / len(V), len(V)
 
 
-def select_candidate(candidates, make_camera, far_lines, lower_focus):
+def _confidence(scores):
+    """``1 - best / second best`` of an array of scores (1 with one, 0 when undecided)."""
+    if len(scores) == 1:
+        return 1.0
+    order = np.argsort(scores, kind="stable")
+    best, second = scores[order[0]], scores[order[1]]
+    if not np.isfinite(best):
+        return 0.0
+    if second > 0:
+        return float(1.0 - best / second) if np.isfinite(second) else 1.0
+    return 0.0
+
+
+def select_candidate(candidates, make_camera, far_lines, lower_focus, lens_scores=None):
     """Score the physical candidates and choose one (section 3.2).
 
     Parameters
@@ -114,6 +134,10 @@ def select_candidate(candidates, make_camera, far_lines, lower_focus):
         Validated far-line pixels (may be empty).
     lower_focus : (3,) array_like
         ``(0, 0, -c)``, for the fallback without lines.
+    lens_scores : dict, optional
+        ``{index: RMS outline residual (px)}`` of the camera's reflection for the physical
+        candidates (:func:`.lens.outline_score`); used alone without far lines, and together
+        with them otherwise.
 
     Returns
     -------
@@ -123,7 +147,7 @@ def select_candidate(candidates, make_camera, far_lines, lower_focus):
         Index of the chosen candidate.
     confidence : float
         ``1 - best / second best`` among physical candidates (1 with one physical candidate,
-        0 without far lines).
+        0 without far lines and lens; with both, of the summed normalised scores).
     warnings : list of str
     """
     warnings = []
@@ -132,6 +156,18 @@ def select_candidate(candidates, make_camera, far_lines, lower_focus):
         raise ValueError("none of the four postures of the rim ellipse is physically possible "
                          "(rim behind the camera or mirror seen from behind); check K, D, the "
                          "mirror's rim_radius and that the boundary points are on the rim")
+    use_lens = lens_scores is not None and len(phys) > 1 and \
+        np.isfinite([lens_scores.get(i, math.inf) for i in phys]).any()
+    lens = np.array([lens_scores.get(i, math.inf) for i in phys]) if use_lens else None
+    if not far_lines and use_lens:
+        chosen = phys[int(np.argmin(lens))]
+        confidence = _confidence(lens)
+        if confidence < LENS_AMBIGUOUS_CONFIDENCE:
+            warnings.append(f"no far_lines given and the camera's reflection barely separates "
+                            f"the physical postures (confidence {confidence:.3f}): the choice "
+                            f"may be wrong; give far_lines (pixels along the image of a far "
+                            f"straight line)")
+        return list(candidates), chosen, confidence, warnings
     if not far_lines:
         dist = []
         for i in phys:
@@ -161,16 +197,12 @@ def select_candidate(candidates, make_camera, far_lines, lower_focus):
             total += s
         scored[i] = candidates[i].with_score(total)
     scores = np.array([scored[i].score for i in phys])
+    if use_lens and np.isfinite(scores).any():
+        def normalised(v):
+            top = np.max(v[np.isfinite(v)])
+            return np.where(np.isfinite(v), v / top if top > 0 else 0.0, 2.0)
+        scores = normalised(scores) + normalised(lens)
     order = np.argsort(scores, kind="stable")
     chosen = phys[int(order[0])]
-    if len(phys) == 1:
-        confidence = 1.0
-    else:
-        best, second = scores[order[0]], scores[order[1]]
-        if not np.isfinite(best):
-            confidence = 0.0
-        elif second > 0:
-            confidence = float(1.0 - best / second) if np.isfinite(second) else 1.0
-        else:
-            confidence = 0.0
+    confidence = _confidence(scores)
     return scored, chosen, confidence, warnings
