@@ -359,7 +359,7 @@ class MisalignedHyperbolicCamera:
     # -- calibration and views (implemented in omnicam.calibration and omnicam.views) ----
     @classmethod
     def calibrate(cls, K, mirror, image=None, boundary_points=None, far_lines=None, D=None,
-                  image_size=None, refine=True):
+                  image_size=None, refine=True, lens="auto"):
         """Mirror posture from one image: rim ellipse, Chen's method, far-line selection.
 
         See :func:`omnicam.calibration.calibrate`. Returns ``(camera, report)``.
@@ -367,7 +367,7 @@ class MisalignedHyperbolicCamera:
         from .calibration import calibrate
         return calibrate(K, mirror, image=image, boundary_points=boundary_points,
                          far_lines=far_lines, D=D, image_size=image_size, refine=refine,
-                         camera_cls=cls)
+                         camera_cls=cls, lens=lens)
 
     def init_panorama_maps(self, size, elevation_range=None, projection="cylindrical", R=None,
                            m1type=cv2.CV_16SC2, depth=None, viewpoint=None):

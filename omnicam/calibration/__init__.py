@@ -7,11 +7,15 @@ Pipeline of :func:`calibrate`:
    are undistorted first and the conic is fitted to undistorted pixels ``K x_n``);
 2. Chen's method (:mod:`.chen`, eqs. 23-29, 32-42): four candidate postures, the physically
    impossible ones marked;
-3. selection by far lines (:mod:`.selection`, section 3.2, eq. 31);
-4. optional non-linear refinement (:mod:`.refine`, beyond the paper);
-5. a :class:`~.report.CalibrationReport`.
+3. the camera's own reflection (:mod:`.lens`, beyond the paper): the outline of the dark blob
+   near the image centre, found by :func:`omnicam.calibration.lens.detect_lens` or given;
+4. selection by far lines (:mod:`.selection`, section 3.2, eq. 31) and by the lens outline;
+5. optional non-linear refinement (:mod:`.refine`, beyond the paper) with rim, far-line and
+   lens-outline residuals;
+6. a :class:`~.report.CalibrationReport`.
 
-Modules: ``rim`` (ellipse), ``chen`` (posture), ``selection`` (choice), ``refine``
+Modules: ``rim`` (ellipse), ``chen`` (posture), ``lens`` (the camera's reflection),
+``selection`` (choice), ``refine``
 (refinement), ``report`` (report and overlay), ``intrinsics`` (the camera alone).
 """
 from __future__ import annotations
@@ -53,7 +57,7 @@ def _normalize(pixels, K, D):
 
 
 def calibrate(K, mirror, image=None, boundary_points=None, far_lines=None, D=None,
-              image_size=None, refine=True, camera_cls=None):
+              image_size=None, refine=True, camera_cls=None, lens="auto"):
     """Mirror posture from one image: rim ellipse, Chen's method, far-line selection, refinement.
 
     Parameters
@@ -80,6 +84,15 @@ def calibrate(K, mirror, image=None, boundary_points=None, far_lines=None, D=Non
         Refine the chosen posture non-linearly (kept only if it lowers the cost).
     camera_cls : type, optional
         Camera class to build (default :class:`omnicam.MisalignedHyperbolicCamera`).
+    lens : "auto", None, False or (M, 2) / (M, 1, 2) array_like
+        The camera's own reflection (a dark blob near the image centre, modelled as a ball of
+        unknown radius about the camera centre; :mod:`.lens`). ``"auto"`` detects its outline
+        in ``image`` (:func:`.lens.detect_lens`; without an image, or when no blob is found,
+        the calibration goes on without it and the report says why); ``None``/``False`` does
+        not use it; an array gives the outline pixels (as seen, >= 8). It selects between the
+        physical postures without far lines (and joins the far lines' score with them), and
+        adds the outline residual to the refinement, which pins the mirror tilt that the rim
+        alone determines poorly.
 
     Returns
     -------
@@ -143,6 +156,32 @@ def calibrate(K, mirror, image=None, boundary_points=None, far_lines=None, D=Non
         warnings.append(f"the rim fit is poor (RMS {fit.rms:.2f} px): check the boundary points "
                         f"(the posture error grows by about 1 deg per px of rim noise)")
 
+    # the camera's own reflection: the outline of the dark blob near the centre
+    lens_fit, lens_px, lens_note = None, None, "not used (lens=None)"
+    if isinstance(lens, str):
+        if lens != "auto":
+            raise ValueError(f"lens must be 'auto', None, False or an (M, 2) array of outline "
+                             f"pixels, got {lens!r}")
+        if image is None:
+            lens_note = "not used: no image (give lens=outline pixels to use it)"
+        else:
+            from .lens import detect_lens
+            try:
+                lens_fit = detect_lens(image, detected if boundary_points is None else fit)
+                lens_px = np.asarray(lens_fit.points, np.float64)
+            except ValueError as err:  # optional: the report says why it was not used
+                lens_note = f"not used: {err}"
+    elif lens is not None and lens is not False:
+        lens_px = _as_pixels(lens, "lens")
+        if len(lens_px) < 8 or not np.isfinite(lens_px).all():
+            raise ValueError(f"lens has {len(lens_px)} point(s) or non-finite values; give at "
+                             f"least 8 finite pixels along the outline of the camera's reflection")
+    lens_xn = None
+    if lens_px is not None:
+        lens_xn = _normalize(lens_px, K, D)
+        if not np.isfinite(lens_xn).all():
+            raise ValueError("some lens outline points cannot be undistorted with D; check D")
+
     # 2. Chen's method (eqs. 23-29, 32-42)
     # Q_e = K^T Q_I K  (eq. 24)
     Qe = chen.normalized_conic(fit.conic, K)
@@ -158,17 +197,40 @@ def calibrate(K, mirror, image=None, boundary_points=None, far_lines=None, D=Non
     def make_camera(c):
         return camera_cls(K, mirror, c.rvec, c.tvec, D=D, image_size=image_size)
 
+    lens_scores = None
+    if lens_xn is not None:
+        from .lens import outline_score
+        Ki2 = np.linalg.inv(K)[:2, :2]
+        lens_scores = {i: outline_score(mirror, c.R, c.tvec, lens_xn, Ki2)[0]
+                       for i, c in enumerate(candidates) if c.physical}
     candidates, chosen, confidence, sel_warnings = selection.select_candidate(
-        candidates, make_camera, lines, (0.0, 0.0, -mirror.c))
+        candidates, make_camera, lines, (0.0, 0.0, -mirror.c), lens_scores)
     warnings.extend(sel_warnings)
     # 4. refinement (beyond the paper)
     cand = candidates[chosen]
     rvec, tvec = cand.rvec, cand.tvec
     refinement = None
     if refine:
-        refinement = refine_posture(K, mirror, rvec, tvec, rim_px, lines_xn)
+        refinement = refine_posture(K, mirror, rvec, tvec, rim_px, lines_xn,
+                                    lens_normalized=lens_xn)
         rvec, tvec = refinement.rvec, refinement.tvec
+    lens_rms = rho = math.nan
+    if lens_xn is not None:
+        from .lens import outline_score
+        R_fin = camera_cls(K, mirror, rvec, tvec).R
+        lens_rms, rho = outline_score(mirror, R_fin, np.asarray(tvec, np.float64), lens_xn,
+                                      np.linalg.inv(K)[:2, :2])
+        lens_note = (f"used: {len(lens_xn)} outline points, RMS {lens_rms:.3f} px to the "
+                     f"ball model, rho {rho:.3f}")
+        if not lens_rms <= max(1.0, 3.0 * fit.rms):
+            warnings.append(f"the outline of the camera's reflection fits the ball model poorly "
+                            f"(RMS {lens_rms:.2f} px): check the lens outline points")
     camera = camera_cls(K, mirror, rvec, tvec, D=D, image_size=image_size)
+    for _ in range(3):  # a fixed point of the gauge (it can move by an ulp once), so that a
+        again = camera_cls(K, mirror, camera.rvec, tvec, D=D, image_size=image_size)
+        if np.array_equal(again.rvec, camera.rvec):  # saved and loaded camera compares equal
+            break
+        camera = again
     axis_std, origin_std = posture_uncertainty(K, mirror, camera.rvec, camera.tvec, rim_px,
                                                max(fit.rms, 1e-12))
     if axis_std > 0.5:
@@ -183,12 +245,16 @@ def calibrate(K, mirror, image=None, boundary_points=None, far_lines=None, D=Non
                                          float(a.axis @ b.axis)))
         d_origin = float(np.linalg.norm(a.tvec - b.tvec))
         distinct = d_axis > 0.01 or d_origin > 1e-3 * mirror.rim_radius
-        if lines and distinct and confidence < selection.AMBIGUOUS_CONFIDENCE:
-            warnings.append(f"the far lines barely separate the two physical postures "
+        threshold = (selection.AMBIGUOUS_CONFIDENCE if lines else
+                     selection.LENS_AMBIGUOUS_CONFIDENCE)
+        already = any("barely separates" in w for w in warnings)  # said by the selection
+        if (lines or lens_scores) and distinct and confidence < threshold and not already:
+            by = "far lines (and the camera's reflection)" if lines else "camera's reflection"
+            warnings.append(f"the {by} barely separate the two physical postures "
                             f"(confidence {confidence:.3f}; they differ by {d_axis:.3f} deg "
                             f"and {d_origin:.3f} in origin): the choice may be wrong; give "
                             f"more or longer far lines, far from the image centre")
-        elif lines and distinct and d_axis < 3.0 * axis_std:
+        elif (lines or lens_scores) and distinct and d_axis < 3.0 * axis_std:
             warnings.append(f"the rim noise ({axis_std:.3f} deg on the axis) is comparable "
                             f"with the separation of the two physical postures ({d_axis:.3f} "
                             f"deg): the choice may be wrong; improve the boundary points")
@@ -196,5 +262,7 @@ def calibrate(K, mirror, image=None, boundary_points=None, far_lines=None, D=Non
                                rim_rms=float(fit.rms), candidates=candidates, chosen=chosen,
                                confidence=float(confidence), warnings=warnings, camera=camera,
                                refinement=refinement, axis_std_deg=axis_std,
-                               origin_std_mm=origin_std, far_lines=lines)
+                               origin_std_mm=origin_std, far_lines=lines,
+                               lens_points=lens_px, lens_fit=lens_fit, lens_scores=lens_scores,
+                               lens_rms=lens_rms, rho=rho, lens_note=lens_note)
     return camera, report
