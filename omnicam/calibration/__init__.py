@@ -211,8 +211,12 @@ def calibrate(K, mirror, image=None, boundary_points=None, far_lines=None, D=Non
     rvec, tvec = cand.rvec, cand.tvec
     refinement = None
     if refine:
+        # with the lens the posture moves further from the analytic one (along the direction
+        # the rim cannot see) and, with far lines, their 4 parameters each must follow: LM
+        # needs more evaluations than the default 15 to get there
         refinement = refine_posture(K, mirror, rvec, tvec, rim_px, lines_xn,
-                                    lens_normalized=lens_xn)
+                                    lens_normalized=lens_xn,
+                                    max_nfev=60 if lens_xn is not None and lines_xn else 15)
         rvec, tvec = refinement.rvec, refinement.tvec
     lens_rms = rho = math.nan
     if lens_xn is not None:
