@@ -127,3 +127,27 @@ def test_single_physical_candidate_has_full_confidence():
              for i, c in enumerate(cands)]
     _, chosen, conf, warnings = selection.select_candidate(cands, None, [], (0, 0, -cam.mirror.c))
     assert chosen == first and conf == 1.0 and not warnings
+
+
+def test_lens_scores_choose_without_far_lines_and_join_the_far_lines():
+    cam = RIGS[5]
+    cands = candidates_of(cam)
+    phys = [i for i, c in enumerate(cands) if c.physical]
+    true = min(phys, key=lambda i: np.linalg.norm(cands[i].tvec - cam.tvec))
+    other = next(i for i in phys if i != true)
+    lens = {true: 0.1, other: 2.0}  # RMS outline residuals, px
+    _, chosen, conf, warnings = selection.select_candidate(cands, None, [], (0, 0, -cam.mirror.c),
+                                                           lens)
+    assert chosen == true and conf == pytest.approx(0.95) and not warnings
+    # barely separated: chosen, with a warning
+    _, _, conf, warnings = selection.select_candidate(cands, None, [], (0, 0, -cam.mirror.c),
+                                                      {true: 1.0, other: 1.2})
+    assert conf < selection.LENS_AMBIGUOUS_CONFIDENCE and warnings
+    # with far lines both kinds of score count (each normalised by its largest value)
+    def make(c):
+        return cam.replace(rvec=c.rvec, tvec=c.tvec)
+    lines = far_line_pixels(cam, np.random.default_rng(2))
+    scored, chosen, conf, _ = selection.select_candidate(cands, make, lines,
+                                                         (0, 0, -cam.mirror.c), lens)
+    assert chosen == true and conf > 0.9
+    assert all(np.isfinite(scored[i].score) for i in phys)  # eq. 31 scores kept
