@@ -17,11 +17,13 @@ What you need:
 
       [[[612.5, 388.0], [640.1, 371.2], ...], [[301.0, 655.4], ...]]
 
-  Accuracy matters: for a small misalignment the two physically possible postures bend a far
-  line by only a few hundredths of a pixel differently, so points clicked to the nearest pixel
-  may not tell them apart. Read the report: a low ``confidence`` comes with a warning. Then add
-  lines, or place the points on the line's edge to subpixel precision (zoom in, or refine them
-  with an edge or ridge detector).
+  Accuracy matters when the far lines have to choose on their own: for a small misalignment
+  the two physically possible postures bend a far line by only a few hundredths of a pixel
+  differently, so points clicked to the nearest pixel may not tell them apart. By default
+  (``lens="auto"``) ``calibrate`` also fits the outline of the camera's own reflection in the
+  mirror, which separates them robustly when it is found. Read the report: a low
+  ``confidence`` comes with a warning; then add lines, or place the points on the line's edge
+  to subpixel precision (zoom in, or refine them with an edge or ridge detector).
 
 Run on your image::
 

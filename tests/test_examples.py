@@ -64,8 +64,8 @@ def test_calibrate_own_image_reads_far_lines_json_and_saves_the_calibration(tmp_
     assert len(lines) == 4 and all(len(line) >= 3 for line in lines)
     assert len(result["report"].far_lines) == 4
     assert result["report"].confidence > 0.5
-    # 500 px render of a room: the rim limits the posture to a few tenths of a degree
-    assert result["axis_error_deg"] < 0.5 and result["centre_error_mm"] < 1.0
+    # a 500 px render of the room: measured 0.09 deg and 0.15 mm
+    assert result["axis_error_deg"] < 0.2 and result["centre_error_mm"] < 0.3
     assert omnicam.MisalignedHyperbolicCamera.load(tmp_path / "calibration.yaml") == \
         result["camera"]
     assert read_png(tmp_path / "overlay.png").shape == (500, 500, 3)
