@@ -235,8 +235,9 @@ def calibrate(K, mirror, image=None, boundary_points=None, far_lines=None, D=Non
         if np.array_equal(again.rvec, camera.rvec):  # saved and loaded camera compares equal
             break
         camera = again
-    axis_std, origin_std = posture_uncertainty(K, mirror, camera.rvec, camera.tvec, rim_px,
-                                               max(fit.rms, 1e-12))
+    axis_std, origin_std = posture_uncertainty(
+        K, mirror, camera.rvec, camera.tvec, rim_px, max(fit.rms, 1e-12), lens_xn,
+        max(lens_rms, 1e-12) if np.isfinite(lens_rms) else None)
     if axis_std > 0.5:
         warnings.append(f"the rim determines the posture poorly: about {axis_std:.2f} deg "
                         f"(RMS) on the mirror axis and {origin_std:.2f} on the origin; "

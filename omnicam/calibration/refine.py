@@ -504,13 +504,18 @@ def refine_posture(K, mirror, rvec, tvec, rim_points, far_lines_normalized=(), l
                         rho=rho)
 
 
-def posture_uncertainty(K, mirror, rvec, tvec, rim_points, rms):
-    """First-order standard deviations of the posture from the rim alone.
+def posture_uncertainty(K, mirror, rvec, tvec, rim_points, rms, lens_normalized=None,
+                        lens_rms=None):
+    """First-order standard deviations of the posture from the rim (and the lens outline).
 
     With ``J`` the Jacobian of the rim residuals (px) with respect to the two axis angles and
     ``tvec``, the covariance is ``rms^2 (J^T J)^-1``. The rim pins the axis only weakly: a tilt
     of the mirror and a lateral shift that keep the rim ellipse almost unchanged (about 1 deg
     per px of noise on 360 points for the default rigs), which is why this is reported.
+
+    With ``lens_normalized`` (the outline of the camera's reflection, :mod:`.lens`) and its
+    RMS residual ``lens_rms`` (px), its rows join ``J`` weighted by ``1 / lens_rms`` (the rim
+    rows by ``1 / rms``), with ``rho`` as one more column.
 
     Returns
     -------
@@ -522,12 +527,25 @@ def posture_uncertainty(K, mirror, rvec, tvec, rim_points, rms):
     """
     R = cv2.Rodrigues(np.asarray(rvec, np.float64).reshape(3, 1))[0]
     rim_px = np.ascontiguousarray(np.asarray(rim_points, np.float64).reshape(-1, 2))
-    prob = _Problem(np.asarray(K, np.float64), mirror, R, np.asarray(tvec, np.float64), rim_px, [])
-    J = prob.jacobian(np.zeros(_N_POSTURE), np.array([1e-7, 1e-7, 1e-6, 1e-6, 1e-6]))
+    lens_xn = None
+    if lens_normalized is not None and len(lens_normalized) and lens_rms is not None \
+            and np.isfinite(lens_rms) and lens_rms > 0:
+        lens_xn = np.ascontiguousarray(np.asarray(lens_normalized, np.float64).reshape(-1, 2))
+    prob = _Problem(np.asarray(K, np.float64), mirror, R, np.asarray(tvec, np.float64), rim_px, [],
+                    lens_xn)
+    x = np.zeros(_N_POSTURE)
+    if prob.lens_xn is not None and np.isfinite(prob.rho0):
+        x = np.append(x, prob.rho0)
+    else:
+        prob.lens_xn = None
+    J = prob.jacobian(x, np.array([1e-7, 1e-7, 1e-6, 1e-6, 1e-6, 1e-6])[:len(x)])
+    w = np.full(len(J), 1.0 / float(rms))
+    w[len(rim_px):] = 1.0 / float(lens_rms) if prob.lens_xn is not None else 1.0
+    J = J * w[:, None]
     try:
-        cov = np.linalg.inv(J.T @ J) * float(rms) ** 2
+        cov = np.linalg.inv(J.T @ J)
     except np.linalg.LinAlgError:
         return math.inf, math.inf
     axis_std = math.degrees(math.sqrt(max(cov[0, 0] + cov[1, 1], 0.0)))
-    origin_std = math.sqrt(max(float(np.trace(cov[2:, 2:])), 0.0))
+    origin_std = math.sqrt(max(float(np.trace(cov[2:5, 2:5])), 0.0))
     return axis_std, origin_std
