@@ -1,9 +1,10 @@
 """Time and accuracy of calibrate() from a rendered 1000x1000 image (issue 3, item 9).
 
 Target: the whole calibration (rim detection, the camera's reflection (lens), Chen's method,
-selection, refinement) from one 1000x1000 image in <= 0.5 s on 2 cores (median of several runs). The rig is rendered
-once with :func:`omnicam.synthetic.render_environment`; the far lines are pixels of three
-straight lines 10-50 m away, projected exactly. Prints the median and minimum times of each
+selection, refinement) from one 1000x1000 image in <= 0.5 s on 2 cores (median of several
+runs). The rig is rendered once with :func:`omnicam.synthetic.render_environment` (with the
+camera body, so ``lens="auto"`` finds it); the far lines are pixels of three straight lines
+10-50 m away, projected exactly. Prints the median and minimum times of each
 configuration and the posture errors against the truth.
 
     python benchmarks/bench_calibrate.py [--size 1000] [--repeat 7] [--rigs 3] [--seed 0]

@@ -13,7 +13,7 @@ distance ``rho`` from ``C``:
 
     d(u) = |(C - P(u)) x V(u)| = rho          (V unit)
 
-which is exact for exact data at any posture error-free; ``rho`` is a nuisance parameter. The
+which holds exactly at the true posture on exact data; ``rho`` is a nuisance parameter. The
 residual of an outline pixel is ``(d(u) - rho) / |grad_u d|`` (pixels, the gradient taken once
 at the starting posture). The outline of a ball's reflection is close to an ellipse; the
 ellipse is only used to reject outliers when detecting it (:func:`detect_lens`), never as the
