@@ -730,6 +730,9 @@ def _frame_count(path):
 
 def _check_writer(tmp, fourcc, fps, size, output):
     """Fail early, with a clear message, if ``cv2.VideoWriter`` cannot write this output."""
+    if size[0] % 2 or size[1] % 2:
+        raise CliError(f"video {output}: the view is {size[0]}x{size[1]}; video needs an even "
+                       f"width and height (cv2.VideoWriter drops an odd last row or column)")
     try:
         writer = cv2.VideoWriter(tmp, cv2.VideoWriter_fourcc(*fourcc), fps, size)
         ok = writer.isOpened()

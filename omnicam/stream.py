@@ -261,6 +261,10 @@ class Unwarper:
                              f"{self.names}")
         if not (isinstance(fourcc, str) and len(fourcc) == 4):
             raise ValueError(f"fourcc must be a 4-character code, got {fourcc!r}")
+        odd = {n: self.view_size(n) for n in outputs if any(v % 2 for v in self.view_size(n))}
+        if odd:
+            raise ValueError(f"video outputs need an even width and height (cv2.VideoWriter "
+                             f"silently drops an odd last row or column); got {odd}")
         own = not isinstance(source, cv2.VideoCapture)
         cap = open_capture(source)
         writers = {}

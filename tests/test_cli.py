@@ -285,6 +285,15 @@ def test_bad_view_spec_is_one_line_and_writes_nothing(data, tmp_path, capsys, vi
     assert list(tmp_path.iterdir()) == []
 
 
+def test_odd_video_size_is_refused_before_writing(data, tmp_path, capsys):
+    out = tmp_path / "out.avi"
+    code = main(["unwarp", str(data["video"]), "-c", str(data["calib"]), "--panorama", "96x25",
+                 "-o", str(out)])
+    assert code == 1
+    assert "even" in one_error_line(capsys.readouterr().err)
+    assert list(tmp_path.iterdir()) == []
+
+
 def test_missing_calibration_file(data, tmp_path, capsys):
     code = main(["unwarp", str(data["video"]), "-c", str(tmp_path / "nope.yaml"), "--panorama",
                  "64x16", "-o", str(tmp_path / "out.avi")])

@@ -158,3 +158,10 @@ def test_stream_bad_sources_and_outputs(tmp_path, unwarper):
         next(unwarper.stream(junk, {"nope": tmp_path / "o.avi"}))
     with pytest.raises(ValueError, match="source"):
         open_capture(3.5)
+
+
+def test_stream_refuses_odd_sized_video_outputs(tmp_path):
+    cam = synthetic.aligned_rig((64, 64))
+    unwarper = Unwarper.from_camera(cam, {"pano": PanoramaView((33, 8))})
+    with pytest.raises(ValueError, match="even"):
+        next(unwarper.stream(0, outputs={"pano": tmp_path / "p.avi"}))
