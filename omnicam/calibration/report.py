@@ -162,6 +162,7 @@ class CalibrationReport:
         """An overlay to inspect the calibration.
 
         Draws the boundary points (light blue dots), the rim of the calibrated camera (green),
+        the outline points of the camera's reflection when the lens was used (light blue),
         the far-line pixels (yellow), and for each physical candidate the image of the far
         lines it implies (the great circle of the plane of its rays, eq. 31) or, without far
         lines, its horizon (elevation 0): red for the chosen one, blue for the other. Text at
@@ -199,6 +200,10 @@ class CalibrationReport:
                 cv2.circle(canvas, (int(round(p[0] * f)), int(round(p[1] * f))),
                            int(1.5 * scale * f), _POINTS, -1, cv2.LINE_AA, shift)
         poly(self.camera.rim_image_points(720), _RIM, closed=True)
+        if self.lens_points is not None:
+            for p in self.lens_points:
+                cv2.circle(canvas, (int(round(p[0] * f)), int(round(p[1] * f))),
+                           int(scale * f), _POINTS, -1, cv2.LINE_AA, shift)
         for line in self.far_lines:
             for p in line:
                 cv2.circle(canvas, (int(round(p[0] * f)), int(round(p[1] * f))),
