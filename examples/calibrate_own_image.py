@@ -41,7 +41,6 @@ predictions) into ``--out``, and prints the report.
 from __future__ import annotations
 
 import argparse
-import json
 import os
 
 import cv2
@@ -54,44 +53,6 @@ from omnicam import synthetic
 OUT = os.path.join(os.path.dirname(os.path.abspath(__file__)), "out")
 
 
-def read_intrinsics(path):
-    """``K``, ``D`` (or None) and ``image_size`` (or None) from a ``cv2.FileStorage`` file."""
-    fs = cv2.FileStorage(path, cv2.FILE_STORAGE_READ)
-    if not fs.isOpened():
-        raise SystemExit(f"cannot read intrinsics {path}")
-    K = fs.getNode("K").mat()
-    D = fs.getNode("D").mat() if not fs.getNode("D").empty() else None
-    node = fs.getNode("image_size")                   # a sequence [w, h] or a 1x2 matrix
-    if node.empty():
-        size = None
-    elif node.isSeq():
-        size = tuple(int(node.at(i).real()) for i in range(node.size()))
-    else:
-        size = tuple(int(v) for v in node.mat().ravel())
-    fs.release()
-    if K is None or K.shape != (3, 3):
-        raise SystemExit(f"{path}: needs a 3x3 matrix K")
-    return K, D, size
-
-
-def write_intrinsics(path, K, image_size):
-    """An intrinsics file as ``read_intrinsics`` and ``omnicam calibrate --intrinsics`` read it."""
-    fs = cv2.FileStorage(path, cv2.FILE_STORAGE_WRITE)
-    fs.write("K", np.asarray(K, np.float64))
-    fs.startWriteStruct("image_size", cv2.FileNode_SEQ)
-    for v in image_size:
-        fs.write("", int(v))
-    fs.endWriteStruct()
-    fs.release()
-
-
-def read_far_lines(path):
-    """JSON list of lines, each a list of ``[x, y]`` -> list of ``(N, 2)`` float arrays."""
-    with open(path, encoding="utf-8") as f:
-        data = json.load(f)
-    return [np.asarray(line, np.float64).reshape(-1, 2) for line in data]
-
-
 def room_example(out):
     """A rendered room seen by the misaligned sample rig, its intrinsics and far lines."""
     truth = omnicam.samples.load("hyperomni_misaligned")
@@ -100,18 +61,13 @@ def room_example(out):
     image_path = os.path.join(out, "mirror.png")
     cv2.imwrite(image_path, image)
     intrinsics = os.path.join(out, "camera.yaml")
-    write_intrinsics(intrinsics, truth.K, truth.image_size)
+    omnicam.write_intrinsics(intrinsics, truth.K, image_size=truth.image_size)
     # the room's vertical corner edges, 3.5 m away: 3-D straight lines projected exactly
     lo, hi = np.asarray(room.box_min), np.asarray(room.box_max)
-    z = np.linspace(lo[2] + 50.0, hi[2] - 50.0, 25)
-    lines = []
-    for x in (lo[0], hi[0]):
-        for y in (lo[1], hi[1]):
-            px = truth.project(np.stack([np.full_like(z, x), np.full_like(z, y), z], axis=1))
-            lines.append(np.round(px[np.isfinite(px).all(axis=1)], 2).tolist())
+    lines = [np.round(synthetic.line_pixels(truth, (x, y, lo[2] + 50.0), (x, y, hi[2] - 50.0), 25), 2)
+             for x in (lo[0], hi[0]) for y in (lo[1], hi[1])]
     lines_path = os.path.join(out, "lines.json")
-    with open(lines_path, "w", encoding="utf-8") as f:
-        json.dump(lines, f)
+    omnicam.write_far_lines(lines_path, lines)
     m = truth.mirror
     return image_path, intrinsics, (m.a, m.b, m.rim_radius), lines_path, truth
 
@@ -138,11 +94,11 @@ def main(argv=None):
     image = cv2.imread(args.image, cv2.IMREAD_COLOR)
     if image is None:
         raise SystemExit(f"cannot read {args.image}")
-    K, D, size = read_intrinsics(args.intrinsics)
+    K, D, size = omnicam.read_intrinsics(args.intrinsics)
     if size is not None and tuple(size) != (image.shape[1], image.shape[0]):
         raise SystemExit(f"intrinsics are for {size}, the image is "
                          f"{image.shape[1]}x{image.shape[0]}; scale K or recalibrate")
-    far_lines = read_far_lines(args.far_lines) if args.far_lines else None
+    far_lines = omnicam.read_far_lines(args.far_lines) if args.far_lines else None
     mirror = omnicam.HyperbolicMirror(*args.mirror)
 
     camera, report = omnicam.MisalignedHyperbolicCamera.calibrate(

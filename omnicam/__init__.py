@@ -33,6 +33,10 @@ _LAZY = {
     "visible_elevation_range": "omnicam.views",
     "synthetic": "omnicam.synthetic",
     "samples": "omnicam.samples",
+    "read_intrinsics": "omnicam.io",
+    "write_intrinsics": "omnicam.io",
+    "read_far_lines": "omnicam.io",
+    "write_far_lines": "omnicam.io",
 }
 
 __all__ = ["HyperbolicMirror", "MisalignedHyperbolicCamera", *_LAZY]

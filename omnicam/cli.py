@@ -24,7 +24,6 @@ from __future__ import annotations
 
 import argparse
 import contextlib
-import json
 import math
 import os
 import re
@@ -369,33 +368,12 @@ def read_intrinsics(path):
 
 
 def read_far_lines(path):
-    """LINES.json -> list of ``(N, 2)`` float64 arrays (each line at least 3 points)."""
-    if not os.path.isfile(path):
-        raise CliError(f"far-lines file {path} does not exist")
+    """:func:`omnicam.io.read_far_lines` with its errors as one-line CLI errors."""
+    from .io import read_far_lines as read
     try:
-        with open(path, encoding="utf-8") as f:
-            data = json.load(f)
-    except json.JSONDecodeError as e:
-        raise CliError(f"far-lines file {path}: not valid JSON ({e})") from None
-    except (OSError, UnicodeDecodeError) as e:
-        raise CliError(f"far-lines file {path}: cannot read ({e})") from None
-    expected = "a list of lines, each a list of [x, y] pixels"
-    if not isinstance(data, list) or not data:
-        raise CliError(f"far-lines file {path}: expected {expected}")
-    lines = []
-    for i, line in enumerate(data):
-        ok = isinstance(line, list) and len(line) >= 3 and all(
-            isinstance(p, list) and len(p) == 2
-            and all(isinstance(v, (int, float)) and not isinstance(v, bool) for v in p)
-            for p in line)
-        if not ok:
-            raise CliError(f"far-lines file {path}: line {i} must be a list of at least 3 "
-                           f"[x, y] pixels ({expected})")
-        arr = np.array(line, dtype=np.float64)
-        if not np.isfinite(arr).all():
-            raise CliError(f"far-lines file {path}: line {i} has non-finite coordinates")
-        lines.append(arr)
-    return lines
+        return read(path)
+    except (FileNotFoundError, ValueError) as e:
+        raise CliError(_one_line(e)) from None
 
 
 def cmd_calibrate(args):
@@ -841,7 +819,7 @@ def _table_rms(cam_a, cam_b, size):
 def cmd_demo(args):
     from . import synthetic
     from .camera import MisalignedHyperbolicCamera
-    from .io import write_intrinsics
+    from .io import write_far_lines, write_intrinsics
 
     t_start = time.perf_counter()
     out = args.output
@@ -868,8 +846,7 @@ def cmd_demo(args):
     _write_image(path("mirror.png"), image)
     write_intrinsics(path("intrinsics.yaml"), truth.K, image_size=truth.image_size)
     lines = demo_far_lines(truth)
-    with open(path("far_lines.json"), "w", encoding="utf-8") as f:
-        json.dump([np.round(line, 2).tolist() for line in lines], f)
+    write_far_lines(path("far_lines.json"), [np.round(line, 2) for line in lines])
     print(f"2. rendered what it sees of a scene at infinity ({path('mirror.png')}); "
           f"{sum(map(len, lines))} pixels 'clicked' (+-{DEMO_CLICK_NOISE_PX} px) along its "
           f"{len(lines)} orange far straight lines ({path('far_lines.json')})")

@@ -14,6 +14,7 @@ Layout (format_version 1)::
 from __future__ import annotations
 
 import contextlib
+import json
 import os
 import tempfile
 
@@ -22,8 +23,8 @@ import numpy as np
 
 from .mirror import HyperbolicMirror
 
-__all__ = ["save_camera", "load_camera", "read_intrinsics", "write_intrinsics", "FORMAT_VERSION",
-           "SUFFIXES"]
+__all__ = ["save_camera", "load_camera", "read_intrinsics", "write_intrinsics", "read_far_lines",
+           "write_far_lines", "FORMAT_VERSION", "SUFFIXES"]
 
 FORMAT_VERSION = 1
 SUFFIXES = (".yaml", ".yml", ".xml", ".json")
@@ -296,3 +297,65 @@ def read_intrinsics(path):
                 D = None
         size = r.check("image_size", validate_image_size, r.image_size())
     return K, D, size
+
+
+def read_far_lines(path):
+    """Far-line pixels from JSON: a list of lines, each a list of ``[x, y]`` pixels.
+
+    The ``far_lines`` of section 3.2, as a user clicked them along the images of far straight
+    lines. Returns a list of ``(N_i, 2)`` float64 arrays (each line at least 3 points).
+
+    Raises
+    ------
+    FileNotFoundError
+        No file at ``path``.
+    ValueError
+        Not JSON of that shape, or non-finite coordinates, naming the file and the line.
+    """
+    path = os.fspath(path)
+    if not os.path.isfile(path):
+        raise FileNotFoundError(f"far-lines file {path} does not exist")
+    try:
+        with open(path, encoding="utf-8") as f:
+            data = json.load(f)
+    except json.JSONDecodeError as e:
+        raise ValueError(f"far-lines file {path}: not valid JSON ({e})") from None
+    except (OSError, UnicodeDecodeError) as e:
+        raise ValueError(f"far-lines file {path}: cannot read ({e})") from None
+    expected = "a list of lines, each a list of [x, y] pixels"
+    if not isinstance(data, list) or not data:
+        raise ValueError(f"far-lines file {path}: expected {expected}")
+    lines = []
+    for i, line in enumerate(data):
+        ok = isinstance(line, list) and len(line) >= 3 and all(
+            isinstance(p, list) and len(p) == 2
+            and all(isinstance(v, (int, float)) and not isinstance(v, bool) for v in p)
+            for p in line)
+        if not ok:
+            raise ValueError(f"far-lines file {path}: line {i} must be a list of at least 3 "
+                             f"[x, y] pixels ({expected})")
+        arr = np.array(line, dtype=np.float64)
+        if not np.isfinite(arr).all():
+            raise ValueError(f"far-lines file {path}: line {i} has non-finite coordinates")
+        lines.append(arr)
+    return lines
+
+
+
+def write_far_lines(path, far_lines):
+    """Write far-line pixels as JSON (what :func:`read_far_lines` reads), atomically."""
+    data = [np.asarray(line, dtype=np.float64).reshape(-1, 2).tolist() for line in far_lines]
+    path = os.fspath(path)
+    fd, tmp = tempfile.mkstemp(prefix=".omnicam-", suffix=".json",
+                               dir=os.path.dirname(os.path.abspath(path)))
+    try:
+        with os.fdopen(fd, "w", encoding="utf-8") as f:
+            json.dump(data, f)
+        umask = os.umask(0)
+        os.umask(umask)
+        os.chmod(tmp, 0o666 & ~umask)
+        os.replace(tmp, path)
+    except BaseException:
+        if os.path.exists(tmp):
+            os.remove(tmp)
+        raise
