@@ -96,7 +96,12 @@ def canonical_rvec(rvec):
 
     Rotations about the mirror axis are unobservable (5 DOF); this picks the representative.
     """
-    R, _ = cv2.Rodrigues(np.asarray(rvec, np.float64).reshape(3, 1))
+    rvec = np.asarray(rvec, np.float64).reshape(3)
+    if rvec[2] == 0.0 and np.linalg.norm(rvec) < math.pi:
+        # already a rotation about an axis in the x-y plane: the representative itself (and
+        # returned unchanged, so the gauge is idempotent to the last bit)
+        return rvec.copy()
+    R, _ = cv2.Rodrigues(rvec.reshape(3, 1))
     m = R[:, 2]
     axis = np.array([-m[1], m[0], 0.0])  # e_z x m
     s = float(np.linalg.norm(axis))

@@ -254,6 +254,10 @@ def test_gauge_rotation_about_the_mirror_axis_is_removed():
     np.testing.assert_allclose(cam.rvec, np.cross([0, 0, 1], axis) / np.linalg.norm(
         np.cross([0, 0, 1], axis)) * math.acos(axis[2]), atol=1e-12)
     assert not np.any(RIGS["aligned"].rvec)
+    # the gauge is idempotent to the last bit: a saved and reloaded camera compares equal
+    for cam in RIGS.values():
+        assert np.array_equal(MisalignedHyperbolicCamera(cam.K, cam.mirror, cam.rvec,
+                                                         cam.tvec).rvec, cam.rvec)
 
 
 def test_camera_is_immutable():

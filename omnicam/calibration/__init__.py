@@ -230,11 +230,6 @@ def calibrate(K, mirror, image=None, boundary_points=None, far_lines=None, D=Non
             warnings.append(f"the outline of the camera's reflection fits the ball model poorly "
                             f"(RMS {lens_rms:.2f} px): check the lens outline points")
     camera = camera_cls(K, mirror, rvec, tvec, D=D, image_size=image_size)
-    for _ in range(3):  # a fixed point of the gauge (it can move by an ulp once), so that a
-        again = camera_cls(K, mirror, camera.rvec, tvec, D=D, image_size=image_size)
-        if np.array_equal(again.rvec, camera.rvec):  # saved and loaded camera compares equal
-            break
-        camera = again
     axis_std, origin_std = posture_uncertainty(
         K, mirror, camera.rvec, camera.tvec, rim_px, max(fit.rms, 1e-12), lens_xn,
         max(lens_rms, 1e-12) if np.isfinite(lens_rms) else None)
