@@ -31,25 +31,6 @@ from omnicam.calibration.lens import outline_pixels
 from omnicam.calibration.rim import detect_rim
 
 
-def far_lines(cam, rng, n_lines=3, n_points=30):
-    """Pixels of far straight lines 10-50 m away (mirror frame), exactly projected."""
-    lines = []
-    while len(lines) < n_lines:
-        dist = rng.uniform(10e3, 50e3)
-        az = rng.uniform(0.0, 2 * np.pi)
-        el = math.radians(rng.uniform(-60.0, 5.0))
-        p = dist * np.array([math.cos(el) * math.cos(az), math.cos(el) * math.sin(az),
-                             math.sin(el)])
-        d = rng.normal(size=3)
-        d -= d @ p / (p @ p) * p
-        d /= np.linalg.norm(d)
-        px = cam.project(p + (np.linspace(-0.5, 0.5, n_points) * dist)[:, None] * d)
-        px = px[np.isfinite(px).all(axis=1)]
-        if len(px) >= 5:
-            lines.append(px)
-    return lines
-
-
 def timed(fn, repeat):
     fn()  # warm-up (numba cache load, lazy imports)
     times = []
@@ -96,7 +77,7 @@ def accuracy(n, seed):
         for truth in rigs:
             cam, report = MisalignedHyperbolicCamera.calibrate(
                 truth.K, truth.mirror, boundary_points=truth.rim_image_points(360),
-                far_lines=far_lines(truth, rng), refine=refine)
+                far_lines=synthetic.far_line_pixels(truth, rng=rng), refine=refine)
             axis, origin = errors(cam, truth)
             worst_axis, worst_origin = max(worst_axis, axis), max(worst_origin, origin)
             right += true_choice(report, truth)
@@ -113,7 +94,7 @@ def accuracy(n, seed):
         for truth in rigs:
             pts = truth.rim_image_points(360) + rng.normal(size=(360, 2)) * sigma
             cam, report = MisalignedHyperbolicCamera.calibrate(
-                truth.K, truth.mirror, boundary_points=pts, far_lines=far_lines(truth, rng))
+                truth.K, truth.mirror, boundary_points=pts, far_lines=synthetic.far_line_pixels(truth, rng=rng))
             cand = report.candidates[report.chosen]
             a = errors(cam.replace(rvec=cand.rvec, tvec=cand.tvec), truth)
             b = errors(cam, truth)
@@ -176,7 +157,7 @@ def main(argv=None):
         t0 = time.perf_counter()
         image = synthetic.render_environment(truth)
         t_render = time.perf_counter() - t0
-        lines = far_lines(truth, rng)
+        lines = synthetic.far_line_pixels(truth, rng=rng)
         C = truth.camera_center
         print(f"rig {k}: tilt {errors(synthetic.aligned_rig(image_size=size), truth)[0]:.2f} deg,"
               f" camera {math.hypot(C[0], C[1]):.2f} mm off the axis (render {t_render:.1f} s)")

@@ -623,20 +623,20 @@ def line_pixels(camera, start, end, n=30):
 
 
 def far_line_pixels(camera, n_lines=3, n_points=30, distance=(10e3, 50e3),
-                    elevation_deg=(-60.0, 5.0), seed=0):
+                    elevation_deg=(-60.0, 5.0), rng=0):
     """Pixels of far straight lines, as a user would click them for section 3.2's selection.
 
     Each line passes at a random distance in ``distance`` (mm) from the mirror origin, at a
     random azimuth and an elevation in ``elevation_deg``, along a random direction across the
     line of sight; its ``n_points`` points span a stretch as long as that distance. Lines with
-    fewer than 5 visible points are drawn again.
+    fewer than 5 visible points are drawn again. ``rng`` is a seed or a ``numpy`` Generator.
 
     Returns
     -------
     list of (N_i, 2) float64 ndarray
         One array per line, the ``far_lines`` argument of ``calibrate``.
     """
-    rng = np.random.default_rng(seed)
+    rng = np.random.default_rng(rng)
     lines = []
     while len(lines) < n_lines:
         dist = rng.uniform(*distance)

@@ -1,5 +1,4 @@
 """calibrate(): rim -> Chen -> selection -> refinement -> report, end to end."""
-import math
 
 import numpy as np
 import pytest
@@ -8,7 +7,6 @@ import omnicam
 from omnicam import MisalignedHyperbolicCamera, synthetic
 from omnicam.calibration import calibrate
 from test_chen import RIGS, axis_angle_deg
-from test_selection import far_line_pixels
 
 
 def posture_errors(cam, truth):
@@ -28,7 +26,7 @@ def test_exact_rim_points_give_the_posture_with_refine_off_and_on():
     rng = np.random.default_rng(11)
     worst = {False: [0.0, 0.0], True: [0.0, 0.0]}
     for truth in RIGS:  # 100 random rigs, lateral offset >= 0.1 mm
-        lines = far_line_pixels(truth, rng)
+        lines = synthetic.far_line_pixels(truth, rng=rng)
         for refine in (False, True):
             cam, report = MisalignedHyperbolicCamera.calibrate(
                 truth.K, truth.mirror, boundary_points=truth.rim_image_points(360),
@@ -46,7 +44,7 @@ def test_exact_rim_points_give_the_posture_with_refine_off_and_on():
 def test_refinement_is_never_worse_than_the_analytic_result_on_exact_data():
     rng = np.random.default_rng(12)
     for truth in RIGS[:20]:
-        lines = far_line_pixels(truth, rng)
+        lines = synthetic.far_line_pixels(truth, rng=rng)
         pts = truth.rim_image_points(360)
         a, _ = calibrate(truth.K, truth.mirror, boundary_points=pts, far_lines=lines,
                          refine=False)
@@ -62,7 +60,7 @@ def test_refinement_is_never_worse_than_the_analytic_result_on_exact_data():
 @pytest.mark.parametrize("refine", [False, True])
 def test_distorted_rim_points_give_the_posture(D, refine):
     truth = synthetic.misaligned_rig(4.0, 100.0, (-2.0, 1.0, 2.0)).replace(D=D)
-    lines = far_line_pixels(truth, np.random.default_rng(3))
+    lines = synthetic.far_line_pixels(truth, rng=3)
     cam, report = calibrate(truth.K, truth.mirror, boundary_points=truth.rim_image_points(360),
                             far_lines=lines, D=D, refine=refine)
     axis, origin = posture_errors(cam, truth)
@@ -79,7 +77,7 @@ def test_rim_clipped_by_the_frame_gives_the_posture():
         y0, y1 = np.percentile(pts[:, 1], [20, 80])
         arcs = pts[(pts[:, 1] > y0) & (pts[:, 1] < y1)]
         cam, report = calibrate(truth.K, truth.mirror, boundary_points=arcs,
-                                far_lines=far_line_pixels(truth, rng))
+                                far_lines=synthetic.far_line_pixels(truth, rng=rng))
         axis, origin = posture_errors(cam, truth)
         assert axis < 1e-6 and origin < 1e-6
         assert chose_true_candidate(report, truth)
@@ -92,7 +90,7 @@ def test_skewed_K_and_opencv_point_layout():
     K[1, 1] *= 1.02
     truth = base.replace(K=K)
     pts = truth.rim_image_points(200).reshape(-1, 1, 2).astype(np.float32)
-    lines = [x.reshape(-1, 1, 2) for x in far_line_pixels(truth, np.random.default_rng(4))]
+    lines = [x.reshape(-1, 1, 2) for x in synthetic.far_line_pixels(truth, rng=4)]
     cam, report = calibrate(truth.K, truth.mirror, boundary_points=pts, far_lines=lines)
     axis, origin = posture_errors(cam, truth)
     assert axis < 1e-3 and origin < 1e-3  # float32 pixels: ~1e-5 px rounding
@@ -110,7 +108,7 @@ def _noise_sweep(n_rigs=12, seed=21):
         rows = []
         for truth in RIGS[:n_rigs]:
             pts = truth.rim_image_points(360) + rng.normal(size=(360, 2)) * sigma
-            lines = far_line_pixels(truth, rng)
+            lines = synthetic.far_line_pixels(truth, rng=rng)
             b, rb = calibrate(truth.K, truth.mirror, boundary_points=pts, far_lines=lines)
             # the analytic posture (what refine=False returns) is the chosen candidate
             a = b.replace(rvec=rb.candidates[rb.chosen].rvec, tvec=rb.candidates[rb.chosen].tvec)
@@ -166,7 +164,7 @@ def test_outliers_on_the_rim_are_ignored():
     rng = np.random.default_rng(5)
     for truth in RIGS[:5]:
         pts = truth.rim_image_points(360)
-        lines = far_line_pixels(truth, rng)
+        lines = synthetic.far_line_pixels(truth, rng=rng)
         bad = rng.choice(360, 36, replace=False)
         centre = pts.mean(axis=0)
         noisy = pts.copy()
@@ -183,7 +181,7 @@ def test_outliers_on_the_rim_are_ignored():
 @pytest.fixture(scope="module")
 def calibrated():
     truth = synthetic.misaligned_rig()
-    lines = far_line_pixels(truth, np.random.default_rng(6))
+    lines = synthetic.far_line_pixels(truth, rng=6)
     cam, report = calibrate(truth.K, truth.mirror, boundary_points=truth.rim_image_points(360),
                             far_lines=lines, image_size=(500, 500))
     return truth, cam, report
@@ -257,7 +255,7 @@ def test_image_path_with_distortion_refits_the_undistorted_rim(monkeypatch):
         return rim.fit_rim(truth.rim_image_points(360))
 
     monkeypatch.setattr(rim, "detect_rim", fake_detect)
-    lines = far_line_pixels(truth, np.random.default_rng(8))
+    lines = synthetic.far_line_pixels(truth, rng=8)
     cam, report = calibrate(truth.K, truth.mirror, image=np.zeros((500, 500, 3), np.uint8),
                             far_lines=lines, D=D)
     axis, origin = posture_errors(cam, truth)
@@ -325,7 +323,7 @@ def rendered_rigs():
     rigs = [synthetic.misaligned_rig(image_size=size),
             synthetic.random_misaligned_rig(rng, 5.0, 5.0, image_size=size)]
     return [(truth, synthetic.render_environment(truth, supersample=2),
-             far_line_pixels(truth, rng))
+             synthetic.far_line_pixels(truth, rng=rng))
             for truth in rigs]
 
 

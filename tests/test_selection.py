@@ -9,30 +9,6 @@ from omnicam.calibration import selection
 from test_chen import RIGS, candidates_of
 
 
-def far_line_pixels(cam, rng, n_lines=3, n_points=30):
-    """Pixels of far straight lines (10-50 m away, mirror frame), by exact projection.
-
-    Each line passes at a random distance and elevation (-60..5 deg) with a random direction;
-    points spread over a stretch as long as the distance; the finite pixels are kept.
-    """
-    lines = []
-    while len(lines) < n_lines:
-        dist = rng.uniform(10e3, 50e3)
-        az = rng.uniform(0.0, 2 * np.pi)
-        el = math.radians(rng.uniform(-60.0, 5.0))
-        p = dist * np.array([math.cos(el) * math.cos(az), math.cos(el) * math.sin(az),
-                             math.sin(el)])
-        d = rng.normal(size=3)
-        d -= d @ p / (p @ p) * p
-        d /= np.linalg.norm(d)
-        s = np.linspace(-0.5, 0.5, n_points) * dist
-        px = cam.project(p + s[:, None] * d)
-        px = px[np.isfinite(px).all(axis=1)]
-        if len(px) >= 5:
-            lines.append(px)
-    return lines
-
-
 def _select(cam, lines):
     def make(c):
         return cam.replace(rvec=c.rvec, tvec=c.tvec)
@@ -44,7 +20,7 @@ def test_far_lines_select_the_true_candidate_on_100_random_rigs():
     rng = np.random.default_rng(7)
     right, confidences = 0, []
     for cam in RIGS:
-        cands, chosen, conf, warnings = _select(cam, far_line_pixels(cam, rng))
+        cands, chosen, conf, warnings = _select(cam, synthetic.far_line_pixels(cam, rng=rng))
         right += np.linalg.norm(cands[chosen].tvec - cam.tvec) < 1e-6
         confidences.append(conf)
         assert not warnings
@@ -54,7 +30,7 @@ def test_far_lines_select_the_true_candidate_on_100_random_rigs():
 
 def test_scores_only_for_physical_candidates():
     cam = RIGS[3]
-    cands, chosen, conf, _ = _select(cam, far_line_pixels(cam, np.random.default_rng(1)))
+    cands, chosen, conf, _ = _select(cam, synthetic.far_line_pixels(cam, rng=1))
     for c in cands:
         assert np.isfinite(c.score) == c.physical
     phys = sorted(c.score for c in cands if c.physical)
@@ -63,7 +39,7 @@ def test_scores_only_for_physical_candidates():
 
 def test_true_posture_makes_far_line_rays_nearly_coplanar():
     cam = RIGS[5]
-    lines = far_line_pixels(cam, np.random.default_rng(2), n_lines=1)
+    lines = synthetic.far_line_pixels(cam, n_lines=1, rng=2)
     s_true, n = selection.line_score(cam, lines[0])
     assert n == len(lines[0])
     cands = [c for c in candidates_of(cam) if c.physical]
@@ -146,7 +122,7 @@ def test_lens_scores_choose_without_far_lines_and_join_the_far_lines():
     # with far lines both kinds of score count (each normalised by its largest value)
     def make(c):
         return cam.replace(rvec=c.rvec, tvec=c.tvec)
-    lines = far_line_pixels(cam, np.random.default_rng(2))
+    lines = synthetic.far_line_pixels(cam, rng=2)
     scored, chosen, conf, _ = selection.select_candidate(cands, make, lines,
                                                          (0, 0, -cam.mirror.c), lens)
     assert chosen == true and conf > 0.9

@@ -308,7 +308,7 @@ def test_true_equirectangular_panorama_reproduces_the_environment(rigs, environm
 
 def test_far_line_pixels_are_images_of_straight_lines():
     cam = synthetic.misaligned_rig()
-    lines = synthetic.far_line_pixels(cam, n_lines=4, seed=3)
+    lines = synthetic.far_line_pixels(cam, n_lines=4, rng=3)
     assert len(lines) == 4
     for px in lines:
         assert len(px) >= 5 and np.isfinite(px).all()
@@ -316,4 +316,4 @@ def test_far_line_pixels_are_images_of_straight_lines():
         # the rays meet one 3-D line: their directions are nearly coplanar (far away, eq. 31)
         assert np.linalg.svd(d, compute_uv=False)[-1] < 1e-5
     assert all(np.array_equal(a, b) for a, b in zip(lines, synthetic.far_line_pixels(
-        cam, n_lines=4, seed=3)))
+        cam, n_lines=4, rng=3)))
