@@ -211,12 +211,13 @@ def calibrate(K, mirror, image=None, boundary_points=None, far_lines=None, D=Non
     rvec, tvec = cand.rvec, cand.tvec
     refinement = None
     if refine:
-        # with the lens the posture moves further from the analytic one (along the direction
-        # the rim cannot see) and, with far lines, their 4 parameters each must follow: LM
-        # needs more evaluations than the default 15 to get there
-        refinement = refine_posture(K, mirror, rvec, tvec, rim_px, lines_xn,
-                                    lens_normalized=lens_xn,
-                                    max_nfev=60 if lens_xn is not None and lines_xn else 15)
+        # With the camera's reflection the refinement uses the rim and the lens outline: the
+        # outline fixes the tilt the rim cannot see, and far lines (4 nuisance parameters each,
+        # badly conditioned in depth) then add nothing measurable to the posture but make LM
+        # four times slower (benchmarks/bench_calibrate.py). They still chose the candidate.
+        refinement = refine_posture(K, mirror, rvec, tvec, rim_px,
+                                    lines_xn if lens_xn is None else (),
+                                    lens_normalized=lens_xn)
         rvec, tvec = refinement.rvec, refinement.tvec
     lens_rms = rho = math.nan
     if lens_xn is not None:
