@@ -22,6 +22,8 @@ import math
 import cv2
 import numpy as np
 
+from ..raytrace import as_points
+
 __all__ = ["RimFit", "fit_rim", "detect_rim", "conic_from_ellipse", "ellipse_from_conic",
            "conic_distance"]
 
@@ -181,16 +183,7 @@ def _axes_angle(S):
 
 # -- validation ----------------------------------------------------------------------------------
 def _as_points(points, min_points):
-    try:
-        pts = np.asarray(points, dtype=np.float64)
-    except (TypeError, ValueError):
-        raise ValueError("points must be an (N, 2) or (N, 1, 2) array of pixel coordinates") \
-            from None
-    if pts.ndim == 3 and pts.shape[1:] == (1, 2):
-        pts = pts.reshape(-1, 2)
-    if pts.ndim != 2 or pts.shape[1] != 2:
-        raise ValueError(f"points must be an (N, 2) or (N, 1, 2) array of pixel coordinates, "
-                         f"got shape {pts.shape}")
+    pts, _ = as_points(points, "points", 2)
     if not np.isfinite(pts).all():
         raise ValueError("points must be finite; drop NaN/inf rows before fitting the rim")
     if len(pts) < min_points:

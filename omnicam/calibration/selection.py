@@ -31,6 +31,8 @@ import math
 
 import numpy as np
 
+from ..raytrace import as_points
+
 __all__ = ["validate_far_lines", "check_lines_inside_rim", "line_score", "select_candidate"]
 
 AMBIGUOUS_CONFIDENCE = 0.8  # below this a selection by far lines comes with a warning
@@ -54,16 +56,7 @@ def validate_far_lines(far_lines):
         far_lines = [far_lines]  # one line given as a bare (N, 2) or (N, 1, 2) array
     out = []
     for i, line in enumerate(far_lines):
-        try:
-            arr = np.asarray(line, dtype=np.float64)
-        except (TypeError, ValueError):
-            raise ValueError(f"far_lines[{i}] must be an (N, 2) or (N, 1, 2) array of pixels") \
-                from None
-        if arr.ndim == 3 and arr.shape[1:] == (1, 2):
-            arr = arr.reshape(-1, 2)
-        if arr.ndim != 2 or arr.shape[1] != 2:
-            raise ValueError(f"far_lines[{i}] must be an (N, 2) or (N, 1, 2) array of pixels, "
-                             f"got shape {arr.shape}")
+        arr, _ = as_points(line, f"far_lines[{i}]", 2)
         if not np.isfinite(arr).all():
             raise ValueError(f"far_lines[{i}] has non-finite pixels; drop them")
         if len(arr) < 3:
