@@ -66,6 +66,29 @@ def rms(values):
     return float(np.sqrt(np.mean(np.square(values))))
 
 
+SWEEP_HEADER = ("  sigma px | axis deg analytic  refined | origin mm analytic  refined | "
+                "chosen right | wrong without warning | mean reported RMS axis")
+
+
+def sweep_row(rigs, sigma, inputs):
+    """Calibrate every rig from ``inputs(truth, sigma)`` and print one row of the noise sweep."""
+    ea, er, oa, orr, right, silent, std = [], [], [], [], 0, 0, []
+    for truth in rigs:
+        cam, report = MisalignedHyperbolicCamera.calibrate(truth.K, truth.mirror,
+                                                           **inputs(truth, sigma))
+        cand = report.candidates[report.chosen]
+        a = errors(cam.replace(rvec=cand.rvec, tvec=cand.tvec), truth)
+        b = errors(cam, truth)
+        ea.append(a[0]), er.append(b[0]), oa.append(a[1]), orr.append(b[1])
+        ok = true_choice(report, truth)
+        right += ok
+        silent += (not ok) and not report.warnings
+        std.append(report.axis_std_deg)
+    print(f"  {sigma:8.2f} | {rms(ea):17.4f} {rms(er):8.4f} | {rms(oa):18.4f} "
+          f"{rms(orr):8.4f} | {right:5d}/{len(rigs):<6d} | {silent:21d} | "
+          f"{np.mean(std):.4f}")
+
+
 def accuracy(n, seed):
     rng = np.random.default_rng(seed)
     rigs = random_rigs(rng, n)
@@ -87,49 +110,19 @@ def accuracy(n, seed):
               f"{dt * 1e3:.1f} ms per calibration")
     print("rim noise sweep (Gaussian, per coordinate), 360 points, 3 exact far lines; "
           "RMS over rigs")
-    print("  sigma px | axis deg analytic  refined | origin mm analytic  refined | chosen right |"
-          " wrong without warning | mean reported RMS axis")
+    print(SWEEP_HEADER)
     for sigma in (0.05, 0.1, 0.2, 0.4, 0.8):
-        ea, er, oa, orr, right, silent, std = [], [], [], [], 0, 0, []
-        for truth in rigs:
-            pts = truth.rim_image_points(360) + rng.normal(size=(360, 2)) * sigma
-            cam, report = MisalignedHyperbolicCamera.calibrate(
-                truth.K, truth.mirror, boundary_points=pts, far_lines=synthetic.far_line_pixels(truth, rng=rng))
-            cand = report.candidates[report.chosen]
-            a = errors(cam.replace(rvec=cand.rvec, tvec=cand.tvec), truth)
-            b = errors(cam, truth)
-            ea.append(a[0]), er.append(b[0]), oa.append(a[1]), orr.append(b[1])
-            ok = true_choice(report, truth)
-            right += ok
-            silent += (not ok) and not report.warnings
-            std.append(report.axis_std_deg)
-
-        print(f"  {sigma:8.2f} | {rms(ea):17.4f} {rms(er):8.4f} | {rms(oa):18.4f} "
-              f"{rms(orr):8.4f} | {right:5d}/{len(rigs):<6d} | {silent:21d} | "
-              f"{np.mean(std):.4f}")
+        sweep_row(rigs, sigma, lambda truth, sigma: dict(
+            boundary_points=truth.rim_image_points(360) + rng.normal(size=(360, 2)) * sigma,
+            far_lines=synthetic.far_line_pixels(truth, rng=rng)))
     print("the same without far lines, with the camera's reflection (exact outline of a 10 mm "
           "ball, 64 points, same noise) as lens; RMS over rigs")
-    print("  sigma px | axis deg analytic  refined | origin mm analytic  refined | chosen right |"
-          " wrong without warning | mean reported RMS axis")
-    outlines = [outline_pixels(truth, 10.0, 64)[0] for truth in rigs]
+    print(SWEEP_HEADER)
+    outlines = {id(truth): outline_pixels(truth, 10.0, 64)[0] for truth in rigs}
     for sigma in (0.0, 0.05, 0.1, 0.2, 0.4, 0.8):
-        ea, er, oa, orr, right, silent, std = [], [], [], [], 0, 0, []
-        for truth, outline in zip(rigs, outlines):
-            pts = truth.rim_image_points(360) + rng.normal(size=(360, 2)) * sigma
-            cam, report = MisalignedHyperbolicCamera.calibrate(
-                truth.K, truth.mirror, boundary_points=pts,
-                lens=outline + rng.normal(size=outline.shape) * sigma)
-            cand = report.candidates[report.chosen]
-            a = errors(cam.replace(rvec=cand.rvec, tvec=cand.tvec), truth)
-            b = errors(cam, truth)
-            ea.append(a[0]), er.append(b[0]), oa.append(a[1]), orr.append(b[1])
-            ok = true_choice(report, truth)
-            right += ok
-            silent += (not ok) and not report.warnings
-            std.append(report.axis_std_deg)
-        print(f"  {sigma:8.2f} | {rms(ea):17.4f} {rms(er):8.4f} | {rms(oa):18.4f} "
-              f"{rms(orr):8.4f} | {right:5d}/{len(rigs):<6d} | {silent:21d} | "
-              f"{np.mean(std):.4f}")
+        sweep_row(rigs, sigma, lambda truth, sigma: dict(
+            boundary_points=truth.rim_image_points(360) + rng.normal(size=(360, 2)) * sigma,
+            lens=outlines[id(truth)] + rng.normal(size=(64, 2)) * sigma))
     return 0
 
 
