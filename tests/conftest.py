@@ -1,4 +1,5 @@
 """Shared fixtures: the canonical rigs every generic model test runs over."""
+import cv2
 import numpy as np
 import pytest
 
@@ -42,3 +43,17 @@ def annulus_pixels(cam, step=4.0, rim_samples=720, inset=(0.05, 0.5, 1.0)):
     pix = np.concatenate([grid, *rings])
     _, d = cam.unproject(pix)
     return pix[np.isfinite(d[:, 0])]
+
+
+def video_frames(path):
+    """``(count, (width, height))`` of a video as OpenCV decodes it."""
+    cap = cv2.VideoCapture(str(path))
+    assert cap.isOpened(), f"{path} is not a readable video"
+    n, size = 0, None
+    while True:
+        ok, frame = cap.read()
+        if not ok:
+            break
+        n, size = n + 1, (frame.shape[1], frame.shape[0])
+    cap.release()
+    return n, size

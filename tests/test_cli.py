@@ -13,26 +13,12 @@ import pytest
 from omnicam import synthetic
 from omnicam.cli import main
 from omnicam.io import read_intrinsics
+from conftest import video_frames
 
 SIZE = (200, 200)  # frames of the small test videos and images
 
 
 # -- helpers ----------------------------------------------------------------------------------
-def frames_of(path):
-    """(count, (width, height)) of a video as OpenCV decodes it."""
-    cap = cv2.VideoCapture(str(path))
-    assert cap.isOpened(), f"{path} is not a readable video"
-    n, size = 0, None
-    while True:
-        ok, frame = cap.read()
-        if not ok:
-            break
-        n += 1
-        size = (frame.shape[1], frame.shape[0])
-    cap.release()
-    return n, size
-
-
 def make_frame(i, size=SIZE):
     """A textured frame with a moving bright square, so frames differ and compress honestly."""
     w, h = size
@@ -92,7 +78,7 @@ def test_unwarp_video_panorama_keeps_frame_count_and_size(data, tmp_path, capsys
                  "-o", str(out)])
     captured = capsys.readouterr()
     assert code == 0, captured.err
-    assert frames_of(out) == (10, (96, 24))
+    assert video_frames(out) == (10, (96, 24))
     assert "fps" in captured.err and "10/10" in captured.err  # the progress bar
     assert leftovers(tmp_path) == []
 
@@ -103,7 +89,7 @@ def test_unwarp_video_perspective_keeps_frame_count_and_size(data, tmp_path, cap
                  "--fov", "90", "--yaw", "30", "--pitch", "-10", "--roll", "5", "--quiet",
                  "-o", str(out)])
     assert code == 0, capsys.readouterr().err
-    assert frames_of(out) == (10, (48, 32))
+    assert video_frames(out) == (10, (48, 32))
 
 
 def test_unwarp_image_sequence_pattern(data, tmp_path, capsys):
@@ -113,7 +99,7 @@ def test_unwarp_image_sequence_pattern(data, tmp_path, capsys):
     code = main(["unwarp", str(tmp_path / "img_%03d.png"), "-c", str(data["calib"]),
                  "--panorama", "64x16", "-q", "-o", str(out)])
     assert code == 0, capsys.readouterr().err
-    assert frames_of(out) == (5, (64, 16))
+    assert video_frames(out) == (5, (64, 16))
 
 
 def test_unwarp_video_max_frames(data, tmp_path, capsys):
@@ -121,7 +107,7 @@ def test_unwarp_video_max_frames(data, tmp_path, capsys):
     code = main(["unwarp", str(data["video"]), "-c", str(data["calib"]), "--panorama", "64x16",
                  "--max-frames", "3", "-o", str(out)])
     assert code == 0, capsys.readouterr().err
-    assert frames_of(out) == (3, (64, 16))
+    assert video_frames(out) == (3, (64, 16))
 
 
 def test_unwarp_image_is_cv2_remap_with_the_calibration_tables(data, rig, tmp_path, capsys):
@@ -171,7 +157,7 @@ def test_unwarp_warns_when_the_frames_have_another_aspect_ratio(rig, data, tmp_p
     err = capsys.readouterr().err
     assert code == 0, err
     assert "warning" in err and "aspect ratio" in err and len(err.splitlines()) == 1
-    assert frames_of(out) == (10, (64, 16))
+    assert video_frames(out) == (10, (64, 16))
 
 
 @pytest.mark.parametrize("kind", ["image", "video"])
@@ -189,7 +175,7 @@ def test_existing_output_is_replaced_only_with_overwrite(data, tmp_path, capsys,
     if kind == "image":
         assert cv2.imread(str(out)).shape == (16, 64, 3)
     else:
-        assert frames_of(out) == (10, (64, 16))
+        assert video_frames(out) == (10, (64, 16))
     assert leftovers(tmp_path) == []
 
 
@@ -198,7 +184,7 @@ def test_truncated_video_keeps_the_frames_so_far(data, tmp_path, capsys):
     truncated = tmp_path / "truncated.avi"
     raw = full.read_bytes()
     truncated.write_bytes(raw[: len(raw) * 6 // 10])
-    n_in, _ = frames_of(truncated)
+    n_in, _ = video_frames(truncated)
     assert 0 < n_in < 10  # the fixture really is truncated, and OpenCV still decodes the start
     out = tmp_path / "out.avi"
     code = main(["unwarp", str(truncated), "-c", str(data["calib"]), "--panorama", "64x16",
@@ -206,7 +192,7 @@ def test_truncated_video_keeps_the_frames_so_far(data, tmp_path, capsys):
     err = capsys.readouterr().err
     assert code == 0, err
     assert "warning" in err and "truncated" in err
-    assert frames_of(out) == (n_in, (64, 16))  # a valid, finalised file
+    assert video_frames(out) == (n_in, (64, 16))  # a valid, finalised file
     assert leftovers(tmp_path) == []
 
 
@@ -241,7 +227,7 @@ def test_ctrl_c_keeps_the_frames_so_far(data, tmp_path, capsys, monkeypatch, whe
     err = capsys.readouterr().err
     assert code == 130
     assert "interrupted: kept the 4 frames" in err and "Traceback" not in err
-    assert frames_of(out) == (4, (64, 16))
+    assert video_frames(out) == (4, (64, 16))
     assert leftovers(tmp_path) == []
 
 

@@ -9,6 +9,7 @@ import cv2
 import pytest
 
 import omnicam
+from conftest import video_frames
 
 EXAMPLES = pathlib.Path(__file__).resolve().parent.parent / "examples"
 
@@ -24,19 +25,6 @@ def read_png(path):
     image = cv2.imread(str(path), cv2.IMREAD_COLOR)
     assert image is not None, f"{path} is not a readable image"
     return image
-
-
-def video_frames(path):
-    cap = cv2.VideoCapture(str(path))
-    assert cap.isOpened(), f"cannot open {path}"
-    n, size = 0, None
-    while True:
-        ok, frame = cap.read()
-        if not ok:
-            break
-        n, size = n + 1, (frame.shape[1], frame.shape[0])
-    cap.release()
-    return n, size
 
 
 def test_quickstart_calibrates_the_render_and_writes_the_views(tmp_path):
