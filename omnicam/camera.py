@@ -46,17 +46,20 @@ def _finite_array(value, name, shape, expected):
     return arr
 
 
-def validate_K(K):
-    """Return ``K`` as a (3, 3) float64 array or raise ``ValueError``."""
-    arr = np.asarray(K, dtype=np.float64) if not isinstance(K, np.ndarray) else K.astype(np.float64)
+def validate_K(K, name="K"):
+    """Return ``K`` as a (3, 3) float64 array or raise ``ValueError`` naming ``name``."""
+    try:
+        arr = np.array(K, dtype=np.float64)
+    except (TypeError, ValueError):
+        raise ValueError(f"{name} must be a 3x3 camera matrix, got {K!r}") from None
     if arr.shape != (3, 3):
-        raise ValueError(f"K must be a 3x3 camera matrix, got shape {arr.shape}")
+        raise ValueError(f"{name} must be a 3x3 camera matrix, got shape {arr.shape}")
     if not np.isfinite(arr).all():
-        raise ValueError("K must be finite")
+        raise ValueError(f"{name} must be finite")
     if not np.allclose(arr[2], (0.0, 0.0, 1.0)):
-        raise ValueError(f"K must have last row (0, 0, 1), got {arr[2].tolist()}")
+        raise ValueError(f"{name} must have last row (0, 0, 1), got {arr[2].tolist()}")
     if abs(np.linalg.det(arr)) < 1e-12 or arr[0, 0] == 0 or arr[1, 1] == 0:
-        raise ValueError("K must be non-singular (fx, fy non-zero)")
+        raise ValueError(f"{name} must be non-singular (fx, fy non-zero)")
     return arr
 
 

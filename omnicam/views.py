@@ -35,6 +35,8 @@ import numbers
 import cv2
 import numpy as np
 
+from .camera import validate_K
+
 __all__ = ["init_panorama_maps", "init_perspective_maps", "rotation_from_ypr", "K_from_fov",
            "visible_elevation_range", "PanoramaView", "PerspectiveView", "UNSEEN", "PROJECTIONS",
            "M1TYPES", "TOLERANCE"]
@@ -162,20 +164,6 @@ def _check_rotation(R, name="R"):
         raise ValueError(f"{name} must be a finite 3x3 rotation matrix, got shape {arr.shape}")
     if not np.allclose(arr @ arr.T, np.eye(3), atol=1e-6) or np.linalg.det(arr) < 0:
         raise ValueError(f"{name} must be a rotation matrix (orthonormal, det +1)")
-    return arr
-
-
-def _check_K_new(K_new):
-    try:
-        arr = np.array(K_new, dtype=np.float64)
-    except (TypeError, ValueError):
-        raise ValueError(f"K_new must be a 3x3 camera matrix, got {K_new!r}") from None
-    if arr.shape != (3, 3) or not np.isfinite(arr).all():
-        raise ValueError(f"K_new must be a finite 3x3 camera matrix, got shape {arr.shape}")
-    if not np.allclose(arr[2], (0.0, 0.0, 1.0)):
-        raise ValueError(f"K_new must have last row (0, 0, 1), got {arr[2].tolist()}")
-    if abs(arr[0, 0] * arr[1, 1]) < 1e-12:
-        raise ValueError("K_new must be non-singular (fx, fy non-zero)")
     return arr
 
 
@@ -523,7 +511,7 @@ def init_perspective_maps(camera, K_new, size, R=None, m1type=cv2.CV_16SC2, dept
     -----
     Accuracy and ``CV_16SC2`` as for :func:`init_panorama_maps`.
     """
-    K_new = _check_K_new(K_new)
+    K_new = validate_K(K_new, "K_new")
     w, h = _check_size(size)
     m1type = _check_m1type(m1type)
     Rm = R0 if R is None else _check_rotation(R)
@@ -594,7 +582,7 @@ class PerspectiveView:
     def __init__(self, size, fov=90.0, yaw=0.0, pitch=0.0, roll=0.0, K_new=None, R=None,
                  depth=None, viewpoint=None):
         self.size = _check_size(size)
-        self.K_new = K_from_fov(fov, self.size) if K_new is None else _check_K_new(K_new)
+        self.K_new = K_from_fov(fov, self.size) if K_new is None else validate_K(K_new, "K_new")
         self.R = rotation_from_ypr(yaw, pitch, roll) if R is None else _check_rotation(R)
         self.depth = _check_depth(depth)
         self.viewpoint = (None if viewpoint is None

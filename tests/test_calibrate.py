@@ -7,6 +7,7 @@ import omnicam
 from omnicam import MisalignedHyperbolicCamera, synthetic
 from omnicam.calibration import calibrate
 from test_chen import RIGS, axis_angle_deg
+import conftest
 
 
 def posture_errors(cam, truth):
@@ -84,11 +85,7 @@ def test_rim_clipped_by_the_frame_gives_the_posture():
 
 
 def test_skewed_K_and_opencv_point_layout():
-    base = synthetic.misaligned_rig(4.0, 100.0, (-2.0, 1.0, 2.0))
-    K = base.K.copy()
-    K[0, 1] = 0.8
-    K[1, 1] *= 1.02
-    truth = base.replace(K=K)
+    truth = conftest.RIGS["skew"]  # skew 0.8, fy 2 % longer than fx
     pts = truth.rim_image_points(200).reshape(-1, 1, 2).astype(np.float32)
     lines = [x.reshape(-1, 1, 2) for x in synthetic.far_line_pixels(truth, rng=4)]
     cam, report = calibrate(truth.K, truth.mirror, boundary_points=pts, far_lines=lines)
