@@ -35,8 +35,8 @@ import math
 import cv2
 import numpy as np
 
-from .camera import MisalignedHyperbolicCamera
-from .mirror import HyperbolicMirror
+from ..camera import MisalignedHyperbolicCamera
+from ..mirror import HyperbolicMirror
 
 __all__ = ["default_mirror", "aligned_rig", "misaligned_rig", "random_misaligned_rig",
            "equirect_directions", "equirect_coords", "make_environment", "render_environment",
