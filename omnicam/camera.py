@@ -18,100 +18,18 @@ Model contract (the binding text is ``shared/reference/conventions.md``):
 """
 from __future__ import annotations
 
-import math
-
 import cv2
 import numpy as np
 
 from . import raytrace
+from ._validate import finite_array, validate_D, validate_image_size, validate_K
+from .gauge import canonical_rvec
+from .io import MODEL_NAME
 from .mirror import HyperbolicMirror
 
-__all__ = ["MisalignedHyperbolicCamera"]
+__all__ = ["MisalignedHyperbolicCamera", "MODEL_NAME", "canonical_rvec", "scale_K", "validate_D",
+           "validate_K", "validate_image_size"]  # the last five re-exported for callers
 
-MODEL_NAME = "misaligned_hyperbolic"
-_D_LENGTHS = (4, 5, 8, 12, 14)
-
-
-# -- validation of parameters (used by the constructor and by io) -----------------------------
-def _finite_array(value, name, shape, expected):
-    try:
-        arr = np.array(value, dtype=np.float64)
-    except (TypeError, ValueError):
-        raise ValueError(f"{name} must be {expected}, got {value!r}") from None
-    if arr.size != int(np.prod(shape)):
-        raise ValueError(f"{name} must be {expected}, got shape {arr.shape}")
-    arr = arr.reshape(shape)
-    if not np.isfinite(arr).all():
-        raise ValueError(f"{name} must be finite, got {arr.ravel().tolist()}")
-    return arr
-
-
-def validate_K(K, name="K"):
-    """Return ``K`` as a (3, 3) float64 array or raise ``ValueError`` naming ``name``."""
-    try:
-        arr = np.array(K, dtype=np.float64)
-    except (TypeError, ValueError):
-        raise ValueError(f"{name} must be a 3x3 camera matrix, got {K!r}") from None
-    if arr.shape != (3, 3):
-        raise ValueError(f"{name} must be a 3x3 camera matrix, got shape {arr.shape}")
-    if not np.isfinite(arr).all():
-        raise ValueError(f"{name} must be finite")
-    if not np.allclose(arr[2], (0.0, 0.0, 1.0)):
-        raise ValueError(f"{name} must have last row (0, 0, 1), got {arr[2].tolist()}")
-    if abs(np.linalg.det(arr)) < 1e-12 or arr[0, 0] == 0 or arr[1, 1] == 0:
-        raise ValueError(f"{name} must be non-singular (fx, fy non-zero)")
-    return arr
-
-
-def validate_D(D):
-    """Return ``D`` as a flat float64 array of an OpenCV length, or ``None``."""
-    if D is None:
-        return None
-    try:
-        arr = np.array(D, dtype=np.float64).ravel()
-    except (TypeError, ValueError):
-        raise ValueError(f"D must be None or 4, 5, 8, 12 or 14 numbers, got {D!r}") from None
-    if arr.size not in _D_LENGTHS:
-        raise ValueError(f"D must have 4, 5, 8, 12 or 14 coefficients (as cv2.projectPoints), "
-                         f"got {arr.size}")
-    if not np.isfinite(arr).all():
-        raise ValueError("D must be finite")
-    return arr
-
-
-def validate_image_size(image_size):
-    """Return ``(width, height)`` as a tuple of positive ints, or ``None``."""
-    if image_size is None:
-        return None
-    try:
-        w, h = (int(v) for v in image_size)
-        exact = all(float(v) == int(v) for v in image_size)
-    except (TypeError, ValueError):
-        raise ValueError(f"image_size must be (width, height), got {image_size!r}") from None
-    if not exact or w <= 0 or h <= 0:
-        raise ValueError(f"image_size must be two positive integers (width, height), "
-                         f"got {image_size!r}")
-    return (w, h)
-
-
-def canonical_rvec(rvec):
-    """The gauge of conventions.md: the smallest rotation taking +z to the mirror axis ``R e_z``.
-
-    Rotations about the mirror axis are unobservable (5 DOF); this picks the representative.
-    """
-    rvec = np.asarray(rvec, np.float64).reshape(3)
-    if rvec[2] == 0.0 and np.linalg.norm(rvec) < math.pi:
-        # already a rotation about an axis in the x-y plane: the representative itself (and
-        # returned unchanged, so the gauge is idempotent to the last bit)
-        return rvec.copy()
-    R, _ = cv2.Rodrigues(rvec.reshape(3, 1))
-    m = R[:, 2]
-    axis = np.array([-m[1], m[0], 0.0])  # e_z x m
-    s = float(np.linalg.norm(axis))
-    angle = math.atan2(s, m[2])
-    if s < 1e-300:
-        return np.zeros(3) if m[2] > 0 else np.array([math.pi, 0.0, 0.0])
-    return axis / s * angle
 
 
 def scale_K(K, from_size, to_size):
@@ -163,8 +81,8 @@ class MisalignedHyperbolicCamera:
         D = validate_D(D)
         self._D = None if D is None else _readonly(D)
         self._mirror = mirror
-        rvec = _finite_array(rvec, "rvec", (3,), "a rotation vector of 3 numbers")
-        tvec = _finite_array(tvec, "tvec", (3,), "a translation vector of 3 numbers")
+        rvec = finite_array(rvec, "rvec", (3,), "a rotation vector of 3 numbers")
+        tvec = finite_array(tvec, "tvec", (3,), "a translation vector of 3 numbers")
         self._rvec = _readonly(canonical_rvec(rvec))
         self._tvec = _readonly(tvec)
         self._R = _readonly(cv2.Rodrigues(self._rvec.reshape(3, 1))[0])
@@ -283,8 +201,8 @@ class MisalignedHyperbolicCamera:
         if (rvec is None) != (tvec is None):
             raise ValueError("give both rvec and tvec, or neither")
         if rvec is not None:
-            Rm = cv2.Rodrigues(_finite_array(rvec, "rvec", (3,), "3 numbers").reshape(3, 1))[0]
-            pts = np.ascontiguousarray(pts @ Rm.T + _finite_array(tvec, "tvec", (3,), "3 numbers"))
+            Rm = cv2.Rodrigues(finite_array(rvec, "rvec", (3,), "3 numbers").reshape(3, 1))[0]
+            pts = np.ascontiguousarray(pts @ Rm.T + finite_array(tvec, "tvec", (3,), "3 numbers"))
         return restore(raytrace.project(pts, False, self._K, self._D, self._R, self._tvec,
                                         self._C, self._mirror))
 

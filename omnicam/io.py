@@ -21,12 +21,14 @@ import tempfile
 import cv2
 import numpy as np
 
+from ._validate import validate_D, validate_image_size, validate_K
 from .mirror import HyperbolicMirror
 
 __all__ = ["save_camera", "load_camera", "read_intrinsics", "write_intrinsics", "read_far_lines",
-           "write_far_lines", "FORMAT_VERSION", "SUFFIXES"]
+           "write_far_lines", "FORMAT_VERSION", "MODEL_NAME", "SUFFIXES"]
 
 FORMAT_VERSION = 1
+MODEL_NAME = "misaligned_hyperbolic"  # the model tag of a calibration file
 SUFFIXES = (".yaml", ".yml", ".xml", ".json")
 # field names of an intrinsics file, first match wins: omnicam's, then OpenCV's calibration sample
 K_FIELDS = ("K", "camera_matrix", "cameraMatrix")
@@ -85,8 +87,6 @@ def save_camera(camera, path):
     ValueError
         Unknown extension, or the folder cannot be written.
     """
-    from .camera import MODEL_NAME
-
     def write(fs):
         fs.write("format_version", FORMAT_VERSION)
         fs.write("model", MODEL_NAME)
@@ -108,8 +108,6 @@ def save_camera(camera, path):
 
 def write_intrinsics(path, K, D=None, image_size=None):
     """Write a pinhole's ``K``, ``D`` and ``image_size`` (what :func:`read_intrinsics` reads)."""
-    from .camera import validate_D, validate_image_size, validate_K
-
     K, D, image_size = validate_K(K), validate_D(D), validate_image_size(image_size)
 
     def write(fs):
@@ -229,8 +227,11 @@ def _reading(path, what):
         fs.release()
 
 
-def load_camera(path, cls=None):
-    """Read and validate a calibration file; return a :class:`MisalignedHyperbolicCamera`.
+def load_camera(path, cls):
+    """Read and validate a calibration file; return ``cls(K, mirror, rvec, tvec, D, image_size)``.
+
+    ``cls`` is the camera class (:meth:`MisalignedHyperbolicCamera.load` passes itself), so this
+    module stays below the camera in the layers and never imports it.
 
     Raises
     ------
@@ -239,9 +240,6 @@ def load_camera(path, cls=None):
     ValueError
         Anything malformed, missing, non-finite or inconsistent, naming the file and the field.
     """
-    from .camera import MODEL_NAME, MisalignedHyperbolicCamera
-
-    cls = cls or MisalignedHyperbolicCamera
     with _reading(path, "calibration file") as r:
         version = r.number("format_version")
         if version != FORMAT_VERSION:
@@ -284,8 +282,6 @@ def read_intrinsics(path):
     FileNotFoundError, ValueError
         As :func:`load_camera`, naming the file and the field.
     """
-    from .camera import validate_D, validate_image_size, validate_K
-
     with _reading(path, "intrinsics file") as r:
         name = r.first(K_FIELDS, required=True)
         K = r.check(name, validate_K, r.matrix(name, (3, 3), allow_list=True))

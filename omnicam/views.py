@@ -35,7 +35,7 @@ import numbers
 import cv2
 import numpy as np
 
-from .camera import validate_K
+from ._validate import validate_K
 
 __all__ = ["init_panorama_maps", "init_perspective_maps", "rotation_from_ypr", "K_from_fov",
            "visible_elevation_range", "PanoramaView", "PerspectiveView", "UNSEEN", "PROJECTIONS",

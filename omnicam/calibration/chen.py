@@ -25,7 +25,7 @@ physical candidates are the two circular sections; section 3.2 (:mod:`.selection
 Paper errata followed here (``conventions.md``): the conic's sign is fixed so that ``Q_e`` has
 exactly one negative eigenvalue; ``V`` is made a rotation (``det V = +1``) so ``R = V U`` is one;
 the free variable of eqs. 39-40 is ``theta`` (the unobservable rotation about the mirror axis,
-set to 0 and then replaced by the gauge of :func:`omnicam.camera.canonical_rvec`); the third
+set to 0 and then replaced by the gauge of :func:`omnicam.gauge.canonical_rvec`); the third
 column of ``U`` (printed as a second ``u2``, eq. 41) is ``u3``; ``delta`` of eq. 42 is the
 square root of the printed ratio.
 """
@@ -37,7 +37,8 @@ import math
 import cv2
 import numpy as np
 
-from ..camera import canonical_rvec, validate_K
+from .._validate import validate_K
+from ..gauge import canonical_rvec
 from ..mirror import HyperbolicMirror
 
 __all__ = ["Candidate", "normalized_conic", "chen_candidates", "rim_cone", "rim_conic",
