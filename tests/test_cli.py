@@ -339,16 +339,16 @@ def test_output_is_a_folder(data, tmp_path, capsys):
 
 @pytest.mark.parametrize("kind", ["image", "video"])
 def test_output_file_that_cannot_be_created(data, tmp_path, capsys, monkeypatch, kind):
-    import omnicam.cli as cli
+    import tempfile
 
-    real_mkstemp = cli.tempfile.mkstemp
+    real_mkstemp = tempfile.mkstemp
 
     def refuse_in_tmp_path(*args, **kwargs):  # e.g. a read-only mount, even for root
         if os.path.samefile(kwargs.get("dir") or tempfile.gettempdir(), tmp_path):
             raise PermissionError(13, "Permission denied")
         return real_mkstemp(*args, **kwargs)
 
-    monkeypatch.setattr(cli.tempfile, "mkstemp", refuse_in_tmp_path)
+    monkeypatch.setattr(tempfile, "mkstemp", refuse_in_tmp_path)
     out = tmp_path / ("out.png" if kind == "image" else "out.avi")
     code = main(["unwarp", str(data[kind]), "-c", str(data["calib"]), "--panorama", "64x16",
                  "-q", "-o", str(out)])
@@ -544,7 +544,7 @@ def test_calibrate_refuses_existing_output_without_overwrite(calib_inputs, tmp_p
 @pytest.fixture(scope="module")
 def scene(tmp_path_factory):
     """A 300x300 render of the demo scene by a misaligned rig, and its far-line pixels."""
-    from omnicam.cli import demo_environment, demo_far_lines
+    from omnicam.synthetic.demo import demo_environment, demo_far_lines
 
     folder = tmp_path_factory.mktemp("calibrate")
     truth = synthetic.misaligned_rig(image_size=(300, 300))

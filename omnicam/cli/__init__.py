@@ -1,0 +1,92 @@
+"""The ``omnicam`` console script: ``calibrate``, ``unwarp``, ``info`` and ``demo``.
+
+::
+
+    omnicam calibrate IMAGE --mirror A B RIM --intrinsics K.yaml [--far-lines LINES.json]
+                      -o CALIB [--no-refine] [--overlay PATH] [--overwrite]
+    omnicam unwarp INPUT -c CALIB (--panorama WxH [--elevation LO HI] [--projection P]
+                   | --perspective WxH --fov DEG [--yaw Y] [--pitch P] [--roll R])
+                   [--depth MM] -o OUTPUT [--overwrite] [--max-frames N] [--fourcc CODE] [--quiet]
+    omnicam info CALIB
+    omnicam demo [-o OUTDIR]
+
+Contract (py360convert style): :func:`main` takes ``argv`` and returns the exit status, so tests
+call ``main([...])`` directly. Every failure the user can cause is one line on stderr,
+``omnicam: error: ...``, with exit status 2 for a malformed command line and 1 for the rest
+(130 after Ctrl-C). Nothing existing is overwritten unless ``--overwrite`` says so, and outputs
+are written to a temporary file in the destination folder (same extension, so the same format)
+that is renamed into place, so a good file is never replaced by a half-written one. A video
+output is also renamed into place when the input ends early (a truncated file) or on Ctrl-C: the
+frames written so far are kept in a valid, finalised file. Set ``OMNICAM_DEBUG=1`` to get the
+traceback of an unexpected error instead of its one-line summary.
+"""
+
+from __future__ import annotations
+
+import os
+
+from . import calibrate, demo, info, unwarp
+from ._common import (
+    EXIT_FAILURE,
+    EXIT_INTERRUPTED,
+    EXIT_OK,
+    PROG,
+    CliError,
+    _error,
+    _one_line,
+    _opencv_quiet,
+    _Parser,
+)
+from .unwarp import Progress  # noqa: F401 (public for tests that patch it)
+
+__all__ = ["main", "build_parser"]
+
+
+# -- the parser -------------------------------------------------------------------------------
+def build_parser():
+    """The ``argparse`` parser of the ``omnicam`` command (one sub-parser per command)."""
+    parser = _Parser(
+        prog=PROG,
+        description="Calibrate and unwarp misaligned hyperbolic-mirror "
+        "catadioptric cameras.",
+    )
+    from .. import __version__
+
+    parser.add_argument(
+        "--version", action="version", version=f"%(prog)s {__version__}"
+    )
+    sub = parser.add_subparsers(dest="command", metavar="COMMAND", required=True)
+
+    for module in (calibrate, unwarp, info, demo):
+        module.add_parser(sub)
+    return parser
+
+
+def main(argv=None) -> int:
+    """Run the ``omnicam`` command line; return the exit status."""
+    try:
+        with _opencv_quiet():
+            args = build_parser().parse_args(argv)
+            return args.func(args) or EXIT_OK
+    except CliError as e:
+        _error(str(e))
+        return e.status
+    except SystemExit as e:  # --help, --version
+        return e.code if isinstance(e.code, int) else EXIT_OK
+    except KeyboardInterrupt:
+        _error("interrupted")
+        return EXIT_INTERRUPTED
+    except Exception as e:  # a bug: still one line, unless asked for the traceback
+        if os.environ.get("OMNICAM_DEBUG"):
+            raise
+        _error(
+            f"unexpected {type(e).__name__}: {_one_line(e, 300)} "
+            f"(set OMNICAM_DEBUG=1 for the traceback)"
+        )
+        return EXIT_FAILURE
+
+
+if __name__ == "__main__":
+    import sys
+
+    sys.exit(main())

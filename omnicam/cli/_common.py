@@ -1,0 +1,272 @@
+"""What every ``omnicam`` subcommand shares: one-line errors, argument types, files in and out."""
+
+from __future__ import annotations
+
+import argparse
+import contextlib
+import math
+import os
+import re
+import sys
+import tempfile
+
+import cv2
+
+PROG = "omnicam"
+
+
+# Exit statuses
+EXIT_OK, EXIT_FAILURE, EXIT_USAGE, EXIT_INTERRUPTED = 0, 1, 2, 130
+
+
+class CliError(Exception):
+    """A failure the user can act on: printed as one line, never as a traceback."""
+
+    def __init__(self, message, status=EXIT_FAILURE):
+        super().__init__(message)
+        self.status = status
+
+
+class _Parser(argparse.ArgumentParser):
+    """argparse with one-line errors: usage problems become a :class:`CliError` (status 2)."""
+
+    def error(self, message):
+        where = self.prog[len(PROG) :].strip()
+        raise CliError(
+            f"{where + ': ' if where else ''}{message} (see '{self.prog} --help')",
+            EXIT_USAGE,
+        )
+
+
+def _size(text):
+    """``WxH`` -> ``(W, H)`` positive ints."""
+    m = re.fullmatch(r"\s*(\d+)\s*[xX]\s*(\d+)\s*", text)
+    if not m:
+        raise argparse.ArgumentTypeError(
+            f"expected WIDTHxHEIGHT such as 1024x256, got {text!r}"
+        )
+    w, h = int(m.group(1)), int(m.group(2))
+    if not (0 < w <= 32767 and 0 < h <= 32767):
+        raise argparse.ArgumentTypeError(
+            f"width and height must be 1..32767, got {text!r}"
+        )
+    return w, h
+
+
+def _finite(text):
+    try:
+        value = float(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected a number, got {text!r}") from None
+    if not math.isfinite(value):
+        raise argparse.ArgumentTypeError(f"expected a finite number, got {text!r}")
+    return value
+
+
+def _positive(text):
+    value = _finite(text)
+    if value <= 0:
+        raise argparse.ArgumentTypeError(f"expected a positive number, got {text!r}")
+    return value
+
+
+def _count(text):
+    try:
+        value = int(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(
+            f"expected a positive integer, got {text!r}"
+        ) from None
+    if value <= 0:
+        raise argparse.ArgumentTypeError(f"expected a positive integer, got {text!r}")
+    return value
+
+
+def _fourcc(text):
+    if len(text) != 4:
+        raise argparse.ArgumentTypeError(f"a FourCC has 4 characters, got {text!r}")
+    return text
+
+
+@contextlib.contextmanager
+def _opencv_quiet():
+    """OpenCV's and FFmpeg's own log lines are not for the user: our errors say it in one line.
+
+    FFmpeg takes its level from ``OPENCV_FFMPEG_LOGLEVEL`` when a capture opens (so setting it
+    after ``import cv2`` works; a value the user set is kept). OpenCV's level is restored after.
+    """
+    os.environ.setdefault("OPENCV_FFMPEG_LOGLEVEL", "-8")  # AV_LOG_QUIET
+    logging = getattr(getattr(cv2, "utils", None), "logging", None)
+    previous = None
+    if logging is not None:
+        with contextlib.suppress(Exception):
+            previous = logging.getLogLevel()
+            logging.setLogLevel(logging.LOG_LEVEL_SILENT)
+    try:
+        yield
+    finally:
+        if previous is not None:
+            with contextlib.suppress(Exception):
+                logging.setLogLevel(previous)
+
+
+def _one_line(e, limit=None):
+    """``str(e)`` on one line, without terminal colour codes, optionally shortened."""
+    text = " ".join(re.sub(r"\x1b\[[0-9;]*m", "", str(e)).split()) or type(e).__name__
+    if limit and len(text) > limit:
+        text = text[: limit - 3] + "..."
+    return text
+
+
+def _error(message):
+    print(f"{PROG}: error: {_one_line(message)}", file=sys.stderr, flush=True)
+
+
+def _warn(message):
+    print(f"{PROG}: warning: {_one_line(message)}", file=sys.stderr, flush=True)
+
+
+def _load_camera(path):
+    from ..camera import MisalignedHyperbolicCamera
+
+    try:
+        return MisalignedHyperbolicCamera.load(path)
+    except (FileNotFoundError, ValueError) as e:
+        raise CliError(_one_line(e)) from None
+
+
+def _check_output(path, overwrite, what="output"):
+    """Refuse an output we must not or cannot write, before doing any work."""
+    path = os.fspath(path)
+    folder = os.path.dirname(os.path.abspath(path))
+    if os.path.isdir(path):
+        raise CliError(f"{what} {path} is a folder")
+    if os.path.lexists(path) and not overwrite:
+        raise CliError(f"{what} {path} exists; pass --overwrite to replace it")
+    if not os.path.isdir(folder):
+        raise CliError(f"{what} {path}: folder {folder} does not exist")
+    if not os.access(folder, os.W_OK | os.X_OK):
+        raise CliError(f"{what} {path}: folder {folder} is not writable")
+
+
+def _temp_beside(path):
+    """A new empty temporary file next to ``path`` with the same extension (so the same format)."""
+    folder = os.path.dirname(os.path.abspath(path))
+    stem, ext = os.path.splitext(os.path.basename(path))
+    try:
+        fd, tmp = tempfile.mkstemp(prefix=f".{stem}.", suffix=ext, dir=folder)
+    except OSError as e:
+        raise CliError(f"cannot write in {folder}: {e.strerror or e}") from None
+    os.close(fd)
+    # mkstemp makes the file private (0600); the output gets the mode a new file would get
+    umask = os.umask(0)
+    os.umask(umask)
+    with contextlib.suppress(OSError):
+        os.chmod(tmp, 0o666 & ~umask)
+    return tmp
+
+
+def _remove_quietly(path):
+    with contextlib.suppress(OSError):
+        os.remove(path)
+
+
+def _publish(tmp, path, overwrite):
+    """Rename the finished temporary file to ``path`` (never replacing a file without overwrite)."""
+    if not overwrite and os.path.lexists(path):
+        _remove_quietly(tmp)
+        raise CliError(
+            f"output {path} appeared while writing; pass --overwrite to replace it"
+        )
+    try:
+        os.replace(tmp, path)
+    except OSError as e:
+        _remove_quietly(tmp)
+        raise CliError(f"cannot write {path}: {e.strerror or e}") from None
+
+
+def _write_image(path, image, overwrite=True):
+    """``cv2.imwrite`` through a temporary file renamed into place."""
+    path = os.fspath(path)
+    if not cv2.haveImageWriter(path):
+        raise CliError(
+            f"output {path}: no image writer for extension "
+            f"{os.path.splitext(path)[1] or '(none)'!r}; use .png, .jpg, .tif, ..."
+        )
+    tmp = _temp_beside(path)
+    try:
+        try:
+            ok, detail = cv2.imwrite(tmp, image), "cv2.imwrite failed"
+        except cv2.error as e:
+            ok, detail = False, _cv_message(e)
+        if not ok:
+            raise CliError(f"cannot write {path}: {detail}")
+    except BaseException:
+        _remove_quietly(tmp)
+        raise
+    _publish(tmp, path, overwrite)
+
+
+def _cv_message(e):
+    """The useful part of a ``cv2.error`` message."""
+    lines = [ln for ln in str(e).splitlines() if ln.strip()]
+    text = lines[-1] if lines else str(e)
+    return re.sub(r"^.*?error: \(-?\d+:[^)]*\)\s*", "", text).strip() or text
+
+
+def _read_image(path, flags=cv2.IMREAD_UNCHANGED):
+    if not os.path.isfile(path):
+        raise CliError(
+            f"image {path} does not exist"
+            if not os.path.exists(path)
+            else f"image {path} is not a file"
+        )
+    try:
+        image = cv2.imread(path, flags)
+    except cv2.error as e:
+        raise CliError(f"cannot read image {path}: {_cv_message(e)}") from None
+    if image is None or image.size == 0:
+        raise CliError(f"cannot read image {path}: not an image format OpenCV reads")
+    return image
+
+
+def read_intrinsics(path):
+    """:func:`omnicam.io.read_intrinsics` with its errors as one-line CLI errors."""
+    from ..io import read_intrinsics as read
+
+    try:
+        return read(path)
+    except (FileNotFoundError, ValueError) as e:
+        raise CliError(_one_line(e)) from None
+
+
+def read_far_lines(path):
+    """:func:`omnicam.io.read_far_lines` with its errors as one-line CLI errors."""
+    from ..io import read_far_lines as read
+
+    try:
+        return read(path)
+    except (FileNotFoundError, ValueError) as e:
+        raise CliError(_one_line(e)) from None
+
+
+def _report_text(report):
+    summary = getattr(report, "summary", None)
+    return str(
+        summary() if callable(summary) else summary if summary is not None else report
+    )
+
+
+def _save_camera(camera, path, overwrite):
+    if not overwrite and os.path.lexists(path):
+        raise CliError(
+            f"calibration file {path} exists; pass --overwrite to replace it"
+        )
+    try:
+        camera.save(path)
+    except (ValueError, OSError) as e:
+        raise CliError(f"cannot write {path}: {_one_line(e)}") from None
+
+
+def _indent(text, prefix="   "):
+    return "\n".join(prefix + line for line in text.splitlines())
