@@ -16,11 +16,11 @@ from __future__ import annotations
 import contextlib
 import json
 import os
-import tempfile
 
 import cv2
 import numpy as np
 
+from ._atomic import OutputError, atomic_output, write_bytes
 from ._validate import validate_D, validate_image_size, validate_K
 from .mirror import HyperbolicMirror
 
@@ -44,32 +44,31 @@ def _suffix(path, what="calibration file"):
 
 
 def _atomic_filestorage(path, what, write):
-    """Write a ``cv2.FileStorage`` file through a temporary file renamed into place.
+    """Write a ``cv2.FileStorage`` file through :func:`omnicam._atomic.atomic_output`.
 
-    ``write(fs)`` fills the open storage. The temporary file lives in the same folder with the
-    same extension (the format follows it), so a good file is never replaced by a broken one.
+    ``write(fs)`` fills the open storage. The temporary file has the target's extension (the
+    format follows it); after the write it must open again and hold the ``format_version`` or
+    ``K`` written first, since ``cv2.FileStorage`` does not report a failed write (a full disk
+    leaves an empty or truncated file).
     """
     path = os.fspath(path)
-    ext = _suffix(path, what)
-    folder = os.path.dirname(os.path.abspath(path))
-    if not os.path.isdir(folder):
-        raise ValueError(f"{what} {path}: folder {folder} does not exist")
-    fd, tmp = tempfile.mkstemp(prefix=".omnicam-", suffix=ext, dir=folder)
-    os.close(fd)
-    umask = os.umask(0)
-    os.umask(umask)
-    os.chmod(tmp, 0o666 & ~umask)  # mkstemp makes 0600; a saved file gets the usual mode
-    try:
+    _suffix(path, what)
+
+    def verify(tmp):
+        fs = cv2.FileStorage(tmp, cv2.FILE_STORAGE_READ)
+        try:
+            return fs.isOpened() and not fs.root().empty()
+        finally:
+            fs.release()
+
+    with atomic_output(path, what=what, verify=verify) as tmp:
         fs = cv2.FileStorage(tmp, cv2.FILE_STORAGE_WRITE)
-        if not fs.isOpened():
-            raise ValueError(f"{what} {path}: cannot write in {folder}")
-        write(fs)
-        fs.release()
-        os.replace(tmp, path)
-    except BaseException:
-        if os.path.exists(tmp):
-            os.remove(tmp)
-        raise
+        try:
+            if not fs.isOpened():
+                raise OutputError(f"cannot write {what} {path}: OpenCV cannot open it for writing")
+            write(fs)
+        finally:
+            fs.release()
 
 
 def _write_seq(fs, name, values):
@@ -341,17 +340,9 @@ def read_far_lines(path):
 def write_far_lines(path, far_lines):
     """Write far-line pixels as JSON (what :func:`read_far_lines` reads), atomically."""
     data = [np.asarray(line, dtype=np.float64).reshape(-1, 2).tolist() for line in far_lines]
-    path = os.fspath(path)
-    fd, tmp = tempfile.mkstemp(prefix=".omnicam-", suffix=".json",
-                               dir=os.path.dirname(os.path.abspath(path)))
-    try:
-        with os.fdopen(fd, "w", encoding="utf-8") as f:
-            json.dump(data, f)
-        umask = os.umask(0)
-        os.umask(umask)
-        os.chmod(tmp, 0o666 & ~umask)
-        os.replace(tmp, path)
-    except BaseException:
-        if os.path.exists(tmp):
-            os.remove(tmp)
-        raise
+
+    def verify(tmp):
+        with open(tmp, encoding="utf-8") as f:
+            return json.load(f) == data
+
+    write_bytes(path, json.dumps(data), what="far-lines file", verify=verify)

@@ -339,16 +339,15 @@ def test_output_is_a_folder(data, tmp_path, capsys):
 
 @pytest.mark.parametrize("kind", ["image", "video"])
 def test_output_file_that_cannot_be_created(data, tmp_path, capsys, monkeypatch, kind):
-    import tempfile
+    real_open = os.open
 
-    real_mkstemp = tempfile.mkstemp
-
-    def refuse_in_tmp_path(*args, **kwargs):  # e.g. a read-only mount, even for root
-        if os.path.samefile(kwargs.get("dir") or tempfile.gettempdir(), tmp_path):
+    def refuse_in_tmp_path(path, flags, *args, **kwargs):  # a read-only mount, even for root
+        if flags & os.O_CREAT and os.path.samefile(os.path.dirname(os.path.abspath(path)),
+                                                   tmp_path):
             raise PermissionError(13, "Permission denied")
-        return real_mkstemp(*args, **kwargs)
+        return real_open(path, flags, *args, **kwargs)
 
-    monkeypatch.setattr(tempfile, "mkstemp", refuse_in_tmp_path)
+    monkeypatch.setattr(os, "open", refuse_in_tmp_path)
     out = tmp_path / ("out.png" if kind == "image" else "out.avi")
     code = main(["unwarp", str(data[kind]), "-c", str(data["calib"]), "--panorama", "64x16",
                  "-q", "-o", str(out)])

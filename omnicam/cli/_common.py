@@ -8,9 +8,10 @@ import math
 import os
 import re
 import sys
-import tempfile
 
 import cv2
+
+from .._atomic import OutputError, atomic_output, temp_beside
 
 PROG = "omnicam"
 
@@ -151,19 +152,10 @@ def _check_output(path, overwrite, what="output"):
 
 def _temp_beside(path):
     """A new empty temporary file next to ``path`` with the same extension (so the same format)."""
-    folder = os.path.dirname(os.path.abspath(path))
-    stem, ext = os.path.splitext(os.path.basename(path))
     try:
-        fd, tmp = tempfile.mkstemp(prefix=f".{stem}.", suffix=ext, dir=folder)
-    except OSError as e:
-        raise CliError(f"cannot write in {folder}: {e.strerror or e}") from None
-    os.close(fd)
-    # mkstemp makes the file private (0600); the output gets the mode a new file would get
-    umask = os.umask(0)
-    os.umask(umask)
-    with contextlib.suppress(OSError):
-        os.chmod(tmp, 0o666 & ~umask)
-    return tmp
+        return temp_beside(path)
+    except OutputError as e:
+        raise CliError(str(e)) from None
 
 
 def _remove_quietly(path):
@@ -175,9 +167,7 @@ def _publish(tmp, path, overwrite):
     """Rename the finished temporary file to ``path`` (never replacing a file without overwrite)."""
     if not overwrite and os.path.lexists(path):
         _remove_quietly(tmp)
-        raise CliError(
-            f"output {path} appeared while writing; pass --overwrite to replace it"
-        )
+        raise CliError(f"output {path} appeared while writing; pass --overwrite to replace it")
     try:
         os.replace(tmp, path)
     except OSError as e:
@@ -186,25 +176,28 @@ def _publish(tmp, path, overwrite):
 
 
 def _write_image(path, image, overwrite=True):
-    """``cv2.imwrite`` through a temporary file renamed into place."""
+    """``cv2.imwrite`` through :func:`omnicam._atomic.atomic_output` (checked by reading back)."""
     path = os.fspath(path)
     if not cv2.haveImageWriter(path):
         raise CliError(
             f"output {path}: no image writer for extension "
             f"{os.path.splitext(path)[1] or '(none)'!r}; use .png, .jpg, .tif, ..."
         )
-    tmp = _temp_beside(path)
+
+    def verify(tmp):
+        back = cv2.imread(tmp, cv2.IMREAD_UNCHANGED)
+        return back is not None and back.shape[:2] == image.shape[:2]
+
     try:
-        try:
-            ok, detail = cv2.imwrite(tmp, image), "cv2.imwrite failed"
-        except cv2.error as e:
-            ok, detail = False, _cv_message(e)
-        if not ok:
-            raise CliError(f"cannot write {path}: {detail}")
-    except BaseException:
-        _remove_quietly(tmp)
-        raise
-    _publish(tmp, path, overwrite)
+        with atomic_output(path, what="image", overwrite=overwrite, verify=verify) as tmp:
+            try:
+                ok, detail = cv2.imwrite(tmp, image), "cv2.imwrite failed"
+            except cv2.error as e:
+                ok, detail = False, _cv_message(e)
+            if not ok:
+                raise CliError(f"cannot write {path}: {detail}")
+    except OutputError as e:
+        raise CliError(str(e)) from None
 
 
 def _cv_message(e):

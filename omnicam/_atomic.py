@@ -1,0 +1,229 @@
+"""One way to write a file: a temporary file beside it, flushed, checked, then renamed into place.
+
+Every file omnicam writes (calibration, intrinsics and far-line files, images, maps, exports,
+videos) goes through :func:`atomic_output`, so a reader sees either the old file or the complete
+new one, never a half-written one -- also on a full disk, Ctrl-C or a crash mid-write:
+
+1. a new, empty temporary file is created next to the target with the same extension (OpenCV
+   picks the format from it), named ``.<name>.omnicam-tmp-<pid>-<random><ext>``, created with
+   ``os.open(..., 0o666)`` so the process umask applies as for any new file (no umask flips);
+2. the caller writes it (by name: ``cv2.FileStorage``, ``cv2.imwrite``, ``cv2.VideoWriter``);
+3. it is flushed to the disk (``fsync``), must be non-empty, and ``verify(tmp)`` (reading it
+   back) must pass -- ``cv2.FileStorage`` and ``cv2.imwrite`` do not report every failed write;
+4. only then ``os.replace`` puts it in place (``overwrite=False``: a hard link that fails if the
+   target appeared meanwhile) and the folder is flushed.
+
+Any failure removes the temporary file, leaves the old target untouched and raises
+:class:`OutputError` (a ``ValueError``) naming the file and the cause. Temporary files left by a
+killed process are removed by the next write into the same folder (:func:`remove_stale`).
+"""
+from __future__ import annotations
+
+import contextlib
+import errno
+import os
+import secrets
+import time
+
+__all__ = ["OutputError", "atomic_output", "write_bytes", "temp_beside", "remove_stale",
+           "TEMP_MARK"]
+
+TEMP_MARK = ".omnicam-tmp-"
+STALE_AFTER_S = 60.0  # a temporary file of a process that is gone, or this old, is litter
+
+
+class OutputError(ValueError):
+    """A file could not be written; the previous file at that path (if any) is unchanged."""
+
+
+def _describe(e):
+    if isinstance(e, OSError):
+        text = e.strerror or str(e)
+        if e.errno == errno.ENOSPC:
+            text = "no space left on the device"
+        return text
+    return str(e)
+
+
+def _pid_alive(pid):
+    try:
+        os.kill(pid, 0)
+    except ProcessLookupError:
+        return False
+    except OSError:  # EPERM: someone else's live process
+        return True
+    return True
+
+
+def remove_stale(folder, now=None):
+    """Remove temporary files of dead or long-gone writers in ``folder``; return how many.
+
+    A file ``.<name>.omnicam-tmp-<pid>-<random><ext>`` is stale when process ``pid`` no longer
+    exists or it is older than ``STALE_AFTER_S`` and its process is not this one. Errors are
+    ignored: this is housekeeping, never a reason to fail a save.
+    """
+    now = time.time() if now is None else now
+    removed = 0
+    with contextlib.suppress(OSError):
+        for entry in os.scandir(folder):
+            name = entry.name
+            if not name.startswith(".") or TEMP_MARK not in name:
+                continue
+            try:
+                pid = int(name.split(TEMP_MARK, 1)[1].split("-", 1)[0])
+            except ValueError:
+                continue
+            if pid == os.getpid():
+                continue
+            with contextlib.suppress(OSError):
+                old = now - entry.stat(follow_symlinks=False).st_mtime > STALE_AFTER_S
+                if not _pid_alive(pid) or old:
+                    os.remove(entry.path)
+                    removed += 1
+    return removed
+
+
+def temp_beside(path):
+    """Create a new, empty temporary file next to ``path`` with the same extension; its name.
+
+    Raises
+    ------
+    OutputError
+        The folder does not exist or cannot be written.
+    """
+    path = os.fspath(path)
+    folder = os.path.dirname(os.path.abspath(path))
+    base, ext = os.path.splitext(os.path.basename(path))
+    if not os.path.isdir(folder):
+        raise OutputError(f"cannot write {path}: folder {folder} does not exist")
+    remove_stale(folder)
+    for _ in range(100):
+        tmp = os.path.join(folder, f".{base}{TEMP_MARK}{os.getpid()}-{secrets.token_hex(4)}{ext}")
+        try:
+            fd = os.open(tmp, os.O_WRONLY | os.O_CREAT | os.O_EXCL, 0o666)
+        except FileExistsError:
+            continue
+        except OSError as e:
+            raise OutputError(f"cannot write {path}: {_describe(e)} (in {folder})") from None
+        os.close(fd)
+        return tmp
+    raise OutputError(f"cannot write {path}: no free temporary name in {folder}")
+
+
+def _fsync(path, directory=False):
+    flags = os.O_RDONLY | (getattr(os, "O_DIRECTORY", 0) if directory else 0)
+    fd = os.open(path, flags)
+    try:
+        os.fsync(fd)
+    finally:
+        os.close(fd)
+
+
+def _remove_quietly(path):
+    with contextlib.suppress(OSError):
+        os.remove(path)
+
+
+def _publish(tmp, path, overwrite):
+    if overwrite:
+        os.replace(tmp, path)
+        return
+    try:
+        os.link(tmp, path)  # atomic and exclusive: fails if ``path`` exists
+    except FileExistsError:
+        raise OutputError(f"cannot write {path}: it exists (it appeared while writing)") from None
+    except OSError as e:
+        if e.errno not in (errno.EPERM, errno.ENOTSUP, errno.EOPNOTSUPP, errno.EXDEV):
+            raise
+        if os.path.lexists(path):  # a file system without hard links
+            raise OutputError(f"cannot write {path}: it exists") from None
+        os.replace(tmp, path)
+        return
+    os.remove(tmp)
+
+
+@contextlib.contextmanager
+def atomic_output(path, *, what="file", overwrite=True, verify=None, allow_empty=False):
+    """Write ``path`` through a temporary file: ``with atomic_output(p) as tmp: write(tmp)``.
+
+    Parameters
+    ----------
+    path : str or os.PathLike
+        The target. Its folder must exist.
+    what : str
+        How the file is named in error messages ("calibration file", "image", ...).
+    overwrite : bool
+        Replace an existing target; with False an existing target is an error (checked again,
+        atomically, when the finished file is put in place).
+    verify : callable, optional
+        ``verify(tmp)`` after the data is on the disk: raise (any exception) or return False if
+        the file is not what was meant to be written, e.g. by reading it back.
+    allow_empty : bool
+        An empty result is an error unless this is set.
+
+    Raises
+    ------
+    OutputError
+        The folder is missing or not writable, the disk is full, the write could not be
+        verified, or the target exists and ``overwrite`` is False. The old target is unchanged
+        and the temporary file removed. An ``OSError`` raised in the ``with`` body becomes
+        this error too; ``KeyboardInterrupt`` and other exceptions propagate unchanged, also
+        after removing the temporary file.
+    """
+    path = os.fspath(path)
+    if os.path.isdir(path):
+        raise OutputError(f"cannot write {what} {path}: it is a folder")
+    if not overwrite and os.path.lexists(path):
+        raise OutputError(f"cannot write {what} {path}: it exists")
+    tmp = temp_beside(path)
+    try:
+        try:
+            yield tmp
+        except OSError as e:  # the writer's own failure, e.g. ENOSPC from f.write
+            raise OutputError(f"cannot write {what} {path}: {_describe(e)}; the previous file "
+                              f"is unchanged") from None
+        try:
+            _fsync(tmp)
+            size = os.path.getsize(tmp)
+        except OSError as e:
+            raise OutputError(f"cannot write {what} {path}: {_describe(e)}; "
+                              f"the previous file is unchanged") from None
+        if size == 0 and not allow_empty:
+            raise OutputError(f"cannot write {what} {path}: nothing was written (is the disk "
+                              f"full?); the previous file is unchanged")
+        if verify is not None:
+            try:
+                ok = verify(tmp)
+            except Exception as e:  # noqa: BLE001 - any failure to read back means a bad write
+                raise OutputError(f"cannot write {what} {path}: the written file does not read "
+                                  f"back ({_describe(e)}); the previous file is unchanged") from None
+            if ok is False:
+                raise OutputError(f"cannot write {what} {path}: the written file does not read "
+                                  f"back; the previous file is unchanged")
+        try:
+            _publish(tmp, path, overwrite)
+        except OSError as e:
+            raise OutputError(f"cannot write {what} {path}: {_describe(e)}") from None
+        with contextlib.suppress(OSError):
+            _fsync(os.path.dirname(os.path.abspath(path)), directory=True)
+    finally:
+        _remove_quietly(tmp)
+
+
+def write_bytes(path, data, *, what="file", overwrite=True, verify=None):
+    """Write ``data`` (bytes or str, UTF-8) to ``path`` atomically (:func:`atomic_output`)."""
+    if isinstance(data, str):
+        data = data.encode("utf-8")
+
+    with atomic_output(path, what=what, overwrite=overwrite, verify=verify,
+                       allow_empty=len(data) == 0) as tmp:
+        try:
+            with open(tmp, "wb") as f:
+                f.write(data)
+                f.flush()
+        except OSError as e:
+            raise OutputError(f"cannot write {what} {path}: {_describe(e)}; the previous file "
+                              f"is unchanged") from None
+        if os.path.getsize(tmp) != len(data):
+            raise OutputError(f"cannot write {what} {path}: short write; the previous file is "
+                              f"unchanged")
