@@ -1,5 +1,4 @@
 """The synthetic renderer (paper Fig. 6): housing, camera reflection, subpixel-true edges."""
-import time
 
 import cv2
 import numpy as np
@@ -231,14 +230,6 @@ def test_cube_corner_is_where_three_colours_meet():
     # the pixel at the corner mixes all three: it is none of them
     c = np.round(px).astype(int)
     assert (np.abs(img[c[1], c[0]] - colours).max(axis=1) > 10).all()
-
-
-def test_render_room_time_is_modest():
-    cam = synthetic.misaligned_rig()
-    synthetic.render_room(cam, supersample=1)
-    t = time.perf_counter()
-    synthetic.render_room(cam, supersample=4)
-    assert time.perf_counter() - t < 10.0  # target ~1 s; generous on a shared machine
 
 
 def test_bad_input_raises_value_error(environment):
