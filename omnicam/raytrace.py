@@ -11,7 +11,8 @@ import numpy as np
 
 from . import _kernels
 
-__all__ = ["as_points", "undistort_normalized", "distort_normalized", "trace", "project"]
+__all__ = ["as_points", "undistort_normalized", "distort_normalized", "trace", "trace_normalized",
+           "project"]
 
 # conventions.md: OpenCV's default 5 iterations of undistortPoints leave up to 0.1 px of error
 _UNDISTORT_CRITERIA = (cv2.TERM_CRITERIA_COUNT | cv2.TERM_CRITERIA_EPS, 200, 1e-15)
@@ -120,6 +121,38 @@ def trace(pixels, K, D, R, C, mirror):
     _kernels.trace_rays(np.ascontiguousarray(uv), np.ascontiguousarray(Kinv), R, C,
                         mirror.a, mirror.b, mirror.rim_radius, origins, directions)
     return origins, directions
+
+
+def trace_normalized(xn, R, C, mirror):
+    """Reflected rays of undistorted normalised coordinates, in numpy: the one reference tracer.
+
+    The calibration code traces a few hundred points per evaluation under trial postures, where
+    a numba call's overhead and the kernel's pixel interface do not fit; this is the same
+    model as :func:`trace` (eqs. 6-19) written with :class:`~omnicam.mirror.HyperbolicMirror`'s
+    vectorised methods.
+
+    Parameters
+    ----------
+    xn : (N, 2) float64 ndarray
+        Undistorted normalised image coordinates ``K^-1 x`` (first two components).
+    R : (3, 3) ndarray
+        Mirror -> camera rotation (eq. 29).
+    C : (3,) ndarray
+        Camera centre in the mirror frame (eq. 17).
+    mirror : HyperbolicMirror
+
+    Returns
+    -------
+    origins, directions : (N, 3) float64 ndarrays
+        Reflection points (eqs. 8-12) and unit reflected directions (eqs. 14-15); NaN rows
+        for rays that miss the mirror inside the rim.
+    """
+    xn = np.asarray(xn, np.float64).reshape(-1, 2)
+    V = np.column_stack([xn, np.ones(len(xn))]) @ np.asarray(R, np.float64)  # R^T x~ (eq. 16)
+    V /= np.linalg.norm(V, axis=1, keepdims=True)
+    C = np.asarray(C, np.float64)
+    P = mirror.intersect(np.broadcast_to(C, V.shape), V)  # eqs. 8-12
+    return P, mirror.reflect(V, mirror.unit_normal(P))  # eqs. 14-15
 
 
 def project(points, at_infinity, K, D, R, t, C, mirror):

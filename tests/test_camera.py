@@ -318,3 +318,18 @@ def test_bad_parameters_raise_value_error(kwargs, match):
 def test_mirror_parameters_must_be_positive_and_finite(a, b, r):
     with pytest.raises(ValueError, match="positive finite"):
         HyperbolicMirror(a, b, r)
+
+
+def test_numpy_reference_tracer_matches_the_kernel(rig):
+    from omnicam import raytrace
+
+    px = annulus_pixels(rig, 200)
+    if rig.D is not None:
+        xn = raytrace.undistort_normalized(px, rig.K, rig.D)
+    else:
+        Ki = np.linalg.inv(rig.K)
+        xn = px @ Ki[:2, :2].T + Ki[:2, 2]
+    P, V = raytrace.trace_normalized(xn, rig.R, rig.camera_center, rig.mirror)
+    P0, V0 = rig.unproject(px)
+    assert np.allclose(P, P0, atol=1e-9, equal_nan=True)
+    assert np.allclose(V, V0, atol=1e-12, equal_nan=True)
