@@ -469,7 +469,9 @@ def init_panorama_maps(camera, size, elevation_range=None, projection="cylindric
         lo, hi = _check_elevation_range(elevation_range, projection)
     vp = _check_viewpoint(camera, viewpoint, depth)
     p0, p1, az_step = _panorama_params((w, h), lo, hi, projection)
-    return _table(camera, _KIND[projection], Rm.T, p0, p1, az_step, (w, h), depth, vp, m1type)
+    maps = _table(camera, _KIND[projection], Rm.T, p0, p1, az_step, (w, h), depth, vp, m1type)
+    _warn_if_unseen(camera, maps, "panorama")
+    return maps
 
 
 def init_perspective_maps(camera, K_new, size, R=None, m1type=cv2.CV_16SC2, depth=None,
@@ -520,7 +522,28 @@ def init_perspective_maps(camera, K_new, size, R=None, m1type=cv2.CV_16SC2, dept
     M = Rm.T @ np.linalg.inv(K_new)
     # a pixel at the principal point spans 1 / f radians (the most of any pixel of the view)
     step = _step_for(math.degrees(1.0 / min(abs(K_new[0, 0]), abs(K_new[1, 1]))))
-    return _table(camera, 0, M, 0.0, 0.0, 0.0, (w, h), depth, vp, m1type, step=step)
+    maps = _table(camera, 0, M, 0.0, 0.0, 0.0, (w, h), depth, vp, m1type, step=step)
+    _warn_if_unseen(camera, maps, "perspective view")
+    return maps
+
+
+#: A view with more than this fraction of its pixels unseen gives a RuntimeWarning.
+UNSEEN_WARN_FRACTION = 0.5
+
+
+def _warn_if_unseen(camera, maps, what):
+    """RuntimeWarning when most of a view lies outside the band the mirror sees."""
+    map1 = maps[0]
+    x = map1 if map1.ndim == 2 else map1[..., 0]
+    frac = float(np.count_nonzero(x == UNSEEN)) / x.size
+    if frac > UNSEEN_WARN_FRACTION:
+        import warnings
+
+        lo, hi = visible_elevation_range(camera)
+        warnings.warn(f"{what}: {frac:.0%} of its pixels are outside what the mirror sees "
+                      f"(visible_elevation_range: {lo:.1f} to {hi:.1f} deg elevation); "
+                      f"aim it lower or use a smaller elevation range", RuntimeWarning,
+                      stacklevel=3)
 
 
 # -- view specs (what the Unwarper and the CLI hold) ----------------------------------------------

@@ -144,3 +144,27 @@ def test_cli_maps_npy(tmp_path, capsys):
                  str(tmp_path / "m")]) == 0, capsys.readouterr().err
     ref = RIG.init_panorama_maps((96, 32), m1type=cv2.CV_32FC1)
     np.testing.assert_array_equal(np.load(tmp_path / "m_x.npy"), ref[0])
+
+
+@pytest.mark.parametrize("argv", [["--panorama", "48x16"], ["--perspective", "40x30", "--fov", "80"],
+                                  ["--equirect", "64x32"]])
+def test_supersampled_maps_average_to_the_plain_ones(argv):
+    """The k x k blocks of the fine maps are centred on the coarse pixels."""
+    import argparse
+
+    from omnicam.cli.maps import _scaled_view
+    from omnicam.cli.unwarp import add_view_arguments, view_specs
+
+    p = argparse.ArgumentParser()
+    add_view_arguments(p)
+    p.set_defaults(ordered=None)
+    spec = view_specs(p.parse_args([*argv, "-o", "x"]))[0]
+    coarse = spec.view.maps(RIG, cv2.CV_32FC1)
+    fine = _scaled_view(spec, RIG, 2).maps(RIG, cv2.CV_32FC1)
+    h, w = coarse[0].shape
+    for c, f in zip(coarse, fine):
+        assert f.shape == (2 * h, 2 * w)
+        seen = (c != -10) & (f.reshape(h, 2, w, 2) != -10).all(axis=(1, 3))
+        mean = f.reshape(h, 2, w, 2).mean(axis=(1, 3))
+        assert seen.sum() > 0.3 * seen.size
+        assert np.abs(mean[seen] - c[seen]).max() < 0.1

@@ -25,7 +25,7 @@ from __future__ import annotations
 
 import os
 
-from . import calibrate, demo, info, unwarp
+from . import calibrate, demo, export, info, maps, unwarp
 from ._common import (
     EXIT_FAILURE,
     EXIT_INTERRUPTED,
@@ -57,13 +57,17 @@ def build_parser():
     )
     sub = parser.add_subparsers(dest="command", metavar="COMMAND", required=True)
 
-    for module in (calibrate, unwarp, info, demo):
+    for module in (calibrate, unwarp, maps, export, info, demo):
         module.add_parser(sub)
     return parser
 
 
 def main(argv=None) -> int:
     """Run the ``omnicam`` command line; return the exit status."""
+    import signal
+
+    if getattr(signal.getsignal(signal.SIGINT), "__name__", "") == "_interrupted_while_loading":
+        signal.signal(signal.SIGINT, signal.default_int_handler)  # loaded: Ctrl-C as usual
     try:
         with _opencv_quiet():
             args = build_parser().parse_args(argv)
