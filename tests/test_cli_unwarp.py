@@ -366,3 +366,41 @@ def test_sigint_while_starting_is_one_line_and_exit_130(data, tmp_path, delay):
     lines = [ln for ln in err.splitlines() if ln.strip()]
     assert len(lines) == 1 and "interrupted" in lines[0]
     assert hidden(tmp_path) == []
+
+
+@pytest.fixture
+def small_tmpfs(tmp_path):
+    """A 300 KiB tmpfs (root only; skipped where mounting is not allowed)."""
+    mnt = tmp_path / "full"
+    mnt.mkdir()
+    if sys.platform != "linux" or os.geteuid() != 0:
+        pytest.skip("mounting a tmpfs needs root on Linux")
+    r = subprocess.run(["mount", "-t", "tmpfs", "-o", "size=300k", "tmpfs", str(mnt)],
+                       capture_output=True)
+    if r.returncode != 0:
+        pytest.skip("cannot mount a tmpfs here")
+    try:
+        yield mnt
+    finally:
+        subprocess.run(["umount", str(mnt)], check=False)
+
+
+@pytest.mark.parametrize("ext, min_free", [("avi", None), ("avi", 0), ("mp4", 0)],
+                         ids=["free-space check", "read-back check avi", "read-back check mp4"])
+def test_a_really_full_disk_never_replaces_the_old_output(data, tmp_path, small_tmpfs, capsys,
+                                                          monkeypatch, ext, min_free):
+    import omnicam.cli.unwarp as unwarp
+
+    if min_free is not None:
+        monkeypatch.setattr(unwarp, "MIN_FREE_BYTES", min_free)  # only the read-back check
+    src = write_video(tmp_path / "src.avi", 200)
+    out = small_tmpfs / f"out.{ext}"
+    write_video(out, 20, (128, 32))
+    before = out.read_bytes()
+    code = main(["unwarp", str(src), "-c", str(data["calib"]), "-q", "--panorama", "512x128",
+                 "-o", str(out), "--overwrite"])
+    line = one_error_line(capsys.readouterr().err)
+    assert code == 1 and "unchanged" in line
+    assert ("no space left" in line) if min_free is None else ("can be read back" in line)
+    assert out.read_bytes() == before
+    assert sorted(p.name for p in small_tmpfs.iterdir()) == [out.name]

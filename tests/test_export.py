@@ -228,3 +228,20 @@ def test_omnidir_file_round_trips_through_filestorage(tmp_path, aligned_fit):
 def test_export_refuses_unknown_format(tmp_path):
     with pytest.raises(ValueError, match="fmt"):
         export(ALIGNED, "fisheye", tmp_path / "x.yaml")
+
+
+@pytest.mark.parametrize("fmt, name", [("omnidir", "omni.yaml"), ("kalibr", "camchain.yaml"),
+                                       ("camodocal", "mei.yaml"),
+                                       ("ocamcalib", "calib_results.txt")])
+def test_cli_export_writes_the_file_and_prints_its_error(tmp_path, capsys, fmt, name):
+    from omnicam.cli import main
+
+    calib = tmp_path / "rig.yaml"
+    ALIGNED.save(calib)
+    out = tmp_path / name
+    assert main(["export", str(calib), "--to", fmt, "-o", str(out)]) == 0, \
+        capsys.readouterr().err
+    printed = capsys.readouterr().out
+    assert out.exists() and "RMS" in printed and "max" in printed
+    assert main(["export", str(calib), "--to", fmt, "-o", str(out)]) == 1  # exists
+    assert "exists" in capsys.readouterr().err
