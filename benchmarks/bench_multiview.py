@@ -22,9 +22,9 @@ import numpy as np
 
 sys.path.insert(0, os.path.join(os.path.dirname(os.path.abspath(__file__)), ".."))
 
-from omnicam import Unwarper, synthetic  # noqa: E402
-from omnicam.views import PanoramaView, PerspectiveView  # noqa: E402
-from omnicam.spherical import equirect_view  # noqa: E402
+from omnicam import Unwarper, synthetic
+from omnicam.spherical import equirect_view
+from omnicam.views import PanoramaView, PerspectiveView
 
 VIEWS = {
     "panorama": PanoramaView((2048, 512)),

@@ -25,9 +25,18 @@ import numpy as np
 
 from ._atomic import OutputError, atomic_output, write_bytes
 
-__all__ = ["UNSEEN_PGM", "ffmpeg_maps", "pgm_bytes", "read_pgm", "write_pgm",
-           "write_ffmpeg_maps", "write_npy_maps", "write_filestorage_maps", "ffmpeg_command",
-           "float_maps"]
+__all__ = [
+    "UNSEEN_PGM",
+    "ffmpeg_command",
+    "ffmpeg_maps",
+    "float_maps",
+    "pgm_bytes",
+    "read_pgm",
+    "write_ffmpeg_maps",
+    "write_filestorage_maps",
+    "write_npy_maps",
+    "write_pgm",
+]
 
 #: Map value for output pixels with no source pixel: outside any frame ffmpeg can read.
 UNSEEN_PGM = 65535
@@ -138,9 +147,9 @@ def write_npy_maps(prefix, map_x, map_y, overwrite=True):
         def verify(tmp, arr=arr):
             return np.array_equal(np.load(tmp), arr)
 
-        with atomic_output(path, what="map", overwrite=overwrite, verify=verify) as tmp:
-            with open(tmp, "wb") as f:
-                np.save(f, arr)
+        with atomic_output(path, what="map", overwrite=overwrite, verify=verify) as tmp, \
+                open(tmp, "wb") as f:
+            np.save(f, arr)
         paths.append(path)
     return paths
 

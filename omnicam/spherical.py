@@ -25,9 +25,17 @@ import numpy as np
 
 from .views import PanoramaView
 
-__all__ = ["equirect_view", "photosphere_xmp", "jpeg_with_photosphere_xmp", "read_jpeg_xmp",
-           "spherical_v1_xml", "inject_spherical_mp4", "parse_boxes", "find_boxes",
-           "SPHERICAL_UUID"]
+__all__ = [
+    "SPHERICAL_UUID",
+    "equirect_view",
+    "find_boxes",
+    "inject_spherical_mp4",
+    "jpeg_with_photosphere_xmp",
+    "parse_boxes",
+    "photosphere_xmp",
+    "read_jpeg_xmp",
+    "spherical_v1_xml",
+]
 
 SPHERICAL_UUID = uuid.UUID("ffcc8263-f855-4a93-8814-587a02521fdd").bytes
 XMP_HEADER = b"http://ns.adobe.com/xap/1.0/\x00"
@@ -88,7 +96,7 @@ def photosphere_xmp(full_size, cropped=None):
         '  <rdf:Description rdf:about="" xmlns:GPano="http://ns.google.com/photos/1.0/panorama/"'
         f"\n    {attrs}/>\n"
         " </rdf:RDF>\n</x:xmpmeta>\n"
-        '<?xpacket end="w"?>').encode("utf-8")
+        '<?xpacket end="w"?>').encode()
 
 
 def jpeg_with_photosphere_xmp(jpeg, full_size, cropped=None):
@@ -134,7 +142,7 @@ def spherical_v1_xml():
         "<GSpherical:Stitched>true</GSpherical:Stitched>"
         f"<GSpherical:StitchingSoftware>{SOFTWARE}</GSpherical:StitchingSoftware>"
         "<GSpherical:ProjectionType>equirectangular</GSpherical:ProjectionType>"
-        "</rdf:SphericalVideo>").encode("utf-8")
+        "</rdf:SphericalVideo>").encode()
 
 
 def _box(kind, payload):
@@ -167,7 +175,7 @@ class Box:
     """An ISO-BMFF box: ``kind``, a ``head`` (bytes before children) and ``children`` or raw
     ``payload``."""
 
-    __slots__ = ("kind", "head", "children", "payload")
+    __slots__ = ("children", "head", "kind", "payload")
 
     def __init__(self, kind, head=b"", children=None, payload=b""):
         self.kind, self.head, self.children, self.payload = kind, head, children, payload

@@ -13,8 +13,8 @@ import warnings
 import cv2
 import numpy as np
 import pytest
-
 from conftest import video_frames
+
 from omnicam import synthetic
 from omnicam.cli import main
 from omnicam.views import K_from_fov, rotation_from_ypr
@@ -82,7 +82,7 @@ def test_two_views_of_an_image_each_with_its_own_options_and_output(data, rig, t
 
 
 def test_several_video_views_decode_each_frame_once(data, tmp_path, capsys, monkeypatch):
-    import omnicam.cli.unwarp as unwarp
+    from omnicam.cli import unwarp
 
     reads = []
     real_open = unwarp._open_capture
@@ -150,7 +150,7 @@ def test_video_to_an_image_sequence_and_previews(data, rig, tmp_path, capsys):
     cap = cv2.VideoCapture(str(data["video"]))
     m = rig.init_panorama_maps((64, 16))
     for i in range(10):
-        ok, frame = cap.read()
+        _, frame = cap.read()
         np.testing.assert_array_equal(cv2.imread(str(tmp_path / f"out_{i:03d}.png")),
                                       cv2.remap(frame, *m, cv2.INTER_LINEAR))
     cap.release()
@@ -252,7 +252,7 @@ class DroppingWriter:
 
 
 def test_frames_lost_on_write_fail_and_keep_the_old_output(data, tmp_path, capsys, monkeypatch):
-    import omnicam.cli.unwarp as unwarp
+    from omnicam.cli import unwarp
 
     out = tmp_path / "out.avi"
     write_video(out, 2, (64, 16))
@@ -268,7 +268,7 @@ def test_frames_lost_on_write_fail_and_keep_the_old_output(data, tmp_path, capsy
 
 
 def test_full_disk_stops_early_and_keeps_the_old_output(data, tmp_path, capsys, monkeypatch):
-    import omnicam.cli.unwarp as unwarp
+    from omnicam.cli import unwarp
 
     out = tmp_path / "out.avi"
     write_video(out, 2, (64, 16))
@@ -285,7 +285,7 @@ def test_full_disk_stops_early_and_keeps_the_old_output(data, tmp_path, capsys, 
 
 def test_ctrl_c_with_an_earlier_output_keeps_it_and_writes_a_partial_file(
         data, tmp_path, capsys, monkeypatch):
-    import omnicam.cli as cli
+    from omnicam import cli
 
     out = tmp_path / "out.avi"
     write_video(out, 2, (64, 16))
@@ -376,7 +376,7 @@ def small_tmpfs(tmp_path):
     if sys.platform != "linux" or os.geteuid() != 0:
         pytest.skip("mounting a tmpfs needs root on Linux")
     r = subprocess.run(["mount", "-t", "tmpfs", "-o", "size=300k", "tmpfs", str(mnt)],
-                       capture_output=True)
+                       capture_output=True, check=False)
     if r.returncode != 0:
         pytest.skip("cannot mount a tmpfs here")
     try:
@@ -389,7 +389,7 @@ def small_tmpfs(tmp_path):
                          ids=["free-space check", "read-back check avi", "read-back check mp4"])
 def test_a_really_full_disk_never_replaces_the_old_output(data, tmp_path, small_tmpfs, capsys,
                                                           monkeypatch, ext, min_free):
-    import omnicam.cli.unwarp as unwarp
+    from omnicam.cli import unwarp
 
     if min_free is not None:
         monkeypatch.setattr(unwarp, "MIN_FREE_BYTES", min_free)  # only the read-back check

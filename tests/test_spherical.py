@@ -27,7 +27,7 @@ RIG = synthetic.misaligned_rig(image_size=(160, 160))
 def test_equirect_pixels_look_at_their_longitude_and_latitude():
     W, H = 72, 36
     mx, my = equirect_view((W, H)).maps(RIG, cv2.CV_32FC1)
-    lo, hi = visible_elevation_range(RIG)
+    _, hi = visible_elevation_range(RIG)
     for i, j in [(20, 36), (30, 5), (25, 60), (35, 0)]:
         lon = 360.0 * (j + 0.5) / W - 180.0
         lat = 90.0 - 180.0 * (i + 0.5) / H
@@ -61,7 +61,7 @@ def test_equirect_must_be_two_to_one():
 
 
 def test_photosphere_xmp_is_an_app1_segment_after_soi_and_parses_back():
-    ok, jpg = cv2.imencode(".jpg", np.zeros((32, 64, 3), np.uint8))
+    _, jpg = cv2.imencode(".jpg", np.zeros((32, 64, 3), np.uint8))
     out = jpeg_with_photosphere_xmp(jpg.tobytes(), (64, 32))
     assert out[:2] == b"\xff\xd8"
     xmp = read_jpeg_xmp(out).decode("utf-8")

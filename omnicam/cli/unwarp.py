@@ -178,13 +178,11 @@ def _unwarper(camera, specs, frame_size):
     from ..stream import Unwarper
 
     size = camera.image_size
-    if size is not None and size != tuple(frame_size):
-        if abs(frame_size[0] * size[1] - frame_size[1] * size[0]) > 0.01 * size[0] * size[1]:
-            _warn(
-                f"frames are {frame_size[0]}x{frame_size[1]} but the calibration is for "
-                f"{size[0]}x{size[1]}, another aspect ratio: assuming the same sensor "
-                f"rescaled (not a crop)"
-            )
+    if size is not None and size != tuple(frame_size) and abs(
+            frame_size[0] * size[1] - frame_size[1] * size[0]) > 0.01 * size[0] * size[1]:
+        _warn(f"frames are {frame_size[0]}x{frame_size[1]} but the calibration is for "
+              f"{size[0]}x{size[1]}, another aspect ratio: assuming the same sensor "
+              f"rescaled (not a crop)")
     views = {str(i): s.view for i, s in enumerate(specs)}
     try:
         with warnings.catch_warnings(record=True) as caught:
@@ -318,7 +316,7 @@ class Progress:
         if self.total:
             bar_len = 24
             done = min(frames / self.total, 1.0)
-            fill = int(round(done * bar_len))
+            fill = round(done * bar_len)
             text = (
                 f"[{'#' * fill}{'.' * (bar_len - fill)}] {frames}/{self.total} frames "
                 f"{100 * done:3.0f}%  {self.fps():6.1f} fps"
@@ -686,5 +684,5 @@ def add_view_arguments(p, output_help=None):
 
 
 # re-exported for callers of the earlier one-view module
-__all__ = ["add_parser", "add_view_arguments", "cmd_unwarp", "view_specs", "view_from_args",
-           "Progress", "VIDEO_FOURCC", "count_frames", "EXIT_FAILURE"]
+__all__ = ["EXIT_FAILURE", "VIDEO_FOURCC", "Progress", "add_parser", "add_view_arguments",
+           "cmd_unwarp", "count_frames", "view_from_args", "view_specs"]
