@@ -183,3 +183,18 @@ def test_stream_refuses_odd_sized_video_outputs(tmp_path):
     unwarper = Unwarper.from_camera(cam, {"pano": PanoramaView((33, 8))})
     with pytest.raises(ValueError, match="even"):
         next(unwarper.stream(0, outputs={"pano": tmp_path / "p.avi"}))
+
+
+def test_perspective_arguments_in_the_wrong_order_say_the_order(cam):
+    from omnicam.views import K_from_fov
+
+    K = K_from_fov(90.0, (40, 30))
+    with pytest.raises(ValueError, match=r"init_perspective_maps\(camera, K_new, size"):
+        cam.init_perspective_maps((40, 30), K)
+    with pytest.raises(ValueError, match=r"PerspectiveView\(size, fov"):
+        PerspectiveView(K, (40, 30))
+    with pytest.raises(ValueError, match="K_new="):
+        PerspectiveView((40, 30), K)
+    a = PerspectiveView(K_new=K, size=(40, 30)).maps(cam)  # keywords: one spelling for both
+    b = cam.init_perspective_maps(K_new=K, size=(40, 30))
+    np.testing.assert_array_equal(a[0], b[0])
