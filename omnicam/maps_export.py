@@ -10,6 +10,13 @@ where the mirror sees nothing or the rounded source pixel lies outside the frame
 ``cv2.remap(..., INTER_NEAREST, borderMode=BORDER_CONSTANT)`` give the same pixels
 (``tests/test_ffmpeg_maps.py`` runs ffmpeg when it is installed and compares exactly).
 
+The pipelines checked pixel for pixel against ``cv2.remap(src, map_x, map_y, INTER_NEAREST,
+borderMode=BORDER_CONSTANT, borderValue=0)`` on the float tables (ffmpeg 5.1):
+``ffmpeg -i src.png -i x.pgm -i y.pgm -lavfi "format=gray,remap" out.png`` (also ``rgb24``) for
+lossless stills, and the video pipeline ``-lavfi "format=yuv444p,remap"``, whose every plane
+equals ``cv2.remap`` of the same plane of the yuv444p source with ffmpeg's black
+``(16, 128, 128)`` as the border value (a lossy codec afterwards is the only difference).
+
 The PGM files are binary ``P5`` with ``maxval`` exactly 65535 (two bytes per sample, most
 significant byte first, as the Netpbm format defines 16-bit PGM), which ffmpeg reads as
 ``gray16be``. Supersampling: build the tables at ``k`` times the output size, remap, then let

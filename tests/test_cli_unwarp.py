@@ -404,3 +404,24 @@ def test_a_really_full_disk_never_replaces_the_old_output(data, tmp_path, small_
     assert ("no space left" in line) if min_free is None else ("can be read back" in line)
     assert out.read_bytes() == before
     assert sorted(p.name for p in small_tmpfs.iterdir()) == [out.name]
+
+
+@pytest.mark.parametrize("tilt, offset", [(0.0, (0.0, 0.0, 0.0)), (3.0, (1.5, -1.0, 1.0)),
+                                          (5.0, (3.0, -4.0, 0.0))])
+def test_default_panorama_leaves_out_the_cameras_own_reflection(tilt, offset):
+    """No pixel of the default panorama sees a camera body of radius 30 mm (a ball about the
+    camera centre; the synthetic renders use 10 mm), while the nadir rows of a full band do."""
+    cam = synthetic.misaligned_rig(tilt, 30.0, offset, image_size=(320, 320))
+
+    def body_pixels(mx, my):
+        seen = mx != -10
+        P, d = cam.unproject(np.stack([mx[seen], my[seen]], axis=1).astype(np.float64))
+        w = P - cam.camera_center
+        b = np.einsum("ij,ij->i", w, d)
+        disc = b * b - (np.einsum("ij,ij->i", w, w) - 30.0 ** 2)
+        return int(np.count_nonzero((disc >= 0) & (-b - np.sqrt(np.maximum(disc, 0)) > 0)))
+
+    assert body_pixels(*cam.init_panorama_maps((360, 90), m1type=cv2.CV_32FC1)) == 0
+    full = cam.init_panorama_maps((360, 90), elevation_range=(-90, 10),
+                                  projection="equirectangular", m1type=cv2.CV_32FC1)
+    assert body_pixels(*full) > 0
