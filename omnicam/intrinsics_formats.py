@@ -201,10 +201,15 @@ def parse_yaml(text):
     ValueError
         Text outside the subset this reads.
     """
+    if not _shallow(text):
+        raise ValueError("nested too deeply")
     lines = _logical_lines(text)
     if not lines:
         return {}
-    value, i = _block(lines, 0, lines[0][0])
+    try:
+        value, i = _block(lines, 0, lines[0][0])
+    except RecursionError:
+        raise ValueError("nested too deeply") from None
     if i != len(lines):
         raise ValueError(f"unexpected text at {lines[i][1][:40]!r}")
     return value
@@ -272,6 +277,31 @@ def _from_kalibr(doc):
         w, h = _numbers(cam.get("resolution"), "field 'resolution'", 2)
         size = (_int(w, "field 'resolution'"), _int(h, "field 'resolution'"))
     return K, D, size
+
+
+def _shallow(text, limit=64):
+    """No brackets or XML elements nested deeper than ``limit`` (cv2.FileStorage has crashed on
+    deeply nested files): only such files are handed to it here."""
+    depth = 0
+    i, n = 0, len(text)
+    while i < n:
+        ch = text[i]
+        if ch in "[{":
+            depth += 1
+        elif ch in "]}":
+            depth -= 1
+        elif ch == "<" and i + 1 < n:
+            nxt = text[i + 1]
+            if nxt == "/":
+                depth -= 1
+            elif nxt not in "?!":
+                end = text.find(">", i)
+                if end > 0 and text[end - 1] != "/":
+                    depth += 1
+        if depth > limit:
+            return False
+        i += 1
+    return True
 
 
 def _image_size_matrix(path):
@@ -343,7 +373,8 @@ def read_other_intrinsics(path):
             raise ValueError(f"intrinsics file {path}: a ROS camera_info or Kalibr camchain "
                              f"without its camera fields") from None
         return None
-    if "image_size" in text:
+    if re.search(r"image_size\W{0,40}(!!|type_id\W{1,4})opencv-(nd-)?matrix", text) \
+            and _shallow(text):
         size = _image_size_matrix(path)
         if size is not None:
             if size.size != 2 or not np.isfinite(size).all() or np.any(size != np.round(size)) \

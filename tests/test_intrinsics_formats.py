@@ -152,3 +152,14 @@ def test_parse_yaml_subset():
                    "c": {"d": True, "e": None}, "f": "hi # not a comment"}
     with pytest.raises(ValueError):
         parse_yaml("a: [1, 2\n")
+
+
+@pytest.mark.parametrize("body", ["camera_matrix: " + "[" * 5000 + "]" * 5000,
+                                  "camera_matrix:\n" + "".join(" " * i + f"k{i}:\n"
+                                                                 for i in range(3000))],
+                         ids=["flow", "indentation"])
+def test_deeply_nested_ros_yaml_is_a_value_error_not_a_crash(tmp_path, body):
+    p = tmp_path / "camera_info.yaml"
+    p.write_text(body)
+    with pytest.raises(ValueError, match="camera_info.yaml"):
+        read_intrinsics(p)
