@@ -195,6 +195,6 @@ def ffmpeg_command(x_pgm, y_pgm, output_size=None, supersample=1, input_name="in
     chain = "format=yuv444p,remap"
     if supersample > 1 and output_size is not None:
         chain += f",scale={output_size[0]}:{output_size[1]}:flags=area"
-    return " ".join(shlex.quote(a) for a in (
-        "ffmpeg", "-i", input_name, "-i", os.fspath(x_pgm), "-i", os.fspath(y_pgm),
-        "-lavfi", chain, output_name))
+    q = shlex.quote
+    return (f"ffmpeg -i {q(input_name)} -i {q(os.fspath(x_pgm))} -i {q(os.fspath(y_pgm))} "
+            f'-lavfi "{chain}" {q(output_name)}')

@@ -169,3 +169,21 @@ def test_supersampled_maps_average_to_the_plain_ones(argv):
         mean = f.reshape(h, 2, w, 2).mean(axis=(1, 3))
         assert seen.sum() > 0.3 * seen.size
         assert np.abs(mean[seen] - c[seen]).max() < 0.1
+
+
+@pytest.mark.skipif(FFMPEG is None, reason="ffmpeg is not installed")
+def test_the_printed_command_runs(tmp_path, maps):
+    import shlex
+
+    from omnicam.maps_export import ffmpeg_command
+
+    src = tmp_path / "in.png"
+    cv2.imwrite(str(src), np.full((160, 160, 3), 90, np.uint8))
+    px, py = write_ffmpeg_maps(tmp_path / "m", *maps, RIG.image_size)
+    cmd = ffmpeg_command(px, py, SIZE, 1, input_name=str(src), output_name=str(tmp_path / "o.png"))
+    assert '-lavfi "format=yuv444p,remap"' in cmd
+    args = shlex.split(cmd)
+    r = subprocess.run([args[0], "-v", "error", "-y", *args[1:]], capture_output=True, text=True,
+                       timeout=120, check=False)
+    assert r.returncode == 0, r.stderr
+    assert cv2.imread(str(tmp_path / "o.png")).shape == (SIZE[1], SIZE[0], 3)
