@@ -5,7 +5,19 @@ Modules that pull in scikit-image or build views load on first use, so ``import 
 stays fast.
 """
 import os
+import sys
 from importlib import import_module
+
+if os.path.basename(sys.argv[0] if sys.argv else "") in ("omnicam", "omnicam.exe"):
+    # the console script: Ctrl-C while the libraries load is one line and exit 130 (not a
+    # KeyboardInterrupt traceback); omnicam.cli.main puts Python's own handler back
+    import signal
+
+    def _interrupted_while_loading(signum, frame):
+        os.write(2, b"omnicam: error: interrupted\n")
+        os._exit(130)
+
+    signal.signal(signal.SIGINT, _interrupted_while_loading)
 
 # numba's OpenMP threads spin after each parallel region by default; on a loaded 2-core machine
 # the spinning thread competes with the one still working and a remap table takes several times

@@ -311,6 +311,16 @@ class MisalignedHyperbolicCamera:
         return init_perspective_maps(self, K_new, size, R=R, m1type=m1type, depth=depth,
                                      viewpoint=viewpoint)
 
+    def to_omnidir(self, depth=None):
+        """The unified (Mei) model of ``cv2.omnidir`` closest to this rig, and its RMS error.
+
+        Returns ``(K, xi, D, M, origin, rms_px)`` with ``X_omni = M (X_mirror - origin)``
+        (``det M = -1``: the image of a mirror is mirror-reversed); see
+        :func:`omnicam.export.fit_omnidir`, which also gives the maximum error.
+        """
+        from .export import fit_omnidir
+        return fit_omnidir(self, depth=depth).as_tuple()
+
     # -- files ----------------------------------------------------------------------------
     def save(self, path):
         """Write the calibration with ``cv2.FileStorage`` (yaml, yml, xml or json), atomically."""

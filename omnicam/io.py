@@ -281,6 +281,16 @@ def read_intrinsics(path):
     FileNotFoundError, ValueError
         As :func:`load_camera`, naming the file and the field.
     """
+    from .intrinsics_formats import read_other_intrinsics  # ROS, Kalibr, image_size matrix
+
+    other = read_other_intrinsics(path)
+    if other is not None and not isinstance(other[0], str):
+        try:
+            K, D, size = validate_K(other[0]), validate_D(other[1]), \
+                validate_image_size(other[2])
+        except ValueError as e:
+            raise ValueError(f"intrinsics file {os.fspath(path)}: {e}") from None
+        return K, (D if D is not None and np.any(D) else None), size
     with _reading(path, "intrinsics file") as r:
         name = r.first(K_FIELDS, required=True)
         K = r.check(name, validate_K, r.matrix(name, (3, 3), allow_list=True))
@@ -290,7 +300,8 @@ def read_intrinsics(path):
             D = r.check(name, validate_D, r.matrix(name, allow_list=True))
             if not np.any(D):
                 D = None
-        size = r.check("image_size", validate_image_size, r.image_size())
+        size = r.check("image_size", validate_image_size,
+                       other[1] if other is not None else r.image_size())
     return K, D, size
 
 

@@ -193,19 +193,28 @@ class Unwarper:
                      for n, _, _, shape in self._plan}
         self._out_key = key
 
-    def unwarp(self, frame):
+    def unwarp(self, frame, copy=False):
         """All views of one frame.
+
+        The output arrays are allocated once and **reused**: each call overwrites the arrays
+        (and returns the same dict) of the previous call, so the per-frame cost is only the
+        remaps. Keep a view across frames with ``copy=True`` (or ``view.copy()``).
 
         Parameters
         ----------
         frame : (H, W) or (H, W, C) ndarray
             A frame of ``source_size`` (any dtype ``cv2.remap`` takes).
+        copy : bool
+            Return new arrays (and a new dict) that later calls do not touch.
 
         Returns
         -------
         views : dict of str -> ndarray
-            The preallocated outputs, overwritten by the next call.
+            The preallocated outputs, overwritten by the next call (unless ``copy``).
         """
+        if not isinstance(frame, np.ndarray) or frame.ndim not in (2, 3) or frame.size == 0:
+            raise ValueError(f"frame must be a non-empty (H, W) or (H, W, C) image array, "
+                             f"got {type(frame).__name__}")
         if self._source_size is not None and (
                 frame.shape[1] != self._source_size[0] or frame.shape[0] != self._source_size[1]):
             raise ValueError(f"frame is {frame.shape[1]}x{frame.shape[0]} but the tables are for "
@@ -219,6 +228,8 @@ class Unwarper:
         for name, m1, m2, _ in self._plan:
             cv2.remap(frame, m1, m2, interp, dst=out[name], borderMode=border,
                       borderValue=value)
+        if copy:
+            return {name: view.copy() for name, view in out.items()}
         return out
 
     __call__ = unwarp

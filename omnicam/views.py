@@ -469,7 +469,9 @@ def init_panorama_maps(camera, size, elevation_range=None, projection="cylindric
         lo, hi = _check_elevation_range(elevation_range, projection)
     vp = _check_viewpoint(camera, viewpoint, depth)
     p0, p1, az_step = _panorama_params((w, h), lo, hi, projection)
-    return _table(camera, _KIND[projection], Rm.T, p0, p1, az_step, (w, h), depth, vp, m1type)
+    maps = _table(camera, _KIND[projection], Rm.T, p0, p1, az_step, (w, h), depth, vp, m1type)
+    _warn_if_unseen(camera, maps, "panorama")
+    return maps
 
 
 def init_perspective_maps(camera, K_new, size, R=None, m1type=cv2.CV_16SC2, depth=None,
@@ -511,6 +513,7 @@ def init_perspective_maps(camera, K_new, size, R=None, m1type=cv2.CV_16SC2, dept
     -----
     Accuracy and ``CV_16SC2`` as for :func:`init_panorama_maps`.
     """
+    _refuse_swapped(K_new, size, "init_perspective_maps(camera, K_new, size, R=None, ...)")
     K_new = validate_K(K_new, "K_new")
     w, h = _check_size(size)
     m1type = _check_m1type(m1type)
@@ -520,7 +523,37 @@ def init_perspective_maps(camera, K_new, size, R=None, m1type=cv2.CV_16SC2, dept
     M = Rm.T @ np.linalg.inv(K_new)
     # a pixel at the principal point spans 1 / f radians (the most of any pixel of the view)
     step = _step_for(math.degrees(1.0 / min(abs(K_new[0, 0]), abs(K_new[1, 1]))))
-    return _table(camera, 0, M, 0.0, 0.0, 0.0, (w, h), depth, vp, m1type, step=step)
+    maps = _table(camera, 0, M, 0.0, 0.0, 0.0, (w, h), depth, vp, m1type, step=step)
+    _warn_if_unseen(camera, maps, "perspective view")
+    return maps
+
+
+def _refuse_swapped(matrix_arg, size_arg, signature):
+    """A clear ValueError when a camera matrix stands where the size goes (or vice versa)."""
+    if np.ndim(size_arg) == 2 and np.shape(size_arg) == (3, 3):
+        raise ValueError(f"size: got a 3x3 matrix where (width, height) goes; the order is "
+                         f"{signature}")
+    if np.ndim(matrix_arg) == 1 and np.shape(matrix_arg) == (2,) and np.ndim(size_arg) == 0:
+        raise ValueError(f"got (width, height) first; the order is {signature}")
+
+
+#: A view with more than this fraction of its pixels unseen gives a RuntimeWarning.
+UNSEEN_WARN_FRACTION = 0.5
+
+
+def _warn_if_unseen(camera, maps, what):
+    """RuntimeWarning when most of a view lies outside the band the mirror sees."""
+    map1 = maps[0]
+    x = map1 if map1.ndim == 2 else map1[..., 0]
+    frac = float(np.count_nonzero(x == UNSEEN)) / x.size
+    if frac > UNSEEN_WARN_FRACTION:
+        import warnings
+
+        lo, hi = visible_elevation_range(camera)
+        warnings.warn(f"{what}: {frac:.0%} of its pixels are outside what the mirror sees "
+                      f"(visible_elevation_range: {lo:.1f} to {hi:.1f} deg elevation); "
+                      f"aim it lower or use a smaller elevation range", RuntimeWarning,
+                      stacklevel=3)
 
 
 # -- view specs (what the Unwarper and the CLI hold) ----------------------------------------------
@@ -581,6 +614,11 @@ class PerspectiveView:
 
     def __init__(self, size, fov=90.0, yaw=0.0, pitch=0.0, roll=0.0, K_new=None, R=None,
                  depth=None, viewpoint=None):
+        _refuse_swapped(fov, size, "PerspectiveView(size, fov=90.0, ..., K_new=None, R=None, "
+                        "...); pass a camera matrix as K_new=")
+        if np.shape(fov) == (3, 3):
+            raise ValueError("fov: got a 3x3 matrix; pass a camera matrix as K_new= (the order "
+                             "is PerspectiveView(size, fov=90.0, ..., K_new=None, R=None, ...))")
         self.size = _check_size(size)
         self.K_new = K_from_fov(fov, self.size) if K_new is None else validate_K(K_new, "K_new")
         self.R = rotation_from_ypr(yaw, pitch, roll) if R is None else _check_rotation(R)

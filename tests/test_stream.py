@@ -53,9 +53,27 @@ def test_unwarp_equals_bare_remap_into_preallocated_outputs(unwarper):
     assert unwarper.view_size("pano") == (256, 64) and unwarper(frame)["front"].shape == (72, 96, 3)
 
 
+def test_unwarp_copy_true_returns_arrays_later_frames_do_not_touch(unwarper):
+    a, b = frames(2)
+    kept = unwarper.unwarp(a, copy=True)
+    again = unwarper.unwarp(b)
+    assert kept["pano"] is not again["pano"]
+    m1, m2 = unwarper.maps["pano"]
+    np.testing.assert_array_equal(kept["pano"], cv2.remap(a, m1, m2, cv2.INTER_LINEAR))
+    assert not np.array_equal(kept["pano"], again["pano"])
+
+
+@pytest.mark.parametrize("bad", [None, [[1, 2], [3, 4]], np.zeros((0, 5, 3), np.uint8)],
+                         ids=["None", "list", "empty"])
+def test_unwarp_refuses_what_is_not_an_image_with_value_error(unwarper, bad):
+    with pytest.raises(ValueError, match="frame"):
+        unwarper.unwarp(bad)
+
+
 def test_unseen_pixels_get_the_border_value(cam):
-    u = Unwarper.from_camera(cam, {"up": PerspectiveView((40, 30), fov=60.0, pitch=85.0)},
-                             border_value=(1, 2, 3))
+    with pytest.warns(RuntimeWarning, match="visible_elevation_range"):  # it sees nothing
+        u = Unwarper.from_camera(cam, {"up": PerspectiveView((40, 30), fov=60.0, pitch=85.0)},
+                                 border_value=(1, 2, 3))
     out = u.unwarp(frames(1)[0])["up"]
     assert (out == (1, 2, 3)).all()
 
@@ -165,3 +183,18 @@ def test_stream_refuses_odd_sized_video_outputs(tmp_path):
     unwarper = Unwarper.from_camera(cam, {"pano": PanoramaView((33, 8))})
     with pytest.raises(ValueError, match="even"):
         next(unwarper.stream(0, outputs={"pano": tmp_path / "p.avi"}))
+
+
+def test_perspective_arguments_in_the_wrong_order_say_the_order(cam):
+    from omnicam.views import K_from_fov
+
+    K = K_from_fov(90.0, (40, 30))
+    with pytest.raises(ValueError, match=r"init_perspective_maps\(camera, K_new, size"):
+        cam.init_perspective_maps((40, 30), K)
+    with pytest.raises(ValueError, match=r"PerspectiveView\(size, fov"):
+        PerspectiveView(K, (40, 30))
+    with pytest.raises(ValueError, match="K_new="):
+        PerspectiveView((40, 30), K)
+    a = PerspectiveView(K_new=K, size=(40, 30)).maps(cam)  # keywords: one spelling for both
+    b = cam.init_perspective_maps(K_new=K, size=(40, 30))
+    np.testing.assert_array_equal(a[0], b[0])

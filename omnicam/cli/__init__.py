@@ -1,12 +1,16 @@
-"""The ``omnicam`` console script: ``calibrate``, ``unwarp``, ``info`` and ``demo``.
+"""The ``omnicam`` console script: calibrate, unwarp, maps, export, info and demo.
 
 ::
 
     omnicam calibrate IMAGE --mirror A B RIM --intrinsics K.yaml [--far-lines LINES.json]
                       -o CALIB [--no-refine] [--overlay PATH] [--overwrite]
-    omnicam unwarp INPUT -c CALIB (--panorama WxH [--elevation LO HI] [--projection P]
-                   | --perspective WxH --fov DEG [--yaw Y] [--pitch P] [--roll R])
-                   [--depth MM] -o OUTPUT [--overwrite] [--max-frames N] [--fourcc CODE] [--quiet]
+    omnicam unwarp INPUT -c CALIB VIEW [VIEW ...] [--overwrite] [--max-frames N]
+                   [--fourcc CODE] [--preview N] [--quiet]
+        VIEW: (--panorama WxH [--elevation LO HI] [--projection P]
+               | --perspective WxH --fov DEG [--yaw Y] [--pitch P] [--roll R]
+               | --equirect WxH) [--depth MM] -o OUTPUT
+    omnicam maps CALIB VIEW [VIEW ...] (--ffmpeg [--supersample K] | --npy | --filestorage EXT)
+    omnicam export CALIB --to omnidir|kalibr|camodocal|ocamcalib -o FILE [--depth MM]
     omnicam info CALIB
     omnicam demo [-o OUTDIR]
 
@@ -16,8 +20,9 @@ call ``main([...])`` directly. Every failure the user can cause is one line on s
 (130 after Ctrl-C). Nothing existing is overwritten unless ``--overwrite`` says so, and outputs
 are written to a temporary file in the destination folder (same extension, so the same format)
 that is renamed into place, so a good file is never replaced by a half-written one. A video
-output is also renamed into place when the input ends early (a truncated file) or on Ctrl-C: the
-frames written so far are kept in a valid, finalised file. Set ``OMNICAM_DEBUG=1`` to get the
+output is read back before it is renamed into place; when the input ends early (a truncated
+file) or on Ctrl-C the frames written so far are kept in a valid, finalised file (beside an
+earlier output, as ``NAME.partial.EXT``, never over it). Set ``OMNICAM_DEBUG=1`` to get the
 traceback of an unexpected error instead of its one-line summary.
 """
 
@@ -25,7 +30,7 @@ from __future__ import annotations
 
 import os
 
-from . import calibrate, demo, info, unwarp
+from . import calibrate, demo, export, info, maps, unwarp
 from ._common import (
     EXIT_FAILURE,
     EXIT_INTERRUPTED,
@@ -57,13 +62,17 @@ def build_parser():
     )
     sub = parser.add_subparsers(dest="command", metavar="COMMAND", required=True)
 
-    for module in (calibrate, unwarp, info, demo):
+    for module in (calibrate, unwarp, maps, export, info, demo):
         module.add_parser(sub)
     return parser
 
 
 def main(argv=None) -> int:
     """Run the ``omnicam`` command line; return the exit status."""
+    import signal
+
+    if getattr(signal.getsignal(signal.SIGINT), "__name__", "") == "_interrupted_while_loading":
+        signal.signal(signal.SIGINT, signal.default_int_handler)  # loaded: Ctrl-C as usual
     try:
         with _opencv_quiet():
             args = build_parser().parse_args(argv)

@@ -1,17 +1,39 @@
-"""``omnicam unwarp``: panoramas and perspective views of images, videos, cameras and streams."""
+"""``omnicam unwarp``: panoramas, perspective and 360 views of images, videos, cameras, streams.
+
+Several views in one call, one decode for all: each ``--panorama``, ``--perspective`` or
+``--equirect`` starts a view, and the options after it (``--elevation``, ``--projection``,
+``--fov``, ``--yaw``, ``--pitch``, ``--roll``, ``--depth``, ``-o``) belong to it; options given
+before the first view belong to the first. Every view has its own ``-o``: an image, a video
+(``.avi``, ``.mp4``, ``.m4v``, ``.mov``, ``.mkv``) or an image sequence (``out_%04d.png``, frames
+numbered from 0).
+
+Video outputs are never lost (issue 10): frames go to a temporary file beside the output; at
+the end the file is read back and must decode every frame written (a full disk makes
+``cv2.VideoWriter`` drop frames silently), and only then replaces the output. On Ctrl-C the
+run stops after the current frame and keeps the frames so far: in the output itself when there
+was none before (the message says so), else in ``NAME.partial.EXT`` beside it, leaving the
+earlier complete output untouched; exit status 130. A failed write stops with an error and
+leaves any earlier output intact.
+"""
 
 from __future__ import annotations
 
+import argparse
 import contextlib
 import math
 import os
 import re
+import signal
 import sys
+import threading
 import time
+import warnings
 
 import cv2
 
+from .._atomic import OutputError, write_bytes
 from ._common import (
+    EXIT_FAILURE,
     EXIT_INTERRUPTED,
     EXIT_OK,
     EXIT_USAGE,
@@ -41,90 +63,137 @@ VIDEO_FOURCC = {
     ".mov": "mp4v",
     ".mkv": "MJPG",
 }
+#: Containers that get the spherical video metadata of an --equirect view.
+SPHERICAL_CONTAINERS = (".mp4", ".m4v", ".mov")
+#: Stop before the disk is completely full (bytes free on the output's file system).
+MIN_FREE_BYTES = 256 * 1024
+
+VIEW_KINDS = ("panorama", "perspective", "equirect")
+VIEW_OPTIONS = ("elevation", "projection", "fov", "yaw", "pitch", "roll", "depth", "output")
+
+
+# -- the command line: views in order -------------------------------------------------------
+class _InOrder(argparse.Action):
+    """Record ``(dest, value)`` in command-line order, so options can attach to their view."""
+
+    def __call__(self, parser, namespace, values, option_string=None):
+        seq = getattr(namespace, "ordered", None) or []
+        seq.append((self.dest, values, option_string))
+        namespace.ordered = seq
+
+
+class ViewSpec:
+    """One view of the command line: its kind, size, options and output."""
+
+    def __init__(self, kind, size, flag):
+        self.kind, self.size, self.flag = kind, size, flag
+        self.options = {}
+        self.view = None
+        self.output = None
+
+    def label(self):
+        return f"--{self.kind} {self.size[0]}x{self.size[1]}"
+
+
+def view_specs(args):
+    """The views of the command line, in order, each with its options and output."""
+    specs, before = [], []
+    for dest, value, flag in getattr(args, "ordered", None) or []:
+        if dest in VIEW_KINDS:
+            specs.append(ViewSpec(dest, value, flag))
+        elif specs:
+            _attach(specs[-1], dest, value, flag)
+        else:
+            before.append((dest, value, flag))
+    if not specs:
+        raise CliError("give a view: --panorama WxH, --perspective WxH --fov DEG or "
+                       "--equirect WxH", EXIT_USAGE)
+    for dest, value, flag in before:
+        _attach(specs[0], dest, value, flag)
+    for i, spec in enumerate(specs):
+        spec.output = spec.options.pop("output", None)
+        if spec.output is None:
+            which = f"view {i + 1} ({spec.label()})" if len(specs) > 1 else spec.label()
+            raise CliError(f"{which} has no -o OUTPUT; each view takes its own -o after it",
+                           EXIT_USAGE)
+        spec.view = view_from_spec(spec)
+    outputs = [os.path.abspath(s.output) for s in specs]
+    if len(set(outputs)) != len(outputs):
+        raise CliError("two views write the same output; give each view its own -o", EXIT_USAGE)
+    return specs
+
+
+def _attach(spec, dest, value, flag):
+    if dest in spec.options:
+        raise CliError(f"{flag} given twice for {spec.label()}", EXIT_USAGE)
+    spec.options[dest] = value
+
+
+def view_from_spec(spec):
+    """The ``PanoramaView`` or ``PerspectiveView`` a :class:`ViewSpec` asks for.
+
+    Options of another kind of view are refused rather than ignored; the view classes check
+    the values (sizes, angle ranges, depth), and what they refuse is a usage error too.
+    """
+    from ..spherical import equirect_view
+    from ..views import PanoramaView, PerspectiveView
+
+    o = spec.options
+    allowed = {"panorama": ("elevation", "projection", "depth"),
+               "perspective": ("fov", "yaw", "pitch", "roll", "depth"),
+               "equirect": ("depth",)}[spec.kind]
+    refused = [f"--{k}" for k in o if k not in allowed]
+    if refused:
+        kinds = {"elevation": "--panorama", "projection": "--panorama", "fov": "--perspective",
+                 "yaw": "--perspective", "pitch": "--perspective", "roll": "--perspective"}
+        owner = kinds.get(refused[0][2:], "--panorama")
+        verb = "only apply" if len(refused) > 1 else "only applies"
+        raise CliError(f"{', '.join(refused)} {verb} to {owner}, not to {spec.flag}", EXIT_USAGE)
+    try:
+        if spec.kind == "panorama":
+            return PanoramaView(spec.size, elevation_range=o.get("elevation"),
+                                projection=o.get("projection") or "cylindrical",
+                                depth=o.get("depth"))
+        if spec.kind == "equirect":
+            return equirect_view(spec.size, depth=o.get("depth"))
+        if o.get("fov") is None:
+            raise CliError("--perspective needs --fov DEG (horizontal field of view)",
+                           EXIT_USAGE)
+        return PerspectiveView(spec.size, fov=o["fov"], yaw=o.get("yaw") or 0.0,
+                               pitch=o.get("pitch") or 0.0, roll=o.get("roll") or 0.0,
+                               depth=o.get("depth"))
+    except ValueError as e:
+        raise CliError(f"{spec.flag}: {_one_line(e)}", EXIT_USAGE) from None
 
 
 def view_from_args(args):
-    """The view the command line asks for: a ``PanoramaView`` or ``PerspectiveView``.
-
-    Options of the other kind of view are refused rather than ignored; the view classes check
-    the values (sizes, angle ranges, depth), and what they refuse is a usage error too.
-    """
-    from ..views import PanoramaView, PerspectiveView
-
-    def refuse(given, kind):
-        if given:
-            verb = "only apply" if len(given) > 1 else "only applies"
-            raise CliError(f"{', '.join(given)} {verb} to --{kind}", EXIT_USAGE)
-
-    try:
-        if args.panorama is not None:
-            refuse(
-                [
-                    o
-                    for o, v in (
-                        ("--fov", args.fov),
-                        ("--yaw", args.yaw),
-                        ("--pitch", args.pitch),
-                        ("--roll", args.roll),
-                    )
-                    if v is not None
-                ],
-                "perspective",
-            )
-            return PanoramaView(
-                args.panorama,
-                elevation_range=args.elevation,
-                projection=args.projection or "cylindrical",
-                depth=args.depth,
-            )
-        refuse(
-            [
-                o
-                for o, v in (
-                    ("--elevation", args.elevation),
-                    ("--projection", args.projection),
-                )
-                if v is not None
-            ],
-            "panorama",
-        )
-        if args.fov is None:
-            raise CliError(
-                "--perspective needs --fov DEG (horizontal field of view)", EXIT_USAGE
-            )
-        return PerspectiveView(
-            args.perspective,
-            fov=args.fov,
-            yaw=args.yaw or 0.0,
-            pitch=args.pitch or 0.0,
-            roll=args.roll or 0.0,
-            depth=args.depth,
-        )
-    except ValueError as e:
-        option = "--panorama" if args.panorama is not None else "--perspective"
-        raise CliError(f"{option}: {_one_line(e)}", EXIT_USAGE) from None
+    """The first view of the command line (kept for callers of the one-view CLI)."""
+    return view_specs(args)[0].view
 
 
-def _unwarper(camera, view, frame_size):
-    """An :class:`~omnicam.stream.Unwarper` of ``view``, its tables for frames of ``frame_size``
-    (``camera.scaled`` when the calibration was made at another resolution)."""
+def _unwarper(camera, specs, frame_size):
+    """An :class:`~omnicam.stream.Unwarper` of the views, its tables for frames of
+    ``frame_size`` (``camera.scaled`` when the calibration was made at another resolution).
+    A view mostly outside what the mirror sees gives a warning line."""
     from ..stream import Unwarper
 
     size = camera.image_size
-    if size is not None and size != tuple(frame_size):
-        if (
-            abs(frame_size[0] * size[1] - frame_size[1] * size[0])
-            > 0.01 * size[0] * size[1]
-        ):
-            _warn(
-                f"frames are {frame_size[0]}x{frame_size[1]} but the calibration is for "
-                f"{size[0]}x{size[1]}, another aspect ratio: assuming the same sensor "
-                f"rescaled (not a crop)"
-            )
+    if size is not None and size != tuple(frame_size) and abs(
+            frame_size[0] * size[1] - frame_size[1] * size[0]) > 0.01 * size[0] * size[1]:
+        _warn(f"frames are {frame_size[0]}x{frame_size[1]} but the calibration is for "
+              f"{size[0]}x{size[1]}, another aspect ratio: assuming the same sensor "
+              f"rescaled (not a crop)")
+    views = {str(i): s.view for i, s in enumerate(specs)}
     try:
-        return Unwarper.from_camera(camera, {"view": view}, frame_size=frame_size)
+        with warnings.catch_warnings(record=True) as caught:
+            warnings.simplefilter("always", RuntimeWarning)
+            unwarper = Unwarper.from_camera(camera, views, frame_size=frame_size)
     except ValueError as e:
         raise CliError(f"cannot build the view: {_one_line(e)}") from None
+    for w in caught:
+        if issubclass(w.category, RuntimeWarning) and "visible_elevation_range" in str(w.message):
+            _warn(str(w.message))
+    return unwarper
 
 
 def _is_device_or_url(spec):
@@ -136,41 +205,88 @@ def _is_sequence(spec):
     return re.search(r"%0?\d*d", spec) is not None and not os.path.exists(spec)
 
 
+def _output_kind(path, video_input):
+    ext = os.path.splitext(path)[1].lower()
+    if _is_sequence(path):
+        if not cv2.haveImageWriter("x" + ext):
+            raise CliError(f"output {path}: an image sequence needs an image extension "
+                           f"(.png, .jpg, .tif, ...)")
+        return "sequence"
+    if video_input:
+        if ext in VIDEO_FOURCC:
+            return "video"
+        raise CliError(f"output {path}: the input is a video; use a video extension "
+                       f"({', '.join(VIDEO_FOURCC)}) or an image sequence (out_%04d.png)")
+    if not cv2.haveImageWriter(path):
+        hint = " (the input is an image)" if ext in VIDEO_FOURCC else ""
+        raise CliError(f"output {path}: no image writer for extension {ext or '(none)'!r}{hint}")
+    return "image"
+
+
 def cmd_unwarp(args):
-    view = view_from_args(args)
-    source, output = args.input, args.output
-    if not (_is_device_or_url(source) or _is_sequence(source)):
+    specs = view_specs(args)
+    source = args.input
+    live = _is_device_or_url(source) or _is_sequence(source)
+    if not live:
         if not os.path.exists(source):
             raise CliError(f"input {source} does not exist")
         if not os.path.isfile(source):
             raise CliError(f"input {source} is not a file")
-        if os.path.exists(output) and os.path.samefile(source, output):
-            raise CliError(f"output {output} is the input")
-    _check_output(output, args.overwrite)
+    video_input = live or not cv2.haveImageReader(source)
+    for spec in specs:
+        spec.kind_out = _output_kind(spec.output, video_input)
+        if not live and os.path.exists(spec.output) and os.path.samefile(source, spec.output):
+            raise CliError(f"output {spec.output} is the input")
+        target = _sequence_name(spec.output, 0) if spec.kind_out == "sequence" else spec.output
+        _check_output(target, args.overwrite)
     camera = _load_camera(args.calibration)
-
-    if not (_is_device_or_url(source) or _is_sequence(source)) and cv2.haveImageReader(
-        source
-    ):
-        return _unwarp_image(args, view, camera)
-    return _unwarp_video(args, view, camera)
+    if not video_input:
+        return _unwarp_image(args, specs, camera)
+    return _unwarp_video(args, specs, camera)
 
 
-def _unwarp_image(args, view, camera):
-    if not cv2.haveImageWriter(args.output):
-        ext = os.path.splitext(args.output)[1]
-        hint = " (the input is an image)" if ext.lower() in VIDEO_FOURCC else ""
-        raise CliError(
-            f"output {args.output}: no image writer for extension "
-            f"{ext or '(none)'!r}{hint}"
-        )
+def _sequence_name(pattern, index):
+    return re.sub(r"%0?\d*d", lambda m: m.group(0) % index, pattern, count=1)
+
+
+def _write_equirect_jpeg(path, image, size, overwrite):
+    from ..spherical import jpeg_with_photosphere_xmp
+
+    ok, jpg = cv2.imencode(".jpg", image, [cv2.IMWRITE_JPEG_QUALITY, 95])
+    if not ok:
+        raise CliError(f"cannot encode {path} as JPEG")
+    data = jpeg_with_photosphere_xmp(jpg.tobytes(), size)
+
+    def verify(tmp):
+        back = cv2.imread(tmp, cv2.IMREAD_UNCHANGED)
+        return back is not None and back.shape[:2] == image.shape[:2]
+
+    try:
+        write_bytes(path, data, what="image", overwrite=overwrite, verify=verify)
+    except OutputError as e:
+        raise CliError(str(e)) from None
+
+
+def _write_view_image(spec, path, image, overwrite):
+    is_jpeg = os.path.splitext(path)[1].lower() in (".jpg", ".jpeg")
+    if spec.kind == "equirect" and is_jpeg:
+        _write_equirect_jpeg(path, image, spec.size, overwrite)
+    else:
+        _write_image(path, image, overwrite)
+
+
+def _unwarp_image(args, specs, camera):
     image = _read_image(args.input)
-    out = _unwarper(camera, view, (image.shape[1], image.shape[0])).unwarp(image)[
-        "view"
-    ]
-    _write_image(args.output, out, args.overwrite)
-    if not args.quiet:
-        print(f"wrote {args.output} ({out.shape[1]}x{out.shape[0]})")
+    views = _unwarper(camera, specs, (image.shape[1], image.shape[0])).unwarp(image)
+    for i, spec in enumerate(specs):
+        out = views[str(i)]
+        path = _sequence_name(spec.output, 0) if spec.kind_out == "sequence" else spec.output
+        _write_view_image(spec, path, out, args.overwrite)
+        if spec.kind == "equirect" and os.path.splitext(path)[1].lower() not in (".jpg",
+                                                                                ".jpeg"):
+            _warn(f"{path}: Photo Sphere metadata is written into .jpg outputs only")
+        if not args.quiet:
+            print(f"wrote {path} ({out.shape[1]}x{out.shape[0]})")
     return EXIT_OK
 
 
@@ -200,7 +316,7 @@ class Progress:
         if self.total:
             bar_len = 24
             done = min(frames / self.total, 1.0)
-            fill = int(round(done * bar_len))
+            fill = round(done * bar_len)
             text = (
                 f"[{'#' * fill}{'.' * (bar_len - fill)}] {frames}/{self.total} frames "
                 f"{100 * done:3.0f}%  {self.fps():6.1f} fps"
@@ -230,56 +346,8 @@ def _open_capture(source):
             raise CliError(f"cannot open camera {source}")
         if "://" in source:
             raise CliError(f"cannot open stream {source}")
-        raise CliError(
-            f"cannot open input {source}: not an image or video OpenCV can read"
-        )
+        raise CliError(f"cannot open input {source}: not an image or video OpenCV can read")
     return cap
-
-
-def _unwarp_video(args, view, camera):
-    output = args.output
-    ext = os.path.splitext(output)[1].lower()
-    fourcc = args.fourcc or VIDEO_FOURCC.get(ext)
-    if fourcc is None:
-        raise CliError(
-            f"output {output}: the input is a video; use a video extension "
-            f"({', '.join(VIDEO_FOURCC)})"
-        )
-    cap = _open_capture(args.input)
-    try:
-        frame_size = _frame_size(cap, args.input)
-        count = cap.get(cv2.CAP_PROP_FRAME_COUNT)
-        declared = int(count) if math.isfinite(count) and count > 0 else 0  # 0: unknown
-        fps = cap.get(cv2.CAP_PROP_FPS)
-        if not (math.isfinite(fps) and 0 < fps < 1000):
-            fps = 30.0
-        unwarper = _unwarper(camera, view, frame_size)
-        tmp = _temp_beside(output)
-        try:
-            _check_writer(tmp, fourcc, fps, unwarper.view_size("view"), output)
-            written, stop = _stream(unwarper, cap, tmp, fourcc, fps, declared, args)
-        except BaseException:
-            _remove_quietly(tmp)
-            raise
-    finally:
-        cap.release()
-    if (
-        stop == "interrupted"
-    ):  # Ctrl-C may have come between a frame's write and its count
-        written = max(written, _frame_count(tmp))
-    _publish(tmp, output, args.overwrite)
-    if stop == "interrupted":
-        _warn(f"interrupted: kept the {written} frames written so far in {output}")
-        return EXIT_INTERRUPTED
-    if stop == "truncated":
-        _warn(
-            f"input ended after {written} of its {declared} frames (truncated, or a "
-            f"frame it cannot decode); kept them in {output}"
-        )
-    elif not args.quiet:
-        w, h = unwarper.view_size("view")
-        print(f"wrote {output} ({written} frames, {w}x{h})")
-    return EXIT_OK
 
 
 def _frame_size(cap, source):
@@ -296,79 +364,269 @@ def _frame_size(cap, source):
     return frame.shape[1], frame.shape[0]
 
 
-def _frame_count(path):
-    """Frames a finished video file declares (0 if it cannot say)."""
-    cap = cv2.VideoCapture(path)
+def count_frames(path, limit=None):
+    """Frames OpenCV decodes from a video file (stops after ``limit``)."""
+    cap = cv2.VideoCapture(os.fspath(path))
+    n = 0
     try:
-        n = cap.get(cv2.CAP_PROP_FRAME_COUNT) if cap.isOpened() else 0
+        if not cap.isOpened():
+            return 0
+        while (limit is None or n < limit) and cap.grab():
+            n += 1
     finally:
         cap.release()
-    return int(n) if math.isfinite(n) and n > 0 else 0
+    return n
 
 
-def _check_writer(tmp, fourcc, fps, size, output):
-    """Fail early, with a clear message, if ``cv2.VideoWriter`` cannot write this output."""
-    if size[0] % 2 or size[1] % 2:
-        raise CliError(
-            f"video {output}: the view is {size[0]}x{size[1]}; video needs an even "
-            f"width and height (cv2.VideoWriter drops an odd last row or column)"
-        )
+def _partial_name(output):
+    stem, ext = os.path.splitext(output)
+    name = f"{stem}.partial{ext}"
+    k = 1
+    while os.path.lexists(name):
+        name = f"{stem}.partial-{k}{ext}"
+        k += 1
+    return name
+
+
+class _VideoOut:
+    """One view's video: a ``cv2.VideoWriter`` on a temporary file beside the output."""
+
+    def __init__(self, spec, fourcc, fps, size):
+        self.spec, self.size = spec, size
+        output = spec.output
+        if size[0] % 2 or size[1] % 2:
+            raise CliError(f"video {output}: the view is {size[0]}x{size[1]}; video needs an "
+                           f"even width and height (cv2.VideoWriter drops an odd last row or "
+                           f"column)")
+        self.tmp = _temp_beside(output)
+        try:
+            self.writer = cv2.VideoWriter(self.tmp, cv2.VideoWriter_fourcc(*fourcc), fps, size)
+            ok = self.writer.isOpened()
+        except cv2.error:
+            ok = False
+        if not ok:
+            _remove_quietly(self.tmp)
+            raise CliError(f"cannot write video {output} with codec {fourcc}; try --fourcc or "
+                           f"another extension")
+        self.written = 0
+
+    def write(self, image):
+        self.writer.write(image)
+        self.written += 1
+
+    def release(self):
+        self.writer.release()
+
+    def discard(self):
+        self.writer.release()
+        _remove_quietly(self.tmp)
+
+
+def _free_bytes(path):
     try:
-        writer = cv2.VideoWriter(tmp, cv2.VideoWriter_fourcc(*fourcc), fps, size)
-        ok = writer.isOpened()
-        writer.release()
-    except cv2.error:
-        ok = False
-    if not ok:
-        raise CliError(
-            f"cannot write video {output} with codec {fourcc}; try --fourcc or "
-            f"another extension"
-        )
+        st = os.statvfs(os.path.dirname(os.path.abspath(path)))
+    except (OSError, AttributeError):
+        return math.inf
+    return st.f_bavail * st.f_frsize
 
 
-def _stream(unwarper, cap, tmp, fourcc, fps, declared, args):
-    """Unwarp frames into ``tmp`` until the input ends, ``--max-frames`` or Ctrl-C.
+@contextlib.contextmanager
+def _ctrl_c_stops(flag):
+    """While streaming, the first Ctrl-C asks the loop to stop after the current frame (no
+    exception anywhere in OpenCV or in a rename); a second one interrupts at once."""
+    if threading.current_thread() is not threading.main_thread():
+        yield
+        return
 
-    ``declared`` is the input's frame count (0 if unknown): ending before it is a truncation.
-    Returns ``(frames_written, how)`` with ``how`` one of ``"end"``, ``"truncated"``,
-    ``"interrupted"``; the writer is released (the file finalised) in every case, by
-    :meth:`Unwarper.stream` when its generator ends or is closed.
+    def on_sigint(signum, frame):
+        if flag["stop"]:
+            raise KeyboardInterrupt
+        flag["stop"] = True
+
+    previous = signal.signal(signal.SIGINT, on_sigint)
+    try:
+        yield
+    finally:
+        signal.signal(signal.SIGINT, previous)
+
+
+def _unwarp_video(args, specs, camera):
+    flag = {"stop": False}
+    with _ctrl_c_stops(flag):
+        return _unwarp_video_guarded(args, specs, camera, flag)
+
+
+def _unwarp_video_guarded(args, specs, camera, flag):
+    cap = _open_capture(args.input)
+    outs, how = [], "end"
+    try:
+        frame_size = _frame_size(cap, args.input)
+        count = cap.get(cv2.CAP_PROP_FRAME_COUNT)
+        declared = int(count) if math.isfinite(count) and count > 0 else 0  # 0: unknown
+        fps = cap.get(cv2.CAP_PROP_FPS)
+        if not (math.isfinite(fps) and 0 < fps < 1000):
+            fps = 30.0
+        unwarper = _unwarper(camera, specs, frame_size)
+        try:
+            for i, spec in enumerate(specs):
+                if spec.kind_out == "video":
+                    ext = os.path.splitext(spec.output)[1].lower()
+                    fourcc = args.fourcc or VIDEO_FOURCC[ext]
+                    outs.append(_VideoOut(spec, fourcc, fps, unwarper.view_size(str(i))))
+            written, how = _stream(unwarper, cap, specs, outs, declared, args, flag)
+        except BaseException:
+            for o in outs:
+                o.discard()
+            raise
+    finally:
+        cap.release()
+    for o in outs:
+        o.release()
+    return _finish(args, specs, outs, written, how, declared)
+
+
+def _stream(unwarper, cap, specs, outs, declared, args, flag):
+    """Unwarp frames until the input ends, ``--max-frames``, Ctrl-C or a full disk.
+
+    Returns ``(frames, how)``, ``how`` one of ``"end"``, ``"truncated"``, ``"interrupted"``.
     """
     total = min(declared or args.max_frames or 0, args.max_frames or declared)
     progress = Progress(total, enabled=not args.quiet)
-    frames = unwarper.stream(
-        cap, outputs={"view": tmp}, fourcc=fourcc, fps=fps, max_frames=args.max_frames
-    )
+    video = {o.spec.output: o for o in outs}
     written, how = 0, "end"
     try:
-        with contextlib.closing(frames):
-            for index, _ in frames:
-                written = index + 1
-                progress.update(written)
+        while args.max_frames is None or written < args.max_frames:
+            if flag["stop"]:
+                how = "interrupted"
+                break
+            ok, frame = cap.read()
+            if not ok or frame is None:
+                break
+            views = unwarper.unwarp(frame)
+            for i, spec in enumerate(specs):
+                image = views[str(i)]
+                if spec.kind_out == "video":
+                    video[spec.output].write(image)
+                else:
+                    _write_view_image(spec, _sequence_name(spec.output, written), image,
+                                      args.overwrite)
+                if args.preview and written % args.preview == 0:
+                    _write_image(_preview_name(spec.output, written), image, True)
+            written += 1
+            progress.update(written)
+            if outs and written % 16 == 0:
+                for o in outs:
+                    if _free_bytes(o.tmp) < MIN_FREE_BYTES:
+                        raise CliError(f"cannot write video {o.spec.output}: no space left on "
+                                       f"the device after {written} frames; the previous file "
+                                       f"is unchanged")
+        if flag["stop"]:
+            how = "interrupted"
     except KeyboardInterrupt:
         how = "interrupted"
     except ValueError as e:  # e.g. a frame of another size than the capture announced
         raise CliError(f"cannot unwarp {args.input}: {_one_line(e)}") from None
     finally:
         progress.close()
-    if written == 0:
+    if written == 0 and how != "interrupted":
         raise CliError(f"cannot read a frame from {args.input}")
-    if (
-        how == "end"
-        and written < declared
-        and not (args.max_frames and written >= args.max_frames)
-    ):
+    if how == "end" and written < declared and not (args.max_frames
+                                                    and written >= args.max_frames):
         how = "truncated"
     return written, how
+
+
+def _preview_name(output, index):
+    stem = re.split(r"%0?\d*d", output, maxsplit=1)[0] if _is_sequence(output) else \
+        os.path.splitext(output)[0]
+    return f"{stem.rstrip('_.-') or 'view'}.preview_{index:06d}.png"
+
+
+def _finish(args, specs, outs, written, how, declared):
+    """Check every video file, add 360 metadata, and put each where it belongs."""
+    status = EXIT_INTERRUPTED if how == "interrupted" else EXIT_OK
+    try:
+        for o in outs:
+            got = count_frames(o.tmp, o.written + 1)
+            if how != "interrupted" and got != o.written:
+                raise CliError(f"cannot write video {o.spec.output}: only {got} of {o.written} "
+                               f"frames can be read back (is the disk full?); the previous "
+                               f"file is unchanged")
+            o.readable = got
+            if o.spec.kind == "equirect" and got:
+                _add_spherical_metadata(o)
+    except BaseException:
+        for o in outs:
+            _remove_quietly(o.tmp)
+        raise
+    for o in outs:
+        output = o.spec.output
+        if how == "interrupted":
+            if o.readable == 0:
+                _remove_quietly(o.tmp)
+                _warn(f"interrupted before a frame of {output} was written: nothing kept")
+                continue
+            if os.path.lexists(output):
+                partial = _partial_name(output)
+                _publish(o.tmp, partial, False)
+                _warn(f"interrupted: kept the {o.readable} frames written so far in {partial}; "
+                      f"the earlier {output} is unchanged")
+            else:
+                _publish(o.tmp, output, False)
+                _warn(f"interrupted: kept the {o.readable} frames written so far in {output} "
+                      f"(there was no earlier output)")
+            continue
+        _publish(o.tmp, output, args.overwrite)
+        if how == "truncated":
+            _warn(f"input ended after {written} of its {declared} frames (truncated, or a "
+                  f"frame it cannot decode); kept them in {output}")
+        elif not args.quiet:
+            print(f"wrote {output} ({written} frames, {o.size[0]}x{o.size[1]})")
+    for spec in specs:
+        if spec.kind_out == "sequence":
+            if how == "interrupted":
+                _warn(f"interrupted: kept the {written} frames written so far as {spec.output}")
+            elif not args.quiet:
+                print(f"wrote {written} frames as {spec.output}")
+    if how == "interrupted" and not outs and not any(s.kind_out == "sequence" for s in specs):
+        _warn("interrupted")
+    return status
+
+
+def _add_spherical_metadata(o):
+    from ..spherical import inject_spherical_mp4
+
+    if os.path.splitext(o.spec.output)[1].lower() not in SPHERICAL_CONTAINERS:
+        _warn(f"{o.spec.output}: spherical video metadata is written into .mp4/.m4v/.mov only")
+        return
+    with open(o.tmp, "rb") as f:
+        data = f.read()
+    try:
+        new = inject_spherical_mp4(data)
+    except ValueError as e:
+        raise CliError(f"cannot add 360 metadata to {o.spec.output}: {e}") from None
+    try:
+        with open(o.tmp, "wb") as f:
+            f.write(new)
+            f.flush()
+            os.fsync(f.fileno())
+    except OSError as e:
+        raise CliError(f"cannot write video {o.spec.output}: {e.strerror or e}; the previous "
+                       f"file is unchanged") from None
+    if count_frames(o.tmp, o.readable + 1) != o.readable:
+        raise CliError(f"cannot write video {o.spec.output}: the file with 360 metadata does "
+                       f"not read back; the previous file is unchanged")
 
 
 def add_parser(sub):
     """Register the ``unwarp`` subcommand on ``sub`` (argparse sub-parsers)."""
     p = sub.add_parser(
         "unwarp",
-        help="panorama or perspective view of an image or a video",
-        description="Unwarp an image, a video file, a camera index or a stream "
-        "URL into a panorama or a virtual perspective view.",
+        help="panorama, perspective or 360 views of an image, a video, a camera or a stream",
+        description="Unwarp an image, a video file, an image sequence, a camera index or a "
+        "stream URL into one or more views, decoding each frame once. Each --panorama, "
+        "--perspective or --equirect starts a view; the options after it, up to the next "
+        "view, belong to it, and each view takes its own -o.",
     )
     p.add_argument(
         "input",
@@ -376,89 +634,55 @@ def add_parser(sub):
         help="image or video file, image sequence (img_%%04d.png), camera index "
         "(0, 1, ...) or stream URL",
     )
-    p.add_argument(
-        "-c",
-        "--calibration",
-        required=True,
-        metavar="CALIB",
-        help="calibration file written by 'omnicam calibrate'",
-    )
-    view = p.add_mutually_exclusive_group(required=True)
-    view.add_argument(
-        "--panorama", type=_size, metavar="WxH", help="panorama of this size"
-    )
-    view.add_argument(
-        "--perspective",
-        type=_size,
-        metavar="WxH",
-        help="virtual perspective view of this size (needs --fov)",
-    )
-    p.add_argument(
-        "--elevation",
-        nargs=2,
-        type=_finite,
-        metavar=("LO", "HI"),
-        help="panorama elevation range in degrees (default: what the mirror sees)",
-    )
-    p.add_argument(
-        "--projection",
-        choices=("cylindrical", "equirectangular"),
-        help="panorama rows linear in tan(elevation) or in elevation "
-        "(default cylindrical)",
-    )
-    p.add_argument(
-        "--fov",
-        type=_finite,
-        metavar="DEG",
-        help="horizontal field of view of the perspective view, degrees",
-    )
-    p.add_argument(
-        "--yaw",
-        type=_finite,
-        metavar="Y",
-        help="perspective view: turn right by Y degrees (default 0)",
-    )
-    p.add_argument(
-        "--pitch",
-        type=_finite,
-        metavar="P",
-        help="perspective view: look up by P degrees (default 0)",
-    )
-    p.add_argument(
-        "--roll",
-        type=_finite,
-        metavar="R",
-        help="perspective view: turn the image clockwise by R degrees (default 0)",
-    )
-    p.add_argument(
-        "--depth",
-        type=_positive,
-        metavar="MM",
-        help="map the scene at this distance from the best-fit viewpoint "
-        "(default: at infinity)",
-    )
-    p.add_argument(
-        "-o",
-        "--output",
-        required=True,
-        metavar="OUTPUT",
-        help="output image, or video (.avi, .mp4, .m4v, .mov, .mkv) for a video input",
-    )
-    p.add_argument(
-        "--overwrite", action="store_true", help="replace OUTPUT if it exists"
-    )
-    p.add_argument(
-        "--max-frames",
-        type=_count,
-        metavar="N",
-        help="video: stop after N frames (useful with a camera)",
-    )
-    p.add_argument(
-        "--fourcc",
-        type=_fourcc,
-        metavar="CODE",
-        help="video codec FourCC (default MJPG for .avi/.mkv, mp4v for .mp4/.mov)",
-    )
+    p.add_argument("-c", "--calibration", required=True, metavar="CALIB",
+                   help="calibration file written by 'omnicam calibrate'")
+    add_view_arguments(p)
+    p.add_argument("--overwrite", action="store_true", help="replace outputs that exist")
+    p.add_argument("--max-frames", type=_count, metavar="N",
+                   help="video: stop after N frames (useful with a camera)")
+    p.add_argument("--fourcc", type=_fourcc, metavar="CODE",
+                   help="video codec FourCC (default MJPG for .avi/.mkv, mp4v for .mp4/.mov)")
+    p.add_argument("--preview", type=_count, metavar="N",
+                   help="video: also write every N-th frame of each view as "
+                   "OUTPUT.preview_FRAME.png")
     p.add_argument("-q", "--quiet", action="store_true", help="no progress bar")
-    p.set_defaults(func=cmd_unwarp)
+    p.set_defaults(func=cmd_unwarp, ordered=None)
     return p
+
+
+def add_view_arguments(p, output_help=None):
+    """The view options (``--panorama``, ``--perspective``, ``--equirect`` and those that
+    belong to a view, ``-o`` included), recorded in order (:func:`view_specs`)."""
+    p.add_argument("--panorama", type=_size, metavar="WxH", action=_InOrder,
+                   help="a panorama of this size (starts a view)")
+    p.add_argument("--perspective", type=_size, metavar="WxH", action=_InOrder,
+                   help="a virtual perspective view of this size, needs --fov (starts a view)")
+    p.add_argument("--equirect", type=_size, metavar="WxH", action=_InOrder,
+                   help="a 2:1 equirectangular 360 image of the full sphere, forward at the "
+                   "centre; .jpg outputs get Photo Sphere XMP, .mp4/.mov the spherical video "
+                   "metadata (starts a view)")
+    p.add_argument("--elevation", nargs=2, type=_finite, metavar=("LO", "HI"), action=_InOrder,
+                   help="panorama elevation range in degrees (default: what the mirror sees, "
+                   "from -60 deg, which leaves out the camera's own reflection)")
+    p.add_argument("--projection", choices=("cylindrical", "equirectangular"), action=_InOrder,
+                   help="panorama rows linear in tan(elevation) or in elevation "
+                   "(default cylindrical)")
+    p.add_argument("--fov", type=_finite, metavar="DEG", action=_InOrder,
+                   help="horizontal field of view of the perspective view, degrees")
+    p.add_argument("--yaw", type=_finite, metavar="Y", action=_InOrder,
+                   help="perspective view: turn right by Y degrees (default 0)")
+    p.add_argument("--pitch", type=_finite, metavar="P", action=_InOrder,
+                   help="perspective view: look up by P degrees (default 0)")
+    p.add_argument("--roll", type=_finite, metavar="R", action=_InOrder,
+                   help="perspective view: turn the image clockwise by R degrees (default 0)")
+    p.add_argument("--depth", type=_positive, metavar="MM", action=_InOrder,
+                   help="map the scene at this distance from the best-fit viewpoint "
+                   "(default: at infinity)")
+    p.add_argument("-o", "--output", metavar="OUTPUT", action=_InOrder,
+                   help=output_help or "the view's output: an image, a video (.avi, .mp4, "
+                   ".m4v, .mov, .mkv) for a video input, or an image sequence (out_%%04d.png)")
+
+
+# re-exported for callers of the earlier one-view module
+__all__ = ["EXIT_FAILURE", "VIDEO_FOURCC", "Progress", "add_parser", "add_view_arguments",
+           "cmd_unwarp", "count_frames", "view_from_args", "view_specs"]
