@@ -309,12 +309,14 @@ def test_unseen_directions_map_outside_and_remap_to_the_border():
     K = K_from_fov(60.0, size)
     up = rotation_from_ypr(0.0, 85.0, 0.0)  # looking at the zenith: nothing is seen
     for m1type in (cv2.CV_32FC1, cv2.CV_32FC2, cv2.CV_16SC2):
-        m1, m2 = cam.init_perspective_maps(K, size, R=up, m1type=m1type)
+        with pytest.warns(RuntimeWarning, match="visible_elevation_range"):
+            m1, m2 = cam.init_perspective_maps(K, size, R=up, m1type=m1type)
         img = np.full((500, 500, 3), 200, np.uint8)
         out = cv2.remap(img, m1, m2, cv2.INTER_LINEAR, borderMode=cv2.BORDER_CONSTANT,
                         borderValue=(7, 7, 7))
         assert (out == 7).all()
-    mapx, mapy = cam.init_perspective_maps(K, size, R=up, m1type=cv2.CV_32FC1)
+    with pytest.warns(RuntimeWarning, match="100% of its pixels"):
+        mapx, mapy = cam.init_perspective_maps(K, size, R=up, m1type=cv2.CV_32FC1)
     assert (mapx == views.UNSEEN).all() and (mapy == views.UNSEEN).all()
     assert views.UNSEEN <= -2.0 and views.UNSEEN > -32768 / 32
     # a horizontal view sees the lower half and not the top rows
