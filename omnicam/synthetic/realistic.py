@@ -111,7 +111,7 @@ _CRITERIA = (cv2.TERM_CRITERIA_COUNT | cv2.TERM_CRITERIA_EPS, 100, 1e-14)
 class BodyGeometry:
     """The camera's body in the camera frame (z along the optical axis, towards the mirror).
 
-    A lens barrel: the cylinder ``x^2 + y^2 = r_barrel^2`` from ``z = min(0, z_box)`` to
+    A lens barrel: the cylinder ``x^2 + y^2 = r_barrel^2`` from the box's front ``z = z_box`` to
     ``z_barrel``, closed by a front disc at ``z_barrel``: dark glass inside ``r_glass`` (with
     an aperture, inner rings of lens elements and specular highlights) and a dark knurled front
     ring outside it. Behind it a box (not a body of revolution): ``|x'| <= w_box``,
@@ -148,7 +148,7 @@ class BodyGeometry:
     def circles(self):
         """Coaxial circles ``(r, z)`` whose reflections bound the round dark silhouette.
 
-        The barrel's front edge ``(r_barrel, z_barrel)``; the back edge ``(r_barrel, 0)`` joins
+        The barrel's front edge ``(r_barrel, z_barrel)``; the back edge ``(r_barrel, z_box)`` joins
         (by :func:`render_rig`) only when the barrel's side is seen beside it.
         """
         return ((float(self.r_barrel), float(self.z_barrel)),)
@@ -459,7 +459,7 @@ def _body_hits(o, v, body):
         ok = (v[:, 2] < 0) & (tf > 0) & (rho2 <= body.r_barrel**2)
         t_best = np.where(ok, tf, t_best)
         label = np.where(ok, np.where(rho2 <= body.r_glass**2, 5, 6), label).astype(np.int8)
-        # barrel side: x^2 + y^2 = r^2 from outside, min(0, z_box) <= z <= z_barrel
+        # barrel side: x^2 + y^2 = r^2 from outside, z_box <= z <= z_barrel
         A = v[:, 0] ** 2 + v[:, 1] ** 2
         B = o[:, 0] * v[:, 0] + o[:, 1] * v[:, 1]
         Cc = o[:, 0] ** 2 + o[:, 1] ** 2 - body.r_barrel**2
@@ -471,7 +471,7 @@ def _body_hits(o, v, body):
             & (Cc > 0)
             & (ts > 0)
             & (zs <= body.z_barrel)
-            & (zs >= min(0.0, body.z_box))
+            & (zs >= body.z_box)
             & (ts < t_best)
         )
         t_best = np.where(ok, ts, t_best)
@@ -1003,7 +1003,7 @@ def random_room(rng, dark_floor=False):
         wall_colors=(*walls, floor_col, (230.0, 230.0, 228.0)),
         rects=tuple(rects),
         plank=float(rng.choice([0.0, 0.12, 0.2])),
-        dark_floor_deg=float(rng.uniform(-70.0, -60.0)) if dark_floor else None,
+        dark_floor_deg=float(rng.uniform(-72.0, -50.0)) if dark_floor else None,
     )
 
 
@@ -1303,20 +1303,19 @@ def _reflection_visible(rendering, size, n_sectors=36):
     img = rendering.image
     grey = 0.114 * img[..., 0] + 0.587 * img[..., 1] + 0.299 * img[..., 2]
     cx, cy = xs.mean(), ys.mean()
+
+    def sectors(band):
+        yb, xb = np.nonzero(band)
+        sec = np.floor((np.arctan2(yb - cy, xb - cx) + np.pi) / (2 * np.pi) * n_sectors)
+        return grey[yb, xb], np.minimum(sec.astype(int), n_sectors - 1)
+
+    gi, si = sectors(inner)
+    go, so = sectors(outer)
     ok = 0
-    for band_in, band_out in [(inner.astype(bool), outer)]:
-        yi, xi = np.nonzero(band_in)
-        yo, xo = np.nonzero(band_out)
-        si = (np.floor((np.arctan2(yi - cy, xi - cx) + np.pi) / (2 * np.pi) * n_sectors)).astype(
-            int
-        )
-        so = (np.floor((np.arctan2(yo - cy, xo - cx) + np.pi) / (2 * np.pi) * n_sectors)).astype(
-            int
-        )
-        for k_ in range(n_sectors):
-            gi, go = grey[yi[si == k_], xi[si == k_]], grey[yo[so == k_], xo[so == k_]]
-            if len(gi) and len(go) and abs(np.median(gi) - np.median(go)) >= 20.0:
-                ok += 1
+    for k_ in range(n_sectors):
+        a, b = gi[si == k_], go[so == k_]
+        if len(a) and len(b) and abs(np.median(a) - np.median(b)) >= 20.0:
+            ok += 1
     return ok >= 0.7 * n_sectors
 
 
@@ -1357,7 +1356,7 @@ def render_case(case):
     if rig.body is not None:
         circles = rig.body.circles()
         if rendering.side_seen:
-            circles = circles + ((float(rig.body.r_barrel), 0.0),)
+            circles = circles + ((float(rig.body.r_barrel), float(rig.body.z_box)),)
         visible = _reflection_visible(rendering, case.image_size)
     # far lines: the wall-floor edges, where the scene is seen all around the pixel
     scene = np.isin(rendering.labels, (3,)).astype(np.uint8)
