@@ -871,13 +871,24 @@ def degrade(image, photometric, seed=0):
 
 
 # -- far lines -----------------------------------------------------------------------------------
+def _directions(num, pixels):
+    """Unit reflected directions of pixels (mirror frame, NaN off the mirror): eqs. 6-15 only."""
+    v = _lin(camera_rays(num.K, num.D, pixels), num.R.T)
+    t = intersect_mirror(num.a, num.b, num.rim, np.broadcast_to(num.C, v.shape), v)
+    P = num.C + t[:, None] * v
+    with np.errstate(invalid="ignore"):
+        d = reflect(v, mirror_normal(num.a, num.b, P))
+        return d / np.linalg.norm(d, axis=1, keepdims=True)
+
+
 def _mirror_grid(camera):
     """Integer pixels of the rim's bounding box and their reflected directions (h, w, 3)."""
-    lo, hi = _rim_box(_Numbers(camera))
+    num = _Numbers(camera)
+    lo, hi = _rim_box(num)
     xs = np.arange(lo[0], hi[0] + 1)
     ys = np.arange(lo[1], hi[1] + 1)
     gx, gy = np.meshgrid(xs, ys)
-    _, _, _, d = trace(camera, np.stack([gx.ravel(), gy.ravel()], axis=1), Rig())
+    d = _directions(num, np.stack([gx.ravel(), gy.ravel()], axis=1))
     return xs, ys, d.reshape(len(ys), len(xs), 3)
 
 
@@ -887,7 +898,7 @@ def far_line_pixels(camera, p1, p2, n_points=40, valid=None, margin=2, _grid=Non
     The line's directions form the great-circle arc ``alpha p1 + beta p2`` (alpha, beta >= 0)
     of the plane with normal ``n = p1 x p2``. Every integer pixel of the mirror is traced;
     where ``n . d`` changes sign between horizontal or vertical neighbours, the crossing is
-    found by bisection on that segment (to 1e-9 px) and kept if its direction lies on the arc.
+    found by bisection on that segment (to 1e-9 px, 30 halvings) and kept if its direction lies on the arc.
 
     Parameters
     ----------
@@ -912,11 +923,9 @@ def far_line_pixels(camera, p1, p2, n_points=40, valid=None, margin=2, _grid=Non
     nrm = np.cross(p1, p2)
     nrm /= np.linalg.norm(nrm)
     xs, ys, dgrid = _grid if _grid is not None else _mirror_grid(camera)
-    bare = Rig()
 
     def side(px):
-        _, _, _, d = trace(camera, px, bare)
-        return _dot(d, nrm)
+        return _dot(_directions(num, px), nrm)
 
     f = _dot(dgrid.reshape(-1, 3), nrm).reshape(dgrid.shape[:2])
     found = []
@@ -932,7 +941,7 @@ def far_line_pixels(camera, p1, p2, n_points=40, valid=None, margin=2, _grid=Non
         fa0 = fa[iy, ix]
         lo_t = np.zeros(len(a))
         hi_t = np.ones(len(a))
-        for _ in range(32):
+        for _ in range(30):
             mid = 0.5 * (lo_t + hi_t)
             fm = side(a + mid[:, None] * step)
             same = np.sign(fm) == np.sign(fa0)
@@ -942,7 +951,7 @@ def far_line_pixels(camera, p1, p2, n_points=40, valid=None, margin=2, _grid=Non
     if not found:
         return np.zeros((0, 2))
     pts = np.concatenate(found)
-    _, _, _, d = trace(camera, pts, bare)
+    d = _directions(num, pts)
     good = np.isfinite(d[:, 0])
     on_arc = (_dot(np.cross(p1, d), nrm) >= 0) & (_dot(np.cross(d, p2), nrm) >= 0)
     w, h = num.size
