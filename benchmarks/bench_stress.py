@@ -21,7 +21,11 @@ Targets (issue 8): 0 silent failures; with the reflection visible the right cand
 >= 99 % without far lines; the axis within 0.05 deg in >= 95 % with the reflection or one far
 line; median(actual axis error / reported axis std) between 0.5 and 2.
 
-    python benchmarks/bench_stress.py --n 100 --seed 0 [--json FILE] [--list]
+    python benchmarks/bench_stress.py --n 100 --seed 0 [--json FILE] [--list] [--reference]
+
+``--reference`` adds a third run per case, ``lens=False`` with the same far line (mode
+``ref``): the rim and the line alone, a check that the renders agree with the model where the
+estimator does not use the camera's reflection.
 """
 
 import argparse
@@ -38,6 +42,7 @@ from omnicam import MisalignedHyperbolicCamera
 from omnicam.synthetic import realistic
 
 MODES = ("default", "1 line")
+REFERENCE = "ref"  # lens=False and one far line: the rim and the line alone (--reference)
 
 
 def posture_errors(camera, truth):
@@ -82,7 +87,8 @@ def run_one(render, mode):
         "size": list(render.case.image_size),
     }
     lines = None
-    if mode == "1 line":
+    lens = False if mode == REFERENCE else "auto"
+    if mode in ("1 line", REFERENCE):
         if not render.far_lines:
             rec.update(status="skipped", message="no far line seen")
             return rec
@@ -90,7 +96,7 @@ def run_one(render, mode):
     t0 = time.perf_counter()
     try:
         cam, report = MisalignedHyperbolicCamera.calibrate(
-            truth.K, truth.mirror, image=render.image, D=truth.D, far_lines=lines
+            truth.K, truth.mirror, image=render.image, D=truth.D, far_lines=lines, lens=lens
         )
     except Exception as exc:  # noqa: BLE001 -- every failure is a result here
         rec.update(
@@ -144,7 +150,7 @@ def summarise(records):
     }
 
 
-def print_table(records):
+def print_table(records, modes=MODES):
     head = (
         f"{'rows':<22}{'mode':<9}{'n':>4}{'ok':>4}{'warn':>5}{'SILENT':>7}{'err':>4}"
         f"{'right%':>8}{'<=.05%':>8}{'med.err':>9}{'err/std':>9}{'t(s)':>7}"
@@ -159,7 +165,7 @@ def print_table(records):
     groups += [(v, lambda r, v=v: v in r["flags"]) for v in realistic.VARIANTS]
     groups.append(("no variant", lambda r: not r["flags"]))
     for name, pick in groups:
-        for mode in MODES:
+        for mode in modes:
             s = summarise([r for r in records if r["mode"] == mode and pick(r)])
             if not s["n"]:
                 continue
@@ -176,14 +182,20 @@ def main(argv=None):
     ap.add_argument("--seed", type=int, default=0)
     ap.add_argument("--json", help="write every run record and the summary to this file")
     ap.add_argument("--list", action="store_true", help="print one line per run")
+    ap.add_argument(
+        "--reference",
+        action="store_true",
+        help="also run lens=False with one far line (mode 'ref'): the rim and the line alone",
+    )
     args = ap.parse_args(argv)
+    modes = MODES + ((REFERENCE,) if args.reference else ())
     records = []
     render_times = []
     for case in realistic.stress_cases(args.n, args.seed):
         t0 = time.perf_counter()
         render = realistic.render_case(case)
         render_times.append(time.perf_counter() - t0)
-        for mode in MODES:
+        for mode in modes:
             rec = run_one(render, mode)
             records.append(rec)
             if args.list or rec["status"] in ("SILENT", "error"):
@@ -202,9 +214,9 @@ def main(argv=None):
         f"\n{args.n} cases, seed {args.seed}; render median "
         f"{statistics.median(render_times):.2f} s, max {max(render_times):.2f} s\n"
     )
-    print_table(records)
+    print_table(records, modes)
     if args.json:
-        summary = {mode: summarise([r for r in records if r["mode"] == mode]) for mode in MODES}
+        summary = {mode: summarise([r for r in records if r["mode"] == mode]) for mode in modes}
         with open(args.json, "w") as fh:
             json.dump(
                 {"n": args.n, "seed": args.seed, "summary": summary, "runs": records},
