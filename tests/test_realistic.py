@@ -200,6 +200,19 @@ def test_body_outline_appears_where_the_front_circle_predicts():
     assert body.circles() == ((14.0, 25.0),)
 
 
+def test_reflection_visible_follows_the_contrast_of_the_silhouette():
+    cam = _rig(size=(400, 400))
+    common = {"r_barrel": 12.0, "z_barrel": 20.0, "r_glass": 10.0, "ring_color": (40.0, 40.0, 40.0)}
+    silver = rl.BodyGeometry(**common, w_box=30.0, h_box=30.0, box_color=(180.0, 180.0, 180.0))
+    dark = rl.BodyGeometry(**common, w_box=30.0, h_box=30.0, box_color=(42.0, 42.0, 42.0))
+    seen = rl.render_rig(cam, rl.Rig(body=silver), supersample=2)
+    hidden = rl.render_rig(cam, rl.Rig(body=dark), supersample=2)
+    assert (seen.labels == rl.LABELS["box"]).sum() > 100  # the box shows around the barrel
+    assert rl._reflection_visible(seen, cam.image_size)
+    assert not rl._reflection_visible(hidden, cam.image_size)  # dark front on a dark box
+    assert not rl._reflection_visible(rl.render_rig(cam, rl.Rig(), 2), cam.image_size)
+
+
 def test_clipped_frame_really_clips_the_rim():
     case = next(c for c in rl.stress_cases(40, 3, image_size=(480, 360)) if "clipped" in c.flags)
     r = rl.render_case(case)
