@@ -39,6 +39,7 @@ import time
 import numpy as np
 
 from omnicam import MisalignedHyperbolicCamera
+from omnicam.gauge import posture_error
 from omnicam.synthetic import realistic
 
 MODES = ("default", "1 line")
@@ -46,16 +47,8 @@ REFERENCE = "ref"  # lens=False and one far line: the rim and the line alone (--
 
 
 def posture_errors(camera, truth):
-    """The two posture-error figures: mirror-axis angle (deg) and camera-centre distance (mm).
-
-    Axis: the angle between the estimated and the true mirror axes ``R[:, 2]`` (camera frame).
-    Origin: ``|camera_center - truth.camera_center|`` (mirror frame). One place, so the lead
-    can switch both to the project's shared metric.
-    """
-    a, b = camera.R[:, 2], truth.R[:, 2]
-    axis = math.degrees(math.atan2(np.linalg.norm(np.cross(a, b)), float(a @ b)))
-    origin = float(np.linalg.norm(camera.camera_center - truth.camera_center))
-    return axis, origin
+    """Mirror-axis angle (deg) and camera-centre distance (mm): :func:`omnicam.gauge.posture_error`."""
+    return posture_error(camera, truth)
 
 
 def _angle(a, b):
