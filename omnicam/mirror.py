@@ -17,17 +17,15 @@ import math
 
 import numpy as np
 
+from ._validate import LENGTH_RANGE, real_number
+
 __all__ = ["HyperbolicMirror"]
 
 
 def _positive_finite(name, value):
-    try:
-        value = float(value)
-    except (TypeError, ValueError):
-        raise ValueError(f"{name} must be a positive finite number, got {value!r}") from None
-    if not (math.isfinite(value) and value > 0):
-        raise ValueError(f"{name} must be a positive finite number, got {value!r}")
-    return value
+    lo, hi = LENGTH_RANGE
+    return real_number(value, name, lo, hi,
+                       expected=f"a positive finite number in [{lo:g}, {hi:g}] (mirror units)")
 
 
 class HyperbolicMirror:
@@ -40,6 +38,9 @@ class HyperbolicMirror:
         (millimetres by convention).
     rim_radius : float
         Radius of the circular mirror boundary (the rim), same unit.
+
+    All three must be real numbers in [1e-3, 1e6] (``_validate.LENGTH_RANGE``); anything else
+    raises ``ValueError`` naming the parameter.
 
     Attributes
     ----------
