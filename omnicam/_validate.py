@@ -24,7 +24,7 @@ import numbers
 
 import numpy as np
 
-__all__ = ["validate_K", "validate_D", "validate_image_size", "finite_array", "real_number",
+__all__ = ["validate_K", "validate_D", "validate_image_size", "finite_array", "float_array", "real_number",
            "validate_rng", "validate_posture", "D_LENGTHS", "FOCAL_RANGE", "LENGTH_RANGE",
            "MAX_SIDE", "MAX_PIXELS", "MAX_RIM_SPAN"]
 
@@ -39,7 +39,7 @@ MAX_PIXELS = 2**31
 MAX_RIM_SPAN = 20_000  # px across the rim's image
 
 
-def _float_array(value, name, expected):
+def float_array(value, name, expected):
     """``value`` as a float64 array; only real numbers (no complex, bool, str, None)."""
     try:
         arr = np.asarray(value)
@@ -59,7 +59,7 @@ def _float_array(value, name, expected):
 
 
 def finite_array(value, name, shape, expected):
-    arr = _float_array(value, name, expected)
+    arr = float_array(value, name, expected)
     if arr.size != int(np.prod(shape)):
         raise ValueError(f"{name} must be {expected}, got shape {arr.shape}")
     arr = arr.reshape(shape)
@@ -89,7 +89,7 @@ def validate_K(K, name="K"):
 
     ``fx, fy`` must lie in ``FOCAL_RANGE`` px, ``|cx|, |cy|, |skew|`` at most 1e7 px.
     """
-    arr = _float_array(K, name, "a 3x3 camera matrix")
+    arr = float_array(K, name, "a 3x3 camera matrix")
     if arr.shape != (3, 3):
         raise ValueError(f"{name} must be a 3x3 camera matrix, got shape {arr.shape}")
     if not np.isfinite(arr).all():
@@ -113,7 +113,7 @@ def validate_D(D, name="D"):
     if D is None:
         return None
     expected = "None or 4, 5, 8, 12 or 14 numbers"
-    arr = _float_array(D, name, expected).ravel()
+    arr = float_array(D, name, expected).ravel()
     if arr.size not in D_LENGTHS:
         raise ValueError(f"{name} must have 4, 5, 8, 12 or 14 coefficients (as "
                          f"cv2.projectPoints), got {arr.size}")

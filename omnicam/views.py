@@ -35,7 +35,7 @@ import numbers
 import cv2
 import numpy as np
 
-from ._validate import validate_K
+from ._validate import finite_array, float_array, real_number, validate_K
 
 __all__ = ["init_panorama_maps", "init_perspective_maps", "rotation_from_ypr", "K_from_fov",
            "visible_elevation_range", "PanoramaView", "PerspectiveView", "UNSEEN", "PROJECTIONS",
@@ -134,9 +134,12 @@ def K_from_fov(fov_deg, size):
 def _check_size(size, min_height=1):
     try:
         w, h = size
+        if not all(isinstance(v, numbers.Real) and not isinstance(v, (bool, np.bool_))
+                   for v in (w, h)):
+            raise TypeError
         exact = all(isinstance(v, numbers.Integral) or float(v) == int(v) for v in (w, h))
         w, h = int(w), int(h)
-    except (TypeError, ValueError):
+    except (TypeError, ValueError, OverflowError):
         raise ValueError(f"size must be (width, height), two positive integers, "
                          f"got {size!r}") from None
     if not exact or w < 1 or h < min_height:
@@ -156,10 +159,7 @@ def _check_m1type(m1type):
 
 
 def _check_rotation(R, name="R"):
-    try:
-        arr = np.array(R, dtype=np.float64)
-    except (TypeError, ValueError):
-        raise ValueError(f"{name} must be a 3x3 rotation matrix, got {R!r}") from None
+    arr = float_array(R, name, "a 3x3 rotation matrix")
     if arr.shape != (3, 3) or not np.isfinite(arr).all():
         raise ValueError(f"{name} must be a finite 3x3 rotation matrix, got shape {arr.shape}")
     if not np.allclose(arr @ arr.T, np.eye(3), atol=1e-6) or np.linalg.det(arr) < 0:
@@ -170,14 +170,8 @@ def _check_rotation(R, name="R"):
 def _check_depth(depth):
     if depth is None:
         return None
-    try:
-        d = float(depth)
-    except (TypeError, ValueError):
-        raise ValueError(f"depth must be None or a positive finite distance, "
-                         f"got {depth!r}") from None
-    if not (math.isfinite(d) and d > 0.0):
-        raise ValueError(f"depth must be None or a positive finite distance, got {depth!r}")
-    return d
+    return real_number(depth, "depth", 0.0, lo_open=True,
+                       expected="None or a positive finite distance")
 
 
 def _check_viewpoint(camera, viewpoint, depth):
@@ -185,19 +179,12 @@ def _check_viewpoint(camera, viewpoint, depth):
         return None  # directions: the viewpoint plays no part (do not compute the best fit)
     if viewpoint is None:
         return np.asarray(camera.best_fit_viewpoint()[0], dtype=np.float64)
-    try:
-        vp = np.array(viewpoint, dtype=np.float64).reshape(3)
-    except (TypeError, ValueError):
-        raise ValueError(f"viewpoint must be None or 3 numbers (mirror frame), "
-                         f"got {viewpoint!r}") from None
-    if not np.isfinite(vp).all():
-        raise ValueError(f"viewpoint must be finite, got {vp.tolist()}")
-    return vp
+    return finite_array(viewpoint, "viewpoint", (3,), "None or 3 numbers (mirror frame)")
 
 
 def _check_elevation_range(elevation_range, projection):
     try:
-        lo, hi = (float(v) for v in elevation_range)
+        lo, hi = (real_number(v, "elevation_range") for v in elevation_range)
     except (TypeError, ValueError):
         raise ValueError(f"elevation_range must be None or (lo, hi) in degrees, "
                          f"got {elevation_range!r}") from None

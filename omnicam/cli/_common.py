@@ -7,6 +7,7 @@ import contextlib
 import math
 import os
 import re
+import stat
 import sys
 
 import cv2
@@ -177,7 +178,12 @@ def _publish(tmp, path, overwrite):
 
 def _write_image(path, image, overwrite=True):
     """``cv2.imwrite`` through :func:`omnicam._atomic.atomic_output` (checked by reading back)."""
-    path = os.fspath(path)
+    from ..io import _fspath, opencv_silenced
+
+    try:
+        path = _fspath(path, "output")
+    except ValueError as e:
+        raise CliError(str(e)) from None
     if not cv2.haveImageWriter(path):
         raise CliError(
             f"output {path}: no image writer for extension "
@@ -189,7 +195,8 @@ def _write_image(path, image, overwrite=True):
         return back is not None and back.shape[:2] == image.shape[:2]
 
     try:
-        with atomic_output(path, what="image", overwrite=overwrite, verify=verify) as tmp:
+        with opencv_silenced(), atomic_output(path, what="image", overwrite=overwrite,
+                                              verify=verify) as tmp:
             try:
                 ok, detail = cv2.imwrite(tmp, image), "cv2.imwrite failed"
             except cv2.error as e:
@@ -208,18 +215,30 @@ def _cv_message(e):
 
 
 def _read_image(path, flags=cv2.IMREAD_UNCHANGED):
-    if not os.path.isfile(path):
-        raise CliError(
-            f"image {path} does not exist"
-            if not os.path.exists(path)
-            else f"image {path} is not a file"
-        )
+    """``cv2.imread`` of a regular file, OpenCV's and libpng's own stderr lines silenced."""
+    from ..io import _fspath, opencv_silenced, shown
+
     try:
-        image = cv2.imread(path, flags)
+        path = _fspath(path, "image")
+        st = os.stat(path)
+    except ValueError as e:
+        raise CliError(str(e)) from None
+    except FileNotFoundError:
+        raise CliError(f"image {shown(path)} does not exist") from None
+    except OSError as e:
+        raise CliError(f"cannot read image {shown(path)}: {e.strerror or e}") from None
+    if not stat.S_ISREG(st.st_mode):
+        raise CliError(f"image {shown(path)} is not a regular file")
+    if st.st_size == 0:
+        raise CliError(f"cannot read image {shown(path)}: the file is empty")
+    try:
+        with opencv_silenced():
+            image = cv2.imread(path, flags)
     except cv2.error as e:
-        raise CliError(f"cannot read image {path}: {_cv_message(e)}") from None
+        raise CliError(f"cannot read image {shown(path)}: {_cv_message(e)}") from None
     if image is None or image.size == 0:
-        raise CliError(f"cannot read image {path}: not an image format OpenCV reads")
+        raise CliError(f"cannot read image {shown(path)}: not an image format OpenCV reads "
+                       f"(or a corrupt file)")
     return image
 
 
