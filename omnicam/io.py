@@ -531,10 +531,11 @@ def _far_lines(data, name):
             arr = None
         if arr is None or arr.dtype.kind not in "iuf" or arr.ndim != 2 or arr.shape[1] != 2 \
                 or arr.shape[0] < 3:
-            raise ValueError(f"line {i} must be a list of at least 3 [x, y] pixels ({expected})")
+            raise ValueError(f"{name}: line {i} must be a list of at least 3 [x, y] pixels "
+                             f"({expected})")
         arr = arr.astype(np.float64)
         if not np.isfinite(arr).all():
-            raise ValueError(f"line {i} has non-finite coordinates")
+            raise ValueError(f"{name}: line {i} has non-finite coordinates")
         lines.append(arr)
     return lines
 

@@ -14,6 +14,7 @@ hot loops use the same formulas in :mod:`omnicam._kernels`.
 from __future__ import annotations
 
 import math
+import numbers
 
 import numpy as np
 
@@ -199,7 +200,14 @@ class HyperbolicMirror:
         return V - 2.0 * n * np.einsum("...i,...i->...", n, V)[..., None]
 
     def rim_points(self, n=360):
-        """``n`` points evenly spaced on the rim circle, ``(n, 3)``, mirror frame."""
+        """``n`` points evenly spaced on the rim circle, ``(n, 3)``, mirror frame.
+
+        ``n`` must be an integer in [1, 10**7] (``ValueError`` naming ``n`` otherwise).
+        """
+        if isinstance(n, bool) or not isinstance(n, numbers.Integral) or not 1 <= n <= 10**7:
+            if not (isinstance(n, float) and n.is_integer() and 1 <= n <= 10**7):
+                raise ValueError(f"n must be an integer number of points in [1, 10**7], "
+                                 f"got {n!r}")
         t = np.linspace(0.0, 2.0 * np.pi, int(n), endpoint=False)
         r = self._rim_radius
         return np.stack([r * np.cos(t), r * np.sin(t), np.full_like(t, self.z_rim)], axis=1)

@@ -139,7 +139,12 @@ def _load_camera(path):
 
 def _check_output(path, overwrite, what="output"):
     """Refuse an output we must not or cannot write, before doing any work."""
-    path = os.fspath(path)
+    from ..io import _fspath
+
+    try:  # a name that is not UTF-8 would crash OpenCV's writers
+        path = _fspath(path, what)
+    except ValueError as e:
+        raise CliError(str(e)) from None
     folder = os.path.dirname(os.path.abspath(path))
     if os.path.isdir(path):
         raise CliError(f"{what} {path} is a folder")
@@ -212,6 +217,30 @@ def _cv_message(e):
     lines = [ln for ln in str(e).splitlines() if ln.strip()]
     text = lines[-1] if lines else str(e)
     return re.sub(r"^.*?error: \(-?\d+:[^)]*\)\s*", "", text).strip() or text
+
+
+IMAGE_EXTENSIONS = (".png", ".jpg", ".jpeg", ".jpe", ".bmp", ".dib", ".tif", ".tiff", ".webp",
+                    ".pbm", ".pgm", ".ppm", ".pxm", ".pnm", ".sr", ".ras", ".exr", ".hdr", ".pic",
+                    ".jp2", ".avif")
+
+
+def _is_image_input(path):
+    """An input to read as one image: an image extension, or content OpenCV recognises.
+
+    By name first, so an empty or corrupt ``.png`` is reported as an unreadable image (not
+    treated as a video). A name that is not UTF-8 is refused (:class:`CliError`).
+    """
+    from ..io import _fspath, opencv_silenced
+
+    try:  # OpenCV (imread, VideoCapture) crashes with SIGSEGV on such a name
+        path = _fspath(path, "input")
+    except ValueError as e:
+        raise CliError(str(e)) from None
+    if os.path.splitext(path)[1].lower() in IMAGE_EXTENSIONS:
+        return True
+
+    with opencv_silenced():
+        return cv2.haveImageReader(path)
 
 
 def _read_image(path, flags=cv2.IMREAD_UNCHANGED):

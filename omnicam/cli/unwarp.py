@@ -24,6 +24,7 @@ from ._common import (
     _one_line,
     _positive,
     _publish,
+    _is_image_input,
     _read_image,
     _remove_quietly,
     _size,
@@ -149,9 +150,7 @@ def cmd_unwarp(args):
     _check_output(output, args.overwrite)
     camera = _load_camera(args.calibration)
 
-    if not (_is_device_or_url(source) or _is_sequence(source)) and cv2.haveImageReader(
-        source
-    ):
+    if not (_is_device_or_url(source) or _is_sequence(source)) and _is_image_input(source):
         return _unwarp_image(args, view, camera)
     return _unwarp_video(args, view, camera)
 
