@@ -14,8 +14,11 @@ Sane magnitudes (a camera outside them is refused at construction and at load):
 * the mirror's ``a, b, rim_radius`` in ``LENGTH_RANGE`` = [1e-3, 1e6] (see
   :mod:`omnicam.mirror`), the mirror's origin at most ``MAX_DISTANCE`` = 1e7 from the camera;
 * the posture physical: the camera centre below the mirror sheet, every rim point in front of
-  the camera, and the rim's image at most ``MAX_RIM_SPAN`` = 20000 px across (every pixel inside
-  it can be enumerated, as the best-fit viewpoint does).
+  the camera, and the rim's image between ``MIN_RIM_SPAN`` = 8 and ``MAX_RIM_SPAN`` = 20000 px
+  across (every pixel inside it can be enumerated, as the best-fit viewpoint does, and there
+  are enough of them);
+* integers in YAML and XML files within 32 bits (OpenCV's parser wraps larger ones around:
+  4294967297 reads as 1), see :mod:`omnicam.io`.
 """
 from __future__ import annotations
 
@@ -37,6 +40,7 @@ MAX_DISTORTION = 1e6
 MAX_SIDE = 100_000  # px per side of an image
 MAX_PIXELS = 2**31
 MAX_RIM_SPAN = 20_000  # px across the rim's image
+MIN_RIM_SPAN = 8  # px: a smaller mirror image holds too few pixels for any use
 
 
 def float_array(value, name, expected):
@@ -181,7 +185,8 @@ def validate_posture(R, tvec, mirror, rim_points):
     Checks: ``R`` finite and a rotation, ``|tvec| <= MAX_DISTANCE``; the camera centre
     ``C = -R^T tvec`` below the mirror sheet (``C_z < b sqrt(1 + (C_x^2 + C_y^2) / a^2)``,
     eq. 13), so it looks at the mirror from outside; every rim point in front of the camera
-    (camera-frame z > 0); the rim's image at most ``MAX_RIM_SPAN`` px across.
+    (camera-frame z > 0); the rim's image between ``MIN_RIM_SPAN`` and ``MAX_RIM_SPAN`` px
+    across.
     """
     if not np.isfinite(R).all() or not np.allclose(R @ R.T, np.eye(3), atol=1e-9):
         raise ValueError("rvec must give a finite rotation matrix")
@@ -201,7 +206,10 @@ def validate_posture(R, tvec, mirror, rim_points):
         raise ValueError("rvec, tvec: the mirror's rim must lie in front of the camera "
                          "(camera-frame z > 0 at every rim point)")
     pix = rim_points()
-    span = np.ptp(pix, axis=0) if np.isfinite(pix).all() else np.array([np.inf])
+    span = np.ptp(pix, axis=0) if np.isfinite(pix).all() else np.array([np.inf, np.inf])
     if not span.max() <= MAX_RIM_SPAN:
         raise ValueError(f"K, tvec: the rim's image must span at most {MAX_RIM_SPAN} px, got "
                          f"{np.round(span, 1).tolist()} px (a scale mistake?)")
+    if not span.min() >= MIN_RIM_SPAN:
+        raise ValueError(f"K, tvec: the rim's image must span at least {MIN_RIM_SPAN} px, got "
+                         f"{np.round(span, 3).tolist()} px (a scale mistake?)")

@@ -137,8 +137,10 @@ def semantic_mutant(rnd, fields, fmt):
     f = {k: (tuple(v[:-1]) + (list(v[-1]) if isinstance(v[-1], list) else dict(v[-1])
                                 if isinstance(v[-1], dict) else v[-1],)) for k, v in fields.items()}
     name = rnd.choice(list(f))
-    op = rnd.choice(["delete", "wrong", "nan", "extreme", "dt", "shape", "posture", "swap",
-                     "scale", "model"])
+    ops = ["delete", "wrong", "nan", "extreme", "dt", "shape", "swap", "scale"]
+    if "mirror" in f:  # a calibration file
+        ops += ["posture", "model"]
+    op = rnd.choice(ops)
     spec = f[name]
     refuse = False
     if op == "delete":
@@ -147,7 +149,7 @@ def semantic_mutant(rnd, fields, fmt):
     elif op == "model":
         bad = rnd.choice(["parabolic", "misaligned_hyperbolic ", "MISALIGNED_HYPERBOLIC", "", "1"])
         f["model"] = ("str", bad)
-        refuse = True
+        refuse = not (fmt == "xml" and bad.strip() == "misaligned_hyperbolic")  # xml strips
     elif op == "posture":  # physically impossible cameras, all must be refused
         choice = rnd.choice(["upper_focus", "behind", "flipped", "inside", "far_side"])
         if choice == "upper_focus":
@@ -1284,11 +1286,11 @@ class Runner:
             olds[name] = os.path.join(mnt, name)
         return olds
 
-    def disks(self):
+    def disks(self, levels=(0, 1024, 3000, 6000, 12000)):
         if os.geteuid() != 0:
             self.skipped.append("full disk and read-only folder: not root (need mount)")
             return
-        for leave in (0, 1024, 3000, 6000, 12000):
+        for leave in levels:
             mnt = self._mount(f"full{leave}")
             if mnt is None:
                 self.skipped.append("full disk: mount -t tmpfs failed")
@@ -1501,7 +1503,7 @@ class Runner:
                 ("cli", lambda: self.cli_args(25 if q else 150)),
                 ("media", lambda: self.media(6 if q else 60, 2 if q else 20)),
                 ("saves", self.saves),
-                ("disks", lambda: None if q else self.disks()),
+                ("disks", lambda: self.disks((0,) if q else (0, 1024, 3000, 6000, 12000))),
                 ("permissions", lambda: None if q else self.permissions()),
                 ("sigint", lambda: self.sigint(0 if q else 8, 2 if q else 8, 0 if q else 4)),
             ]
