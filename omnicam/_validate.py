@@ -190,7 +190,7 @@ def validate_posture(R, tvec, mirror, rim_points):
     """
     if not np.isfinite(R).all() or not np.allclose(R @ R.T, np.eye(3), atol=1e-9):
         raise ValueError("rvec must give a finite rotation matrix")
-    if np.linalg.norm(tvec) > MAX_DISTANCE:
+    if np.abs(tvec).max() > MAX_DISTANCE or np.linalg.norm(tvec) > MAX_DISTANCE:
         raise ValueError(f"tvec must be at most {MAX_DISTANCE:g} from the camera (mirror "
                          f"units), got {tvec.tolist()}")
     C = -R.T @ tvec

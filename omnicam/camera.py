@@ -330,12 +330,30 @@ class MisalignedHyperbolicCamera:
 
     # -- files ----------------------------------------------------------------------------
     def save(self, path):
-        """Write the calibration with ``cv2.FileStorage`` (yaml, yml, xml or json), atomically."""
+        """Write the calibration with ``cv2.FileStorage`` (yaml, yml, xml or json), atomically.
+
+        The file is written beside ``path``, read back and compared, then renamed into place
+        (:func:`omnicam.io.save_camera`).
+
+        Raises
+        ------
+        ValueError
+            Unknown extension, or the file cannot be written (missing or read-only folder, full
+            disk, ...), naming the file; the old file at ``path`` is then unchanged.
+        """
         from .io import save_camera
         save_camera(self, path)
 
     @classmethod
     def load(cls, path):
-        """Read a calibration file written by :meth:`save`, validating every field."""
+        """Read a calibration file written by :meth:`save`, validating every field.
+
+        Raises
+        ------
+        FileNotFoundError
+            No file at ``path``.
+        ValueError
+            Anything else (see :func:`omnicam.io.load_camera`), naming the file and the field.
+        """
         from .io import load_camera
         return load_camera(path, cls)

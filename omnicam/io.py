@@ -21,14 +21,15 @@ on some inputs. Found by ``tests/fuzz/run.py`` and an outside fuzz run:
   (a non-UTF-8 ``model`` tag, byte flips);
 * a raw ``UnicodeDecodeError`` from ``FileNode.string()`` on non-UTF-8 text;
 * ``FileNode.mat()`` saturating silently: ``dt: u`` with the value 583 reads as 255;
-* integers beyond 32 bits wrapped around silently: ``format_version: 4294967297`` reads as 1;
+* integers beyond 32 bits wrapped around silently: ``format_version: 4294967297`` reads as 1,
+  and so does ``format_version: true`` (YAML booleans become the integers 1 and 0);
 * its own ``[ERROR:0@...] persistence.cpp`` lines on stderr for every parse error.
 
 So before OpenCV sees anything, :func:`_prescan` refuses (``ValueError`` naming the file) a name
 that is not UTF-8, anything but a regular file (a folder, FIFO or device: "is not a regular
 file"), files over ``MAX_FILE_BYTES`` (1 MiB), empty or binary files (a NUL byte), text that is
 not UTF-8, nesting deeper than ``MAX_DEPTH`` (brackets, XML elements, YAML indentation) and
-base64 blocks (omnicam never writes them), and in YAML and XML integers beyond 32 bits. JSON is then parsed by the standard library alone and
+base64 blocks (omnicam never writes them), and in YAML and XML integers beyond 32 bits and the booleans ``true``/``false``. JSON is then parsed by the standard library alone and
 never reaches OpenCV; YAML and XML are parsed by ``cv2.FileStorage`` from the checked text in
 memory (so what OpenCV parses is what was checked), with its log silenced, and its node tree is
 copied into Python values. Matrices are rebuilt from ``rows``, ``cols``, ``dt`` and ``data``
@@ -73,6 +74,7 @@ _DT_RANGES = {"u": (0, 255), "c": (-128, 127), "w": (0, 65535), "s": (-32768, 32
               "i": (-(2**31), 2**31 - 1), "f": (-3.4028234663852886e38, 3.4028234663852886e38),
               "d": (-math.inf, math.inf)}
 _MAX_MATRIX_VALUES = 1 << 16
+_BOOLEAN = re.compile(r"(?m)(?:^|[:\[,>-])[ \t]*(true|false)[ \t]*(?=$|[,\]#<])")
 _LONG_INT = re.compile(r"(?<![\w.+-])[-+]?\d{10,}(?![\w.])")  # 10+ digits, not part of a real
 
 
@@ -223,6 +225,10 @@ def _prescan(path, what, json_only=False):
     if not json_only and "$base64$" in text:
         raise ValueError(f"{what} {name}: base64-encoded data is not supported")
     if not json_only and not text.lstrip().startswith("{"):
+        m = _BOOLEAN.search(text)
+        if m:
+            raise ValueError(f"{what} {name}: {m.group(1)!r} where a value is expected; OpenCV "
+                             f"would read it as the number {int(m.group(1) == 'true')}")
         for m in _LONG_INT.finditer(text):
             if abs(int(m.group())) > 2**31 - 1:
                 raise ValueError(f"{what} {name}: the integer {m.group()} does not fit in 32 "

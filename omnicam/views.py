@@ -86,7 +86,7 @@ def rotation_from_ypr(yaw=0.0, pitch=0.0, roll=0.0):
     for name, v in (("yaw", yaw), ("pitch", pitch), ("roll", roll)):
         try:
             v = float(v)
-        except (TypeError, ValueError):
+        except (TypeError, ValueError, OverflowError):
             raise ValueError(f"{name} must be a finite number of degrees, got {v!r}") from None
         if not math.isfinite(v):
             raise ValueError(f"{name} must be a finite number of degrees, got {v!r}")
@@ -121,7 +121,7 @@ def K_from_fov(fov_deg, size):
     w, h = _check_size(size)
     try:
         fov = float(fov_deg)
-    except (TypeError, ValueError):
+    except (TypeError, ValueError, OverflowError):
         raise ValueError(f"fov_deg must be a number of degrees in (0, 180), "
                          f"got {fov_deg!r}") from None
     if not (0.0 < fov < 180.0):
@@ -148,6 +148,14 @@ def _check_size(size, min_height=1):
     if w > 32767 or h > 32767:
         raise ValueError(f"size must be at most 32767 x 32767 (cv2.remap), got {size!r}")
     return w, h
+
+
+def _check_camera(camera):
+    """A camera (duck-typed: views sit below the camera class and do not import it)."""
+    if not all(hasattr(camera, a) for a in ("mirror", "K", "R", "unproject", "rim_image_points")):
+        raise ValueError(f"camera must be a MisalignedHyperbolicCamera, got "
+                         f"{type(camera).__name__}")
+    return camera
 
 
 def _check_m1type(m1type):
@@ -242,6 +250,7 @@ def visible_elevation_range(camera):
     rim ray. For a misaligned rig the upper edge of what is seen varies with azimuth; the band
     is the union over azimuths, so some pixels near ``hi`` are unseen at some azimuths.
     """
+    _check_camera(camera)
     rim_dirs = _rim_directions(camera)
     el = _elevation_deg(rim_dirs)
     hi = float(np.max(el))
@@ -438,6 +447,7 @@ def init_panorama_maps(camera, size, elevation_range=None, projection="cylindric
     seen or unseen either way. For the aligned rig the default ``hi`` is exactly the rim's
     elevation, so row 0 lies on the rim.
     """
+    _check_camera(camera)
     w, h = _check_size(size, min_height=2)
     if projection not in PROJECTIONS:
         raise ValueError(f"projection must be one of {PROJECTIONS}, got {projection!r}")
@@ -499,6 +509,7 @@ def init_perspective_maps(camera, K_new, size, R=None, m1type=cv2.CV_16SC2, dept
     Accuracy and ``CV_16SC2`` as for :func:`init_panorama_maps`.
     """
     K_new = validate_K(K_new, "K_new")
+    _check_camera(camera)
     w, h = _check_size(size)
     m1type = _check_m1type(m1type)
     Rm = R0 if R is None else _check_rotation(R)
