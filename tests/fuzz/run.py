@@ -314,7 +314,7 @@ class Captured:
     def __exit__(self, *exc):
         sys.stdout.flush()
         sys.stderr.flush()
-        for fd, saved in zip((1, 2), self.saved):
+        for fd, saved in zip((1, 2), self.saved, strict=True):
             os.dup2(saved, fd)
             os.close(saved)
         self.final = [self.text(0), self.text(1)]
@@ -462,6 +462,11 @@ def case_save(ctx, spec, cap):
     before = _snapshot(path)
     kind = spec["writer"]
     om = ctx.omnicam
+    if spec.get("loads_first"):  # after a killed writer: the file must be whole
+        try:
+            om.MisalignedHyperbolicCamera.load(path)
+        except Exception as e:  # noqa: BLE001
+            return "bad", f"the file left by a killed save does not load: {e}"
     try:
         if kind == "camera":
             ctx.cam_d.save(path)
@@ -586,7 +591,7 @@ def _api_cases():
     from_mirror = ("a", "b", "rim_radius")
     for i, pname in enumerate(from_mirror):
         for v in BAD_NUMBERS + [2e6, 1e-4]:
-            def fn(ctx, i=i, v=v):
+            def fn(ctx, i=i, v=v, pname=pname):
                 args = [28.0, 23.0, 30.0]
                 args[i] = v
                 ctx.omnicam.HyperbolicMirror(*args)
@@ -1295,7 +1300,7 @@ class Runner:
                 return
             olds = self._old_files(mnt)
             with open(os.path.join(mnt, "old.png"), "wb") as f:
-                f.write(open(self.image, "rb").read()[:1] and b"\x89PNG-old-output")
+                f.write(b"\x89PNG-old-output")
             self._fill(mnt, leave)
             cat = f"full disk ({leave} B free)"
             for name, writer in (("c.yaml", "camera"), ("c.xml", "camera"), ("c.json", "camera"),
@@ -1309,7 +1314,7 @@ class Runner:
                          self.path("cliout", "ov.png"), "--overwrite", "--no-refine"]},
                 timeout=240)
             self.run(cat, "omnicam unwarp image on a full disk", {
-                "kind": "cli_write", "keep": [os.path.join(mnt, "old.png")],
+                "kind": "cli_write", "keep": [os.path.join(mnt, "old.png")], "must_fail": True,
                 "argv": ["unwarp", self.image, "-c", self.calib, "--panorama", "512x128", "-o",
                          os.path.join(mnt, "old.png"), "--overwrite"]})
             old_video = os.path.join(mnt, "old.avi")
@@ -1318,7 +1323,7 @@ class Runner:
                     f.write(b"RIFF-old-video")
             if os.path.exists(old_video):
                 self.run(cat, "omnicam unwarp video on a full disk", {
-                    "kind": "cli_write", "keep": [old_video],
+                    "kind": "cli_write", "keep": [old_video], "must_fail": True,
                     "argv": ["unwarp", self.video, "-c", self.calib, "--panorama", "256x64",
                              "-o", old_video, "--overwrite", "--quiet"]}, timeout=120)
         # read-only: a tmpfs remounted read-only
@@ -1431,6 +1436,29 @@ class Runner:
                             [sys.executable, "-c", script, out], env, delay, d,
                             keep={out: None}, rc=(0,), loads=out, wait_ready=True)
 
+    def sigkill_saves(self, n):
+        """SIGKILL mid-save: the file stays loadable; the next save removes the temporary."""
+        rnd = self.rnd
+        env = dict(os.environ, PYTHONPATH=REPO)
+        script = ("import sys\nfrom omnicam import synthetic\n"
+                  "cam = synthetic.misaligned_rig()\nother = cam.replace(D=[0.1, 0, 0, 0, 0])\n"
+                  "cam.save(sys.argv[1])\nprint('ready', flush=True)\ni = 0\nwhile True:\n"
+                  "    (cam if i % 2 else other).save(sys.argv[1])\n    i += 1\n")
+        for i in range(n):
+            ext = rnd.choice([".yaml", ".xml", ".json"])
+            d = os.path.dirname(self.path("sigkill", f"k{i}", "x"))
+            out = os.path.join(d, f"c{ext}")
+            p = subprocess.Popen([sys.executable, "-c", script, out], stdout=subprocess.PIPE,
+                                 stderr=subprocess.PIPE, env=env)
+            p.stdout.readline()
+            time.sleep(rnd.uniform(0.0, 1.0))
+            p.kill()
+            p.communicate()
+            result = self.worker.run({"kind": "save", "writer": "camera", "path": out,
+                                      "must_succeed": True, "loads_first": True},
+                                     self.args.timeout)
+            self.record("SIGKILL during save", f"{ext} #{i}", result)
+
     def _interrupt(self, label, cmd, env, delay, folder, keep, new_ok=False, rc=(0, 130),
                    loads=None, wait_ready=False):
         t0 = time.perf_counter()
@@ -1486,7 +1514,7 @@ class Runner:
             self.setup()
             self.worker.start()
             steps = [
-                ("file mutants", lambda: self.file_mutants(60 if q else 400, 40 if q else 300,
+                ("file mutants", lambda: self.file_mutants(60 if q else 400, 40 if q else 600,
                                                            10 if q else 5)),
                 ("intrinsics", lambda: self.intrinsics_mutants(20 if q else 120)),
                 ("far lines", lambda: self.far_line_mutants(20 if q else 80)),
@@ -1498,6 +1526,7 @@ class Runner:
                 ("disks", lambda: self.disks((0,) if q else (0, 1024, 3000, 6000, 12000))),
                 ("permissions", lambda: None if q else self.permissions()),
                 ("sigint", lambda: self.sigint(0 if q else 8, 2 if q else 8, 0 if q else 4)),
+                ("sigkill", lambda: self.sigkill_saves(2 if q else 20)),
             ]
             for name, step in steps:
                 if self.args.only and name not in self.args.only:
