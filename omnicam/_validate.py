@@ -103,7 +103,8 @@ def validate_K(K, name="K"):
     lo, hi = FOCAL_RANGE
     for label, f in (("fx", arr[0, 0]), ("fy", arr[1, 1])):
         if not lo <= f <= hi:
-            raise ValueError(f"{name} must have {label} in [{lo:g}, {hi:g}] px, got {f:g}")
+            raise ValueError(f"{name} must be non-singular with {label} in [{lo:g}, {hi:g}] px, "
+                             f"got {f:g}")
     if np.abs(arr[:2, 1:]).max() > PIXEL_LIMIT:
         raise ValueError(f"{name} must have |cx|, |cy| and |skew| at most {PIXEL_LIMIT:g} px, "
                          f"got {arr[:2, 1:].ravel().tolist()}")

@@ -23,7 +23,10 @@ on some inputs. Found by ``tests/fuzz/run.py`` and an outside fuzz run:
 * ``FileNode.mat()`` saturating silently: ``dt: u`` with the value 583 reads as 255;
 * integers beyond 32 bits wrapped around silently: ``format_version: 4294967297`` reads as 1,
   and so does ``format_version: true`` (YAML booleans become the integers 1 and 0);
-* its own ``[ERROR:0@...] persistence.cpp`` lines on stderr for every parse error.
+* its own ``[ERROR:0@...] persistence.cpp`` lines on stderr for every parse error;
+* ``FileNode.getNode`` and ``FileNode.at`` cost time linear in the position: walking a 1 MiB
+  file of 60,000 keys took 40 s (so maps over 256 keys and sequences over 4096 items are
+  refused, and only the fields omnicam needs are read).
 
 So before OpenCV sees anything, :func:`_prescan` refuses (``ValueError`` naming the file) a name
 that is not UTF-8, anything but a regular file (a folder, FIFO or device: "is not a regular
@@ -66,6 +69,8 @@ SUFFIXES = (".yaml", ".yml", ".xml", ".json")
 MAX_FILE_BYTES = 1 << 20  # calibration, intrinsics and far-line files are a few kB
 MAX_DEPTH = 32  # nesting of brackets / elements / YAML blocks (ours: 3)
 MAX_INDENT = 128  # columns of YAML indentation
+MAX_FIELDS = 256  # keys of a map
+MAX_VALUES = 4096  # items of a sequence (our matrices hold at most 14)
 # field names of an intrinsics file, first match wins: omnicam's, then OpenCV's calibration sample
 K_FIELDS = ("K", "camera_matrix", "cameraMatrix")
 D_FIELDS = ("D", "dist_coeffs", "distortion_coefficients", "distCoeffs")
@@ -73,7 +78,7 @@ D_FIELDS = ("D", "dist_coeffs", "distortion_coefficients", "distCoeffs")
 _DT_RANGES = {"u": (0, 255), "c": (-128, 127), "w": (0, 65535), "s": (-32768, 32767),
               "i": (-(2**31), 2**31 - 1), "f": (-3.4028234663852886e38, 3.4028234663852886e38),
               "d": (-math.inf, math.inf)}
-_MAX_MATRIX_VALUES = 1 << 16
+_MAX_MATRIX_VALUES = MAX_VALUES
 _BOOLEAN = re.compile(r"(?m)(?:^|[:\[,>-])[ \t]*(true|false)[ \t]*(?=$|[,\]#<])")
 _LONG_INT = re.compile(r"(?<![\w.+-])[-+]?\d{10,}(?![\w.])")  # 10+ digits, not part of a real
 
@@ -254,12 +259,21 @@ class _Matrix:
 
 
 def _from_node(node, depth=0):
-    """A ``cv2.FileNode`` tree as Python values (dict, list, int, float, str, None)."""
+    """A ``cv2.FileNode`` subtree as Python values (dict, list, int, float, str, None).
+
+    ``FileNode.getNode`` and ``FileNode.at`` take time linear in the position, so maps are
+    limited to ``MAX_FIELDS`` keys and sequences to ``MAX_VALUES`` items (a 1 MiB file of
+    60,000 keys would otherwise take minutes).
+    """
     if depth > MAX_DEPTH:
-        raise ValueError("nested too deeply")
+        raise ValueError("is nested too deeply")
     if node.isMap():
+        if node.size() > MAX_FIELDS:
+            raise ValueError(f"has more than {MAX_FIELDS} fields")
         return {k: _from_node(node.getNode(k), depth + 1) for k in node.keys()}
     if node.isSeq():
+        if node.size() > MAX_VALUES:
+            raise ValueError(f"has more than {MAX_VALUES} values")
         return [_from_node(node.at(i), depth + 1) for i in range(node.size())]
     if node.isInt():
         return int(node.real())
@@ -269,12 +283,29 @@ def _from_node(node, depth=0):
         try:
             return node.string()
         except UnicodeDecodeError:
-            raise ValueError("a string is not UTF-8") from None
+            raise ValueError("holds a string that is not UTF-8") from None
     return None
 
 
+class _Fields:
+    """The top-level map of an open ``cv2.FileStorage``, each field converted when read."""
+
+    def __init__(self, fs):
+        self.fs = fs  # kept open while fields are read
+        self.names = set(fs.root().keys())
+
+    def get(self, name):
+        if name not in self.names:
+            return None
+        with opencv_silenced():
+            try:
+                return _from_node(self.fs.root().getNode(name))
+            except cv2.error as e:
+                raise ValueError(f"is malformed ({str(e).splitlines()[-1]})") from None
+
+
 def _parse(text, path, what, ext):
-    """The document of ``text`` as Python values (a dict)."""
+    """The fields of the document ``text``: a dict (JSON) or :class:`_Fields` (YAML, XML)."""
     name = shown(path)
     if ext == ".json" or text.lstrip().startswith("{"):
         try:
@@ -284,27 +315,25 @@ def _parse(text, path, what, ext):
         except ValueError as e:
             raise ValueError(f"{what} {name}: not a readable OpenCV FileStorage file (not valid "
                              f"JSON: {e})") from None
-    else:
-        with opencv_silenced():
-            try:
-                fs = cv2.FileStorage(text, cv2.FILE_STORAGE_READ | cv2.FILE_STORAGE_MEMORY)
-                opened = fs.isOpened()
-            except (cv2.error, SystemError):
-                fs, opened = None, False
-            if not opened:
-                raise ValueError(f"{what} {name}: not a readable OpenCV FileStorage file "
-                                 f"(yaml, yml, xml or json)")
-            try:
-                data = _from_node(fs.root())
-            except cv2.error as e:
-                raise ValueError(f"{what} {name}: malformed ({str(e).splitlines()[-1]})") from None
-            except ValueError as e:
-                raise ValueError(f"{what} {name}: {e}") from None
-            finally:
-                fs.release()
-    if not isinstance(data, dict):
+        if not isinstance(data, dict):
+            raise ValueError(f"{what} {name}: expected a map of named fields at the top level")
+        return data
+    with opencv_silenced():
+        try:
+            fs = cv2.FileStorage(text, cv2.FILE_STORAGE_READ | cv2.FILE_STORAGE_MEMORY)
+            opened = fs.isOpened()
+            root_is_map = opened and fs.root().isMap()
+        except (cv2.error, SystemError):
+            opened = root_is_map = False
+    if not opened:
+        raise ValueError(f"{what} {name}: not a readable OpenCV FileStorage file "
+                         f"(yaml, yml, xml or json)")
+    if not root_is_map:
         raise ValueError(f"{what} {name}: expected a map of named fields at the top level")
-    return data
+    if fs.root().size() > MAX_FIELDS:
+        raise ValueError(f"{what} {name}: more than {MAX_FIELDS} top-level fields; not a "
+                         f"calibration or intrinsics file")
+    return _Fields(fs)
 
 
 def _is_number(v):
@@ -321,7 +350,10 @@ class _Reader:
         return ValueError(f"{self.what} {self.path}: field {field!r} {what}")
 
     def node(self, field, parent=None, required=True):
-        value = (parent if parent is not None else self.data).get(field.split(".")[-1])
+        try:
+            value = (parent if parent is not None else self.data).get(field.split(".")[-1])
+        except ValueError as e:
+            raise self.fail(field, str(e)) from None
         if value is None and required:
             raise self.fail(field, "is missing")
         return value

@@ -880,6 +880,8 @@ class Runner:
 
     def run(self, category, label, spec, timeout=None, worker=None):
         result = (worker or self.worker).run(spec, timeout or self.args.timeout)
+        if self.args.verbose and result.get("seconds", 0) > 2:
+            print(f"  slow ({result['seconds']:.1f} s) {category}: {label}", flush=True)
         self.record(category, label, result)
         return result
 
@@ -1063,6 +1065,23 @@ class Runner:
             "crlf.yaml": render(base_fields(self.cam), "yaml").replace("\n", "\r\n").encode(),
             "xmlent.xml": b'<?xml version="1.0"?>\n<!DOCTYPE a [<!ENTITY x "xxxxxxxxxx">]>\n'
                           b"<opencv_storage><a>&x;&x;&x;</a></opencv_storage>\n",
+            "longkey.yaml": b"%YAML:1.0\n---\n" + b"k" * 100000 + b": 1\n",
+            "longstr.yaml": b"%YAML:1.0\n---\nmodel: \"" + b"m" * 100000 + b"\"\n",
+            "longstr.xml": b'<?xml version="1.0"?>\n<opencv_storage><model>' + b"m" * 100000
+                           + b"</model></opencv_storage>\n",
+            "longtag.xml": b'<?xml version="1.0"?>\n<opencv_storage><' + b"t" * 100000
+                           + b">1</" + b"t" * 100000 + b"></opencv_storage>\n",
+            "manykeys.yaml": b"%YAML:1.0\n---\n" + b"".join(b"k%d: %d\n" % (i, i)
+                                                          for i in range(60000)),
+            "attrs.xml": b'<?xml version="1.0"?>\n<opencv_storage><K type_id="opencv-matrix" '
+                         + b" ".join(b'a%d="1"' % i for i in range(20000))
+                         + b"><rows>1</rows></K></opencv_storage>\n",
+            "unclosed.xml": b'<?xml version="1.0"?>\n<opencv_storage><K type_id="opencv-matrix">'
+                            b"<rows>3</rows><cols>3<dt>d</dt><data>1 2 3",
+            "badmat.yaml": b"%YAML:1.0\n---\nK: !!opencv-matrix\n   rows: 3\n   cols: 3\n"
+                           b"   dt: \"3d\"\n   data: [ 1, 2, 3 ]\n",
+            "rowsbig.yaml": b"%YAML:1.0\n---\nK: !!opencv-matrix\n   rows: 2147483647\n"
+                            b"   cols: 2147483647\n   dt: d\n   data: [ 1, 2, 3 ]\n",
         }
         for name, data in files.items():
             with open(os.path.join(d, name), "wb") as f:
