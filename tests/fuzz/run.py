@@ -511,7 +511,10 @@ def case_cli_write(ctx, spec, cap):
         if rc != 0 and _snapshot(p) != b:
             return "bad", f"exit {rc} but {os.path.basename(p)} was changed or lost"
         if rc == 0 and spec.get("must_fail"):
-            return "bad", f"exit 0 and 'wrote' on a full/read-only disk: {os.path.basename(p)}"
+            now = _snapshot(p) or b""
+            fate = "unchanged" if now == b else f"replaced by {len(now)} bytes"
+            return "bad", (f"exit 0 and 'wrote' on a full/read-only disk: {os.path.basename(p)} "
+                           f"{fate}; stdout {cap.text(0).strip()[-80:]!r}")
     left = _temps(os.path.dirname(spec["keep"][0]))
     if left:
         return "bad", f"temporary files left: {left}"
