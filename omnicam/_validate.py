@@ -40,6 +40,8 @@ MAX_DISTORTION = 1e6
 MAX_SIDE = 100_000  # px per side of an image
 MAX_PIXELS = 2**31
 MAX_RIM_SPAN = 20_000  # px across the rim's image
+_COS, _SIN = np.cos(np.linspace(0.0, 2.0 * math.pi, 72, endpoint=False)), np.sin(
+    np.linspace(0.0, 2.0 * math.pi, 72, endpoint=False))
 MIN_RIM_SPAN = 8  # px: a smaller mirror image holds too few pixels for any use
 
 
@@ -98,7 +100,7 @@ def validate_K(K, name="K"):
         raise ValueError(f"{name} must be a 3x3 camera matrix, got shape {arr.shape}")
     if not np.isfinite(arr).all():
         raise ValueError(f"{name} must be finite")
-    if not np.allclose(arr[2], (0.0, 0.0, 1.0)):
+    if np.abs(arr[2] - (0.0, 0.0, 1.0)).max() > 1e-8:
         raise ValueError(f"{name} must have last row (0, 0, 1), got {arr[2].tolist()}")
     lo, hi = FOCAL_RANGE
     for label, f in (("fx", arr[0, 0]), ("fy", arr[1, 1])):
@@ -189,7 +191,7 @@ def validate_posture(R, tvec, mirror, rim_points):
     (camera-frame z > 0); the rim's image between ``MIN_RIM_SPAN`` and ``MAX_RIM_SPAN`` px
     across.
     """
-    if not np.isfinite(R).all() or not np.allclose(R @ R.T, np.eye(3), atol=1e-9):
+    if not np.isfinite(R).all() or np.abs(R @ R.T - np.eye(3)).max() > 1e-9:
         raise ValueError("rvec must give a finite rotation matrix")
     if np.abs(tvec).max() > MAX_DISTANCE or np.linalg.norm(tvec) > MAX_DISTANCE:
         raise ValueError(f"tvec must be at most {MAX_DISTANCE:g} from the camera (mirror "
@@ -199,10 +201,8 @@ def validate_posture(R, tvec, mirror, rim_points):
     if not C[2] < sheet:
         raise ValueError(f"tvec, rvec: the camera centre {C.tolist()} (mirror frame) must lie "
                          f"below the mirror sheet (Z < {sheet:g} there), looking up at it")
-    t = np.linspace(0.0, 2.0 * math.pi, 72, endpoint=False)
-    rim = np.stack([mirror.rim_radius * np.cos(t), mirror.rim_radius * np.sin(t),
-                    np.full_like(t, mirror.z_rim)], axis=1)
-    z = (rim @ R.T + tvec)[:, 2]
+    # camera-frame z of rim points: R[2] . (r cos t, r sin t, z_rim) + tvec[2]
+    z = mirror.rim_radius * (R[2, 0] * _COS + R[2, 1] * _SIN) + R[2, 2] * mirror.z_rim + tvec[2]
     if not (z > 0).all():
         raise ValueError("rvec, tvec: the mirror's rim must lie in front of the camera "
                          "(camera-frame z > 0 at every rim point)")

@@ -105,7 +105,7 @@ class MisalignedHyperbolicCamera:
         self._image_size = validate_image_size(image_size)
         self._viewpoint = None
         # a physical rig: camera below the mirror sheet, rim in front, rim image enumerable
-        validate_posture(self._R, self._tvec, mirror, lambda: self.rim_image_points(72))
+        validate_posture(self._R, self._tvec, mirror, lambda: self.rim_image_points(36))
 
     # -- constructors -------------------------------------------------------------------
     @classmethod
