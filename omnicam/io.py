@@ -115,6 +115,8 @@ def opencv_silenced():
 
     omnicam reports every failure once, in its own words naming the file; OpenCV's
     ``[ERROR:0@...]`` lines, libpng's and libjpeg's warnings would only repeat it in noise.
+    fd 2 is process-wide: output of other threads during the call (milliseconds) is dropped
+    too.
     """
     logging = getattr(getattr(cv2, "utils", None), "logging", None)
     previous = None
@@ -575,6 +577,8 @@ def _far_lines(data, name):
             arr = None
         if arr is not None and arr.dtype.kind == "O":
             arr = None
+        if arr is not None and arr.ndim == 3 and arr.shape[1:] == (1, 2):
+            arr = arr.reshape(-1, 2)  # OpenCV's (N, 1, 2)
         if arr is None or arr.dtype.kind not in "iuf" or arr.ndim != 2 or arr.shape[1] != 2 \
                 or arr.shape[0] < 3:
             raise ValueError(f"{name}: line {i} must be a list of at least 3 [x, y] pixels "

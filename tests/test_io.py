@@ -308,3 +308,13 @@ def test_save_into_a_read_only_folder_raises_and_keeps_the_old_file(tmp_path):
         assert MisalignedHyperbolicCamera.load(path) == RIGS["aligned"]
     finally:
         subprocess.run(["umount", "-l", str(mnt)], capture_output=True)
+
+
+def test_far_lines_round_trip_also_from_opencv_shaped_arrays(tmp_path):
+    from omnicam.io import read_far_lines, write_far_lines
+    lines = [np.arange(10.0).reshape(5, 1, 2) + i for i in range(3)]
+    write_far_lines(tmp_path / "l.json", lines)
+    back = read_far_lines(tmp_path / "l.json")
+    assert all(np.array_equal(b, a.reshape(-1, 2)) for a, b in zip(lines, back, strict=True))
+    with pytest.raises(ValueError, match="far_lines"):
+        write_far_lines(tmp_path / "l.json", [[[1.0, 2.0]] * 2])

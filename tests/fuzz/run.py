@@ -1278,8 +1278,11 @@ class Runner:
     def _mount(self, name, size="64k"):
         mnt = self.path("mnt", name, "x")
         mnt = os.path.dirname(mnt)
-        r = subprocess.run(["mount", "-t", "tmpfs", "-o", f"size={size}", "tmpfs", mnt],
-                           capture_output=True, text=True)
+        try:
+            r = subprocess.run(["mount", "-t", "tmpfs", "-o", f"size={size}", "tmpfs", mnt],
+                               capture_output=True, text=True)
+        except OSError:  # no mount command
+            return None
         if r.returncode != 0:
             return None
         self.mounts.append(mnt)
@@ -1356,7 +1359,7 @@ class Runner:
         with open(os.path.join(mnt, "old.png"), "wb") as f:
             f.write(b"\x89PNG-old-output")
         r = subprocess.run(["mount", "-o", "remount,ro", mnt], capture_output=True)
-        if r.returncode != 0:
+        if r.returncode != 0:  # (mount exists: the tmpfs above was mounted with it)
             self.skipped.append("read-only folder: remount,ro failed")
             return
         cat = "read-only folder"
@@ -1564,7 +1567,8 @@ class Runner:
         finally:
             self.worker.close()
             for mnt in reversed(self.mounts):
-                subprocess.run(["umount", "-l", mnt], capture_output=True)
+                with contextlib.suppress(OSError):
+                    subprocess.run(["umount", "-l", mnt], capture_output=True)
             if not self.args.keep:
                 shutil.rmtree(self.workdir, ignore_errors=True)
         return self.report(time.perf_counter() - t0)
