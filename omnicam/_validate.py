@@ -27,7 +27,8 @@ import numbers
 
 import numpy as np
 
-__all__ = ["validate_K", "validate_D", "validate_image_size", "finite_array", "float_array", "real_number",
+__all__ = ["validate_K", "validate_D", "validate_image_size", "finite_array", "float_array",
+           "real_number",
            "validate_rng", "validate_posture", "D_LENGTHS", "FOCAL_RANGE", "LENGTH_RANGE",
            "MAX_SIDE", "MAX_PIXELS", "MAX_RIM_SPAN"]
 

@@ -32,7 +32,8 @@ So before OpenCV sees anything, :func:`_prescan` refuses (``ValueError`` naming 
 that is not UTF-8, anything but a regular file (a folder, FIFO or device: "is not a regular
 file"), files over ``MAX_FILE_BYTES`` (1 MiB), empty or binary files (a NUL byte), text that is
 not UTF-8, nesting deeper than ``MAX_DEPTH`` (brackets, XML elements, YAML indentation) and
-base64 blocks (omnicam never writes them), and in YAML and XML integers beyond 32 bits and the booleans ``true``/``false``. JSON is then parsed by the standard library alone and
+base64 blocks (omnicam never writes them), and in YAML and XML integers beyond 32 bits and
+the booleans ``true``/``false``. JSON is then parsed by the standard library alone and
 never reaches OpenCV; YAML and XML are parsed by ``cv2.FileStorage`` from the checked text in
 memory (so what OpenCV parses is what was checked), with its log silenced, and its node tree is
 copied into Python values. Matrices are rebuilt from ``rows``, ``cols``, ``dt`` and ``data``
@@ -387,8 +388,8 @@ class _Reader:
         out = np.empty(len(values))
         for i, v in enumerate(values):
             if not _is_number(v) or (integer and not isinstance(v, int)):
-                raise self.fail(field, f"value {i} must be {'an integer' if integer else 'a number'}"
-                                f", got {v!r}")
+                kind = "an integer" if integer else "a number"
+                raise self.fail(field, f"value {i} must be {kind}, got {v!r}")
             try:
                 out[i] = float(v)
             except OverflowError:
