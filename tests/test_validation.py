@@ -119,3 +119,21 @@ def test_detect_rim_refuses_bad_arguments_at_once(kw, name):
     cv2.circle(image, (48, 48), 35, 200, -1)
     with pytest.raises(ValueError, match=name):
         detect_rim(image, **kw)
+
+
+@pytest.mark.parametrize("content", [b"", b"\x89PNG\r\n\x1a\n" + b"\x00garbage" * 40])
+def test_cli_unreadable_png_is_one_line_naming_it_without_opencv_noise(tmp_path, content):
+    import subprocess
+    import sys
+    calib = tmp_path / "c.yaml"
+    synthetic.misaligned_rig().save(calib)
+    image = tmp_path / "in.png"
+    image.write_bytes(content)
+    r = subprocess.run([sys.executable, "-c", "import sys; from omnicam.cli import main; "
+                        "sys.exit(main(sys.argv[1:]))", "unwarp", str(image), "-c", str(calib),
+                        "--panorama", "128x32", "-o", str(tmp_path / "out.png")],
+                       capture_output=True, text=True, timeout=300)
+    assert r.returncode == 1
+    lines = r.stderr.splitlines()
+    assert len(lines) == 1 and lines[0].startswith("omnicam: error: cannot read image"), lines
+    assert str(image) in lines[0]

@@ -96,6 +96,10 @@ def _opencv_quiet():
 
     FFmpeg takes its level from ``OPENCV_FFMPEG_LOGLEVEL`` when a capture opens (so setting it
     after ``import cv2`` works; a value the user set is kept). OpenCV's level is restored after.
+    Some lines bypass both (``OpenCV: FFMPEG: tag ... is not found`` from the video writer,
+    libpng's and libjpeg's warnings are plain ``fprintf(stderr)``), so for the whole command
+    file descriptor 2 goes to ``/dev/null`` while ``sys.stderr`` -- omnicam's messages,
+    warnings and tracebacks -- keeps writing to the real stderr through a duplicate of it.
     """
     os.environ.setdefault("OPENCV_FFMPEG_LOGLEVEL", "-8")  # AV_LOG_QUIET
     logging = getattr(getattr(cv2, "utils", None), "logging", None)
@@ -104,9 +108,34 @@ def _opencv_quiet():
         with contextlib.suppress(Exception):
             previous = logging.getLogLevel()
             logging.setLogLevel(logging.LOG_LEVEL_SILENT)
+    swapped = saved = None
+    try:
+        fd = sys.stderr.fileno()
+    except (AttributeError, OSError, ValueError):  # captured (pytest capsys, io.StringIO)
+        fd = None
+    with contextlib.suppress(OSError, ValueError):
+        sys.stderr.flush()
+        saved = os.dup(2)
+        devnull = os.open(os.devnull, os.O_WRONLY)
+        try:
+            if fd == 2:  # our own messages keep the real stderr
+                swapped = sys.stderr
+                sys.stderr = open(os.dup(saved), "w", buffering=1,  # noqa: SIM115
+                                  encoding=swapped.encoding, errors="backslashreplace")
+            os.dup2(devnull, 2)
+        finally:
+            os.close(devnull)
     try:
         yield
     finally:
+        if swapped is not None:
+            with contextlib.suppress(Exception):
+                sys.stderr.close()
+            sys.stderr = swapped
+        if saved is not None:
+            with contextlib.suppress(OSError):
+                os.dup2(saved, 2)
+            os.close(saved)
         if previous is not None:
             with contextlib.suppress(Exception):
                 logging.setLogLevel(previous)

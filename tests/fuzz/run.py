@@ -1163,6 +1163,8 @@ class Runner:
             ["calibrate", img, "--mirror", "28", "23", "30", "--intrinsics", k, "--far-lines",
              "{t}", "-o", self.path("cliout", "c.yaml"), "--overwrite"],
             ["calibrate", img, "--mirror", "28", "23", "30", "--intrinsics", k, "-o", "{t}"],
+            ["unwarp", self.video, "-c", calib, "--panorama", "128x32", "-o",
+             self.path("cliout", "o.mp4"), "--overwrite", "--quiet", "--fourcc", "{f}"],
             ["info", "{t}"], ["{t}"], ["info"], ["calibrate"], ["unwarp"], [],
             ["unwarp", img, "-c", calib, "-o", out_png],
             ["unwarp", img, "-c", calib, "--panorama", "128x32", "--perspective", "64x48",
@@ -1170,7 +1172,9 @@ class Runner:
         ]
         for i in range(n):
             tpl = templates[i % len(templates)]
-            argv = [rnd.choice(toks) if t == "{t}" else t for t in tpl]
+            fourccs = ["H264", "avc1", "XVID", "MJPG", "zzzz", "mp4v", "hev1", "\0\0\0\0"]
+            argv = [rnd.choice(toks) if t == "{t}" else rnd.choice(fourccs) if t == "{f}" else t
+                    for t in tpl]
             expensive = bool(argv) and argv[0] == "calibrate" and all(
                 t not in toks for t in argv[1:])
             self.run("CLI arguments", " ".join(map(repr, argv)),
