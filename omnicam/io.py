@@ -435,8 +435,13 @@ class _Reader:
         return mat if shape is None else mat.reshape(shape)
 
     def image_size(self):
-        """``image_size: [w, h]`` (or OpenCV sample's ``image_width``/``image_height``), or None."""
+        """``image_size: [w, h]`` or a 2-value matrix (or ``image_width``/``image_height``)."""
         value = self.node("image_size", required=False)
+        if isinstance(value, dict) and {"rows", "cols", "dt", "data"} <= set(value):
+            m = self._opencv_matrix("image_size", value).ravel()  # fs.write("image_size", arr)
+            if m.size != 2 or np.any(m != np.round(m)):
+                raise self.fail("image_size", "must be (width, height), two integers")
+            return (int(m[0]), int(m[1]))
         if value is not None:
             if not (isinstance(value, list) and len(value) == 2 and all(
                     isinstance(v, int) and not isinstance(v, bool) for v in value)):

@@ -318,3 +318,14 @@ def test_far_lines_round_trip_also_from_opencv_shaped_arrays(tmp_path):
     assert all(np.array_equal(b, a.reshape(-1, 2)) for a, b in zip(lines, back, strict=True))
     with pytest.raises(ValueError, match="far_lines"):
         write_far_lines(tmp_path / "l.json", [[[1.0, 2.0]] * 2])
+
+
+def test_image_size_written_as_an_opencv_matrix_is_read(tmp_path):
+    from omnicam.io import read_intrinsics
+    K = RIGS["aligned"].K
+    for ext in (".yaml", ".xml", ".json"):
+        fs = cv2.FileStorage(str(tmp_path / f"k{ext}"), cv2.FILE_STORAGE_WRITE)
+        fs.write("camera_matrix", K)
+        fs.write("image_size", np.array([[640], [480]], np.int32))
+        fs.release()
+        assert read_intrinsics(tmp_path / f"k{ext}")[2] == (640, 480)
