@@ -89,9 +89,18 @@ def temp_beside(path):
     Raises
     ------
     OutputError
-        The folder does not exist or cannot be written.
+        The folder does not exist or cannot be written, or the name is not valid UTF-8
+        (OpenCV's writers crash on such names, so no omnicam output may have one).
     """
     path = os.fspath(path)
+    if isinstance(path, bytes):
+        path = os.fsdecode(path)
+    try:
+        path.encode("utf-8")
+    except UnicodeEncodeError:  # OpenCV's writers crash (SIGSEGV) on such names
+        shown = path.encode("utf-8", "surrogateescape").decode("utf-8", "backslashreplace")
+        raise OutputError(f"cannot write {shown}: the file name is not valid UTF-8; rename "
+                          f"it") from None
     folder = os.path.dirname(os.path.abspath(path))
     base, ext = os.path.splitext(os.path.basename(path))
     if not os.path.isdir(folder):

@@ -4,21 +4,69 @@ The lowest layer of omnicam with :mod:`omnicam.mirror` and :mod:`omnicam.gauge`:
 nothing from the package. Each function returns the value in its canonical form (float64 arrays,
 tuples of ints) or raises ``ValueError`` naming the argument and what it must be
 (``docs/conventions.md``).
+
+Sane magnitudes (a camera outside them is refused at construction and at load):
+
+* focal lengths ``fx, fy`` in ``[FOCAL_RANGE]`` = [1e-2, 1e7] px, principal point and skew at
+  most ``PIXEL_LIMIT`` = 1e7 px in magnitude;
+* image sizes at most ``MAX_SIDE`` = 100000 px per side and ``MAX_PIXELS`` = 2**31 pixels;
+* distortion coefficients at most ``MAX_DISTORTION`` = 1e6 in magnitude;
+* the mirror's ``a, b, rim_radius`` in ``LENGTH_RANGE`` = [1e-3, 1e6] (see
+  :mod:`omnicam.mirror`), the mirror's origin at most ``MAX_DISTANCE`` = 1e7 from the camera;
+* the posture physical: the camera centre below the mirror sheet, every rim point in front of
+  the camera, and the rim's image between ``MIN_RIM_SPAN`` = 8 and ``MAX_RIM_SPAN`` = 20000 px
+  across (every pixel inside it can be enumerated, as the best-fit viewpoint does, and there
+  are enough of them);
+* integers in YAML and XML files within 32 bits (OpenCV's parser wraps larger ones around:
+  4294967297 reads as 1), see :mod:`omnicam.io`.
 """
 from __future__ import annotations
 
+import math
+import numbers
+
 import numpy as np
 
-__all__ = ["validate_K", "validate_D", "validate_image_size", "finite_array", "D_LENGTHS"]
+__all__ = ["validate_K", "validate_D", "validate_image_size", "finite_array", "float_array",
+           "real_number",
+           "validate_rng", "validate_posture", "D_LENGTHS", "FOCAL_RANGE", "LENGTH_RANGE",
+           "MAX_SIDE", "MAX_PIXELS", "MAX_RIM_SPAN"]
 
 D_LENGTHS = (4, 5, 8, 12, 14)  # as cv2.projectPoints takes them
+FOCAL_RANGE = (1e-2, 1e7)  # px
+PIXEL_LIMIT = 1e7  # px, |cx|, |cy|, |skew|
+LENGTH_RANGE = (1e-3, 1e6)  # a, b, rim_radius (mirror units)
+MAX_DISTANCE = 1e7  # |tvec| (mirror units)
+MAX_DISTORTION = 1e6
+MAX_SIDE = 100_000  # px per side of an image
+MAX_PIXELS = 2**31
+MAX_RIM_SPAN = 20_000  # px across the rim's image
+_COS, _SIN = np.cos(np.linspace(0.0, 2.0 * math.pi, 72, endpoint=False)), np.sin(
+    np.linspace(0.0, 2.0 * math.pi, 72, endpoint=False))
+MIN_RIM_SPAN = 8  # px: a smaller mirror image holds too few pixels for any use
+
+
+def float_array(value, name, expected):
+    """``value`` as a float64 array; only real numbers (no complex, bool, str, None)."""
+    try:
+        arr = np.asarray(value)
+    except (TypeError, ValueError, OverflowError):
+        raise ValueError(f"{name} must be {expected}, got {value!r}") from None
+    if arr.dtype.kind == "O":  # Python ints too large for int64, or mixed objects
+        items = arr.ravel().tolist()
+        if not all(isinstance(v, numbers.Real) and not isinstance(v, bool) for v in items):
+            raise ValueError(f"{name} must be {expected}, got {value!r}")
+        try:
+            arr = np.array([float(v) for v in items], dtype=np.float64).reshape(arr.shape)
+        except OverflowError:
+            raise ValueError(f"{name} must be finite, got {value!r}") from None
+    if arr.dtype.kind not in "iuf":
+        raise ValueError(f"{name} must be {expected} (real numbers), got {value!r}")
+    return arr.astype(np.float64)
 
 
 def finite_array(value, name, shape, expected):
-    try:
-        arr = np.array(value, dtype=np.float64)
-    except (TypeError, ValueError):
-        raise ValueError(f"{name} must be {expected}, got {value!r}") from None
+    arr = float_array(value, name, expected)
     if arr.size != int(np.prod(shape)):
         raise ValueError(f"{name} must be {expected}, got shape {arr.shape}")
     arr = arr.reshape(shape)
@@ -27,49 +75,143 @@ def finite_array(value, name, shape, expected):
     return arr
 
 
-def validate_K(K, name="K"):
-    """Return ``K`` as a (3, 3) float64 array or raise ``ValueError`` naming ``name``."""
+def real_number(value, name, lo=-math.inf, hi=math.inf, expected=None, lo_open=False):
+    """``float(value)`` for a real, finite number in ``[lo, hi]`` (``(lo, hi]`` if ``lo_open``)."""
+    expected = expected or "a finite number"
+    if isinstance(value, np.ndarray) and value.ndim == 0:
+        value = value[()]
+    if isinstance(value, (bool, np.bool_)) or not isinstance(value, numbers.Real):
+        raise ValueError(f"{name} must be {expected}, got {value!r}")
     try:
-        arr = np.array(K, dtype=np.float64)
-    except (TypeError, ValueError):
-        raise ValueError(f"{name} must be a 3x3 camera matrix, got {K!r}") from None
+        v = float(value)
+    except (TypeError, ValueError, OverflowError):
+        raise ValueError(f"{name} must be {expected}, got {value!r}") from None
+    if not math.isfinite(v) or v < lo or v > hi or (lo_open and v == lo):
+        raise ValueError(f"{name} must be {expected}, got {value!r}")
+    return v
+
+
+def validate_K(K, name="K"):
+    """Return ``K`` as a (3, 3) float64 array or raise ``ValueError`` naming ``name``.
+
+    ``fx, fy`` must lie in ``FOCAL_RANGE`` px, ``|cx|, |cy|, |skew|`` at most 1e7 px.
+    """
+    arr = float_array(K, name, "a 3x3 camera matrix")
     if arr.shape != (3, 3):
         raise ValueError(f"{name} must be a 3x3 camera matrix, got shape {arr.shape}")
     if not np.isfinite(arr).all():
         raise ValueError(f"{name} must be finite")
-    if not np.allclose(arr[2], (0.0, 0.0, 1.0)):
+    if np.abs(arr[2] - (0.0, 0.0, 1.0)).max() > 1e-8:
         raise ValueError(f"{name} must have last row (0, 0, 1), got {arr[2].tolist()}")
-    if abs(np.linalg.det(arr)) < 1e-12 or arr[0, 0] == 0 or arr[1, 1] == 0:
-        raise ValueError(f"{name} must be non-singular (fx, fy non-zero)")
+    lo, hi = FOCAL_RANGE
+    for label, f in (("fx", arr[0, 0]), ("fy", arr[1, 1])):
+        if not lo <= f <= hi:
+            raise ValueError(f"{name} must be non-singular with {label} in [{lo:g}, {hi:g}] px, "
+                             f"got {f:g}")
+    if np.abs(arr[:2, 1:]).max() > PIXEL_LIMIT:
+        raise ValueError(f"{name} must have |cx|, |cy| and |skew| at most {PIXEL_LIMIT:g} px, "
+                         f"got {arr[:2, 1:].ravel().tolist()}")
+    if abs(np.linalg.det(arr)) < 1e-12:
+        raise ValueError(f"{name} must be non-singular")
     return arr
 
 
-def validate_D(D):
+def validate_D(D, name="D"):
     """Return ``D`` as a flat float64 array of an OpenCV length, or ``None``."""
     if D is None:
         return None
-    try:
-        arr = np.array(D, dtype=np.float64).ravel()
-    except (TypeError, ValueError):
-        raise ValueError(f"D must be None or 4, 5, 8, 12 or 14 numbers, got {D!r}") from None
+    expected = "None or 4, 5, 8, 12 or 14 numbers"
+    arr = float_array(D, name, expected).ravel()
     if arr.size not in D_LENGTHS:
-        raise ValueError(f"D must have 4, 5, 8, 12 or 14 coefficients (as cv2.projectPoints), "
-                         f"got {arr.size}")
+        raise ValueError(f"{name} must have 4, 5, 8, 12 or 14 coefficients (as "
+                         f"cv2.projectPoints), got {arr.size}")
     if not np.isfinite(arr).all():
-        raise ValueError("D must be finite")
+        raise ValueError(f"{name} must be finite")
+    if np.abs(arr).max() > MAX_DISTORTION:
+        raise ValueError(f"{name} coefficients must be at most {MAX_DISTORTION:g} in magnitude, "
+                         f"got {arr.tolist()}")
     return arr
 
 
-def validate_image_size(image_size):
-    """Return ``(width, height)`` as a tuple of positive ints, or ``None``."""
+def validate_image_size(image_size, name="image_size"):
+    """Return ``(width, height)`` as a tuple of positive ints, or ``None``.
+
+    At most ``MAX_SIDE`` px per side and ``MAX_PIXELS`` pixels in all.
+    """
     if image_size is None:
         return None
+    expected = "(width, height), two positive integers"
+    if isinstance(image_size, (str, bytes)):
+        raise ValueError(f"{name} must be {expected}, got {image_size!r}")
     try:
-        w, h = (int(v) for v in image_size)
-        exact = all(float(v) == int(v) for v in image_size)
-    except (TypeError, ValueError):
-        raise ValueError(f"image_size must be (width, height), got {image_size!r}") from None
-    if not exact or w <= 0 or h <= 0:
-        raise ValueError(f"image_size must be two positive integers (width, height), "
-                         f"got {image_size!r}")
+        values = list(image_size)
+    except TypeError:
+        raise ValueError(f"{name} must be {expected}, got {image_size!r}") from None
+    if len(values) != 2:
+        raise ValueError(f"{name} must be {expected}, got {image_size!r}")
+    out = []
+    for v in values:
+        v = real_number(v, name, expected=expected)  # refuses str, bool, complex, inf, NaN
+        if v != int(v) or v <= 0:
+            raise ValueError(f"{name} must be {expected}, got {image_size!r}")
+        out.append(int(v))
+    w, h = out
+    if w > MAX_SIDE or h > MAX_SIDE or w * h > MAX_PIXELS:
+        raise ValueError(f"{name} must be at most {MAX_SIDE} px per side and {MAX_PIXELS} "
+                         f"pixels, got {image_size!r}")
     return (w, h)
+
+
+def validate_rng(rng, name="rng"):
+    """A seed for ``numpy.random.default_rng``: None, a non-negative int or a Generator."""
+    if rng is None or isinstance(rng, (np.random.Generator, np.random.BitGenerator,
+                                       np.random.SeedSequence)):
+        return rng
+    if isinstance(rng, numbers.Integral) and not isinstance(rng, bool) and int(rng) >= 0:
+        return int(rng)
+    raise ValueError(f"{name} must be None, a non-negative integer seed or a "
+                     f"numpy.random.Generator, got {rng!r}")
+
+
+def validate_posture(R, tvec, mirror, rim_points):
+    """Refuse a posture no real rig has (``ValueError`` naming ``rvec``/``tvec``).
+
+    Parameters
+    ----------
+    R : (3, 3) float64 ndarray
+        ``cv2.Rodrigues(rvec)``, mirror -> camera.
+    tvec : (3,) float64 ndarray
+    mirror : HyperbolicMirror
+    rim_points : callable
+        ``rim_points()`` -> (n, 2) pixels of the rim (the camera's ``rim_image_points``), called
+        only once the rim is known to be in front of the camera.
+
+    Checks: ``R`` finite and a rotation, ``|tvec| <= MAX_DISTANCE``; the camera centre
+    ``C = -R^T tvec`` below the mirror sheet (``C_z < b sqrt(1 + (C_x^2 + C_y^2) / a^2)``,
+    eq. 13), so it looks at the mirror from outside; every rim point in front of the camera
+    (camera-frame z > 0); the rim's image between ``MIN_RIM_SPAN`` and ``MAX_RIM_SPAN`` px
+    across.
+    """
+    if not np.isfinite(R).all() or np.abs(R @ R.T - np.eye(3)).max() > 1e-9:
+        raise ValueError("rvec must give a finite rotation matrix")
+    if np.abs(tvec).max() > MAX_DISTANCE or np.linalg.norm(tvec) > MAX_DISTANCE:
+        raise ValueError(f"tvec must be at most {MAX_DISTANCE:g} from the camera (mirror "
+                         f"units), got {tvec.tolist()}")
+    C = -R.T @ tvec
+    sheet = mirror.b * math.sqrt(1.0 + (C[0] ** 2 + C[1] ** 2) / mirror.a**2)
+    if not C[2] < sheet:
+        raise ValueError(f"tvec, rvec: the camera centre {C.tolist()} (mirror frame) must lie "
+                         f"below the mirror sheet (Z < {sheet:g} there), looking up at it")
+    # camera-frame z of rim points: R[2] . (r cos t, r sin t, z_rim) + tvec[2]
+    z = mirror.rim_radius * (R[2, 0] * _COS + R[2, 1] * _SIN) + R[2, 2] * mirror.z_rim + tvec[2]
+    if not (z > 0).all():
+        raise ValueError("rvec, tvec: the mirror's rim must lie in front of the camera "
+                         "(camera-frame z > 0 at every rim point)")
+    pix = rim_points()
+    span = np.ptp(pix, axis=0) if np.isfinite(pix).all() else np.array([np.inf, np.inf])
+    if not span.max() <= MAX_RIM_SPAN:
+        raise ValueError(f"K, tvec: the rim's image must span at most {MAX_RIM_SPAN} px, got "
+                         f"{np.round(span, 1).tolist()} px (a scale mistake?)")
+    if not span.min() >= MIN_RIM_SPAN:
+        raise ValueError(f"K, tvec: the rim's image must span at least {MIN_RIM_SPAN} px, got "
+                         f"{np.round(span, 3).tolist()} px (a scale mistake?)")

@@ -22,7 +22,8 @@ import cv2
 import numpy as np
 
 from . import raytrace
-from ._validate import finite_array, validate_D, validate_image_size, validate_K
+from ._validate import (finite_array, validate_D, validate_image_size, validate_K,
+                        validate_posture)
 from .gauge import canonical_rvec
 from .io import MODEL_NAME
 from .mirror import HyperbolicMirror
@@ -70,6 +71,15 @@ class MisalignedHyperbolicCamera:
         OpenCV distortion coefficients (4, 5, 8, 12 or 14 values).
     image_size : (int, int) or None
         ``(width, height)`` of the images, metadata only (needed by :meth:`scaled`).
+
+    Raises
+    ------
+    ValueError
+        Naming the parameter, for anything that is not a physical rig of sane magnitudes
+        (:mod:`omnicam._validate`): non-real or non-finite values; ``fx, fy`` outside
+        [1e-2, 1e7] px; an image size above 100000 px per side or 2**31 pixels; a rotation
+        that is not finite; the camera centre not below the mirror sheet or a rim point not in
+        front of the camera; a rim image wider than 20000 px.
     """
 
     __slots__ = ("_K", "_D", "_mirror", "_rvec", "_tvec", "_R", "_C", "_image_size", "_viewpoint")
@@ -83,12 +93,19 @@ class MisalignedHyperbolicCamera:
         self._mirror = mirror
         rvec = finite_array(rvec, "rvec", (3,), "a rotation vector of 3 numbers")
         tvec = finite_array(tvec, "tvec", (3,), "a translation vector of 3 numbers")
-        self._rvec = _readonly(canonical_rvec(rvec))
+        with np.errstate(all="ignore"):  # a huge rvec gives NaN, refused just below
+            rvec = canonical_rvec(rvec)
+            R = cv2.Rodrigues(rvec.reshape(3, 1))[0]
+        if not np.isfinite(rvec).all():
+            raise ValueError("rvec must give a finite rotation, got a non-finite gauge")
+        self._rvec = _readonly(rvec)
         self._tvec = _readonly(tvec)
-        self._R = _readonly(cv2.Rodrigues(self._rvec.reshape(3, 1))[0])
+        self._R = _readonly(R)
         self._C = _readonly(-self._R.T @ self._tvec)  # F_M of eq. 17
         self._image_size = validate_image_size(image_size)
         self._viewpoint = None
+        # a physical rig: camera below the mirror sheet, rim in front, rim image enumerable
+        validate_posture(self._R, self._tvec, mirror, lambda: self.rim_image_points(36))
 
     # -- constructors -------------------------------------------------------------------
     @classmethod
@@ -323,12 +340,30 @@ class MisalignedHyperbolicCamera:
 
     # -- files ----------------------------------------------------------------------------
     def save(self, path):
-        """Write the calibration with ``cv2.FileStorage`` (yaml, yml, xml or json), atomically."""
+        """Write the calibration with ``cv2.FileStorage`` (yaml, yml, xml or json), atomically.
+
+        The file is written beside ``path``, read back and compared, then renamed into place
+        (:func:`omnicam.io.save_camera`).
+
+        Raises
+        ------
+        ValueError
+            Unknown extension, or the file cannot be written (missing or read-only folder, full
+            disk, ...), naming the file; the old file at ``path`` is then unchanged.
+        """
         from .io import save_camera
         save_camera(self, path)
 
     @classmethod
     def load(cls, path):
-        """Read a calibration file written by :meth:`save`, validating every field."""
+        """Read a calibration file written by :meth:`save`, validating every field.
+
+        Raises
+        ------
+        FileNotFoundError
+            No file at ``path``.
+        ValueError
+            Anything else (see :func:`omnicam.io.load_camera`), naming the file and the field.
+        """
         from .io import load_camera
         return load_camera(path, cls)

@@ -304,38 +304,16 @@ def _shallow(text, limit=64):
     return True
 
 
-def _image_size_matrix(path):
-    """``(K, D, size)`` of a FileStorage file whose ``image_size`` is a matrix, else None."""
-    import cv2
-
-    try:
-        fs = cv2.FileStorage(path, cv2.FILE_STORAGE_READ)
-    except (cv2.error, SystemError):
-        return None
-    try:
-        if not fs.isOpened():
-            return None
-        node = fs.getNode("image_size")
-        if node.empty() or not node.isMap():
-            return None
-        mat = node.mat()
-        if mat is None:
-            return None
-        return np.asarray(mat, dtype=np.float64).ravel()
-    except cv2.error:
-        return None
-    finally:
-        fs.release()
-
-
 def read_other_intrinsics(path):
-    """``(K, D, image_size)`` from a ROS or Kalibr YAML file, or the image size of a
-    FileStorage file that writes it as a matrix; ``None`` when ``path`` is none of these.
+    """``(K, D, image_size)`` from a ROS or Kalibr YAML file; ``None`` when it is neither.
+
+    Only omnicam's own small YAML parser reads the file (never ``cv2.FileStorage``); call it
+    after :func:`omnicam.io`'s pre-scan. ``image_size`` written as an OpenCV matrix is read by
+    :func:`omnicam.io.read_intrinsics` itself.
 
     Returns
     -------
-    None, or a tuple ``(K, D, image_size)`` (unvalidated), or ``("image_size", (w, h))`` for
-    a FileStorage file whose other fields :func:`omnicam.io.read_intrinsics` reads itself.
+    None, or a tuple ``(K, D, image_size)`` (unvalidated).
 
     Raises
     ------
@@ -373,13 +351,4 @@ def read_other_intrinsics(path):
             raise ValueError(f"intrinsics file {path}: a ROS camera_info or Kalibr camchain "
                              f"without its camera fields") from None
         return None
-    if re.search(r"image_size\W{0,40}(!!|type_id\W{1,4})opencv-(nd-)?matrix", text) \
-            and _shallow(text):
-        size = _image_size_matrix(path)
-        if size is not None:
-            if size.size != 2 or not np.isfinite(size).all() or np.any(size != np.round(size)) \
-                    or np.any(size <= 0):
-                raise ValueError(f"intrinsics file {path}: field 'image_size' must be "
-                                 f"(width, height), two positive integers")
-            return ("image_size", (int(size[0]), int(size[1])))
     return None

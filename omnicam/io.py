@@ -10,12 +10,48 @@ Layout (format_version 1)::
     rvec: !!opencv-matrix 3x1
     tvec: !!opencv-matrix 3x1
     image_size: [width, height]     (absent when unknown)
+
+Reading is defensive, because ``cv2.FileStorage`` (OpenCV 4.x and 5.0) crashes the whole process
+on some inputs. Found by ``tests/fuzz/run.py`` and an outside fuzz run:
+
+* SIGSEGV on a file name that is not valid UTF-8;
+* SIGSEGV on JSON with 100,000 nested brackets and on XML with 30,000 nested elements (its
+  parsers recurse without a limit);
+* heap corruption ("double free or corruption") after loading a few corrupt ``.json`` files
+  (a non-UTF-8 ``model`` tag, byte flips);
+* a raw ``UnicodeDecodeError`` from ``FileNode.string()`` on non-UTF-8 text;
+* ``FileNode.mat()`` saturating silently: ``dt: u`` with the value 583 reads as 255;
+* integers beyond 32 bits wrapped around silently: ``format_version: 4294967297`` reads as 1,
+  and so does ``format_version: true`` (YAML booleans become the integers 1 and 0);
+* its own ``[ERROR:0@...] persistence.cpp`` lines on stderr for every parse error;
+* ``FileNode.getNode`` and ``FileNode.at`` cost time linear in the position: walking a 1 MiB
+  file of 60,000 keys took 40 s (so maps over 256 keys and sequences over 4096 items are
+  refused, and only the fields omnicam needs are read).
+
+So before OpenCV sees anything, :func:`_prescan` refuses (``ValueError`` naming the file) a name
+that is not UTF-8, anything but a regular file (a folder, FIFO or device: "is not a regular
+file"), files over ``MAX_FILE_BYTES`` (1 MiB), empty or binary files (a NUL byte), text that is
+not UTF-8, nesting deeper than ``MAX_DEPTH`` (brackets, XML elements, YAML indentation) and
+base64 blocks (omnicam never writes them), and in YAML and XML integers beyond 32 bits and
+the booleans ``true``/``false``. JSON is then parsed by the standard library alone and
+never reaches OpenCV; YAML and XML are parsed by ``cv2.FileStorage`` from the checked text in
+memory (so what OpenCV parses is what was checked), with its log silenced, and its node tree is
+copied into Python values. Matrices are rebuilt from ``rows``, ``cols``, ``dt`` and ``data``
+here, every value checked against the range of its ``dt``.
+
+Writing goes through :func:`omnicam._atomic.atomic_output` and is verified by reading the
+temporary file back with the same reader: a failure (full disk, read-only folder, ...) raises
+``ValueError`` naming the file and keeps the old file.
 """
 from __future__ import annotations
 
 import contextlib
 import json
+import math
 import os
+import re
+import stat
+import sys
 
 import cv2
 import numpy as np
@@ -25,119 +61,305 @@ from ._validate import validate_D, validate_image_size, validate_K
 from .mirror import HyperbolicMirror
 
 __all__ = ["save_camera", "load_camera", "read_intrinsics", "write_intrinsics", "read_far_lines",
-           "write_far_lines", "FORMAT_VERSION", "MODEL_NAME", "SUFFIXES"]
+           "write_far_lines", "FORMAT_VERSION", "MODEL_NAME", "SUFFIXES", "MAX_FILE_BYTES",
+           "MAX_DEPTH"]
 
 FORMAT_VERSION = 1
 MODEL_NAME = "misaligned_hyperbolic"  # the model tag of a calibration file
 SUFFIXES = (".yaml", ".yml", ".xml", ".json")
+MAX_FILE_BYTES = 1 << 20  # calibration, intrinsics and far-line files are a few kB
+MAX_DEPTH = 32  # nesting of brackets / elements / YAML blocks (ours: 3)
+MAX_INDENT = 128  # columns of YAML indentation
+MAX_FIELDS = 256  # keys of a map
+MAX_VALUES = 4096  # items of a sequence (our matrices hold at most 14)
 # field names of an intrinsics file, first match wins: omnicam's, then OpenCV's calibration sample
 K_FIELDS = ("K", "camera_matrix", "cameraMatrix")
 D_FIELDS = ("D", "dist_coeffs", "distortion_coefficients", "distCoeffs")
+# OpenCV matrix element types (dt) and the values they hold
+_DT_RANGES = {"u": (0, 255), "c": (-128, 127), "w": (0, 65535), "s": (-32768, 32767),
+              "i": (-(2**31), 2**31 - 1), "f": (-3.4028234663852886e38, 3.4028234663852886e38),
+              "d": (-math.inf, math.inf)}
+_MAX_MATRIX_VALUES = MAX_VALUES
+_BOOLEAN = re.compile(r"(?m)(?:^|[:\[,>-])[ \t]*(true|false)[ \t]*(?=$|[,\]#<])")
+_LONG_INT = re.compile(r"(?<![\w.+-])[-+]?\d{10,}(?![\w.])")  # 10+ digits, not part of a real
+
+
+def shown(path):
+    """``path`` as text that can always be printed (undecodable bytes as ``\\xNN``)."""
+    if isinstance(path, bytes):
+        return path.decode("utf-8", "backslashreplace")
+    return str(path).encode("utf-8", "surrogateescape").decode("utf-8", "backslashreplace")
+
+
+def _fspath(path, what):
+    """``os.fspath(path)`` as str; a name that is not UTF-8 is refused (it crashes OpenCV)."""
+    try:
+        path = os.fspath(path)
+    except TypeError:
+        raise ValueError(f"{what} path must be a file name (str or os.PathLike), "
+                         f"got {path!r}") from None
+    if isinstance(path, bytes):
+        path = os.fsdecode(path)
+    if "\0" in path:
+        raise ValueError(f"{what} {shown(path)}: the name contains a NUL character")
+    try:
+        path.encode("utf-8")
+    except UnicodeEncodeError:
+        raise ValueError(f"{what} {shown(path)}: the file name is not valid UTF-8 "
+                         f"(OpenCV cannot handle it); rename the file") from None
+    return path
+
+
+@contextlib.contextmanager
+def opencv_silenced():
+    """Silence OpenCV's own log and anything its libraries print on stderr (fd 2) meanwhile.
+
+    omnicam reports every failure once, in its own words naming the file; OpenCV's
+    ``[ERROR:0@...]`` lines, libpng's and libjpeg's warnings would only repeat it in noise.
+    fd 2 is process-wide: output of other threads during the call (milliseconds) is dropped
+    too.
+    """
+    logging = getattr(getattr(cv2, "utils", None), "logging", None)
+    previous = None
+    if logging is not None:
+        with contextlib.suppress(Exception):
+            previous = logging.getLogLevel()
+            logging.setLogLevel(logging.LOG_LEVEL_SILENT)
+    saved = None
+    with contextlib.suppress(Exception):
+        sys.stderr.flush()
+    with contextlib.suppress(OSError):
+        devnull = os.open(os.devnull, os.O_WRONLY)
+        try:
+            saved = os.dup(2)
+            os.dup2(devnull, 2)
+        except OSError:
+            saved = None
+        finally:
+            os.close(devnull)
+    try:
+        yield
+    finally:
+        if saved is not None:
+            with contextlib.suppress(OSError):
+                os.dup2(saved, 2)
+            os.close(saved)
+        if previous is not None:
+            with contextlib.suppress(Exception):
+                logging.setLogLevel(previous)
+
+
+def _nesting(text):
+    """Deepest nesting of ``[``/``{`` outside strings, of XML elements, and YAML indentation."""
+    depth = deepest = 0
+    quote = None
+    escaped = False
+    for ch in text:  # brackets outside double- or single-quoted strings
+        if quote:
+            if escaped:
+                escaped = False
+            elif ch == "\\" and quote == '"':
+                escaped = True
+            elif ch == quote:
+                quote = None
+        elif ch in "\"'":
+            quote = ch
+        elif ch in "[{":
+            depth += 1
+            deepest = max(deepest, depth)
+        elif ch in "]}":
+            depth -= 1
+    elements = 0
+    if "<" in text:
+        depth = 0
+        for m in re.finditer(r"<(/?)[A-Za-z_:][^<>]*?(/?)>", re.sub(r"<!--.*?-->", "", text,
+                                                                      flags=re.DOTALL)):
+            if m.group(1):
+                depth -= 1
+            elif not m.group(2):
+                depth += 1
+                elements = max(elements, depth)
+    indent = 0
+    for line in text.splitlines():
+        m = re.match(r"[ \t]*(?:-[ \t]+)*", line)
+        indent = max(indent, m.end())
+    return max(deepest, elements), indent
+
+
+def _prescan(path, what, json_only=False):
+    """The text of ``path`` if it is safe to parse, else ``ValueError`` naming the file.
+
+    Raises ``FileNotFoundError`` if nothing is at ``path``; see the module docstring for what
+    is refused and why.
+    """
+    name = shown(path)
+    try:
+        st = os.stat(path)
+    except FileNotFoundError:
+        raise FileNotFoundError(f"{what} {name} does not exist") from None
+    except NotADirectoryError:
+        raise FileNotFoundError(f"{what} {name} does not exist (a parent is not a "
+                                f"folder)") from None
+    except OSError as e:
+        raise ValueError(f"{what} {name}: cannot read it ({e.strerror or e})") from None
+    if not stat.S_ISREG(st.st_mode):
+        kind = ("a folder" if stat.S_ISDIR(st.st_mode) else "a FIFO" if stat.S_ISFIFO(st.st_mode)
+                else "a device" if stat.S_ISCHR(st.st_mode) or stat.S_ISBLK(st.st_mode)
+                else "a socket" if stat.S_ISSOCK(st.st_mode) else "not a file")
+        raise ValueError(f"{what} {name} is not a regular file ({kind})")
+    if st.st_size > MAX_FILE_BYTES:
+        raise ValueError(f"{what} {name}: too large ({st.st_size} bytes; at most "
+                         f"{MAX_FILE_BYTES} are read)")
+    try:
+        with open(path, "rb") as f:
+            data = f.read(MAX_FILE_BYTES + 1)
+    except OSError as e:
+        raise ValueError(f"{what} {name}: cannot read it ({e.strerror or e})") from None
+    if len(data) > MAX_FILE_BYTES:
+        raise ValueError(f"{what} {name}: too large (more than {MAX_FILE_BYTES} bytes)")
+    if not data.strip():
+        raise ValueError(f"{what} {name} is empty, not a readable yaml, xml or json file")
+    if b"\0" in data:
+        raise ValueError(f"{what} {name}: a binary file, not yaml, xml or json text")
+    try:
+        text = data.decode("utf-8")
+    except UnicodeDecodeError as e:
+        raise ValueError(f"{what} {name}: not UTF-8 text (byte {e.start}); a corrupt or "
+                         f"binary file") from None
+    depth, indent = _nesting(text)
+    if depth > MAX_DEPTH or (not json_only and indent > MAX_INDENT):
+        raise ValueError(f"{what} {name}: nested too deeply ({max(depth, indent)} levels or "
+                         f"columns; at most {MAX_DEPTH}); not a file omnicam writes")
+    if not json_only and "$base64$" in text:
+        raise ValueError(f"{what} {name}: base64-encoded data is not supported")
+    if not json_only and not text.lstrip().startswith("{"):
+        m = _BOOLEAN.search(text)
+        if m:
+            raise ValueError(f"{what} {name}: {m.group(1)!r} where a value is expected; OpenCV "
+                             f"would read it as the number {int(m.group(1) == 'true')}")
+        for m in _LONG_INT.finditer(text):
+            if abs(int(m.group())) > 2**31 - 1:
+                raise ValueError(f"{what} {name}: the integer {m.group()} does not fit in 32 "
+                                 f"bits (OpenCV would read it wrapped around); write it as a "
+                                 f"real number such as {m.group()}.")
+    return text
 
 
 def _suffix(path, what="calibration file"):
     ext = os.path.splitext(str(path))[1].lower()
     if ext not in SUFFIXES:
-        raise ValueError(f"{what} {path!s}: extension must be one of {', '.join(SUFFIXES)}"
+        raise ValueError(f"{what} {shown(path)}: extension must be one of {', '.join(SUFFIXES)}"
                          f" (the format follows it), got {ext or 'none'!r}")
     return ext
 
 
-def _atomic_filestorage(path, what, write):
-    """Write a ``cv2.FileStorage`` file through :func:`omnicam._atomic.atomic_output`.
+# -- reading ------------------------------------------------------------------------------------
+class _Matrix:
+    """An ``opencv-matrix`` node: ``rows``, ``cols``, ``dt`` and ``data`` as read."""
 
-    ``write(fs)`` fills the open storage. The temporary file has the target's extension (the
-    format follows it); after the write it must open again and hold the ``format_version`` or
-    ``K`` written first, since ``cv2.FileStorage`` does not report a failed write (a full disk
-    leaves an empty or truncated file).
+    def __init__(self, fields):
+        self.fields = fields
+
+
+def _from_node(node, depth=0):
+    """A ``cv2.FileNode`` subtree as Python values (dict, list, int, float, str, None).
+
+    ``FileNode.getNode`` and ``FileNode.at`` take time linear in the position, so maps are
+    limited to ``MAX_FIELDS`` keys and sequences to ``MAX_VALUES`` items (a 1 MiB file of
+    60,000 keys would otherwise take minutes).
     """
-    path = os.fspath(path)
-    _suffix(path, what)
-
-    def verify(tmp):
-        fs = cv2.FileStorage(tmp, cv2.FILE_STORAGE_READ)
+    if depth > MAX_DEPTH:
+        raise ValueError("is nested too deeply")
+    if node.isMap():
+        if node.size() > MAX_FIELDS:
+            raise ValueError(f"has more than {MAX_FIELDS} fields")
+        return {k: _from_node(node.getNode(k), depth + 1) for k in node.keys()}
+    if node.isSeq():
+        if node.size() > MAX_VALUES:
+            raise ValueError(f"has more than {MAX_VALUES} values")
+        return [_from_node(node.at(i), depth + 1) for i in range(node.size())]
+    if node.isInt():
+        return int(node.real())
+    if node.isReal():
+        return float(node.real())
+    if node.isString():
         try:
-            return fs.isOpened() and not fs.root().empty()
-        finally:
-            fs.release()
+            return node.string()
+        except UnicodeDecodeError:
+            raise ValueError("holds a string that is not UTF-8") from None
+    return None
 
-    with atomic_output(path, what=what, verify=verify) as tmp:
-        fs = cv2.FileStorage(tmp, cv2.FILE_STORAGE_WRITE)
+
+class _Fields:
+    """The top-level map of an open ``cv2.FileStorage``, each field converted when read."""
+
+    def __init__(self, fs):
+        self.fs = fs  # kept open while fields are read
+        self.names = set(fs.root().keys())
+
+    def get(self, name):
+        if name not in self.names:
+            return None
+        with opencv_silenced():
+            try:
+                return _from_node(self.fs.root().getNode(name))
+            except cv2.error as e:
+                raise ValueError(f"is malformed ({str(e).splitlines()[-1]})") from None
+
+
+def _parse(text, path, what, ext):
+    """The fields of the document ``text``: a dict (JSON) or :class:`_Fields` (YAML, XML)."""
+    name = shown(path)
+    if ext == ".json" or text.lstrip().startswith("{"):
         try:
-            if not fs.isOpened():
-                raise OutputError(f"cannot write {what} {path}: OpenCV cannot open it for writing")
-            write(fs)
-        finally:
-            fs.release()
+            data = json.loads(text)
+        except RecursionError:
+            raise ValueError(f"{what} {name}: nested too deeply") from None
+        except ValueError as e:
+            raise ValueError(f"{what} {name}: not a readable OpenCV FileStorage file (not valid "
+                             f"JSON: {e})") from None
+        if not isinstance(data, dict):
+            raise ValueError(f"{what} {name}: expected a map of named fields at the top level")
+        return data
+    with opencv_silenced():
+        try:
+            fs = cv2.FileStorage(text, cv2.FILE_STORAGE_READ | cv2.FILE_STORAGE_MEMORY)
+            opened = fs.isOpened()
+            root_is_map = opened and fs.root().isMap()
+        except (cv2.error, SystemError):
+            opened = root_is_map = False
+    if not opened:
+        raise ValueError(f"{what} {name}: not a readable OpenCV FileStorage file "
+                         f"(yaml, yml, xml or json)")
+    if not root_is_map:
+        raise ValueError(f"{what} {name}: expected a map of named fields at the top level")
+    if fs.root().size() > MAX_FIELDS:
+        raise ValueError(f"{what} {name}: more than {MAX_FIELDS} top-level fields; not a "
+                         f"calibration or intrinsics file")
+    return _Fields(fs)
 
 
-def _write_seq(fs, name, values):
-    fs.startWriteStruct(name, cv2.FileNode_SEQ)
-    for v in values:
-        fs.write("", int(v))
-    fs.endWriteStruct()
-
-
-def save_camera(camera, path):
-    """Write ``camera`` to ``path``; a temporary file in the same folder is renamed into place.
-
-    Raises
-    ------
-    ValueError
-        Unknown extension, or the folder cannot be written.
-    """
-    def write(fs):
-        fs.write("format_version", FORMAT_VERSION)
-        fs.write("model", MODEL_NAME)
-        fs.startWriteStruct("mirror", cv2.FileNode_MAP)
-        fs.write("a", camera.mirror.a)
-        fs.write("b", camera.mirror.b)
-        fs.write("rim_radius", camera.mirror.rim_radius)
-        fs.endWriteStruct()
-        fs.write("K", np.asarray(camera.K))
-        if camera.D is not None:
-            fs.write("D", np.asarray(camera.D).reshape(1, -1))
-        fs.write("rvec", np.asarray(camera.rvec).reshape(3, 1))
-        fs.write("tvec", np.asarray(camera.tvec).reshape(3, 1))
-        if camera.image_size is not None:
-            _write_seq(fs, "image_size", camera.image_size)
-
-    _atomic_filestorage(path, "calibration file", write)
-
-
-def write_intrinsics(path, K, D=None, image_size=None):
-    """Write a pinhole's ``K``, ``D`` and ``image_size`` (what :func:`read_intrinsics` reads)."""
-    K, D, image_size = validate_K(K), validate_D(D), validate_image_size(image_size)
-
-    def write(fs):
-        fs.write("K", K)
-        if D is not None:
-            fs.write("D", D.reshape(1, -1))
-        if image_size is not None:
-            _write_seq(fs, "image_size", image_size)
-
-    _atomic_filestorage(path, "intrinsics file", write)
+def _is_number(v):
+    return isinstance(v, (int, float)) and not isinstance(v, bool)
 
 
 class _Reader:
-    """Typed access to the nodes of an open FileStorage, every failure a ValueError."""
+    """Typed access to the fields of a parsed file, every failure a ValueError naming both."""
 
-    def __init__(self, fs, path, what):
-        self.fs, self.path, self.what = fs, path, what
+    def __init__(self, data, path, what):
+        self.data, self.path, self.what = data, shown(path), what
 
     def fail(self, field, what):
         return ValueError(f"{self.what} {self.path}: field {field!r} {what}")
 
     def node(self, field, parent=None, required=True):
         try:
-            node = (parent if parent is not None else self.fs.root()).getNode(field.split(".")[-1])
-        except cv2.error:
-            raise self.fail(field, "is malformed") from None
-        if node.empty() or node.isNone():
-            if required:
-                raise self.fail(field, "is missing")
-            return None
-        return node
+            value = (parent if parent is not None else self.data).get(field.split(".")[-1])
+        except ValueError as e:
+            raise self.fail(field, str(e)) from None
+        if value is None and required:
+            raise self.fail(field, "is missing")
+        return value
 
     def first(self, fields, required=False):
         """The first of ``fields`` present (aliases), or None."""
@@ -149,48 +371,94 @@ class _Reader:
         return None
 
     def number(self, field, parent=None):
-        node = self.node(field, parent)
-        if not (node.isReal() or node.isInt()):
+        value = self.node(field, parent)
+        if not _is_number(value):
             raise self.fail(field, "must be a number")
-        value = node.real()
-        if not np.isfinite(value):
+        try:
+            value = float(value)
+        except OverflowError:
+            value = math.inf
+        if not math.isfinite(value):
             raise self.fail(field, f"must be finite, got {value}")
         return value
 
+    def _numbers(self, field, values, lo=-math.inf, hi=math.inf, integer=False):
+        if not isinstance(values, list) or not values or len(values) > _MAX_MATRIX_VALUES:
+            raise self.fail(field, "must hold a non-empty list of numbers")
+        out = np.empty(len(values))
+        for i, v in enumerate(values):
+            if not _is_number(v) or (integer and not isinstance(v, int)):
+                kind = "an integer" if integer else "a number"
+                raise self.fail(field, f"value {i} must be {kind}, got {v!r}")
+            try:
+                out[i] = float(v)
+            except OverflowError:
+                out[i] = math.inf
+            if not math.isfinite(out[i]):
+                raise self.fail(field, "must be finite")
+            if not lo <= v <= hi:
+                raise self.fail(field, f"value {v!r} does not fit its type (range {lo:g}..{hi:g})")
+        return out
+
+    def _opencv_matrix(self, field, m):
+        """Rebuild an ``opencv-matrix`` map, every value checked against its ``dt``."""
+        rows, cols, dt, data = (m.get(k) for k in ("rows", "cols", "dt", "data"))
+        if not all(isinstance(v, int) and not isinstance(v, bool) and 0 < v <= _MAX_MATRIX_VALUES
+                   for v in (rows, cols)):
+            raise self.fail(field, "must have positive integer rows and cols")
+        if dt not in _DT_RANGES:
+            raise self.fail(field, f"must have a one-channel dt ({', '.join(_DT_RANGES)}), "
+                            f"got {dt!r}")
+        lo, hi = _DT_RANGES[dt]
+        values = self._numbers(field, data, lo, hi, integer=dt not in "fd")
+        if values.size != rows * cols:
+            raise self.fail(field, f"has {values.size} values for {rows}x{cols}")
+        return values.reshape(rows, cols)
+
+    def _opencv_nd_matrix(self, field, m):
+        """An ``opencv-nd-matrix`` (``fs.write`` of a 1-D array) with one size, as a column."""
+        sizes = m.get("sizes")
+        sizes = [sizes] if isinstance(sizes, int) else sizes  # XML gives one size as a scalar
+        if not (isinstance(sizes, list) and len(sizes) == 1 and isinstance(sizes[0], int)
+                and not isinstance(sizes[0], bool)):
+            raise self.fail(field, "must be a one-dimensional opencv-nd-matrix")
+        return self._opencv_matrix(field, {"rows": sizes[0], "cols": 1, "dt": m.get("dt"),
+                                           "data": m.get("data")})
+
     def matrix(self, field, shape=None, required=True, allow_list=False):
         """An ``!!opencv-matrix`` (or, with ``allow_list``, a plain list of numbers)."""
-        node = self.node(field, required=required)
-        if node is None:
+        value = self.node(field, required=required)
+        if value is None:
             return None
-        mat = None
-        try:
-            if node.isMap():
-                mat = node.mat()
-            elif allow_list and node.isSeq():
-                mat = np.array([node.at(i).real() for i in range(node.size())])
-        except cv2.error:
-            mat = None
-        if mat is None:
+        if isinstance(value, dict) and {"rows", "cols", "dt", "data"} <= set(value):
+            mat = self._opencv_matrix(field, value)
+        elif isinstance(value, dict) and {"sizes", "dt", "data"} <= set(value):
+            mat = self._opencv_nd_matrix(field, value)
+        elif allow_list and isinstance(value, list):
+            mat = self._numbers(field, value)
+        else:
             raise self.fail(field, "must be an OpenCV matrix (!!opencv-matrix)"
                             + (" or a list of numbers" if allow_list else ""))
-        mat = np.asarray(mat, dtype=np.float64)
         if shape is not None and len(shape) == 2 and mat.shape != shape and not (
                 allow_list and mat.size == shape[0] * shape[1] and mat.ndim == 1):
             raise self.fail(field, f"must be a {shape[0]}x{shape[1]} matrix, got {mat.shape}")
         if shape is not None and mat.size != int(np.prod(shape)):
             raise self.fail(field, f"must have {int(np.prod(shape))} values, got shape {mat.shape}")
-        if not np.isfinite(mat).all():
-            raise self.fail(field, "must be finite")
         return mat if shape is None else mat.reshape(shape)
 
     def image_size(self):
-        """``image_size: [w, h]`` (or OpenCV sample's ``image_width``/``image_height``), or None."""
-        node = self.node("image_size", required=False)
-        if node is not None:
-            if not node.isSeq() or node.size() != 2 or not all(
-                    node.at(i).isInt() for i in range(2)):
+        """``image_size: [w, h]`` or a 2-value matrix (or ``image_width``/``image_height``)."""
+        value = self.node("image_size", required=False)
+        if isinstance(value, dict):  # fs.write("image_size", array): an (nd-)matrix
+            m = self.matrix("image_size").ravel()
+            if m.size != 2 or np.any(m != np.round(m)):
+                raise self.fail("image_size", "must be (width, height), two integers")
+            return (int(m[0]), int(m[1]))
+        if value is not None:
+            if not (isinstance(value, list) and len(value) == 2 and all(
+                    isinstance(v, int) and not isinstance(v, bool) for v in value)):
                 raise self.fail("image_size", "must be a sequence [width, height] of integers")
-            return (int(node.at(0).real()), int(node.at(1).real()))
+            return tuple(value)
         if self.node("image_width", required=False) is not None:
             return (self.number("image_width"), self.number("image_height"))
         return None
@@ -203,27 +471,11 @@ class _Reader:
             raise self.fail(field, str(e)) from None
 
 
-@contextlib.contextmanager
 def _reading(path, what):
-    """Open ``path`` for reading as a :class:`_Reader`; OpenCV's errors become ValueError."""
-    path = os.fspath(path)
-    _suffix(path, what)
-    if not os.path.isfile(path):
-        raise FileNotFoundError(f"{what} {path} does not exist")
-    try:
-        fs = cv2.FileStorage(path, cv2.FILE_STORAGE_READ)
-        opened = fs.isOpened()
-    except (cv2.error, SystemError):  # cv2 5 raises SystemError on an empty file
-        opened = False
-    if not opened:
-        raise ValueError(f"{what} {path}: not a readable OpenCV FileStorage file "
-                         f"(yaml, yml, xml or json)")
-    try:
-        yield _Reader(fs, path, what)
-    except cv2.error as e:
-        raise ValueError(f"{what} {path}: malformed ({str(e).splitlines()[-1]})") from None
-    finally:
-        fs.release()
+    """A :class:`_Reader` of the file at ``path``: pre-scanned, parsed, never crashing OpenCV."""
+    path = _fspath(path, what)
+    ext = _suffix(path, what)
+    return _Reader(_parse(_prescan(path, what), path, what, ext), path, what)
 
 
 def load_camera(path, cls):
@@ -237,29 +489,31 @@ def load_camera(path, cls):
     FileNotFoundError
         No file at ``path``.
     ValueError
-        Anything malformed, missing, non-finite or inconsistent, naming the file and the field.
+        Anything malformed, missing, non-finite, out of range (the camera's physical validation)
+        or inconsistent, naming the file and the field; also a path that is not a regular file,
+        a name that is not UTF-8, and files that are too large, binary or nested too deeply.
     """
-    with _reading(path, "calibration file") as r:
-        version = r.number("format_version")
-        if version != FORMAT_VERSION:
-            raise r.fail("format_version", f"is {version:g}; this omnicam reads {FORMAT_VERSION}")
-        model = r.node("model")
-        if not model.isString() or model.string() != MODEL_NAME:
-            raise r.fail("model", f"must be {MODEL_NAME!r}")
-        mnode = r.node("mirror")
-        if not mnode.isMap():
-            raise r.fail("mirror", "must be a map with a, b, rim_radius")
-        ab = [r.number(f"mirror.{k}", mnode) for k in ("a", "b", "rim_radius")]
-        mirror = r.check("mirror", lambda v: HyperbolicMirror(*v), ab)
-        K = r.matrix("K", (3, 3))
-        D = r.matrix("D", required=False)
-        rvec = r.matrix("rvec", (3,))
-        tvec = r.matrix("tvec", (3,))
-        size = r.image_size()
-        try:
-            return cls(K, mirror, rvec, tvec, D=None if D is None else D.ravel(), image_size=size)
-        except ValueError as e:
-            raise r.fail(str(e).split(" ", 1)[0], str(e)) from None
+    r = _reading(path, "calibration file")
+    version = r.number("format_version")
+    if version != FORMAT_VERSION:
+        raise r.fail("format_version", f"is {version:g}; this omnicam reads {FORMAT_VERSION}")
+    model = r.node("model")
+    if model != MODEL_NAME:
+        raise r.fail("model", f"must be {MODEL_NAME!r}")
+    mnode = r.node("mirror")
+    if not isinstance(mnode, dict):
+        raise r.fail("mirror", "must be a map with a, b, rim_radius")
+    ab = [r.number(f"mirror.{k}", mnode) for k in ("a", "b", "rim_radius")]
+    mirror = r.check("mirror", lambda v: HyperbolicMirror(*v), ab)
+    K = r.matrix("K", (3, 3))
+    D = r.matrix("D", required=False)
+    rvec = r.matrix("rvec", (3,))
+    tvec = r.matrix("tvec", (3,))
+    size = r.image_size()
+    try:
+        return cls(K, mirror, rvec, tvec, D=None if D is None else D.ravel(), image_size=size)
+    except ValueError as e:
+        raise r.fail(str(e).split(" ", 1)[0].rstrip(":,"), str(e)) from None
 
 
 def read_intrinsics(path):
@@ -281,27 +535,28 @@ def read_intrinsics(path):
     FileNotFoundError, ValueError
         As :func:`load_camera`, naming the file and the field.
     """
-    from .intrinsics_formats import read_other_intrinsics  # ROS, Kalibr, image_size matrix
+    from .intrinsics_formats import read_other_intrinsics  # ROS camera_info, Kalibr
 
+    what = "intrinsics file"
+    path = _fspath(path, what)
+    _prescan(path, what)  # nothing that could crash a parser reaches one
     other = read_other_intrinsics(path)
-    if other is not None and not isinstance(other[0], str):
+    if other is not None:
         try:
-            K, D, size = validate_K(other[0]), validate_D(other[1]), \
-                validate_image_size(other[2])
+            K, D, size = validate_K(other[0]), validate_D(other[1]), validate_image_size(other[2])
         except ValueError as e:
-            raise ValueError(f"intrinsics file {os.fspath(path)}: {e}") from None
+            raise ValueError(f"{what} {path}: {e}") from None
         return K, (D if D is not None and np.any(D) else None), size
-    with _reading(path, "intrinsics file") as r:
-        name = r.first(K_FIELDS, required=True)
-        K = r.check(name, validate_K, r.matrix(name, (3, 3), allow_list=True))
-        name = r.first(D_FIELDS)
-        D = None
-        if name is not None:
-            D = r.check(name, validate_D, r.matrix(name, allow_list=True))
-            if not np.any(D):
-                D = None
-        size = r.check("image_size", validate_image_size,
-                       other[1] if other is not None else r.image_size())
+    r = _reading(path, what)
+    name = r.first(K_FIELDS, required=True)
+    K = r.check(name, validate_K, r.matrix(name, (3, 3), allow_list=True))
+    name = r.first(D_FIELDS)
+    D = None
+    if name is not None:
+        D = r.check(name, validate_D, r.matrix(name, allow_list=True))
+        if not np.any(D):
+            D = None
+    size = r.check("image_size", validate_image_size, r.image_size())
     return K, D, size
 
 
@@ -309,51 +564,183 @@ def read_far_lines(path):
     """Far-line pixels from JSON: a list of lines, each a list of ``[x, y]`` pixels.
 
     The ``far_lines`` of section 3.2, as a user clicked them along the images of far straight
-    lines. Returns a list of ``(N_i, 2)`` float64 arrays (each line at least 3 points).
+    lines. Returns a list of ``(N_i, 2)`` float64 arrays (each line at least 3 points). The file
+    is pre-scanned as calibration files are (regular file, size, UTF-8, nesting) and parsed by
+    the standard library.
 
     Raises
     ------
     FileNotFoundError
         No file at ``path``.
     ValueError
-        Not JSON of that shape, or non-finite coordinates, naming the file and the line.
+        Not JSON of that shape, non-finite coordinates, or a file refused by the pre-scan,
+        naming the file (and the line).
     """
-    path = os.fspath(path)
-    if not os.path.isfile(path):
-        raise FileNotFoundError(f"far-lines file {path} does not exist")
+    what = "far-lines file"
+    path = _fspath(path, what)
+    text = _prescan(path, what, json_only=True)
+    name = shown(path)
     try:
-        with open(path, encoding="utf-8") as f:
-            data = json.load(f)
-    except json.JSONDecodeError as e:
-        raise ValueError(f"far-lines file {path}: not valid JSON ({e})") from None
-    except (OSError, UnicodeDecodeError) as e:
-        raise ValueError(f"far-lines file {path}: cannot read ({e})") from None
-    expected = "a list of lines, each a list of [x, y] pixels"
-    if not isinstance(data, list) or not data:
-        raise ValueError(f"far-lines file {path}: expected {expected}")
+        data = json.loads(text)
+    except RecursionError:
+        raise ValueError(f"{what} {name}: nested too deeply") from None
+    except ValueError as e:
+        raise ValueError(f"{what} {name}: not valid JSON ({e})") from None
+    try:
+        return _far_lines(data, "lines")
+    except ValueError as e:
+        raise ValueError(f"{what} {name}: {e}") from None
+
+
+def _far_lines(data, name):
+    """Validate far lines (a list of lines of ``[x, y]`` pixels): a list of (N, 2) arrays."""
+    expected = "a list of lines, each a list of at least 3 [x, y] pixels"
+    if isinstance(data, np.ndarray) and data.ndim == 3:
+        data = list(data)
+    if not isinstance(data, (list, tuple)) or not data:
+        raise ValueError(f"{name} must be {expected}, got {type(data).__name__}")
     lines = []
     for i, line in enumerate(data):
-        ok = isinstance(line, list) and len(line) >= 3 and all(
-            isinstance(p, list) and len(p) == 2
-            and all(isinstance(v, (int, float)) and not isinstance(v, bool) for v in p)
-            for p in line)
-        if not ok:
-            raise ValueError(f"far-lines file {path}: line {i} must be a list of at least 3 "
-                             f"[x, y] pixels ({expected})")
-        arr = np.array(line, dtype=np.float64)
+        try:
+            arr = np.asarray(line)
+        except (TypeError, ValueError, OverflowError):
+            arr = None
+        if arr is not None and arr.dtype.kind == "O":
+            arr = None
+        if arr is not None and arr.ndim == 3 and arr.shape[1:] == (1, 2):
+            arr = arr.reshape(-1, 2)  # OpenCV's (N, 1, 2)
+        if arr is None or arr.dtype.kind not in "iuf" or arr.ndim != 2 or arr.shape[1] != 2 \
+                or arr.shape[0] < 3:
+            raise ValueError(f"{name}: line {i} must be a list of at least 3 [x, y] pixels "
+                             f"({expected})")
+        arr = arr.astype(np.float64)
         if not np.isfinite(arr).all():
-            raise ValueError(f"far-lines file {path}: line {i} has non-finite coordinates")
+            raise ValueError(f"{name}: line {i} has non-finite coordinates")
         lines.append(arr)
     return lines
 
 
+# -- writing ------------------------------------------------------------------------------------
+def _atomic_filestorage(path, what, write, read_back):
+    """Write a ``cv2.FileStorage`` file through :func:`omnicam._atomic.atomic_output`.
+
+    ``write(fs)`` fills the open storage; ``read_back(tmp)`` must then return True for the
+    temporary file (it re-reads it with this module's reader), since ``cv2.FileStorage`` does
+    not report a failed write (a full disk leaves an empty or truncated file).
+    """
+    path = _fspath(path, what)
+    _suffix(path, what)
+
+    with opencv_silenced(), atomic_output(path, what=what, verify=read_back) as tmp:
+        fs = cv2.FileStorage(tmp, cv2.FILE_STORAGE_WRITE)
+        try:
+            if not fs.isOpened():
+                raise OutputError(f"cannot write {what} {shown(path)}: OpenCV cannot open it "
+                                  f"for writing")
+            write(fs)
+        finally:
+            fs.release()
+
+
+def _write_seq(fs, name, values):
+    fs.startWriteStruct(name, cv2.FileNode_SEQ)
+    for v in values:
+        fs.write("", int(v))
+    fs.endWriteStruct()
+
+
+def save_camera(camera, path):
+    """Write ``camera`` to ``path`` atomically and verified.
+
+    A temporary file in the same folder is written, flushed, read back and compared with
+    ``camera``, and only then renamed into place (:func:`omnicam._atomic.atomic_output`).
+
+    Raises
+    ------
+    ValueError
+        Unknown extension, a name that is not UTF-8, or the file cannot be written (missing or
+        read-only folder, full disk, a folder in the way, ...): the message names the file, the
+        old file at ``path`` is unchanged and no temporary file is left.
+    """
+    cls = type(camera)
+
+    def write(fs):
+        fs.write("format_version", FORMAT_VERSION)
+        fs.write("model", MODEL_NAME)
+        fs.startWriteStruct("mirror", cv2.FileNode_MAP)
+        fs.write("a", camera.mirror.a)
+        fs.write("b", camera.mirror.b)
+        fs.write("rim_radius", camera.mirror.rim_radius)
+        fs.endWriteStruct()
+        fs.write("K", np.asarray(camera.K))
+        if camera.D is not None:
+            fs.write("D", np.asarray(camera.D).reshape(1, -1))
+        fs.write("rvec", np.asarray(camera.rvec).reshape(3, 1))
+        fs.write("tvec", np.asarray(camera.tvec).reshape(3, 1))
+        if camera.image_size is not None:
+            _write_seq(fs, "image_size", camera.image_size)
+
+    def read_back(tmp):
+        return _same_camera(load_camera(tmp, cls), camera)
+
+    _atomic_filestorage(path, "calibration file", write, read_back)
+
+
+def _close(a, b):
+    if a is None or b is None:
+        return a is None and b is None
+    a, b = np.asarray(a, np.float64), np.asarray(b, np.float64)
+    return a.shape == b.shape and np.allclose(a, b, rtol=1e-12, atol=1e-12)
+
+
+def _same_camera(a, b):
+    return (a.mirror == b.mirror and a.image_size == b.image_size
+            and all(_close(getattr(a, n), getattr(b, n)) for n in ("K", "D", "rvec", "tvec")))
+
+
+def write_intrinsics(path, K, D=None, image_size=None):
+    """Write a pinhole's ``K``, ``D`` and ``image_size`` (what :func:`read_intrinsics` reads).
+
+    Atomic and verified as :func:`save_camera`.
+
+    Raises
+    ------
+    ValueError
+        A bad ``K``, ``D`` or ``image_size`` (naming it), or the file cannot be written (as
+        :func:`save_camera`; the old file is unchanged).
+    """
+    K, D, image_size = validate_K(K), validate_D(D), validate_image_size(image_size)
+
+    def write(fs):
+        fs.write("K", K)
+        if D is not None:
+            fs.write("D", D.reshape(1, -1))
+        if image_size is not None:
+            _write_seq(fs, "image_size", image_size)
+
+    def read_back(tmp):
+        K2, D2, size2 = read_intrinsics(tmp)
+        return _close(K2, K) and size2 == image_size and (
+            _close(D2, D) if D2 is not None or D is None or np.any(D) else True)
+
+    _atomic_filestorage(path, "intrinsics file", write, read_back)
+
 
 def write_far_lines(path, far_lines):
-    """Write far-line pixels as JSON (what :func:`read_far_lines` reads), atomically."""
-    data = [np.asarray(line, dtype=np.float64).reshape(-1, 2).tolist() for line in far_lines]
+    """Write far-line pixels as JSON (what :func:`read_far_lines` reads), atomically.
+
+    Raises
+    ------
+    ValueError
+        ``far_lines`` is not a list of lines of at least 3 finite ``[x, y]`` pixels (naming
+        it), or the file cannot be written (the old file is unchanged, naming the file).
+    """
+    what = "far-lines file"
+    path = _fspath(path, what)
+    data = [line.tolist() for line in _far_lines(far_lines, "far_lines")]
 
     def verify(tmp):
         with open(tmp, encoding="utf-8") as f:
             return json.load(f) == data
 
-    write_bytes(path, json.dumps(data), what="far-lines file", verify=verify)
+    write_bytes(path, json.dumps(data), what=what, verify=verify)

@@ -14,20 +14,19 @@ hot loops use the same formulas in :mod:`omnicam._kernels`.
 from __future__ import annotations
 
 import math
+import numbers
 
 import numpy as np
+
+from ._validate import LENGTH_RANGE, real_number
 
 __all__ = ["HyperbolicMirror"]
 
 
 def _positive_finite(name, value):
-    try:
-        value = float(value)
-    except (TypeError, ValueError):
-        raise ValueError(f"{name} must be a positive finite number, got {value!r}") from None
-    if not (math.isfinite(value) and value > 0):
-        raise ValueError(f"{name} must be a positive finite number, got {value!r}")
-    return value
+    lo, hi = LENGTH_RANGE
+    return real_number(value, name, lo, hi,
+                       expected=f"a positive finite number in [{lo:g}, {hi:g}] (mirror units)")
 
 
 class HyperbolicMirror:
@@ -40,6 +39,9 @@ class HyperbolicMirror:
         (millimetres by convention).
     rim_radius : float
         Radius of the circular mirror boundary (the rim), same unit.
+
+    All three must be real numbers in [1e-3, 1e6] (``_validate.LENGTH_RANGE``); anything else
+    raises ``ValueError`` naming the parameter.
 
     Attributes
     ----------
@@ -198,7 +200,14 @@ class HyperbolicMirror:
         return V - 2.0 * n * np.einsum("...i,...i->...", n, V)[..., None]
 
     def rim_points(self, n=360):
-        """``n`` points evenly spaced on the rim circle, ``(n, 3)``, mirror frame."""
+        """``n`` points evenly spaced on the rim circle, ``(n, 3)``, mirror frame.
+
+        ``n`` must be an integer in [1, 10**7] (``ValueError`` naming ``n`` otherwise).
+        """
+        if isinstance(n, bool) or not isinstance(n, numbers.Integral) or not 1 <= n <= 10**7:
+            if not (isinstance(n, float) and n.is_integer() and 1 <= n <= 10**7):
+                raise ValueError(f"n must be an integer number of points in [1, 10**7], "
+                                 f"got {n!r}")
         t = np.linspace(0.0, 2.0 * np.pi, int(n), endpoint=False)
         r = self._rim_radius
         return np.stack([r * np.cos(t), r * np.sin(t), np.full_like(t, self.z_rim)], axis=1)

@@ -35,7 +35,7 @@ import numbers
 import cv2
 import numpy as np
 
-from ._validate import validate_K
+from ._validate import finite_array, float_array, real_number, validate_K
 
 __all__ = ["init_panorama_maps", "init_perspective_maps", "rotation_from_ypr", "K_from_fov",
            "visible_elevation_range", "PanoramaView", "PerspectiveView", "UNSEEN", "PROJECTIONS",
@@ -86,7 +86,7 @@ def rotation_from_ypr(yaw=0.0, pitch=0.0, roll=0.0):
     for name, v in (("yaw", yaw), ("pitch", pitch), ("roll", roll)):
         try:
             v = float(v)
-        except (TypeError, ValueError):
+        except (TypeError, ValueError, OverflowError):
             raise ValueError(f"{name} must be a finite number of degrees, got {v!r}") from None
         if not math.isfinite(v):
             raise ValueError(f"{name} must be a finite number of degrees, got {v!r}")
@@ -121,7 +121,7 @@ def K_from_fov(fov_deg, size):
     w, h = _check_size(size)
     try:
         fov = float(fov_deg)
-    except (TypeError, ValueError):
+    except (TypeError, ValueError, OverflowError):
         raise ValueError(f"fov_deg must be a number of degrees in (0, 180), "
                          f"got {fov_deg!r}") from None
     if not (0.0 < fov < 180.0):
@@ -134,9 +134,12 @@ def K_from_fov(fov_deg, size):
 def _check_size(size, min_height=1):
     try:
         w, h = size
+        if not all(isinstance(v, numbers.Real) and not isinstance(v, (bool, np.bool_))
+                   for v in (w, h)):
+            raise TypeError
         exact = all(isinstance(v, numbers.Integral) or float(v) == int(v) for v in (w, h))
         w, h = int(w), int(h)
-    except (TypeError, ValueError):
+    except (TypeError, ValueError, OverflowError):
         raise ValueError(f"size must be (width, height), two positive integers, "
                          f"got {size!r}") from None
     if not exact or w < 1 or h < min_height:
@@ -145,6 +148,14 @@ def _check_size(size, min_height=1):
     if w > 32767 or h > 32767:
         raise ValueError(f"size must be at most 32767 x 32767 (cv2.remap), got {size!r}")
     return w, h
+
+
+def _check_camera(camera):
+    """A camera (duck-typed: views sit below the camera class and do not import it)."""
+    if not all(hasattr(camera, a) for a in ("mirror", "K", "R", "unproject", "rim_image_points")):
+        raise ValueError(f"camera must be a MisalignedHyperbolicCamera, got "
+                         f"{type(camera).__name__}")
+    return camera
 
 
 def _check_m1type(m1type):
@@ -156,10 +167,7 @@ def _check_m1type(m1type):
 
 
 def _check_rotation(R, name="R"):
-    try:
-        arr = np.array(R, dtype=np.float64)
-    except (TypeError, ValueError):
-        raise ValueError(f"{name} must be a 3x3 rotation matrix, got {R!r}") from None
+    arr = float_array(R, name, "a 3x3 rotation matrix")
     if arr.shape != (3, 3) or not np.isfinite(arr).all():
         raise ValueError(f"{name} must be a finite 3x3 rotation matrix, got shape {arr.shape}")
     if not np.allclose(arr @ arr.T, np.eye(3), atol=1e-6) or np.linalg.det(arr) < 0:
@@ -170,14 +178,8 @@ def _check_rotation(R, name="R"):
 def _check_depth(depth):
     if depth is None:
         return None
-    try:
-        d = float(depth)
-    except (TypeError, ValueError):
-        raise ValueError(f"depth must be None or a positive finite distance, "
-                         f"got {depth!r}") from None
-    if not (math.isfinite(d) and d > 0.0):
-        raise ValueError(f"depth must be None or a positive finite distance, got {depth!r}")
-    return d
+    return real_number(depth, "depth", 0.0, lo_open=True,
+                       expected="None or a positive finite distance")
 
 
 def _check_viewpoint(camera, viewpoint, depth):
@@ -185,19 +187,12 @@ def _check_viewpoint(camera, viewpoint, depth):
         return None  # directions: the viewpoint plays no part (do not compute the best fit)
     if viewpoint is None:
         return np.asarray(camera.best_fit_viewpoint()[0], dtype=np.float64)
-    try:
-        vp = np.array(viewpoint, dtype=np.float64).reshape(3)
-    except (TypeError, ValueError):
-        raise ValueError(f"viewpoint must be None or 3 numbers (mirror frame), "
-                         f"got {viewpoint!r}") from None
-    if not np.isfinite(vp).all():
-        raise ValueError(f"viewpoint must be finite, got {vp.tolist()}")
-    return vp
+    return finite_array(viewpoint, "viewpoint", (3,), "None or 3 numbers (mirror frame)")
 
 
 def _check_elevation_range(elevation_range, projection):
     try:
-        lo, hi = (float(v) for v in elevation_range)
+        lo, hi = (real_number(v, "elevation_range") for v in elevation_range)
     except (TypeError, ValueError):
         raise ValueError(f"elevation_range must be None or (lo, hi) in degrees, "
                          f"got {elevation_range!r}") from None
@@ -255,6 +250,7 @@ def visible_elevation_range(camera):
     rim ray. For a misaligned rig the upper edge of what is seen varies with azimuth; the band
     is the union over azimuths, so some pixels near ``hi`` are unseen at some azimuths.
     """
+    _check_camera(camera)
     rim_dirs = _rim_directions(camera)
     el = _elevation_deg(rim_dirs)
     hi = float(np.max(el))
@@ -451,6 +447,7 @@ def init_panorama_maps(camera, size, elevation_range=None, projection="cylindric
     seen or unseen either way. For the aligned rig the default ``hi`` is exactly the rim's
     elevation, so row 0 lies on the rim.
     """
+    _check_camera(camera)
     w, h = _check_size(size, min_height=2)
     if projection not in PROJECTIONS:
         raise ValueError(f"projection must be one of {PROJECTIONS}, got {projection!r}")
@@ -515,6 +512,7 @@ def init_perspective_maps(camera, K_new, size, R=None, m1type=cv2.CV_16SC2, dept
     """
     _refuse_swapped(K_new, size, "init_perspective_maps(camera, K_new, size, R=None, ...)")
     K_new = validate_K(K_new, "K_new")
+    _check_camera(camera)
     w, h = _check_size(size)
     m1type = _check_m1type(m1type)
     Rm = R0 if R is None else _check_rotation(R)

@@ -90,3 +90,10 @@ def test_temporaries_of_dead_writers_are_removed_by_the_next_write(tmp_path):
     assert not litter.exists()
     assert mine.exists()  # this process's own temporaries are never touched
     assert remove_stale(tmp_path) == 0
+
+
+def test_a_name_that_is_not_utf8_is_refused_before_any_writer_sees_it(tmp_path):
+    bad = os.fsdecode(os.path.join(os.fsencode(tmp_path), b"out\xff.avi"))
+    with pytest.raises(OutputError, match="not valid UTF-8"):
+        write_bytes(bad, b"data")
+    assert os.listdir(tmp_path) == []

@@ -159,3 +159,173 @@ def test_bad_intrinsics_file_raises_value_error_naming_the_field(tmp_path, text,
     with pytest.raises(ValueError, match=field) as err:
         read_intrinsics(path)
     assert str(path) in str(err.value)
+
+
+# -- inputs that crashed or fooled cv2.FileStorage: refused first, naming the file ----------
+def _load_error(path):
+    with pytest.raises(ValueError) as err:
+        MisalignedHyperbolicCamera.load(path)
+    return str(err.value)
+
+
+def test_non_utf8_file_name_is_refused_before_opencv_sees_it(tmp_path):
+    good = tmp_path / "c.yaml"
+    RIGS["aligned"].save(good)
+    bad = os.path.join(os.fsencode(tmp_path), b"c\xff.yaml")
+    os.link(os.fsencode(good), bad)
+    assert "not valid UTF-8" in _load_error(os.fsdecode(bad))
+    with pytest.raises(ValueError, match="not valid UTF-8"):
+        RIGS["aligned"].save(os.fsdecode(bad))
+    assert sorted(os.listdir(os.fsencode(tmp_path))) == [b"c.yaml", b"c\xff.yaml"]
+
+
+@pytest.mark.parametrize("name, text", [
+    ("deep.json", "[" * 100_000 + "]" * 100_000),
+    ("deep.xml", '<?xml version="1.0"?>\n<opencv_storage>' + "<a>" * 30_000 + "</a>" * 30_000
+     + "</opencv_storage>\n"),
+    ("deep.yaml", "%YAML:1.0\n---\nK: " + "[" * 100_000 + "]" * 100_000 + "\n"),
+])
+def test_deep_nesting_is_refused_without_crashing(tmp_path, name, text):
+    path = tmp_path / name
+    path.write_text(text)
+    message = _load_error(path)
+    assert str(path) in message and "nested too deeply" in message
+
+
+def test_matrix_value_out_of_its_dt_range_is_refused_not_saturated(tmp_path):
+    path, text = _saved(tmp_path)
+    K = RIGS["distorted"].K
+    new = text.replace("K: !!opencv-matrix\n   rows: 3\n   cols: 3\n   dt: d\n   data: [ "
+                       + _yaml_matrix(K).split("data: [ ", 1)[1].split("]", 1)[0] + "]",
+                       "K: !!opencv-matrix\n   rows: 3\n   cols: 3\n   dt: u\n"
+                       "   data: [ 583, 0, 250, 0, 583, 250, 0, 0, 1 ]")
+    assert new != text
+    path.write_text(new)
+    message = _load_error(path)
+    assert "'K'" in message and "583" in message
+
+
+def test_integers_beyond_32_bits_are_refused_not_wrapped(tmp_path):
+    path, text = _saved(tmp_path)
+    path.write_text(text.replace("format_version: 1", "format_version: 4294967297"))
+    assert "4294967297" in _load_error(path)
+
+
+@pytest.mark.parametrize("kind", ["folder", "fifo", "device"])
+def test_a_non_regular_file_named_yaml_is_not_a_regular_file(tmp_path, kind):
+    path = tmp_path / "c.yaml"
+    if kind == "folder":
+        path.mkdir()
+    elif kind == "fifo":
+        os.mkfifo(path)
+    else:
+        path.symlink_to("/dev/null")
+    assert "is not a regular file" in _load_error(path)
+    from omnicam.io import read_intrinsics
+    with pytest.raises(ValueError, match="is not a regular file"):
+        read_intrinsics(path)
+
+
+@pytest.mark.parametrize("data, words", [
+    (b"%YAML:1.0\n#" + b"x" * (2 << 20), "too large"),
+    (bytes(range(256)) * 4, "binary"),
+    (b"%YAML:1.0\nmodel: \"misaligned_\xffhyperbolic\"\n", "not UTF-8"),
+    (b"", "empty"),
+])
+def test_oversized_binary_and_non_utf8_files_are_refused(tmp_path, data, words):
+    for ext in (".yaml", ".json"):
+        path = tmp_path / f"c{ext}"
+        path.write_bytes(data)
+        message = _load_error(path)
+        assert words in message and str(path) in message
+
+
+def test_opencv_prints_nothing_of_its_own_for_a_garbage_file(tmp_path, capfd):
+    path = tmp_path / "c.yaml"
+    path.write_text("%YAML:1.0\n---\nK: [ 1, 2\n  : : ]]] {{\n")
+    _load_error(path)
+    out, err = capfd.readouterr()
+    assert out == "" and err == ""
+
+
+def test_save_that_does_not_read_back_equal_keeps_the_old_file(tmp_path, monkeypatch):
+    path = tmp_path / "c.json"
+    RIGS["aligned"].save(path)
+    before = path.read_bytes()
+    import omnicam.io
+    monkeypatch.setattr(omnicam.io, "_same_camera", lambda a, b: False)
+    with pytest.raises(ValueError, match="does not read back"):
+        RIGS["misaligned"].save(path)
+    assert path.read_bytes() == before
+    assert os.listdir(tmp_path) == ["c.json"]
+
+
+def _tmpfs(tmp_path, size="64k"):
+    if os.geteuid() != 0:
+        pytest.skip("needs root to mount a tmpfs")
+    import subprocess
+    mnt = tmp_path / "mnt"
+    mnt.mkdir()
+    if subprocess.run(["mount", "-t", "tmpfs", "-o", f"size={size}", "tmpfs", str(mnt)],
+                      capture_output=True).returncode != 0:
+        pytest.skip("mount -t tmpfs is not permitted here")
+    return mnt
+
+
+@pytest.mark.parametrize("ext", [".yaml", ".xml", ".json"])
+def test_save_on_a_full_disk_raises_and_keeps_the_old_file(tmp_path, ext):
+    import subprocess
+    mnt = _tmpfs(tmp_path)
+    try:
+        path = mnt / f"c{ext}"
+        RIGS["aligned"].save(path)
+        before = path.read_bytes()
+        with open(mnt / "filler", "wb", buffering=0) as f:
+            try:
+                while True:
+                    f.write(b"\0" * 1024)
+            except OSError:
+                pass
+        with pytest.raises(ValueError, match=f"c{ext}"):
+            RIGS["distorted"].save(path)
+        assert path.read_bytes() == before
+        assert sorted(os.listdir(mnt)) == [f"c{ext}", "filler"]
+    finally:
+        subprocess.run(["umount", "-l", str(mnt)], capture_output=True)
+
+
+def test_save_into_a_read_only_folder_raises_and_keeps_the_old_file(tmp_path):
+    import subprocess
+    mnt = _tmpfs(tmp_path)
+    try:
+        path = mnt / "c.yaml"
+        RIGS["aligned"].save(path)
+        before = path.read_bytes()
+        subprocess.run(["mount", "-o", "remount,ro", str(mnt)], check=True)
+        with pytest.raises(ValueError, match="c.yaml"):
+            RIGS["distorted"].save(path)
+        assert path.read_bytes() == before
+        assert MisalignedHyperbolicCamera.load(path) == RIGS["aligned"]
+    finally:
+        subprocess.run(["umount", "-l", str(mnt)], capture_output=True)
+
+
+def test_far_lines_round_trip_also_from_opencv_shaped_arrays(tmp_path):
+    from omnicam.io import read_far_lines, write_far_lines
+    lines = [np.arange(10.0).reshape(5, 1, 2) + i for i in range(3)]
+    write_far_lines(tmp_path / "l.json", lines)
+    back = read_far_lines(tmp_path / "l.json")
+    assert all(np.array_equal(b, a.reshape(-1, 2)) for a, b in zip(lines, back, strict=True))
+    with pytest.raises(ValueError, match="far_lines"):
+        write_far_lines(tmp_path / "l.json", [[[1.0, 2.0]] * 2])
+
+
+def test_image_size_written_as_an_opencv_matrix_is_read(tmp_path):
+    from omnicam.io import read_intrinsics
+    K = RIGS["aligned"].K
+    for ext in (".yaml", ".xml", ".json"):
+        fs = cv2.FileStorage(str(tmp_path / f"k{ext}"), cv2.FILE_STORAGE_WRITE)
+        fs.write("camera_matrix", K)
+        fs.write("image_size", np.array([[640], [480]], np.int32))
+        fs.release()
+        assert read_intrinsics(tmp_path / f"k{ext}")[2] == (640, 480)

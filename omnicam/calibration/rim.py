@@ -22,6 +22,7 @@ import math
 import cv2
 import numpy as np
 
+from .._validate import real_number, validate_rng
 from ..raytrace import as_points
 from .edges import as_gray, edge_points_along_normals
 from .ellipse import (
@@ -405,9 +406,15 @@ def detect_rim(image, *, sigma=0.7, threshold=2.0, rng=0):
     ValueError
         Not an image, or no elliptic bright-inside boundary found.
     """
-    if not (np.isfinite(sigma) and sigma >= 0):
-        raise ValueError(f"sigma must be a non-negative number of pixels, got {sigma!r}")
+    # arguments first (ValueError naming them); sigma bounded so the blur cannot run for hours
+    sigma = real_number(sigma, "sigma", 0.0, 25.0, expected="a number of pixels in [0, 25]")
+    threshold = real_number(threshold, "threshold", 0.0, 1e4, lo_open=True,
+                            expected="a positive number of pixels")
+    rng = validate_rng(rng)
     gray = as_gray(image)
+    if sigma > max(1.0, min(gray.shape) / 8):
+        raise ValueError(f"sigma must be at most 1/8 of the image's shorter side "
+                         f"({max(1.0, min(gray.shape) / 8):g} px), got {sigma!r}")
     center, S, coarse_px = _coarse_ellipse(gray)
     G = cv2.GaussianBlur(gray, (0, 0), float(sigma)) if sigma > 0 else gray
     cw = 3.0 * max(sigma, 0.5)  # half-width of the centroid window

@@ -54,6 +54,9 @@ def validate_far_lines(far_lines):
     if isinstance(far_lines, np.ndarray) and far_lines.dtype != object and (
             far_lines.ndim == 2 or (far_lines.ndim == 3 and far_lines.shape[1] == 1)):
         far_lines = [far_lines]  # one line given as a bare (N, 2) or (N, 1, 2) array
+    if isinstance(far_lines, (str, bytes, dict)) or not hasattr(far_lines, "__iter__"):
+        raise ValueError(f"far_lines must be a sequence of (N_i, 2) pixel arrays, "
+                         f"got {type(far_lines).__name__}")
     out = []
     for i, line in enumerate(far_lines):
         arr, _ = as_points(line, f"far_lines[{i}]", 2)

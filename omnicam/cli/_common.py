@@ -7,6 +7,7 @@ import contextlib
 import math
 import os
 import re
+import stat
 import sys
 
 import cv2
@@ -95,6 +96,10 @@ def _opencv_quiet():
 
     FFmpeg takes its level from ``OPENCV_FFMPEG_LOGLEVEL`` when a capture opens (so setting it
     after ``import cv2`` works; a value the user set is kept). OpenCV's level is restored after.
+    Some lines bypass both (``OpenCV: FFMPEG: tag ... is not found`` from the video writer,
+    libpng's and libjpeg's warnings are plain ``fprintf(stderr)``), so for the whole command
+    file descriptor 2 goes to ``/dev/null`` while ``sys.stderr`` -- omnicam's messages,
+    warnings and tracebacks -- keeps writing to the real stderr through a duplicate of it.
     """
     os.environ.setdefault("OPENCV_FFMPEG_LOGLEVEL", "-8")  # AV_LOG_QUIET
     logging = getattr(getattr(cv2, "utils", None), "logging", None)
@@ -103,9 +108,34 @@ def _opencv_quiet():
         with contextlib.suppress(Exception):
             previous = logging.getLogLevel()
             logging.setLogLevel(logging.LOG_LEVEL_SILENT)
+    swapped = saved = None
+    try:
+        fd = sys.stderr.fileno()
+    except (AttributeError, OSError, ValueError):  # captured (pytest capsys, io.StringIO)
+        fd = None
+    with contextlib.suppress(OSError, ValueError):
+        sys.stderr.flush()
+        saved = os.dup(2)
+        devnull = os.open(os.devnull, os.O_WRONLY)
+        try:
+            if fd == 2:  # our own messages keep the real stderr
+                swapped = sys.stderr
+                sys.stderr = open(os.dup(saved), "w", buffering=1,  # noqa: SIM115
+                                  encoding=swapped.encoding, errors="backslashreplace")
+            os.dup2(devnull, 2)
+        finally:
+            os.close(devnull)
     try:
         yield
     finally:
+        if swapped is not None:
+            with contextlib.suppress(Exception):
+                sys.stderr.close()
+            sys.stderr = swapped
+        if saved is not None:
+            with contextlib.suppress(OSError):
+                os.dup2(saved, 2)
+            os.close(saved)
         if previous is not None:
             with contextlib.suppress(Exception):
                 logging.setLogLevel(previous)
@@ -138,7 +168,12 @@ def _load_camera(path):
 
 def _check_output(path, overwrite, what="output"):
     """Refuse an output we must not or cannot write, before doing any work."""
-    path = os.fspath(path)
+    from ..io import _fspath
+
+    try:  # a name that is not UTF-8 would crash OpenCV's writers
+        path = _fspath(path, what)
+    except ValueError as e:
+        raise CliError(str(e)) from None
     folder = os.path.dirname(os.path.abspath(path))
     if os.path.isdir(path):
         raise CliError(f"{what} {path} is a folder")
@@ -177,7 +212,12 @@ def _publish(tmp, path, overwrite):
 
 def _write_image(path, image, overwrite=True):
     """``cv2.imwrite`` through :func:`omnicam._atomic.atomic_output` (checked by reading back)."""
-    path = os.fspath(path)
+    from ..io import _fspath, opencv_silenced
+
+    try:
+        path = _fspath(path, "output")
+    except ValueError as e:
+        raise CliError(str(e)) from None
     if not cv2.haveImageWriter(path):
         raise CliError(
             f"output {path}: no image writer for extension "
@@ -189,7 +229,8 @@ def _write_image(path, image, overwrite=True):
         return back is not None and back.shape[:2] == image.shape[:2]
 
     try:
-        with atomic_output(path, what="image", overwrite=overwrite, verify=verify) as tmp:
+        with opencv_silenced(), atomic_output(path, what="image", overwrite=overwrite,
+                                              verify=verify) as tmp:
             try:
                 ok, detail = cv2.imwrite(tmp, image), "cv2.imwrite failed"
             except cv2.error as e:
@@ -207,19 +248,55 @@ def _cv_message(e):
     return re.sub(r"^.*?error: \(-?\d+:[^)]*\)\s*", "", text).strip() or text
 
 
+IMAGE_EXTENSIONS = (".png", ".jpg", ".jpeg", ".jpe", ".bmp", ".dib", ".tif", ".tiff", ".webp",
+                    ".pbm", ".pgm", ".ppm", ".pxm", ".pnm", ".sr", ".ras", ".exr", ".hdr", ".pic",
+                    ".jp2", ".avif")
+
+
+def _is_image_input(path):
+    """An input to read as one image: an image extension, or content OpenCV recognises.
+
+    By name first, so an empty or corrupt ``.png`` is reported as an unreadable image (not
+    treated as a video). A name that is not UTF-8 is refused (:class:`CliError`).
+    """
+    from ..io import _fspath, opencv_silenced
+
+    try:  # OpenCV (imread, VideoCapture) crashes with SIGSEGV on such a name
+        path = _fspath(path, "input")
+    except ValueError as e:
+        raise CliError(str(e)) from None
+    if os.path.splitext(path)[1].lower() in IMAGE_EXTENSIONS:
+        return True
+
+    with opencv_silenced():
+        return cv2.haveImageReader(path)
+
+
 def _read_image(path, flags=cv2.IMREAD_UNCHANGED):
-    if not os.path.isfile(path):
-        raise CliError(
-            f"image {path} does not exist"
-            if not os.path.exists(path)
-            else f"image {path} is not a file"
-        )
+    """``cv2.imread`` of a regular file, OpenCV's and libpng's own stderr lines silenced."""
+    from ..io import _fspath, opencv_silenced, shown
+
     try:
-        image = cv2.imread(path, flags)
+        path = _fspath(path, "image")
+        st = os.stat(path)
+    except ValueError as e:
+        raise CliError(str(e)) from None
+    except FileNotFoundError:
+        raise CliError(f"image {shown(path)} does not exist") from None
+    except OSError as e:
+        raise CliError(f"cannot read image {shown(path)}: {e.strerror or e}") from None
+    if not stat.S_ISREG(st.st_mode):
+        raise CliError(f"image {shown(path)} is not a regular file")
+    if st.st_size == 0:
+        raise CliError(f"cannot read image {shown(path)}: the file is empty")
+    try:
+        with opencv_silenced():
+            image = cv2.imread(path, flags)
     except cv2.error as e:
-        raise CliError(f"cannot read image {path}: {_cv_message(e)}") from None
+        raise CliError(f"cannot read image {shown(path)}: {_cv_message(e)}") from None
     if image is None or image.size == 0:
-        raise CliError(f"cannot read image {path}: not an image format OpenCV reads")
+        raise CliError(f"cannot read image {shown(path)}: not an image format OpenCV reads "
+                       f"(or a corrupt file)")
     return image
 
 

@@ -46,6 +46,7 @@ from ._common import (
     _one_line,
     _positive,
     _publish,
+    _is_image_input,
     _read_image,
     _remove_quietly,
     _size,
@@ -232,7 +233,7 @@ def cmd_unwarp(args):
             raise CliError(f"input {source} does not exist")
         if not os.path.isfile(source):
             raise CliError(f"input {source} is not a file")
-    video_input = live or not cv2.haveImageReader(source)
+    video_input = live or not _is_image_input(source)
     for spec in specs:
         spec.kind_out = _output_kind(spec.output, video_input)
         if not live and os.path.exists(spec.output) and os.path.samefile(source, spec.output):
