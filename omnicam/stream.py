@@ -13,6 +13,7 @@ different camera cannot be told from a rescale, so we do not guess.
 """
 from __future__ import annotations
 
+import math
 import os
 
 import cv2
@@ -78,6 +79,38 @@ def open_capture(source):
     return cap
 
 
+def _check_border_value(value):
+    """``border_value`` as 4 floats (``cv2.remap``'s scalar), or ``ValueError`` naming it."""
+    values = (value,) if np.isscalar(value) else value
+    try:
+        out = tuple(values)
+        ok = 1 <= len(out) <= 4 and all(
+            isinstance(v, (int, float, np.integer, np.floating)) and not isinstance(v, bool)
+            and math.isfinite(float(v)) for v in out)
+    except TypeError:
+        ok = False
+    if not ok:
+        raise ValueError(f"border_value must be a finite number or 1 to 4 finite numbers (one "
+                         f"per channel, as cv2.remap's borderValue), got {value!r}")
+    out = tuple(float(v) for v in out)
+    return out * 4 if len(out) == 1 else out + (0.0,) * (4 - len(out))
+
+
+def _check_frame_size(frame_size):
+    """``frame_size`` as ``(width, height)`` positive ints, or ``ValueError`` naming it."""
+    try:
+        w, h = frame_size
+        ok = all(isinstance(v, (int, float, np.integer, np.floating)) and not isinstance(v, bool)
+                 and math.isfinite(float(v)) and float(v) == int(v) and 0 < v <= 100_000
+                 for v in (w, h))
+    except (TypeError, ValueError):
+        ok = False
+    if not ok:
+        raise ValueError(f"frame_size must be (width, height), two positive integers up to "
+                         f"100000, got {frame_size!r}")
+    return int(w), int(h)
+
+
 class Unwarper:
     """Named views' remap tables, applied to frames with ``cv2.remap`` into preallocated outputs.
 
@@ -123,11 +156,7 @@ class Unwarper:
             raise ValueError(f"border_mode must be a cv2.BORDER_* constant, got {border_mode!r}")
         self._interp = int(interpolation)
         self._border = int(border_mode)
-        if np.isscalar(border_value):
-            border_value = (float(border_value),) * 4
-        else:
-            border_value = tuple(float(v) for v in border_value)
-        self._border_value = border_value
+        self._border_value = _check_border_value(border_value)
         self._out = {}
         self._out_key = None
         # per view: (name, map1, map2, output shape without channels) for the hot loop
@@ -158,7 +187,7 @@ class Unwarper:
                 raise ValueError(f"view {name!r} must be a PanoramaView or PerspectiveView, "
                                  f"got {type(spec).__name__}")
         if frame_size is not None:
-            frame_size = (int(frame_size[0]), int(frame_size[1]))
+            frame_size = _check_frame_size(frame_size)
             if camera.image_size is not None and tuple(camera.image_size) != frame_size:
                 camera = camera.scaled(frame_size)
         source = frame_size if frame_size is not None else camera.image_size

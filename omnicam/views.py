@@ -528,6 +528,10 @@ def init_perspective_maps(camera, K_new, size, R=None, m1type=cv2.CV_16SC2, dept
 
 def _refuse_swapped(matrix_arg, size_arg, signature):
     """A clear ValueError when a camera matrix stands where the size goes (or vice versa)."""
+    try:
+        np.ndim(size_arg), np.ndim(matrix_arg)
+    except ValueError:  # ragged nesting: the validators name the argument
+        return
     if np.ndim(size_arg) == 2 and np.shape(size_arg) == (3, 3):
         raise ValueError(f"size: got a 3x3 matrix where (width, height) goes; the order is "
                          f"{signature}")

@@ -234,6 +234,13 @@ def cmd_unwarp(args):
         if not os.path.isfile(source):
             raise CliError(f"input {source} is not a file")
     video_input = live or not _is_image_input(source)
+    from ..io import _fspath
+
+    for spec in specs:  # a name that is not UTF-8 crashes OpenCV's writers: refuse it first
+        try:
+            _fspath(spec.output, "output")
+        except ValueError as e:
+            raise CliError(str(e)) from None
     for spec in specs:
         spec.kind_out = _output_kind(spec.output, video_input)
         if not live and os.path.exists(spec.output) and os.path.samefile(source, spec.output):

@@ -1433,7 +1433,13 @@ class Runner:
         rnd = self.rnd
         env = dict(os.environ, PYTHONPATH=REPO)
         env.pop("OMNICAM_DEBUG", None)
-        entry = "import sys; from omnicam.cli import main; sys.exit(main(sys.argv[1:]))"
+        # what a user runs: the console script (its SIGINT handling starts at import)
+        script_path = os.path.join(os.path.dirname(sys.executable), "omnicam")
+        if os.path.exists(script_path):
+            command = [script_path]
+        else:
+            entry = "import sys; from omnicam.cli import main; sys.exit(main(sys.argv[1:]))"
+            command = [sys.executable, "-c", entry]
         d = os.path.dirname(self.path("sigint", "x"))
         for i in range(n_video):
             out = os.path.join(d, f"v{i}.avi")
@@ -1443,7 +1449,7 @@ class Runner:
             argv = ["unwarp", self.long_video, "-c", self.calib, "--panorama", "512x128", "-o",
                     out, "--overwrite", "--quiet"]
             self._interrupt(f"SIGINT during unwarp (video, --overwrite) at {delay:.2f} s",
-                            [sys.executable, "-c", entry, *argv], env, delay, d,
+                            [*command, *argv], env, delay, d,
                             keep={out: before})
         for i in range(n_calib):
             out = os.path.join(d, f"c{i}.yaml")
@@ -1454,7 +1460,7 @@ class Runner:
                     self.path("good", "k.yaml"), "-o", out, "--overlay",
                     os.path.join(d, f"ov{i}.png"), "--overwrite"]
             self._interrupt(f"SIGINT during calibrate at {delay:.2f} s",
-                            [sys.executable, "-c", entry, *argv], env, delay, d,
+                            [*command, *argv], env, delay, d,
                             keep={out: before}, new_ok=True, loads=out)
         script = ("import sys, numpy as np\nfrom omnicam import synthetic\n"
                   "cam = synthetic.misaligned_rig()\nother = cam.replace(D=[0.1, 0, 0, 0, 0])\n"
