@@ -443,6 +443,14 @@ def detect_reflection(image, rim, *, center=None, max_radius=0.6, min_radius=0.0
             f"{c0[1]:.0f})"
         )
     pts = c0 + radii[rj, None] * np.stack([np.cos(ang[ri]), np.sin(ang[ri])], axis=1)
+    dark_max = dark + 0.6 * contrast
+
+    def dark_inside(rho):
+        """A silhouette is dark inside: 80 % of the annulus 0.6-0.95 of its radius is dark
+        (a dark scene line or ring is dark only along itself)."""
+        band = prof[:, (radii >= 0.6 * rho) & (radii <= 0.95 * rho)]
+        return band.size > 0 and float(np.nanmean(band < dark_max)) >= 0.8
+
     # 3. vote over centres and radii, one vote per (ray, radius bin)
     half = 0.08 * r_rim
     offs = np.linspace(-half, half, 9)
@@ -459,9 +467,10 @@ def detect_reflection(image, rim, *, center=None, max_radius=0.6, min_radius=0.0
                 key = np.unique(ri * nb + np.clip(b - shift, 0, nb - 1))
                 h = np.bincount(key % nb, minlength=nb)
                 hist = np.maximum(hist, np.r_[h[shift:], np.zeros(shift)] if shift else h)
-            ok = np.flatnonzero((hist >= 0.4 * n_rays) & (np.arange(nb) * bw >= R_min))
+            ok = [j for j in np.flatnonzero((hist >= 0.4 * n_rays) & (np.arange(nb) * bw >= R_min))
+                  if dark_inside(j * bw)]
             if len(ok):
-                j = int(ok.max())  # the outermost well-supported circle
+                j = int(max(ok))  # the outermost well-supported circle that is dark inside
                 cand = (j * bw, hist[j], c)
                 if best is None or cand[0] > best[0] + 2 * bw or (
                     abs(cand[0] - best[0]) <= 2 * bw and cand[1] > best[1]
@@ -501,7 +510,7 @@ def detect_reflection(image, rim, *, center=None, max_radius=0.6, min_radius=0.0
         rise = f[:, -1] - f[:, 0]
         dd = np.where(np.isfinite(d), d, -np.inf)
         j = np.clip(np.argmax(dd, axis=1), 1, len(tau) - 2)
-        good = np.isfinite(rise) & (rise > 0.25 * contrast) & np.isfinite(dd.max(axis=1))
+        good = np.isfinite(rise) & (rise > 0.15 * contrast) & np.isfinite(dd.max(axis=1))
         off = _subpixel_peak(np.nan_to_num(d, nan=0.0), j)
         s = r_ray + tau[j] + off * 0.25
         p = c + s[:, None] * e
