@@ -388,7 +388,7 @@ def refinement_step(K, mirror, cand, rim, lines_xn, cue, circle, refine=True):
     unc = posture_uncertainty(
         K, mirror, rvec, tvec, rim_px, rim_sigma,
         (spec[0], final_circle.r, final_circle.z, spec[3], spec[4]) if use_refl else None,
-        final_circle.rms if use_refl else None, floor=SIGMA_FLOOR)
+        final_circle.rms if use_refl else None, floor=1e-9)
     return Refinement(np.asarray(rvec, np.float64), np.asarray(tvec, np.float64), kept,
                       tuple(accepted), tuple(rejected), unc, final_circle)
 
