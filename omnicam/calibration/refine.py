@@ -643,14 +643,28 @@ class Uncertainty:
                 f"of the posture's variance)")
 
 
+def _correlation_factor(res):
+    """``sqrt((1 + rho1) / (1 - rho1))``: how much the lag-1 correlation ``rho1`` of residuals
+    along a contour (in the order given; clipped to [0, 0.9]) inflates a standard deviation
+    computed as if they were independent (``N_eff = N (1 - rho1) / (1 + rho1)``)."""
+    r = np.asarray(res, np.float64)
+    r = r[np.isfinite(r)] - np.mean(r[np.isfinite(r)]) if np.isfinite(r).sum() > 8 else None
+    if r is None or not np.any(r):
+        return 1.0
+    rho1 = float(np.clip((r[:-1] @ r[1:]) / (r @ r), 0.0, 0.9))
+    return math.sqrt((1.0 + rho1) / (1.0 - rho1))
+
+
 def posture_uncertainty(K, mirror, rvec, tvec, rim_points, rim_sigma, reflection=None,
                         reflection_sigma=None, floor=0.02):
     """First-order a posteriori covariance of the posture from the rim (and the reflection).
 
     With ``J`` the Jacobian of the residuals (px) with respect to the posture (two axis angles,
     ``tvec``) and the nuisance parameters, each source's rows weighted by ``1 / sigma`` with
-    ``sigma`` its observed RMS residual (at least ``floor`` px), the covariance is
-    ``(J^T J)^-1``; the posture block is reported. The rim pins the axis only weakly (a tilt of
+    ``sigma`` its observed RMS residual (at least ``floor`` px) times the inflation that the
+    correlation of neighbouring residuals implies (:func:`_correlation_factor`; edge points
+    share blur and interpolation), the covariance is ``(J^T J)^-1``; the posture block is
+    reported. The rim pins the axis only weakly (a tilt of
     the mirror and a lateral shift keep the ellipse almost unchanged), which the weak direction
     names.
 
@@ -677,8 +691,12 @@ def posture_uncertainty(K, mirror, rvec, tvec, rim_points, rim_sigma, reflection
         sig.append(max(float(reflection_sigma), floor))
     prob = _Problem(_Posture(R, t), terms)
     J = prob.jacobian(prob.x0())
-    w = np.concatenate([np.full(len(term.residuals(R, t, term.x0())), 1.0 / s)
-                        for term, s in zip(terms, sig)])
+    w = []
+    for term, s in zip(terms, sig):
+        res = term.residuals(R, t, term.x0())
+        n_out = len(res) - (getattr(term, "prior", None) is not None)
+        w.append(np.full(len(res), 1.0 / (s * _correlation_factor(res[:n_out]))))
+    w = np.concatenate(w)
     if spec is not None and len(terms) > 1 and terms[-1].prior is not None:
         w[-1] = 1e-3  # the weak pull on z is not a measurement: (almost) no information
     J = J * w[:, None]

@@ -328,13 +328,12 @@ def _polar(G, center, radii, angles):
     return out
 
 
-def _rises(prof, dr, min_rise, dark_max):
+def _rises(prof, dr, min_rise, dark_max, k=3):
     """Per ray, radii of strong dark-to-bright rises: local maxima of the radial derivative
-    whose rise over +-3 samples exceeds ``min_rise`` with the inner side below ``dark_max``.
+    whose rise over +-k samples exceeds ``min_rise`` with the inner side below ``dark_max``.
 
     Returns (ray index, radius index) arrays."""
     d = np.gradient(prof, axis=1) / dr
-    k = 3
     inner = np.full_like(prof, np.nan)
     outer = np.full_like(prof, np.nan)
     inner[:, k:] = prof[:, :-k]
@@ -347,23 +346,13 @@ def _rises(prof, dr, min_rise, dark_max):
     return np.nonzero(peak & strong)
 
 
-def _subpixel_peak(d, j):
-    """Parabola vertex of ``d`` at the samples ``j-1, j, j+1`` (row-wise), offset in samples."""
-    rows = np.arange(len(j))
-    a, b, c = d[rows, j - 1], d[rows, j], d[rows, j + 1]
-    den = a - 2 * b + c
-    with np.errstate(invalid="ignore", divide="ignore"):
-        off = np.where(den < 0, 0.5 * (a - c) / den, 0.0)
-    return np.clip(np.nan_to_num(off), -0.5, 0.5)
-
-
 def detect_reflection(image, rim, *, center=None, max_radius=0.6, min_radius=0.03, rng=0):
     """Find the outermost round dark silhouette around the image of the camera centre.
 
     1. Radial profiles from ``center`` (default the rim centre) out to ``max_radius`` times the
        rim's minor semi-axis, of the image smoothed in proportion to the rim's size.
     2. Per ray, every strong dark-to-bright rise (local maximum of the radial derivative whose
-       rise exceeds a quarter of the contrast between the dark centre and the mirror's scene,
+       rise exceeds a fifth of the contrast between the dark centre and the mirror's scene,
        with a dark inner side); highlights and inner rings of the glass give inner rises,
        struts and scene edges give rises off the common circle.
     3. A vote over circle centres near ``center`` and radii (one vote per ray and radius bin)
@@ -371,8 +360,8 @@ def detect_reflection(image, rim, *, center=None, max_radius=0.6, min_radius=0.0
        rays is kept (the lens barrel or body, not the glass's inner rings).
     4. Per ray the rise nearest to that circle, then a robust ellipse (RANSAC,
        :func:`.rim.fit_rim`) rejects struts and highlights; two more rounds along rays from the
-       ellipse's centre in a narrow window, unsmoothed but for 0.7 px, with the derivative's
-       peak located to subpixel precision (a parabola).
+       ellipse's centre in a narrow window, unsmoothed but for 0.7 px, each edge at the
+       centroid of the radial derivative within 1.5 px of its steepest sample.
     5. Declines (:class:`~.errors.EstimationError`) when the centre is not darker than the
        scene, no round silhouette has enough support, or the silhouette has no darker core (the
        lens glass; a uniformly dark floor or clutter has none).
@@ -434,7 +423,7 @@ def detect_reflection(image, rim, *, center=None, max_radius=0.6, min_radius=0.0
             f"no camera reflection found: the centre (grey {dark:.0f}) is not clearly darker "
             f"than the mirror's scene (grey {scene:.0f})"
         )
-    ri, rj = _rises(prof, dr, 0.25 * contrast, dark + 0.6 * contrast)
+    ri, rj = _rises(prof, dr, 0.2 * contrast, dark + 0.6 * contrast)
     keep = radii[rj] >= R_min
     ri, rj = ri[keep], rj[keep]
     if len(ri) < 0.3 * n_rays:
@@ -445,18 +434,19 @@ def detect_reflection(image, rim, *, center=None, max_radius=0.6, min_radius=0.0
     pts = c0 + radii[rj, None] * np.stack([np.cos(ang[ri]), np.sin(ang[ri])], axis=1)
     dark_max = dark + 0.6 * contrast
 
-    def dark_inside(rho):
-        """A silhouette is dark inside: 80 % of the annulus 0.6-0.95 of its radius is dark
-        (a dark scene line or ring is dark only along itself)."""
-        band = prof[:, (radii >= 0.6 * rho) & (radii <= 0.95 * rho)]
-        return band.size > 0 and float(np.nanmean(band < dark_max)) >= 0.8
+    def dark_inside(rho, c):
+        """A silhouette is dark inside: 80 % of the annulus 0.6-0.95 of its radius about its
+        centre ``c`` is dark (a dark scene line or ring is dark only along itself)."""
+        band = _polar(G, c, np.linspace(0.6, 0.95, 8) * rho, ang[::2])
+        ok = np.isfinite(band)
+        return ok.any() and float(np.mean(band[ok] < dark_max)) >= 0.8
 
     # 3. vote over centres and radii, one vote per (ray, radius bin)
     half = 0.08 * r_rim
     offs = np.linspace(-half, half, 9)
     bw = max(2.0, 0.025 * R_max)
     nb = int(R_max / bw) + 2
-    best = None
+    found = {}  # radius bin -> (support, centre): the best centre for each supported radius
     for ox in offs:
         for oy in offs:
             c = c0 + (ox, oy)
@@ -467,23 +457,40 @@ def detect_reflection(image, rim, *, center=None, max_radius=0.6, min_radius=0.0
                 key = np.unique(ri * nb + np.clip(b - shift, 0, nb - 1))
                 h = np.bincount(key % nb, minlength=nb)
                 hist = np.maximum(hist, np.r_[h[shift:], np.zeros(shift)] if shift else h)
-            ok = [j for j in np.flatnonzero((hist >= 0.4 * n_rays) & (np.arange(nb) * bw >= R_min))
-                  if dark_inside(j * bw)]
-            if len(ok):
-                j = int(max(ok))  # the outermost well-supported circle that is dark inside
-                cand = (j * bw, hist[j], c)
-                if best is None or cand[0] > best[0] + 2 * bw or (
-                    abs(cand[0] - best[0]) <= 2 * bw and cand[1] > best[1]
-                ):
-                    best = cand
-    if best is None:
+            for j in np.flatnonzero((hist >= 0.4 * n_rays) & (np.arange(nb) * bw >= R_min)):
+                if int(j) not in found or hist[j] > found[int(j)][0]:
+                    found[int(j)] = (hist[j], c)
+    # circles dark inside, outermost first; neighbouring bins are one circle (its best centre)
+    order = [j for j in sorted(found, reverse=True) if dark_inside((j + 1) * bw, found[j][1])]
+    circles = []
+    for j in order:
+        if circles and circles[-1][0] - j <= 2:
+            if found[j][0] > found[circles[-1][0]][0]:
+                circles[-1] = (j, circles[-1][1])
+            continue
+        circles.append((j, j))
+    if not circles:
         raise EstimationError(
             "no camera reflection found: no round dark silhouette around the image centre "
-            "(edges on fewer than 40 % of the rays share a circle)"
+            "(edges on fewer than 40 % of the rays share a circle that is dark inside)"
         )
-    r_est, _, c_est = best
+    first_why = None
+    for j, _ in circles[:4]:
+        try:
+            return _refine_silhouette(gray, G, pts, found[j][1], j * bw, bw, sig, contrast, rng)
+        except EstimationError as err:  # e.g. a square box behind the barrel: try inside it
+            first_why = first_why or err
+    raise first_why
+
+
+def _refine_silhouette(gray, G, pts, c_est, r_est, bw, sig, contrast, rng):
+    """Steps 4-5 of :func:`detect_reflection` for one voted circle."""
+    from .rim import fit_rim
+
     rad = np.hypot(pts[:, 0] - c_est[0], pts[:, 1] - c_est[1])
     near = np.abs(rad - (r_est + bw)) <= 2.5 * bw
+    if near.sum() < 12:
+        raise EstimationError("no camera reflection found: too few edge points on the circle")
     try:
         fit = fit_rim(pts[near], threshold=max(1.0, 2 * sig), rng=rng)
     except ValueError as err:
@@ -495,11 +502,8 @@ def detect_reflection(image, rim, *, center=None, max_radius=0.6, min_radius=0.0
     for _ in range(2):
         c = np.asarray(fit.center)
         e = np.stack([np.cos(ang), np.sin(ang)], axis=1)
-        # radius of the ellipse along each ray: solve on the sampled ellipse
-        S = fit.shape_matrix
-        Si = np.linalg.inv(S)
-        q = e @ Si.T
-        r_ray = 1.0 / np.linalg.norm(q, axis=1)
+        # radius of the ellipse along each ray: |S^-1 e| = 1 / r
+        r_ray = 1.0 / np.linalg.norm(e @ np.linalg.inv(fit.shape_matrix).T, axis=1)
         w = max(3.0, 3.0 * fit.rms + 2.0 * sig)
         tau = np.arange(-w, w + 1e-9, 0.25)
         mx = (c[0] + e[:, :1] * (r_ray[:, None] + tau)).astype(np.float32)
@@ -511,9 +515,13 @@ def detect_reflection(image, rim, *, center=None, max_radius=0.6, min_radius=0.0
         dd = np.where(np.isfinite(d), d, -np.inf)
         j = np.clip(np.argmax(dd, axis=1), 1, len(tau) - 2)
         good = np.isfinite(rise) & (rise > 0.15 * contrast) & np.isfinite(dd.max(axis=1))
-        off = _subpixel_peak(np.nan_to_num(d, nan=0.0), j)
-        s = r_ray + tau[j] + off * 0.25
-        p = c + s[:, None] * e
+        # the centroid of the rise within 1.5 px of its steepest sample: the parabola through
+        # the peak scatters by 0.15 px on an exact anti-aliased disk, the centroid by 0.01 px
+        dn = np.nan_to_num(d, nan=0.0)
+        win = (np.abs(tau[None, :] - tau[j][:, None]) <= 1.5) & (dn > 0)
+        wsum = (dn * win).sum(axis=1)
+        loc = (dn * win * tau[None, :]).sum(axis=1) / np.where(wsum > 0, wsum, 1.0)
+        p = c + (r_ray + loc)[:, None] * e
         p, rise_k = p[good], rise[good]
         if len(p) < 12:
             raise EstimationError("no camera reflection found: its outline faded on refinement")

@@ -41,9 +41,9 @@ from .errors import EstimationError
 __all__ = ["Selection", "validate_far_lines", "check_lines_inside_rim", "line_score",
            "line_costs", "reflection_costs", "select_candidate"]
 
-AMBIGUOUS_CONFIDENCE = 0.8  # below this a choice comes with a warning
-# (exact far lines give > 0.99; with rim noise the wrong choices seen had 0.07-0.74; for the
-# reflection 0.8 is a separation of 2.1 sigma)
+AMBIGUOUS_CONFIDENCE = 0.8  # below this a choice by far lines comes with a warning
+# (exact far lines give > 0.99; with rim noise the wrong choices seen had 0.07-0.74)
+REFLECTION_SIGMA = 3.0  # a choice that rests on the reflection needs 3 sigma (confidence 0.978)
 
 
 def validate_far_lines(far_lines):
@@ -124,7 +124,8 @@ class Selection:
         physical candidate, 0 without any cue; with far lines alone it equals the paper's
         ``1 - best / second best``.
     ambiguous : bool
-        More than one physical candidate and ``confidence < AMBIGUOUS_CONFIDENCE``.
+        More than one physical candidate and ``confidence < AMBIGUOUS_CONFIDENCE`` (with the
+        reflection among the cues: below ``tanh(REFLECTION_SIGMA^2 / 4)``, a 3-sigma gap).
     scores_per_cue : dict
         ``{cue: {candidate index: score}}``: ``"far lines"`` (eq. 31), ``"reflection rms px"``
         (outline residual with the circle fitted), ``"self-reflection px"`` (distance of the
@@ -262,7 +263,10 @@ def select_candidate(candidates, make_camera, far_lines, lower_focus, reflection
     for cue, c in costs.items():
         ranked = sorted(c[i] for i in phys)
         sigma[cue] = math.sqrt(ranked[1] - ranked[0]) if np.isfinite(ranked[1]) else math.inf
-    ambiguous = confidence < AMBIGUOUS_CONFIDENCE
+    needed = AMBIGUOUS_CONFIDENCE
+    if "reflection" in costs:
+        needed = max(needed, math.tanh(REFLECTION_SIGMA**2 / 4.0))
+    ambiguous = confidence < needed
     if ambiguous:
         cues = " and ".join(costs)
         warnings.append(f"the {cues} barely separate the physical postures (confidence "

@@ -34,11 +34,6 @@ __all__ = [
 #: A cue joins the refinement only if the rim's chi-square rises by at most this much
 #: (2 x the 99.9 % point of chi-square with 5 degrees of freedom, the posture's).
 CUE_CHI2 = 2.0 * 20.515
-#: Rim edge points are not independent (neighbours share blur, interpolation and the scene's
-#: edges): the rim's chi-square counts at most this many independent points. Measured on
-#: 500x500 barrel renders: an agreeing outline raised the rim's RMS by 1-5 % (0.056 -> 0.059
-#: px over 1300 points, a white-noise chi-square of +40...+140).
-RIM_N_EFF = 120
 #: Rim and outline residuals are never taken as smaller than this (px): edge location limits.
 SIGMA_FLOOR = 0.02
 #: Outline points used in the refinement (evenly subsampled; selection uses all).
@@ -322,14 +317,16 @@ def refinement_step(K, mirror, cand, rim, lines_xn, cue, circle, refine=True):
     """Refine on the rim and every cue that agrees with it; see :class:`Refinement`.
 
     A cue joins only if the joint fit keeps the rim at its own noise level: with ``sigma^2``
-    the rim's a posteriori variance alone (``2 cost / (N - 5)``, at least ``SIGMA_FLOOR``^2), the
-    rim's chi-square may rise by at most ``CUE_CHI2``, and the cue's own RMS must stay within
+    the rim's a posteriori variance alone (``2 cost / (N - 5)``, at least ``SIGMA_FLOOR``^2,
+    inflated by the correlation of neighbouring residuals as the reported uncertainty is), the
+    rim's chi-square may rise by at most ``CUE_CHI2`` (the shift the cue causes must be within
+    the rim's own uncertainty ellipsoid), and the cue's own RMS must stay within
     3x its measured scatter (1 px at least for the outline, 3 px for far lines). The reflection
     is tried first; far lines join only when it did not (they then add nothing measurable but
     time, ``benchmarks/bench_calibrate.py``).
     """
     from .reflection import ReflectionCircle, fit_circle
-    from .refine import posture_uncertainty, refine_posture
+    from .refine import RimTerm, _correlation_factor, posture_uncertainty, refine_posture
 
     rvec, tvec = cand.rvec, cand.tvec
     rim_px = rim.points
@@ -337,13 +334,16 @@ def refinement_step(K, mirror, cand, rim, lines_xn, cue, circle, refine=True):
     spec = None
     if cue.used and circle is not None and np.isfinite(circle.rms):
         xn_r = _subsample(cue.normalized, MAX_REFINE_POINTS)
-        # z is held at its fit under the analytic posture: free, it trades with the tilt
-        # (on 500x500 barrel renders a free z drifted 12 -> 22 mm and the axis 0.5 deg)
-        spec = (xn_r, circle.r, circle.z, cue.r is not None, True)
+        # an unknown z stays free: it trades with the tilt, and the uncertainty must say so
+        spec = (xn_r, circle.r, circle.z, cue.r is not None, cue.z is not None)
     if refine:
         base = refine_posture(K, mirror, rvec, tvec, rim_px)
         kept = base
-        var = max(2.0 * base.rim_cost / max(len(rim_px) - 5, 1), SIGMA_FLOOR**2)
+        # the rim's a posteriori variance, inflated by the correlation of neighbouring edge
+        # points as in the reported uncertainty (so the test and the uncertainty agree)
+        R0 = cv2.Rodrigues(np.asarray(base.rvec, np.float64).reshape(3, 1))[0]
+        f = _correlation_factor(RimTerm(K, mirror, R0, base.tvec, rim_px).residuals(R0, base.tvec))
+        var = max(2.0 * base.rim_cost / max(len(rim_px) - 5, 1), SIGMA_FLOOR**2) * f * f
         tries = []
         if spec is not None:
             tries.append("reflection")
@@ -355,12 +355,12 @@ def refinement_step(K, mirror, cand, rim, lines_xn, cue, circle, refine=True):
             if name == "far lines" and "reflection" in accepted:
                 break
             if name == "reflection":
-                res = refine_posture(K, mirror, rvec, tvec, rim_px, reflection=spec)
+                res = refine_posture(K, mirror, rvec, tvec, rim_px, reflection=spec, max_nfev=200)
                 own, cap = res.reflection_rms, max(1.0, 3.0 * cue.sigma) if np.isfinite(cue.sigma) else 1.0
             else:
                 res = refine_posture(K, mirror, rvec, tvec, rim_px, lines_xn)
                 own, cap = res.line_rms, 3.0
-            chi2 = 2.0 * (res.rim_cost - base.rim_cost) / var * min(1.0, RIM_N_EFF / len(rim_px))
+            chi2 = 2.0 * (res.rim_cost - base.rim_cost) / var
             if chi2 > CUE_CHI2:
                 rejected.append((name, f"joining it raised the rim's RMS from {base.rim_rms:.3f} "
                                        f"to {res.rim_rms:.3f} px (chi-square +{chi2:.0f}, "
