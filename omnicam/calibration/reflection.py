@@ -528,7 +528,7 @@ def _refine_silhouette(gray, G, pts, c_est, r_est, bw, sig, contrast, rng):
         dist = np.abs(fit.distance(p))
         mask = dist <= max(0.5, 3.5 * 1.4826 * float(np.median(dist)))
         try:
-            fit = fit_rim(p[mask], threshold=max(0.3, 3 * fit.rms), rng=rng)
+            fit = fit_rim(p[mask], robust=False)  # outliers already cut by the ellipse
         except ValueError as err:
             raise EstimationError(f"no camera reflection found: {err}") from None
     quality = len(fit.points) / n_rays

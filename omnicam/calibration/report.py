@@ -69,6 +69,8 @@ class CalibrationReport:
         The cues that joined the rim in the refinement.
     rejected_cues : tuple of (str, str)
         The cues left out, with the reason (how much they disagreed).
+    skipped_cues : tuple of (str, str)
+        Cues not tried in the refinement, with the reason (not a disagreement).
     weak_direction : str
         The least determined combination of the posture in words.
     steps : dict
@@ -100,6 +102,7 @@ class CalibrationReport:
     sigma_per_cue: dict = dataclasses.field(default_factory=dict)
     accepted_cues: tuple = ()
     rejected_cues: tuple = ()
+    skipped_cues: tuple = ()
     weak_direction: str = "unknown"
     steps: dict = dataclasses.field(default_factory=dict)
 
@@ -125,7 +128,7 @@ class CalibrationReport:
                    lens_z=circ.z if circ is not None else math.nan, lens_note=note,
                    ambiguous=sel.ambiguous, scores_per_cue=sel.scores_per_cue,
                    sigma_per_cue=sel.sigma, accepted_cues=ref.accepted_cues,
-                   rejected_cues=ref.rejected_cues,
+                   rejected_cues=ref.rejected_cues, skipped_cues=ref.skipped_cues,
                    weak_direction=ref.uncertainty.describe(),
                    steps={"rim": rim, "reflection": cue, "candidates": cands,
                           "selection": sel, "refinement": ref})
@@ -195,6 +198,8 @@ class CalibrationReport:
                             f", lens RMS {r.reflection_rms:.4f} px") + ")")
             for name, why in self.rejected_cues:
                 lines.append(f"  refinement left out the {name}: {why}")
+            for name, why in self.skipped_cues:
+                lines.append(f"  refinement without the {name}: {why}")
         else:
             lines.append("  refinement: off")
         if self.warnings:

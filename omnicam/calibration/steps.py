@@ -292,6 +292,8 @@ class Refinement:
     accepted_cues : tuple of str
     rejected_cues : tuple of (str, str)
         ``(cue, why)``: the rim's chi-square rise when the cue joined, or its own residual.
+    skipped_cues : tuple of (str, str)
+        ``(cue, why)``: cues not tried in the refinement (not a disagreement).
     uncertainty : Uncertainty
         A posteriori (:func:`.refine.posture_uncertainty`): rows weighted by their observed RMS.
     circle : ReflectionCircle or None
@@ -305,12 +307,21 @@ class Refinement:
     rejected_cues: tuple
     uncertainty: object
     circle: object
+    skipped_cues: tuple = ()
 
 
 def _subsample(x, n):
     if len(x) <= n:
         return x
     return x[np.linspace(0, len(x) - 1, n).astype(int)]
+
+
+def _z_range(mirror, res):
+    """Where the reflection's circle may lie: from ``-c / 2`` behind the camera centre to the
+    mirror vertex's distance (as :func:`.reflection.fit_circle` searches, up to the vertex)."""
+    R = cv2.Rodrigues(np.asarray(res.rvec, np.float64).reshape(3, 1))[0]
+    vertex = float(np.linalg.norm(R @ np.array([0.0, 0.0, mirror.b]) + res.tvec))
+    return -0.5 * mirror.c, vertex
 
 
 def refinement_step(K, mirror, cand, rim, lines_xn, cue, circle, refine=True):
@@ -321,16 +332,18 @@ def refinement_step(K, mirror, cand, rim, lines_xn, cue, circle, refine=True):
     inflated by the correlation of neighbouring residuals as the reported uncertainty is), the
     rim's chi-square may rise by at most ``CUE_CHI2`` (the shift the cue causes must be within
     the rim's own uncertainty ellipsoid), and the cue's own RMS must stay within
-    3x its measured scatter (1 px at least for the outline, 3 px for far lines). The reflection
-    is tried first; far lines join only when it did not (they then add nothing measurable but
-    time, ``benchmarks/bench_calibrate.py``).
+    3x its measured scatter (1 px at least for the outline, 3 px for far lines), and the
+    reflection's circle must lie between the camera and the mirror. The reflection is tried
+    first, and only with its ``r`` or ``z`` known (otherwise it only chose the candidate: see
+    ``skipped_cues``); far lines join only when it did not join (they then add nothing
+    measurable but time, ``benchmarks/bench_calibrate.py``).
     """
     from .reflection import ReflectionCircle, fit_circle
     from .refine import RimTerm, _correlation_factor, posture_uncertainty, refine_posture
 
     rvec, tvec = cand.rvec, cand.tvec
     rim_px = rim.points
-    accepted, rejected, kept = [], [], None
+    accepted, rejected, skipped, kept = [], [], [], None
     spec = None
     if cue.used and circle is not None and np.isfinite(circle.rms):
         xn_r = _subsample(cue.normalized, MAX_REFINE_POINTS)
@@ -345,7 +358,14 @@ def refinement_step(K, mirror, cand, rim, lines_xn, cue, circle, refine=True):
         f = _correlation_factor(RimTerm(K, mirror, R0, base.tvec, rim_px).residuals(R0, base.tvec))
         var = max(2.0 * base.rim_cost / max(len(rim_px) - 5, 1), SIGMA_FLOOR**2) * f * f
         tries = []
-        if spec is not None:
+        if spec is not None and cue.r is None and cue.z is None:
+            # with r and z both unknown the circle trades its z with the mirror's tilt along a
+            # valley the linear uncertainty does not see (exact outlines + 0.05 px noise, 10
+            # rigs: axis 0.05-0.2 deg -> 0.1-1.3 deg, reported 0.03-0.14): it chose the
+            # candidate; the posture rests on the rim (and far lines)
+            skipped.append(("reflection", "its circle's r and z are both unknown and z trades "
+                                          "with the tilt; give lens_z or lens_r to refine with it"))
+        elif spec is not None:
             tries.append("reflection")
         elif cue.used:
             rejected.append(("reflection", "its outline does not reach the camera under this posture"))
@@ -361,7 +381,12 @@ def refinement_step(K, mirror, cand, rim, lines_xn, cue, circle, refine=True):
                 res = refine_posture(K, mirror, rvec, tvec, rim_px, lines_xn)
                 own, cap = res.line_rms, 3.0
             chi2 = 2.0 * (res.rim_cost - base.rim_cost) / var
-            if chi2 > CUE_CHI2:
+            z_range = _z_range(mirror, res) if name == "reflection" else None
+            if z_range is not None and not z_range[0] <= res.z <= z_range[1]:
+                rejected.append((name, f"the fitted circle lies at z = {res.z:.1f}, not between "
+                                       f"the camera and the mirror ({z_range[0]:.1f} to "
+                                       f"{z_range[1]:.1f})"))
+            elif chi2 > CUE_CHI2:
                 rejected.append((name, f"joining it raised the rim's RMS from {base.rim_rms:.3f} "
                                        f"to {res.rim_rms:.3f} px (chi-square +{chi2:.0f}, "
                                        f"allowed {CUE_CHI2:.0f})"))
@@ -390,7 +415,7 @@ def refinement_step(K, mirror, cand, rim, lines_xn, cue, circle, refine=True):
         (spec[0], final_circle.r, final_circle.z, spec[3], spec[4]) if use_refl else None,
         final_circle.rms if use_refl else None, floor=1e-9)
     return Refinement(np.asarray(rvec, np.float64), np.asarray(tvec, np.float64), kept,
-                      tuple(accepted), tuple(rejected), unc, final_circle)
+                      tuple(accepted), tuple(rejected), unc, final_circle, tuple(skipped))
 
 
 # -- 6. warnings -------------------------------------------------------------------------------
@@ -400,6 +425,17 @@ def warnings_step(rim, cue, selection, refinement, cands):
     for name, why in refinement.rejected_cues:
         out.append(f"the {name} disagree(s) with the rim and was left out of the refinement: "
                    f"{why}; check it (the posture rests on the rim alone)")
+    refl = selection.scores_per_cue.get("reflection rms px")
+    if cue.used and refl:
+        best = min(refl.values())
+        limit = max(1.0, 5.0 * cue.sigma) if np.isfinite(cue.sigma) else 1.0
+        if not best <= limit:
+            where = selection.scores_per_cue.get("self-reflection px", {})
+            off = f"; the camera sees itself {min(where.values()):.0f} px or more from where " \
+                  f"the postures predict" if where else ""
+            out.append(f"the camera's reflection fits none of the rim's postures (best RMS "
+                       f"{best:.2f} px, allowed {limit:.2f}{off}): check K (the principal "
+                       f"point), D and the mirror's a, b and rim_radius")
     unc = refinement.uncertainty
     if unc.axis_std_deg > 0.5:
         out.append(f"the posture is poorly determined: about {unc.axis_std_deg:.2f} deg (RMS) "
