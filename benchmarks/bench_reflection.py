@@ -57,10 +57,12 @@ def show(name, rows):
     right = sum(r[1] for r in rows)
     err = np.array([r[2] for r in rows])
     ratio = np.array([r[3] for r in rows])
-    print(f"{name:<28} found {found}/{len(rows)}  right {right}/{len(rows)}  axis err median "
-          f"{np.median(err):.3f} p95 {np.percentile(err, 95):.3f} max {err.max():.3f} deg  "
-          f"err/std median {np.median(ratio):.2f}  silent {sum(r[4] for r in rows)}  "
-          f"time median {np.median([r[5] for r in rows]) * 1e3:.0f} ms")
+    print(
+        f"{name:<28} found {found}/{len(rows)}  right {right}/{len(rows)}  axis err median "
+        f"{np.median(err):.3f} p95 {np.percentile(err, 95):.3f} max {err.max():.3f} deg  "
+        f"err/std median {np.median(ratio):.2f}  silent {sum(r[4] for r in rows)}  "
+        f"time median {np.median([r[5] for r in rows]) * 1e3:.0f} ms"
+    )
 
 
 def office():
@@ -77,8 +79,10 @@ def office():
         t0 = time.perf_counter()
         cam, rep = calibrate(K, m, image=image)
         times.append(time.perf_counter() - t0)
-    print(f"office photo (K guessed: f {f:.0f} px, principal point at the rim centre, default "
-          f"mirror): calibrate() median {np.median(times) * 1e3:.0f} ms of 3")
+    print(
+        f"office photo (K guessed: f {f:.0f} px, principal point at the rim centre, default "
+        f"mirror): calibrate() median {np.median(times) * 1e3:.0f} ms of 3"
+    )
     print(rep.summary())
 
 

@@ -36,8 +36,9 @@ def hits(camera, pixels, r, z, glass=0.7, box=None, z_box=None):
     return out
 
 
-def render(camera, r=9.0, z=12.0, glass=0.7, box=16.0, z_box=2.0, supersample=3, scene=None,
-           window=0.6):
+def render(
+    camera, r=9.0, z=12.0, glass=0.7, box=16.0, z_box=2.0, supersample=3, scene=None, window=0.6
+):
     """Grey-scale render (uint8) of the scene with the barrel and box blended in per subpixel."""
     if scene is None:
         scene = synthetic.render_environment(camera, supersample=2, body_radius=None)

@@ -6,20 +6,22 @@ from pathlib import Path
 import cv2
 import numpy as np
 import pytest
-
 from barrel import render
+from test_chen import RIGS
+
 from omnicam import synthetic
 from omnicam.calibration import EstimationError, calibrate, reflection
 from omnicam.calibration.refine import refine_posture
 from omnicam.calibration.rim import detect_rim
-from test_chen import RIGS
 
 R_C, Z_C = 9.0, 12.0  # the barrel's front edge in tests/barrel.py
 
 REAL_PHOTO = next(
-    (p / "shared" / "data" / "real" / "office_catadioptric_1920x1080.jpg"
-     for p in Path(__file__).resolve().parents[1:4]
-     if (p / "shared" / "data" / "real" / "office_catadioptric_1920x1080.jpg").exists()),
+    (
+        p / "shared" / "data" / "real" / "office_catadioptric_1920x1080.jpg"
+        for p in Path(__file__).resolve().parents[1:4]
+        if (p / "shared" / "data" / "real" / "office_catadioptric_1920x1080.jpg").exists()
+    ),
     Path("/nonexistent"),
 )
 
@@ -34,7 +36,9 @@ def axis_error_deg(cam, truth):
 
 
 def chose_true(report, truth):
-    best = min(report.physical, key=lambda i: np.linalg.norm(report.candidates[i].tvec - truth.tvec))
+    best = min(
+        report.physical, key=lambda i: np.linalg.norm(report.candidates[i].tvec - truth.tvec)
+    )
     return best == report.chosen
 
 
@@ -60,8 +64,9 @@ def test_exact_outline_fits_the_true_circle_with_zero_residual():
 def test_exact_circle_outline_gives_the_exact_posture_and_the_true_candidate():
     for truth in RIGS[:15]:
         out, _ = reflection.outline_pixels(truth, R_C, Z_C, 64)
-        cam, report = calibrate(truth.K, truth.mirror, boundary_points=truth.rim_image_points(360),
-                                lens=out, lens_z=Z_C)
+        cam, report = calibrate(
+            truth.K, truth.mirror, boundary_points=truth.rim_image_points(360), lens=out, lens_z=Z_C
+        )
         assert chose_true(report, truth) and not report.ambiguous, report.summary()
         assert report.confidence > 0.99
         assert axis_error_deg(cam, truth) < 1e-5
@@ -79,8 +84,14 @@ def test_exact_outline_brings_back_the_tilt_a_noisy_rim_misses():
         _, rep = calibrate(truth.K, truth.mirror, boundary_points=rim_px, lens=out, refine=False)
         start = rep.candidates[rep.chosen]
         ea.append(axis_error_deg(truth.replace(rvec=start.rvec, tvec=start.tvec), truth))
-        res = refine_posture(truth.K, truth.mirror, start.rvec, start.tvec, rim_px,
-                             reflection=(xn, R_C, Z_C, False, True))
+        res = refine_posture(
+            truth.K,
+            truth.mirror,
+            start.rvec,
+            start.tvec,
+            rim_px,
+            reflection=(xn, R_C, Z_C, False, True),
+        )
         er.append(axis_error_deg(truth.replace(rvec=res.rvec, tvec=res.tvec), truth))
     assert math.sqrt(np.mean(np.square(er))) < 0.2 * math.sqrt(np.mean(np.square(ea))), (ea, er)
 
@@ -138,8 +149,9 @@ def test_an_outline_that_disagrees_with_the_rim_is_left_out_and_reported():
     truth = RIGS[3]
     out, _ = reflection.outline_pixels(truth, R_C, Z_C, 64)
     # the outline of another posture: the truth tilted by 2 deg about the camera's x axis
-    tilted = truth.replace(rvec=cv2.Rodrigues(cv2.Rodrigues(np.radians([2.0, 0, 0]))[0]
-                                              @ truth.R)[0].ravel())
+    tilted = truth.replace(
+        rvec=cv2.Rodrigues(cv2.Rodrigues(np.radians([2.0, 0, 0]))[0] @ truth.R)[0].ravel()
+    )
     wrong, _ = reflection.outline_pixels(tilted, R_C, Z_C, 64)
     rim = truth.rim_image_points(360) + np.random.default_rng(1).normal(size=(360, 2)) * 0.05
     cam, report = calibrate(truth.K, truth.mirror, boundary_points=rim, lens=wrong, lens_z=Z_C)

@@ -13,7 +13,14 @@ Started from the analytic posture of Chen's method (:mod:`.chen`), it minimises,
   ``(V_i, n_i)`` with ``n_i = unit((Q - P_i) x e)``, converted to pixels by the local
   derivative of that sine with respect to the pixel. It is exactly zero when the rays meet the
   line at any distance (eq. 31's coplanarity of directions is only the limit of a line at
-  infinity and would bias a refinement).
+  infinity and would bias a refinement);
+* **the camera's reflection** (optional, :mod:`.reflection`): for each outline pixel the radius
+  at which its reflected ray crosses the plane ``z_c = z`` of the coaxial circle, minus ``r``,
+  in pixels by the local derivative; ``r`` and ``z`` nuisance parameters unless known.
+
+Each kind of residual is one class (:class:`RimTerm`, :class:`FarLineTerm`,
+:class:`ReflectionTerm`) with ``residuals(R, t, y)`` and ``jacobian(posture, x, y, steps)``
+(posture columns, own nuisance columns); ``_Problem`` stacks the terms it is given.
 
 Parameters: two small rotations of the mirror axis (about two axes perpendicular to it), the
 three components of the mirror origin ``tvec``, and per line a rotation of ``e`` (2) and a shift
@@ -32,6 +39,8 @@ on the default rigs three far lines shrink the axis uncertainty by well under 1 
 
 The result is kept only if its cost is lower than the cost of the analytic posture (with the
 line parameters fitted to it), so refinement never makes an exact analytic result worse.
+Whether a cue may join the rim at all is decided by :func:`.steps.refinement_step`;
+:func:`posture_uncertainty` gives the a posteriori covariance and its weakest direction.
 """
 from __future__ import annotations
 
@@ -42,8 +51,8 @@ import cv2
 import numpy as np
 
 
-__all__ = ["RefineResult", "Uncertainty", "RimTerm", "FarLineTerm", "ReflectionTerm", "refine_posture",
-           "posture_uncertainty", "gauge_rotation"]
+__all__ = ["RefineResult", "Uncertainty", "RimTerm", "FarLineTerm", "ReflectionTerm",
+           "refine_posture", "posture_uncertainty", "gauge_rotation"]
 
 _N_POSTURE = 5
 _STEPS = np.array([1e-7, 1e-7, 1e-6, 1e-6, 1e-6])  # posture steps of the difference quotients
@@ -214,7 +223,8 @@ class RimTerm:
         ]
 
         def img(q, off):
-            return (A[0, 0] * q[0] + A[0, 1] * q[1] + off[0], A[1, 0] * q[0] + A[1, 1] * q[1] + off[1])
+            return (A[0, 0] * q[0] + A[0, 1] * q[1] + off[0],
+                    A[1, 0] * q[0] + A[1, 1] * q[1] + off[1])
 
         return img(p, k), img(p1, (0.0, 0.0)), img(p2, (0.0, 0.0))
 
@@ -554,7 +564,8 @@ def refine_posture(K, mirror, rvec, tvec, rim_points, far_lines_normalized=(), l
     lines_xn = [np.ascontiguousarray(np.asarray(x, np.float64)) for x in far_lines_normalized]
     depth = 1000.0 * mirror.rim_radius if line_depth is None else float(line_depth)
     # lines whose rays mostly miss the mirror under this posture are left out
-    lines_xn = [x for x in lines_xn if np.isfinite(_rays(mirror, R0, t0, x)[1]).all(axis=1).sum() >= 3]
+    lines_xn = [x for x in lines_xn
+                if np.isfinite(_rays(mirror, R0, t0, x)[1]).all(axis=1).sum() >= 3]
     rim = RimTerm(K, mirror, R0, t0, rim_px)
     if robust:
         rim.set_robust_weights(R0, t0)
@@ -594,7 +605,8 @@ def refine_posture(K, mirror, rvec, tvec, rim_points, far_lines_normalized=(), l
     if lines_xn:
         lr = terms[1].residuals(R, t, x[prob.slices[1]])
         line_rms = float(np.sqrt(np.mean(lr**2)))
-        lines = [terms[1].line(i, x[prob.slices[1]][4 * i : 4 * i + 4]) for i in range(len(lines_xn))]
+        y = x[prob.slices[1]]
+        lines = [terms[1].line(i, y[4 * i : 4 * i + 4]) for i in range(len(lines_xn))]
     refl_rms, r_c, z_c = math.nan, math.nan, math.nan
     if spec is not None:
         term = terms[-1]

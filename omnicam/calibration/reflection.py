@@ -209,8 +209,12 @@ def fit_circle(mirror, R, t, xn, Kinv2, r=None, z=None, min_fraction=0.8, h=1e-2
 
     z0 = 0.0 if z is None else float(z)
     if z is None:
-        best = minimize_scalar(lambda zz: min(rms_at(zz)[1], 1e30), bounds=(z_lo, z_hi),
-                               method="bounded", options={"xatol": 1e-3 * mirror.rim_radius})
+        best = minimize_scalar(
+            lambda zz: min(rms_at(zz)[1], 1e30),
+            bounds=(z_lo, z_hi),
+            method="bounded",
+            options={"xatol": 1e-3 * mirror.rim_radius},
+        )
         z0 = float(best.x)
     rr, e = rms_at(z0)
     return ReflectionCircle(r=float(rr), z=z0, rms=float(e))
@@ -391,7 +395,7 @@ def detect_reflection(image, rim, *, center=None, max_radius=0.6, min_radius=0.0
     ValueError
         Bad arguments.
     """
-    from .rim import RimFit, fit_rim
+    from .rim import RimFit
 
     if not isinstance(rim, RimFit):
         raise ValueError(
@@ -508,8 +512,9 @@ def _refine_silhouette(gray, G, pts, c_est, r_est, bw, sig, contrast, rng):
         tau = np.arange(-w, w + 1e-9, 0.25)
         mx = (c[0] + e[:, :1] * (r_ray[:, None] + tau)).astype(np.float32)
         my = (c[1] + e[:, 1:] * (r_ray[:, None] + tau)).astype(np.float32)
-        f = cv2.remap(G1, mx, my, cv2.INTER_LINEAR, borderMode=cv2.BORDER_CONSTANT,
-                      borderValue=np.nan)
+        f = cv2.remap(
+            G1, mx, my, cv2.INTER_LINEAR, borderMode=cv2.BORDER_CONSTANT, borderValue=np.nan
+        )
         d = np.gradient(f, axis=1)
         rise = f[:, -1] - f[:, 0]
         dd = np.where(np.isfinite(d), d, -np.inf)

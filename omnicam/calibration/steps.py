@@ -202,8 +202,15 @@ def reflection_step(lens, image, rim, K, D, r=None, z=None):
                 f"got {lens!r}"
             )
         if image is None:
-            return ReflectionCue(None, None, None, sigma, r, z,
-                                 "not used: no image (give lens=outline pixels to use it)")
+            return ReflectionCue(
+                None,
+                None,
+                None,
+                sigma,
+                r,
+                z,
+                "not used: no image (give lens=outline pixels to use it)",
+            )
         try:
             fit = detect_reflection(image, rim)
         except EstimationError as err:  # optional: the report says why it was not used
@@ -272,8 +279,12 @@ def selection_step(cands, cue, lines, mirror, K, D, make_camera):
     circles, spec = {}, None
     if cue.used:
         circles, self_px = reflection_circles(cands, cue, K, mirror, D)
-        spec = {"rms": {i: c.rms for i, c in circles.items()}, "n": len(cue.normalized),
-                "sigma": cue.sigma, "self_px": self_px}
+        spec = {
+            "rms": {i: c.rms for i, c in circles.items()},
+            "n": len(cue.normalized),
+            "sigma": cue.sigma,
+            "self_px": self_px,
+        }
     sel = select_candidate(cands.all, make_camera, lines, (0.0, 0.0, -mirror.c), spec)
     return sel, circles
 
@@ -338,8 +349,13 @@ def refinement_step(K, mirror, cand, rim, lines_xn, cue, circle, refine=True):
     ``skipped_cues``); far lines join only when it did not join (they then add nothing
     measurable but time, ``benchmarks/bench_calibrate.py``).
     """
+    from .refine import (
+        RimTerm,
+        _correlation_factor,
+        posture_uncertainty,
+        refine_posture,
+    )
     from .reflection import ReflectionCircle, fit_circle
-    from .refine import RimTerm, _correlation_factor, posture_uncertainty, refine_posture
 
     rvec, tvec = cand.rvec, cand.tvec
     rim_px = rim.points
@@ -363,12 +379,19 @@ def refinement_step(K, mirror, cand, rim, lines_xn, cue, circle, refine=True):
             # valley the linear uncertainty does not see (exact outlines + 0.05 px noise, 10
             # rigs: axis 0.05-0.2 deg -> 0.1-1.3 deg, reported 0.03-0.14): it chose the
             # candidate; the posture rests on the rim (and far lines)
-            skipped.append(("reflection", "its circle's r and z are both unknown and z trades "
-                                          "with the tilt; give lens_z or lens_r to refine with it"))
+            skipped.append(
+                (
+                    "reflection",
+                    "its circle's r and z are both unknown and z trades "
+                    "with the tilt; give lens_z or lens_r to refine with it",
+                )
+            )
         elif spec is not None:
             tries.append("reflection")
         elif cue.used:
-            rejected.append(("reflection", "its outline does not reach the camera under this posture"))
+            rejected.append(
+                ("reflection", "its outline does not reach the camera under this posture")
+            )
         if lines_xn:
             tries.append("far lines")
         for name in tries:
@@ -376,23 +399,41 @@ def refinement_step(K, mirror, cand, rim, lines_xn, cue, circle, refine=True):
                 break
             if name == "reflection":
                 res = refine_posture(K, mirror, rvec, tvec, rim_px, reflection=spec, max_nfev=200)
-                own, cap = res.reflection_rms, max(1.0, 3.0 * cue.sigma) if np.isfinite(cue.sigma) else 1.0
+                own, cap = (
+                    res.reflection_rms,
+                    max(1.0, 3.0 * cue.sigma) if np.isfinite(cue.sigma) else 1.0,
+                )
             else:
                 res = refine_posture(K, mirror, rvec, tvec, rim_px, lines_xn)
                 own, cap = res.line_rms, 3.0
             chi2 = 2.0 * (res.rim_cost - base.rim_cost) / var
             z_range = _z_range(mirror, res) if name == "reflection" else None
             if z_range is not None and not z_range[0] <= res.z <= z_range[1]:
-                rejected.append((name, f"the fitted circle lies at z = {res.z:.1f}, not between "
-                                       f"the camera and the mirror ({z_range[0]:.1f} to "
-                                       f"{z_range[1]:.1f})"))
+                rejected.append(
+                    (
+                        name,
+                        f"the fitted circle lies at z = {res.z:.1f}, not between "
+                        f"the camera and the mirror ({z_range[0]:.1f} to "
+                        f"{z_range[1]:.1f})",
+                    )
+                )
             elif chi2 > CUE_CHI2:
-                rejected.append((name, f"joining it raised the rim's RMS from {base.rim_rms:.3f} "
-                                       f"to {res.rim_rms:.3f} px (chi-square +{chi2:.0f}, "
-                                       f"allowed {CUE_CHI2:.0f})"))
+                rejected.append(
+                    (
+                        name,
+                        f"joining it raised the rim's RMS from {base.rim_rms:.3f} "
+                        f"to {res.rim_rms:.3f} px (chi-square +{chi2:.0f}, "
+                        f"allowed {CUE_CHI2:.0f})",
+                    )
+                )
             elif not own <= cap:
-                rejected.append((name, f"its own RMS residual after the joint fit is "
-                                       f"{own:.2f} px (allowed {cap:.2f})"))
+                rejected.append(
+                    (
+                        name,
+                        f"its own RMS residual after the joint fit is "
+                        f"{own:.2f} px (allowed {cap:.2f})",
+                    )
+                )
             else:
                 accepted.append(name)
                 kept = res
@@ -406,16 +447,32 @@ def refinement_step(K, mirror, cand, rim, lines_xn, cue, circle, refine=True):
         if kept is not None and "reflection" in accepted:
             final_circle = ReflectionCircle(kept.r, kept.z, kept.reflection_rms)
         else:
-            final_circle = fit_circle(mirror, R, tvec, cue.normalized, np.linalg.inv(K)[:2, :2],
-                                      r=cue.r, z=cue.z)
+            final_circle = fit_circle(
+                mirror, R, tvec, cue.normalized, np.linalg.inv(K)[:2, :2], r=cue.r, z=cue.z
+            )
     rim_sigma = kept.rim_rms if kept is not None else rim.fit.rms
     use_refl = "reflection" in accepted or (not refine and spec is not None and cue.used)
     unc = posture_uncertainty(
-        K, mirror, rvec, tvec, rim_px, rim_sigma,
+        K,
+        mirror,
+        rvec,
+        tvec,
+        rim_px,
+        rim_sigma,
         (spec[0], final_circle.r, final_circle.z, spec[3], spec[4]) if use_refl else None,
-        final_circle.rms if use_refl else None, floor=1e-9)
-    return Refinement(np.asarray(rvec, np.float64), np.asarray(tvec, np.float64), kept,
-                      tuple(accepted), tuple(rejected), unc, final_circle, tuple(skipped))
+        final_circle.rms if use_refl else None,
+        floor=1e-9,
+    )
+    return Refinement(
+        np.asarray(rvec, np.float64),
+        np.asarray(tvec, np.float64),
+        kept,
+        tuple(accepted),
+        tuple(rejected),
+        unc,
+        final_circle,
+        tuple(skipped),
+    )
 
 
 # -- 6. warnings -------------------------------------------------------------------------------
@@ -423,33 +480,46 @@ def warnings_step(rim, cue, selection, refinement, cands):
     """Everything a user must know before trusting the result, as a tuple of sentences."""
     out = list(rim.warnings) + list(selection.warnings)
     for name, why in refinement.rejected_cues:
-        out.append(f"the {name} disagree(s) with the rim and was left out of the refinement: "
-                   f"{why}; check it (the posture rests on the rim alone)")
+        out.append(
+            f"the {name} disagree(s) with the rim and was left out of the refinement: "
+            f"{why}; check it (the posture rests on the rim alone)"
+        )
     refl = selection.scores_per_cue.get("reflection rms px")
     if cue.used and refl:
         best = min(refl.values())
         limit = max(1.0, 5.0 * cue.sigma) if np.isfinite(cue.sigma) else 1.0
         if not best <= limit:
             where = selection.scores_per_cue.get("self-reflection px", {})
-            off = f"; the camera sees itself {min(where.values()):.0f} px or more from where " \
-                  f"the postures predict" if where else ""
-            out.append(f"the camera's reflection fits none of the rim's postures (best RMS "
-                       f"{best:.2f} px, allowed {limit:.2f}{off}): check K (the principal "
-                       f"point), D and the mirror's a, b and rim_radius")
+            off = (
+                f"; the camera sees itself {min(where.values()):.0f} px or more from where "
+                f"the postures predict"
+                if where
+                else ""
+            )
+            out.append(
+                f"the camera's reflection fits none of the rim's postures (best RMS "
+                f"{best:.2f} px, allowed {limit:.2f}{off}): check K (the principal "
+                f"point), D and the mirror's a, b and rim_radius"
+            )
     unc = refinement.uncertainty
     if unc.axis_std_deg > 0.5:
-        out.append(f"the posture is poorly determined: about {unc.axis_std_deg:.2f} deg (RMS) "
-                   f"on the mirror axis and {unc.origin_std:.2f} on the origin, mostly "
-                   f"{unc.describe()}; improve the boundary points or show the camera's "
-                   f"reflection")
+        out.append(
+            f"the posture is poorly determined: about {unc.axis_std_deg:.2f} deg (RMS) "
+            f"on the mirror axis and {unc.origin_std:.2f} on the origin, mostly "
+            f"{unc.describe()}; improve the boundary points or show the camera's "
+            f"reflection"
+        )
     others = [i for i in cands.physical if i != selection.chosen]
     if others and not selection.ambiguous and selection.costs_per_cue:
         a, b = cands.all[selection.chosen], cands.all[others[0]]
-        d_axis = math.degrees(math.atan2(np.linalg.norm(np.cross(a.axis, b.axis)),
-                                         float(a.axis @ b.axis)))
+        d_axis = math.degrees(
+            math.atan2(np.linalg.norm(np.cross(a.axis, b.axis)), float(a.axis @ b.axis))
+        )
         if d_axis > 0.01 and d_axis < 3.0 * unc.axis_std_deg:
-            out.append(f"the posture's uncertainty ({unc.axis_std_deg:.3f} deg on the axis) is "
-                       f"comparable with the separation of the two physical postures "
-                       f"({d_axis:.3f} deg): the choice may be wrong; improve the boundary "
-                       f"points")
+            out.append(
+                f"the posture's uncertainty ({unc.axis_std_deg:.3f} deg on the axis) is "
+                f"comparable with the separation of the two physical postures "
+                f"({d_axis:.3f} deg): the choice may be wrong; improve the boundary "
+                f"points"
+            )
     return tuple(out)
