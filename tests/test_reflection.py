@@ -227,3 +227,29 @@ def test_a_dark_floor_around_the_body_is_not_taken_for_it():
         xn, Ki2 = normalized(truth, fit.points)
         rho, g = reflection.plane_radius(truth.mirror, truth.R, truth.tvec, xn, Z_C, Ki2)
         assert math.sqrt(np.mean(((rho - R_C) / g) ** 2)) < 0.25, fit
+
+
+def test_an_outline_no_posture_explains_does_not_choose_and_warns():
+    truth = RIGS[4]
+    out, _ = reflection.outline_pixels(truth, R_C, Z_C, 64)
+    moved = out + (15.0, -10.0)  # where no posture of this rim puts the camera's reflection
+    _, report = calibrate(truth.K, truth.mirror, boundary_points=truth.rim_image_points(360),
+                          lens=moved)
+    assert report.ambiguous and report.confidence == 0.0
+    assert "reflection" not in report.steps["selection"].costs_per_cue
+    assert any("fits none of the rim's postures" in w for w in report.warnings)
+
+
+@pytest.mark.skipif(not REAL_PHOTO.exists(), reason="shared real photograph not available")
+def test_office_photo_with_a_guessed_K_says_that_no_posture_explains_the_reflection():
+    """K guessed (principal point at the rim centre, f from the rim's size, the default mirror):
+    both postures put the camera's self-reflection 22-24 px from the lens (outline RMS 6.5 and
+    5.3 px), so the reflection does not choose, and the report says to check K."""
+    image = cv2.imread(str(REAL_PHOTO))
+    rim = detect_rim(image)
+    m = synthetic.default_mirror()
+    f = float(np.mean(rim.axes)) * (m.z_rim + m.c) / m.rim_radius
+    K = np.array([[f, 0, rim.center[0]], [0, f, rim.center[1]], [0, 0, 1.0]])
+    _, report = calibrate(K, m, image=image)
+    assert report.lens_used and report.ambiguous
+    assert any("check K" in w for w in report.warnings)

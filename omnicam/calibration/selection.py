@@ -198,9 +198,9 @@ def select_candidate(candidates, make_camera, far_lines, lower_focus, reflection
     lower_focus : (3,) array_like
         ``(0, 0, -c)``, for the fallback without any cue.
     reflection : dict, optional
-        ``{"rms": {index: px}, "n": points, "sigma": px, "self_px": {index: px}}``: the
-        camera's reflection fitted under each physical candidate
-        (:func:`.reflection.fit_circle`).
+        ``{"rms": {index: px}, "n": points, "sigma": px, "self_px": {index: px}, "limit": px}``:
+        the camera's reflection fitted under each physical candidate
+        (:func:`.reflection.fit_circle`); it chooses only if the best RMS is within ``limit``.
 
     Returns
     -------
@@ -240,7 +240,17 @@ def select_candidate(candidates, make_camera, far_lines, lower_focus, reflection
             scores["reflection rms px"] = rms
             if reflection.get("self_px"):
                 scores["self-reflection px"] = dict(reflection["self_px"])
-            costs["reflection"] = reflection_costs(rms, reflection["n"], reflection["sigma"])
+            limit = float(reflection.get("limit", math.inf))
+            if min(rms.values()) <= limit:
+                costs["reflection"] = reflection_costs(rms, reflection["n"], reflection["sigma"])
+            else:  # no posture explains it: it cannot tell them apart either
+                where = reflection.get("self_px") or {}
+                off = (f"; the camera sees itself {min(where.values()):.0f} px or more from "
+                       f"where the postures predict" if where else "")
+                warnings.append(f"the camera's reflection fits none of the rim's postures "
+                                f"(best RMS {min(rms.values()):.2f} px, allowed {limit:.2f}{off}) "
+                                f"and was not used to choose: check K (the principal point), D "
+                                f"and the mirror's a, b and rim_radius")
     if len(phys) == 1:
         return Selection(tuple(scored), phys[0], 1.0, False, scores, costs, sigma,
                          tuple(warnings))

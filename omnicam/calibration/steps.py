@@ -284,6 +284,8 @@ def selection_step(cands, cue, lines, mirror, K, D, make_camera):
             "n": len(cue.normalized),
             "sigma": cue.sigma,
             "self_px": self_px,
+            # the reflection must fit some posture: 5x its own scatter, at least 1 px
+            "limit": max(1.0, 5.0 * cue.sigma) if np.isfinite(cue.sigma) else 1.0,
         }
     sel = select_candidate(cands.all, make_camera, lines, (0.0, 0.0, -mirror.c), spec)
     return sel, circles
@@ -484,23 +486,6 @@ def warnings_step(rim, cue, selection, refinement, cands):
             f"the {name} disagree(s) with the rim and was left out of the refinement: "
             f"{why}; check it (the posture rests on the rim alone)"
         )
-    refl = selection.scores_per_cue.get("reflection rms px")
-    if cue.used and refl:
-        best = min(refl.values())
-        limit = max(1.0, 5.0 * cue.sigma) if np.isfinite(cue.sigma) else 1.0
-        if not best <= limit:
-            where = selection.scores_per_cue.get("self-reflection px", {})
-            off = (
-                f"; the camera sees itself {min(where.values()):.0f} px or more from where "
-                f"the postures predict"
-                if where
-                else ""
-            )
-            out.append(
-                f"the camera's reflection fits none of the rim's postures (best RMS "
-                f"{best:.2f} px, allowed {limit:.2f}{off}): check K (the principal "
-                f"point), D and the mirror's a, b and rim_radius"
-            )
     unc = refinement.uncertainty
     if unc.axis_std_deg > 0.5:
         out.append(
