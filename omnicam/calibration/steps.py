@@ -453,7 +453,8 @@ def refinement_step(K, mirror, cand, rim, lines_xn, cue, circle, refine=True):
                 mirror, R, tvec, cue.normalized, np.linalg.inv(K)[:2, :2], r=cue.r, z=cue.z
             )
     rim_sigma = kept.rim_rms if kept is not None else rim.fit.rms
-    use_refl = "reflection" in accepted or (not refine and spec is not None and cue.used)
+    known = cue.r is not None or cue.z is not None  # else z trades with the tilt (above)
+    use_refl = "reflection" in accepted or (not refine and spec is not None and known)
     unc = posture_uncertainty(
         K,
         mirror,
