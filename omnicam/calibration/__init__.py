@@ -4,10 +4,11 @@
 
 1. **rim** (:func:`.steps.rim_step` -> ``RimStep``): the rim ellipse ``Q_I`` (eqs. 20-22),
    detected (:func:`.rim.detect_rim`) or fitted to given boundary points (undistorted with ``D``);
-2. **reflection cue** (:func:`.steps.reflection_step` -> ``ReflectionCue``): the outline of the
-   camera's own reflection (:mod:`.reflection`, beyond the paper), detected or given;
-3. **candidates** (:func:`.steps.candidates_step` -> ``Candidates``): Chen's four postures
+2. **candidates** (:func:`.steps.candidates_step` -> ``Candidates``): Chen's four postures
    (:mod:`.chen`, eqs. 23-29, 32-42), the impossible ones marked;
+3. **reflection cue** (:func:`.steps.reflection_step` -> ``ReflectionCue``): the outline of the
+   camera's own reflection (:mod:`.reflection`, beyond the paper), given, or detected around
+   the candidates' self-reflection pixels;
 4. **selection** (:func:`.steps.selection_step` -> :class:`.selection.Selection`): far lines
    (eq. 31) and the reflection (a coaxial circle fitted under each candidate), each cue's score
    per candidate, the combined confidence and an ``ambiguous`` flag;
@@ -113,13 +114,14 @@ def calibrate(K, mirror, image=None, boundary_points=None, far_lines=None, D=Non
     lines = selection.validate_far_lines(far_lines)
 
     rim = steps.rim_step(K, D, image, boundary_points)
-    cue = steps.reflection_step(lens, image, rim.detected or rim.fit, K, D, lens_r, lens_z)
     lines_xn = [steps.normalize(line, K, D) for line in lines]
     # far-line pixels outside the fitted rim by more than its noise cannot see the mirror
     selection.check_lines_inside_rim(
         [rim.fit.distance(x @ K[:2, :2].T + K[:2, 2]) for x in lines_xn],
         max(2.0, 3.0 * rim.fit.rms))
     cands = steps.candidates_step(rim, K, mirror)
+    cue = steps.reflection_step(lens, image, rim.detected or rim.fit, K, D, lens_r, lens_z,
+                                cands, mirror)
 
     def make_camera(c):
         return camera_cls(K, mirror, c.rvec, c.tvec, D=D, image_size=image_size)

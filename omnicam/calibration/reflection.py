@@ -350,7 +350,9 @@ def _rises(prof, dr, min_rise, dark_max, k=3):
     return np.nonzero(peak & strong)
 
 
-def detect_reflection(image, rim, *, center=None, max_radius=0.6, min_radius=0.03, rng=0):
+def detect_reflection(
+    image, rim, *, center=None, center_search=0.08, max_radius=0.6, min_radius=0.03, rng=0
+):
     """Find the outermost round dark silhouette around the image of the camera centre.
 
     1. Radial profiles from ``center`` (default the rim centre) out to ``max_radius`` times the
@@ -377,7 +379,10 @@ def detect_reflection(image, rim, *, center=None, max_radius=0.6, min_radius=0.0
     rim : RimFit
         The rim (its centre and size bound the search).
     center : (2,) array_like, optional
-        Where to look (e.g. a predicted self-reflection pixel); default the rim centre.
+        Where to look (e.g. the mean of the candidates' self-reflection pixels); default the rim
+        centre.
+    center_search : float
+        The silhouette's centre is sought within this many rim semi-axes of ``center``.
     max_radius, min_radius : float
         Search radii in units of the rim's minor semi-axis.
     rng : int or numpy.random.Generator
@@ -401,8 +406,11 @@ def detect_reflection(image, rim, *, center=None, max_radius=0.6, min_radius=0.0
         raise ValueError(
             f"rim must be a RimFit (from detect_rim or fit_rim), got {type(rim).__name__}"
         )
-    if not (0 < min_radius < max_radius <= 1.0):
-        raise ValueError("need 0 < min_radius < max_radius <= 1 (units of the rim's semi-axis)")
+    if not (0 < min_radius < max_radius <= 1.0) or not (0 <= center_search <= 0.5):
+        raise ValueError(
+            "need 0 < min_radius < max_radius <= 1 and 0 <= center_search <= 0.5 (units of "
+            "the rim's semi-axis)"
+        )
     gray = _gray(image)
     r_rim = float(min(rim.axes))
     c0 = np.asarray(rim.center if center is None else center, np.float64).reshape(2)
@@ -446,8 +454,8 @@ def detect_reflection(image, rim, *, center=None, max_radius=0.6, min_radius=0.0
         return ok.any() and float(np.mean(band[ok] < dark_max)) >= 0.8
 
     # 3. vote over centres and radii, one vote per (ray, radius bin)
-    half = 0.08 * r_rim
-    offs = np.linspace(-half, half, 9)
+    half = float(center_search) * r_rim
+    offs = np.linspace(-half, half, int(np.clip(np.ceil(half / (0.01 * r_rim)) + 1, 9, 31)))
     bw = max(2.0, 0.025 * R_max)
     nb = int(R_max / bw) + 2
     found = {}  # radius bin -> (support, centre): the best centre for each supported radius

@@ -183,8 +183,12 @@ class ReflectionCue:
         return self.points is not None
 
 
-def reflection_step(lens, image, rim, K, D, r=None, z=None):
+def reflection_step(lens, image, rim, K, D, r=None, z=None, cands=None, mirror=None):
     """Detect or take the outline of the camera's reflection; see :class:`ReflectionCue`.
+
+    With ``cands`` (and ``mirror``) the detection looks around the physical candidates' self-
+    reflection pixels (their mean, within their spread plus 8 % of the rim's semi-axis): a
+    tilted mirror moves the camera's reflection well away from the rim centre.
 
     ``lens`` is ``"auto"`` (detect in ``image``), ``None``/``False`` (not used) or an
     ``(M, 2)`` array of outline pixels.
@@ -212,7 +216,17 @@ def reflection_step(lens, image, rim, K, D, r=None, z=None):
                 "not used: no image (give lens=outline pixels to use it)",
             )
         try:
-            fit = detect_reflection(image, rim)
+            where = {}
+            if cands is not None and mirror is not None and cands.physical:
+                from .reflection import self_reflection_pixel
+
+                u = np.array([self_reflection_pixel(mirror, cands.all[i].R, cands.all[i].tvec,
+                                                    K, D) for i in cands.physical])
+                if np.isfinite(u).all():
+                    c = u.mean(axis=0)
+                    spread = float(np.linalg.norm(u - c, axis=1).max()) / float(min(rim.axes))
+                    where = {"center": c, "center_search": min(0.5, 0.08 + spread)}
+            fit = detect_reflection(image, rim, **where)
         except EstimationError as err:  # optional: the report says why it was not used
             return ReflectionCue(None, None, None, sigma, r, z, f"not used: {err}")
         px, sigma = np.asarray(fit.points, np.float64), float(fit.rms)
