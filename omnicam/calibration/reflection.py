@@ -425,11 +425,17 @@ def detect_reflection(
     radii = np.arange(0.0, R_max, dr)
     prof = _polar(G, c0, radii, ang)
     # levels: the dark centre and the mirror's scene (a ring well inside the rim)
-    dark = float(np.nanmedian(prof[:, radii < max(R_min, 0.05 * r_rim)]))
+    centre = prof[:, radii < max(R_min, 0.05 * r_rim)]
     ring = _polar(G, c0, np.linspace(0.7, 0.9, 16) * r_rim, ang)
-    scene = float(np.nanmedian(ring))
+    near = np.abs(np.diff(_polar(gray, c0, radii[:40], ang), axis=1))
+    if min(np.isfinite(a).sum() for a in (centre, ring, near)) < 16:
+        raise EstimationError(
+            f"no camera reflection found: the place to look, ({c0[0]:.0f}, {c0[1]:.0f}), is "
+            f"not in the image"
+        )
+    dark, scene = float(np.nanmedian(centre)), float(np.nanmedian(ring))
     contrast = scene - dark
-    noise = 1.4826 * float(np.nanmedian(np.abs(np.diff(_polar(gray, c0, radii[:40], ang), axis=1))))
+    noise = 1.4826 * float(np.nanmedian(near))
     if not (np.isfinite(contrast) and contrast > max(10.0, 4.0 * noise)):
         raise EstimationError(
             f"no camera reflection found: the centre (grey {dark:.0f}) is not clearly darker "
