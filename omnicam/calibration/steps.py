@@ -454,9 +454,7 @@ def refinement_step(K, mirror, cand, rim, lines_xn, cue, circle, refine=True):
                 accepted.append(name)
                 kept = res
         rvec, tvec = kept.rvec, kept.tvec
-    from ..camera import canonical_rvec
-
-    rvec = canonical_rvec(rvec)
+    # the candidates (chen) and refine_posture (gauge_rotation) already return the gauge
     R = cv2.Rodrigues(np.asarray(rvec, np.float64).reshape(3, 1))[0]
     final_circle = None
     if cue.used:
