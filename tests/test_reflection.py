@@ -253,3 +253,16 @@ def test_office_photo_with_a_guessed_K_says_that_no_posture_explains_the_reflect
     _, report = calibrate(K, m, image=image)
     assert report.lens_used and report.ambiguous
     assert any("check K" in w for w in report.warnings)
+
+
+def test_self_reflection_pixel_with_distortion_is_the_seen_pixel():
+    truth = conftest_rig("distorted")
+    u = reflection.self_reflection_pixel(truth.mirror, truth.R, truth.tvec, truth.K, truth.D)
+    P, V = truth.unproject(u[None])  # unproject undistorts: the ray must come back to C
+    assert np.linalg.norm(np.cross(truth.camera_center - P[0], V[0])) < 1e-6
+
+
+def conftest_rig(name):
+    import conftest
+
+    return conftest.RIGS[name]

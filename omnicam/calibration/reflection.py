@@ -104,7 +104,7 @@ def self_reflection_pixel(mirror, R, t, K, D=None):
     if D is not None:
         from ..raytrace import distort_normalized
 
-        xn = distort_normalized(xn[None], K, D)[0]
+        return distort_normalized(xn[None], K, D)[0]  # distorted, then K
     return K[:2, :2] @ xn + K[:2, 2]
 
 
