@@ -301,8 +301,10 @@ def selection_step(cands, cue, lines, mirror, K, D, make_camera):
             "n": len(cue.normalized),
             "sigma": cue.sigma,
             "self_px": self_px,
-            # the reflection must fit some posture: 5x its own scatter, at least 1 px
-            "limit": max(1.0, 5.0 * cue.sigma) if np.isfinite(cue.sigma) else 1.0,
+            # the reflection must fit some posture: within 5x its own scatter, at least 2 px
+            # (the analytic posture is off along the rim's weak direction, which moves the
+            # predicted outline by 1-2 px on realistic renders; a wrong K moves it by 5+)
+            "limit": max(2.0, 5.0 * cue.sigma) if np.isfinite(cue.sigma) else 2.0,
         }
     sel = select_candidate(cands.all, make_camera, lines, (0.0, 0.0, -mirror.c), spec)
     return sel, circles
