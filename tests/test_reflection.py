@@ -233,8 +233,9 @@ def test_an_outline_no_posture_explains_does_not_choose_and_warns():
     truth = RIGS[4]
     out, _ = reflection.outline_pixels(truth, R_C, Z_C, 64)
     moved = out + (15.0, -10.0)  # where no posture of this rim puts the camera's reflection
-    _, report = calibrate(truth.K, truth.mirror, boundary_points=truth.rim_image_points(360),
-                          lens=moved)
+    _, report = calibrate(
+        truth.K, truth.mirror, boundary_points=truth.rim_image_points(360), lens=moved
+    )
     assert report.ambiguous and report.confidence == 0.0
     assert "reflection" not in report.steps["selection"].costs_per_cue
     assert any("fits none of the rim's postures" in w for w in report.warnings)

@@ -50,7 +50,6 @@ import math
 import cv2
 import numpy as np
 
-
 __all__ = ["RefineResult", "Uncertainty", "RimTerm", "FarLineTerm", "ReflectionTerm",
            "refine_posture", "posture_uncertainty", "gauge_rotation"]
 

@@ -223,8 +223,12 @@ def reflection_step(lens, image, rim, K, D, r=None, z=None, cands=None, mirror=N
             if cands is not None and mirror is not None and cands.physical:
                 from .reflection import self_reflection_pixel
 
-                u = np.array([self_reflection_pixel(mirror, cands.all[i].R, cands.all[i].tvec,
-                                                    K, D) for i in cands.physical])
+                u = np.array(
+                    [
+                        self_reflection_pixel(mirror, cands.all[i].R, cands.all[i].tvec, K, D)
+                        for i in cands.physical
+                    ]
+                )
                 if np.isfinite(u).all():
                     c = u.mean(axis=0)
                     spread = float(np.linalg.norm(u - c, axis=1).max()) / float(min(rim.axes))
@@ -506,10 +510,12 @@ def warnings_step(rim, cue, selection, refinement, cands):
         )
     unc = refinement.uncertainty
     if AXIS_WARN_DEG < unc.axis_std_deg <= 0.5:
-        out.append(f"the mirror axis is uncertain by about {unc.axis_std_deg:.2f} deg (RMS; "
-                   f"errors of {2 * unc.axis_std_deg:.2f} deg are plausible), mostly "
-                   f"{unc.describe()}; the camera's reflection pins it when its circle's z or r "
-                   f"is given (lens_z, lens_r)")
+        out.append(
+            f"the mirror axis is uncertain by about {unc.axis_std_deg:.2f} deg (RMS; "
+            f"errors of {2 * unc.axis_std_deg:.2f} deg are plausible), mostly "
+            f"{unc.describe()}; the camera's reflection pins it when its circle's z or r "
+            f"is given (lens_z, lens_r)"
+        )
     if unc.axis_std_deg > 0.5:
         out.append(
             f"the posture is poorly determined: about {unc.axis_std_deg:.2f} deg (RMS) "
