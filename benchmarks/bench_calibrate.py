@@ -14,8 +14,8 @@ random rigs (tilt <= 5 deg, offset <= 5 mm, camera >= 0.1 mm off the axis) with 
 points (refine off and on), then a sweep of Gaussian rim noise, each with 3 exact far lines:
 worst/RMS axis and origin errors, how often the true candidate is chosen, and whether every
 wrong choice came with a warning; then the same sweep without far lines but with the exact
-outline of the camera's reflection (a 10 mm ball, 64 points) given as ``lens``, with the same
-noise on it.
+outline of the camera's reflection (a circle of 9 mm at 12 mm, 64 points) given as ``lens``
+with the same noise on it (z fitted).
 
     python benchmarks/bench_calibrate.py --accuracy 100
 """
@@ -27,7 +27,7 @@ import time
 import numpy as np
 
 from omnicam import MisalignedHyperbolicCamera, synthetic
-from omnicam.calibration.lens import outline_pixels
+from omnicam.calibration.reflection import outline_pixels
 from omnicam.calibration.rim import detect_rim
 
 
@@ -115,10 +115,10 @@ def accuracy(n, seed):
         sweep_row(rigs, sigma, lambda truth, sigma: dict(
             boundary_points=truth.rim_image_points(360) + rng.normal(size=(360, 2)) * sigma,
             far_lines=synthetic.far_line_pixels(truth, rng=rng)))
-    print("the same without far lines, with the camera's reflection (exact outline of a 10 mm "
-          "ball, 64 points, same noise) as lens; RMS over rigs")
+    print("the same without far lines, with the camera's reflection (exact outline of a "
+          "coaxial circle r 9 at z 12, 64 points, same noise, z fitted) as lens; RMS over rigs")
     print(SWEEP_HEADER)
-    outlines = {id(truth): outline_pixels(truth, 10.0, 64)[0] for truth in rigs}
+    outlines = {id(truth): outline_pixels(truth, 9.0, 12.0, 64)[0] for truth in rigs}
     for sigma in (0.0, 0.05, 0.1, 0.2, 0.4, 0.8):
         sweep_row(rigs, sigma, lambda truth, sigma: dict(
             boundary_points=truth.rim_image_points(360) + rng.normal(size=(360, 2)) * sigma,
@@ -171,7 +171,7 @@ def main(argv=None):
                   f"{axis:.4f} deg, origin error {origin:.4f} mm, chosen {report.chosen} "
                   f"(confidence {report.confidence:.3f}), RMS uncertainty "
                   f"{report.axis_std_deg:.3f} deg, lens "
-                  f"{'rho %.2f' % report.rho if report.lens_used else 'off'}, "
+                  f"{'r %.2f' % report.lens_r if report.lens_used else 'off'}, "
                   f"{len(report.warnings)} warning(s)")
     worst = max(medians)
     print(f"slowest median of the default use: {worst * 1e3:.1f} ms (target <= 500 ms): "

@@ -333,7 +333,9 @@ def test_rendered_images_give_the_axis_within_0_05_deg_and_origin_within_0_1_mm(
         cam, report = MisalignedHyperbolicCamera.calibrate(truth.K, truth.mirror, image=image,
                                                            far_lines=lines)
         axis, origin = posture_errors(cam, truth)
-        assert chose_true_candidate(report, truth) and report.warnings == []
+        assert chose_true_candidate(report, truth)
+        # at most the note that the axis is uncertain by ~0.05 deg (RMS), which it is
+        assert all(w.startswith("the mirror axis is uncertain") for w in report.warnings)
         assert cam.image_size == (1000, 1000)
         assert axis < 0.05, axis      # degrees
         assert origin < 0.1, origin   # mm

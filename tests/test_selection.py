@@ -5,15 +5,15 @@ import numpy as np
 import pytest
 
 from omnicam import synthetic
-from omnicam.calibration import selection
+from omnicam.calibration import EstimationError, selection
 from test_chen import RIGS, candidates_of
 
 
 def _select(cam, lines):
     def make(c):
         return cam.replace(rvec=c.rvec, tvec=c.tvec)
-    return selection.select_candidate(candidates_of(cam), make, lines,
-                                      (0.0, 0.0, -cam.mirror.c))
+    sel = selection.select_candidate(candidates_of(cam), make, lines, (0.0, 0.0, -cam.mirror.c))
+    return list(sel.candidates), sel.chosen, sel.confidence, list(sel.warnings)
 
 
 def test_far_lines_select_the_true_candidate_on_100_random_rigs():
@@ -91,7 +91,7 @@ def test_far_line_outside_the_rim_raises():
 def test_no_physical_candidate_raises():
     cam = RIGS[0]
     cands = [c.__class__(**{**c.__dict__, "physical": False}) for c in candidates_of(cam)]
-    with pytest.raises(ValueError, match="physically possible"):
+    with pytest.raises(EstimationError, match="physically possible"):
         selection.select_candidate(cands, None, [], (0, 0, -cam.mirror.c))
 
 
@@ -101,29 +101,52 @@ def test_single_physical_candidate_has_full_confidence():
     first = next(i for i, c in enumerate(cands) if c.physical)
     cands = [c if i == first else c.__class__(**{**c.__dict__, "physical": False})
              for i, c in enumerate(cands)]
-    _, chosen, conf, warnings = selection.select_candidate(cands, None, [], (0, 0, -cam.mirror.c))
-    assert chosen == first and conf == 1.0 and not warnings
+    sel = selection.select_candidate(cands, None, [], (0, 0, -cam.mirror.c))
+    assert sel.chosen == first and sel.confidence == 1.0 and not sel.warnings
+    assert not sel.ambiguous
 
 
-def test_lens_scores_choose_without_far_lines_and_join_the_far_lines():
+def test_reflection_costs_are_the_outline_separation_in_sigma():
+    # two candidates 0.1 px and 0.3 px RMS, 200 points of 0.1 px scatter: 100 (0.09 - 0.01)
+    # / 0.01 = 800 chi-square units, about 28 sigma
+    c = selection.reflection_costs({0: 0.1, 1: 0.3}, 200, 0.1)
+    assert c[0] == 0.0 and c[1] == pytest.approx(800.0)
+    # the best candidate's own misfit counts as noise: 1.0 vs 1.2 px over 200 points
+    c = selection.reflection_costs({0: 1.0, 1: 1.2}, 200, 0.1)
+    assert c[1] == pytest.approx(100 * 0.44)
+
+
+def test_reflection_chooses_without_far_lines_and_adds_to_the_far_lines():
     cam = RIGS[5]
     cands = candidates_of(cam)
     phys = [i for i, c in enumerate(cands) if c.physical]
     true = min(phys, key=lambda i: np.linalg.norm(cands[i].tvec - cam.tvec))
     other = next(i for i in phys if i != true)
-    lens = {true: 0.1, other: 2.0}  # RMS outline residuals, px
-    _, chosen, conf, warnings = selection.select_candidate(cands, None, [], (0, 0, -cam.mirror.c),
-                                                           lens)
-    assert chosen == true and conf == pytest.approx(0.95) and not warnings
-    # barely separated: chosen, with a warning
-    _, _, conf, warnings = selection.select_candidate(cands, None, [], (0, 0, -cam.mirror.c),
-                                                      {true: 1.0, other: 1.2})
-    assert conf < selection.LENS_AMBIGUOUS_CONFIDENCE and warnings
-    # with far lines both kinds of score count (each normalised by its largest value)
+    spec = {"rms": {true: 0.1, other: 0.3}, "n": 200, "sigma": 0.1, "self_px": {}}
+    sel = selection.select_candidate(cands, None, [], (0, 0, -cam.mirror.c), spec)
+    assert sel.chosen == true and sel.confidence > 0.99 and not sel.ambiguous
+    assert sel.sigma["reflection"] == pytest.approx(math.sqrt(800.0))
+    assert sel.scores_per_cue["reflection rms px"] == {true: 0.1, other: 0.3}
+    # barely separated (1.5 sigma): chosen, flagged ambiguous, with a warning
+    spec = {"rms": {true: 0.1, other: 0.1 * math.sqrt(1 + 2.25 / 100)}, "n": 200,
+            "sigma": 0.1}
+    sel = selection.select_candidate(cands, None, [], (0, 0, -cam.mirror.c), spec)
+    assert sel.chosen == true and sel.ambiguous and sel.warnings
+    assert sel.sigma["reflection"] == pytest.approx(1.5)
+
     def make(c):
         return cam.replace(rvec=c.rvec, tvec=c.tvec)
+
+    # with far lines both cues' costs add up; each cue's scores are listed
     lines = synthetic.far_line_pixels(cam, rng=2)
-    scored, chosen, conf, _ = selection.select_candidate(cands, make, lines,
-                                                         (0, 0, -cam.mirror.c), lens)
-    assert chosen == true and conf > 0.9
-    assert all(np.isfinite(scored[i].score) for i in phys)  # eq. 31 scores kept
+    sel = selection.select_candidate(cands, make, lines, (0, 0, -cam.mirror.c), spec)
+    assert sel.chosen == true and sel.confidence > 0.9 and not sel.ambiguous
+    assert set(sel.costs_per_cue) == {"far lines", "reflection"}
+    assert all(np.isfinite(sel.candidates[i].score) for i in phys)  # eq. 31 scores kept
+
+
+def test_far_lines_alone_give_the_papers_confidence():
+    cam = RIGS[7]
+    cands, chosen, conf, _ = _select(cam, synthetic.far_line_pixels(cam, n_lines=1, rng=3))
+    phys = sorted(c.score for c in cands if c.physical)
+    assert conf == pytest.approx(1.0 - phys[0] / phys[1], abs=1e-9)

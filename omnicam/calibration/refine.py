@@ -13,7 +13,14 @@ Started from the analytic posture of Chen's method (:mod:`.chen`), it minimises,
   ``(V_i, n_i)`` with ``n_i = unit((Q - P_i) x e)``, converted to pixels by the local
   derivative of that sine with respect to the pixel. It is exactly zero when the rays meet the
   line at any distance (eq. 31's coplanarity of directions is only the limit of a line at
-  infinity and would bias a refinement).
+  infinity and would bias a refinement);
+* **the camera's reflection** (optional, :mod:`.reflection`): for each outline pixel the radius
+  at which its reflected ray crosses the plane ``z_c = z`` of the coaxial circle, minus ``r``,
+  in pixels by the local derivative; ``r`` and ``z`` nuisance parameters unless known.
+
+Each kind of residual is one class (:class:`RimTerm`, :class:`FarLineTerm`,
+:class:`ReflectionTerm`) with ``residuals(R, t, y)`` and ``jacobian(posture, x, y, steps)``
+(posture columns, own nuisance columns); ``_Problem`` stacks the terms it is given.
 
 Parameters: two small rotations of the mirror axis (about two axes perpendicular to it), the
 three components of the mirror origin ``tvec``, and per line a rotation of ``e`` (2) and a shift
@@ -32,6 +39,8 @@ on the default rigs three far lines shrink the axis uncertainty by well under 1 
 
 The result is kept only if its cost is lower than the cost of the analytic posture (with the
 line parameters fitted to it), so refinement never makes an exact analytic result worse.
+Whether a cue may join the rim at all is decided by :func:`.steps.refinement_step`;
+:func:`posture_uncertainty` gives the a posteriori covariance and its weakest direction.
 """
 from __future__ import annotations
 
@@ -41,10 +50,11 @@ import math
 import cv2
 import numpy as np
 
-
-__all__ = ["RefineResult", "refine_posture", "posture_uncertainty", "gauge_rotation"]
+__all__ = ["RefineResult", "Uncertainty", "RimTerm", "FarLineTerm", "ReflectionTerm",
+           "refine_posture", "posture_uncertainty", "gauge_rotation"]
 
 _N_POSTURE = 5
+_STEPS = np.array([1e-7, 1e-7, 1e-6, 1e-6, 1e-6])  # posture steps of the difference quotients
 
 
 @dataclasses.dataclass(frozen=True, eq=False)
@@ -68,11 +78,15 @@ class RefineResult:
         The fitted 3-D lines ``(Q, e)`` in the mirror frame.
     nfev : int
         Residual evaluations of the solver.
-    lens_rms : float
-        RMS outline residual of the camera's reflection for the kept posture, px (NaN without
-        the lens).
-    rho : float
-        Fitted radius of the ball that models the camera body (NaN without the lens).
+    reflection_rms : float
+        RMS outline residual of the camera's reflection for the kept posture, px (NaN without).
+    r, z : float
+        The reflection's coaxial circle (NaN without).
+    rim_cost, rim_cost_initial : float
+        ``0.5 * sum(rim residual^2)`` (robust weights) at the kept and at the starting posture:
+        how much the other terms moved the rim (the acceptance test of a cue).
+    n_rim : int
+        Number of rim rows.
     """
 
     rvec: np.ndarray
@@ -84,8 +98,12 @@ class RefineResult:
     line_rms: float
     lines: list
     nfev: int
-    lens_rms: float = math.nan
-    rho: float = math.nan
+    reflection_rms: float = math.nan
+    r: float = math.nan
+    z: float = math.nan
+    rim_cost: float = math.nan
+    rim_cost_initial: float = math.nan
+    n_rim: int = 0
 
 
 def gauge_rotation(axis):
@@ -146,41 +164,44 @@ def _rotate(v, w):
     return v * math.cos(th) + np.cross(k, v) * math.sin(th) + k * (k @ v) * (1 - math.cos(th))
 
 
-class _Problem:
-    """Residuals of the refinement; see the module docstring."""
+class _Posture:
+    """The 5 posture parameters: two small rotations of the mirror axis about axes
+    perpendicular to it, and the shift of ``tvec`` (the rotation about the axis is the gauge)."""
 
-    def __init__(self, K, mirror, R0, t0, rim_px, lines_xn, lens_xn=None):
+    def __init__(self, R0, t0):
+        self.a0 = R0[:, 2] / np.linalg.norm(R0[:, 2])
+        self.b1, self.b2 = _perp_basis(self.a0)
+        self.t0 = np.asarray(t0, np.float64)
+
+    def __call__(self, x):
+        axis = _rotate(self.a0, x[0] * self.b1 + x[1] * self.b2)
+        return gauge_rotation(axis), self.t0 + x[2:5]
+
+
+class RimTerm:
+    """Rim reprojection rows: orthogonal pixel distance of each boundary point to the image of
+    the rim circle ``c(phi) = K pi(R rho(phi) + t)``, ``phi`` the foot point (Newton, variable
+    projection), optionally Huber-weighted (weights fixed at the start). No nuisance parameter.
+    The Jacobian follows from the envelope theorem at the foot points."""
+
+    name = "rim"
+    n_nuisance = 0
+
+    def __init__(self, K, mirror, R0, t0, rim_px):
         self.K = K
         self.A = K[:2, :2]
         self.k = K[:2, 2]
         self.mirror = mirror
-        self.a0 = R0[:, 2] / np.linalg.norm(R0[:, 2])
-        self.b1, self.b2 = _perp_basis(self.a0)
-        self.t0 = np.asarray(t0, np.float64)
-        self.rim_px = rim_px
-        self.lines_xn = lines_xn
+        self.px = rim_px
         self.phi0 = self._foot_points(R0, t0, init=True)
-        self.rim_w = np.ones(len(rim_px))  # sqrt of the robust weights of the rim rows
-        self.line0 = []
-        self.line_scale = []
-        self._ray_cache = (None,)
-        self.lens_xn = None if lens_xn is None or len(lens_xn) == 0 else lens_xn
-        self.n_y = 4 * len(lines_xn)  # line parameters follow the posture; then rho
-        if self.lens_xn is not None:
-            from .lens import fit_rho, ray_distances
-            self.Kinv2 = np.linalg.inv(K)[:2, :2]
-            d, g = ray_distances(mirror, R0, t0, self.lens_xn, self.Kinv2)
-            ok = np.isfinite(d) & np.isfinite(g) & (g > 0)
-            # pixel scale of each outline row: 1 / |grad_u d| at the starting posture
-            self.lens_scale = np.where(ok, 1.0 / np.where(ok, g, 1.0), 0.0)
-            self.rho0 = fit_rho(d, g)
+        self.w = np.ones(len(rim_px))  # sqrt of the robust weights
 
-    # posture ----------------------------------------------------------------------------
-    def posture(self, x):
-        axis = _rotate(self.a0, x[0] * self.b1 + x[1] * self.b2)
-        return gauge_rotation(axis), self.t0 + x[2:5]
+    def __len__(self):
+        return len(self.px)
 
-    # rim --------------------------------------------------------------------------------
+    def x0(self):
+        return np.zeros(0)
+
     def _curve(self, R, t, phi):
         """Rim image ``c(phi)`` and its first two derivatives, as component pairs of (N,)."""
         r, zr = self.mirror.rim_radius, self.mirror.z_rim
@@ -189,14 +210,16 @@ class _Problem:
         for i in range(3):
             a, b = R[i, 0] * cp, R[i, 1] * sp
             X.append(r * (a + b) + (R[i, 2] * zr + t[i]))  # R rho + t
-            X1.append(r * (R[i, 1] * cp - R[i, 0] * sp))   # R rho'
-            X2.append(-r * (a + b))                          # R rho''
+            X1.append(r * (R[i, 1] * cp - R[i, 0] * sp))  # R rho'
+            X2.append(-r * (a + b))  # R rho''
         iz = 1.0 / X[2]
         A, k = self.A, self.k
         p = [X[0] * iz, X[1] * iz]
         p1 = [(X1[0] - p[0] * X1[2]) * iz, (X1[1] - p[1] * X1[2]) * iz]
-        p2 = [(X2[0] - p[0] * X2[2] - 2.0 * p1[0] * X1[2]) * iz,
-              (X2[1] - p[1] * X2[2] - 2.0 * p1[1] * X1[2]) * iz]
+        p2 = [
+            (X2[0] - p[0] * X2[2] - 2.0 * p1[0] * X1[2]) * iz,
+            (X2[1] - p[1] * X2[2] - 2.0 * p1[1] * X1[2]) * iz,
+        ]
 
         def img(q, off):
             return (A[0, 0] * q[0] + A[0, 1] * q[1] + off[0],
@@ -205,11 +228,11 @@ class _Problem:
         return img(p, k), img(p1, (0.0, 0.0)), img(p2, (0.0, 0.0))
 
     def _foot_points(self, R, t, init=False, phi=None, iters=3):
-        ux, uy = self.rim_px[:, 0], self.rim_px[:, 1]
+        ux, uy = self.px[:, 0], self.px[:, 1]
         if init:
             # start at the rim point on the pixel's ray (exact for exact data)
             Ki = np.linalg.inv(self.K)
-            xh = np.concatenate([self.rim_px, np.ones((len(ux), 1))], axis=1) @ Ki.T
+            xh = np.concatenate([self.px, np.ones((len(ux), 1))], axis=1) @ Ki.T
             a = xh @ R  # R^T x~
             b = R.T @ t
             with np.errstate(divide="ignore", invalid="ignore"):
@@ -226,43 +249,94 @@ class _Problem:
             phi = phi - g / np.where(h > 0, h, h1)
         return phi
 
-    def _rim_normals(self, R, t, phi):
+    def _normals(self, R, t, phi):
         (cx, cy), (dx, dy), _ = self._curve(R, t, phi)
         nn = np.hypot(dx, dy)
         return cx, cy, dy / nn, -dx / nn
 
-    def rim_residuals(self, R, t):
+    def residuals(self, R, t, y=None, weighted=True):
         phi = self._foot_points(R, t, phi=self.phi0)
-        cx, cy, nx, ny = self._rim_normals(R, t, phi)
-        return ((self.rim_px[:, 0] - cx) * nx + (self.rim_px[:, 1] - cy) * ny) * self.rim_w
+        cx, cy, nx, ny = self._normals(R, t, phi)
+        r = (self.px[:, 0] - cx) * nx + (self.px[:, 1] - cy) * ny
+        return r * self.w if weighted else r
 
     def set_robust_weights(self, R, t, k=2.0):
-        """Huber weights of the rim rows from their residuals at ``(R, t)``, fixed thereafter
-        (one reweighting step): ``w = min(1, k s / |r|)``, ``s = 1.4826 MAD``."""
-        self.rim_w = np.ones(len(self.rim_px))
-        r = np.abs(self.rim_residuals(R, t))
+        """Huber weights from the residuals at ``(R, t)``, fixed thereafter (one reweighting
+        step): ``w = min(1, k s / |r|)``, ``s = 1.4826 MAD``."""
+        self.w = np.ones(len(self.px))
+        r = np.abs(self.residuals(R, t))
         s = 1.4826 * float(np.median(r))
         if s > 0:
-            self.rim_w = np.sqrt(np.minimum(1.0, k * s / np.maximum(r, 1e-300)))
+            self.w = np.sqrt(np.minimum(1.0, k * s / np.maximum(r, 1e-300)))
 
-    # lines ------------------------------------------------------------------------------
-    def rays(self, R, t, xn):
-        """Reflected rays of normalised coordinates (eqs. 6-19), in numpy: the line sets are
-        small and this runs hundreds of times (no thread start-up per call)."""
-        C = -R.T @ t  # F_M (eq. 17)
-        V = np.concatenate([xn, np.ones((len(xn), 1))], axis=1) @ R  # V_M = R^T V_C (eq. 16)
-        V /= np.linalg.norm(V, axis=1, keepdims=True)
-        P = self.mirror.intersect(C, V)  # eqs. 8-12
-        return P, self.mirror.reflect(V, self.mirror.unit_normal(P))  # eqs. 14-15
+    def jacobian(self, posture, x, y, steps):
+        """Posture columns (5): ``d dist / d p = -n . dc/dp`` at the foot points, ``dc/dR`` by
+        differences of ``R`` and ``dc/dt`` analytic."""
+        R, t = posture(x)
+        phi = self._foot_points(R, t, phi=self.phi0)
+        cx, cy, nx, ny = self._normals(R, t, phi)
+        J = np.zeros((len(self.px), _N_POSTURE))
+        for k in range(2):
+            xk = x.copy()
+            xk[k] += steps[k]
+            Rk, _ = posture(xk)
+            (ckx, cky), _, _ = self._curve(Rk, t, phi)
+            J[:, k] = -((ckx - cx) * nx + (cky - cy) * ny) / steps[k] * self.w
+        r, zr = self.mirror.rim_radius, self.mirror.z_rim
+        rho = np.stack([r * np.cos(phi), r * np.sin(phi), np.full_like(phi, zr)], axis=1)
+        X = rho @ R.T + t
+        z = X[:, 2]
+        # n^T A, then d pi / d t = [[1/z, 0, -x/z^2], [0, 1/z, -y/z^2]]
+        m0 = nx * self.A[0, 0] + ny * self.A[1, 0]
+        m1 = nx * self.A[0, 1] + ny * self.A[1, 1]
+        J[:, 2] = -m0 / z * self.w
+        J[:, 3] = -m1 / z * self.w
+        J[:, 4] = (m0 * X[:, 0] + m1 * X[:, 1]) / z**2 * self.w
+        return J, np.zeros((len(self.px), 0))
 
-    def init_lines(self, R, t, depth):
+
+def _rays(mirror, R, t, xn):
+    """Reflected rays of normalised coordinates (eqs. 6-19) in the mirror frame, in numpy: the
+    sets are small and this runs hundreds of times (no thread start-up per call)."""
+    C = -R.T @ t  # F_M (eq. 17)
+    V = np.concatenate([xn, np.ones((len(xn), 1))], axis=1) @ R  # V_M = R^T V_C (eq. 16)
+    V /= np.linalg.norm(V, axis=1, keepdims=True)
+    P = mirror.intersect(C, V)  # eqs. 8-12
+    return P, mirror.reflect(V, mirror.unit_normal(P))  # eqs. 14-15
+
+
+class FarLineTerm:
+    """Far-line rows: every far line is one 3-D line ``L = {Q + s e}`` (4 nuisance parameters:
+    a rotation of ``e`` and a shift of ``Q``), and each traced ray ``(P_i, V_i)`` of its pixels
+    must meet it; residual ``(V_i, n_i)``, ``n_i = unit((Q - P_i) x e)``, in pixels by the local
+    derivative with respect to the pixel at the start (exact at any distance of the line, where
+    eq. 31 is only the limit of a line at infinity)."""
+
+    name = "far lines"
+
+    def __init__(self, K, mirror, R0, t0, lines_xn, depth):
+        self.K = K
+        self.mirror = mirror
+        self.lines_xn = lines_xn
+        self.n_nuisance = 4 * len(lines_xn)
+        self._cache = (None,)
+        self._init_lines(R0, t0, depth)
+
+    def __len__(self):
+        return sum(len(x) for x in self.lines_xn)
+
+    def x0(self):
+        return np.zeros(self.n_nuisance)
+
+    def _init_lines(self, R, t, depth):
         """Initial 3-D lines from the rays of the analytic posture (eqs. 30-31)."""
-        self.line0, self.line_scale = [], []
+        self.line0 = []
+        self.scale = np.ones(len(self))
         for xn in self.lines_xn:
-            P, V = self.rays(R, t, xn)
+            P, V = _rays(self.mirror, R, t, xn)
             ok = np.isfinite(V).all(axis=1)
             P, V = P[ok], V[ok]
-            w, E = np.linalg.eigh(V.T @ V)
+            _, E = np.linalg.eigh(V.T @ V)
             N = E[:, 0]  # normal of the plane of the rays  (eq. 31)
             p = P.mean(axis=0)
             m = np.cross(N, V[0])
@@ -278,135 +352,180 @@ class _Problem:
             f2 = np.cross(e0, f1)
             self.line0.append((Qa, e0, f1, f2, depth))
         # pixel scale of each residual: 1 / |d residual / d pixel| at the analytic posture
-        zero = np.zeros(4 * len(self.lines_xn))
-        base = self.line_residuals(R, t, zero, scaled=False)
+        zero = self.x0()
+        base = self._raw(R, t, zero, self.lines_xn)
         h = 1e-4
+        Ki = np.linalg.inv(self.K)
         grads = []
         for dx in ((h, 0.0), (0.0, h)):
-            shifted = []
-            for xn in self.lines_xn:
-                Ki = np.linalg.inv(self.K)
-                shifted.append(xn + np.array(dx) @ Ki[:2, :2].T)
-            grads.append((self.line_residuals(R, t, zero, scaled=False, lines_xn=shifted)
-                          - base) / h)
+            shifted = [xn + np.array(dx) @ Ki[:2, :2].T for xn in self.lines_xn]
+            grads.append((self._raw(R, t, zero, shifted) - base) / h)
         g = np.hypot(grads[0], grads[1])
-        self.line_scale = np.where(g > 0, 1.0 / np.where(g > 0, g, 1.0), 0.0)
+        self.scale = np.where(g > 0, 1.0 / np.where(g > 0, g, 1.0), 0.0)
 
     def line(self, i, y):
         Qa, e0, f1, f2, depth = self.line0[i]
         e = e0 + y[0] * f1 + y[1] * f2
         e /= np.linalg.norm(e)
-        Q = Qa + depth * (y[2] * f1 + y[3] * f2)
-        return Q, e
+        return Qa + depth * (y[2] * f1 + y[3] * f2), e
 
-    def line_residuals(self, R, t, y, scaled=True, lines_xn=None):
-        lines_xn = self.lines_xn if lines_xn is None else lines_xn
-        if not lines_xn:
-            return np.zeros(0)
+    def _raw(self, R, t, y, lines_xn):
         sizes = [len(xn) for xn in lines_xn]
         if lines_xn is self.lines_xn:  # the rays depend on the posture only: cache them
             key = (R.tobytes(), t.tobytes())
-            if self._ray_cache[0] != key:
-                P, V = self.rays(R, t, np.concatenate(lines_xn))
-                self._ray_cache = (key, P, V)
-            _, P, V = self._ray_cache
+            if self._cache[0] != key:
+                self._cache = (key, *_rays(self.mirror, R, t, np.concatenate(lines_xn)))
+            _, P, V = self._cache
         else:
-            P, V = self.rays(R, t, np.concatenate(lines_xn))
+            P, V = _rays(self.mirror, R, t, np.concatenate(lines_xn))
         idx = np.repeat(np.arange(len(sizes)), sizes)
         Q = np.empty((len(lines_xn), 3))
         E = np.empty((len(lines_xn), 3))
         for i in range(len(lines_xn)):
-            Q[i], E[i] = self.line(i, y[4 * i:4 * i + 4])
+            Q[i], E[i] = self.line(i, y[4 * i : 4 * i + 4])
         n = np.cross(Q[idx] - P, E[idx])
         n /= np.linalg.norm(n, axis=1, keepdims=True)
         r = (V * n).sum(axis=1)
-        r = np.where(np.isfinite(r), r, 0.0)
-        return r * self.line_scale if scaled else r
-
-    # lens ---------------------------------------------------------------------------------
-    def lens_residuals(self, R, t, rho):
-        """``(d - rho) / |grad d|`` of the blob outline (px); rays that miss give 0."""
-        if self.lens_xn is None:
-            return np.zeros(0)
-        from .lens import ray_distances
-        r = (ray_distances(self.mirror, R, t, self.lens_xn) - rho) * self.lens_scale
         return np.where(np.isfinite(r), r, 0.0)
 
-    # all --------------------------------------------------------------------------------
-    def residuals(self, x):
-        R, t = self.posture(x[:_N_POSTURE])
-        parts = [self.rim_residuals(R, t)]
-        if self.lines_xn:
-            parts.append(self.line_residuals(R, t, x[_N_POSTURE:_N_POSTURE + self.n_y]))
-        if self.lens_xn is not None:
-            parts.append(self.lens_residuals(R, t, x[_N_POSTURE + self.n_y]))
-        return parts[0] if len(parts) == 1 else np.concatenate(parts)
+    def residuals(self, R, t, y, weighted=True):
+        return self._raw(R, t, y, self.lines_xn) * self.scale
 
-    def line_jacobian(self, R, t, y, steps):
-        """Line rows and line columns only (the posture fixed): 4 grouped forward differences."""
-        base = self.line_residuals(R, t, y)
-        sizes = [len(xn) for xn in self.lines_xn]
-        rows = np.repeat(np.arange(len(sizes)), sizes)
+    def nuisance_jacobian(self, R, t, y, steps):
+        """Line rows and line columns (the posture fixed): 4 grouped forward differences."""
+        base = self.residuals(R, t, y)
+        rows = np.repeat(np.arange(len(self.lines_xn)), [len(x) for x in self.lines_xn])
         J = np.zeros((len(base), len(y)))
         for k in range(4):
             yk = y.copy()
             yk[k::4] += steps[k]
-            d = (self.line_residuals(R, t, yk) - base) / steps[k]
-            J[np.arange(len(base)), 4 * rows + k] = d
+            J[np.arange(len(base)), 4 * rows + k] = (self.residuals(R, t, yk) - base) / steps[k]
         return J
 
-    def jacobian(self, x, steps):
-        """Rim rows: the envelope theorem at the foot points (``d dist / d p = -n . dc/dp``),
-        with ``dc/dR`` by differences of ``R`` and ``dc/dt`` analytic. Line rows: forward
-        differences, posture columns one by one, line columns in 4 groups."""
+    def jacobian(self, posture, x, y, steps):
+        R, t = posture(x)
+        return _posture_fd(self, posture, x, y, steps), self.nuisance_jacobian(
+            R, t, y, np.full(len(y), 1e-7)
+        )
+
+
+class ReflectionTerm:
+    """Rows of the camera's reflection (:mod:`.reflection`): for each outline pixel the radius
+    ``rho`` at which its reflected ray crosses the plane ``z_c = z``, minus ``r``, in pixels by
+    ``1 / |grad_u rho|`` at the start. Nuisance parameters ``r`` and ``z`` unless given; a free
+    ``z`` is pulled weakly towards its start (one extra row, ``(z - z0) / c`` px), since for a
+    nearly central rig only ``r / (2c - z)`` is determined."""
+
+    name = "reflection"
+
+    def __init__(self, K, mirror, R0, t0, xn, r0, z0, r_known=False, z_known=False):
+        from .reflection import plane_radius
+
+        self.mirror = mirror
+        self.xn = xn
+        self.r0, self.z0 = float(r0), float(z0)
+        self.free = [not r_known, not z_known]
+        self.n_nuisance = sum(self.free)
+        _, g = plane_radius(mirror, R0, t0, xn, self.z0, np.linalg.inv(K)[:2, :2])
+        ok = np.isfinite(g) & (g > 0)
+        self.scale = np.where(ok, 1.0 / np.where(ok, g, 1.0), 0.0)
+        self.prior = 1e-2 / mirror.c if self.free[1] else None
+
+    def __len__(self):
+        return len(self.xn) + (self.prior is not None)
+
+    def x0(self):
+        return np.array([v for v, f in zip((self.r0, self.z0), self.free) if f])
+
+    def circle(self, y):
+        it = iter(y)
+        r = next(it) if self.free[0] else self.r0
+        z = next(it) if self.free[1] else self.z0
+        return float(r), float(z)
+
+    def residuals(self, R, t, y, weighted=True, outline_only=False):
+        from .reflection import plane_radius
+
+        r, z = self.circle(y)
+        res = (plane_radius(self.mirror, R, t, self.xn, z) - r) * self.scale
+        res = np.where(np.isfinite(res), res, 0.0)
+        if self.prior is None or outline_only:
+            return res
+        return np.append(res, (z - self.z0) * self.prior)
+
+    def jacobian(self, posture, x, y, steps):
+        R, t = posture(x)
+        Jp = _posture_fd(self, posture, x, y, steps)
+        base = self.residuals(R, t, y)
+        Jn = np.zeros((len(base), len(y)))
+        for k in range(len(y)):
+            yk = y.copy()
+            h = 1e-6 * max(1.0, abs(yk[k]))
+            yk[k] += h
+            Jn[:, k] = (self.residuals(R, t, yk) - base) / h
+        return Jp, Jn
+
+
+def _posture_fd(term, posture, x, y, steps):
+    """Posture columns of a term by forward differences."""
+    R, t = posture(x)
+    base = term.residuals(R, t, y)
+    J = np.zeros((len(base), _N_POSTURE))
+    for k in range(_N_POSTURE):
+        xk = x.copy()
+        xk[k] += steps[k]
+        Rk, tk = posture(xk)
+        J[:, k] = (term.residuals(Rk, tk, y) - base) / steps[k]
+    return J
+
+
+class _Problem:
+    """A sum of terms over the posture and each term's nuisance parameters."""
+
+    def __init__(self, posture, terms):
+        self.posture = posture
+        self.terms = terms
+        self.slices, i = [], _N_POSTURE
+        for term in terms:
+            self.slices.append(slice(i, i + term.n_nuisance))
+            i += term.n_nuisance
+        self.n = i
+
+    def x0(self):
+        return np.concatenate([np.zeros(_N_POSTURE)] + [t.x0() for t in self.terms])
+
+    def parts(self, x):
         R, t = self.posture(x[:_N_POSTURE])
-        phi = self._foot_points(R, t, phi=self.phi0)
-        cx, cy, nx, ny = self._rim_normals(R, t, phi)
-        n_rim = len(self.rim_px)
-        n_line = sum(len(xn) for xn in self.lines_xn)
-        n_lens = 0 if self.lens_xn is None else len(self.lens_xn)
-        J = np.zeros((n_rim + n_line + n_lens, len(x)))
-        for k in range(2):
-            xk = x[:_N_POSTURE].copy()
-            xk[k] += steps[k]
-            Rk, _ = self.posture(xk)
-            (ckx, cky), _, _ = self._curve(Rk, t, phi)
-            J[:n_rim, k] = -((ckx - cx) * nx + (cky - cy) * ny) / steps[k] * self.rim_w
-        r, zr = self.mirror.rim_radius, self.mirror.z_rim
-        rho = np.stack([r * np.cos(phi), r * np.sin(phi), np.full_like(phi, zr)], axis=1)
-        X = rho @ R.T + t
-        z = X[:, 2]
-        # n^T A, then d pi / d t = [[1/z, 0, -x/z^2], [0, 1/z, -y/z^2]]
-        m0 = nx * self.A[0, 0] + ny * self.A[1, 0]
-        m1 = nx * self.A[0, 1] + ny * self.A[1, 1]
-        J[:n_rim, 2] = -m0 / z * self.rim_w
-        J[:n_rim, 3] = -m1 / z * self.rim_w
-        J[:n_rim, 4] = (m0 * X[:, 0] + m1 * X[:, 1]) / z**2 * self.rim_w
-        if n_line:
-            y = x[_N_POSTURE:_N_POSTURE + self.n_y]
-            base = self.line_residuals(R, t, y)
-            for k in range(_N_POSTURE):
-                xk = x[:_N_POSTURE].copy()
-                xk[k] += steps[k]
-                Rk, tk = self.posture(xk)
-                J[n_rim:n_rim + n_line, k] = (self.line_residuals(Rk, tk, y) - base) / steps[k]
-            J[n_rim:n_rim + n_line, _N_POSTURE:_N_POSTURE + self.n_y] = self.line_jacobian(
-                R, t, y, steps[_N_POSTURE:_N_POSTURE + self.n_y])
-        if n_lens:
-            rho = x[_N_POSTURE + self.n_y]
-            base = self.lens_residuals(R, t, rho)
-            for k in range(_N_POSTURE):
-                xk = x[:_N_POSTURE].copy()
-                xk[k] += steps[k]
-                Rk, tk = self.posture(xk)
-                J[n_rim + n_line:, k] = (self.lens_residuals(Rk, tk, rho) - base) / steps[k]
-            J[n_rim + n_line:, -1] = -self.lens_scale
-        return J
+        return [term.residuals(R, t, x[s]) for term, s in zip(self.terms, self.slices)]
+
+    def residuals(self, x):
+        return np.concatenate(self.parts(x))
+
+    def jacobian(self, x, steps=_STEPS):
+        rows = []
+        for term, s in zip(self.terms, self.slices):
+            Jp, Jn = term.jacobian(self.posture, x[:_N_POSTURE], x[s], steps)
+            block = np.zeros((len(Jp), self.n))
+            block[:, :_N_POSTURE] = Jp
+            block[:, s] = Jn
+            rows.append(block)
+        return np.concatenate(rows)
+
+
+def _reflection_spec(reflection):
+    """``(xn, r0, z0, r_known, z_known)`` or None."""
+    if reflection is None:
+        return None
+    xn, r0, z0, r_known, z_known = reflection
+    xn = np.ascontiguousarray(np.asarray(xn, np.float64).reshape(-1, 2))
+    if len(xn) == 0 or not (np.isfinite(r0) and np.isfinite(z0)):
+        return None
+    return xn, float(r0), float(z0), bool(r_known), bool(z_known)
 
 
 def refine_posture(K, mirror, rvec, tvec, rim_points, far_lines_normalized=(), line_depth=None,
-                   max_nfev=15, robust=True, lens_normalized=None):
-    """Refine a mirror posture by non-linear least squares (rim and far lines).
+                   max_nfev=15, robust=True, reflection=None):
+    """Refine a mirror posture by non-linear least squares (rim, far lines, reflection).
 
     Parameters
     ----------
@@ -423,15 +542,13 @@ def refine_posture(K, mirror, rvec, tvec, rim_points, far_lines_normalized=(), l
         Starting distance of the 3-D lines; default ``1000 * rim_radius``.
     max_nfev : int
         Cap on residual evaluations of each of the two solver stages.
-    lens_normalized : (M, 2) ndarray, optional
-        Undistorted normalised coordinates of the outline of the camera's reflection
-        (:mod:`.lens`); adds the rows ``(d - rho) / |grad d|`` (px) and ``rho`` as one more
-        parameter (started at its closed-form best fit, :func:`.lens.fit_rho`).
     robust : bool
-        Weight the rim rows by Huber weights (``k = 2`` robust standard deviations) computed
-        from the residuals of the starting posture: boundary points that the rim fit kept but
-        that sit off the rim (reflections, holder edges, clipped borders) then count less.
-        The costs compared to accept the result use the same weights.
+        Huber weights on the rim rows (``k = 2`` robust standard deviations) from the residuals
+        of the starting posture; the costs compared to accept the result use the same weights.
+    reflection : tuple, optional
+        ``(xn, r0, z0, r_known, z_known)``: undistorted normalised coordinates of the outline of
+        the camera's reflection, the starting circle (e.g. :func:`.reflection.fit_circle`) and
+        which of ``r``, ``z`` are known (kept fixed).
 
     Returns
     -------
@@ -446,106 +563,164 @@ def refine_posture(K, mirror, rvec, tvec, rim_points, far_lines_normalized=(), l
     lines_xn = [np.ascontiguousarray(np.asarray(x, np.float64)) for x in far_lines_normalized]
     depth = 1000.0 * mirror.rim_radius if line_depth is None else float(line_depth)
     # lines whose rays mostly miss the mirror under this posture are left out
-    probe = _Problem(K, mirror, R0, t0, rim_px[:5], [])
-    lines_xn = [x for x in lines_xn if np.isfinite(probe.rays(R0, t0, x)[1]).all(axis=1).sum() >= 3]
-    lens_xn = None
-    if lens_normalized is not None and len(lens_normalized):
-        lens_xn = np.ascontiguousarray(np.asarray(lens_normalized, np.float64).reshape(-1, 2))
-    prob = _Problem(K, mirror, R0, t0, rim_px, lines_xn, lens_xn)
-    if prob.lens_xn is not None and not np.isfinite(prob.rho0):
-        prob = _Problem(K, mirror, R0, t0, rim_px, lines_xn)  # the outline misses the camera
-    has_lens = prob.lens_xn is not None
+    lines_xn = [x for x in lines_xn
+                if np.isfinite(_rays(mirror, R0, t0, x)[1]).all(axis=1).sum() >= 3]
+    rim = RimTerm(K, mirror, R0, t0, rim_px)
     if robust:
-        prob.set_robust_weights(R0, t0)
-    n_lines = len(lines_xn)
-    if n_lines:
-        prob.init_lines(R0, t0, depth)
-    steps = np.array([1e-7, 1e-7, 1e-6, 1e-6, 1e-6] + [1e-7] * 4 * n_lines + [1e-6] * has_lens)
-    x0 = np.zeros(_N_POSTURE + 4 * n_lines + has_lens)
-    if has_lens:
-        x0[-1] = prob.rho0  # closed-form best rho at the analytic posture (its fair cost)
-
+        rim.set_robust_weights(R0, t0)
+    terms = [rim]
+    if lines_xn:
+        terms.append(FarLineTerm(K, mirror, R0, t0, lines_xn, depth))
+    spec = _reflection_spec(reflection)
+    if spec is not None:
+        terms.append(ReflectionTerm(K, mirror, R0, t0, *spec))
+    prob = _Problem(_Posture(R0, t0), terms)
+    x0 = prob.x0()
     opts = dict(method="lm", x_scale="jac", xtol=1e-8, ftol=1e-6, gtol=1e-10)
-    # stage 1: the line parameters alone at the analytic posture (its fair cost)
     nfev = 0
-    if n_lines:
-        sl = slice(_N_POSTURE, _N_POSTURE + 4 * n_lines)
-        s1 = least_squares(lambda y: prob.line_residuals(R0, t0, y), x0[sl],
-                           jac=lambda y: prob.line_jacobian(R0, t0, y, steps[sl]),
+    # stage 1: the line parameters alone at the analytic posture (its fair cost)
+    if lines_xn:
+        lt, sl = terms[1], prob.slices[1]
+        s1 = least_squares(lambda y: lt.residuals(R0, t0, y), x0[sl],
+                           jac=lambda y: lt.nuisance_jacobian(R0, t0, y, np.full(len(y), 1e-7)),
                            max_nfev=max_nfev, **opts)
         x0[sl] = s1.x
         nfev += s1.nfev
     r_init = prob.residuals(x0)
     cost_init = 0.5 * float(r_init @ r_init)
-
-    # stage 2: posture and lines together (skipped when the start is already exact)
-    x, r, cost_fin, accepted = x0, r_init, cost_init, False
+    # stage 2: posture and nuisances together (skipped when the start is already exact)
+    x, cost_fin, accepted = x0, cost_init, False
     if cost_init > 1e-20 * len(r_init):
-        sol = least_squares(prob.residuals, x0, jac=lambda x: prob.jacobian(x, steps),
-                            max_nfev=max_nfev, **opts)
+        sol = least_squares(prob.residuals, x0, jac=prob.jacobian, max_nfev=max_nfev, **opts)
         nfev += sol.nfev
         r_fin = prob.residuals(sol.x)
         cost_fin = 0.5 * float(r_fin @ r_fin)
         # keep the refined posture only if it is better: never worse than the analytic one
         if np.isfinite(cost_fin) and cost_fin < cost_init:
-            x, r, accepted = sol.x, r_fin, True
+            x, accepted = sol.x, True
     R, t = prob.posture(x[:_N_POSTURE])
-    n_rim = len(rim_px)
-    rim_rms = float(np.sqrt(np.mean((r[:n_rim] / prob.rim_w) ** 2)))
-    n_line = sum(len(xn) for xn in lines_xn)
-    line_rms = float(np.sqrt(np.mean(r[n_rim:n_rim + n_line] ** 2))) if n_lines else math.nan
-    lens_rms = float(np.sqrt(np.mean(r[n_rim + n_line:] ** 2))) if has_lens else math.nan
-    rho = float(x[-1]) if has_lens else math.nan
-    lines = [prob.line(i, x[_N_POSTURE + 4 * i:_N_POSTURE + 4 * i + 4]) for i in range(n_lines)]
-    rvec_out = cv2.Rodrigues(R)[0].ravel()
-    return RefineResult(rvec=rvec_out, tvec=np.asarray(t, np.float64), accepted=accepted,
-                        cost_initial=cost_init, cost_final=cost_fin, rim_rms=rim_rms,
-                        line_rms=line_rms, lines=lines, nfev=int(nfev), lens_rms=lens_rms,
-                        rho=rho)
+    rim_rms = float(np.sqrt(np.mean(rim.residuals(R, t, weighted=False) ** 2)))
+    line_rms, lines = math.nan, []
+    if lines_xn:
+        lr = terms[1].residuals(R, t, x[prob.slices[1]])
+        line_rms = float(np.sqrt(np.mean(lr**2)))
+        y = x[prob.slices[1]]
+        lines = [terms[1].line(i, y[4 * i : 4 * i + 4]) for i in range(len(lines_xn))]
+    refl_rms, r_c, z_c = math.nan, math.nan, math.nan
+    if spec is not None:
+        term = terms[-1]
+        y = x[prob.slices[-1]]
+        refl_rms = float(np.sqrt(np.mean(term.residuals(R, t, y, outline_only=True) ** 2)))
+        r_c, z_c = term.circle(y)
+    return RefineResult(rvec=cv2.Rodrigues(R)[0].ravel(), tvec=np.asarray(t, np.float64),
+                        accepted=accepted, cost_initial=cost_init, cost_final=cost_fin,
+                        rim_rms=rim_rms, line_rms=line_rms, lines=lines, nfev=int(nfev),
+                        reflection_rms=refl_rms, r=r_c, z=z_c,
+                        rim_cost=0.5 * float(np.sum(rim.residuals(R, t) ** 2)),
+                        rim_cost_initial=0.5 * float(np.sum(rim.residuals(R0, t0) ** 2)),
+                        n_rim=len(rim_px))
 
 
-def posture_uncertainty(K, mirror, rvec, tvec, rim_points, rms, lens_normalized=None,
-                        lens_rms=None):
-    """First-order standard deviations of the posture from the rim (and the lens outline).
+@dataclasses.dataclass(frozen=True)
+class Uncertainty:
+    """A posteriori first-order uncertainty of the posture (:func:`posture_uncertainty`).
 
-    With ``J`` the Jacobian of the rim residuals (px) with respect to the two axis angles and
-    ``tvec``, the covariance is ``rms^2 (J^T J)^-1``. The rim pins the axis only weakly: a tilt
-    of the mirror and a lateral shift that keep the rim ellipse almost unchanged (about 1 deg
-    per px of noise on 360 points for the default rigs), which is why this is reported.
+    Attributes
+    ----------
+    axis_std_deg : float
+        RMS error of the mirror axis direction, degrees.
+    origin_std : float
+        Square root of the trace of the origin's covariance, length unit.
+    weak_tilt_deg, weak_shift : float
+        The least determined combination of the posture (the covariance's principal direction,
+        angles scaled by the camera's distance to the mirror): one standard deviation along it
+        is a tilt of ``weak_tilt_deg`` with a shift of the origin of ``weak_shift``.
+    weak_share : float
+        Fraction of the posture's variance along that direction.
+    """
 
-    With ``lens_normalized`` (the outline of the camera's reflection, :mod:`.lens`) and its
-    RMS residual ``lens_rms`` (px), its rows join ``J`` weighted by ``1 / lens_rms`` (the rim
-    rows by ``1 / rms``), with ``rho`` as one more column.
+    axis_std_deg: float
+    origin_std: float
+    weak_tilt_deg: float = math.nan
+    weak_shift: float = math.nan
+    weak_share: float = math.nan
+
+    def describe(self):
+        """The weakly determined direction in words."""
+        if not np.isfinite(self.weak_tilt_deg):
+            return "unknown"
+        return (f"a tilt of {self.weak_tilt_deg:.3g} deg with a compensating shift of "
+                f"{self.weak_shift:.3g} (one standard deviation; {100 * self.weak_share:.0f} % "
+                f"of the posture's variance)")
+
+
+def _correlation_factor(res):
+    """``sqrt((1 + rho1) / (1 - rho1))``: how much the lag-1 correlation ``rho1`` of residuals
+    along a contour (in the order given; clipped to [0, 0.9]) inflates a standard deviation
+    computed as if they were independent (``N_eff = N (1 - rho1) / (1 + rho1)``)."""
+    r = np.asarray(res, np.float64)
+    r = r[np.isfinite(r)] - np.mean(r[np.isfinite(r)]) if np.isfinite(r).sum() > 8 else None
+    if r is None or not np.any(r):
+        return 1.0
+    rho1 = float(np.clip((r[:-1] @ r[1:]) / (r @ r), 0.0, 0.9))
+    return math.sqrt((1.0 + rho1) / (1.0 - rho1))
+
+
+def posture_uncertainty(K, mirror, rvec, tvec, rim_points, rim_sigma, reflection=None,
+                        reflection_sigma=None, floor=0.02):
+    """First-order a posteriori covariance of the posture from the rim (and the reflection).
+
+    With ``J`` the Jacobian of the residuals (px) with respect to the posture (two axis angles,
+    ``tvec``) and the nuisance parameters, each source's rows weighted by ``1 / sigma`` with
+    ``sigma`` its observed RMS residual (at least ``floor`` px) times the inflation that the
+    correlation of neighbouring residuals implies (:func:`_correlation_factor`; edge points
+    share blur and interpolation), the covariance is ``(J^T J)^-1``; the posture block is
+    reported. The rim pins the axis only weakly (a tilt of
+    the mirror and a lateral shift keep the ellipse almost unchanged), which the weak direction
+    names.
+
+    Parameters
+    ----------
+    rim_sigma : float
+        Observed RMS of the rim residuals, px.
+    reflection : tuple, optional
+        As for :func:`refine_posture`; joins with ``reflection_sigma`` (its observed RMS, px).
 
     Returns
     -------
-    axis_std_deg : float
-        RMS error of the axis direction (square root of the summed variances of the two
-        angles), degrees.
-    origin_std_mm : float
-        Standard deviation of the origin (square root of the covariance's trace), length unit.
+    Uncertainty
     """
+    K = np.asarray(K, np.float64)
     R = cv2.Rodrigues(np.asarray(rvec, np.float64).reshape(3, 1))[0]
+    t = np.asarray(tvec, np.float64)
     rim_px = np.ascontiguousarray(np.asarray(rim_points, np.float64).reshape(-1, 2))
-    lens_xn = None
-    if lens_normalized is not None and len(lens_normalized) and lens_rms is not None \
-            and np.isfinite(lens_rms) and lens_rms > 0:
-        lens_xn = np.ascontiguousarray(np.asarray(lens_normalized, np.float64).reshape(-1, 2))
-    prob = _Problem(np.asarray(K, np.float64), mirror, R, np.asarray(tvec, np.float64), rim_px, [],
-                    lens_xn)
-    x = np.zeros(_N_POSTURE)
-    if prob.lens_xn is not None and np.isfinite(prob.rho0):
-        x = np.append(x, prob.rho0)
-    else:
-        prob.lens_xn = None
-    J = prob.jacobian(x, np.array([1e-7, 1e-7, 1e-6, 1e-6, 1e-6, 1e-6])[:len(x)])
-    w = np.full(len(J), 1.0 / float(rms))
-    w[len(rim_px):] = 1.0 / float(lens_rms) if prob.lens_xn is not None else 1.0
+    terms = [RimTerm(K, mirror, R, t, rim_px)]
+    sig = [max(float(rim_sigma), floor)]
+    spec = _reflection_spec(reflection)
+    if spec is not None and reflection_sigma is not None and np.isfinite(reflection_sigma):
+        terms.append(ReflectionTerm(K, mirror, R, t, *spec))
+        sig.append(max(float(reflection_sigma), floor))
+    prob = _Problem(_Posture(R, t), terms)
+    J = prob.jacobian(prob.x0())
+    w = []
+    for term, s in zip(terms, sig):
+        res = term.residuals(R, t, term.x0())
+        n_out = len(res) - (getattr(term, "prior", None) is not None)
+        w.append(np.full(len(res), 1.0 / (s * _correlation_factor(res[:n_out]))))
+    w = np.concatenate(w)
+    if spec is not None and len(terms) > 1 and terms[-1].prior is not None:
+        w[-1] = 1e-3  # the weak pull on z is not a measurement: (almost) no information
     J = J * w[:, None]
     try:
-        cov = np.linalg.inv(J.T @ J)
+        cov = np.linalg.inv(J.T @ J)[:_N_POSTURE, :_N_POSTURE]
     except np.linalg.LinAlgError:
-        return math.inf, math.inf
+        return Uncertainty(math.inf, math.inf)
     axis_std = math.degrees(math.sqrt(max(cov[0, 0] + cov[1, 1], 0.0)))
     origin_std = math.sqrt(max(float(np.trace(cov[2:5, 2:5])), 0.0))
-    return axis_std, origin_std
+    L = float(np.linalg.norm(t))  # angles -> lengths at the camera's distance
+    S = np.diag([L, L, 1.0, 1.0, 1.0])
+    lam, E = np.linalg.eigh(S @ cov @ S)
+    v = E[:, -1] * math.sqrt(max(lam[-1], 0.0))
+    share = float(lam[-1] / max(lam.sum(), 1e-300))
+    return Uncertainty(axis_std, origin_std, math.degrees(float(np.hypot(v[0], v[1])) / L),
+                       float(np.linalg.norm(v[2:5])), share)

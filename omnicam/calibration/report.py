@@ -44,24 +44,38 @@ class CalibrationReport:
     refinement : RefineResult or None
         The non-linear refinement (None with ``refine=False``).
     axis_std_deg, origin_std_mm : float
-        First-order RMS uncertainty of the axis direction (degrees) and of the origin (length
-        unit) from the rim's RMS (and, when the lens was used, the outline's RMS), assuming
-        independent point errors (edge points of an image are correlated, so real errors can
-        run about 1.5x larger; on rendered 500x500 images with the lens the RMS ratio was 1.0).
+        A posteriori first-order RMS uncertainty of the axis direction (degrees) and of the
+        origin (length unit): every source's rows weighted by its observed RMS residual.
     far_lines : list of (N_i, 2) ndarray
         The far-line pixels used.
     lens_points : (M, 2) ndarray or None
-        Outline pixels of the camera's own reflection that were used (None: lens not used).
-    lens_fit : LensFit or None
-        What :func:`.lens.detect_lens` found (``lens="auto"`` with an image).
+        Outline pixels of the camera's own reflection (None: not used).
+    lens_fit : ReflectionFit or None
+        What :func:`.reflection.detect_reflection` found (``lens="auto"`` with an image).
     lens_scores : dict or None
         ``{index: RMS outline residual (px)}`` of the physical candidates (selection).
     lens_rms : float
-        RMS outline residual of the returned posture, px, with ``rho`` fitted (NaN: not used).
-    rho : float
-        Radius of the ball about the camera centre that models the body (NaN: not used).
+        RMS outline residual of the returned posture, px, with the circle fitted (NaN: not used).
+    lens_r, lens_z : float
+        The circle coaxial with the optical axis that forms the outline (NaN: not used).
     lens_note : str
-        Whether the lens was used, and why not.
+        Whether the reflection was used, and why not.
+    ambiguous : bool
+        The selection could not separate the physical postures (comes with a warning).
+    scores_per_cue, sigma_per_cue : dict
+        Each cue's score per candidate, and how many standard deviations it separates the two
+        best (:class:`.selection.Selection`).
+    accepted_cues : tuple of str
+        The cues that joined the rim in the refinement.
+    rejected_cues : tuple of (str, str)
+        The cues left out, with the reason (how much they disagreed).
+    skipped_cues : tuple of (str, str)
+        Cues not tried in the refinement, with the reason (not a disagreement).
+    weak_direction : str
+        The least determined combination of the posture in words.
+    steps : dict
+        The typed results of every step (``rim``, ``reflection``, ``candidates``,
+        ``selection``, ``refinement``).
     """
 
     conic: np.ndarray
@@ -80,8 +94,44 @@ class CalibrationReport:
     lens_fit: object = None
     lens_scores: object = None
     lens_rms: float = math.nan
-    rho: float = math.nan
+    lens_r: float = math.nan
+    lens_z: float = math.nan
     lens_note: str = "not used"
+    ambiguous: bool = False
+    scores_per_cue: dict = dataclasses.field(default_factory=dict)
+    sigma_per_cue: dict = dataclasses.field(default_factory=dict)
+    accepted_cues: tuple = ()
+    rejected_cues: tuple = ()
+    skipped_cues: tuple = ()
+    weak_direction: str = "unknown"
+    steps: dict = dataclasses.field(default_factory=dict)
+
+    @classmethod
+    def from_steps(cls, rim, cue, cands, sel, ref, warnings, camera, far_lines):
+        """The report of :func:`omnicam.calibration.calibrate` from its steps' results."""
+        circ = ref.circle
+        note = cue.note
+        if cue.used and circ is not None:
+            note += (f", circle r {circ.r:.3f} at z {circ.z:.3f}, RMS {circ.rms:.3f} px; "
+                     + ("joined the refinement" if "reflection" in ref.accepted_cues else
+                        "not in the refinement"))
+        return cls(conic=np.asarray(rim.fit.conic, np.float64), boundary_points=rim.seen,
+                   rim_rms=float(rim.fit.rms), candidates=list(sel.candidates),
+                   chosen=sel.chosen, confidence=float(sel.confidence), warnings=warnings,
+                   camera=camera, refinement=ref.result,
+                   axis_std_deg=ref.uncertainty.axis_std_deg,
+                   origin_std_mm=ref.uncertainty.origin_std, far_lines=far_lines,
+                   lens_points=cue.points, lens_fit=cue.fit,
+                   lens_scores=sel.scores_per_cue.get("reflection rms px"),
+                   lens_rms=circ.rms if circ is not None else math.nan,
+                   lens_r=circ.r if circ is not None else math.nan,
+                   lens_z=circ.z if circ is not None else math.nan, lens_note=note,
+                   ambiguous=sel.ambiguous, scores_per_cue=sel.scores_per_cue,
+                   sigma_per_cue=sel.sigma, accepted_cues=ref.accepted_cues,
+                   rejected_cues=ref.rejected_cues, skipped_cues=ref.skipped_cues,
+                   weak_direction=ref.uncertainty.describe(),
+                   steps={"rim": rim, "reflection": cue, "candidates": cands,
+                          "selection": sel, "refinement": ref})
 
     @property
     def lens_used(self):
@@ -115,9 +165,9 @@ class CalibrationReport:
             f"  tvec = [{', '.join(f'{v:.6f}' for v in cam.tvec)}]",
             f"  mirror axis tilt from the optical axis: {tilt:.4f} deg; camera centre in the "
             f"mirror frame: [{', '.join(f'{v:.4f}' for v in cam.camera_center)}]",
-            f"  RMS uncertainty from the rim{' and lens' if self.lens_used else ''} noise "
-            f"(first order, independent point errors): axis {self.axis_std_deg:.3g} deg, "
-            f"origin {self.origin_std_mm:.3g}",
+            f"  RMS uncertainty (a posteriori, first order; rim"
+            f"{''.join(' + ' + c for c in self.accepted_cues)}): axis {self.axis_std_deg:.3g} "
+            f"deg, origin {self.origin_std_mm:.3g}; weakest: {self.weak_direction}",
             f"  camera reflection (lens): {self.lens_note}",
             f"  candidates (Chen's method, section 3.1; score of eq. 31 with "
             f"{len(self.far_lines)} far line(s)"
@@ -129,9 +179,13 @@ class CalibrationReport:
             score = "-" if not np.isfinite(c.score) else f"{c.score:.3e}"
             if self.lens_scores and i in self.lens_scores:
                 score += f" lens {self.lens_scores[i]:.3f}"
+            if i in self.scores_per_cue.get("self-reflection px", {}):
+                score += f" self-px {self.scores_per_cue['self-reflection px'][i]:.1f}"
             lines.append(f"   {mark}[{i}] l={c.l} m={c.m} score {score:>10}  "
                          f"tvec [{', '.join(f'{v:.4f}' for v in c.tvec)}]  {state}")
-        lines.append(f"  chosen: {self.chosen}, confidence {self.confidence:.4f}")
+        sep = ", ".join(f"{k} {v:.1f} sigma" for k, v in self.sigma_per_cue.items())
+        lines.append(f"  chosen: {self.chosen}, confidence {self.confidence:.4f}"
+                     + (f" ({sep})" if sep else "") + (" AMBIGUOUS" if self.ambiguous else ""))
         if self.refinement is not None:
             r = self.refinement
             kept = "accepted" if r.accepted else "kept the analytic posture"
@@ -140,8 +194,12 @@ class CalibrationReport:
                          f"{r.rim_rms:.4f} px"
                          + ("" if not np.isfinite(r.line_rms) else
                             f", far-line RMS {r.line_rms:.4f} px")
-                         + ("" if not np.isfinite(r.lens_rms) else
-                            f", lens RMS {r.lens_rms:.4f} px, rho {r.rho:.4f}") + ")")
+                         + ("" if not np.isfinite(r.reflection_rms) else
+                            f", lens RMS {r.reflection_rms:.4f} px") + ")")
+            for name, why in self.rejected_cues:
+                lines.append(f"  refinement left out the {name}: {why}")
+            for name, why in self.skipped_cues:
+                lines.append(f"  refinement without the {name}: {why}")
         else:
             lines.append("  refinement: off")
         if self.warnings:

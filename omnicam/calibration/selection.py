@@ -19,25 +19,31 @@ is nearest to the mirror's lower focus ``(0, 0, -c)`` (where a rig's camera is m
 says that the choice is ambiguous: on random misalignments this is right only about half of the
 time.
 
-The camera's own reflection (:mod:`.lens`) separates them without lines: under each physical
-candidate the outline of the dark blob must be the set of pixels whose rays pass at one distance
-``rho`` from the camera centre; its score is the RMS of ``(d - rho) / |grad d|`` in px with
-``rho`` fitted in closed form. Alone it chooses by the least score; with far lines each kind of
-score is divided by its largest value over the physical candidates and the sums are compared.
+The camera's own reflection (:mod:`.reflection`) separates them without lines: under each
+physical candidate the outline must be the pixels whose reflected rays pass through one circle
+coaxial with the optical axis; the candidates' best fits differ by a displacement of the
+predicted outline, measured in units of the outline's own noise (:func:`reflection_costs`).
+
+Every cue gives a cost per candidate in chi-square units above its best candidate; the costs add
+up, the least total is chosen, and ``confidence = tanh(gap / 4)`` (for far lines alone exactly the
+paper-style ``1 - best / second best``). :class:`Selection` lists every cue's scores.
 """
 from __future__ import annotations
 
+import dataclasses
 import math
 
 import numpy as np
 
 from ..raytrace import as_points
+from .errors import EstimationError
 
-__all__ = ["validate_far_lines", "check_lines_inside_rim", "line_score", "select_candidate"]
+__all__ = ["Selection", "validate_far_lines", "check_lines_inside_rim", "line_score",
+           "line_costs", "reflection_costs", "select_candidate"]
 
-AMBIGUOUS_CONFIDENCE = 0.8  # below this a selection by far lines comes with a warning
+AMBIGUOUS_CONFIDENCE = 0.8  # below this a choice by far lines comes with a warning
 # (exact far lines give > 0.99; with rim noise the wrong choices seen had 0.07-0.74)
-LENS_AMBIGUOUS_CONFIDENCE = 0.5  # below this a selection by the lens alone comes with a warning
+REFLECTION_SIGMA = 3.0  # a choice that rests on the reflection needs 3 sigma (confidence 0.978)
 
 
 def validate_far_lines(far_lines):
@@ -105,100 +111,184 @@ def line_score(camera, line_pixels):
     return float(max(lam[0], 0.0)) / len(V), len(V)
 
 
-def _confidence(scores):
-    """``1 - best / second best`` of an array of scores (1 with one, 0 when undecided)."""
-    if len(scores) == 1:
-        return 1.0
-    order = np.argsort(scores, kind="stable")
-    best, second = scores[order[0]], scores[order[1]]
-    if not np.isfinite(best):
-        return 0.0
-    if second > 0:
-        return float(1.0 - best / second) if np.isfinite(second) else 1.0
-    return 0.0
 
+@dataclasses.dataclass(frozen=True, eq=False)
+class Selection:
+    """The choice between the physical postures (section 3.2 and the camera's reflection).
 
-def select_candidate(candidates, make_camera, far_lines, lower_focus, lens_scores=None):
-    """Score the physical candidates and choose one (section 3.2).
-
-    Parameters
+    Attributes
     ----------
-    candidates : list of Candidate
-    make_camera : callable
-        ``make_camera(candidate) -> camera`` with ``unproject``.
-    far_lines : list of (N_i, 2) ndarray
-        Validated far-line pixels (may be empty).
-    lower_focus : (3,) array_like
-        ``(0, 0, -c)``, for the fallback without lines.
-    lens_scores : dict, optional
-        ``{index: RMS outline residual (px)}`` of the camera's reflection for the physical
-        candidates (:func:`.lens.outline_score`); used alone without far lines, and together
-        with them otherwise.
-
-    Returns
-    -------
-    candidates : list of Candidate
-        With scores set (NaN for non-physical ones; without lines, NaN for all).
+    candidates : tuple of Candidate
+        With the far-line score of eq. 31 set on the physical ones when lines were given.
     chosen : int
         Index of the chosen candidate.
     confidence : float
-        ``1 - best / second best`` among physical candidates (1 with one physical candidate,
-        0 without far lines and lens; with both, of the summed normalised scores).
-    warnings : list of str
+        ``tanh((cost_second - cost_best) / 4)`` of the combined costs, in [0, 1]: 1 with one
+        physical candidate, 0 without any cue; with far lines alone it equals the paper's
+        ``1 - best / second best``.
+    ambiguous : bool
+        More than one physical candidate and ``confidence < AMBIGUOUS_CONFIDENCE`` (with the
+        reflection among the cues: below ``tanh(REFLECTION_SIGMA^2 / 4)``, a 3-sigma gap).
+    scores_per_cue : dict
+        ``{cue: {candidate index: score}}``: ``"far lines"`` (eq. 31), ``"reflection rms px"``
+        (outline residual with the circle fitted), ``"self-reflection px"`` (distance of the
+        predicted self-reflection pixel from the detected outline's centre; information only).
+    costs_per_cue : dict
+        ``{cue: {candidate index: cost}}`` in chi-square units above the best candidate of that
+        cue; their sum is the combined cost.
+    sigma : dict
+        ``{cue: separation of the two best candidates in standard deviations}``.
+    warnings : tuple of str
+    """
+
+    candidates: tuple
+    chosen: int
+    confidence: float
+    ambiguous: bool
+    scores_per_cue: dict
+    costs_per_cue: dict
+    sigma: dict
+    warnings: tuple
+
+
+def line_costs(scores):
+    """Far-line costs ``4 artanh(1 - best / score)`` (0 for the best; ``{index: score}``)."""
+    finite = [v for v in scores.values() if np.isfinite(v)]
+    if not finite:
+        return {i: 0.0 for i in scores}
+    best = min(finite)
+    out = {}
+    for i, s in scores.items():
+        if not np.isfinite(s):
+            out[i] = math.inf
+        elif s <= best:
+            out[i] = 0.0
+        else:
+            c = 1.0 - best / s if s > 0 else 0.0
+            out[i] = math.inf if c >= 1.0 else 4.0 * math.atanh(c)
+    return out
+
+
+def reflection_costs(rms, n_points, sigma_measured):
+    """Reflection costs from each candidate's RMS outline residual (px, circle fitted).
+
+    The predictions of two candidates differ by a displacement field along the outline; with
+    ``N`` points of noise ``sigma`` its chi-square is ``N_eff (rms_k^2 - rms_best^2) / sigma^2``
+    with ``N_eff = N / 2`` (neighbouring edge points are correlated) and ``sigma`` the larger
+    of the measurement's own scatter (the detection's RMS to its ellipse), the best
+    candidate's RMS (model error counts as noise) and 0.05 px.
+    """
+    finite = [v for v in rms.values() if np.isfinite(v)]
+    if not finite:
+        return {i: 0.0 for i in rms}
+    best = min(finite)
+    s = max(float(sigma_measured) if np.isfinite(sigma_measured) else 0.0, best, 0.05)
+    n_eff = 0.5 * n_points
+    return {i: (n_eff * max(v * v - best * best, 0.0) / (s * s) if np.isfinite(v) else math.inf)
+            for i, v in rms.items()}
+
+
+def select_candidate(candidates, make_camera, far_lines, lower_focus, reflection=None):
+    """Score the physical candidates by every cue given and choose one (section 3.2).
+
+    Parameters
+    ----------
+    candidates : sequence of Candidate
+    make_camera : callable
+        ``make_camera(candidate) -> camera`` with ``unproject`` (used for far lines).
+    far_lines : list of (N_i, 2) ndarray
+        Validated far-line pixels (may be empty).
+    lower_focus : (3,) array_like
+        ``(0, 0, -c)``, for the fallback without any cue.
+    reflection : dict, optional
+        ``{"rms": {index: px}, "n": points, "sigma": px, "self_px": {index: px}, "limit": px}``:
+        the camera's reflection fitted under each physical candidate
+        (:func:`.reflection.fit_circle`); it chooses only if the best RMS is within ``limit``.
+
+    Returns
+    -------
+    Selection
+
+    Raises
+    ------
+    EstimationError
+        No physically possible candidate.
     """
     warnings = []
     phys = [i for i, c in enumerate(candidates) if c.physical]
     if not phys:
-        raise ValueError("none of the four postures of the rim ellipse is physically possible "
-                         "(rim behind the camera or mirror seen from behind); check K, D, the "
-                         "mirror's rim_radius and that the boundary points are on the rim")
-    use_lens = lens_scores is not None and len(phys) > 1 and \
-        np.isfinite([lens_scores.get(i, math.inf) for i in phys]).any()
-    lens = np.array([lens_scores.get(i, math.inf) for i in phys]) if use_lens else None
-    if not far_lines and use_lens:
-        chosen = phys[int(np.argmin(lens))]
-        confidence = _confidence(lens)
-        if confidence < LENS_AMBIGUOUS_CONFIDENCE:
-            warnings.append(f"no far_lines given and the camera's reflection barely separates "
-                            f"the physical postures (confidence {confidence:.3f}): the choice "
-                            f"may be wrong; give far_lines (pixels along the image of a far "
-                            f"straight line)")
-        return list(candidates), chosen, confidence, warnings
-    if not far_lines:
-        dist = []
-        for i in phys:
-            c = candidates[i]
-            C = -c.R.T @ c.tvec
-            dist.append(float(np.linalg.norm(C - np.asarray(lower_focus, np.float64))))
-        chosen = phys[int(np.argmin(dist))]
-        if len(phys) > 1:
-            warnings.append("no far_lines given: the choice between the physical postures is "
-                            "ambiguous (fallback: the camera nearest the lower focus, right about "
-                            "half of the time); give far_lines (pixels along the image of a far "
-                            "straight line) to select by eq. 31")
-            confidence = 0.0
-        else:
-            confidence = 1.0
-        return list(candidates), chosen, confidence, warnings
-
+        raise EstimationError("none of the four postures of the rim ellipse is physically possible "
+                              "(rim behind the camera or mirror seen from behind); check K, D, the "
+                              "mirror's rim_radius and that the boundary points are on the rim")
     scored = list(candidates)
-    for i in phys:
-        cam = make_camera(candidates[i])
-        total = 0.0
-        for j, line in enumerate(far_lines):
-            s, n_used = line_score(cam, line)
-            if n_used < len(line):
-                warnings.append(f"candidate {i}: {len(line) - n_used} pixel(s) of far_lines[{j}] "
-                                f"miss the mirror and were left out")
-            total += s
-        scored[i] = candidates[i].with_score(total)
-    scores = np.array([scored[i].score for i in phys])
-    if use_lens and np.isfinite(scores).any():
-        def normalised(v):
-            top = np.max(v[np.isfinite(v)])
-            return np.where(np.isfinite(v), v / top if top > 0 else 0.0, 2.0)
-        scores = normalised(scores) + normalised(lens)
-    order = np.argsort(scores, kind="stable")
-    chosen = phys[int(order[0])]
-    confidence = _confidence(scores)
-    return scored, chosen, confidence, warnings
+    scores, costs, sigma = {}, {}, {}
+    if far_lines and len(phys) > 1:
+        line_s = {}
+        for i in phys:
+            cam = make_camera(candidates[i])
+            total = 0.0
+            for j, line in enumerate(far_lines):
+                s, n_used = line_score(cam, line)
+                if n_used < len(line):
+                    warnings.append(f"candidate {i}: {len(line) - n_used} pixel(s) of "
+                                    f"far_lines[{j}] miss the mirror and were left out")
+                total += s
+            scored[i] = candidates[i].with_score(total)
+            line_s[i] = total
+        scores["far lines"] = line_s
+        costs["far lines"] = line_costs(line_s)
+    if reflection is not None and len(phys) > 1:
+        rms = {i: float(reflection["rms"].get(i, math.inf)) for i in phys}
+        if any(np.isfinite(v) for v in rms.values()):
+            scores["reflection rms px"] = rms
+            if reflection.get("self_px"):
+                scores["self-reflection px"] = dict(reflection["self_px"])
+            limit = float(reflection.get("limit", math.inf))
+            if min(rms.values()) <= limit:
+                costs["reflection"] = reflection_costs(rms, reflection["n"], reflection["sigma"])
+            else:  # no posture explains it: it cannot tell them apart either
+                where = reflection.get("self_px") or {}
+                off = (f"; the camera sees itself {min(where.values()):.0f} px or more from "
+                       f"where the postures predict" if where else "")
+                warnings.append(f"the camera's reflection fits none of the rim's postures "
+                                f"(best RMS {min(rms.values()):.2f} px, allowed {limit:.2f}{off}) "
+                                f"and was not used to choose: check K (the principal point), D "
+                                f"and the mirror's a, b and rim_radius")
+    if len(phys) == 1:
+        return Selection(tuple(scored), phys[0], 1.0, False, scores, costs, sigma,
+                         tuple(warnings))
+    if not costs:
+        dist = [float(np.linalg.norm(-candidates[i].R.T @ candidates[i].tvec
+                                     - np.asarray(lower_focus, np.float64))) for i in phys]
+        chosen = phys[int(np.argmin(dist))]
+        warnings.append("no far_lines given and no camera reflection used: the choice between "
+                        "the physical postures is ambiguous (fallback: the camera nearest the "
+                        "lower focus, right about half of the time); give far_lines (pixels "
+                        "along the image of a far straight line) or an image showing the "
+                        "camera's reflection")
+        return Selection(tuple(scored), chosen, 0.0, True, scores, costs, sigma,
+                         tuple(warnings))
+    total = {i: sum(c[i] for c in costs.values()) for i in phys}
+    order = sorted(phys, key=lambda i: (total[i], i))
+    chosen = order[0]
+    gap = total[order[1]] - total[chosen]
+    confidence = 1.0 if not np.isfinite(gap) else float(math.tanh(gap / 4.0))
+    for cue, c in costs.items():
+        ranked = sorted(c[i] for i in phys)
+        sigma[cue] = math.sqrt(ranked[1] - ranked[0]) if np.isfinite(ranked[1]) else math.inf
+    needed = AMBIGUOUS_CONFIDENCE
+    if "reflection" in costs:
+        needed = max(needed, math.tanh(REFLECTION_SIGMA**2 / 4.0))
+    ambiguous = confidence < needed
+    if ambiguous:
+        cues = " and ".join(costs)
+        warnings.append(f"the {cues} barely separate the physical postures (confidence "
+                        f"{confidence:.3f}): the choice may be wrong; give more or longer far "
+                        f"lines, far from the image centre")
+    disagree = [cue for cue, c in costs.items() if min(phys, key=lambda i: (c[i], i)) != chosen
+                and c[chosen] > 4.0]
+    for cue in disagree:
+        warnings.append(f"the {cue} prefer another posture than the combined choice (by "
+                        f"{math.sqrt(costs[cue][chosen]):.1f} sigma): check that cue")
+    return Selection(tuple(scored), chosen, confidence, ambiguous, scores, costs, sigma,
+                     tuple(warnings))

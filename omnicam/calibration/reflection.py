@@ -1,0 +1,582 @@
+"""The camera's own reflection: a circle coaxial with the optical axis (model and detection).
+
+The camera and its lens are bodies of revolution about the optical axis. Seen in the mirror, the
+outline of their reflection is formed by one circle of the body (the front edge of the lens
+barrel or of the body): radius ``r`` at the axial distance ``z`` from the camera centre along
+the camera's +z axis (conventions.md, "The camera's own reflection"). An outline pixel ``u``
+lies on it exactly when its reflected ray ``(P(u), V(u))`` (eqs. 6-19) passes through that
+circle. In the camera frame (``P_c = R P + t``, ``V_c = R V``) the ray meets the circle's plane
+``z_c = z`` at ``X = P_c + s V_c``, ``s = (z - P_c,z) / V_c,z > 0``, and
+
+    rho(u) = sqrt(X_x^2 + X_y^2),        residual(u) = (rho(u) - r) / |grad_u rho|
+
+is the radial distance in that plane converted to pixels by the local derivative (so it is, to
+first order, the pixel distance from ``u`` to the predicted outline). It is exactly zero at the
+true posture on exact data. ``r`` and ``z`` are nuisance parameters; either may be known. For a
+nearly central rig the reflected rays almost meet in one point (the outer focus), so only
+``r / (2c - z)`` is well determined: ``z`` is then fitted with a weak pull towards its start
+(the selection's best fit), which costs nothing in the posture.
+
+The **self-reflection pixel** is where the camera sees itself: the pinhole image of the mirror
+point nearest to the camera centre ``C`` (Fermat with the scene point ``X = C``). It moves by
+about twice the mirror's tilt, the direction the rim ellipse pins worst.
+
+Functions: :func:`self_reflection_point`, :func:`self_reflection_pixel`, :func:`plane_radius`,
+:func:`fit_circle` (``r`` in closed form, ``z`` by a bounded 1-D search), :func:`outline_pixels`
+(the exact outline of a circle for a camera), :func:`detect_reflection` (image ->
+:class:`ReflectionFit`).
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+
+import cv2
+import numpy as np
+
+from .errors import EstimationError
+
+__all__ = [
+    "ReflectionCircle",
+    "ReflectionFit",
+    "self_reflection_point",
+    "self_reflection_pixel",
+    "plane_radius",
+    "fit_circle",
+    "outline_pixels",
+    "detect_reflection",
+]
+
+
+# -- geometry ----------------------------------------------------------------------------------
+@dataclasses.dataclass(frozen=True)
+class ReflectionCircle:
+    """A circle coaxial with the optical axis: radius ``r`` at axial distance ``z`` (camera frame,
+    the mirror's length unit), and the RMS outline residual (px) of the fit that produced it."""
+
+    r: float
+    z: float
+    rms: float = math.nan
+
+
+def self_reflection_point(mirror, C, iters=20):
+    """The mirror point nearest to ``C`` (mirror frame): where the camera sees itself.
+
+    Newton's method on ``f(X, Y) = |P(X, Y) - C|^2`` with ``P = (X, Y, Z(X, Y))`` on the sheet
+    ``Z = b sqrt(1 + (X^2 + Y^2) / a^2)`` (eq. 1), started below ``C`` on the sheet.
+
+    Returns
+    -------
+    (3,) float64 ndarray
+    """
+    a2, b2 = mirror.a**2, mirror.b**2
+    C = np.asarray(C, np.float64)
+    q = C[:2].copy()
+
+    def grad(q):
+        Z = math.sqrt(b2 * (1.0 + (q @ q) / a2))
+        Zq = b2 * q / (a2 * Z)  # dZ/d(X, Y)
+        return (q - C[:2]) + (Z - C[2]) * Zq
+
+    for _ in range(iters):
+        g = grad(q)
+        h = 1e-6 * max(1.0, float(np.abs(q).max()))
+        H = np.stack([(grad(q + h * e) - g) / h for e in np.eye(2)], axis=1)
+        step = np.linalg.solve(H, g)
+        q = q - step
+        if float(np.abs(step).max()) < 1e-13 * max(1.0, mirror.a):
+            break
+    return np.array([q[0], q[1], math.sqrt(b2 * (1.0 + (q @ q) / a2))])
+
+
+def self_reflection_pixel(mirror, R, t, K, D=None):
+    """The pixel where the camera sees itself under the posture ``(R, t)`` (distorted with ``D``).
+
+    Returns
+    -------
+    (2,) float64 ndarray
+    """
+    C = -R.T @ t  # F_M (eq. 17)
+    P = self_reflection_point(mirror, C)
+    Xc = R @ P + t
+    xn = Xc[:2] / Xc[2]
+    if D is not None:
+        from ..raytrace import distort_normalized
+
+        return distort_normalized(xn[None], K, D)[0]  # distorted, then K
+    return K[:2, :2] @ xn + K[:2, 2]
+
+
+def _rays_camera(mirror, R, t, xn):
+    """Reflected rays ``(P_c, V_c)`` in the camera frame of normalised coordinates (eqs. 6-19)."""
+    C = -R.T @ t  # F_M (eq. 17)
+    V = np.concatenate([xn, np.ones((len(xn), 1))], axis=1) @ R  # V_M = R^T V_C (eq. 16)
+    V /= np.linalg.norm(V, axis=1, keepdims=True)
+    P = mirror.intersect(C, V)  # eqs. 8-12
+    W = mirror.reflect(V, mirror.unit_normal(P))  # eqs. 14-15
+    return P @ R.T + t, W @ R.T
+
+
+def _radius_in_plane(Pc, Vc, z):
+    """``rho`` where each ray crosses ``z_c = z`` (NaN if it does not, going forward)."""
+    with np.errstate(divide="ignore", invalid="ignore"):
+        s = (z - Pc[:, 2]) / Vc[:, 2]
+        X = Pc[:, :2] + s[:, None] * Vc[:, :2]
+        rho = np.hypot(X[:, 0], X[:, 1])
+    return np.where(s > 0, rho, np.nan)
+
+
+def plane_radius(mirror, R, t, xn, z, Kinv2=None, h=1e-2):
+    """``rho(u)`` of each pixel's reflected ray in the plane ``z_c = z``, and ``|grad_u rho|``.
+
+    Parameters
+    ----------
+    mirror : HyperbolicMirror
+    R, t : (3, 3), (3,) ndarray
+        Mirror posture (``X_cam = R X_mirror + t``).
+    xn : (N, 2) ndarray
+        Undistorted normalised coordinates of the outline pixels.
+    z : float
+        Axial distance of the circle's plane from the camera centre.
+    Kinv2 : (2, 2) ndarray, optional
+        ``inv(K)[:2, :2]``; with it the pixel gradient is also returned (central differences
+        of ``h`` px).
+
+    Returns
+    -------
+    rho : (N,) ndarray
+        NaN where the ray misses the mirror or does not reach the plane.
+    g : (N,) ndarray
+        ``|grad_u rho|`` (only with ``Kinv2``).
+    """
+    Pc, Vc = _rays_camera(mirror, R, t, xn)
+    rho = _radius_in_plane(Pc, Vc, z)
+    if Kinv2 is None:
+        return rho
+    grads = []
+    for k in range(2):
+        d = h * Kinv2[:, k]
+        hi = _radius_in_plane(*_rays_camera(mirror, R, t, xn + d), z)
+        lo = _radius_in_plane(*_rays_camera(mirror, R, t, xn - d), z)
+        grads.append((hi - lo) / (2 * h))
+    return rho, np.hypot(grads[0], grads[1])
+
+
+def _closed_form_r(rho, g):
+    ok = np.isfinite(rho) & np.isfinite(g) & (g > 0)
+    if ok.sum() < 3:
+        return math.nan, math.inf
+    w = 1.0 / g[ok] ** 2
+    r = float((w * rho[ok]).sum() / w.sum())
+    res = (rho[ok] - r) / g[ok]
+    return r, float(np.sqrt(np.mean(res * res)))
+
+
+def fit_circle(mirror, R, t, xn, Kinv2, r=None, z=None, min_fraction=0.8, h=1e-2):
+    """The coaxial circle that best explains an outline under one posture.
+
+    ``r`` minimises ``sum(((rho - r) / g)^2)`` in closed form (``g = |grad_u rho|``, central
+    differences of ``h`` px, at each ``z``); ``z`` (unless given) is found by a bounded 1-D search
+    (Brent) between ``-c / 2`` and half the camera's distance to the mirror vertex (the circle
+    is part of the camera: nearer to it than to the mirror).
+
+    Returns
+    -------
+    ReflectionCircle
+        ``rms`` is the RMS pixel residual; ``inf`` when fewer than ``min_fraction`` of the
+        outline's rays reach the plane (the outline cannot be the camera's under this posture).
+    """
+    from scipy.optimize import minimize_scalar
+
+    n = len(xn)
+    rays = [_rays_camera(mirror, R, t, xn)]
+    for k in range(2):
+        d = h * Kinv2[:, k]
+        rays += [_rays_camera(mirror, R, t, xn + d), _rays_camera(mirror, R, t, xn - d)]
+    vertex = float(np.linalg.norm(R @ np.array([0.0, 0.0, mirror.b]) + t))
+    z_lo, z_hi = -0.5 * mirror.c, 0.5 * vertex
+
+    def rms_at(zz):
+        rho, xp, xm, yp, ym = (_radius_in_plane(P, V, zz) for P, V in rays)
+        g = np.hypot((xp - xm) / (2 * h), (yp - ym) / (2 * h))
+        ok = np.isfinite(rho) & np.isfinite(g) & (g > 0)
+        if ok.sum() < max(3, min_fraction * n):
+            return math.nan, math.inf
+        if r is None:
+            return _closed_form_r(rho, g)
+        return float(r), float(np.sqrt(np.mean(((rho[ok] - r) / g[ok]) ** 2)))
+
+    z0 = 0.0 if z is None else float(z)
+    if z is None:
+        best = minimize_scalar(
+            lambda zz: min(rms_at(zz)[1], 1e30),
+            bounds=(z_lo, z_hi),
+            method="bounded",
+            options={"xatol": 1e-3 * mirror.rim_radius},
+        )
+        z0 = float(best.x)
+    rr, e = rms_at(z0)
+    return ReflectionCircle(r=float(rr), z=z0, rms=float(e))
+
+
+def outline_pixels(camera, r, z, n=90, tol=1e-10):
+    """Exact outline of the circle ``(r, z)`` as the camera sees it in the mirror.
+
+    Along ``n`` rays (evenly spaced angles) from the self-reflection pixel, the pixel whose
+    reflected ray crosses the plane ``z_c = z`` at the radius ``r``, by bisection (``rho`` grows
+    along each ray from its value at the self-reflection pixel).
+
+    Returns
+    -------
+    outline : (n, 2) float64 ndarray
+        Pixels (distorted, as seen); NaN where the outline leaves the mirror.
+    centre : (2,) float64 ndarray
+        The self-reflection pixel.
+    """
+    R, t = camera.R, camera.tvec
+    u0 = self_reflection_pixel(camera.mirror, R, t, camera.K, camera.D)
+
+    def rho(u):
+        P, V = camera.unproject(u)
+        return _radius_in_plane(P @ R.T + t, V @ R.T, z)
+
+    ang = np.linspace(0.0, 2.0 * np.pi, int(n), endpoint=False)
+    e = np.stack([np.cos(ang), np.sin(ang)], axis=1)
+    lo = np.zeros(len(e))
+    hi = np.ones(len(e))
+    for _ in range(60):  # grow until beyond the outline
+        d = rho(u0 + hi[:, None] * e)
+        grow = np.isfinite(d) & (d < r)
+        if not grow.any():
+            break
+        hi = np.where(grow, 2.0 * hi, hi)
+    while (hi - lo).max() > tol:
+        mid = 0.5 * (lo + hi)
+        inside = rho(u0 + mid[:, None] * e) < r
+        lo = np.where(inside, mid, lo)
+        hi = np.where(inside, hi, mid)
+    out = u0 + (0.5 * (lo + hi))[:, None] * e
+    out[~np.isfinite(rho(out))] = np.nan
+    return out, u0
+
+
+# -- detection ---------------------------------------------------------------------------------
+@dataclasses.dataclass(frozen=True, eq=False)
+class ReflectionFit:
+    """The outline of the camera's reflection found by :func:`detect_reflection`.
+
+    Attributes
+    ----------
+    points : (N, 2) float64 ndarray
+        Subpixel outline points (outer dark-to-bright edge, inliers of the ellipse fit), px.
+    center : (2,) float64 ndarray
+        Centre of the fitted ellipse, px.
+    radius : float
+        Mean semi-axis of the fitted ellipse, px.
+    rms : float
+        RMS distance of ``points`` to the ellipse, px: the measurement's own scatter (the
+        outline of a coaxial circle is close to, not exactly, an ellipse).
+    center_std : float
+        Standard deviation of ``center`` per coordinate, ``rms * sqrt(2 / N)``, px.
+    quality : float
+        Fraction of the search rays that gave an inlier edge point, in [0, 1].
+    contrast : float
+        Median grey-level rise across the outline.
+    """
+
+    points: np.ndarray
+    center: np.ndarray
+    radius: float
+    rms: float
+    center_std: float
+    quality: float
+    contrast: float
+
+    def __post_init__(self):
+        for name in ("points", "center"):
+            arr = np.array(getattr(self, name), np.float64)
+            arr.flags.writeable = False
+            object.__setattr__(self, name, arr)
+
+    def __repr__(self):
+        return (
+            f"ReflectionFit(center=({self.center[0]:.2f}, {self.center[1]:.2f}), radius="
+            f"{self.radius:.2f} px, points={len(self.points)}, rms={self.rms:.3f} px, "
+            f"quality={self.quality:.2f}, contrast={self.contrast:.1f})"
+        )
+
+
+def _gray(image):
+    img = np.asarray(image)
+    if img.ndim == 3 and img.shape[2] == 1:
+        img = img[:, :, 0]
+    if img.ndim == 3 and img.shape[2] in (3, 4):
+        img = cv2.cvtColor(img[:, :, :3].astype(np.float32), cv2.COLOR_BGR2GRAY)
+    if img.ndim != 2:
+        raise ValueError(f"image must be grey (H, W) or BGR(A) (H, W, 3|4), got {img.shape}")
+    g = np.nan_to_num(img.astype(np.float32))
+    if np.asarray(image).dtype == np.uint16:
+        g = g / 257.0
+    elif g.size and float(g.max()) <= 1.0 and np.asarray(image).dtype.kind == "f":
+        g = g * 255.0
+    return g
+
+
+def _polar(G, center, radii, angles):
+    """Samples of ``G`` along rays: (n_angles, n_radii) float32 (bilinear, NaN outside)."""
+    ca, sa = np.cos(angles)[:, None], np.sin(angles)[:, None]
+    mx = (center[0] + ca * radii[None, :]).astype(np.float32)
+    my = (center[1] + sa * radii[None, :]).astype(np.float32)
+    out = cv2.remap(G, mx, my, cv2.INTER_LINEAR, borderMode=cv2.BORDER_CONSTANT, borderValue=np.nan)
+    return out
+
+
+def _rises(prof, dr, min_rise, dark_max, k=3):
+    """Per ray, radii of strong dark-to-bright rises: local maxima of the radial derivative
+    whose rise over +-k samples exceeds ``min_rise`` with the inner side below ``dark_max``.
+
+    Returns (ray index, radius index) arrays."""
+    d = np.gradient(prof, axis=1) / dr
+    inner = np.full_like(prof, np.nan)
+    outer = np.full_like(prof, np.nan)
+    inner[:, k:] = prof[:, :-k]
+    outer[:, :-k] = prof[:, k:]
+    with np.errstate(invalid="ignore"):
+        peak = (d > 0) & (d >= np.roll(d, 1, axis=1)) & (d > np.roll(d, -1, axis=1))
+        strong = (outer - inner > min_rise) & (inner < dark_max)
+    peak[:, :k] = False
+    peak[:, -k:] = False
+    return np.nonzero(peak & strong)
+
+
+def detect_reflection(
+    image, rim, *, center=None, center_search=0.08, max_radius=0.6, min_radius=0.03, rng=0
+):
+    """Find the outermost round dark silhouette around the image of the camera centre.
+
+    1. Radial profiles from ``center`` (default the rim centre) out to ``max_radius`` times the
+       rim's minor semi-axis, of the image smoothed in proportion to the rim's size.
+    2. Per ray, every strong dark-to-bright rise (local maximum of the radial derivative whose
+       rise exceeds a fifth of the contrast between the dark centre and the mirror's scene,
+       with a dark inner side); highlights and inner rings of the glass give inner rises,
+       struts and scene edges give rises off the common circle.
+    3. A vote over circle centres near ``center`` and radii (one vote per ray and radius bin)
+       finds the round silhouettes; the **outermost** one supported by at least 40 % of the
+       rays is kept (the lens barrel or body, not the glass's inner rings).
+    4. Per ray the rise nearest to that circle, then a robust ellipse (RANSAC,
+       :func:`.rim.fit_rim`) rejects struts and highlights; two more rounds along rays from the
+       ellipse's centre in a narrow window, unsmoothed but for 0.7 px, each edge at the
+       centroid of the radial derivative within 1.5 px of its steepest sample.
+    5. Declines (:class:`~.errors.EstimationError`) when the centre is not darker than the
+       scene, no round silhouette has enough support, or the silhouette has no darker core (the
+       lens glass; a uniformly dark floor or clutter has none).
+
+    Parameters
+    ----------
+    image : (H, W) or (H, W, 3|4) ndarray
+        Grey or BGR(A) image, uint8, uint16 or float.
+    rim : RimFit
+        The rim (its centre and size bound the search).
+    center : (2,) array_like, optional
+        Where to look (e.g. the mean of the candidates' self-reflection pixels); default the rim
+        centre.
+    center_search : float
+        The silhouette's centre is sought within this many rim semi-axes of ``center``.
+    max_radius, min_radius : float
+        Search radii in units of the rim's minor semi-axis.
+    rng : int or numpy.random.Generator
+        Seed of the RANSAC sampling.
+
+    Returns
+    -------
+    ReflectionFit
+
+    Raises
+    ------
+    EstimationError
+        No camera reflection found (the message says why); the calibration then goes on
+        without it.
+    ValueError
+        Bad arguments.
+    """
+    from .rim import RimFit
+
+    if not isinstance(rim, RimFit):
+        raise ValueError(
+            f"rim must be a RimFit (from detect_rim or fit_rim), got {type(rim).__name__}"
+        )
+    if not (0 < min_radius < max_radius <= 1.0) or not (0 <= center_search <= 0.5):
+        raise ValueError(
+            "need 0 < min_radius < max_radius <= 1 and 0 <= center_search <= 0.5 (units of "
+            "the rim's semi-axis)"
+        )
+    gray = _gray(image)
+    r_rim = float(min(rim.axes))
+    c0 = np.asarray(rim.center if center is None else center, np.float64).reshape(2)
+    if not np.isfinite(c0).all():
+        raise ValueError("center must be a finite pixel")
+    R_max, R_min = max_radius * r_rim, max(3.0, min_radius * r_rim)
+    sig = max(0.7, r_rim / 300.0)
+    G = cv2.GaussianBlur(gray, (0, 0), sig)
+    n_rays = int(np.clip(2 * np.pi * R_max / 6.0, 180, 720))
+    ang = np.linspace(0, 2 * np.pi, n_rays, endpoint=False)
+    dr = max(0.5, sig / 2)
+    radii = np.arange(0.0, R_max, dr)
+    prof = _polar(G, c0, radii, ang)
+    # levels: the dark centre and the mirror's scene (a ring well inside the rim)
+    centre = prof[:, radii < max(R_min, 0.05 * r_rim)]
+    ring = _polar(G, c0, np.linspace(0.7, 0.9, 16) * r_rim, ang)
+    near = np.abs(np.diff(_polar(gray, c0, radii[:40], ang), axis=1))
+    if min(np.isfinite(a).sum() for a in (centre, ring, near)) < 16:
+        raise EstimationError(
+            f"no camera reflection found: the place to look, ({c0[0]:.0f}, {c0[1]:.0f}), is "
+            f"not in the image"
+        )
+    dark, scene = float(np.nanmedian(centre)), float(np.nanmedian(ring))
+    contrast = scene - dark
+    noise = 1.4826 * float(np.nanmedian(near))
+    if not (np.isfinite(contrast) and contrast > max(10.0, 4.0 * noise)):
+        raise EstimationError(
+            f"no camera reflection found: the centre (grey {dark:.0f}) is not clearly darker "
+            f"than the mirror's scene (grey {scene:.0f})"
+        )
+    ri, rj = _rises(prof, dr, 0.2 * contrast, dark + 0.6 * contrast)
+    keep = radii[rj] >= R_min
+    ri, rj = ri[keep], rj[keep]
+    if len(ri) < 0.3 * n_rays:
+        raise EstimationError(
+            f"no camera reflection found: too few dark-to-bright edges around ({c0[0]:.0f}, "
+            f"{c0[1]:.0f})"
+        )
+    pts = c0 + radii[rj, None] * np.stack([np.cos(ang[ri]), np.sin(ang[ri])], axis=1)
+    dark_max = dark + 0.6 * contrast
+
+    def dark_inside(rho, c):
+        """A silhouette is dark inside: 80 % of the annulus 0.6-0.95 of its radius about its
+        centre ``c`` is dark (a dark scene line or ring is dark only along itself)."""
+        band = _polar(G, c, np.linspace(0.6, 0.95, 8) * rho, ang[::2])
+        ok = np.isfinite(band)
+        return ok.any() and float(np.mean(band[ok] < dark_max)) >= 0.8
+
+    # 3. vote over centres and radii, one vote per (ray, radius bin)
+    half = float(center_search) * r_rim
+    offs = np.linspace(-half, half, int(np.clip(np.ceil(half / (0.01 * r_rim)) + 1, 9, 31)))
+    bw = max(2.0, 0.025 * R_max)
+    nb = int(R_max / bw) + 2
+    found = {}  # radius bin -> (support, centre): the best centre for each supported radius
+    for ox in offs:
+        for oy in offs:
+            c = c0 + (ox, oy)
+            rad = np.hypot(pts[:, 0] - c[0], pts[:, 1] - c[1])
+            b = np.clip((rad / bw).astype(int), 0, nb - 1)
+            hist = np.zeros(nb)
+            for shift in (0, 1):  # bins of 2 bw, overlapping
+                key = np.unique(ri * nb + np.clip(b - shift, 0, nb - 1))
+                h = np.bincount(key % nb, minlength=nb)
+                hist = np.maximum(hist, np.r_[h[shift:], np.zeros(shift)] if shift else h)
+            for j in np.flatnonzero((hist >= 0.4 * n_rays) & (np.arange(nb) * bw >= R_min)):
+                if int(j) not in found or hist[j] > found[int(j)][0]:
+                    found[int(j)] = (hist[j], c)
+    # circles dark inside, outermost first; neighbouring bins are one circle (its best centre)
+    order = [j for j in sorted(found, reverse=True) if dark_inside((j + 1) * bw, found[j][1])]
+    circles = []
+    for j in order:
+        if circles and circles[-1][0] - j <= 2:
+            if found[j][0] > found[circles[-1][0]][0]:
+                circles[-1] = (j, circles[-1][1])
+            continue
+        circles.append((j, j))
+    if not circles:
+        raise EstimationError(
+            "no camera reflection found: no round dark silhouette around the image centre "
+            "(edges on fewer than 40 % of the rays share a circle that is dark inside)"
+        )
+    first_why = None
+    for j, _ in circles[:4]:
+        try:
+            return _refine_silhouette(gray, G, pts, found[j][1], j * bw, bw, sig, contrast, rng)
+        except EstimationError as err:  # e.g. a square box behind the barrel: try inside it
+            first_why = first_why or err
+    raise first_why
+
+
+def _refine_silhouette(gray, G, pts, c_est, r_est, bw, sig, contrast, rng):
+    """Steps 4-5 of :func:`detect_reflection` for one voted circle."""
+    from .rim import fit_rim
+
+    rad = np.hypot(pts[:, 0] - c_est[0], pts[:, 1] - c_est[1])
+    near = np.abs(rad - (r_est + bw)) <= 2.5 * bw
+    if near.sum() < 12:
+        raise EstimationError("no camera reflection found: too few edge points on the circle")
+    try:
+        fit = fit_rim(pts[near], threshold=max(1.0, 2 * sig), rng=rng)
+    except ValueError as err:
+        raise EstimationError(f"no camera reflection found: {err}") from None
+    # 4. subpixel rounds along rays from the ellipse's centre, narrow window
+    G1 = cv2.GaussianBlur(gray, (0, 0), 0.7)
+    n_rays = int(np.clip(2 * np.pi * float(fit.axes.mean()) / 2.0, 90, 1440))
+    ang = np.linspace(0, 2 * np.pi, n_rays, endpoint=False)
+    for _ in range(2):
+        c = np.asarray(fit.center)
+        e = np.stack([np.cos(ang), np.sin(ang)], axis=1)
+        # radius of the ellipse along each ray: |S^-1 e| = 1 / r
+        r_ray = 1.0 / np.linalg.norm(e @ np.linalg.inv(fit.shape_matrix).T, axis=1)
+        w = max(3.0, 3.0 * fit.rms + 2.0 * sig)
+        tau = np.arange(-w, w + 1e-9, 0.25)
+        mx = (c[0] + e[:, :1] * (r_ray[:, None] + tau)).astype(np.float32)
+        my = (c[1] + e[:, 1:] * (r_ray[:, None] + tau)).astype(np.float32)
+        f = cv2.remap(
+            G1, mx, my, cv2.INTER_LINEAR, borderMode=cv2.BORDER_CONSTANT, borderValue=np.nan
+        )
+        d = np.gradient(f, axis=1)
+        rise = f[:, -1] - f[:, 0]
+        dd = np.where(np.isfinite(d), d, -np.inf)
+        j = np.clip(np.argmax(dd, axis=1), 1, len(tau) - 2)
+        good = np.isfinite(rise) & (rise > 0.15 * contrast) & np.isfinite(dd.max(axis=1))
+        # the centroid of the rise within 1.5 px of its steepest sample: the parabola through
+        # the peak scatters by 0.15 px on an exact anti-aliased disk, the centroid by 0.01 px
+        dn = np.nan_to_num(d, nan=0.0)
+        win = (np.abs(tau[None, :] - tau[j][:, None]) <= 1.5) & (dn > 0)
+        wsum = (dn * win).sum(axis=1)
+        loc = (dn * win * tau[None, :]).sum(axis=1) / np.where(wsum > 0, wsum, 1.0)
+        p = c + (r_ray + loc)[:, None] * e
+        p, rise_k = p[good], rise[good]
+        if len(p) < 12:
+            raise EstimationError("no camera reflection found: its outline faded on refinement")
+        dist = np.abs(fit.distance(p))
+        mask = dist <= max(0.5, 3.5 * 1.4826 * float(np.median(dist)))
+        try:
+            fit = fit_rim(p[mask], robust=False)  # outliers already cut by the ellipse
+        except ValueError as err:
+            raise EstimationError(f"no camera reflection found: {err}") from None
+    quality = len(fit.points) / n_rays
+    radius = float(np.mean(fit.axes))
+    core = _polar(G, fit.center, np.linspace(0.0, 0.5, 12) * radius, ang[::4])
+    shell = _polar(G, fit.center, np.linspace(0.75, 0.95, 8) * radius, ang[::4])
+    core_level, shell_level = float(np.nanmedian(core)), float(np.nanmedian(shell))
+    edge_rise = float(np.median(rise_k))
+    why = None
+    if quality < 0.4:
+        why = f"its outline is found on only {100 * quality:.0f} % of the rays (need 40 %)"
+    elif fit.axes[0] > 1.4 * fit.axes[1]:
+        why = f"the silhouette is not round (axes {fit.axes[0]:.1f} and {fit.axes[1]:.1f} px)"
+    elif fit.rms > max(0.75, 0.02 * radius):
+        why = f"the silhouette's edge is ragged (RMS {fit.rms:.2f} px to an ellipse)"
+    elif not core_level < shell_level - max(3.0, 0.05 * contrast):
+        why = (
+            f"the silhouette has no darker core (grey {core_level:.0f} inside, "
+            f"{shell_level:.0f} near its edge): no lens glass, e.g. a dark floor"
+        )
+    if why is not None:
+        raise EstimationError(f"no camera reflection found: {why}")
+    n = len(fit.points)
+    return ReflectionFit(
+        points=fit.points,
+        center=fit.center,
+        radius=radius,
+        rms=float(fit.rms),
+        center_std=float(fit.rms * math.sqrt(2.0 / max(n, 1))),
+        quality=float(quality),
+        contrast=edge_rise,
+    )

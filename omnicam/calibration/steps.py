@@ -1,0 +1,539 @@
+"""The named steps of :func:`omnicam.calibration.calibrate`, each returning a typed result.
+
+rim (:func:`rim_step` -> :class:`RimStep`) -> reflection cue (:func:`reflection_step` ->
+:class:`ReflectionCue`) -> candidates (:func:`candidates_step` -> :class:`Candidates`) ->
+selection (:func:`selection_step` -> :class:`.selection.Selection`) -> refinement
+(:func:`refinement_step` -> :class:`Refinement`) -> warnings (:func:`warnings_step`).
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+
+import cv2
+import numpy as np
+
+from .errors import EstimationError
+
+__all__ = [
+    "RimStep",
+    "ReflectionCue",
+    "Candidates",
+    "Refinement",
+    "rim_step",
+    "reflection_step",
+    "candidates_step",
+    "selection_step",
+    "refinement_step",
+    "warnings_step",
+    "as_pixels",
+    "normalize",
+]
+
+#: A cue joins the refinement only if the rim's chi-square rises by at most this much
+#: (2 x the 99.9 % point of chi-square with 5 degrees of freedom, the posture's).
+CUE_CHI2 = 2.0 * 20.515
+#: Rim and outline residuals are never taken as smaller than this (px): edge location limits.
+SIGMA_FLOOR = 0.02
+#: Above this RMS axis uncertainty (deg) the report warns: an error over 0.1 deg is then
+#: within two standard deviations (issue 8 counts 0.1 deg without a warning as a failure).
+AXIS_WARN_DEG = 0.05
+#: Outline points used in the refinement (evenly subsampled; selection uses all).
+MAX_REFINE_POINTS = 400
+
+
+def as_pixels(points, name):
+    """``(N, 2)`` float64 pixels from ``(N, 2)`` / ``(N, 1, 2)``; ``ValueError`` naming ``name``."""
+    try:
+        arr = np.asarray(points, dtype=np.float64)
+    except (TypeError, ValueError):
+        raise ValueError(f"{name} must be an (N, 2) or (N, 1, 2) array of pixels") from None
+    if arr.ndim == 3 and arr.shape[1:] == (1, 2):
+        arr = arr.reshape(-1, 2)
+    if arr.ndim != 2 or arr.shape[1] != 2:
+        raise ValueError(
+            f"{name} must be an (N, 2) or (N, 1, 2) array of pixels, got shape {arr.shape}"
+        )
+    return arr
+
+
+def normalize(pixels, K, D):
+    """Pixels -> undistorted normalised coordinates (``inv(K)`` with skew, tight undistortion)."""
+    from ..raytrace import undistort_normalized
+
+    if D is None:
+        Ki = np.linalg.inv(K)
+        return pixels @ Ki[:2, :2].T + Ki[:2, 2]
+    return undistort_normalized(np.ascontiguousarray(pixels), K, D)
+
+
+# -- 1. rim ------------------------------------------------------------------------------------
+@dataclasses.dataclass(frozen=True, eq=False)
+class RimStep:
+    """The rim ellipse ``Q_I`` (eqs. 20-22).
+
+    Attributes
+    ----------
+    fit : RimFit
+        The ellipse; with ``D`` fitted to undistorted pixels ``K x_n``.
+    detected : RimFit or None
+        What :func:`.rim.detect_rim` found in the image (None with boundary points).
+    seen : (N, 2) ndarray
+        The inlier boundary points as seen (distorted).
+    warnings : tuple of str
+    """
+
+    fit: object
+    detected: object
+    seen: np.ndarray
+    warnings: tuple
+
+    @property
+    def points(self):
+        """(N, 2) boundary points in undistorted pixels (the refinement's rim rows)."""
+        return np.asarray(self.fit.points, np.float64)
+
+
+def rim_step(K, D, image=None, boundary_points=None):
+    """Fit (or detect) the rim ellipse; see :class:`RimStep`.
+
+    Raises
+    ------
+    ValueError
+        Too few or non-finite boundary points, points that cannot be undistorted.
+    EstimationError
+        No ellipse in the image or among the points.
+    """
+    from .rim import detect_rim, fit_rim
+
+    warnings = []
+    detected = None
+    if boundary_points is not None:
+        seen = as_pixels(boundary_points, "boundary_points")
+        if len(seen) < 6:
+            raise ValueError(
+                f"boundary_points has {len(seen)} point(s); give at least 6 points spread "
+                f"along the mirror rim (dozens are better)"
+            )
+        if not np.isfinite(seen).all():
+            raise ValueError("boundary_points has non-finite values; drop them")
+        if image is not None:
+            warnings.append(
+                "both image and boundary_points given: the rim was fitted to the boundary "
+                "points, the image only gave the size"
+            )
+    else:
+        from .reflection import _gray
+
+        _gray(image)  # bad input (shape) raises ValueError here, before the search
+        try:
+            detected = detect_rim(image)
+        except ValueError as err:  # a valid image without a findable rim
+            raise EstimationError(str(err)) from None
+        seen = np.asarray(detected.points, np.float64)
+        fit = detected
+    if boundary_points is not None or D is not None:
+        xn = normalize(seen, K, D)
+        ideal = xn @ K[:2, :2].T + K[:2, 2]  # undistorted pixels, same K
+        if not np.isfinite(ideal).all():
+            raise ValueError("some boundary points cannot be undistorted with D; check D")
+        try:
+            fit = fit_rim(ideal)
+        except ValueError as err:
+            raise EstimationError(str(err)) from None
+        seen = seen[np.asarray(fit.inliers, bool)]
+    if fit.rms > 1.0:
+        warnings.append(
+            f"the rim fit is poor (RMS {fit.rms:.2f} px): check the boundary points (the "
+            f"posture error grows by about 1 deg per px of rim noise)"
+        )
+    return RimStep(fit=fit, detected=detected, seen=seen, warnings=tuple(warnings))
+
+
+# -- 2. the camera's reflection ----------------------------------------------------------------
+@dataclasses.dataclass(frozen=True, eq=False)
+class ReflectionCue:
+    """The outline of the camera's reflection, if any (:mod:`.reflection`).
+
+    Attributes
+    ----------
+    points : (M, 2) ndarray or None
+        Outline pixels as seen (None: not used).
+    normalized : (M, 2) ndarray or None
+        Their undistorted normalised coordinates.
+    fit : ReflectionFit or None
+        The detection (``lens="auto"``).
+    sigma : float
+        The measurement's own scatter, px (the detection's RMS to its ellipse; NaN for given
+        points).
+    r, z : float or None
+        Known radius and axial distance of the circle (None: fitted).
+    note : str
+        Whether it is used, and why not.
+    """
+
+    points: object
+    normalized: object
+    fit: object
+    sigma: float
+    r: object
+    z: object
+    note: str
+
+    @property
+    def used(self):
+        return self.points is not None
+
+
+def reflection_step(lens, image, rim, K, D, r=None, z=None, cands=None, mirror=None):
+    """Detect or take the outline of the camera's reflection; see :class:`ReflectionCue`.
+
+    With ``cands`` (and ``mirror``) the detection looks around the physical candidates' self-
+    reflection pixels (their mean, within their spread plus 8 % of the rim's semi-axis): a
+    tilted mirror moves the camera's reflection well away from the rim centre.
+
+    ``lens`` is ``"auto"`` (detect in ``image``), ``None``/``False`` (not used) or an
+    ``(M, 2)`` array of outline pixels.
+    """
+    from .reflection import detect_reflection
+
+    for name, v in (("lens_r", r), ("lens_z", z)):
+        if v is not None and not (np.isfinite(v) and (name == "lens_z" or v > 0)):
+            raise ValueError(f"{name} must be a finite number (lens_r > 0) or None, got {v!r}")
+    fit, px, sigma = None, None, math.nan
+    if isinstance(lens, str):
+        if lens != "auto":
+            raise ValueError(
+                f"lens must be 'auto', None, False or an (M, 2) array of outline pixels, "
+                f"got {lens!r}"
+            )
+        if image is None:
+            return ReflectionCue(
+                None,
+                None,
+                None,
+                sigma,
+                r,
+                z,
+                "not used: no image (give lens=outline pixels to use it)",
+            )
+        try:
+            where = {}
+            if cands is not None and mirror is not None and cands.physical:
+                from .reflection import self_reflection_pixel
+
+                u = np.array(
+                    [
+                        self_reflection_pixel(mirror, cands.all[i].R, cands.all[i].tvec, K, D)
+                        for i in cands.physical
+                    ]
+                )
+                if np.isfinite(u).all():
+                    c = u.mean(axis=0)
+                    spread = float(np.linalg.norm(u - c, axis=1).max()) / float(min(rim.axes))
+                    where = {"center": c, "center_search": min(0.5, 0.08 + spread)}
+            fit = detect_reflection(image, rim, **where)
+        except EstimationError as err:  # optional: the report says why it was not used
+            return ReflectionCue(None, None, None, sigma, r, z, f"not used: {err}")
+        px, sigma = np.asarray(fit.points, np.float64), float(fit.rms)
+    elif lens is None or lens is False:
+        return ReflectionCue(None, None, None, sigma, r, z, "not used (lens=None)")
+    else:
+        px = as_pixels(lens, "lens")
+        if len(px) < 8 or not np.isfinite(px).all():
+            raise ValueError(
+                f"lens has {len(px)} point(s) or non-finite values; give at least 8 finite "
+                f"pixels along the outline of the camera's reflection"
+            )
+    xn = normalize(px, K, D)
+    if not np.isfinite(xn).all():
+        raise ValueError("some lens outline points cannot be undistorted with D; check D")
+    return ReflectionCue(px, xn, fit, sigma, r, z, f"used: {len(px)} outline points")
+
+
+# -- 3. candidates -----------------------------------------------------------------------------
+@dataclasses.dataclass(frozen=True, eq=False)
+class Candidates:
+    """The four postures of Chen's method (eqs. 23-29, 32-42) and which are physical."""
+
+    all: tuple
+    physical: tuple
+
+
+def candidates_step(rim, K, mirror):
+    """Chen's candidates for the rim ellipse; see :class:`Candidates`."""
+    from . import chen
+
+    Qe = chen.normalized_conic(rim.fit.conic, K)  # Q_e = K^T Q_I K  (eq. 24)
+    cands = tuple(chen.chen_candidates(Qe, mirror))
+    return Candidates(cands, tuple(i for i, c in enumerate(cands) if c.physical))
+
+
+# -- 4. selection ------------------------------------------------------------------------------
+def reflection_circles(cands, cue, K, mirror, D=None):
+    """The best coaxial circle (and the self-reflection pixel) under each physical candidate."""
+    from .reflection import fit_circle, self_reflection_pixel
+
+    Kinv2 = np.linalg.inv(K)[:2, :2]
+    circles, self_px = {}, {}
+    for i in cands.physical:
+        c = cands.all[i]
+        circles[i] = fit_circle(mirror, c.R, c.tvec, cue.normalized, Kinv2, r=cue.r, z=cue.z)
+        if cue.fit is not None:
+            u0 = self_reflection_pixel(mirror, c.R, c.tvec, K, D)
+            self_px[i] = float(np.linalg.norm(u0 - cue.fit.center))
+    return circles, self_px
+
+
+def selection_step(cands, cue, lines, mirror, K, D, make_camera):
+    """Score every physical candidate by every cue and choose (:func:`.selection.select_candidate`).
+
+    Returns
+    -------
+    selection : Selection
+    circles : dict
+        ``{index: ReflectionCircle}`` under each physical candidate (empty without the cue).
+    """
+    from .selection import select_candidate
+
+    circles, spec = {}, None
+    if cue.used:
+        circles, self_px = reflection_circles(cands, cue, K, mirror, D)
+        spec = {
+            "rms": {i: c.rms for i, c in circles.items()},
+            "n": len(cue.normalized),
+            "sigma": cue.sigma,
+            "self_px": self_px,
+            # the reflection must fit some posture: within 5x its own scatter, at least 2 px
+            # (the analytic posture is off along the rim's weak direction, which moves the
+            # predicted outline by 1-2 px on realistic renders; a wrong K moves it by 5+)
+            "limit": max(2.0, 5.0 * cue.sigma) if np.isfinite(cue.sigma) else 2.0,
+        }
+    sel = select_candidate(cands.all, make_camera, lines, (0.0, 0.0, -mirror.c), spec)
+    return sel, circles
+
+
+# -- 5. refinement -----------------------------------------------------------------------------
+@dataclasses.dataclass(frozen=True, eq=False)
+class Refinement:
+    """The refined posture, which cues joined the rim, and its a posteriori uncertainty.
+
+    Attributes
+    ----------
+    rvec, tvec : (3,) ndarray
+        The final posture.
+    result : RefineResult or None
+        The refinement kept (None with ``refine=False``).
+    accepted_cues : tuple of str
+    rejected_cues : tuple of (str, str)
+        ``(cue, why)``: the rim's chi-square rise when the cue joined, or its own residual.
+    skipped_cues : tuple of (str, str)
+        ``(cue, why)``: cues not tried in the refinement (not a disagreement).
+    uncertainty : Uncertainty
+        A posteriori (:func:`.refine.posture_uncertainty`): rows weighted by their observed RMS.
+    circle : ReflectionCircle or None
+        The reflection's circle under the final posture (when the cue was given).
+    """
+
+    rvec: np.ndarray
+    tvec: np.ndarray
+    result: object
+    accepted_cues: tuple
+    rejected_cues: tuple
+    uncertainty: object
+    circle: object
+    skipped_cues: tuple = ()
+
+
+def _subsample(x, n):
+    if len(x) <= n:
+        return x
+    return x[np.linspace(0, len(x) - 1, n).astype(int)]
+
+
+def _z_range(mirror, res):
+    """Where the reflection's circle may lie: from ``-c / 2`` behind the camera centre to the
+    mirror vertex's distance (as :func:`.reflection.fit_circle` searches, up to the vertex)."""
+    R = cv2.Rodrigues(np.asarray(res.rvec, np.float64).reshape(3, 1))[0]
+    vertex = float(np.linalg.norm(R @ np.array([0.0, 0.0, mirror.b]) + res.tvec))
+    return -0.5 * mirror.c, vertex
+
+
+def refinement_step(K, mirror, cand, rim, lines_xn, cue, circle, refine=True):
+    """Refine on the rim and every cue that agrees with it; see :class:`Refinement`.
+
+    A cue joins only if the joint fit keeps the rim at its own noise level: with ``sigma^2``
+    the rim's a posteriori variance alone (``2 cost / (N - 5)``, at least ``SIGMA_FLOOR``^2,
+    inflated by the correlation of neighbouring residuals as the reported uncertainty is), the
+    rim's chi-square may rise by at most ``CUE_CHI2`` (the shift the cue causes must be within
+    the rim's own uncertainty ellipsoid), and the cue's own RMS must stay within
+    3x its measured scatter (1 px at least for the outline, 3 px for far lines), and the
+    reflection's circle must lie between the camera and the mirror. The reflection is tried
+    first, and only with its ``r`` or ``z`` known (otherwise it only chose the candidate: see
+    ``skipped_cues``); far lines join only when it did not join (they then add nothing
+    measurable but time, ``benchmarks/bench_calibrate.py``).
+    """
+    from .refine import (
+        RimTerm,
+        _correlation_factor,
+        posture_uncertainty,
+        refine_posture,
+    )
+    from .reflection import ReflectionCircle, fit_circle
+
+    rvec, tvec = cand.rvec, cand.tvec
+    rim_px = rim.points
+    accepted, rejected, skipped, kept = [], [], [], None
+    spec = None
+    if cue.used and circle is not None and np.isfinite(circle.rms):
+        xn_r = _subsample(cue.normalized, MAX_REFINE_POINTS)
+        # an unknown z stays free: it trades with the tilt, and the uncertainty must say so
+        spec = (xn_r, circle.r, circle.z, cue.r is not None, cue.z is not None)
+    if refine:
+        base = refine_posture(K, mirror, rvec, tvec, rim_px)
+        kept = base
+        # the rim's a posteriori variance, inflated by the correlation of neighbouring edge
+        # points as in the reported uncertainty (so the test and the uncertainty agree)
+        R0 = cv2.Rodrigues(np.asarray(base.rvec, np.float64).reshape(3, 1))[0]
+        f = _correlation_factor(RimTerm(K, mirror, R0, base.tvec, rim_px).residuals(R0, base.tvec))
+        var = max(2.0 * base.rim_cost / max(len(rim_px) - 5, 1), SIGMA_FLOOR**2) * f * f
+        tries = []
+        if spec is not None and cue.r is None and cue.z is None:
+            # with r and z both unknown the circle trades its z with the mirror's tilt along a
+            # valley the linear uncertainty does not see (exact outlines + 0.05 px noise, 10
+            # rigs: axis 0.05-0.2 deg -> 0.1-1.3 deg, reported 0.03-0.14): it chose the
+            # candidate; the posture rests on the rim (and far lines)
+            skipped.append(
+                (
+                    "reflection",
+                    "its circle's r and z are both unknown and z trades "
+                    "with the tilt; give lens_z or lens_r to refine with it",
+                )
+            )
+        elif spec is not None:
+            tries.append("reflection")
+        elif cue.used:
+            rejected.append(
+                ("reflection", "its outline does not reach the camera under this posture")
+            )
+        if lines_xn:
+            tries.append("far lines")
+        for name in tries:
+            if name == "far lines" and "reflection" in accepted:
+                break
+            if name == "reflection":
+                res = refine_posture(K, mirror, rvec, tvec, rim_px, reflection=spec, max_nfev=200)
+                own, cap = (
+                    res.reflection_rms,
+                    max(1.0, 3.0 * cue.sigma) if np.isfinite(cue.sigma) else 1.0,
+                )
+            else:
+                res = refine_posture(K, mirror, rvec, tvec, rim_px, lines_xn)
+                own, cap = res.line_rms, 3.0
+            chi2 = 2.0 * (res.rim_cost - base.rim_cost) / var
+            z_range = _z_range(mirror, res) if name == "reflection" else None
+            if z_range is not None and not z_range[0] <= res.z <= z_range[1]:
+                rejected.append(
+                    (
+                        name,
+                        f"the fitted circle lies at z = {res.z:.1f}, not between "
+                        f"the camera and the mirror ({z_range[0]:.1f} to "
+                        f"{z_range[1]:.1f})",
+                    )
+                )
+            elif chi2 > CUE_CHI2:
+                rejected.append(
+                    (
+                        name,
+                        f"joining it raised the rim's RMS from {base.rim_rms:.3f} "
+                        f"to {res.rim_rms:.3f} px (chi-square +{chi2:.0f}, "
+                        f"allowed {CUE_CHI2:.0f})",
+                    )
+                )
+            elif not own <= cap:
+                rejected.append(
+                    (
+                        name,
+                        f"its own RMS residual after the joint fit is "
+                        f"{own:.2f} px (allowed {cap:.2f})",
+                    )
+                )
+            else:
+                accepted.append(name)
+                kept = res
+        rvec, tvec = kept.rvec, kept.tvec
+    # the candidates (chen) and refine_posture (gauge_rotation) already return the gauge
+    R = cv2.Rodrigues(np.asarray(rvec, np.float64).reshape(3, 1))[0]
+    final_circle = None
+    if cue.used:
+        if kept is not None and "reflection" in accepted:
+            final_circle = ReflectionCircle(kept.r, kept.z, kept.reflection_rms)
+        else:
+            final_circle = fit_circle(
+                mirror, R, tvec, cue.normalized, np.linalg.inv(K)[:2, :2], r=cue.r, z=cue.z
+            )
+    rim_sigma = kept.rim_rms if kept is not None else rim.fit.rms
+    known = cue.r is not None or cue.z is not None  # else z trades with the tilt (above)
+    use_refl = "reflection" in accepted or (not refine and spec is not None and known)
+    unc = posture_uncertainty(
+        K,
+        mirror,
+        rvec,
+        tvec,
+        rim_px,
+        rim_sigma,
+        (spec[0], final_circle.r, final_circle.z, spec[3], spec[4]) if use_refl else None,
+        final_circle.rms if use_refl else None,
+        floor=1e-9,
+    )
+    return Refinement(
+        np.asarray(rvec, np.float64),
+        np.asarray(tvec, np.float64),
+        kept,
+        tuple(accepted),
+        tuple(rejected),
+        unc,
+        final_circle,
+        tuple(skipped),
+    )
+
+
+# -- 6. warnings -------------------------------------------------------------------------------
+def warnings_step(rim, cue, selection, refinement, cands):
+    """Everything a user must know before trusting the result, as a tuple of sentences."""
+    out = list(rim.warnings) + list(selection.warnings)
+    for name, why in refinement.rejected_cues:
+        out.append(
+            f"the {name} disagree(s) with the rim and was left out of the refinement: "
+            f"{why}; check it (the posture rests on the rim alone)"
+        )
+    unc = refinement.uncertainty
+    if AXIS_WARN_DEG < unc.axis_std_deg <= 0.5:
+        out.append(
+            f"the mirror axis is uncertain by about {unc.axis_std_deg:.2f} deg (RMS; "
+            f"errors of {2 * unc.axis_std_deg:.2f} deg are plausible), mostly "
+            f"{unc.describe()}; the camera's reflection pins it when its circle's z or r "
+            f"is given (lens_z, lens_r)"
+        )
+    if unc.axis_std_deg > 0.5:
+        out.append(
+            f"the posture is poorly determined: about {unc.axis_std_deg:.2f} deg (RMS) "
+            f"on the mirror axis and {unc.origin_std:.2f} on the origin, mostly "
+            f"{unc.describe()}; improve the boundary points or show the camera's "
+            f"reflection"
+        )
+    others = [i for i in cands.physical if i != selection.chosen]
+    if others and not selection.ambiguous and selection.costs_per_cue:
+        a, b = cands.all[selection.chosen], cands.all[others[0]]
+        d_axis = math.degrees(
+            math.atan2(np.linalg.norm(np.cross(a.axis, b.axis)), float(a.axis @ b.axis))
+        )
+        if d_axis > 0.01 and d_axis < 3.0 * unc.axis_std_deg:
+            out.append(
+                f"the posture's uncertainty ({unc.axis_std_deg:.3f} deg on the axis) is "
+                f"comparable with the separation of the two physical postures "
+                f"({d_axis:.3f} deg): the choice may be wrong; improve the boundary "
+                f"points"
+            )
+    return tuple(out)
