@@ -37,12 +37,16 @@ from .ellipse import (
     refine_geometric,
 )
 
-__all__ = ["RimFit", "fit_rim", "detect_rim", "conic_from_ellipse", "ellipse_from_conic",
-           "conic_distance"]
+__all__ = ["RimFit", "check_hint", "conic_distance", "conic_from_ellipse", "detect_rim",
+           "ellipse_from_conic", "fit_rim"]
 
 
 
 _COARSE_SIZE = 256  # longer side of the image used to find the rim roughly
+_HINT_RADIUS = 0.15  # a hinted rim's radius is within +-15 % of the hint's
+_HINT_CENTER = 0.15  # and its centre within 15 % of the hint's radius of the hint's centre
+_TEXTURE_FLOOR = 0.1  # weight of an ellipse without texture contrast (1 + contrast at best)
+_EXPECTED_SCORE = 0.3  # a rim of the expected size wins unless another's score is 1/0.3 x more
 
 
 @dataclasses.dataclass(frozen=True, eq=False)
@@ -226,19 +230,29 @@ def _fit_with_mask(pts, N, mask, robust, threshold):
                   inliers=mask)
 
 
-def _coarse_ellipse(gray):
-    """The rim roughly: centre and shape ``S`` (full-resolution px) of the best bright-inside
-    ellipse found on a copy whose longer side is ``_COARSE_SIZE`` px.
+def _coarse_ellipse(gray, hint=None, expected=None):
+    """The rim roughly: ``(center, S, px, polarity)``: centre and shape ``S`` (full-resolution
+    px) of the best rim ellipse found on a copy whose longer side is ``_COARSE_SIZE`` px, the
+    size of one coarse pixel, and ``+1`` for a mirror brighter than what surrounds it, ``-1``
+    for a darker one (a white holder).
 
-    1. Canny edge pixels vote for a centre along their gradient direction (towards the brighter
-       side: the inside of a bright mirror in a dark housing; a dark blob such as the camera's
-       reflection votes away from its own centre).
+    1. Canny edge pixels vote for a centre along their gradient direction, once towards the
+       brighter side (a bright mirror in a dark housing) and once towards the darker side (a
+       mirror in a white holder); a dark blob such as the camera's reflection votes away from
+       its own centre in the first pass.
     2. For the strongest centres, radii are ranked by the arc length of edge pixels at that
-       distance whose gradient points at the centre: a long rim beats a small complete circle,
-       and clipping only shortens the arc.
-    3. The best few circles are refined to ellipses (RANSAC on the edge pixels near them with the
-       right polarity, then again on those near the ellipse and aligned with its normal); the
-       ellipse supported by the longest arc wins.
+       distance whose gradient points at the centre (with the pass's polarity): a long rim beats
+       a small complete circle, and clipping only shortens the arc.
+    3. The best few circles of each polarity are refined to ellipses (RANSAC on the edge pixels
+       near them, then again on those near the ellipse and aligned with its normal).
+    4. The rim is where the mirror's textured reflection ends: each ellipse's arc length is
+       weighted by how much more textured the image is just inside it than just outside it
+       (:func:`_texture_contrast`), so a holder's outer edge (uniform inside) loses to the rim
+       (textured inside, uniform holder outside) even when its arc is longer.
+
+    ``hint = (cx, cy, r)`` (full-resolution px) keeps centres within ``_HINT_CENTER * r`` of
+    ``(cx, cy)`` and radii within ``r (1 -+ _HINT_RADIUS)``; ``expected = (r_min, r_max)`` keeps
+    radii in that range.
     """
     h, w = gray.shape
     s = min(1.0, _COARSE_SIZE / max(h, w))
@@ -249,9 +263,10 @@ def _coarse_ellipse(gray):
     gx = cv2.Sobel(small, cv2.CV_32F, 1, 0, ksize=3)
     gy = cv2.Sobel(small, cv2.CV_32F, 0, 1, ksize=3)
     mag = np.hypot(gx, gy)
-    # Canny's high threshold: the strongest 8 % of the gradients, but at least a tenth of the
-    # strong ones (a small rim on a flat background has few edge pixels)
-    hi = max(float(np.percentile(mag, 92)), 0.1 * float(np.percentile(mag, 99.9)))
+    # Canny's high threshold: the strongest 20 % of the gradients (a weak rim against a white
+    # holder next to a textured scene needs that many), but at least a tenth of the strong ones
+    # (a small rim on a flat background has few edge pixels)
+    hi = max(float(np.percentile(mag, 80)), 0.1 * float(np.percentile(mag, 99.9)))
     if not hi > 0:
         raise ValueError("no ellipse found: the image has no edges")
     scale = 255.0 / float(mag.max())
@@ -266,9 +281,52 @@ def _coarse_ellipse(gray):
     g /= np.linalg.norm(g, axis=1, keepdims=True)
     p = np.stack([xs, ys], axis=1).astype(np.float64)
     H, W = small.shape
+    ss = 0.5 * (sx + sy)  # full-resolution px -> coarse px (the aspect is kept by resize)
 
+    hint_c, hint_r = None, None
+    if hint is not None:  # the hint overrides the default range (and ``expected``)
+        hint_c = (np.array(hint[:2], np.float64) + 0.5) * (sx, sy) - 0.5
+        hint_r = hint[2] * ss
+        rmin, rmax = (1.0 - _HINT_RADIUS) * hint_r - 1.0, (1.0 + _HINT_RADIUS) * hint_r + 1.0
+    elif expected is not None:
+        rmin, rmax = expected[0] * ss - 1.0, expected[1] * ss + 1.0
+    else:
+        rmin, rmax = 0.08 * max(H, W), 0.8 * max(H, W)
+    rmin = max(rmin, 3.0)
+    if not rmax > rmin:
+        raise ValueError("no ellipse found: the rim size asked for is too small for the image")
+    texture = cv2.GaussianBlur(mag, (0, 0), 2.0)
+    found = []
+    for polarity in (1.0, -1.0):
+        for support, c, S in _coarse_candidates(p, polarity * g, (H, W), rmin, rmax, hint_c,
+                                                hint_r):
+            contrast = _texture_contrast(texture, c, S)
+            found.append((support * (_TEXTURE_FLOOR + max(contrast, 0.0)), support, c, S,
+                          polarity))
+    # an ellipse must be supported along >= ~8 % of its length to count, and keep to the
+    # sizes asked for (a refinement may have slid to a neighbouring circle)
+    found = [f for f in found if f[1] >= 0.5 * np.linalg.eigvalsh(f[3])[1]
+             and rmin <= np.linalg.eigvalsh(f[3])[0] and np.linalg.eigvalsh(f[3])[1] <= rmax]
+    if not found:
+        where = "" if hint is None else f" near the hint {tuple(float(v) for v in hint)}"
+        raise ValueError(f"no ellipse found{where}: no elliptic boundary between a textured "
+                         f"mirror and a plainer housing; is the mirror rim in view?")
+    score, _, c, S, polarity = max(found, key=lambda f: f[0])
+    # to full resolution: x = (x_small + 0.5) / s - 0.5 per axis
+    A = np.diag([1.0 / sx, 1.0 / sy])
+    center = A @ (c + 0.5) - 0.5
+    AS = A @ S
+    wv, V = np.linalg.eigh(AS @ AS.T)
+    return center, V @ np.diag(np.sqrt(wv)) @ V.T, 1.0 / min(sx, sy), polarity, score
+
+
+def _coarse_candidates(p, g, shape, rmin, rmax, hint_c=None, hint_r=None):
+    """Steps 1-3 of :func:`_coarse_ellipse` for one polarity: ``[(support, c, S), ...]``.
+
+    ``p`` edge pixels, ``g`` unit gradients pointing into the rim (towards its centre).
+    """
+    H, W = shape
     # 1. centre votes along +g, centres up to a quarter of the image outside it
-    rmin, rmax = 0.08 * max(H, W), 0.8 * max(H, W)
     vote = np.arange(len(p))
     if len(vote) > 4000:  # enough votes for a clear peak; keeps the time bounded
         vote = np.random.default_rng(0).choice(len(p), 4000, replace=False)
@@ -281,6 +339,10 @@ def _coarse_ellipse(gray):
     ok = (cx >= 0) & (cx < acc_w) & (cy >= 0) & (cy < acc_h)
     acc = np.bincount((cy[ok] * acc_w + cx[ok]), minlength=acc_w * acc_h).astype(np.float32)
     acc = cv2.GaussianBlur(acc.reshape(acc_h, acc_w), (0, 0), 1.5)
+    if hint_c is not None:  # centres near the hinted one only
+        yy, xx = np.mgrid[0:acc_h, 0:acc_w]
+        far = np.hypot(xx - m - hint_c[0], yy - m - hint_c[1]) > _HINT_CENTER * hint_r + 1.5
+        acc[far] = 0
     peaks = []
     for _ in range(4):  # the strongest centres, with non-maximum suppression
         j = int(np.argmax(acc))
@@ -312,22 +374,37 @@ def _coarse_ellipse(gray):
                 candidates.append((arc3[k], c, int(k)))
     candidates.sort(key=lambda item: -item[0])
 
-    # 3. refine the best few to ellipses; the longest supported arc wins
-    best = None
+    # 3. refine the best few to ellipses
+    out = []
     for _, c, k in candidates[:3]:
         refined = _refine_coarse(p, g, c, float(k))
-        if refined is not None and (best is None or refined[0] > best[0]):
-            best = refined
-    if best is None or best[0] < 0.5 * np.linalg.eigvalsh(best[2])[1]:  # arc < ~8 % of the rim
-        raise ValueError("no ellipse found: no bright-inside elliptic boundary in the image; is "
-                         "the mirror rim in view (bright mirror against a darker housing)?")
-    _, c, S = best
-    # to full resolution: x = (x_small + 0.5) / s - 0.5 per axis
-    A = np.diag([1.0 / sx, 1.0 / sy])
-    center = A @ (c + 0.5) - 0.5
-    AS = A @ S
-    wv, V = np.linalg.eigh(AS @ AS.T)
-    return center, V @ np.diag(np.sqrt(wv)) @ V.T, 1.0 / min(sx, sy)
+        if refined is not None:
+            out.append(refined)
+    return out
+
+
+def _texture_contrast(texture, c, S):
+    """``(T_in - T_out) / (T_in + T_out)`` of the local texture (blurred gradient magnitude):
+    medians over the bands ``0.75..0.93`` and ``1.07..1.25`` of the ellipse ``(c, S)``, in-frame
+    samples only; 1 for a textured inside and a uniform outside, 0 without a difference."""
+    H, W = texture.shape
+    t = np.linspace(0.0, 2.0 * np.pi, 96, endpoint=False)
+    u = np.stack([np.cos(t), np.sin(t)], axis=1) @ S.T
+
+    def band(rhos):
+        q = (c + u[None] * np.asarray(rhos)[:, None, None]).reshape(-1, 2)
+        ok = (q[:, 0] >= 0) & (q[:, 0] <= W - 1) & (q[:, 1] >= 0) & (q[:, 1] <= H - 1)
+        if ok.sum() < 16:
+            return math.nan
+        qi = np.rint(q[ok]).astype(np.int64)
+        return float(np.median(texture[qi[:, 1], qi[:, 0]]))
+
+    t_in, t_out = band((0.75, 0.81, 0.87, 0.93)), band((1.07, 1.13, 1.19, 1.25))
+    if not math.isfinite(t_in):
+        return 0.0
+    if not math.isfinite(t_out):  # the whole outside is out of the frame: no evidence
+        return 0.0
+    return (t_in - t_out) / max(t_in + t_out, 1e-12)
 
 
 def _refine_coarse(p, g, c, r):
@@ -362,31 +439,46 @@ def _refine_coarse(p, g, c, r):
     return int(sel.sum()), center, S
 
 
-def detect_rim(image, *, sigma=0.7, threshold=2.0, rng=0):
-    """Find the mirror rim (its outer bright-mirror / dark-housing boundary) in an image.
+def detect_rim(image, *, hint=None, expected=None, sigma=0.7, threshold=2.0, rng=0):
+    """Find the mirror rim (where the mirror's textured reflection meets its holder) in an image.
 
     1. Coarse, on a copy 256 px wide (:func:`_coarse_ellipse`): Canny edge pixels vote along
-       their gradient for the centre of a bright-inside circle, radii are ranked by the arc
-       length they gather, and the best circles are refined to ellipses; the longest supported
-       arc wins. The camera's dark reflection in the middle has the opposite polarity, and a long
-       clipped rim beats a small complete circle (lens rings, horizon circles).
+       their gradient for the centre of a circle, once for a mirror brighter than its holder and
+       once for a darker one (a white holder); radii are ranked by the arc length they gather,
+       and the best circles are refined to ellipses. Each ellipse's arc length is weighted by
+       the texture contrast across it (textured mirror inside, plain holder outside), so the
+       holder's outer edge, the camera's dark reflection (opposite polarity) and circles in the
+       scene lose to the rim; a long clipped rim beats a small complete circle.
     2. Fine, at full resolution: along the normals of the current ellipse, the strongest
-       outward intensity drop of the image smoothed by ``sigma`` is located to subpixel
-       precision (profiles leaving the image are dropped, so a clipped rim gives an arc), and
-       :func:`fit_rim` (RANSAC, then orthogonal-distance refinement) fits ``Q_I``
+       intensity step of the chosen polarity in the image smoothed by ``sigma`` is located to
+       subpixel precision (profiles leaving the image are dropped, so a clipped rim gives an
+       arc), and :func:`fit_rim` (RANSAC, then orthogonal-distance refinement) fits ``Q_I``
        (eqs. 20-22). Three rounds with shrinking search windows; the first takes the
-       outermost strong drop of each profile (the mirror's edge rather than scene edges inside).
+       outermost strong step of each profile (the mirror's edge rather than scene edges inside).
     3. Check: the ellipse must be found along at least 30 % of its in-frame length and fit its
-       points to ``max(1.5 px, 0.5 % of the major semi-axis)`` RMS, otherwise ``ValueError``.
+       points to ``max(1.5 px, 0.5 % of the major semi-axis)`` RMS, otherwise ``ValueError``;
+       with a ``hint`` it must also lie within the hinted ranges.
 
-    Assumes the mirror is brighter than the housing around it along most of the rim (true of
-    every catadioptric image we know: a mirror reflects the lit scene, the holder is black), and
-    a rim at least ~8 % of the image's longer side in radius.
+    Assumes the mirror differs from its holder in brightness along most of the rim, and a rim
+    at least ~8 % of the image's longer side in radius (unless hinted).
 
     Parameters
     ----------
     image : (H, W) or (H, W, 3|4) ndarray, uint8, uint16 or float
-        Grey or BGR(A) catadioptric image with the mirror brighter than its housing.
+        Grey or BGR(A) catadioptric image.
+    hint : (cx, cy, r) tuple of float, optional
+        A rough circle on the rim (px; pixel centres at integers): only ellipses whose centre is
+        within ``0.15 r`` of ``(cx, cy)`` and whose radii are within ``r (1 -+ 0.15)`` are
+        considered. The centre must be inside the image, ``r`` positive and at most the image
+        diagonal.
+    expected : float or (r_min, r_max), optional
+        The rim's expected radius in px (a number: ``+-15 %``), or the range of its semi-axes,
+        e.g. from ``K`` and the mirror with
+        :func:`omnicam.calibration.plausibility.expected_rim` (``.radius_range``). Ellipses of
+        that size are preferred: one is taken unless an ellipse of another size scores more
+        than three times better (weighted arc length, step 1), as with a ``K`` for another
+        resolution; :func:`.plausibility.check_plausibility` then reports the size mismatch.
+        Ignored with a ``hint``.
     sigma : float
         Gaussian smoothing before locating the edge, px.
     threshold : float
@@ -403,13 +495,75 @@ def detect_rim(image, *, sigma=0.7, threshold=2.0, rng=0):
     Raises
     ------
     ValueError
-        Not an image, or no elliptic bright-inside boundary found.
+        Not an image, a bad ``hint`` or ``expected``, or no elliptic rim found (near the hint).
     """
     if not (np.isfinite(sigma) and sigma >= 0):
         raise ValueError(f"sigma must be a non-negative number of pixels, got {sigma!r}")
     gray = as_gray(image)
-    center, S, coarse_px = _coarse_ellipse(gray)
+    hint = check_hint(hint, (gray.shape[1], gray.shape[0]))
+    expected = _check_expected(expected)
+    if hint is not None:
+        return _detect(gray, _coarse_ellipse(gray, hint, None), hint, sigma, threshold, rng)
+    coarse = _coarse_ellipse(gray, None, None)
+    if expected is None:
+        return _detect(gray, coarse, None, sigma, threshold, rng)
+    # the rim of the expected size unless one of another size is far clearer (a wrong K)
+    try:
+        sized = _coarse_ellipse(gray, None, expected)
+    except ValueError:
+        sized = None
+    if sized is not None and sized[4] >= _EXPECTED_SCORE * coarse[4]:
+        try:
+            return _detect(gray, sized, None, sigma, threshold, rng)
+        except ValueError:
+            pass
+    return _detect(gray, coarse, None, sigma, threshold, rng)
+
+
+def check_hint(hint, image_size):
+    """``hint`` as a ``(cx, cy, r)`` tuple of floats, or ``None``; ``ValueError`` naming it."""
+    if hint is None:
+        return None
+    try:
+        cx, cy, r = (float(v) for v in np.asarray(hint, dtype=np.float64).reshape(-1))
+    except (TypeError, ValueError):
+        raise ValueError(f"hint must be (cx, cy, r): the rim's rough centre and radius in px, "
+                         f"got {hint!r}") from None
+    w, h = image_size
+    if not (math.isfinite(cx) and math.isfinite(cy) and math.isfinite(r)):
+        raise ValueError(f"hint must be finite (cx, cy, r) in px, got {hint!r}")
+    if not r > 0:
+        raise ValueError(f"hint radius must be positive, got r = {r!r}")
+    if not (-0.5 <= cx <= w - 0.5 and -0.5 <= cy <= h - 0.5):
+        raise ValueError(f"hint centre ({cx:g}, {cy:g}) is outside the {w}x{h} image; give the "
+                         f"rim's centre in image pixels")
+    if r > math.hypot(w, h):
+        raise ValueError(f"hint radius {r:g} px is larger than the image diagonal "
+                         f"({math.hypot(w, h):.0f} px); give the rim's radius in image pixels")
+    return cx, cy, r
+
+
+def _check_expected(expected):
+    if expected is None:
+        return None
+    try:
+        v = np.asarray(expected, dtype=np.float64).reshape(-1)
+    except (TypeError, ValueError):
+        v = np.empty(0)
+    if len(v) == 1:
+        v = v[0] * np.array([1.0 - _HINT_RADIUS, 1.0 + _HINT_RADIUS])
+    if not (len(v) == 2 and np.isfinite(v).all() and 0 < v[0] <= v[1]):
+        raise ValueError(f"expected must be the rim's radius in px or a range (r_min, r_max) "
+                         f"with 0 < r_min <= r_max, got {expected!r}")
+    return float(v[0]), float(v[1])
+
+
+def _detect(gray, coarse, hint, sigma, threshold, rng):
+    """Steps 2-3 of :func:`detect_rim` from the coarse ellipse ``coarse``."""
+    center, S, coarse_px, polarity, _ = coarse
     G = cv2.GaussianBlur(gray, (0, 0), float(sigma)) if sigma > 0 else gray
+    if polarity < 0:  # a mirror darker than its holder: find rises as drops
+        G = 1.0 - G
     cw = 3.0 * max(sigma, 0.5)  # half-width of the centroid window
     fit = None
     for i in range(3):
@@ -441,7 +595,15 @@ def detect_rim(image, *, sigma=0.7, threshold=2.0, rng=0):
         raise ValueError(f"no ellipse found: the best elliptic boundary is supported along "
                          f"{100 * support:.0f} % of its visible length with {fit.rms:.2f} px RMS "
                          f"(a rim needs >= 30 % and <= {max(1.5, 0.005 * fit.axes[0]):.2f} px); is "
-                         f"the whole mirror in view, brighter than its housing and in focus?")
+                         f"the whole mirror in view, differing from its holder and in focus?")
+    if hint is not None:
+        off = float(np.linalg.norm(fit.center - hint[:2]))
+        if (off > (_HINT_CENTER + 0.02) * hint[2]
+                or not (1.0 - _HINT_RADIUS - 0.02) * hint[2] <= fit.axes[1]
+                or not fit.axes[0] <= (1.0 + _HINT_RADIUS + 0.02) * hint[2]):
+            raise ValueError(f"no ellipse found near the hint {hint}: the nearest rim found has "
+                             f"centre ({fit.center[0]:.1f}, {fit.center[1]:.1f}) and semi-axes "
+                             f"{fit.axes[0]:.1f}, {fit.axes[1]:.1f} px; check the hint")
     return fit
 
 
