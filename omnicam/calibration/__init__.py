@@ -20,6 +20,7 @@ Modules: ``rim`` (ellipse), ``chen`` (posture), ``lens`` (the camera's reflectio
 """
 from __future__ import annotations
 
+import dataclasses
 import math
 
 import numpy as np
@@ -57,7 +58,8 @@ def _normalize(pixels, K, D):
 
 
 def calibrate(K, mirror, image=None, boundary_points=None, far_lines=None, D=None,
-              image_size=None, refine=True, camera_cls=None, lens="auto"):
+              image_size=None, refine=True, camera_cls=None, lens="auto", rim_hint=None,
+              max_tilt_deg=10.0, max_offset_mm=10.0, check_plausibility=True):
     """Mirror posture from one image: rim ellipse, Chen's method, far-line selection, refinement.
 
     Parameters
@@ -93,6 +95,15 @@ def calibrate(K, mirror, image=None, boundary_points=None, far_lines=None, D=Non
         physical postures without far lines (and joins the far lines' score with them), and
         adds the outline residual to the refinement, which pins the mirror tilt that the rim
         alone determines poorly.
+    rim_hint : (cx, cy, r), optional
+        A rough circle on the rim in the image (px), passed to ``detect_rim(hint=...)``.
+    max_tilt_deg, max_offset_mm : float
+        Plausibility limits (:mod:`.plausibility`): the largest mirror-axis tilt and distance
+        of the camera centre from the lower focus of a real rig. They also set the rim size
+        ``detect_rim`` expects from ``K`` and the mirror.
+    check_plausibility : bool
+        Check the result (:func:`.plausibility.assess`): implausible findings are added to the
+        report's ``warnings`` and listed in its ``plausibility``.
 
     Returns
     -------
@@ -140,7 +151,9 @@ def calibrate(K, mirror, image=None, boundary_points=None, far_lines=None, D=Non
             warnings.append("both image and boundary_points given: the rim was fitted to the "
                             "boundary points, the image only gave the size")
     else:
-        detected = detect_rim(image)
+        from .plausibility import expected_rim  # the rim size K and the mirror predict
+        detected = detect_rim(image, hint=rim_hint, expected=expected_rim(
+            K, mirror, D, max_tilt_deg, max_offset_mm).radius_range)
         seen = np.asarray(detected.points, np.float64)
         if D is None:
             fit = detected
@@ -266,4 +279,12 @@ def calibrate(K, mirror, image=None, boundary_points=None, far_lines=None, D=Non
                                origin_std_mm=origin_std, far_lines=lines,
                                lens_points=lens_px, lens_fit=lens_fit, lens_scores=lens_scores,
                                lens_rms=lens_rms, rho=rho, lens_note=lens_note)
+    if check_plausibility:  # (.plausibility) a second calibration only when suspicious
+        from .plausibility import assess
+        implausible = assess(report, image_size, lambda m: calibrate(
+            K, m, boundary_points=seen, far_lines=lines or None, D=D, image_size=image_size,
+            refine=refine, camera_cls=camera_cls, lens=False if lens_px is None else lens_px,
+            check_plausibility=False), max_tilt_deg=max_tilt_deg, max_offset_mm=max_offset_mm)
+        warnings.extend(str(w) for w in implausible)  # the report's list
+        report = dataclasses.replace(report, plausibility=tuple(implausible))
     return camera, report

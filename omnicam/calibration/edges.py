@@ -97,7 +97,7 @@ def edge_points_along_normals(G, center, S, half_width, step=0.25, outermost=Fal
     d0, d1, d2 = drop[rows, k - 1], drop[rows, k], drop[rows, k + 1]
     strength = d1
     pos = d0 > 0
-    pos &= d2 > 0
+    pos &= (d2 > 0) & (d1 > 0)  # logs of positive drops only
     l0, l1, l2 = (np.log(np.where(pos, v, 1.0)) for v in (d0, d1, d2))
     den_log = l0 - 2 * l1 + l2
     den_lin = d0 - 2 * d1 + d2

@@ -62,6 +62,9 @@ class CalibrationReport:
         Radius of the ball about the camera centre that models the body (NaN: not used).
     lens_note : str
         Whether the lens was used, and why not.
+    plausibility : tuple of PlausibilityWarning
+        The implausible findings (:mod:`.plausibility`), also in ``warnings``; empty when the
+        result is plausible or was not checked.
     """
 
     conic: np.ndarray
@@ -82,6 +85,7 @@ class CalibrationReport:
     lens_rms: float = math.nan
     rho: float = math.nan
     lens_note: str = "not used"
+    plausibility: tuple = ()
 
     @property
     def lens_used(self):
