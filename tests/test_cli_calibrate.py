@@ -7,12 +7,12 @@ import re
 import cv2
 import numpy as np
 import pytest
+from test_rim import white_holder_render
 
 from omnicam import MisalignedHyperbolicCamera, synthetic
 from omnicam.calibration.rim import fit_rim
 from omnicam.camera import scale_K
 from omnicam.cli import main
-from test_rim import white_holder_render
 
 SIZE = (320, 240)
 MIRROR = ["--mirror", "23.4", "28.1", "30"]

@@ -230,30 +230,10 @@ def _fit_with_mask(pts, N, mask, robust, threshold):
                   inliers=mask)
 
 
-def _coarse_ellipse(gray, hint=None, expected=None):
-    """The rim roughly: ``(center, S, px, polarity)``: centre and shape ``S`` (full-resolution
-    px) of the best rim ellipse found on a copy whose longer side is ``_COARSE_SIZE`` px, the
-    size of one coarse pixel, and ``+1`` for a mirror brighter than what surrounds it, ``-1``
-    for a darker one (a white holder).
-
-    1. Canny edge pixels vote for a centre along their gradient direction, once towards the
-       brighter side (a bright mirror in a dark housing) and once towards the darker side (a
-       mirror in a white holder); a dark blob such as the camera's reflection votes away from
-       its own centre in the first pass.
-    2. For the strongest centres, radii are ranked by the arc length of edge pixels at that
-       distance whose gradient points at the centre (with the pass's polarity): a long rim beats
-       a small complete circle, and clipping only shortens the arc.
-    3. The best few circles of each polarity are refined to ellipses (RANSAC on the edge pixels
-       near them, then again on those near the ellipse and aligned with its normal).
-    4. The rim is where the mirror's textured reflection ends: each ellipse's arc length is
-       weighted by how much more textured the image is just inside it than just outside it
-       (:func:`_texture_contrast`), so a holder's outer edge (uniform inside) loses to the rim
-       (textured inside, uniform holder outside) even when its arc is longer.
-
-    ``hint = (cx, cy, r)`` (full-resolution px) keeps centres within ``_HINT_CENTER * r`` of
-    ``(cx, cy)`` and radii within ``r (1 -+ _HINT_RADIUS)``; ``expected = (r_min, r_max)`` keeps
-    radii in that range.
-    """
+def _coarse_edges(gray):
+    """Edge pixels of a copy whose longer side is ``_COARSE_SIZE`` px, for :func:`_coarse_ellipse`:
+    ``(p, g, texture, (H, W), (sx, sy))``: pixels, unit gradients, the local texture (blurred
+    gradient magnitude), the copy's shape and its scale per axis."""
     h, w = gray.shape
     s = min(1.0, _COARSE_SIZE / max(h, w))
     small = cv2.resize(gray, (max(8, round(w * s)), max(8, round(h * s))),
@@ -280,7 +260,35 @@ def _coarse_ellipse(gray, hint=None, expected=None):
     g = np.stack([gx[ys, xs], gy[ys, xs]], axis=1).astype(np.float64)
     g /= np.linalg.norm(g, axis=1, keepdims=True)
     p = np.stack([xs, ys], axis=1).astype(np.float64)
-    H, W = small.shape
+    return p, g, cv2.GaussianBlur(mag, (0, 0), 2.0), small.shape, (sx, sy)
+
+
+def _coarse_ellipse(coarse_edges, hint=None, expected=None):
+    """The rim roughly: ``(center, S, px, polarity)``: centre and shape ``S`` (full-resolution
+    px) of the best rim ellipse found on a copy whose longer side is ``_COARSE_SIZE`` px, the
+    size of one coarse pixel, and ``+1`` for a mirror brighter than what surrounds it, ``-1``
+    for a darker one (a white holder), and the ellipse's score; ``coarse_edges`` is what
+    :func:`_coarse_edges` returns.
+
+    1. Canny edge pixels vote for a centre along their gradient direction, once towards the
+       brighter side (a bright mirror in a dark housing) and once towards the darker side (a
+       mirror in a white holder); a dark blob such as the camera's reflection votes away from
+       its own centre in the first pass.
+    2. For the strongest centres, radii are ranked by the arc length of edge pixels at that
+       distance whose gradient points at the centre (with the pass's polarity): a long rim beats
+       a small complete circle, and clipping only shortens the arc.
+    3. The best few circles of each polarity are refined to ellipses (RANSAC on the edge pixels
+       near them, then again on those near the ellipse and aligned with its normal).
+    4. The rim is where the mirror's textured reflection ends: each ellipse's arc length is
+       weighted by how much more textured the image is just inside it than just outside it
+       (:func:`_texture_contrast`), so a holder's outer edge (uniform inside) loses to the rim
+       (textured inside, uniform holder outside) even when its arc is longer.
+
+    ``hint = (cx, cy, r)`` (full-resolution px) keeps centres within ``_HINT_CENTER * r`` of
+    ``(cx, cy)`` and radii within ``r (1 -+ _HINT_RADIUS)``; ``expected = (r_min, r_max)`` keeps
+    radii in that range.
+    """
+    p, g, texture, (H, W), (sx, sy) = coarse_edges
     ss = 0.5 * (sx + sy)  # full-resolution px -> coarse px (the aspect is kept by resize)
 
     hint_c, hint_r = None, None
@@ -295,7 +303,6 @@ def _coarse_ellipse(gray, hint=None, expected=None):
     rmin = max(rmin, 3.0)
     if not rmax > rmin:
         raise ValueError("no ellipse found: the rim size asked for is too small for the image")
-    texture = cv2.GaussianBlur(mag, (0, 0), 2.0)
     found = []
     for polarity in (1.0, -1.0):
         for support, c, S in _coarse_candidates(p, polarity * g, (H, W), rmin, rmax, hint_c,
@@ -417,6 +424,8 @@ def _refine_coarse(p, g, c, r):
     rr = np.linalg.norm(d, axis=1)
     inward = -(d * g).sum(axis=1) / np.maximum(rr, 1e-9)
     sel = (inward > 0.8) & (np.abs(rr - r) < max(4.0, 0.08 * r))
+    # the ellipse stays near the circle: only pixels in a wide band can support it
+    near = np.flatnonzero((inward > 0.5) & (np.abs(rr - r) < max(8.0, 0.3 * r)))
     rng = np.random.default_rng(0)
     for thr in (1.5, 1.0):  # algebraic fits are plenty at this scale
         if sel.sum() < 12:
@@ -434,8 +443,9 @@ def _refine_coarse(p, g, c, r):
             center, S = ellipse_from_conic(N.T @ Qn @ N)
         except ValueError:
             return None
-        dist, _, nrm = orthogonal_residuals(p, center, S, iters=4)
-        sel = (np.abs(dist) < 2.0 * thr) & (-(g * nrm).sum(axis=1) > 0.8)
+        dist, _, nrm = orthogonal_residuals(p[near], center, S, iters=4)
+        sel = np.zeros(len(p), bool)
+        sel[near] = (np.abs(dist) < 2.0 * thr) & (-(g[near] * nrm).sum(axis=1) > 0.8)
     return int(sel.sum()), center, S
 
 
@@ -502,14 +512,18 @@ def detect_rim(image, *, hint=None, expected=None, sigma=0.7, threshold=2.0, rng
     gray = as_gray(image)
     hint = check_hint(hint, (gray.shape[1], gray.shape[0]))
     expected = _check_expected(expected)
+    edges = _coarse_edges(gray)
     if hint is not None:
-        return _detect(gray, _coarse_ellipse(gray, hint, None), hint, sigma, threshold, rng)
-    coarse = _coarse_ellipse(gray, None, None)
+        return _detect(gray, _coarse_ellipse(edges, hint, None), hint, sigma, threshold, rng)
+    coarse = _coarse_ellipse(edges, None, None)
     if expected is None:
         return _detect(gray, coarse, None, sigma, threshold, rng)
     # the rim of the expected size unless one of another size is far clearer (a wrong K)
+    semi = np.linalg.eigvalsh(coarse[1])  # (minor, major), full-resolution px
+    if 0.95 * expected[0] <= semi[0] and semi[1] <= 1.05 * expected[1]:
+        return _detect(gray, coarse, None, sigma, threshold, rng)  # the best is of that size
     try:
-        sized = _coarse_ellipse(gray, None, expected)
+        sized = _coarse_ellipse(edges, None, expected)
     except ValueError:
         sized = None
     if sized is not None and sized[4] >= _EXPECTED_SCORE * coarse[4]:
