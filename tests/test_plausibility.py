@@ -253,3 +253,23 @@ def test_plausibility_warning_is_a_user_warning_with_its_message():
     w = PlausibilityWarning("tilt", "too tilted", 12.0, 10.0)
     assert isinstance(w, UserWarning) and str(w) == "too tilted"
     assert (w.kind, w.value, w.limit) == ("tilt", 12.0, 10.0)
+
+
+def test_implausible_choice_with_a_plausible_other_candidate_says_so(scene):
+    """The chosen posture implausible, another physical candidate of Chen's method within the
+    limits: the warning points at the choice, not at a swap of a and b."""
+    import dataclasses
+
+    from omnicam.calibration.plausibility import assess
+
+    cam = scene["cam"]
+    _, report = calibrate(cam.K, cam.mirror, image=scene["image"])
+    physical = [i for i, c in enumerate(report.candidates) if c.physical]
+    assert len(physical) == 2
+    bad = synthetic.misaligned_rig(20.0, 0.0, (0.0, 0.0, 0.0), image_size=SIZE)
+    calls = []
+    faked = dataclasses.replace(report, camera=bad, chosen=physical[0])
+    ws = assess(faked, SIZE, lambda m: calls.append(m))
+    assert "choice" in [w.kind for w in ws] and "swapped_ab" not in [w.kind for w in ws]
+    assert f"candidate {physical[1]}" in str(next(w for w in ws if w.kind == "choice"))
+    assert calls == []  # no second calibration with a and b swapped

@@ -395,8 +395,14 @@ def test_white_holder_render_has_the_holder_edge_outside_the_rim(holder):
     assert img[cy, cx + 150, 1] == 235 and img[cy, cx + 185, 1] < 110
 
 
-@pytest.mark.parametrize("kwargs", [{}, {"expected": (115.0, 150.0)}, {"expected": 130.0}],
-                         ids=["default", "expected_range", "expected_radius"])
+def test_detect_rim_unguided_takes_a_white_holders_outer_edge(holder):
+    """Without a size or a hint, detect_rim looks for a mirror brighter than its housing: in a
+    white holder that is the holder's outer edge (calibrate passes the expected size)."""
+    assert abs(detect_rim(holder[0]).axes.mean() - 167.0) < 1.5
+
+
+@pytest.mark.parametrize("kwargs", [{"expected": (115.0, 150.0)}, {"expected": 130.0}],
+                         ids=["expected_range", "expected_radius"])
 def test_detect_rim_white_holder_finds_the_rim_not_the_holder_edge(holder, kwargs):
     img, cam = holder
     fit = detect_rim(img, **kwargs)
@@ -422,10 +428,13 @@ def test_detect_rim_hint_decides_between_circles(holder):
     assert abs(edge.axes.mean() - 167.0) < 1.5
 
 
-def test_detect_rim_expected_size_not_found_falls_back_to_any_size(holder):
-    img, cam = holder
-    fit = detect_rim(img, expected=(40.0, 50.0))  # e.g. K for another resolution
-    assert _rms_to_conic(fit.conic, cam.rim_image_points(2000)) < 0.1
+def test_detect_rim_expected_size_far_off_falls_back_to_any_size():
+    """Only short arcs of the expected size (a K for another resolution): the longest arc of
+    any size is taken, as without ``expected``."""
+    cam = synthetic.misaligned_rig()
+    img = np.round(_render(cam)).astype(np.uint8)
+    fit = detect_rim(img, expected=(50.0, 65.0))
+    assert _rms_to_conic(fit.conic, cam.rim_image_points(2000)) < 0.05
 
 
 def test_detect_rim_no_rim_near_the_hint_raises(holder):

@@ -96,7 +96,8 @@ def calibrate(K, mirror, image=None, boundary_points=None, far_lines=None, D=Non
         adds the outline residual to the refinement, which pins the mirror tilt that the rim
         alone determines poorly.
     rim_hint : (cx, cy, r), optional
-        A rough circle on the rim in the image (px), passed to ``detect_rim(hint=...)``.
+        A rough circle on the rim in ``image`` (px), passed to ``detect_rim(hint=...)``
+        (unused with ``boundary_points``).
     max_tilt_deg, max_offset_mm : float
         Plausibility limits (:mod:`.plausibility`): the largest mirror-axis tilt and distance
         of the camera centre from the lower focus of a real rig. They also set the rim size

@@ -47,7 +47,8 @@ class PlausibilityWarning(UserWarning):
     ----------
     kind : str
         ``"tilt"``, ``"offset"``, ``"principal_point"``, ``"intrinsics"``, ``"rim_size"``,
-        ``"residual"`` or ``"swapped_ab"``.
+        ``"residual"``, ``"swapped_ab"`` or ``"choice"`` (another physical posture of Chen's
+        method is within the limits while the chosen one is not).
     value, limit : float
         The measured value and the limit it broke (NaN where it does not apply).
     """
@@ -331,7 +332,7 @@ def check_plausibility(camera, rim, image_size=None, *, max_tilt_deg=DEFAULT_MAX
 
 
 def swapped_mirror_warnings(mirror, given, swapped, *, max_tilt_deg=DEFAULT_MAX_TILT_DEG,
-                            max_offset_mm=DEFAULT_MAX_OFFSET_MM, ratio=10.0):
+                            max_offset_mm=DEFAULT_MAX_OFFSET_MM, ratio=10.0, use_posture=True):
     """Whether the mirror fits clearly better with ``a`` and ``b`` swapped.
 
     The rim alone fits any mirror exactly (Chen's method has as many unknowns as the ellipse),
@@ -350,6 +351,8 @@ def swapped_mirror_warnings(mirror, given, swapped, *, max_tilt_deg=DEFAULT_MAX_
         calibration failed: no evidence).
     ratio : float
         How many times lower a swapped cost must be to count as clearly better.
+    use_posture : bool
+        Also count an implausible posture that becomes plausible swapped.
 
     Returns
     -------
@@ -373,7 +376,7 @@ def swapped_mirror_warnings(mirror, given, swapped, *, max_tilt_deg=DEFAULT_MAX_
 
     cam_g, cam_s = given["camera"], swapped["camera"]
     posture = None
-    if not plausible(cam_g) and plausible(cam_s):
+    if use_posture and not plausible(cam_g) and plausible(cam_s):
         posture = (f"tilt {tilt_deg(cam_g.R):.1f} deg and offset "
                    f"{focus_offset(cam_g.camera_center, mirror):.1f} as given, "
                    f"{tilt_deg(cam_s.R):.1f} deg and "
@@ -412,7 +415,9 @@ def assess(report, image_size=None, recalibrate=None, *, max_tilt_deg=DEFAULT_MA
     lines and of the camera's reflection after refinement; then, when something is suspicious
     (an implausible posture, or cue residuals above about 1 px), the calibration is repeated
     with ``a`` and ``b`` swapped through ``recalibrate(mirror) -> (camera, report)`` and
-    compared (:func:`swapped_mirror_warnings`). A good rig costs no second calibration.
+    compared (:func:`swapped_mirror_warnings`). A good rig costs no second calibration. When
+    the chosen posture is implausible but another physical candidate of Chen's method is
+    within the limits, that is said instead (kind ``"choice"``), and no swap is suspected.
 
     Returns
     -------
@@ -429,13 +434,30 @@ def assess(report, image_size=None, recalibrate=None, *, max_tilt_deg=DEFAULT_MA
                              max_residual_px=max_residual_px,
                              max_aspect_deviation=max_aspect_deviation, **limits)
     mirror = camera.mirror
+    implausible_posture = any(w.kind in ("tilt", "offset") for w in out)
+    others = []  # other physical candidates of Chen's method within the limits
+    for i, cand in enumerate(getattr(report, "candidates", ())):
+        if i == getattr(report, "chosen", None) or not getattr(cand, "physical", False):
+            continue
+        R = cv2.Rodrigues(np.asarray(cand.rvec, np.float64).reshape(3, 1))[0]
+        tilt = tilt_deg(R)
+        off = focus_offset(-R.T @ np.asarray(cand.tvec, np.float64), mirror)
+        if tilt <= max_tilt_deg and off <= max_offset_mm:
+            others.append(f"candidate {i}: tilt {tilt:.1f} deg, offset {off:.1f}")
+    if implausible_posture and others:
+        out.append(PlausibilityWarning(
+            "choice",
+            f"another physical posture is within the limits ({'; '.join(others)}): the choice "
+            f"between the postures may be wrong; give far lines (--far-lines) or check the "
+            f"camera's reflection in the overlay"))
     if recalibrate is None or mirror.a == mirror.b:
         return out
     costs = cue_costs(report)
     f = 0.5 * (camera.K[0, 0] + camera.K[1, 1])
     # eq. 31's score is a mean squared sine between the rays and their plane: sqrt * f ~ px
     line_px = math.sqrt(max(costs["far-line score (eq. 31)"], 0.0)) * f
-    suspicious = (any(w.kind in ("tilt", "offset") for w in out)
+    # a wrong choice explains an implausible posture better than a swap
+    suspicious = ((implausible_posture and not others)
                   or (math.isfinite(line_px) and line_px > 1.0)
                   or costs["outline RMS (px)"] > 1.0)
     if not suspicious:
@@ -446,4 +468,4 @@ def assess(report, image_size=None, recalibrate=None, *, max_tilt_deg=DEFAULT_MA
     except (ValueError, RuntimeError, np.linalg.LinAlgError):
         swapped = None  # no posture with the swapped mirror: no evidence for it
     return out + swapped_mirror_warnings(mirror, {"camera": camera, "costs": costs}, swapped,
-                                         **limits)
+                                         use_posture=not others, **limits)

@@ -18,6 +18,7 @@ from __future__ import annotations
 
 import dataclasses
 import math
+import typing
 
 import cv2
 import numpy as np
@@ -45,8 +46,17 @@ __all__ = ["RimFit", "check_hint", "conic_distance", "conic_from_ellipse", "dete
 _COARSE_SIZE = 256  # longer side of the image used to find the rim roughly
 _HINT_RADIUS = 0.15  # a hinted rim's radius is within +-15 % of the hint's
 _HINT_CENTER = 0.15  # and its centre within 15 % of the hint's radius of the hint's centre
-_TEXTURE_FLOOR = 0.1  # weight of an ellipse without texture contrast (1 + contrast at best)
-_EXPECTED_SCORE = 0.3  # a rim of the expected size wins unless another's score is 1/0.3 x more
+_EXPECTED_SCORE = 0.5  # else a rim of the expected size needs half the arc of one of any size
+_N_TRIES = 3  # coarse ellipses tried at full resolution, best first
+
+
+class _Coarse(typing.NamedTuple):
+    center: np.ndarray
+    S: np.ndarray
+    px: float
+    polarity: float
+    score: float
+    support: float
 
 
 @dataclasses.dataclass(frozen=True, eq=False)
@@ -264,11 +274,17 @@ def _coarse_edges(gray):
 
 
 def _coarse_ellipse(coarse_edges, hint=None, expected=None):
-    """The rim roughly: ``(center, S, px, polarity)``: centre and shape ``S`` (full-resolution
-    px) of the best rim ellipse found on a copy whose longer side is ``_COARSE_SIZE`` px, the
-    size of one coarse pixel, and ``+1`` for a mirror brighter than what surrounds it, ``-1``
-    for a darker one (a white holder), and the ellipse's score; ``coarse_edges`` is what
+    """The rim roughly: the best few ellipses found on a copy whose longer side is
+    ``_COARSE_SIZE`` px, best first, as :class:`_Coarse` (centre and shape ``S`` in
+    full-resolution px, the size of one coarse pixel, ``+1`` for a mirror brighter than what
+    surrounds it or ``-1`` for a darker one, score, arc length); ``coarse_edges`` is what
     :func:`_coarse_edges` returns.
+
+    Without ``hint`` or ``expected`` only bright mirrors are searched (step 1, first pass) and
+    the longest arc wins (steps 1-3). With them (steps 1-4), both polarities are searched and
+    each arc length is weighted by the texture contrast across the ellipse (``1 + contrast``)
+    and by how well its size fits (a log-normal prior about the hinted radius or the middle of
+    the expected range).
 
     1. Canny edge pixels vote for a centre along their gradient direction, once towards the
        brighter side (a bright mirror in a dark housing) and once towards the darker side (a
@@ -281,8 +297,8 @@ def _coarse_ellipse(coarse_edges, hint=None, expected=None):
        near them, then again on those near the ellipse and aligned with its normal).
     4. The rim is where the mirror's textured reflection ends: each ellipse's arc length is
        weighted by how much more textured the image is just inside it than just outside it
-       (:func:`_texture_contrast`), so a holder's outer edge (uniform inside) loses to the rim
-       (textured inside, uniform holder outside) even when its arc is longer.
+       (:func:`_texture_contrast`), so a holder's outer edge (uniform inside) tends to lose to
+       the rim (textured inside, uniform holder outside) even when its arc is longer.
 
     ``hint = (cx, cy, r)`` (full-resolution px) keeps centres within ``_HINT_CENTER * r`` of
     ``(cx, cy)`` and radii within ``r (1 -+ _HINT_RADIUS)``; ``expected = (r_min, r_max)`` keeps
@@ -303,28 +319,41 @@ def _coarse_ellipse(coarse_edges, hint=None, expected=None):
     rmin = max(rmin, 3.0)
     if not rmax > rmin:
         raise ValueError("no ellipse found: the rim size asked for is too small for the image")
+    guided = hint is not None or expected is not None
+    if hint is not None:
+        nominal, spread = hint_r, _HINT_RADIUS / 2.0
+    elif expected is not None:  # the range's ends at two standard deviations (log radius)
+        nominal = math.sqrt(expected[0] * expected[1]) * ss
+        spread = max(0.25 * math.log(expected[1] / expected[0]), 0.02)
     found = []
-    for polarity in (1.0, -1.0):
+    for polarity in (1.0, -1.0) if guided else (1.0,):
         for support, c, S in _coarse_candidates(p, polarity * g, (H, W), rmin, rmax, hint_c,
                                                 hint_r):
-            contrast = _texture_contrast(texture, c, S)
-            found.append((support * (_TEXTURE_FLOOR + max(contrast, 0.0)), support, c, S,
-                          polarity))
-    # an ellipse must be supported along >= ~8 % of its length to count, and keep to the
-    # sizes asked for (a refinement may have slid to a neighbouring circle)
-    found = [f for f in found if f[1] >= 0.5 * np.linalg.eigvalsh(f[3])[1]
-             and rmin <= np.linalg.eigvalsh(f[3])[0] and np.linalg.eigvalsh(f[3])[1] <= rmax]
+            semi = np.linalg.eigvalsh(S)
+            # an ellipse must be supported along >= ~8 % of its length to count, and keep to
+            # the sizes asked for (a refinement may have slid to a neighbouring circle)
+            if support < 0.5 * semi[1] or not (rmin <= semi[0] and semi[1] <= rmax):
+                continue
+            score = float(support)
+            if guided:
+                # the rim is where the textured reflection ends, and of about the size asked for
+                z = math.log(math.sqrt(semi[0] * semi[1]) / nominal) / spread
+                score *= (1.0 + max(_texture_contrast(texture, c, S), 0.0)) * math.exp(-0.5 * z * z)
+            found.append((score, support, c, S, polarity))
     if not found:
         where = "" if hint is None else f" near the hint {tuple(float(v) for v in hint)}"
-        raise ValueError(f"no ellipse found{where}: no elliptic boundary between a textured "
-                         f"mirror and a plainer housing; is the mirror rim in view?")
-    score, _, c, S, polarity = max(found, key=lambda f: f[0])
-    # to full resolution: x = (x_small + 0.5) / s - 0.5 per axis
+        raise ValueError(f"no ellipse found{where}: no elliptic boundary between the mirror "
+                         f"and its housing; is the mirror rim in view?")
+    found.sort(key=lambda f: -f[0])
+    out = []
     A = np.diag([1.0 / sx, 1.0 / sy])
-    center = A @ (c + 0.5) - 0.5
-    AS = A @ S
-    wv, V = np.linalg.eigh(AS @ AS.T)
-    return center, V @ np.diag(np.sqrt(wv)) @ V.T, 1.0 / min(sx, sy), polarity, score
+    for score, support, c, S, polarity in found[:_N_TRIES]:
+        # to full resolution: x = (x_small + 0.5) / s - 0.5 per axis
+        AS = A @ S
+        wv, V = np.linalg.eigh(AS @ AS.T)
+        out.append(_Coarse(A @ (c + 0.5) - 0.5, V @ np.diag(np.sqrt(wv)) @ V.T,
+                           1.0 / min(sx, sy), polarity, score, support))
+    return out
 
 
 def _coarse_candidates(p, g, shape, rmin, rmax, hint_c=None, hint_r=None):
@@ -450,15 +479,18 @@ def _refine_coarse(p, g, c, r):
 
 
 def detect_rim(image, *, hint=None, expected=None, sigma=0.7, threshold=2.0, rng=0):
-    """Find the mirror rim (where the mirror's textured reflection meets its holder) in an image.
+    """Find the mirror rim (where the mirror's reflection meets its holder) in an image.
 
     1. Coarse, on a copy 256 px wide (:func:`_coarse_ellipse`): Canny edge pixels vote along
-       their gradient for the centre of a circle, once for a mirror brighter than its holder and
-       once for a darker one (a white holder); radii are ranked by the arc length they gather,
-       and the best circles are refined to ellipses. Each ellipse's arc length is weighted by
-       the texture contrast across it (textured mirror inside, plain holder outside), so the
-       holder's outer edge, the camera's dark reflection (opposite polarity) and circles in the
-       scene lose to the rim; a long clipped rim beats a small complete circle.
+       their gradient for the centre of a circle whose inside is brighter; radii are ranked by
+       the arc length they gather, the best circles are refined to ellipses and the longest
+       arc wins. The camera's dark reflection in the middle has the opposite polarity, and a
+       long clipped rim beats a small complete circle (lens rings, horizon circles).
+       With a ``hint`` or an ``expected`` size the search also takes mirrors darker than their
+       holder (a white holder ring), keeps to the sizes asked for, and weights each arc by the
+       texture contrast across it (the rim is where the textured reflection ends and the plain
+       holder begins) and by how well its size fits; the holder's outer edge then loses to the
+       rim. The best three ellipses are tried in turn in step 2.
     2. Fine, at full resolution: along the normals of the current ellipse, the strongest
        intensity step of the chosen polarity in the image smoothed by ``sigma`` is located to
        subpixel precision (profiles leaving the image are dropped, so a clipped rim gives an
@@ -469,8 +501,9 @@ def detect_rim(image, *, hint=None, expected=None, sigma=0.7, threshold=2.0, rng
        points to ``max(1.5 px, 0.5 % of the major semi-axis)`` RMS, otherwise ``ValueError``;
        with a ``hint`` it must also lie within the hinted ranges.
 
-    Assumes the mirror differs from its holder in brightness along most of the rim, and a rim
-    at least ~8 % of the image's longer side in radius (unless hinted).
+    Without ``hint`` or ``expected`` it assumes the mirror is brighter than its housing along
+    most of the rim (a black holder) and a rim at least ~8 % of the image's longer side in
+    radius. :func:`omnicam.calibration.calibrate` passes ``expected`` from ``K`` and the mirror.
 
     Parameters
     ----------
@@ -484,11 +517,11 @@ def detect_rim(image, *, hint=None, expected=None, sigma=0.7, threshold=2.0, rng
     expected : float or (r_min, r_max), optional
         The rim's expected radius in px (a number: ``+-15 %``), or the range of its semi-axes,
         e.g. from ``K`` and the mirror with
-        :func:`omnicam.calibration.plausibility.expected_rim` (``.radius_range``). Ellipses of
-        that size are preferred: one is taken unless an ellipse of another size scores more
-        than three times better (weighted arc length, step 1), as with a ``K`` for another
-        resolution; :func:`.plausibility.check_plausibility` then reports the size mismatch.
-        Ignored with a ``hint``.
+        :func:`omnicam.calibration.plausibility.expected_rim` (``.radius_range``). The rim of
+        that size is taken unless the unguided search (step 1) finds an ellipse of another
+        size with more than twice its arc length, as with a ``K`` for another resolution
+        (:func:`.plausibility.check_plausibility` then reports the size mismatch). Ignored
+        with a ``hint``.
     sigma : float
         Gaussian smoothing before locating the edge, px.
     threshold : float
@@ -515,23 +548,31 @@ def detect_rim(image, *, hint=None, expected=None, sigma=0.7, threshold=2.0, rng
     edges = _coarse_edges(gray)
     if hint is not None:
         return _detect(gray, _coarse_ellipse(edges, hint, None), hint, sigma, threshold, rng)
-    coarse = _coarse_ellipse(edges, None, None)
     if expected is None:
-        return _detect(gray, coarse, None, sigma, threshold, rng)
-    # the rim of the expected size unless one of another size is far clearer (a wrong K)
-    semi = np.linalg.eigvalsh(coarse[1])  # (minor, major), full-resolution px
-    if 0.95 * expected[0] <= semi[0] and semi[1] <= 1.05 * expected[1]:
-        return _detect(gray, coarse, None, sigma, threshold, rng)  # the best is of that size
-    try:
-        sized = _coarse_ellipse(edges, None, expected)
-    except ValueError:
-        sized = None
-    if sized is not None and sized[4] >= _EXPECTED_SCORE * coarse[4]:
+        return _detect(gray, _coarse_ellipse(edges), None, sigma, threshold, rng)
+    # the rim of the expected size unless one of any size has a far longer arc (a wrong K)
+    found = {}
+    for key, kw in (("sized", {"expected": expected}), ("any", {})):
+        try:
+            found[key] = _coarse_ellipse(edges, **kw)
+        except ValueError as err:
+            found[key], error = [], err
+    sized, anysize = found["sized"], found["any"]
+    if sized and (not anysize or _fits(anysize[0], expected)
+                  or sized[0].support >= _EXPECTED_SCORE * anysize[0].support):
         try:
             return _detect(gray, sized, None, sigma, threshold, rng)
-        except ValueError:
-            pass
-    return _detect(gray, coarse, None, sigma, threshold, rng)
+        except ValueError as err:
+            error = err
+    if anysize:
+        return _detect(gray, anysize, None, sigma, threshold, rng)
+    raise error
+
+
+def _fits(coarse, expected):
+    """Whether a coarse ellipse's semi-axes lie in the ``expected`` range (5 % slack)."""
+    semi = np.linalg.eigvalsh(coarse.S)
+    return 0.95 * expected[0] <= semi[0] and semi[1] <= 1.05 * expected[1]
 
 
 def check_hint(hint, image_size):
@@ -572,9 +613,20 @@ def _check_expected(expected):
     return float(v[0]), float(v[1])
 
 
-def _detect(gray, coarse, hint, sigma, threshold, rng):
-    """Steps 2-3 of :func:`detect_rim` from the coarse ellipse ``coarse``."""
-    center, S, coarse_px, polarity, _ = coarse
+def _detect(gray, coarses, hint, sigma, threshold, rng):
+    """Steps 2-3 of :func:`detect_rim` from each coarse ellipse in turn; the first that passes."""
+    error = None
+    for coarse in coarses:
+        try:
+            return _detect_one(gray, coarse, hint, sigma, threshold, rng)
+        except ValueError as err:
+            error = error or err
+    raise error
+
+
+def _detect_one(gray, coarse, hint, sigma, threshold, rng):
+    """Steps 2-3 of :func:`detect_rim` from one coarse ellipse."""
+    center, S, coarse_px, polarity = coarse[:4]
     G = cv2.GaussianBlur(gray, (0, 0), float(sigma)) if sigma > 0 else gray
     if polarity < 0:  # a mirror darker than its holder: find rises as drops
         G = 1.0 - G
