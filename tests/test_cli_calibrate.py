@@ -131,7 +131,7 @@ def test_rim_hint_finds_the_rim_inside_a_white_holder(tmp_path, capsys):
     cv2.imwrite(str(tmp_path / "holder.png"), img)
     k = write_K(tmp_path / "k.yaml", truth.K)
     rim = fit_rim(truth.rim_image_points(720), robust=False)
-    hint = f"{rim.center[0] + 4:.1f},{rim.center[1] - 3:.1f},{rim.axes.mean() * 0.92:.1f}"
+    hint = f"{rim.center[0] + 4:.1f},{rim.center[1] - 3:.1f},{rim.axes.mean() * 0.97:.1f}"
     calib = tmp_path / "calib.yaml"
     code = run(str(tmp_path / "holder.png"), k, calib, "--rim-hint", hint)
     captured = capsys.readouterr()

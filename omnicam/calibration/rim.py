@@ -242,8 +242,8 @@ def _fit_with_mask(pts, N, mask, robust, threshold):
 
 def _coarse_edges(gray):
     """Edge pixels of a copy whose longer side is ``_COARSE_SIZE`` px, for :func:`_coarse_ellipse`:
-    ``(p, g, texture, (H, W), (sx, sy))``: pixels, unit gradients, the local texture (blurred
-    gradient magnitude), the copy's shape and its scale per axis."""
+    ``(p, g, (H, W), (sx, sy))``: pixels, unit gradients, the copy's shape and its scale per
+    axis."""
     h, w = gray.shape
     s = min(1.0, _COARSE_SIZE / max(h, w))
     small = cv2.resize(gray, (max(8, round(w * s)), max(8, round(h * s))),
@@ -270,41 +270,40 @@ def _coarse_edges(gray):
     g = np.stack([gx[ys, xs], gy[ys, xs]], axis=1).astype(np.float64)
     g /= np.linalg.norm(g, axis=1, keepdims=True)
     p = np.stack([xs, ys], axis=1).astype(np.float64)
-    return p, g, cv2.GaussianBlur(mag, (0, 0), 2.0), small.shape, (sx, sy)
+    return p, g, small.shape, (sx, sy)
 
 
 def _coarse_ellipse(coarse_edges, hint=None, expected=None):
     """The rim roughly: the best few ellipses found on a copy whose longer side is
     ``_COARSE_SIZE`` px, best first, as :class:`_Coarse` (centre and shape ``S`` in
-    full-resolution px, the size of one coarse pixel, ``+1`` for a mirror brighter than what
-    surrounds it or ``-1`` for a darker one, score, arc length); ``coarse_edges`` is what
-    :func:`_coarse_edges` returns.
+    full-resolution px, the size of one coarse pixel, the polarity: ``+1`` for a mirror
+    brighter than what surrounds it, ``-1`` for a darker one, ``0`` for either along the rim;
+    the score and the arc length); ``coarse_edges`` is what :func:`_coarse_edges` returns.
 
-    Without ``hint`` or ``expected`` only bright mirrors are searched (step 1, first pass) and
-    the longest arc wins (steps 1-3). With them (steps 1-4), both polarities are searched and
-    each arc length is weighted by the texture contrast across the ellipse (``1 + contrast``)
-    and by how well its size fits (a log-normal prior about the hinted radius or the middle of
-    the expected range).
-
-    1. Canny edge pixels vote for a centre along their gradient direction, once towards the
-       brighter side (a bright mirror in a dark housing) and once towards the darker side (a
-       mirror in a white holder); a dark blob such as the camera's reflection votes away from
-       its own centre in the first pass.
+    1. Canny edge pixels vote for a centre along their gradient direction towards the brighter
+       side (a bright mirror in a dark housing; a dark blob such as the camera's reflection
+       votes away from its own centre).
     2. For the strongest centres, radii are ranked by the arc length of edge pixels at that
-       distance whose gradient points at the centre (with the pass's polarity): a long rim beats
-       a small complete circle, and clipping only shortens the arc.
-    3. The best few circles of each polarity are refined to ellipses (RANSAC on the edge pixels
-       near them, then again on those near the ellipse and aligned with its normal).
-    4. The rim is where the mirror's textured reflection ends: each ellipse's arc length is
-       weighted by how much more textured the image is just inside it than just outside it
-       (:func:`_texture_contrast`), so a holder's outer edge (uniform inside) tends to lose to
-       the rim (textured inside, uniform holder outside) even when its arc is longer.
+       distance whose gradient points at the centre: a long rim beats a small complete circle,
+       and clipping only shortens the arc.
+    3. The best few circles are refined to ellipses (RANSAC on the edge pixels near them, then
+       again on those near the ellipse and aligned with its normal); the longest arc wins.
+    4. Only with a ``hint`` or an ``expected`` size: steps 1-3 are repeated for a mirror darker
+       than its holder (a white holder ring) and for gradients of either sign (a grey or metal
+       holder whose contrast with the mirror changes sign along the rim), and each arc length
+       is weighted by how well the ellipse's size fits: a log-normal prior about the hinted
+       radius (``sigma = _HINT_RADIUS / 2``) or about the middle of the expected range (its
+       ends at two sigma). A holder's outer edge, a few percent to tens of percent larger than
+       the rim and often the stronger edge, then loses to the rim. (Weighting by the texture
+       contrast across the ellipse, textured mirror inside and plain holder outside, was
+       tried and dropped: on renders of rooms with plain walls the true rim's contrast was
+       negative, noise on a dark holder looks like texture.)
 
     ``hint = (cx, cy, r)`` (full-resolution px) keeps centres within ``_HINT_CENTER * r`` of
     ``(cx, cy)`` and radii within ``r (1 -+ _HINT_RADIUS)``; ``expected = (r_min, r_max)`` keeps
     radii in that range.
     """
-    p, g, texture, (H, W), (sx, sy) = coarse_edges
+    p, g, (H, W), (sx, sy) = coarse_edges
     ss = 0.5 * (sx + sy)  # full-resolution px -> coarse px (the aspect is kept by resize)
 
     hint_c, hint_r = None, None
@@ -319,32 +318,32 @@ def _coarse_ellipse(coarse_edges, hint=None, expected=None):
     rmin = max(rmin, 3.0)
     if not rmax > rmin:
         raise ValueError("no ellipse found: the rim size asked for is too small for the image")
-    guided = hint is not None or expected is not None
-    if hint is not None:
-        nominal, spread = hint_r, _HINT_RADIUS / 2.0
-    elif expected is not None:  # the range's ends at two standard deviations (log radius)
-        nominal = math.sqrt(expected[0] * expected[1]) * ss
-        spread = max(0.25 * math.log(expected[1] / expected[0]), 0.02)
+    prior = _size_prior(hint, expected)
+    guided = prior is not None
     found = []
-    for polarity in (1.0, -1.0) if guided else (1.0,):
-        for support, c, S in _coarse_candidates(p, polarity * g, (H, W), rmin, rmax, hint_c,
-                                                hint_r):
+    for polarity in (1.0, -1.0, 0.0) if guided else (1.0,):
+        for support, c, S in _coarse_candidates(p, (polarity or 1.0) * g, (H, W), rmin, rmax,
+                                                hint_c, hint_r, unsigned=polarity == 0.0):
             semi = np.linalg.eigvalsh(S)
             # an ellipse must be supported along >= ~8 % of its length to count, and keep to
             # the sizes asked for (a refinement may have slid to a neighbouring circle)
             if support < 0.5 * semi[1] or not (rmin <= semi[0] and semi[1] <= rmax):
                 continue
             score = float(support)
-            if guided:
-                # the rim is where the textured reflection ends, and of about the size asked for
-                z = math.log(math.sqrt(semi[0] * semi[1]) / nominal) / spread
-                score *= (1.0 + max(_texture_contrast(texture, c, S), 0.0)) * math.exp(-0.5 * z * z)
+            if guided:  # of about the size asked for
+                score *= prior(semi / ss)
             found.append((score, support, c, S, polarity))
     if not found:
         where = "" if hint is None else f" near the hint {tuple(float(v) for v in hint)}"
         raise ValueError(f"no ellipse found{where}: no elliptic boundary between the mirror "
                          f"and its housing; is the mirror rim in view?")
     found.sort(key=lambda f: -f[0])
+    distinct = []
+    for f in found:  # the same ellipse refined from neighbouring circles counts once
+        if all(np.abs(f[2] - d[2]).max() > 1.0 or np.abs(f[3] - d[3]).max() > 1.0
+               for d in distinct):
+            distinct.append(f)
+    found = distinct
     out = []
     A = np.diag([1.0 / sx, 1.0 / sy])
     for score, support, c, S, polarity in found[:_N_TRIES]:
@@ -356,10 +355,11 @@ def _coarse_ellipse(coarse_edges, hint=None, expected=None):
     return out
 
 
-def _coarse_candidates(p, g, shape, rmin, rmax, hint_c=None, hint_r=None):
+def _coarse_candidates(p, g, shape, rmin, rmax, hint_c=None, hint_r=None, unsigned=False):
     """Steps 1-3 of :func:`_coarse_ellipse` for one polarity: ``[(support, c, S), ...]``.
 
-    ``p`` edge pixels, ``g`` unit gradients pointing into the rim (towards its centre).
+    ``p`` edge pixels, ``g`` unit gradients pointing into the rim (towards its centre); with
+    ``unsigned`` gradients of either sign count (a rim whose contrast changes sign).
     """
     H, W = shape
     # 1. centre votes along +g, centres up to a quarter of the image outside it
@@ -370,6 +370,8 @@ def _coarse_candidates(p, g, shape, rmin, rmax, hint_c=None, hint_r=None):
     acc_w, acc_h = W + 2 * m, H + 2 * m
     t = np.arange(rmin, rmax, 1.0, dtype=np.float32)
     pv, gv = p[vote].astype(np.float32), g[vote].astype(np.float32)
+    if unsigned:
+        pv, gv = np.concatenate([pv, pv]), np.concatenate([gv, -gv])
     cx = (pv[:, :1] + gv[:, :1] * t + (m + 0.5)).astype(np.int32)
     cy = (pv[:, 1:] + gv[:, 1:] * t + (m + 0.5)).astype(np.int32)
     ok = (cx >= 0) & (cx < acc_w) & (cy >= 0) & (cy < acc_h)
@@ -395,6 +397,8 @@ def _coarse_candidates(p, g, shape, rmin, rmax, hint_c=None, hint_r=None):
         d = p - c
         r = np.linalg.norm(d, axis=1)
         inward = -(d * g).sum(axis=1) / np.maximum(r, 1e-9)  # gradient towards the centre
+        if unsigned:
+            inward = np.abs(inward)
         sel = (inward > 0.9) & (r > rmin) & (r < rmax)
         if sel.sum() < 10:
             continue
@@ -413,37 +417,13 @@ def _coarse_candidates(p, g, shape, rmin, rmax, hint_c=None, hint_r=None):
     # 3. refine the best few to ellipses
     out = []
     for _, c, k in candidates[:3]:
-        refined = _refine_coarse(p, g, c, float(k))
+        refined = _refine_coarse(p, g, c, float(k), unsigned)
         if refined is not None:
             out.append(refined)
     return out
 
 
-def _texture_contrast(texture, c, S):
-    """``(T_in - T_out) / (T_in + T_out)`` of the local texture (blurred gradient magnitude):
-    medians over the bands ``0.75..0.93`` and ``1.07..1.25`` of the ellipse ``(c, S)``, in-frame
-    samples only; 1 for a textured inside and a uniform outside, 0 without a difference."""
-    H, W = texture.shape
-    t = np.linspace(0.0, 2.0 * np.pi, 96, endpoint=False)
-    u = np.stack([np.cos(t), np.sin(t)], axis=1) @ S.T
-
-    def band(rhos):
-        q = (c + u[None] * np.asarray(rhos)[:, None, None]).reshape(-1, 2)
-        ok = (q[:, 0] >= 0) & (q[:, 0] <= W - 1) & (q[:, 1] >= 0) & (q[:, 1] <= H - 1)
-        if ok.sum() < 16:
-            return math.nan
-        qi = np.rint(q[ok]).astype(np.int64)
-        return float(np.median(texture[qi[:, 1], qi[:, 0]]))
-
-    t_in, t_out = band((0.75, 0.81, 0.87, 0.93)), band((1.07, 1.13, 1.19, 1.25))
-    if not math.isfinite(t_in):
-        return 0.0
-    if not math.isfinite(t_out):  # the whole outside is out of the frame: no evidence
-        return 0.0
-    return (t_in - t_out) / max(t_in + t_out, 1e-12)
-
-
-def _refine_coarse(p, g, c, r):
+def _refine_coarse(p, g, c, r, unsigned=False):
     """Ellipse through the edge pixels ``p`` (gradients ``g``) near the circle ``(c, r)``.
 
     Returns ``(support, center, S)`` with ``support`` the number of edge pixels (about the arc
@@ -452,6 +432,8 @@ def _refine_coarse(p, g, c, r):
     d = p - c
     rr = np.linalg.norm(d, axis=1)
     inward = -(d * g).sum(axis=1) / np.maximum(rr, 1e-9)
+    if unsigned:
+        inward = np.abs(inward)
     sel = (inward > 0.8) & (np.abs(rr - r) < max(4.0, 0.08 * r))
     # the ellipse stays near the circle: only pixels in a wide band can support it
     near = np.flatnonzero((inward > 0.5) & (np.abs(rr - r) < max(8.0, 0.3 * r)))
@@ -474,7 +456,8 @@ def _refine_coarse(p, g, c, r):
             return None
         dist, _, nrm = orthogonal_residuals(p[near], center, S, iters=4)
         sel = np.zeros(len(p), bool)
-        sel[near] = (np.abs(dist) < 2.0 * thr) & (-(g[near] * nrm).sum(axis=1) > 0.8)
+        align = -(g[near] * nrm).sum(axis=1)
+        sel[near] = (np.abs(dist) < 2.0 * thr) & ((np.abs(align) if unsigned else align) > 0.8)
     return int(sel.sum()), center, S
 
 
@@ -487,12 +470,13 @@ def detect_rim(image, *, hint=None, expected=None, sigma=0.7, threshold=2.0, rng
        arc wins. The camera's dark reflection in the middle has the opposite polarity, and a
        long clipped rim beats a small complete circle (lens rings, horizon circles).
        With a ``hint`` or an ``expected`` size the search also takes mirrors darker than their
-       holder (a white holder ring), keeps to the sizes asked for, and weights each arc by the
-       texture contrast across it (the rim is where the textured reflection ends and the plain
-       holder begins) and by how well its size fits; the holder's outer edge then loses to the
-       rim. The best three ellipses are tried in turn in step 2.
+       holder (a white holder ring) and rims whose contrast changes sign along them (a grey
+       or metal holder), keeps to the sizes asked for, and weights each arc by how well its
+       size fits; the holder's outer edge then loses to the rim. The best three ellipses are
+       tried in turn in step 2.
     2. Fine, at full resolution: along the normals of the current ellipse, the strongest
-       intensity step of the chosen polarity in the image smoothed by ``sigma`` is located to
+       intensity step of the chosen polarity (guided: of either sign, when one polarity does
+       not make a rim) in the image smoothed by ``sigma`` is located to
        subpixel precision (profiles leaving the image are dropped, so a clipped rim gives an
        arc), and :func:`fit_rim` (RANSAC, then orthogonal-distance refinement) fits ``Q_I``
        (eqs. 20-22). Three rounds with shrinking search windows; the first takes the
@@ -547,7 +531,8 @@ def detect_rim(image, *, hint=None, expected=None, sigma=0.7, threshold=2.0, rng
     expected = _check_expected(expected)
     edges = _coarse_edges(gray)
     if hint is not None:
-        return _detect(gray, _coarse_ellipse(edges, hint, None), hint, sigma, threshold, rng)
+        return _detect(gray, _coarse_ellipse(edges, hint, None), hint, sigma, threshold, rng,
+                       _size_prior(hint, None))
     if expected is None:
         return _detect(gray, _coarse_ellipse(edges), None, sigma, threshold, rng)
     # the rim of the expected size unless one of any size has a far longer arc (a wrong K)
@@ -561,7 +546,8 @@ def detect_rim(image, *, hint=None, expected=None, sigma=0.7, threshold=2.0, rng
     if sized and (not anysize or _fits(anysize[0], expected)
                   or sized[0].support >= _EXPECTED_SCORE * anysize[0].support):
         try:
-            return _detect(gray, sized, None, sigma, threshold, rng)
+            return _detect(gray, sized, None, sigma, threshold, rng,
+                           _size_prior(None, expected))
         except ValueError as err:
             error = err
     if anysize:
@@ -613,22 +599,62 @@ def _check_expected(expected):
     return float(v[0]), float(v[1])
 
 
-def _detect(gray, coarses, hint, sigma, threshold, rng):
-    """Steps 2-3 of :func:`detect_rim` from each coarse ellipse in turn; the first that passes."""
-    error = None
+def _size_prior(hint, expected):
+    """Weight of a rim size for the guided search: ``semi (2,) px -> exp(-z^2 / 2)``, ``z`` the
+    log of the mean radius over the hinted radius or the middle of the expected range, in
+    units of ``_HINT_RADIUS / 2`` or of a quarter of the range's log width; None unguided."""
+    if hint is not None:
+        nominal, spread = hint[2], _HINT_RADIUS / 2.0
+    elif expected is not None:  # the range's ends at two standard deviations (log radius)
+        nominal = math.sqrt(expected[0] * expected[1])
+        spread = max(0.25 * math.log(expected[1] / expected[0]), 0.02)
+    else:
+        return None
+
+    def prior(semi):
+        z = math.log(math.sqrt(float(semi[0]) * float(semi[1])) / nominal) / spread
+        return math.exp(-0.5 * z * z)
+
+    return prior
+
+
+def _detect(gray, coarses, hint, sigma, threshold, rng, prior=None):
+    """Steps 2-3 of :func:`detect_rim` from the coarse ellipses.
+
+    Unguided (``prior`` None) the first that passes is returned. Guided (a hint or an
+    expected size; ``prior`` weights a size), when the steps of an ellipse's polarity do not
+    make a rim, steps of either sign are tried (a rim whose contrast with a grey or metal
+    holder changes sign along it), and unless a rim is found along >= 90 % of its in-frame
+    length every coarse ellipse is followed and the fit with the largest ``support * prior``
+    wins (a coarse ellipse that mixes the rim and the holder's edge converges to one of them
+    or to a poorly supported compromise)."""
+    error, best = None, None
     for coarse in coarses:
-        try:
-            return _detect_one(gray, coarse, hint, sigma, threshold, rng)
-        except ValueError as err:
-            error = error or err
-    raise error
+        for absolute in (True,) if coarse.polarity == 0 else (
+                (False, True) if prior is not None else (False,)):
+            try:
+                fit, support = _detect_one(gray, coarse, hint, sigma, threshold, rng, absolute)
+            except ValueError as err:
+                error = error or err
+                continue
+            if prior is None:
+                return fit
+            score = support * prior(fit.axes)
+            if best is None or score > best[0]:
+                best = (score, fit)
+            if support >= 0.9:
+                return best[1]
+            break
+    if best is None:
+        raise error
+    return best[1]
 
 
-def _detect_one(gray, coarse, hint, sigma, threshold, rng):
+def _detect_one(gray, coarse, hint, sigma, threshold, rng, absolute=False):
     """Steps 2-3 of :func:`detect_rim` from one coarse ellipse."""
     center, S, coarse_px, polarity = coarse[:4]
     G = cv2.GaussianBlur(gray, (0, 0), float(sigma)) if sigma > 0 else gray
-    if polarity < 0:  # a mirror darker than its holder: find rises as drops
+    if polarity < 0 and not absolute:  # a mirror darker than its holder: rises as drops
         G = 1.0 - G
     cw = 3.0 * max(sigma, 0.5)  # half-width of the centroid window
     fit = None
@@ -636,7 +662,8 @@ def _detect_one(gray, coarse, hint, sigma, threshold, rng):
         # search window: the coarse ellipse's uncertainty, then the spread of the last fit
         hw = max(6.0, 3.0 * coarse_px) if i == 0 else cw + max(1.5, 3.0 * fit.rms)
         pts, n_tried = edge_points_along_normals(G, center, S, hw, outermost=(i == 0),
-                                                  centroid=0.0 if i == 0 else cw)
+                                                  centroid=0.0 if i == 0 else cw,
+                                                  absolute=absolute)
         if len(pts) < 6:
             raise ValueError("no ellipse found: the rim is not visible along enough of its length "
                              "(too much of it outside the image?)")
@@ -670,7 +697,7 @@ def _detect_one(gray, coarse, hint, sigma, threshold, rng):
             raise ValueError(f"no ellipse found near the hint {hint}: the nearest rim found has "
                              f"centre ({fit.center[0]:.1f}, {fit.center[1]:.1f}) and semi-axes "
                              f"{fit.axes[0]:.1f}, {fit.axes[1]:.1f} px; check the hint")
-    return fit
+    return fit, support
 
 
 # private aliases kept for modules written before the split (calibration.lens)
