@@ -359,7 +359,7 @@ def test_detect_rim_no_circle_in_image_raises():
 
 # -- a white holder ring with struts; hints and the expected size --------------------------------
 def white_holder_render(size=400, rim_px=130, holder_px=167, struts=(20, 140, 260), noise=0.0,
-                        seed=0):
+                        seed=0, holder=235.0):
     """A rig in a white holder ring (``holder_px`` outer radius) on a darker textured room, three
     dark struts crossing holder and mirror (radial bars), rendered by ``omnicam.synthetic``
     (environment at infinity, camera's reflection): ``(image, camera)``. The mirror's content
@@ -372,7 +372,9 @@ def white_holder_render(size=400, rim_px=130, holder_px=167, struts=(20, 140, 26
     rng = np.random.default_rng(seed)
     room = 70 + 25 * np.sin(xx / 23.0) * np.cos(yy / 31.0) + rng.normal(0, 3, (size, size))
     bg = np.repeat(room[..., None], 3, axis=2)
-    bg[np.hypot(xx - c[0], yy - c[1]) < holder_px] = 235
+    ring = np.hypot(xx - c[0], yy - c[1]) < holder_px
+    bg[ring] = (holder(xx, yy) if callable(holder) else holder)[..., None][ring] \
+        if callable(holder) else holder
     img = synthetic.render_environment(cam, background=bg, noise=noise, seed=seed)
     q = np.stack([xx - c[0], yy - c[1]], -1)
     for ang in struts:
@@ -466,3 +468,16 @@ def test_detect_rim_bad_hint_raises_value_error_naming_hint(holder, hint, match)
 def test_detect_rim_bad_expected_raises_value_error_naming_it(holder, expected):
     with pytest.raises(ValueError, match="expected"):
         detect_rim(holder[0], expected=expected)
+
+
+def test_detect_rim_metal_holder_whose_contrast_changes_sign_along_the_rim():
+    """A grey ring shading from 90 (left) to 250 (right): the mirror's content near the rim
+    (~200) is brighter than the ring on one side and darker on the other."""
+    img, cam = white_holder_render(holder=lambda x, y: 90.0 + 160.0 * x / 400.0)
+    rim = cam.rim_image_points(2000)
+    cx, cy = np.rint(rim.mean(axis=0)).astype(int)
+    inside_l, inside_r = img[cy, cx - 120, 1], img[cy, cx + 120, 1]  # mirror near the rim
+    ring_l, ring_r = img[cy, cx - 150, 1], img[cy, cx + 150, 1]
+    assert ring_l < inside_l - 40 and ring_r > inside_r + 10  # the sign changes
+    fit = detect_rim(img, expected=(115.0, 150.0))
+    assert _rms_to_conic(fit.conic, rim) < 0.1
