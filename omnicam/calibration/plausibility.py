@@ -116,9 +116,10 @@ class ExpectedRim:
     max_offset_mm: float
 
 
-def _rim_ellipse(K, D, mirror, R, t, n=72):
-    """Centre and semi-axes (px) of the image of the rim circle for the posture ``R, t``."""
-    X = mirror.rim_points(n) @ R.T + t  # camera frame
+def _rim_ellipse(K, D, rim, R, t):
+    """Centre and semi-axes (px) of the image of the rim circle (points ``rim``, mirror frame)
+    for the posture ``R, t``."""
+    X = rim @ R.T + t  # camera frame
     if not (X[:, 2] > 1e-9).all():
         return None
     if D is None:
@@ -162,7 +163,8 @@ def expected_rim(K, mirror, D=None, max_tilt_deg=DEFAULT_MAX_TILT_DEG,
     max_tilt_deg = _limit(max_tilt_deg, "max_tilt_deg")
     max_offset_mm = _limit(max_offset_mm, "max_offset_mm")
     focus = np.array([0.0, 0.0, -mirror.c])
-    aligned = _rim_ellipse(K, D, mirror, np.eye(3), -focus)
+    rim = mirror.rim_points(36)
+    aligned = _rim_ellipse(K, D, rim, np.eye(3), -focus)
     if aligned is None:
         raise ValueError("K and the mirror put the rim behind the camera; check K")
     center = aligned[0]
@@ -174,7 +176,7 @@ def expected_rim(K, mirror, D=None, max_tilt_deg=DEFAULT_MAX_TILT_DEG,
     for rvec in tilts:
         R = cv2.Rodrigues(rvec.reshape(3, 1))[0]
         for o in offsets:
-            e = _rim_ellipse(K, D, mirror, R, -R @ (focus + o))  # X_cam = R (X - C)
+            e = _rim_ellipse(K, D, rim, R, -R @ (focus + o))  # X_cam = R (X - C)
             if e is None:
                 continue
             lo, hi = min(lo, e[1]), max(hi, e[2])

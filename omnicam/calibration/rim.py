@@ -323,7 +323,8 @@ def _coarse_ellipse(coarse_edges, hint=None, expected=None):
     found = []
     for polarity in (1.0, -1.0, 0.0) if guided else (1.0,):
         for support, c, S in _coarse_candidates(p, (polarity or 1.0) * g, (H, W), rmin, rmax,
-                                                hint_c, hint_r, unsigned=polarity == 0.0):
+                                                hint_c, hint_r, unsigned=polarity == 0.0,
+                                                n_refine=2 if guided else 3):
             semi = np.linalg.eigvalsh(S)
             # an ellipse must be supported along >= ~8 % of its length to count, and keep to
             # the sizes asked for (a refinement may have slid to a neighbouring circle)
@@ -355,7 +356,8 @@ def _coarse_ellipse(coarse_edges, hint=None, expected=None):
     return out
 
 
-def _coarse_candidates(p, g, shape, rmin, rmax, hint_c=None, hint_r=None, unsigned=False):
+def _coarse_candidates(p, g, shape, rmin, rmax, hint_c=None, hint_r=None, unsigned=False,
+                       n_refine=3):
     """Steps 1-3 of :func:`_coarse_ellipse` for one polarity: ``[(support, c, S), ...]``.
 
     ``p`` edge pixels, ``g`` unit gradients pointing into the rim (towards its centre); with
@@ -416,7 +418,7 @@ def _coarse_candidates(p, g, shape, rmin, rmax, hint_c=None, hint_r=None, unsign
 
     # 3. refine the best few to ellipses
     out = []
-    for _, c, k in candidates[:3]:
+    for _, c, k in candidates[:n_refine]:
         refined = _refine_coarse(p, g, c, float(k), unsigned)
         if refined is not None:
             out.append(refined)
