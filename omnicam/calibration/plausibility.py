@@ -326,8 +326,8 @@ def check_plausibility(camera, rim, image_size=None, *, max_tilt_deg=DEFAULT_MAX
         if rms is not None and math.isfinite(rms) and rms > max_residual_px:
             out.append(PlausibilityWarning(
                 "residual",
-                f"the {name} fit the calibrated camera with {rms:.2f} px RMS after refinement "
-                f"(limit {max_residual_px:g} px): check those points (a line that is not "
+                f"the {name} residual after refinement is {rms:.2f} px RMS (limit "
+                f"{max_residual_px:g} px): check those points (a line that is not "
                 f"straight or not far, an outline that is not the camera's), K and the mirror",
                 rms, max_residual_px))
     return out
