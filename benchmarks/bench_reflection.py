@@ -27,8 +27,12 @@ import numpy as np
 sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "tests"))
 from barrel import render  # noqa: E402
 
-from omnicam import synthetic  # noqa: E402
-from omnicam.calibration import calibrate  # noqa: E402
+from omnicam import (
+    MisalignedHyperbolicCamera,  # noqa: E402
+    synthetic,  # noqa: E402
+)
+
+calibrate = MisalignedHyperbolicCamera.calibrate
 from omnicam.calibration.rim import detect_rim  # noqa: E402
 
 OFFICE = Path("/work/shared/data/real/office_catadioptric_1920x1080.jpg")

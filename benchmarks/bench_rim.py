@@ -45,7 +45,8 @@ def main(argv=None):
         ("1000x1000 misaligned, room", synthetic.misaligned_rig(image_size=(1000, 1000)), "room"),
     ]
     try:
-        from omnicam.calibration import calibrate
+        from omnicam import MisalignedHyperbolicCamera
+        calibrate = MisalignedHyperbolicCamera.calibrate
     except ImportError:
         calibrate = None
     for name, cam, kind in cases:

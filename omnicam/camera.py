@@ -22,8 +22,7 @@ import cv2
 import numpy as np
 
 from . import raytrace
-from ._validate import (finite_array, validate_D, validate_image_size, validate_K,
-                        validate_posture)
+from ._validate import finite_array, validate_D, validate_image_size, validate_K, validate_posture
 from .gauge import canonical_rvec
 from .io import MODEL_NAME
 from .mirror import HyperbolicMirror
@@ -302,15 +301,18 @@ class MisalignedHyperbolicCamera:
     # -- calibration and views (implemented in omnicam.calibration and omnicam.views) ----
     @classmethod
     def calibrate(cls, K, mirror, image=None, boundary_points=None, far_lines=None, D=None,
-                  image_size=None, refine=True, lens="auto"):
-        """Mirror posture from one image: rim ellipse, Chen's method, far-line selection.
+                  image_size=None, refine=True, lens="auto", **options):
+        """Mirror posture from one image: rim, Chen's method, selection, refinement, checks.
 
-        See :func:`omnicam.calibration.calibrate`. Returns ``(camera, report)``.
+        See :func:`omnicam.calibration.calibrate` for ``options`` (``lens_r``, ``lens_z``,
+        ``rim_hint``, ``max_tilt_deg``, ``max_offset_mm``, ``check_plausibility``). Returns
+        ``(camera, report)`` with a camera of this class.
         """
         from .calibration import calibrate
+
         return calibrate(K, mirror, image=image, boundary_points=boundary_points,
                          far_lines=far_lines, D=D, image_size=image_size, refine=refine,
-                         camera_cls=cls, lens=lens)
+                         camera_cls=cls, lens=lens, **options)
 
     def init_panorama_maps(self, size, elevation_range=None, projection="cylindrical", R=None,
                            m1type=cv2.CV_16SC2, depth=None, viewpoint=None):

@@ -4,7 +4,6 @@
 """
 from __future__ import annotations
 
-import contextlib
 from importlib import resources
 
 from .camera import MisalignedHyperbolicCamera

@@ -374,7 +374,6 @@ def test_bad_input_raises_value_error_naming_the_argument():
 
 
 # -- the estimator on a small stress matrix ---------------------------------------------------
-@pytest.mark.xfail(reason="issue 8 estimator in progress", strict=False)
 def test_small_stress_matrix_has_no_silent_failure():
     silent = []
     cases = list(rl.stress_cases(24, 11, image_size=(400, 400)))

@@ -9,8 +9,10 @@ import pytest
 from barrel import render
 from test_chen import RIGS
 
-from omnicam import synthetic
-from omnicam.calibration import EstimationError, calibrate, reflection
+from omnicam import MisalignedHyperbolicCamera, synthetic
+from omnicam.calibration import EstimationError, reflection
+
+calibrate = MisalignedHyperbolicCamera.calibrate
 from omnicam.calibration.refine import refine_posture
 from omnicam.calibration.rim import detect_rim
 

@@ -355,3 +355,129 @@ def test_detect_rim_no_circle_in_image_raises():
     img[60:240, 60:240] = 200
     with pytest.raises(ValueError, match="no ellipse"):
         detect_rim(img)
+
+
+# -- a white holder ring with struts; hints and the expected size --------------------------------
+def white_holder_render(size=400, rim_px=130, holder_px=167, struts=(20, 140, 260), noise=0.0,
+                        seed=0, holder=235.0):
+    """A rig in a white holder ring (``holder_px`` outer radius) on a darker textured room, three
+    dark struts crossing holder and mirror (radial bars), rendered by ``omnicam.synthetic``
+    (environment at infinity, camera's reflection): ``(image, camera)``. The mirror's content
+    near the rim (bright sky) is only ~25 grey levels darker than the holder, while the holder's
+    outer edge is a 165-level step: the edge a bright-mirror detector takes for the rim."""
+    cam = synthetic.misaligned_rig(2.0, 40.0, (1.0, -0.5, 0.5), image_size=(size, size),
+                                   fill=2 * rim_px / size)
+    c = cam.rim_image_points(720).mean(axis=0)
+    yy, xx = np.mgrid[0:size, 0:size].astype(np.float32)
+    rng = np.random.default_rng(seed)
+    room = 70 + 25 * np.sin(xx / 23.0) * np.cos(yy / 31.0) + rng.normal(0, 3, (size, size))
+    bg = np.repeat(room[..., None], 3, axis=2)
+    ring = np.hypot(xx - c[0], yy - c[1]) < holder_px
+    bg[ring] = (holder(xx, yy) if callable(holder) else holder)[..., None][ring] \
+        if callable(holder) else holder
+    img = synthetic.render_environment(cam, background=bg, noise=noise, seed=seed)
+    q = np.stack([xx - c[0], yy - c[1]], -1)
+    for ang in struts:
+        u = np.array([np.cos(np.deg2rad(ang)), np.sin(np.deg2rad(ang))])
+        img[(np.abs(q @ np.array([-u[1], u[0]])) < 0.02 * size) & (q @ u > 0.35 * rim_px)] = 45
+    return img, cam
+
+
+@pytest.fixture(scope="module")
+def holder():
+    return white_holder_render()
+
+
+def test_white_holder_render_has_the_holder_edge_outside_the_rim(holder):
+    img, cam = holder
+    fit_true = fit_rim(cam.rim_image_points(720), robust=False)
+    assert 125 < fit_true.axes.mean() < 135
+    # the ring outside the rim is the white holder, the room beyond it is darker
+    cx, cy = np.rint(fit_true.center).astype(int)
+    assert img[cy, cx + 150, 1] == 235 and img[cy, cx + 185, 1] < 110
+
+
+def test_detect_rim_unguided_takes_a_white_holders_outer_edge(holder):
+    """Without a size or a hint, detect_rim looks for a mirror brighter than its housing: in a
+    white holder that is the holder's outer edge (calibrate passes the expected size)."""
+    assert abs(detect_rim(holder[0]).axes.mean() - 167.0) < 1.5
+
+
+@pytest.mark.parametrize("kwargs", [{"expected": (115.0, 150.0)}, {"expected": 130.0}],
+                         ids=["expected_range", "expected_radius"])
+def test_detect_rim_white_holder_finds_the_rim_not_the_holder_edge(holder, kwargs):
+    img, cam = holder
+    fit = detect_rim(img, **kwargs)
+    truth = cam.rim_image_points(2000)
+    assert _rms_to_conic(fit.conic, truth) < 0.1
+    assert abs(fit.axes.mean() - 129.3) < 0.5  # the holder's edge is at 167 px
+
+
+def test_detect_rim_white_holder_with_noise(holder):
+    img, cam = white_holder_render(noise=4.0, seed=3)
+    fit = detect_rim(img, expected=(115.0, 150.0))
+    assert _rms_to_conic(fit.conic, cam.rim_image_points(2000)) < 0.1
+
+
+def test_detect_rim_hint_decides_between_circles(holder):
+    """The hint names the circle: near the rim it finds the rim, near the holder's outer edge
+    (what the user asked for) the holder's edge."""
+    img, cam = holder
+    c = fit_rim(cam.rim_image_points(720), robust=False).center
+    rim = detect_rim(img, hint=(c[0] + 8, c[1] - 6, 140.0))
+    assert _rms_to_conic(rim.conic, cam.rim_image_points(2000)) < 0.1
+    edge = detect_rim(img, hint=(c[0], c[1], 160.0))
+    assert abs(edge.axes.mean() - 167.0) < 1.5
+
+
+def test_detect_rim_expected_size_far_off_falls_back_to_any_size():
+    """Only short arcs of the expected size (a K for another resolution): the longest arc of
+    any size is taken, as without ``expected``."""
+    cam = synthetic.misaligned_rig()
+    img = np.round(_render(cam)).astype(np.uint8)
+    fit = detect_rim(img, expected=(50.0, 65.0))
+    assert _rms_to_conic(fit.conic, cam.rim_image_points(2000)) < 0.05
+
+
+def test_detect_rim_no_rim_near_the_hint_raises(holder):
+    img, _ = holder
+    with pytest.raises(ValueError, match="hint"):
+        detect_rim(img, hint=(60.0, 60.0, 40.0))
+
+
+@pytest.mark.parametrize("hint, match", [
+    ((500.0, 200.0, 100.0), "outside"),
+    ((200.0, -3.0, 100.0), "outside"),
+    ((float("nan"), 200.0, 100.0), "finite"),
+    ((200.0, 200.0, float("inf")), "finite"),
+    ((200.0, 200.0, 0.0), "positive"),
+    ((200.0, 200.0, -5.0), "positive"),
+    ((200.0, 200.0, 1000.0), "diagonal"),
+    ((200.0, 200.0), r"\(cx, cy, r\)"),
+    ("centre", r"\(cx, cy, r\)"),
+])
+def test_detect_rim_bad_hint_raises_value_error_naming_hint(holder, hint, match):
+    img, _ = holder
+    with pytest.raises(ValueError, match="hint") as err:
+        detect_rim(img, hint=hint)
+    assert err.match(match)
+
+
+@pytest.mark.parametrize("expected", [(0.0, 10.0), (20.0, 10.0), (float("nan"), 5.0), -3.0,
+                                      (1.0, 2.0, 3.0), "big"])
+def test_detect_rim_bad_expected_raises_value_error_naming_it(holder, expected):
+    with pytest.raises(ValueError, match="expected"):
+        detect_rim(holder[0], expected=expected)
+
+
+def test_detect_rim_metal_holder_whose_contrast_changes_sign_along_the_rim():
+    """A grey ring shading from 90 (left) to 250 (right): the mirror's content near the rim
+    (~200) is brighter than the ring on one side and darker on the other."""
+    img, cam = white_holder_render(holder=lambda x, y: 90.0 + 160.0 * x / 400.0)
+    rim = cam.rim_image_points(2000)
+    cx, cy = np.rint(rim.mean(axis=0)).astype(int)
+    inside_l, inside_r = img[cy, cx - 120, 1], img[cy, cx + 120, 1]  # mirror near the rim
+    ring_l, ring_r = img[cy, cx - 150, 1], img[cy, cx + 150, 1]
+    assert ring_l < inside_l - 40 and ring_r > inside_r + 10  # the sign changes
+    fit = detect_rim(img, expected=(115.0, 150.0))
+    assert _rms_to_conic(fit.conic, rim) < 0.1

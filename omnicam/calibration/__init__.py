@@ -15,12 +15,17 @@
 5. **refinement** (:func:`.steps.refinement_step` -> ``Refinement``): rim plus every cue that
    keeps the rim at its own noise level; the others are reported as rejected; a posteriori
    uncertainty with the weakly determined direction;
-6. **warnings** (:func:`.steps.warnings_step`), then a :class:`~.report.CalibrationReport`.
+6. **warnings** (:func:`.steps.warnings_step`), then a :class:`~.report.CalibrationReport`;
+7. **plausibility** (:func:`.plausibility.assess`): a result no real rig could have (a tilt or
+   offset beyond the limits, a ``K`` that does not fit the image or the rim, ``a`` and ``b``
+   that fit better swapped, large cue residuals) is named in the warnings.
 
 :class:`~.errors.EstimationError` (a ``ValueError``) means valid input from which the posture
 cannot be estimated (no rim, no physical posture); a plain ``ValueError`` means bad input.
 """
 from __future__ import annotations
+
+import dataclasses
 
 import numpy as np
 
@@ -38,7 +43,8 @@ def __getattr__(name):
 
 def calibrate(K, mirror, image=None, boundary_points=None, far_lines=None, D=None,
               image_size=None, refine=True, camera_cls=None, lens="auto",
-              lens_r=None, lens_z=None):
+              lens_r=None, lens_z=None, rim_hint=None, max_tilt_deg=10.0, max_offset_mm=10.0,
+              check_plausibility=True):
     """Mirror posture from one image: rim ellipse, Chen's method, far-line selection, refinement.
 
     Parameters
@@ -63,8 +69,10 @@ def calibrate(K, mirror, image=None, boundary_points=None, far_lines=None, D=Non
         ``(width, height)``; defaults to the image's size.
     refine : bool
         Refine the chosen posture non-linearly (kept only if it lowers the cost).
-    camera_cls : type, optional
-        Camera class to build (default :class:`omnicam.MisalignedHyperbolicCamera`).
+    camera_cls : type
+        The camera class to build: :meth:`omnicam.MisalignedHyperbolicCamera.calibrate` (the
+        entry point for users) passes itself. This package sits below the camera in the
+        layers and never imports it.
     lens : "auto", None, False or (M, 2) / (M, 1, 2) array_like
         The camera's own reflection, modelled as a circle coaxial with the optical axis
         (:mod:`.reflection`). ``"auto"`` detects the outermost round dark silhouette around the
@@ -78,6 +86,16 @@ def calibrate(K, mirror, image=None, boundary_points=None, far_lines=None, D=Non
         Known radius and axial distance (from the camera centre, towards the mirror) of the
         circle that forms the reflection's outline, in the mirror's length unit; fitted when
         not given.
+    rim_hint : (cx, cy, r), optional
+        A rough circle on the rim in ``image`` (px), passed to ``detect_rim(hint=...)``
+        (unused with ``boundary_points``).
+    max_tilt_deg, max_offset_mm : float
+        Plausibility limits (:mod:`.plausibility`): the largest mirror-axis tilt and distance
+        of the camera centre from the lower focus of a real rig. They also set the rim size
+        ``detect_rim`` expects from ``K`` and the mirror.
+    check_plausibility : bool
+        Check the result (:func:`.plausibility.assess`): implausible findings are added to the
+        report's ``warnings`` and listed in its ``plausibility``.
 
     Returns
     -------
@@ -93,12 +111,14 @@ def calibrate(K, mirror, image=None, boundary_points=None, far_lines=None, D=Non
         Valid input but no estimate: no rim ellipse (in the image or among the points) or no
         physically possible posture.
     """
-    from ..camera import MisalignedHyperbolicCamera, validate_D, validate_image_size, validate_K
+    from .._validate import validate_D, validate_image_size, validate_K
     from ..mirror import HyperbolicMirror
     from . import selection, steps
     from .report import CalibrationReport
 
-    camera_cls = MisalignedHyperbolicCamera if camera_cls is None else camera_cls
+    if not isinstance(camera_cls, type):
+        raise ValueError("camera_cls must be the camera class to build; call "
+                         "omnicam.MisalignedHyperbolicCamera.calibrate(...)")
     K = validate_K(K)
     D = validate_D(D)
     if not isinstance(mirror, HyperbolicMirror):
@@ -113,7 +133,8 @@ def calibrate(K, mirror, image=None, boundary_points=None, far_lines=None, D=Non
     image_size = validate_image_size(image_size)
     lines = selection.validate_far_lines(far_lines)
 
-    rim = steps.rim_step(K, D, image, boundary_points)
+    rim = steps.rim_step(K, D, image, boundary_points, rim_hint, mirror, max_tilt_deg,
+                         max_offset_mm)
     lines_xn = [steps.normalize(line, K, D) for line in lines]
     # far-line pixels outside the fitted rim by more than its noise cannot see the mirror
     selection.check_lines_inside_rim(
@@ -133,4 +154,14 @@ def calibrate(K, mirror, image=None, boundary_points=None, far_lines=None, D=Non
     camera = camera_cls(K, mirror, ref.rvec, ref.tvec, D=D, image_size=image_size)
     report = CalibrationReport.from_steps(rim, cue, cands, sel, ref, list(warnings), camera,
                                           lines)
+    if check_plausibility:  # (.plausibility) a second calibration only when suspicious
+        from .plausibility import assess
+
+        implausible = assess(report, image_size, lambda m: calibrate(
+            K, m, boundary_points=rim.seen, far_lines=lines or None, D=D, image_size=image_size,
+            refine=refine, camera_cls=camera_cls, lens=cue.points if cue.used else False,
+            lens_r=lens_r, lens_z=lens_z, check_plausibility=False),
+            max_tilt_deg=max_tilt_deg, max_offset_mm=max_offset_mm)
+        report.warnings.extend(str(w) for w in implausible)
+        report = dataclasses.replace(report, plausibility=tuple(implausible))
     return camera, report

@@ -41,7 +41,7 @@ def as_gray(image):
 
 
 def edge_points_along_normals(G, center, S, half_width, step=0.25, outermost=False,
-                               centroid=0.0):
+                               centroid=0.0, absolute=False):
     """Subpixel rim points: strongest outward intensity drop along the ellipse normals.
 
     The ellipse is sampled every pixel of arc length; along each outward normal the smoothed
@@ -53,6 +53,8 @@ def edge_points_along_normals(G, center, S, half_width, step=0.25, outermost=Fal
     whereas the peak of a bilinearly interpolated profile is pulled towards pixel centres
     (~0.15 px per point against ~0.02 px with the centroid on rendered rims). Profiles that
     leave the image, whose maximum lies at the window ends or that find no drop are dropped.
+
+    With ``absolute`` a rise counts as much as a drop (edges of either polarity).
 
     Returns ``(points, n_tried)``: the (M, 2) edge points and the number of normals whose whole
     profile was inside the image.
@@ -81,6 +83,8 @@ def edge_points_along_normals(G, center, S, half_width, step=0.25, outermost=Fal
     my = e[:, 1:].astype(np.float32) + nrm[:, 1:].astype(np.float32) * tau32
     prof = cv2.remap(G, mx, my, cv2.INTER_LINEAR).astype(np.float64)
     drop = (prof[:, :-2] - prof[:, 2:]) / (2 * step)  # outward drop at tau[1:-1]
+    if absolute:  # a step of either sign (a rim whose contrast changes sign along it)
+        drop = np.abs(drop)
     if outermost:
         # the outermost local maximum at least half as strong as the strongest one
         dmax = drop.max(axis=1, keepdims=True)
@@ -97,7 +101,7 @@ def edge_points_along_normals(G, center, S, half_width, step=0.25, outermost=Fal
     d0, d1, d2 = drop[rows, k - 1], drop[rows, k], drop[rows, k + 1]
     strength = d1
     pos = d0 > 0
-    pos &= d2 > 0
+    pos &= (d2 > 0) & (d1 > 0)  # logs of positive drops only
     l0, l1, l2 = (np.log(np.where(pos, v, 1.0)) for v in (d0, d1, d2))
     den_log = l0 - 2 * l1 + l2
     den_lin = d0 - 2 * d1 + d2

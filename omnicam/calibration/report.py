@@ -76,6 +76,9 @@ class CalibrationReport:
     steps : dict
         The typed results of every step (``rim``, ``reflection``, ``candidates``,
         ``selection``, ``refinement``).
+    plausibility : tuple of PlausibilityWarning
+        The implausible findings (:mod:`.plausibility`), also in ``warnings``; empty when the
+        result is plausible or was not checked.
     """
 
     conic: np.ndarray
@@ -105,6 +108,7 @@ class CalibrationReport:
     skipped_cues: tuple = ()
     weak_direction: str = "unknown"
     steps: dict = dataclasses.field(default_factory=dict)
+    plausibility: tuple = ()
 
     @classmethod
     def from_steps(cls, rim, cue, cands, sel, ref, warnings, camera, far_lines):

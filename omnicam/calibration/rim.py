@@ -18,6 +18,7 @@ from __future__ import annotations
 
 import dataclasses
 import math
+import typing
 
 import cv2
 import numpy as np
@@ -38,12 +39,25 @@ from .ellipse import (
     refine_geometric,
 )
 
-__all__ = ["RimFit", "fit_rim", "detect_rim", "conic_from_ellipse", "ellipse_from_conic",
-           "conic_distance"]
+__all__ = ["RimFit", "check_hint", "conic_distance", "conic_from_ellipse", "detect_rim",
+           "ellipse_from_conic", "fit_rim"]
 
 
 
 _COARSE_SIZE = 256  # longer side of the image used to find the rim roughly
+_HINT_RADIUS = 0.15  # a hinted rim's radius is within +-15 % of the hint's
+_HINT_CENTER = 0.15  # and its centre within 15 % of the hint's radius of the hint's centre
+_EXPECTED_SCORE = 0.5  # else a rim of the expected size needs half the arc of one of any size
+_N_TRIES = 3  # coarse ellipses tried at full resolution, best first
+
+
+class _Coarse(typing.NamedTuple):
+    center: np.ndarray
+    S: np.ndarray
+    px: float
+    polarity: float
+    score: float
+    support: float
 
 
 @dataclasses.dataclass(frozen=True, eq=False)
@@ -227,20 +241,10 @@ def _fit_with_mask(pts, N, mask, robust, threshold):
                   inliers=mask)
 
 
-def _coarse_ellipse(gray):
-    """The rim roughly: centre and shape ``S`` (full-resolution px) of the best bright-inside
-    ellipse found on a copy whose longer side is ``_COARSE_SIZE`` px.
-
-    1. Canny edge pixels vote for a centre along their gradient direction (towards the brighter
-       side: the inside of a bright mirror in a dark housing; a dark blob such as the camera's
-       reflection votes away from its own centre).
-    2. For the strongest centres, radii are ranked by the arc length of edge pixels at that
-       distance whose gradient points at the centre: a long rim beats a small complete circle,
-       and clipping only shortens the arc.
-    3. The best few circles are refined to ellipses (RANSAC on the edge pixels near them with the
-       right polarity, then again on those near the ellipse and aligned with its normal); the
-       ellipse supported by the longest arc wins.
-    """
+def _coarse_edges(gray):
+    """Edge pixels of a copy whose longer side is ``_COARSE_SIZE`` px, for :func:`_coarse_ellipse`:
+    ``(p, g, (H, W), (sx, sy))``: pixels, unit gradients, the copy's shape and its scale per
+    axis."""
     h, w = gray.shape
     s = min(1.0, _COARSE_SIZE / max(h, w))
     small = cv2.resize(gray, (max(8, round(w * s)), max(8, round(h * s))),
@@ -250,9 +254,10 @@ def _coarse_ellipse(gray):
     gx = cv2.Sobel(small, cv2.CV_32F, 1, 0, ksize=3)
     gy = cv2.Sobel(small, cv2.CV_32F, 0, 1, ksize=3)
     mag = np.hypot(gx, gy)
-    # Canny's high threshold: the strongest 8 % of the gradients, but at least a tenth of the
-    # strong ones (a small rim on a flat background has few edge pixels)
-    hi = max(float(np.percentile(mag, 92)), 0.1 * float(np.percentile(mag, 99.9)))
+    # Canny's high threshold: the strongest 20 % of the gradients (a weak rim against a white
+    # holder next to a textured scene needs that many), but at least a tenth of the strong ones
+    # (a small rim on a flat background has few edge pixels)
+    hi = max(float(np.percentile(mag, 80)), 0.1 * float(np.percentile(mag, 99.9)))
     if not hi > 0:
         raise ValueError("no ellipse found: the image has no edges")
     scale = 255.0 / float(mag.max())
@@ -266,10 +271,101 @@ def _coarse_ellipse(gray):
     g = np.stack([gx[ys, xs], gy[ys, xs]], axis=1).astype(np.float64)
     g /= np.linalg.norm(g, axis=1, keepdims=True)
     p = np.stack([xs, ys], axis=1).astype(np.float64)
-    H, W = small.shape
+    return p, g, small.shape, (sx, sy)
 
+
+def _coarse_ellipse(coarse_edges, hint=None, expected=None):
+    """The rim roughly: the best few ellipses found on a copy whose longer side is
+    ``_COARSE_SIZE`` px, best first, as :class:`_Coarse` (centre and shape ``S`` in
+    full-resolution px, the size of one coarse pixel, the polarity: ``+1`` for a mirror
+    brighter than what surrounds it, ``-1`` for a darker one, ``0`` for either along the rim;
+    the score and the arc length); ``coarse_edges`` is what :func:`_coarse_edges` returns.
+
+    1. Canny edge pixels vote for a centre along their gradient direction towards the brighter
+       side (a bright mirror in a dark housing; a dark blob such as the camera's reflection
+       votes away from its own centre).
+    2. For the strongest centres, radii are ranked by the arc length of edge pixels at that
+       distance whose gradient points at the centre: a long rim beats a small complete circle,
+       and clipping only shortens the arc.
+    3. The best few circles are refined to ellipses (RANSAC on the edge pixels near them, then
+       again on those near the ellipse and aligned with its normal); the longest arc wins.
+    4. Only with a ``hint`` or an ``expected`` size: steps 1-3 are repeated for a mirror darker
+       than its holder (a white holder ring) and for gradients of either sign (a grey or metal
+       holder whose contrast with the mirror changes sign along the rim), and each arc length
+       is weighted by how well the ellipse's size fits: a log-normal prior about the hinted
+       radius (``sigma = _HINT_RADIUS / 2``) or about the middle of the expected range (its
+       ends at two sigma). A holder's outer edge, a few percent to tens of percent larger than
+       the rim and often the stronger edge, then loses to the rim. (Weighting by the texture
+       contrast across the ellipse, textured mirror inside and plain holder outside, was
+       tried and dropped: on renders of rooms with plain walls the true rim's contrast was
+       negative, noise on a dark holder looks like texture.)
+
+    ``hint = (cx, cy, r)`` (full-resolution px) keeps centres within ``_HINT_CENTER * r`` of
+    ``(cx, cy)`` and radii within ``r (1 -+ _HINT_RADIUS)``; ``expected = (r_min, r_max)`` keeps
+    radii in that range.
+    """
+    p, g, (H, W), (sx, sy) = coarse_edges
+    ss = 0.5 * (sx + sy)  # full-resolution px -> coarse px (the aspect is kept by resize)
+
+    hint_c, hint_r = None, None
+    if hint is not None:  # the hint overrides the default range (and ``expected``)
+        hint_c = (np.array(hint[:2], np.float64) + 0.5) * (sx, sy) - 0.5
+        hint_r = hint[2] * ss
+        rmin, rmax = (1.0 - _HINT_RADIUS) * hint_r - 1.0, (1.0 + _HINT_RADIUS) * hint_r + 1.0
+    elif expected is not None:
+        rmin, rmax = expected[0] * ss - 1.0, expected[1] * ss + 1.0
+    else:
+        rmin, rmax = 0.08 * max(H, W), 0.8 * max(H, W)
+    rmin = max(rmin, 3.0)
+    if not rmax > rmin:
+        raise ValueError("no ellipse found: the rim size asked for is too small for the image")
+    prior = _size_prior(hint, expected)
+    guided = prior is not None
+    found = []
+    for polarity in (1.0, -1.0, 0.0) if guided else (1.0,):
+        for support, c, S in _coarse_candidates(p, (polarity or 1.0) * g, (H, W), rmin, rmax,
+                                                hint_c, hint_r, unsigned=polarity == 0.0,
+                                                n_refine=2 if guided else 3):
+            semi = np.linalg.eigvalsh(S)
+            # an ellipse must be supported along >= ~8 % of its length to count, and keep to
+            # the sizes asked for (a refinement may have slid to a neighbouring circle)
+            if support < 0.5 * semi[1] or not (rmin <= semi[0] and semi[1] <= rmax):
+                continue
+            score = float(support)
+            if guided:  # of about the size asked for
+                score *= prior(semi / ss)
+            found.append((score, support, c, S, polarity))
+    if not found:
+        where = "" if hint is None else f" near the hint {tuple(float(v) for v in hint)}"
+        raise ValueError(f"no ellipse found{where}: no elliptic boundary between the mirror "
+                         f"and its housing; is the mirror rim in view?")
+    found.sort(key=lambda f: -f[0])
+    distinct = []
+    for f in found:  # the same ellipse refined from neighbouring circles counts once
+        if all(np.abs(f[2] - d[2]).max() > 1.0 or np.abs(f[3] - d[3]).max() > 1.0
+               for d in distinct):
+            distinct.append(f)
+    found = distinct
+    out = []
+    A = np.diag([1.0 / sx, 1.0 / sy])
+    for score, support, c, S, polarity in found[:_N_TRIES]:
+        # to full resolution: x = (x_small + 0.5) / s - 0.5 per axis
+        AS = A @ S
+        wv, V = np.linalg.eigh(AS @ AS.T)
+        out.append(_Coarse(A @ (c + 0.5) - 0.5, V @ np.diag(np.sqrt(wv)) @ V.T,
+                           1.0 / min(sx, sy), polarity, score, support))
+    return out
+
+
+def _coarse_candidates(p, g, shape, rmin, rmax, hint_c=None, hint_r=None, unsigned=False,
+                       n_refine=3):
+    """Steps 1-3 of :func:`_coarse_ellipse` for one polarity: ``[(support, c, S), ...]``.
+
+    ``p`` edge pixels, ``g`` unit gradients pointing into the rim (towards its centre); with
+    ``unsigned`` gradients of either sign count (a rim whose contrast changes sign).
+    """
+    H, W = shape
     # 1. centre votes along +g, centres up to a quarter of the image outside it
-    rmin, rmax = 0.08 * max(H, W), 0.8 * max(H, W)
     vote = np.arange(len(p))
     if len(vote) > 4000:  # enough votes for a clear peak; keeps the time bounded
         vote = np.random.default_rng(0).choice(len(p), 4000, replace=False)
@@ -277,11 +373,17 @@ def _coarse_ellipse(gray):
     acc_w, acc_h = W + 2 * m, H + 2 * m
     t = np.arange(rmin, rmax, 1.0, dtype=np.float32)
     pv, gv = p[vote].astype(np.float32), g[vote].astype(np.float32)
+    if unsigned:
+        pv, gv = np.concatenate([pv, pv]), np.concatenate([gv, -gv])
     cx = (pv[:, :1] + gv[:, :1] * t + (m + 0.5)).astype(np.int32)
     cy = (pv[:, 1:] + gv[:, 1:] * t + (m + 0.5)).astype(np.int32)
     ok = (cx >= 0) & (cx < acc_w) & (cy >= 0) & (cy < acc_h)
     acc = np.bincount((cy[ok] * acc_w + cx[ok]), minlength=acc_w * acc_h).astype(np.float32)
     acc = cv2.GaussianBlur(acc.reshape(acc_h, acc_w), (0, 0), 1.5)
+    if hint_c is not None:  # centres near the hinted one only
+        yy, xx = np.mgrid[0:acc_h, 0:acc_w]
+        far = np.hypot(xx - m - hint_c[0], yy - m - hint_c[1]) > _HINT_CENTER * hint_r + 1.5
+        acc[far] = 0
     peaks = []
     for _ in range(4):  # the strongest centres, with non-maximum suppression
         j = int(np.argmax(acc))
@@ -298,6 +400,8 @@ def _coarse_ellipse(gray):
         d = p - c
         r = np.linalg.norm(d, axis=1)
         inward = -(d * g).sum(axis=1) / np.maximum(r, 1e-9)  # gradient towards the centre
+        if unsigned:
+            inward = np.abs(inward)
         sel = (inward > 0.9) & (r > rmin) & (r < rmax)
         if sel.sum() < 10:
             continue
@@ -313,25 +417,16 @@ def _coarse_ellipse(gray):
                 candidates.append((arc3[k], c, int(k)))
     candidates.sort(key=lambda item: -item[0])
 
-    # 3. refine the best few to ellipses; the longest supported arc wins
-    best = None
-    for _, c, k in candidates[:3]:
-        refined = _refine_coarse(p, g, c, float(k))
-        if refined is not None and (best is None or refined[0] > best[0]):
-            best = refined
-    if best is None or best[0] < 0.5 * np.linalg.eigvalsh(best[2])[1]:  # arc < ~8 % of the rim
-        raise ValueError("no ellipse found: no bright-inside elliptic boundary in the image; is "
-                         "the mirror rim in view (bright mirror against a darker housing)?")
-    _, c, S = best
-    # to full resolution: x = (x_small + 0.5) / s - 0.5 per axis
-    A = np.diag([1.0 / sx, 1.0 / sy])
-    center = A @ (c + 0.5) - 0.5
-    AS = A @ S
-    wv, V = np.linalg.eigh(AS @ AS.T)
-    return center, V @ np.diag(np.sqrt(wv)) @ V.T, 1.0 / min(sx, sy)
+    # 3. refine the best few to ellipses
+    out = []
+    for _, c, k in candidates[:n_refine]:
+        refined = _refine_coarse(p, g, c, float(k), unsigned)
+        if refined is not None:
+            out.append(refined)
+    return out
 
 
-def _refine_coarse(p, g, c, r):
+def _refine_coarse(p, g, c, r, unsigned=False):
     """Ellipse through the edge pixels ``p`` (gradients ``g``) near the circle ``(c, r)``.
 
     Returns ``(support, center, S)`` with ``support`` the number of edge pixels (about the arc
@@ -340,7 +435,11 @@ def _refine_coarse(p, g, c, r):
     d = p - c
     rr = np.linalg.norm(d, axis=1)
     inward = -(d * g).sum(axis=1) / np.maximum(rr, 1e-9)
+    if unsigned:
+        inward = np.abs(inward)
     sel = (inward > 0.8) & (np.abs(rr - r) < max(4.0, 0.08 * r))
+    # the ellipse stays near the circle: only pixels in a wide band can support it
+    near = np.flatnonzero((inward > 0.5) & (np.abs(rr - r) < max(8.0, 0.3 * r)))
     rng = np.random.default_rng(0)
     for thr in (1.5, 1.0):  # algebraic fits are plenty at this scale
         if sel.sum() < 12:
@@ -358,36 +457,58 @@ def _refine_coarse(p, g, c, r):
             center, S = ellipse_from_conic(N.T @ Qn @ N)
         except ValueError:
             return None
-        dist, _, nrm = orthogonal_residuals(p, center, S, iters=4)
-        sel = (np.abs(dist) < 2.0 * thr) & (-(g * nrm).sum(axis=1) > 0.8)
+        dist, _, nrm = orthogonal_residuals(p[near], center, S, iters=4)
+        sel = np.zeros(len(p), bool)
+        align = -(g[near] * nrm).sum(axis=1)
+        sel[near] = (np.abs(dist) < 2.0 * thr) & ((np.abs(align) if unsigned else align) > 0.8)
     return int(sel.sum()), center, S
 
 
-def detect_rim(image, *, sigma=0.7, threshold=2.0, rng=0):
-    """Find the mirror rim (its outer bright-mirror / dark-housing boundary) in an image.
+def detect_rim(image, *, hint=None, expected=None, sigma=0.7, threshold=2.0, rng=0):
+    """Find the mirror rim (where the mirror's reflection meets its holder) in an image.
 
     1. Coarse, on a copy 256 px wide (:func:`_coarse_ellipse`): Canny edge pixels vote along
-       their gradient for the centre of a bright-inside circle, radii are ranked by the arc
-       length they gather, and the best circles are refined to ellipses; the longest supported
-       arc wins. The camera's dark reflection in the middle has the opposite polarity, and a long
-       clipped rim beats a small complete circle (lens rings, horizon circles).
+       their gradient for the centre of a circle whose inside is brighter; radii are ranked by
+       the arc length they gather, the best circles are refined to ellipses and the longest
+       arc wins. The camera's dark reflection in the middle has the opposite polarity, and a
+       long clipped rim beats a small complete circle (lens rings, horizon circles).
+       With a ``hint`` or an ``expected`` size the search also takes mirrors darker than their
+       holder (a white holder ring) and rims whose contrast changes sign along them (a grey
+       or metal holder), keeps to the sizes asked for, and weights each arc by how well its
+       size fits; the holder's outer edge then loses to the rim. The best three ellipses are
+       tried in turn in step 2.
     2. Fine, at full resolution: along the normals of the current ellipse, the strongest
-       outward intensity drop of the image smoothed by ``sigma`` is located to subpixel
-       precision (profiles leaving the image are dropped, so a clipped rim gives an arc), and
-       :func:`fit_rim` (RANSAC, then orthogonal-distance refinement) fits ``Q_I``
+       intensity step of the chosen polarity (guided: of either sign, when one polarity does
+       not make a rim) in the image smoothed by ``sigma`` is located to
+       subpixel precision (profiles leaving the image are dropped, so a clipped rim gives an
+       arc), and :func:`fit_rim` (RANSAC, then orthogonal-distance refinement) fits ``Q_I``
        (eqs. 20-22). Three rounds with shrinking search windows; the first takes the
-       outermost strong drop of each profile (the mirror's edge rather than scene edges inside).
+       outermost strong step of each profile (the mirror's edge rather than scene edges inside).
     3. Check: the ellipse must be found along at least 30 % of its in-frame length and fit its
-       points to ``max(1.5 px, 0.5 % of the major semi-axis)`` RMS, otherwise ``ValueError``.
+       points to ``max(1.5 px, 0.5 % of the major semi-axis)`` RMS, otherwise ``ValueError``;
+       with a ``hint`` it must also lie within the hinted ranges.
 
-    Assumes the mirror is brighter than the housing around it along most of the rim (true of
-    every catadioptric image we know: a mirror reflects the lit scene, the holder is black), and
-    a rim at least ~8 % of the image's longer side in radius.
+    Without ``hint`` or ``expected`` it assumes the mirror is brighter than its housing along
+    most of the rim (a black holder) and a rim at least ~8 % of the image's longer side in
+    radius. :func:`omnicam.calibration.calibrate` passes ``expected`` from ``K`` and the mirror.
 
     Parameters
     ----------
     image : (H, W) or (H, W, 3|4) ndarray, uint8, uint16 or float
-        Grey or BGR(A) catadioptric image with the mirror brighter than its housing.
+        Grey or BGR(A) catadioptric image.
+    hint : (cx, cy, r) tuple of float, optional
+        A rough circle on the rim (px; pixel centres at integers): only ellipses whose centre is
+        within ``0.15 r`` of ``(cx, cy)`` and whose radii are within ``r (1 -+ 0.15)`` are
+        considered. The centre must be inside the image, ``r`` positive and at most the image
+        diagonal.
+    expected : float or (r_min, r_max), optional
+        The rim's expected radius in px (a number: ``+-15 %``), or the range of its semi-axes,
+        e.g. from ``K`` and the mirror with
+        :func:`omnicam.calibration.plausibility.expected_rim` (``.radius_range``). The rim of
+        that size is taken unless the unguided search (step 1) finds an ellipse of another
+        size with more than twice its arc length, as with a ``K`` for another resolution
+        (:func:`.plausibility.check_plausibility` then reports the size mismatch). Ignored
+        with a ``hint``.
     sigma : float
         Gaussian smoothing before locating the edge, px.
     threshold : float
@@ -404,7 +525,7 @@ def detect_rim(image, *, sigma=0.7, threshold=2.0, rng=0):
     Raises
     ------
     ValueError
-        Not an image, or no elliptic bright-inside boundary found.
+        Not an image, a bad ``hint`` or ``expected``, or no elliptic rim found (near the hint).
     """
     # arguments first (ValueError naming them); sigma bounded so the blur cannot run for hours
     sigma = real_number(sigma, "sigma", 0.0, 25.0, expected="a number of pixels in [0, 25]")
@@ -415,15 +536,143 @@ def detect_rim(image, *, sigma=0.7, threshold=2.0, rng=0):
     if sigma > max(1.0, min(gray.shape) / 8):
         raise ValueError(f"sigma must be at most 1/8 of the image's shorter side "
                          f"({max(1.0, min(gray.shape) / 8):g} px), got {sigma!r}")
-    center, S, coarse_px = _coarse_ellipse(gray)
+    hint = check_hint(hint, (gray.shape[1], gray.shape[0]))
+    expected = _check_expected(expected)
+    edges = _coarse_edges(gray)
+    if hint is not None:
+        return _detect(gray, _coarse_ellipse(edges, hint, None), hint, sigma, threshold, rng,
+                       _size_prior(hint, None))
+    if expected is None:
+        return _detect(gray, _coarse_ellipse(edges), None, sigma, threshold, rng)
+    # the rim of the expected size unless one of any size has a far longer arc (a wrong K)
+    found = {}
+    for key, kw in (("sized", {"expected": expected}), ("any", {})):
+        try:
+            found[key] = _coarse_ellipse(edges, **kw)
+        except ValueError as err:
+            found[key], error = [], err
+    sized, anysize = found["sized"], found["any"]
+    if sized and (not anysize or _fits(anysize[0], expected)
+                  or sized[0].support >= _EXPECTED_SCORE * anysize[0].support):
+        try:
+            return _detect(gray, sized, None, sigma, threshold, rng,
+                           _size_prior(None, expected))
+        except ValueError as err:
+            error = err
+    if anysize:
+        return _detect(gray, anysize, None, sigma, threshold, rng)
+    raise error
+
+
+def _fits(coarse, expected):
+    """Whether a coarse ellipse's semi-axes lie in the ``expected`` range (5 % slack)."""
+    semi = np.linalg.eigvalsh(coarse.S)
+    return 0.95 * expected[0] <= semi[0] and semi[1] <= 1.05 * expected[1]
+
+
+def check_hint(hint, image_size):
+    """``hint`` as a ``(cx, cy, r)`` tuple of floats, or ``None``; ``ValueError`` naming it."""
+    if hint is None:
+        return None
+    try:
+        cx, cy, r = (float(v) for v in np.asarray(hint, dtype=np.float64).reshape(-1))
+    except (TypeError, ValueError):
+        raise ValueError(f"hint must be (cx, cy, r): the rim's rough centre and radius in px, "
+                         f"got {hint!r}") from None
+    w, h = image_size
+    if not (math.isfinite(cx) and math.isfinite(cy) and math.isfinite(r)):
+        raise ValueError(f"hint must be finite (cx, cy, r) in px, got {hint!r}")
+    if not r > 0:
+        raise ValueError(f"hint radius must be positive, got r = {r!r}")
+    if not (-0.5 <= cx <= w - 0.5 and -0.5 <= cy <= h - 0.5):
+        raise ValueError(f"hint centre ({cx:g}, {cy:g}) is outside the {w}x{h} image; give the "
+                         f"rim's centre in image pixels")
+    if r > math.hypot(w, h):
+        raise ValueError(f"hint radius {r:g} px is larger than the image diagonal "
+                         f"({math.hypot(w, h):.0f} px); give the rim's radius in image pixels")
+    return cx, cy, r
+
+
+def _check_expected(expected):
+    if expected is None:
+        return None
+    try:
+        v = np.asarray(expected, dtype=np.float64).reshape(-1)
+    except (TypeError, ValueError):
+        v = np.empty(0)
+    if len(v) == 1:
+        v = v[0] * np.array([1.0 - _HINT_RADIUS, 1.0 + _HINT_RADIUS])
+    if not (len(v) == 2 and np.isfinite(v).all() and 0 < v[0] <= v[1]):
+        raise ValueError(f"expected must be the rim's radius in px or a range (r_min, r_max) "
+                         f"with 0 < r_min <= r_max, got {expected!r}")
+    return float(v[0]), float(v[1])
+
+
+def _size_prior(hint, expected):
+    """Weight of a rim size for the guided search: ``semi (2,) px -> exp(-z^2 / 2)``, ``z`` the
+    log of the mean radius over the hinted radius or the middle of the expected range, in
+    units of ``_HINT_RADIUS / 2`` or of a quarter of the range's log width; None unguided."""
+    if hint is not None:
+        nominal, spread = hint[2], _HINT_RADIUS / 2.0
+    elif expected is not None:  # the range's ends at two standard deviations (log radius)
+        nominal = math.sqrt(expected[0] * expected[1])
+        spread = max(0.25 * math.log(expected[1] / expected[0]), 0.02)
+    else:
+        return None
+
+    def prior(semi):
+        z = math.log(math.sqrt(float(semi[0]) * float(semi[1])) / nominal) / spread
+        return math.exp(-0.5 * z * z)
+
+    return prior
+
+
+def _detect(gray, coarses, hint, sigma, threshold, rng, prior=None):
+    """Steps 2-3 of :func:`detect_rim` from the coarse ellipses.
+
+    Unguided (``prior`` None) the first that passes is returned. Guided (a hint or an
+    expected size; ``prior`` weights a size), when the steps of an ellipse's polarity do not
+    make a rim, steps of either sign are tried (a rim whose contrast with a grey or metal
+    holder changes sign along it), and unless a rim is found along >= 90 % of its in-frame
+    length every coarse ellipse is followed and the fit with the largest ``support * prior``
+    wins (a coarse ellipse that mixes the rim and the holder's edge converges to one of them
+    or to a poorly supported compromise)."""
+    error, best = None, None
+    for coarse in coarses:
+        for absolute in (True,) if coarse.polarity == 0 else (
+                (False, True) if prior is not None else (False,)):
+            try:
+                fit, support = _detect_one(gray, coarse, hint, sigma, threshold, rng, absolute)
+            except ValueError as err:
+                error = error or err
+                continue
+            if prior is None:
+                return fit
+            score = support * prior(fit.axes)
+            if best is None or score > best[0]:
+                best = (score, fit)
+            if support >= 0.9:
+                return best[1]
+            break
+    if best is None:
+        raise error
+    return best[1]
+
+
+def _detect_one(gray, coarse, hint, sigma, threshold, rng, absolute=False):
+    """Steps 2-3 of :func:`detect_rim` from one coarse ellipse."""
+    center, S, coarse_px, polarity = coarse[:4]
     G = cv2.GaussianBlur(gray, (0, 0), float(sigma)) if sigma > 0 else gray
+    if polarity < 0 and not absolute:  # a mirror darker than its holder: rises as drops
+        G = 1.0 - G
     cw = 3.0 * max(sigma, 0.5)  # half-width of the centroid window
     fit = None
     for i in range(3):
         # search window: the coarse ellipse's uncertainty, then the spread of the last fit
         hw = max(6.0, 3.0 * coarse_px) if i == 0 else cw + max(1.5, 3.0 * fit.rms)
         pts, n_tried = edge_points_along_normals(G, center, S, hw, outermost=(i == 0),
-                                                  centroid=0.0 if i == 0 else cw)
+                                                  centroid=0.0 if i == 0 else cw,
+                                                  absolute=absolute)
         if len(pts) < 6:
             raise ValueError("no ellipse found: the rim is not visible along enough of its length "
                              "(too much of it outside the image?)")
@@ -448,8 +697,16 @@ def detect_rim(image, *, sigma=0.7, threshold=2.0, rng=0):
         raise ValueError(f"no ellipse found: the best elliptic boundary is supported along "
                          f"{100 * support:.0f} % of its visible length with {fit.rms:.2f} px RMS "
                          f"(a rim needs >= 30 % and <= {max(1.5, 0.005 * fit.axes[0]):.2f} px); is "
-                         f"the whole mirror in view, brighter than its housing and in focus?")
-    return fit
+                         f"the whole mirror in view, differing from its holder and in focus?")
+    if hint is not None:
+        off = float(np.linalg.norm(fit.center - hint[:2]))
+        if (off > (_HINT_CENTER + 0.02) * hint[2]
+                or not (1.0 - _HINT_RADIUS - 0.02) * hint[2] <= fit.axes[1]
+                or not fit.axes[0] <= (1.0 + _HINT_RADIUS + 0.02) * hint[2]):
+            raise ValueError(f"no ellipse found near the hint {hint}: the nearest rim found has "
+                             f"centre ({fit.center[0]:.1f}, {fit.center[1]:.1f}) and semi-axes "
+                             f"{fit.axes[0]:.1f}, {fit.axes[1]:.1f} px; check the hint")
+    return fit, support
 
 
 # private aliases kept for modules written before the split (calibration.lens)

@@ -95,8 +95,13 @@ class RimStep:
         return np.asarray(self.fit.points, np.float64)
 
 
-def rim_step(K, D, image=None, boundary_points=None):
+def rim_step(K, D, image=None, boundary_points=None, hint=None, mirror=None,
+             max_tilt_deg=10.0, max_offset_mm=10.0):
     """Fit (or detect) the rim ellipse; see :class:`RimStep`.
+
+    In an image the search is guided by ``hint`` (a rough circle ``(cx, cy, r)``) and by the
+    rim size that ``K`` and ``mirror`` predict for rigs within the plausibility limits
+    (:func:`.plausibility.expected_rim`): the holder's outer edge is not the rim.
 
     Raises
     ------
@@ -105,7 +110,7 @@ def rim_step(K, D, image=None, boundary_points=None):
     EstimationError
         No ellipse in the image or among the points.
     """
-    from .rim import detect_rim, fit_rim
+    from .rim import check_hint, detect_rim, fit_rim
 
     warnings = []
     detected = None
@@ -126,9 +131,15 @@ def rim_step(K, D, image=None, boundary_points=None):
     else:
         from .reflection import _gray
 
-        _gray(image)  # bad input (shape) raises ValueError here, before the search
+        gray = _gray(image)  # bad input (shape) raises ValueError here, before the search
+        hint = check_hint(hint, (gray.shape[1], gray.shape[0]))  # bad hint: ValueError
+        expected = None
+        if mirror is not None:
+            from .plausibility import expected_rim  # the rim size K and the mirror predict
+
+            expected = expected_rim(K, mirror, D, max_tilt_deg, max_offset_mm).radius_range
         try:
-            detected = detect_rim(image)
+            detected = detect_rim(image, hint=hint, expected=expected)
         except ValueError as err:  # a valid image without a findable rim
             raise EstimationError(str(err)) from None
         seen = np.asarray(detected.points, np.float64)

@@ -2,6 +2,9 @@
 
 from __future__ import annotations
 
+import argparse
+import json
+import math
 import os
 
 import cv2
@@ -52,8 +55,22 @@ def cmd_calibrate(args):
         raise CliError(f"--mirror: {e}") from None
     K, D, size = read_intrinsics(args.intrinsics)
     far_lines = read_far_lines(args.far_lines) if args.far_lines else None
+    boundary = (
+        read_boundary_points(args.boundary_points) if args.boundary_points else None
+    )
     image = _read_image(args.image, cv2.IMREAD_COLOR | cv2.IMREAD_IGNORE_ORIENTATION)
     image_size = (image.shape[1], image.shape[0])
+    if args.rim_hint is not None:
+        from ..calibration.rim import check_hint
+
+        try:
+            check_hint(args.rim_hint, image_size)
+        except ValueError as e:
+            raise CliError(f"--rim-hint: {_one_line(e)}") from None
+        if boundary is not None:
+            _warn(
+                "--rim-hint is not used with --boundary-points (the rim is fitted to them)"
+            )
     if size is not None and size != image_size:
         _warn(
             f"intrinsics are for {size[0]}x{size[1]}, image is {image_size[0]}x{image_size[1]}: "
@@ -61,23 +78,119 @@ def cmd_calibrate(args):
         )
         K = scale_K(K, size, image_size)
 
+    from ..calibration import calibrate
+
     try:
-        camera, report = MisalignedHyperbolicCamera.calibrate(
+        camera, report = calibrate(
             K,
             mirror,
             image=image,
+            boundary_points=boundary,
             far_lines=far_lines,
             D=D,
             image_size=image_size,
             refine=args.refine,
+            camera_cls=MisalignedHyperbolicCamera,
+            rim_hint=args.rim_hint,
+            max_tilt_deg=args.max_tilt,
+            max_offset_mm=args.max_offset,
         )
     except (ValueError, RuntimeError, NotImplementedError, np.linalg.LinAlgError) as e:
         raise CliError(f"calibration failed: {_one_line(e)}") from None
     print(_report_text(report), flush=True)
-    _write_image(overlay, report.draw(image), args.overwrite)
+    _write_image(overlay, report.draw(image), args.overwrite)  # to see what went wrong
+    implausible = getattr(report, "plausibility", ())
+    for w in implausible:
+        _warn(f"implausible: {w}")
+    if implausible and not args.force:
+        raise CliError(
+            f"the calibration is implausible ({len(implausible)} warning"
+            f"{'s' if len(implausible) > 1 else ''} above); {calib} not written, see "
+            f"{overlay}; fix the inputs, or pass --force to write it anyway"
+        )
     _save_camera(camera, calib, args.overwrite)
     print(f"wrote {calib} and {overlay}")
     return EXIT_OK
+
+
+BOUNDARY_FORMAT = (
+    "JSON list of [x, y] pixels on the mirror rim (at least 6, spread along it; "
+    "e.g. [[412.5, 80.0], [530.2, 101.7], ...]), or a cv2.FileStorage file "
+    "(.yaml/.yml/.xml/.json) with an Nx2 matrix 'boundary_points'"
+)
+
+
+def read_boundary_points(path):
+    """Rim pixels from ``path``: a JSON list of ``[x, y]`` or a FileStorage ``boundary_points``
+    (N x 2 matrix; ``N x 1`` two-channel as ``cv2`` writes point vectors works too).
+
+    Returns an ``(N, 2)`` float64 array; every failure is a :class:`CliError` naming the file.
+    """
+    from ..io import _reading
+
+    what = "boundary-points file"
+    if not os.path.isfile(path):
+        raise CliError(
+            f"{what} {path} does not exist"
+            if not os.path.exists(path)
+            else f"{what} {path} is not a file"
+        )
+    data = None
+    if os.path.splitext(path)[1].lower() == ".json":
+        try:
+            with open(path, encoding="utf-8") as f:
+                data = json.load(f)
+        except json.JSONDecodeError as e:
+            raise CliError(f"{what} {path}: not valid JSON ({e})") from None
+        except (OSError, UnicodeDecodeError) as e:
+            raise CliError(f"{what} {path}: cannot read ({e})") from None
+    if isinstance(data, list):
+        ok = all(
+            isinstance(p, list)
+            and len(p) == 2
+            and all(isinstance(v, (int, float)) and not isinstance(v, bool) for v in p)
+            for p in data
+        )
+        if not ok:
+            raise CliError(f"{what} {path}: expected a {BOUNDARY_FORMAT}")
+        pts = np.array(data, dtype=np.float64).reshape(-1, 2)
+    elif data is not None and not isinstance(data, dict):
+        raise CliError(f"{what} {path}: expected a {BOUNDARY_FORMAT}")
+    else:
+        try:
+            pts = _reading(path, what).matrix("boundary_points")
+        except (FileNotFoundError, ValueError) as e:
+            raise CliError(_one_line(e)) from None
+        if pts.ndim == 3 and pts.shape[1:] == (1, 2):
+            pts = pts.reshape(-1, 2)
+        if pts.ndim != 2 or pts.shape[1] != 2:
+            raise CliError(
+                f"{what} {path}: 'boundary_points' must be an Nx2 matrix, got {pts.shape}"
+            )
+    if len(pts) < 6:
+        raise CliError(
+            f"{what} {path}: {len(pts)} point(s); give at least 6 pixels spread along the rim"
+        )
+    if not np.isfinite(pts).all():
+        raise CliError(f"{what} {path}: non-finite coordinates")
+    return pts
+
+
+def _rim_hint(text):
+    """``CX,CY,R`` -> three floats, ``R`` positive."""
+    parts = text.replace(" ", "").split(",")
+    try:
+        cx, cy, r = (float(v) for v in parts)
+    except ValueError:
+        raise argparse.ArgumentTypeError(
+            f"expected CX,CY,R (the rim's centre and radius in px) such as 640,360,300, "
+            f"got {text!r}"
+        ) from None
+    if not all(math.isfinite(v) for v in (cx, cy, r)) or r <= 0:
+        raise argparse.ArgumentTypeError(
+            f"expected finite CX,CY and a positive R, got {text!r}"
+        )
+    return cx, cy, r
 
 
 def _overlay_path(calib):
@@ -92,7 +205,10 @@ def add_parser(sub):
         help="mirror posture from one image of the mirror",
         description="Estimate the mirror posture from one image: rim ellipse, "
         "Chen's method, far-line selection and refinement. Prints the report, "
-        "saves an overlay image and writes the calibration file.",
+        "saves an overlay image and writes the calibration file. A result no real rig "
+        "gives (tilt or offset above the limits, K inconsistent with the image or the "
+        "rim, a and b fitting better swapped, large residuals) is printed with what to "
+        "check and NOT written (exit status 1) unless --force.",
     )
     p.add_argument(
         "image",
@@ -122,6 +238,41 @@ def add_parser(sub):
         metavar="LINES.json",
         help="JSON list of lines, each a list of [x, y] pixels of a straight scene "
         "line far from the camera; used to pick the right posture candidate",
+    )
+    p.add_argument(
+        "--rim-hint",
+        type=_rim_hint,
+        metavar="CX,CY,R",
+        help="rough centre and radius of the mirror rim in IMAGE (px): the rim is searched "
+        "only within 15%% of R of that circle (use it when the overlay shows another "
+        "ellipse, e.g. the holder's outer edge)",
+    )
+    p.add_argument(
+        "--boundary-points",
+        metavar="FILE",
+        help=f"pixels on the mirror rim instead of detecting it: {BOUNDARY_FORMAT}",
+    )
+    p.add_argument(
+        "--max-tilt",
+        type=_positive,
+        default=10.0,
+        metavar="DEG",
+        help="plausibility limit on the angle between the mirror axis and the optical axis "
+        "(default %(default)g)",
+    )
+    p.add_argument(
+        "--max-offset",
+        type=_positive,
+        default=10.0,
+        metavar="MM",
+        help="plausibility limit on the distance of the camera centre from the mirror's "
+        "lower focus, in the mirror's unit (default %(default)g)",
+    )
+    p.add_argument(
+        "--force",
+        action="store_true",
+        help="write the calibration file even when it is implausible (the warnings are "
+        "printed either way; without --force an implausible result exits with status 1)",
     )
     p.add_argument(
         "-o",

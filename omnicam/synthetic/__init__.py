@@ -651,5 +651,3 @@ def far_line_pixels(camera, n_lines=3, n_points=30, distance=(10e3, 50e3),
             lines.append(px)
     return lines
 
-
-from . import realistic  # noqa: E402,F401  (renders that look like real rigs, issue 8)

@@ -736,7 +736,8 @@ def _api_cases():
                         ("lens", ["bogus", 5])):
         for v in pool:
             def fn(ctx, pname=pname, v=v):
-                from omnicam.calibration import calibrate
+                from omnicam import MisalignedHyperbolicCamera
+                calibrate = MisalignedHyperbolicCamera.calibrate
                 kw = calib_kw(ctx)
                 kw[pname] = v
                 return calibrate(**kw)

@@ -1,0 +1,229 @@
+"""``omnicam calibrate``: rim hints, boundary points, plausibility limits and --force."""
+from __future__ import annotations
+
+import json
+import re
+
+import cv2
+import numpy as np
+import pytest
+from test_rim import white_holder_render
+
+from omnicam import MisalignedHyperbolicCamera, synthetic
+from omnicam.calibration.rim import fit_rim
+from omnicam.camera import scale_K
+from omnicam.cli import main
+
+SIZE = (320, 240)
+MIRROR = ["--mirror", "23.4", "28.1", "30"]
+
+
+def write_K(path, K, image_size=None):
+    fs = cv2.FileStorage(str(path), cv2.FILE_STORAGE_WRITE)
+    fs.write("K", np.asarray(K, np.float64))
+    if image_size is not None:
+        fs.startWriteStruct("image_size", cv2.FileNode_SEQ)
+        for v in image_size:
+            fs.write("", int(v))
+        fs.endWriteStruct()
+    fs.release()
+    return str(path)
+
+
+def error_line(err):
+    """The one error line of a failed command (warnings may come before it)."""
+    lines = [ln for ln in err.splitlines() if ln.strip()]
+    assert "Traceback" not in err
+    errors = [ln for ln in lines if ln.startswith("omnicam: error: ")]
+    assert len(errors) == 1 and lines[-1] == errors[0], err
+    assert all(ln.startswith("omnicam: ") for ln in lines), err
+    return errors[0]
+
+
+def axis_error_deg(cam, truth):
+    return float(np.degrees(np.arccos(np.clip(cam.R[:, 2] @ truth.R[:, 2], -1.0, 1.0))))
+
+
+@pytest.fixture(scope="module")
+def scene(tmp_path_factory):
+    folder = tmp_path_factory.mktemp("cli-calibrate")
+    truth = synthetic.misaligned_rig(3.0, 30.0, (1.5, -1.0, 1.0), image_size=SIZE)
+    image = folder / "mirror.png"
+    cv2.imwrite(str(image), synthetic.render_environment(truth, seed=1))
+    tilted = synthetic.misaligned_rig(12.0, 100.0, (1.0, 0.5, 0.0), image_size=SIZE, fill=0.7)
+    tilted_image = folder / "tilted.png"
+    cv2.imwrite(str(tilted_image), synthetic.render_environment(tilted, seed=2))
+    return {"truth": truth, "image": str(image), "k": write_K(folder / "k.yaml", truth.K),
+            "tilted": tilted, "tilted_image": str(tilted_image),
+            "tilted_k": write_K(folder / "tk.yaml", tilted.K)}
+
+
+def run(image, k, out, *extra):
+    return main(["calibrate", image, *MIRROR, "--intrinsics", k, "-o", str(out), *extra])
+
+
+def test_good_rig_exits_zero_and_writes_the_calibration(scene, tmp_path, capsys):
+    calib = tmp_path / "calib.yaml"
+    code = run(scene["image"], scene["k"], calib)
+    captured = capsys.readouterr()
+    assert code == 0, captured.err
+    assert "implausible" not in captured.err
+    assert axis_error_deg(MisalignedHyperbolicCamera.load(calib), scene["truth"]) < 0.2
+
+
+def test_implausible_result_exits_one_and_writes_no_calibration(scene, tmp_path, capsys):
+    """K for twice the resolution (the file gives no image_size, so nothing rescales it)."""
+    k2 = write_K(tmp_path / "k2.yaml", scale_K(scene["truth"].K, SIZE, (640, 480)))
+    calib = tmp_path / "calib.yaml"
+    code = run(scene["image"], k2, calib)
+    captured = capsys.readouterr()
+    assert code == 1
+    err = error_line(captured.err)
+    assert "implausible" in err and "--force" in err and "not written" in err
+    assert "omnicam: warning: implausible: the rim found has semi-axes" in captured.err
+    assert "another resolution" in captured.err
+    assert not calib.exists()
+    assert (tmp_path / "calib_overlay.png").is_file()  # to look at what went wrong
+    assert "WARNINGS" in captured.out  # the report is printed too
+
+
+def test_force_writes_an_implausible_calibration_with_the_warnings(scene, tmp_path, capsys):
+    k2 = write_K(tmp_path / "k2.yaml", scale_K(scene["truth"].K, SIZE, (640, 480)))
+    calib = tmp_path / "calib.yaml"
+    code = run(scene["image"], k2, calib, "--force")
+    captured = capsys.readouterr()
+    assert code == 0, captured.err
+    assert "omnicam: warning: implausible:" in captured.err
+    assert calib.is_file()
+
+
+def test_a_and_b_swapped_exit_one(scene, tmp_path, capsys):
+    calib = tmp_path / "calib.yaml"
+    code = main(["calibrate", scene["image"], "--mirror", "28.1", "23.4", "30", "--intrinsics",
+                 scene["k"], "-o", str(calib)])
+    captured = capsys.readouterr()
+    assert code == 1 and not calib.exists()
+    assert "a and b swapped (a = 23.4, b = 28.1)" in captured.err
+    error_line(captured.err)
+
+
+def test_max_tilt_and_max_offset_set_the_limits(scene, tmp_path, capsys):
+    """A rig tilted 12 deg: refused by default, accepted with --max-tilt 15."""
+    calib = tmp_path / "calib.yaml"
+    code = run(scene["tilted_image"], scene["tilted_k"], calib)
+    captured = capsys.readouterr()
+    assert code == 1 and not calib.exists()
+    assert re.search(r"tilted 1[12]\.\d deg from the optical axis \(limit 10 deg", captured.err)
+    code = run(scene["tilted_image"], scene["tilted_k"], calib, "--max-tilt", "15",
+               "--overwrite")
+    captured = capsys.readouterr()
+    assert code == 0, captured.err
+    cam = MisalignedHyperbolicCamera.load(calib)
+    assert axis_error_deg(cam, scene["tilted"]) < 0.3
+    code = run(scene["tilted_image"], scene["tilted_k"], calib, "--max-tilt", "15",
+               "--max-offset", "0.5", "--overwrite")
+    captured = capsys.readouterr()
+    assert code == 1 and "(limit 0.5, mirror units)" in captured.err
+
+
+def test_rim_hint_finds_the_rim_inside_a_white_holder(tmp_path, capsys):
+    img, truth = white_holder_render(320, 104, 134)
+    cv2.imwrite(str(tmp_path / "holder.png"), img)
+    k = write_K(tmp_path / "k.yaml", truth.K)
+    rim = fit_rim(truth.rim_image_points(720), robust=False)
+    hint = f"{rim.center[0] + 4:.1f},{rim.center[1] - 3:.1f},{rim.axes.mean() * 0.97:.1f}"
+    calib = tmp_path / "calib.yaml"
+    code = run(str(tmp_path / "holder.png"), k, calib, "--rim-hint", hint)
+    captured = capsys.readouterr()
+    assert code == 0, captured.err
+    assert axis_error_deg(MisalignedHyperbolicCamera.load(calib), truth) < 0.3
+    # the hint names the circle: at the holder's outer edge the result is refused
+    code = run(str(tmp_path / "holder.png"), k, tmp_path / "edge.yaml", "--rim-hint",
+               f"{rim.center[0]:.1f},{rim.center[1]:.1f},134")
+    captured = capsys.readouterr()
+    assert code == 1 and "the rim found has semi-axes 13" in captured.err
+    assert not (tmp_path / "edge.yaml").exists()
+
+
+@pytest.mark.parametrize("hint, status, words", [
+    ("900,100,50", 1, "--rim-hint: hint centre (900, 100) is outside the 320x240 image"),
+    ("100,100,0", 2, "positive R"),
+    ("100,100", 2, "expected CX,CY,R"),
+    ("a,b,c", 2, "expected CX,CY,R"),
+    ("nan,1,2", 2, "finite"),
+])
+def test_bad_rim_hint_is_one_line_and_writes_nothing(scene, tmp_path, capsys, hint, status,
+                                                     words):
+    code = run(scene["image"], scene["k"], tmp_path / "calib.yaml", "--rim-hint", hint)
+    assert code == status
+    assert words in error_line(capsys.readouterr().err)
+    assert list(tmp_path.iterdir()) == []
+
+
+@pytest.mark.parametrize("fmt", ["json", "yaml", "xml"])
+def test_boundary_points_from_json_or_filestorage(scene, tmp_path, capsys, fmt):
+    truth = scene["truth"]
+    pts = truth.rim_image_points(200)
+    pts = pts[(pts[:, 0] > 0) & (pts[:, 0] < SIZE[0] - 1) & (pts[:, 1] > 0)
+              & (pts[:, 1] < SIZE[1] - 1)]
+    path = tmp_path / f"rim.{fmt}"
+    if fmt == "json":
+        path.write_text(json.dumps(pts.tolist()))
+    else:
+        fs = cv2.FileStorage(str(path), cv2.FILE_STORAGE_WRITE)
+        fs.write("boundary_points", pts)
+        fs.release()
+    calib = tmp_path / "calib.yaml"
+    code = run(scene["image"], scene["k"], calib, "--boundary-points", str(path))
+    captured = capsys.readouterr()
+    assert code == 0, captured.err
+    assert f"{len(pts)} boundary points" in captured.out
+    assert axis_error_deg(MisalignedHyperbolicCamera.load(calib), truth) < 0.2
+
+
+BAD_POINTS = {
+    "missing": (None, "does not exist"),
+    "not json": ("[[1, 2], ", "not valid JSON"),
+    "not pairs": ("[[1, 2, 3], [4, 5, 6]]", "list of [x, y] pixels"),
+    "too few": ("[[1, 2], [3, 4], [5, 6]]", "at least 6"),
+    "a number": ("42", "list of [x, y] pixels"),
+    "filestorage without the field": ('{"points_elsewhere": 1}', "'boundary_points'"),
+}
+
+
+@pytest.mark.parametrize("content, words", BAD_POINTS.values(), ids=BAD_POINTS.keys())
+def test_bad_boundary_points_file_is_one_line_and_writes_nothing(scene, tmp_path, capsys,
+                                                                 content, words):
+    path = tmp_path / "rim.json"
+    if content is not None:
+        path.write_text(content)
+    before = sorted(p.name for p in tmp_path.iterdir())
+    code = run(scene["image"], scene["k"], tmp_path / "calib.yaml", "--boundary-points",
+               str(path))
+    assert code == 1
+    line = error_line(capsys.readouterr().err)
+    assert words in line and "rim.json" in line
+    assert sorted(p.name for p in tmp_path.iterdir()) == before
+
+
+def test_photo_without_a_mirror_exits_one(tmp_path, capsys):
+    skdata = pytest.importorskip("skimage.data")
+    cup = np.ascontiguousarray(skdata.coffee()[:, :, ::-1])
+    cv2.imwrite(str(tmp_path / "cup.png"), cup)
+    h, w = cup.shape[:2]
+    m = synthetic.default_mirror()
+    f = 0.5 * 0.85 * min(w, h) * (m.z_rim + m.c) / m.rim_radius
+    k = write_K(tmp_path / "k.yaml", [[f, 0, (w - 1) / 2], [0, f, (h - 1) / 2], [0, 0, 1]])
+    code = run(str(tmp_path / "cup.png"), k, tmp_path / "calib.yaml")
+    assert code == 1
+    error_line(capsys.readouterr().err)
+    assert not (tmp_path / "calib.yaml").exists()
+
+
+def test_help_documents_the_new_options(capsys):
+    assert main(["calibrate", "--help"]) == 0
+    out = " ".join(capsys.readouterr().out.split())
+    for words in ("--rim-hint CX,CY,R", "--boundary-points FILE", "--max-tilt DEG",
+                  "--max-offset MM", "--force", "JSON list of [x, y] pixels",
+                  "'boundary_points'"):
+        assert words in out
