@@ -10,6 +10,7 @@ import cv2
 import numpy as np
 
 from . import _kernels
+from ._jit import notice_if_cold, run_chunks
 
 __all__ = ["as_points", "undistort_normalized", "distort_normalized", "trace", "project"]
 
@@ -51,6 +52,12 @@ def as_points(points, name, dim):
         return result.reshape(-1, 1, result.shape[-1]) if layout == 3 else result
 
     return pts, restore
+
+
+def _f64(x):
+    """``x`` as a writable C-contiguous float64 array (a copy only if needed): every kernel call
+    has the same argument types, so each kernel compiles and caches one signature."""
+    return np.require(x, np.float64, ["C_CONTIGUOUS", "WRITEABLE", "ALIGNED"])
 
 
 def undistort_normalized(pixels, K, D):
@@ -117,8 +124,9 @@ def trace(pixels, K, D, R, C, mirror):
     n = uv.shape[0]
     origins = np.empty((n, 3))
     directions = np.empty((n, 3))
-    _kernels.trace_rays(np.ascontiguousarray(uv), np.ascontiguousarray(Kinv), R, C,
-                        mirror.a, mirror.b, mirror.rim_radius, origins, directions)
+    notice_if_cold(_kernels.trace_rays)
+    run_chunks(_kernels.trace_rays, n, _f64(uv), _f64(Kinv), _f64(R), _f64(C), float(mirror.a),
+               float(mirror.b), float(mirror.rim_radius), origins, directions, min_chunk=4096)
     return origins, directions
 
 
@@ -131,8 +139,10 @@ def project(points, at_infinity, K, D, R, t, C, mirror):
     """
     out = np.empty((points.shape[0], 2))
     Kk = K if D is None else np.eye(3)
-    _kernels.project_points(points, bool(at_infinity), R, t, C, mirror.a, mirror.b,
-                            mirror.rim_radius, np.ascontiguousarray(Kk), out)
+    notice_if_cold(_kernels.project_points)
+    run_chunks(_kernels.project_points, len(out), _f64(points), bool(at_infinity), _f64(R),
+               _f64(t), _f64(C), float(mirror.a), float(mirror.b), float(mirror.rim_radius),
+               _f64(Kk), out, min_chunk=256)
     if D is not None:
         out = distort_normalized(out, K, D)
     return out

@@ -35,6 +35,7 @@ import numbers
 import cv2
 import numpy as np
 
+from ._jit import notice_if_cold, run_chunks
 from .camera import validate_K
 
 __all__ = ["init_panorama_maps", "init_perspective_maps", "rotation_from_ypr", "K_from_fov",
@@ -324,11 +325,44 @@ def _reject_sines(camera, depth, viewpoint):
     return math.sin(math.radians(limit)), math.sin(math.radians(min(limit + 30.0, 89.5)))
 
 
+def _rig_args(camera):
+    """:class:`omnicam._kernels.RigArgs` of a camera: float64 C-contiguous writable copies (the
+    kernels' one signature; numba types read-only arrays apart)."""
+    from ._kernels import RigArgs
+
+    D = camera.D
+    dist = np.zeros(14)
+    tilt = np.eye(3)
+    if D is not None:
+        dist[: D.size] = D
+        if D.size == 14:
+            tilt = _tilt_matrix(D[12], D[13])
+    m = camera.mirror
+    return RigArgs(_arg(camera.camera_center), _arg(camera.R), _arg(camera.tvec), float(m.a),
+                   float(m.b), float(m.rim_radius), _arg(camera.K), dist, tilt, D is not None)
+
+
+def _view_args(camera, kind, A, p0, p1, az_step, depth, viewpoint):
+    """:class:`omnicam._kernels.ViewArgs` of a view (see :func:`_table`)."""
+    from ._kernels import NEWTON_TOL_REL, ViewArgs
+
+    sin_reject, sin_try = _reject_sines(camera, depth, viewpoint)
+    m = camera.mirror
+    return ViewArgs(int(kind), _arg(A), float(p0), float(p1), float(az_step), depth is None,
+                    0.0 if depth is None else float(depth),
+                    np.zeros(3) if viewpoint is None else _arg(viewpoint), float(sin_reject),
+                    float(sin_try), NEWTON_TOL_REL * (float(m.a) + float(m.b)))
+
+
 def _table(camera, kind, A, p0, p1, az_step, size, depth, viewpoint, m1type, step=None,
            stats=None):
-    """Run :func:`omnicam._kernels.view_table` and return the maps for ``m1type``."""
-    from . import _kernels
+    """Build the table of a view (:func:`_build_table`) and return the maps for ``m1type``.
 
+    ``kind, A, p0, p1, az_step`` define the output directions
+    (:func:`omnicam._kernels._view_direction`), ``step`` the node spacing (a multiple of 4;
+    by default from ``CELL_DEGREES``), ``stats`` (8,) int64 receives the counts of
+    :func:`_build_table`.
+    """
     w, h = size
     if step is None:
         if kind == 0:
@@ -339,19 +373,8 @@ def _table(camera, kind, A, p0, p1, az_step, size, depth, viewpoint, m1type, ste
     step = int(step)
     if step < 4 or step % 4:
         raise ValueError(f"step must be a multiple of 4, got {step}")
-    D = camera.D
-    dist = np.zeros(14)
-    tilt = np.eye(3)
-    if D is not None:
-        dist[:D.size] = D
-        if D.size == 14:
-            tilt = _tilt_matrix(D[12], D[13])
-    sin_reject, sin_try = _reject_sines(camera, depth, viewpoint)
-    at_infinity = depth is None
-    # writable C-contiguous float64 copies everywhere: one kernel signature (numba types
-    # read-only arrays apart, and the camera's arrays are read-only), so one cache entry
-    vp = np.zeros(3) if viewpoint is None else _arg(viewpoint)
-    m = camera.mirror
+    view = _view_args(camera, kind, A, p0, p1, az_step, depth, viewpoint)
+    rig = _rig_args(camera)
     if m1type == cv2.CV_16SC2:
         mode = 1
         outx = outy = np.empty((1, 1), np.float32)
@@ -364,13 +387,7 @@ def _table(camera, kind, A, p0, p1, az_step, size, depth, viewpoint, m1type, ste
         out16 = np.empty((1, 1, 2), np.int16)
         outf16 = np.empty((1, 1), np.uint16)
     st = np.zeros(8, np.int64) if stats is None else stats
-    _kernels.view_table(
-        kind, _arg(A), float(p0), float(p1), float(az_step),
-        w, h, step, at_infinity, 0.0 if depth is None else float(depth), vp,
-        float(sin_reject), float(sin_try), _arg(camera.camera_center), _arg(camera.R),
-        _arg(camera.tvec), float(m.a), float(m.b), float(m.rim_radius), _arg(camera.K), dist,
-        tilt, D is not None,
-        float(TOLERANCE), mode, outx, outy, out16, outf16, st)
+    _build_table(view, rig, (w, h), step, mode, (outx, outy, out16, outf16), st)
     if mode == 1:
         return out16, outf16
     if m1type == cv2.CV_32FC2:
@@ -379,8 +396,121 @@ def _table(camera, kind, A, p0, p1, az_step, size, depth, viewpoint, m1type, ste
 
 
 def _arg(x):
-    """A writable C-contiguous float64 copy (the kernel's one signature)."""
+    """A writable C-contiguous float64 copy (the kernels' one signature)."""
     return np.array(x, dtype=np.float64, order="C", copy=True)
+
+
+class _GridStack:
+    """G node grids of one shape and spacing with their check points, solved and classified.
+
+    The coarse grid of a table (G = 1) or the refined grids of its failing cells; see the
+    section comment of :mod:`omnicam._kernels`. ``S``, ``P``, ``node_margins``: (G, NY, NX, 2)
+    mirror points, pixels and margins of the nodes; ``cls`` (G, ny, nx) the cells' classes.
+    """
+
+    def __init__(self, view, rig, origins, spacing, shape, coarse=None, cells=None):
+        from . import _kernels as k
+
+        G = origins.shape[0]
+        ny, nx = shape
+        nodes = (G, ny + 3, nx + 3)
+        positions = np.empty(nodes + (2,))
+        starts = np.empty(nodes + (2,))
+        if cells is None:
+            cells, coarse_S = np.zeros((0, 2), np.int64), np.zeros((1, 1, 2))
+        else:
+            coarse_S = coarse.S[0]
+        run_chunks(k.grid_node_points, positions[..., 0].size, origins, spacing, coarse_S,
+                   cells, positions, starts)
+        self.S, self.P, self.node_margins, _ok = _solve(view, rig, positions, starts)
+        checks = (G, 3, ny + 1, nx + 1)
+        positions = np.empty(checks + (2,))
+        starts = np.empty(checks + (2,))
+        estimates = np.empty(checks + (4,))
+        run_chunks(k.grid_check_points, positions[..., 0].size, rig, origins, spacing, self.S,
+                   self.P, positions, starts, estimates)
+        _S, P, margins, ok = _solve(view, rig, positions, starts)
+        self.pixel_error = np.empty(checks)
+        self.mirror_error = np.empty(checks)
+        self.check_margins = np.empty(checks + (2,))
+        run_chunks(k.score_check_points, ok.size, ok.reshape(-1), P.reshape(-1, 2),
+                   margins.reshape(-1, 2), estimates.reshape(-1, 4),
+                   self.pixel_error.reshape(-1), self.mirror_error.reshape(-1),
+                   self.check_margins.reshape(-1, 2))
+
+    def classify(self, half_tol, allow_edge):
+        from . import _kernels as k
+
+        G, _w, ny1, nx1 = self.pixel_error.shape
+        self.cls = np.empty((G, ny1 - 1, nx1 - 1), np.int64)
+        k.classify_cells(self.node_margins, self.check_margins, self.pixel_error,
+                         self.mirror_error, half_tol, allow_edge, self.cls)
+        return self.cls
+
+    def n_solved(self):
+        """Nodes and check points with a solution."""
+        return (int(np.count_nonzero(self.node_margins[..., 0] > -np.inf)),
+                int(np.count_nonzero(self.check_margins[..., 0] > -np.inf)))
+
+
+def _solve(view, rig, positions, starts, pixels_only=False):
+    """:func:`omnicam._kernels.solve_view_points` over arrays of positions (..., 2)."""
+    from . import _kernels as k
+
+    shape = positions.shape[:-1]
+    n = int(np.prod(shape))
+    ok = np.zeros(shape, np.bool_)
+    S = np.empty(shape + (2,))
+    P = np.empty(shape + (2,))
+    margins = np.empty(shape + (2,))
+    run_chunks(k.solve_view_points, n, view, rig, positions.reshape(-1, 2),
+               starts.reshape(-1, 2), pixels_only, ok.reshape(-1), S.reshape(-1, 2),
+               P.reshape(-1, 2), margins.reshape(-1, 2), min_chunk=32)
+    return S, P, margins, ok
+
+
+def _build_table(view, rig, size, step, mode, outputs, stats):
+    """The phases of a table (section comment of :mod:`omnicam._kernels`), writing ``outputs``.
+
+    ``stats`` (8,) int64 receives: nodes and check points solved, coarse cells seen / unseen /
+    edge / refined, refined sub-cells left to exact pixels, pixels solved exactly.
+    """
+    from . import _kernels as k
+
+    notice_if_cold(k.solve_view_points, k.fill_rows)
+    w, h = size
+    ny, nx = (h + step - 1) // step, (w + step - 1) // step
+    half_tol = 0.5 * TOLERANCE
+    coarse = _GridStack(view, rig, np.zeros((1, 2)), float(step), (ny, nx))
+    cls = coarse.classify(half_tol, False)[0]
+    # refine the failing cells on grids FINE times finer (own nodes, checks and classes)
+    cells = np.argwhere(cls == k.CELL_BAD).astype(np.int64)
+    refined_index = np.full((ny, nx), -1, np.int64)
+    refined_index[cells[:, 0], cells[:, 1]] = np.arange(len(cells))
+    fine = _GridStack(view, rig, (cells[:, ::-1] * step).astype(np.float64),
+                      float(step // k.FINE), (k.FINE, k.FINE), coarse, cells)
+    fine_cls = fine.classify(half_tol, True)
+    # the pixels: interpolated, unseen, decided at the edge, or pending an exact solution
+    column_cos, column_sin = np.empty(w), np.empty(w)
+    weights = np.empty((4, step))
+    k.table_weights(view, w, step, column_cos, column_sin, weights)
+    pending = np.zeros((h, w), np.uint8)
+    outx, outy, out16, outf16 = outputs
+    run_chunks(k.fill_rows, h, view, rig, cls, refined_index, coarse.S[0], coarse.P[0], fine.S,
+               fine.P, fine_cls, column_cos, column_sin, weights, mode, outx, outy, out16, outf16,
+               pending, min_chunk=16)
+    index = np.flatnonzero(pending)
+    positions = np.stack([index % w, index // w], axis=1).astype(np.float64)
+    _S, P, _m, _ok = _solve(view, rig, positions, positions, pixels_only=True)
+    run_chunks(k.store_entries, len(index), index, P, mode, outx, outy, out16, outf16)
+    n_nodes, n_checks = coarse.n_solved()
+    f_nodes, f_checks = fine.n_solved()
+    stats[0] = n_nodes + f_nodes
+    stats[1] = n_checks + f_checks
+    stats[2:6] = [np.count_nonzero(cls == c)
+                  for c in (k.CELL_SEEN, k.CELL_UNSEEN, k.CELL_EDGE, k.CELL_BAD)]
+    stats[6] = np.count_nonzero(fine_cls == k.CELL_BAD)
+    stats[7] = len(index)
 
 
 def _panorama_params(size, lo, hi, projection):
