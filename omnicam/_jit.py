@@ -1,6 +1,6 @@
 """How omnicam runs its numba kernels: the decorator, the first-compile notice and threads.
 
-* :func:`kernel` is ``numba.njit(cache=True, nogil=True)`` when numba can write its cache for
+* :func:`kernel` is ``numba.njit(cache=True, nogil=True, error_model="numpy")`` when numba can write its cache for
   this package, else ``numba.njit(nogil=True)`` after one line on stderr saying so (numba raises
   "cannot cache function ...: no locator available" when neither the package's ``__pycache__``
   nor the user cache folder is writable and ``NUMBA_CACHE_DIR`` is unset).
@@ -66,6 +66,9 @@ def kernel(func=None, **options):
     """``numba.njit`` with ``cache`` (when possible) and ``nogil``; ``options`` are passed on."""
     options.setdefault("cache", CACHE)
     options.setdefault("nogil", True)
+    # IEEE division (x / 0 is inf or NaN) as in numpy and in numba's parallel loops, not
+    # Python's ZeroDivisionError: no test-and-raise branch in every division
+    options.setdefault("error_model", "numpy")
     if func is None:
         return numba.njit(**options)
     return numba.njit(**options)(func)

@@ -27,7 +27,7 @@ GRADIENT_ZERO = 1e-9  # |grad L| under which a stalled line search counts as con
 GRADIENT_STEP_REL = 0.1  # gradient step where L is not convex, times min(|C - P|, rim radius)
 
 
-@kernel(inline="always")
+@kernel
 def _first_hit_k(Fx, Fy, Fz, Vx, Vy, Vz, ia2, ib2):
     """Smallest k > 0 with Z > 0 where ``F + k V`` meets the sheet (eqs. 8-11); NaN if none."""
     alpha = (Vx * Vx + Vy * Vy) * ia2 - Vz * Vz * ib2
@@ -106,7 +106,7 @@ def trace_rays(lo, hi, uv, Kinv, R, C, a, b, rim_radius, origins, directions):
                 directions[i, j] = _NAN
 
 
-@kernel(inline="always")
+@kernel
 def _path_length(s1, s2, Cx, Cy, Cz, Xx, Xy, Xz, at_infinity, a, b):
     """Fermat path length camera -> mirror point (s1, s2, f(s)) -> scene point (or direction)."""
     z = b * math.sqrt(1.0 + (s1 * s1 + s2 * s2) / (a * a))
@@ -116,7 +116,7 @@ def _path_length(s1, s2, Cx, Cy, Cz, Xx, Xy, Xz, at_infinity, a, b):
     return r1 + math.sqrt((Xx - s1) ** 2 + (Xy - s2) ** 2 + (Xz - z) ** 2)
 
 
-@kernel(inline="always")
+@kernel
 def _newton_step(s1, s2, Cx, Cy, Cz, Xx, Xy, Xz, at_infinity, a, b):
     """Newton step on Fermat's path length ``L(s) = |C - P(s)| + |X - P(s)|`` at ``s``.
 
@@ -176,7 +176,7 @@ def _newton_step(s1, s2, Cx, Cy, Cz, Xx, Xy, Xz, at_infinity, a, b):
     return 0.0, 0.0, g1, g2, r1, False
 
 
-@kernel(inline="always")
+@kernel
 def _reflection_point(Cx, Cy, Cz, Xx, Xy, Xz, at_infinity, a, b, rim_radius, tol, max_iter):
     """Mirror point whose reflection joins the camera centre C and the scene point X.
 
@@ -475,35 +475,6 @@ def _view_pixel(rig, s1, s2, Xx, Xy, Xz, at_infinity):
 
 
 @kernel
-def _view_solve(rig, Xx, Xy, Xz, at_infinity, tol):
-    """``_reflection_point`` from the aligned start for the rig's camera centre."""
-    C = rig.C
-    return _reflection_point(C[0], C[1], C[2], Xx, Xy, Xz, at_infinity, rig.a, rig.b,
-                             rig.rim_radius, tol, NEWTON_MAX_ITER)
-
-
-@kernel
-def _view_exact(view, rig, dx, dy, dz):
-    """Exact table entry of a unit direction: project_points' answer (NaN if unseen).
-
-    ``dz > sin_reject`` is above every elevation the rig can see (proved in omnicam.views):
-    unseen without solving.
-    """
-    if not dz <= view.sin_reject:
-        return _NAN, _NAN
-    Xx, Xy, Xz = _view_target(view, dx, dy, dz)
-    if not view.at_infinity and _inside_mirror_body(Xx, Xy, Xz, rig.a, rig.b):
-        return _NAN, _NAN
-    s1, s2, ok = _view_solve(rig, Xx, Xy, Xz, view.at_infinity, view.newton_tol)
-    if not ok or s1 * s1 + s2 * s2 > rig.rim_radius * rig.rim_radius:
-        return _NAN, _NAN
-    x, y, m = _view_pixel(rig, s1, s2, Xx, Xy, Xz, view.at_infinity)
-    if not m > 0.0:
-        return _NAN, _NAN
-    return x, y
-
-
-@kernel
 def _newton_warm(rig, s1, s2, Xx, Xy, Xz, at_infinity, tol):
     """Newton's full steps of ``_reflection_point`` from a start already in its basin.
 
@@ -532,35 +503,52 @@ def _newton_warm(rig, s1, s2, Xx, Xy, Xz, at_infinity, tol):
 
 
 @kernel
-def _view_eval(view, rig, u, v, g1, g2):
-    """Exact solution at output position (u, v) on the extended sheet, with its margins.
+def _view_point(view, rig, u, v, g1, g2, pixels_only):
+    """Exact solution at output position (u, v): ``ok, s1, s2, x, y, vis, rim_m``.
 
-    Returns ``ok, s1, s2, x, y, vis, rim_m``: the mirror point, its (geometric) pixel,
-    ``vis`` = the least of the visibility margins (relative rim, cosines of
-    :func:`_view_pixel`, the body test of finite targets) over ``VIEW_CLEAR`` (>= 1: clearly
-    seen) and ``rim_m = 1 - |s|^2 / rim_radius^2``. ``ok`` is False when not solved.
-    ``(g1, g2)``: a start for Newton from interpolated neighbours, or NaN.
+    The mirror point ``s`` whose reflection joins the camera centre and the pixel's target
+    (``_reflection_point``; from ``(g1, g2)`` first when not NaN, a start interpolated from
+    solved neighbours), and its (geometric) pixel ``(x, y)``.
+
+    Grid points (``pixels_only`` False) are solved on the sheet extended past the rim, up to
+    the elevation ``sin_try``, with their margins: ``vis`` = the least of the relative rim
+    margin, the cosines of :func:`_view_pixel` and the body test of finite targets, over
+    ``VIEW_CLEAR`` (>= 1: clearly seen), and ``rim_m = 1 - |s|^2 / rim_radius^2``.
+    Pixels (``pixels_only``) get project_points' answer: not ok (NaN) when unseen, i.e. above
+    ``sin_reject`` (proved in omnicam.views), inside the mirror body, outside the rim, or
+    failing a visibility test; no margins.
     """
-    dx, dy, dz = _view_direction(view, u, v)
-    if not dz <= view.sin_try:
-        return False, _NAN, _NAN, _NAN, _NAN, _NAN, _NAN
     at_infinity = view.at_infinity
+    a = rig.a
+    b = rig.b
+    rim2 = rig.rim_radius * rig.rim_radius
+    dx, dy, dz = _view_direction(view, u, v)
+    if not dz <= (view.sin_reject if pixels_only else view.sin_try):
+        return False, _NAN, _NAN, _NAN, _NAN, _NAN, _NAN
     Xx, Xy, Xz = _view_target(view, dx, dy, dz)
+    if pixels_only and not at_infinity and _inside_mirror_body(Xx, Xy, Xz, a, b):
+        return False, _NAN, _NAN, _NAN, _NAN, _NAN, _NAN
     ok = False
     if g1 == g1 and g2 == g2:
         s1, s2, ok = _newton_warm(rig, g1, g2, Xx, Xy, Xz, at_infinity, view.newton_tol)
     if not ok:
-        s1, s2, ok = _view_solve(rig, Xx, Xy, Xz, at_infinity, view.newton_tol)
-    if not ok:
+        C = rig.C
+        s1, s2, ok = _reflection_point(C[0], C[1], C[2], Xx, Xy, Xz, at_infinity, a, b,
+                                       rig.rim_radius, view.newton_tol, NEWTON_MAX_ITER)
+    if not ok or (pixels_only and s1 * s1 + s2 * s2 > rim2):
         return False, _NAN, _NAN, _NAN, _NAN, _NAN, _NAN
     x, y, m = _view_pixel(rig, s1, s2, Xx, Xy, Xz, at_infinity)
+    if pixels_only:
+        if not m > 0.0:
+            return False, _NAN, _NAN, _NAN, _NAN, _NAN, _NAN
+        return True, s1, s2, x, y, _NAN, _NAN
     if not (x == x and y == y):
         return False, _NAN, _NAN, _NAN, _NAN, _NAN, _NAN
-    rim_m = 1.0 - (s1 * s1 + s2 * s2) / (rig.rim_radius * rig.rim_radius)
+    rim_m = 1.0 - (s1 * s1 + s2 * s2) / rim2
     vis = min(rim_m, m)
     if not at_infinity:
-        rx = (Xx * Xx + Xy * Xy) / (rig.a * rig.a)
-        rz = Xz * Xz / (rig.b * rig.b)
+        rx = (Xx * Xx + Xy * Xy) / (a * a)
+        rz = Xz * Xz / (b * b)
         if Xz > -VIEW_CLEAR * math.sqrt(Xx * Xx + Xy * Xy + Xz * Xz):
             vis = min(vis, (rx - rz + 1.0) / (rx + rz + 1.0))
     return True, s1, s2, x, y, vis / VIEW_CLEAR, rim_m
@@ -574,10 +562,9 @@ def _lagrange4(t):
 
 
 @kernel
-def _interp_cell(S, r, k, tv, tu):
-    """Tensor cubic Lagrange interpolation of node values S (NY, NX, 2) in cell (r, k)."""
-    v0, v1, v2, v3 = _lagrange4(tv)
-    u0, u1, u2, u3 = _lagrange4(tu)
+def _interp_weighted(S, r, k, v0, v1, v2, v3, u0, u1, u2, u3):
+    """Tensor cubic interpolation of node values S (NY, NX, 2) in cell (r, k) with the row
+    weights ``v*`` and column weights ``u*`` (:func:`_lagrange4`)."""
     o1 = 0.0
     o2 = 0.0
     for m in range(4):
@@ -589,6 +576,15 @@ def _interp_cell(S, r, k, tv, tu):
         o1 += wv * row1
         o2 += wv * row2
     return o1, o2
+
+
+@kernel
+def _interp_cell(S, r, k, tv, tu):
+    """Tensor cubic Lagrange interpolation of node values S (NY, NX, 2) in cell (r, k) at the
+    cell coordinates (tv, tu) in [0, 1]^2."""
+    v0, v1, v2, v3 = _lagrange4(tv)
+    u0, u1, u2, u3 = _lagrange4(tu)
+    return _interp_weighted(S, r, k, v0, v1, v2, v3, u0, u1, u2, u3)
 
 
 @kernel(inline="always")
@@ -642,16 +638,16 @@ def grid_node_points(lo, hi, origins, spacing, coarse_S, cells, positions, start
 
 
 @kernel
-def grid_check_points(lo, hi, rig, origins, spacing, S, P, positions, starts, estimates):
-    """Check points ``lo:hi`` of a grid stack: positions, starts and interpolated estimates.
+def grid_check_points(lo, hi, origins, spacing, S, P, positions, starts, estimates):
+    """Check points ``lo:hi`` of a grid stack: positions, starts and interpolated pixels.
 
     Check point (c, which, r, k) of grid c with ny x nx cells: ``which`` CHECK_CENTRE: centre of
     cell (r, k); CHECK_HORIZONTAL_EDGE: middle of the horizontal edge above cell (r, k) (r = ny:
     below the last row); CHECK_VERTICAL_EDGE: middle of the vertical edge left of it (k = nx:
     right of the last column). Combinations that name no edge get NaN positions (never solved).
-    ``estimates[..., 0:2]``: the pixel interpolated from the nodes' pixels ``P``;
-    ``[..., 2:4]``: the pixel of the mirror point interpolated from ``S``, which is also the
-    start. Arrays are (G, 3, ny + 1, nx + 1, k), flat index ``lo:hi``.
+    ``estimates``: the pixel interpolated from the nodes' pixels ``P``; ``starts``: the mirror
+    point interpolated from ``S`` (solve_view_points gives its pixel). Arrays are
+    (G, 3, ny + 1, nx + 1, k), flat index ``lo:hi``.
     """
     ny = positions.shape[2] - 1
     nx = positions.shape[3] - 1
@@ -663,7 +659,7 @@ def grid_check_points(lo, hi, rig, origins, spacing, S, P, positions, starts, es
         for m in range(2):
             positions[c, which, r, k, m] = _NAN
             starts[c, which, r, k, m] = _NAN
-        for m in range(4):
+        for m in range(2):
             estimates[c, which, r, k, m] = _NAN
         if which == CHECK_CENTRE and (r == ny or k == nx):
             continue
@@ -693,31 +689,27 @@ def grid_check_points(lo, hi, rig, origins, spacing, S, P, positions, starts, es
         xi, yi = _interp_cell(P[c], cr, ck, tv, tu)
         estimates[c, which, r, k, 0] = xi
         estimates[c, which, r, k, 1] = yi
-        # the pixel of a mirror point does not depend on the target (margins only)
-        xi, yi, _m = _view_pixel(rig, si1, si2, 1.0, 0.0, 0.0, True)
-        estimates[c, which, r, k, 2] = xi
-        estimates[c, which, r, k, 3] = yi
 
 
 @kernel
-def solve_view_points(lo, hi, view, rig, positions, starts, pixels_only, ok, S, P, margins):
+def solve_view_points(lo, hi, view, rig, positions, starts, pixels_only, ok, S, P, margins,
+                      start_pixels):
     """Exact solutions at the output positions ``lo:hi`` (N, 2).
 
-    Grid points (``pixels_only`` False): the mirror point ``S``, its pixel ``P`` and
-    ``margins`` = (vis, rim_m) of :func:`_view_eval` (``-inf, inf`` and ``ok`` False when not
-    solved), Newton started from ``starts`` when they are not NaN.
-    Pixels left undecided (``pixels_only``): ``P`` = the exact table entry
-    (:func:`_view_exact`, NaN if unseen); the other outputs are not written.
+    :func:`_view_point` at each: the mirror point ``S``, its pixel ``P`` (the exact table
+    entry for ``pixels_only``, NaN if unseen) and ``margins`` = (vis, rim_m) (``-inf, inf``
+    and ``ok`` False when not solved), Newton started from ``starts`` where not NaN.
+    ``start_pixels``: the pixels of the starts (grid points only).
     """
     for n in range(lo, hi):
-        u = positions[n, 0]
-        v = positions[n, 1]
-        if pixels_only:
-            dx, dy, dz = _view_direction(view, u, v)
-            P[n, 0], P[n, 1] = _view_exact(view, rig, dx, dy, dz)
-            continue
-        solved, s1, s2, x, y, vis, rim_m = _view_eval(view, rig, u, v, starts[n, 0],
-                                                      starts[n, 1])
+        if not pixels_only:
+            # the pixel of a mirror point does not depend on the target (margins only)
+            x, y, _m = _view_pixel(rig, starts[n, 0], starts[n, 1], 1.0, 0.0, 0.0, True)
+            start_pixels[n, 0] = x
+            start_pixels[n, 1] = y
+        solved, s1, s2, x, y, vis, rim_m = _view_point(view, rig, positions[n, 0],
+                                                       positions[n, 1], starts[n, 0],
+                                                       starts[n, 1], pixels_only)
         ok[n] = solved
         S[n, 0] = s1
         S[n, 1] = s2
@@ -832,19 +824,22 @@ def _edge_pixel(view, rig, s1, s2, dx, dy, dz):
 
 
 @kernel
-def table_weights(view, W, step, column_cos, column_sin, weights):
-    """Per-column cos / sin of the azimuth (panoramas) and the cubic weights of the node
-    columns per column offset in a cell, ``weights`` (4, step)."""
+def table_weights(view, column_cos, column_sin, weights, fine_weights):
+    """Per-column cos / sin of the azimuth (panoramas), and the cubic weights of the node
+    columns per column offset in a cell (``weights`` (4, step)) and in a refined sub-cell
+    (``fine_weights`` (4, step / FINE))."""
     if view.kind != 0:
-        for j in range(W):
+        for j in range(column_cos.shape[0]):
             column_cos[j] = math.cos(view.az_step * j)
             column_sin[j] = math.sin(view.az_step * j)
-    for t in range(step):
-        w0, w1, w2, w3 = _lagrange4(t / step)
-        weights[0, t] = w0
-        weights[1, t] = w1
-        weights[2, t] = w2
-        weights[3, t] = w3
+    for w in (weights, fine_weights):
+        step = w.shape[1]
+        for t in range(step):
+            w0, w1, w2, w3 = _lagrange4(t / step)
+            w[0, t] = w0
+            w[1, t] = w1
+            w[2, t] = w2
+            w[3, t] = w3
 
 
 @kernel
@@ -867,72 +862,66 @@ def _pixel_direction(view, i, j, row_z, row_cos, column_cos, column_sin):
 
 
 @kernel
-def _fill_mixed_cell(view, rig, i, j0, j1, k, cell_class, refined_index, fine_row, fine_tv,
-                     fine_S, fine_P, fine_cls, row_S, weights, row_z, row_cos, column_cos,
-                     column_sin, mode, outx, outy, out16, outf16, pending):
-    """Entries of row i, columns j0:j1 of coarse cell k, which is neither SEEN nor UNSEEN.
+def _fill_refined_cell(view, rig, i, j0, j1, fine_row, fine_tv, fine_S, fine_P, fine_cls,
+                       fine_weights, row_z, row_cos, column_cos, column_sin, mode, outx, outy,
+                       out16, outf16, pending):
+    """Entries of row i, columns j0:j1 of a refined coarse cell, sub-cell by sub-cell.
 
-    A refined cell (BAD, its grid ``refined_index`` of the refined stack) uses its sub-cell's
-    class; an EDGE (sub-)cell decides per pixel from the interpolated mirror point
-    (:func:`_edge_pixel`); what stays undecided is marked in ``pending`` for the exact solver.
+    ``fine_S, fine_P`` (FINE + 3, FINE + 3, 2), ``fine_cls`` (FINE, FINE): the cell's refined
+    grid; ``fine_row, fine_tv``: the sub-cell row and the position in it; ``fine_weights``
+    (4, g): column weights per column offset in a sub-cell. SEEN sub-cells interpolate the
+    pixel, UNSEEN ones are unseen, EDGE ones decide per pixel from the interpolated mirror point
+    (:func:`_edge_pixel`); what stays undecided is marked in ``pending``.
     """
-    g = weights.shape[1] // FINE  # sub-cell size
-    for j in range(j0, j1):
-        x = _NAN
-        y = _NAN
-        decided = False
-        fine_class = CELL_BAD
-        if cell_class == CELL_BAD:  # refined cell: its sub-cell's class first
-            fb = (j - j0) // g
-            fine_class = fine_cls[refined_index, fine_row, fb]
+    g = fine_weights.shape[1]
+    v0, v1, v2, v3 = _lagrange4(fine_tv)
+    for fb in range(FINE):
+        k0 = j0 + fb * g
+        k1 = min(j1, k0 + g)
+        fine_class = fine_cls[fine_row, fb]
+        for j in range(k0, k1):
+            tu = j - k0
+            u0 = fine_weights[0, tu]
+            u1 = fine_weights[1, tu]
+            u2 = fine_weights[2, tu]
+            u3 = fine_weights[3, tu]
             if fine_class == CELL_SEEN:
-                x, y = _interp_cell(fine_P[refined_index], fine_row, fb, fine_tv,
-                                    (j - j0 - fb * g) / g)
-                decided = True
-            elif fine_class == CELL_UNSEEN:
-                decided = True
-        if decided:
-            _view_store(i, j, x, y, mode, outx, outy, out16, outf16)
-            continue
-        dx, dy, dz = _pixel_direction(view, i, j, row_z, row_cos, column_cos, column_sin)
-        decided = not dz <= view.sin_reject  # above every elevation the rig sees
-        if not decided:
-            if cell_class == CELL_EDGE:
-                tu = j - j0
-                s1 = weights[0, tu] * row_S[k, 0] + weights[1, tu] * row_S[k + 1, 0] \
-                    + weights[2, tu] * row_S[k + 2, 0] + weights[3, tu] * row_S[k + 3, 0]
-                s2 = weights[0, tu] * row_S[k, 1] + weights[1, tu] * row_S[k + 1, 1] \
-                    + weights[2, tu] * row_S[k + 2, 1] + weights[3, tu] * row_S[k + 3, 1]
+                x, y = _interp_weighted(fine_P, fine_row, fb, v0, v1, v2, v3, u0, u1, u2, u3)
+                _view_store(i, j, x, y, mode, outx, outy, out16, outf16)
+                continue
+            if fine_class == CELL_UNSEEN:
+                _view_store(i, j, _NAN, _NAN, mode, outx, outy, out16, outf16)
+                continue
+            dx, dy, dz = _pixel_direction(view, i, j, row_z, row_cos, column_cos, column_sin)
+            x = _NAN
+            y = _NAN
+            decided = not dz <= view.sin_reject  # above every elevation the rig sees
+            if not decided and fine_class == CELL_EDGE:
+                s1, s2 = _interp_weighted(fine_S, fine_row, fb, v0, v1, v2, v3, u0, u1, u2, u3)
                 x, y, decided = _edge_pixel(view, rig, s1, s2, dx, dy, dz)
-            elif fine_class == CELL_EDGE:
-                fb = (j - j0) // g
-                s1, s2 = _interp_cell(fine_S[refined_index], fine_row, fb, fine_tv,
-                                      (j - j0 - fb * g) / g)
-                x, y, decided = _edge_pixel(view, rig, s1, s2, dx, dy, dz)
-        if decided:
-            _view_store(i, j, x, y, mode, outx, outy, out16, outf16)
-        else:
-            pending[i, j] = 1
+            if decided:
+                _view_store(i, j, x, y, mode, outx, outy, out16, outf16)
+            else:
+                pending[i, j] = 1
 
 
 @kernel
-def fill_rows(lo, hi, view, rig, cls, refined_index, S, P, fine_S, fine_P, fine_cls, column_cos,
-              column_sin, weights, mode, outx, outy, out16, outf16, pending):
+def fill_rows(lo, hi, view, rig, cls, refined_index, P, fine_S, fine_P, fine_cls, column_cos,
+              column_sin, weights, fine_weights, mode, outx, outy, out16, outf16, pending):
     """Table entries of rows ``lo:hi``; pixels that need an exact solution are marked pending.
 
-    ``cls`` (ny, nx): classes of the coarse cells, whose nodes are ``S``, ``P`` (NY, NX, 2);
+    ``cls`` (ny, nx): classes of the coarse cells, whose nodes' pixels are ``P`` (NY, NX, 2);
     ``refined_index`` (ny, nx): which grid of the refined stack (``fine_*``) refines a BAD cell.
-    ``weights`` (4, step): :func:`table_weights`. ``mode`` 0 writes float32 ``outx, outy``
+    ``weights`` (4, step), ``fine_weights`` (4, step / FINE): :func:`table_weights`. ``mode`` 0 writes float32 ``outx, outy``
     (H, W); mode 1 writes ``out16`` (H, W, 2) int16 and ``outf16`` (H, W) uint16 as
     ``cv2.convertMaps(.., CV_16SC2)`` does.
     """
     h = weights.shape[1]
-    g = h // FINE
+    g = fine_weights.shape[1]
     W = pending.shape[1]
     nx = cls.shape[1]
     NX = nx + 3
     row_P = np.empty((NX, 2))
-    row_S = np.empty((NX, 2))
     for i in range(lo, hi):
         r = i // h
         v0, v1, v2, v3 = _lagrange4((i - r * h) / h)
@@ -940,8 +929,6 @@ def fill_rows(lo, hi, view, rig, cls, refined_index, S, P, fine_S, fine_P, fine_
             for cc in range(2):
                 row_P[q, cc] = v0 * P[r, q, cc] + v1 * P[r + 1, q, cc] + v2 * P[r + 2, q, cc] \
                     + v3 * P[r + 3, q, cc]
-                row_S[q, cc] = v0 * S[r, q, cc] + v1 * S[r + 1, q, cc] + v2 * S[r + 2, q, cc] \
-                    + v3 * S[r + 3, q, cc]
         row_z = 0.0
         row_cos = 0.0
         if view.kind == 1:
@@ -984,11 +971,12 @@ def fill_rows(lo, hi, view, rig, cls, refined_index, S, P, fine_S, fine_P, fine_
             elif cell_class == CELL_UNSEEN:
                 for j in range(j0, j1):
                     _view_store(i, j, _NAN, _NAN, mode, outx, outy, out16, outf16)
-            else:
-                _fill_mixed_cell(view, rig, i, j0, j1, k, cell_class, refined_index[r, k],
-                                 fine_row, fine_tv, fine_S, fine_P, fine_cls, row_S, weights,
-                                 row_z, row_cos, column_cos, column_sin, mode, outx, outy,
-                                 out16, outf16, pending)
+            else:  # refined (coarse cells are never EDGE: classify_cells without allow_edge)
+                c = refined_index[r, k]
+                _fill_refined_cell(view, rig, i, j0, j1, fine_row, fine_tv, fine_S[c],
+                                   fine_P[c], fine_cls[c], fine_weights, row_z, row_cos,
+                                   column_cos, column_sin, mode, outx, outy, out16, outf16,
+                                   pending)
 
 
 @kernel

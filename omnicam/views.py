@@ -422,14 +422,15 @@ class _GridStack:
             coarse_S = coarse.S[0]
         run_chunks(k.grid_node_points, positions[..., 0].size, origins, spacing, coarse_S,
                    cells, positions, starts)
-        self.S, self.P, self.node_margins, _ok = _solve(view, rig, positions, starts)
+        self.S, self.P, self.node_margins, _ok, _sp = _solve(view, rig, positions, starts)
         checks = (G, 3, ny + 1, nx + 1)
         positions = np.empty(checks + (2,))
         starts = np.empty(checks + (2,))
-        estimates = np.empty(checks + (4,))
-        run_chunks(k.grid_check_points, positions[..., 0].size, rig, origins, spacing, self.S,
-                   self.P, positions, starts, estimates)
-        _S, P, margins, ok = _solve(view, rig, positions, starts)
+        interpolated = np.empty(checks + (2,))
+        run_chunks(k.grid_check_points, positions[..., 0].size, origins, spacing, self.S,
+                   self.P, positions, starts, interpolated)
+        _S, P, margins, ok, start_pixels = _solve(view, rig, positions, starts)
+        estimates = np.concatenate([interpolated, start_pixels], axis=-1)
         self.pixel_error = np.empty(checks)
         self.mirror_error = np.empty(checks)
         self.check_margins = np.empty(checks + (2,))
@@ -463,10 +464,12 @@ def _solve(view, rig, positions, starts, pixels_only=False):
     S = np.empty(shape + (2,))
     P = np.empty(shape + (2,))
     margins = np.empty(shape + (2,))
+    start_pixels = np.empty(shape + (2,))
     run_chunks(k.solve_view_points, n, view, rig, positions.reshape(-1, 2),
                starts.reshape(-1, 2), pixels_only, ok.reshape(-1), S.reshape(-1, 2),
-               P.reshape(-1, 2), margins.reshape(-1, 2), min_chunk=32)
-    return S, P, margins, ok
+               P.reshape(-1, 2), margins.reshape(-1, 2), start_pixels.reshape(-1, 2),
+               min_chunk=32)
+    return S, P, margins, ok, start_pixels
 
 
 def _build_table(view, rig, size, step, mode, outputs, stats):
@@ -492,16 +495,15 @@ def _build_table(view, rig, size, step, mode, outputs, stats):
     fine_cls = fine.classify(half_tol, True)
     # the pixels: interpolated, unseen, decided at the edge, or pending an exact solution
     column_cos, column_sin = np.empty(w), np.empty(w)
-    weights = np.empty((4, step))
-    k.table_weights(view, w, step, column_cos, column_sin, weights)
+    weights, fine_weights = np.empty((4, step)), np.empty((4, step // k.FINE))
+    k.table_weights(view, column_cos, column_sin, weights, fine_weights)
     pending = np.zeros((h, w), np.uint8)
     outx, outy, out16, outf16 = outputs
-    run_chunks(k.fill_rows, h, view, rig, cls, refined_index, coarse.S[0], coarse.P[0], fine.S,
-               fine.P, fine_cls, column_cos, column_sin, weights, mode, outx, outy, out16, outf16,
-               pending, min_chunk=16)
+    run_chunks(k.fill_rows, h, view, rig, cls, refined_index, coarse.P[0], fine.S, fine.P, fine_cls, column_cos, column_sin, weights, fine_weights, mode, outx, outy,
+               out16, outf16, pending, min_chunk=16)
     index = np.flatnonzero(pending)
     positions = np.stack([index % w, index // w], axis=1).astype(np.float64)
-    _S, P, _m, _ok = _solve(view, rig, positions, positions, pixels_only=True)
+    P = _solve(view, rig, positions, positions, pixels_only=True)[1]
     run_chunks(k.store_entries, len(index), index, P, mode, outx, outy, out16, outf16)
     n_nodes, n_checks = coarse.n_solved()
     f_nodes, f_checks = fine.n_solved()
