@@ -13,7 +13,6 @@
 
 from __future__ import annotations
 
-import os
 import sys
 from concurrent.futures import ThreadPoolExecutor
 
@@ -114,7 +113,7 @@ def run_chunks(func, n, *args, min_chunk=256, chunks_per_thread=4):
     """
     threads = n_threads()
     n_chunks = min(threads * chunks_per_thread, n // min_chunk) if threads > 1 else 1
-    if n_chunks <= 1 or os.environ.get("NUMBA_DISABLE_JIT") == "1":
+    if n_chunks <= 1 or numba.config.DISABLE_JIT:  # pure Python holds the GIL: no gain
         func(0, n, *args)
         return
     bounds = [n * c // n_chunks for c in range(n_chunks + 1)]

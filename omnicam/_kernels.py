@@ -391,7 +391,7 @@ def _view_direction(view, u, v):
     return x / n, y / n, z / n
 
 
-@kernel
+@kernel(inline="always")
 def _view_target(view, dx, dy, dz):
     """The scene target of a unit direction: itself at infinity, else ``viewpoint + depth d``."""
     if view.at_infinity:
@@ -406,7 +406,7 @@ def _inside_mirror_body(Xx, Xy, Xz, a, b):
     return Xz > 0.0 and (Xx * Xx + Xy * Xy) / (a * a) - Xz * Xz / (b * b) + 1.0 < 0.0
 
 
-@kernel
+@kernel(inline="always")
 def _distort(rig, xn, yn):
     """OpenCV's distortion of normalised coordinates (``cv2.projectPoints``: k1..k6, p1, p2,
     s1..s4, then the tilt of tau_x, tau_y)."""
@@ -429,7 +429,7 @@ def _distort(rig, xn, yn):
     return ip * vx, ip * vy
 
 
-@kernel
+@kernel(inline="always")
 def _view_pixel(rig, s1, s2, Xx, Xy, Xz, at_infinity):
     """Pixel of the mirror point (s1, s2, f(s)) and the smallest visibility cosine.
 
@@ -807,7 +807,7 @@ def classify_cells(node_margins, check_margins, pixel_error, mirror_error, half_
                 cls[c, r, k] = cell_class
 
 
-@kernel
+@kernel(inline="always")
 def _edge_pixel(view, rig, s1, s2, dx, dy, dz):
     """Entry from an interpolated mirror point: ``(x, y, decided)``; undecided near the edge."""
     Xx, Xy, Xz = _view_target(view, dx, dy, dz)
@@ -842,7 +842,7 @@ def table_weights(view, column_cos, column_sin, weights, fine_weights):
             w[3, t] = w3
 
 
-@kernel
+@kernel(inline="always")
 def _pixel_direction(view, i, j, row_z, row_cos, column_cos, column_sin):
     """Unit direction of output pixel (row i, column j), as :func:`_view_direction` with the
     row's and columns' trigonometry precomputed."""

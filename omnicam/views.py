@@ -29,6 +29,7 @@ The view conventions (azimuth, row order, ``R``, yaw/pitch/roll) are those of
 """
 from __future__ import annotations
 
+import functools
 import math
 import numbers
 
@@ -216,13 +217,25 @@ def _check_elevation_range(elevation_range, projection):
 
 # -- the band a mirror sees ---------------------------------------------------------------------
 def _rim_directions(camera, n=3600):
-    """Reflected directions of ``n`` rim points (eqs. 14-15 at the rim), mirror frame."""
+    """Reflected directions of ``n`` rim points (eqs. 14-15 at the rim), mirror frame.
+
+    They depend on the mirror and the camera centre only; the last few rigs' are kept (every
+    table needs them, and they cost about as much as a small table).
+    """
     m = camera.mirror
-    P = m.rim_points(n)
-    V = P - camera.camera_center
+    C = np.asarray(camera.camera_center, dtype=np.float64)
+    return _rim_directions_of(m, float(m.a), float(m.b), float(m.rim_radius), C.tobytes(), n)
+
+
+@functools.lru_cache(maxsize=8)
+def _rim_directions_of(mirror, a, b, rim_radius, centre_bytes, n):
+    P = mirror.rim_points(n)
+    V = P - np.frombuffer(centre_bytes, dtype=np.float64)
     V /= np.linalg.norm(V, axis=1, keepdims=True)
-    nrm = m.unit_normal(P)
-    return m.reflect(V, nrm)
+    nrm = mirror.unit_normal(P)
+    out = mirror.reflect(V, nrm)
+    out.flags.writeable = False
+    return out
 
 
 def _elevation_deg(d):
