@@ -106,10 +106,13 @@ def _pool():
 
 
 def run_chunks(func, n, *args, min_chunk=256, chunks_per_thread=4):
-    """Call ``func(lo, hi, *args)`` over ``range(n)`` in chunks on the thread pool.
+    """Call ``func(lo, hi, *args)`` over ``range(n)`` in chunks, on the calling thread and the
+    pool's.
 
     ``func`` must release the GIL (:func:`kernel` does) and write disjoint slices. Small ``n``
-    runs in the calling thread. Several chunks per thread balance uneven work.
+    runs in the calling thread alone. Each thread takes the next chunk when it is done with
+    one, so uneven work balances, and the calling thread works too: on a busy machine a pool
+    thread that is not scheduled delays at most the chunk it holds.
     """
     threads = n_threads()
     n_chunks = min(threads * chunks_per_thread, n // min_chunk) if threads > 1 else 1
@@ -117,6 +120,13 @@ def run_chunks(func, n, *args, min_chunk=256, chunks_per_thread=4):
         func(0, n, *args)
         return
     bounds = [n * c // n_chunks for c in range(n_chunks + 1)]
-    futures = [_pool().submit(func, lo, hi, *args) for lo, hi in zip(bounds[:-1], bounds[1:])]
-    for f in futures:
+    chunks = iter(range(n_chunks))  # next() on it is atomic under the GIL
+
+    def work():
+        for c in chunks:
+            func(bounds[c], bounds[c + 1], *args)
+
+    helpers = [_pool().submit(work) for _ in range(min(threads, n_chunks) - 1)]
+    work()
+    for f in helpers:
         f.result()

@@ -807,6 +807,38 @@ def classify_cells(node_margins, check_margins, pixel_error, mirror_error, half_
                 cls[c, r, k] = cell_class
 
 
+@kernel
+def mark_cells_above_band(view, origins, spacing, W, H, cls):
+    """Make UNSEEN the BAD cells of a perspective grid stack whose every pixel looks above
+    ``sin_reject`` (where nothing is seen), so that they are neither refined nor visited.
+
+    With ``sin_reject > 0`` the directions above that elevation form a convex cone, and the
+    pixels whose directions lie in it a convex set of the image plane: a cell is in it when
+    its four corner pixels are (with a margin of ``1e-9`` for rounding).
+    """
+    if view.kind != 0 or not 0.0 < view.sin_reject < 1.0:
+        return
+    limit = view.sin_reject + 1e-9
+    for c in range(cls.shape[0]):
+        for r in range(cls.shape[1]):
+            for k in range(cls.shape[2]):
+                if cls[c, r, k] != CELL_BAD:
+                    continue
+                u0 = origins[c, 0] + k * spacing
+                v0 = origins[c, 1] + r * spacing
+                u1 = min(u0 + spacing - 1.0, W - 1.0)
+                v1 = min(v0 + spacing - 1.0, H - 1.0)
+                above = True
+                for corner in range(4):
+                    u = u0 if corner % 2 == 0 else u1
+                    v = v0 if corner < 2 else v1
+                    _dx, _dy, dz = _view_direction(view, u, v)
+                    if not dz > limit:
+                        above = False
+                if above:
+                    cls[c, r, k] = CELL_UNSEEN
+
+
 @kernel(inline="always")
 def _edge_pixel(view, rig, s1, s2, dx, dy, dz):
     """Entry from an interpolated mirror point: ``(x, y, decided)``; undecided near the edge."""
@@ -871,10 +903,11 @@ def _fill_refined_cell(view, rig, i, j0, j1, fine_row, fine_tv, fine_S, fine_P, 
     grid; ``fine_row, fine_tv``: the sub-cell row and the position in it; ``fine_weights``
     (4, g): column weights per column offset in a sub-cell. SEEN sub-cells interpolate the
     pixel, UNSEEN ones are unseen, EDGE ones decide per pixel from the interpolated mirror point
-    (:func:`_edge_pixel`); what stays undecided is marked in ``pending``.
+    (:func:`_edge_pixel`); what stays undecided is marked in ``pending`` (returns how many).
     """
     g = fine_weights.shape[1]
     v0, v1, v2, v3 = _lagrange4(fine_tv)
+    n_pending = 0
     for fb in range(FINE):
         k0 = j0 + fb * g
         k1 = min(j1, k0 + g)
@@ -903,18 +936,21 @@ def _fill_refined_cell(view, rig, i, j0, j1, fine_row, fine_tv, fine_S, fine_P, 
                 _view_store(i, j, x, y, mode, outx, outy, out16, outf16)
             else:
                 pending[i, j] = 1
+                n_pending += 1
+    return n_pending
 
 
 @kernel
 def fill_rows(lo, hi, view, rig, cls, refined_index, P, fine_S, fine_P, fine_cls, column_cos,
-              column_sin, weights, fine_weights, mode, outx, outy, out16, outf16, pending):
+              column_sin, weights, fine_weights, mode, outx, outy, out16, outf16, pending,
+              pending_rows):
     """Table entries of rows ``lo:hi``; pixels that need an exact solution are marked pending.
 
     ``cls`` (ny, nx): classes of the coarse cells, whose nodes' pixels are ``P`` (NY, NX, 2);
     ``refined_index`` (ny, nx): which grid of the refined stack (``fine_*``) refines a BAD cell.
     ``weights`` (4, step), ``fine_weights`` (4, step / FINE): :func:`table_weights`. ``mode`` 0 writes float32 ``outx, outy``
     (H, W); mode 1 writes ``out16`` (H, W, 2) int16 and ``outf16`` (H, W) uint16 as
-    ``cv2.convertMaps(.., CV_16SC2)`` does.
+    ``cv2.convertMaps(.., CV_16SC2)`` does. ``pending_rows`` (H,): pending pixels per row.
     """
     h = weights.shape[1]
     g = fine_weights.shape[1]
@@ -923,6 +959,7 @@ def fill_rows(lo, hi, view, rig, cls, refined_index, P, fine_S, fine_P, fine_cls
     NX = nx + 3
     row_P = np.empty((NX, 2))
     for i in range(lo, hi):
+        pending_rows[i] = 0
         r = i // h
         v0, v1, v2, v3 = _lagrange4((i - r * h) / h)
         for q in range(NX):
@@ -960,23 +997,27 @@ def fill_rows(lo, hi, view, rig, cls, refined_index, P, fine_S, fine_P, fine_cls
                                                 + weights[2, tu] * a2 + weights[3, tu] * a3)
                         outy[i, j] = np.float32(weights[0, tu] * b0 + weights[1, tu] * b1
                                                 + weights[2, tu] * b2 + weights[3, tu] * b3)
-                else:
+                else:  # _view_store's fixed point; finite here (all 16 nodes solved)
                     for j in range(j0, j1):
                         tu = j - j0
-                        x = weights[0, tu] * a0 + weights[1, tu] * a1 + weights[2, tu] * a2 \
-                            + weights[3, tu] * a3
-                        y = weights[0, tu] * b0 + weights[1, tu] * b1 + weights[2, tu] * b2 \
-                            + weights[3, tu] * b3
-                        _view_store(i, j, x, y, 1, outx, outy, out16, outf16)
+                        fx = np.float32(weights[0, tu] * a0 + weights[1, tu] * a1
+                                        + weights[2, tu] * a2 + weights[3, tu] * a3)
+                        fy = np.float32(weights[0, tu] * b0 + weights[1, tu] * b1
+                                        + weights[2, tu] * b2 + weights[3, tu] * b3)
+                        ix = int(np.rint(np.float64(fx) * 32.0))
+                        iy = int(np.rint(np.float64(fy) * 32.0))
+                        out16[i, j, 0] = max(-32768, min(32767, ix >> 5))
+                        out16[i, j, 1] = max(-32768, min(32767, iy >> 5))
+                        outf16[i, j] = (iy & 31) * 32 + (ix & 31)
             elif cell_class == CELL_UNSEEN:
                 for j in range(j0, j1):
                     _view_store(i, j, _NAN, _NAN, mode, outx, outy, out16, outf16)
             else:  # refined (coarse cells are never EDGE: classify_cells without allow_edge)
                 c = refined_index[r, k]
-                _fill_refined_cell(view, rig, i, j0, j1, fine_row, fine_tv, fine_S[c],
-                                   fine_P[c], fine_cls[c], fine_weights, row_z, row_cos,
-                                   column_cos, column_sin, mode, outx, outy, out16, outf16,
-                                   pending)
+                pending_rows[i] += _fill_refined_cell(
+                    view, rig, i, j0, j1, fine_row, fine_tv, fine_S[c], fine_P[c], fine_cls[c],
+                    fine_weights, row_z, row_cos, column_cos, column_sin, mode, outx, outy,
+                    out16, outf16, pending)
 
 
 @kernel

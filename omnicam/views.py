@@ -426,6 +426,7 @@ class _GridStack:
 
         G = origins.shape[0]
         ny, nx = shape
+        self.origins, self.spacing = origins, spacing
         nodes = (G, ny + 3, nx + 3)
         positions = np.empty(nodes + (2,))
         starts = np.empty(nodes + (2,))
@@ -433,32 +434,33 @@ class _GridStack:
             cells, coarse_S = np.zeros((0, 2), np.int64), np.zeros((1, 1, 2))
         else:
             coarse_S = coarse.S[0]
-        run_chunks(k.grid_node_points, positions[..., 0].size, origins, spacing, coarse_S,
-                   cells, positions, starts)
+        k.grid_node_points(0, positions[..., 0].size, origins, spacing, coarse_S, cells,
+                           positions, starts)
         self.S, self.P, self.node_margins, _ok, _sp = _solve(view, rig, positions, starts)
         checks = (G, 3, ny + 1, nx + 1)
         positions = np.empty(checks + (2,))
         starts = np.empty(checks + (2,))
         interpolated = np.empty(checks + (2,))
-        run_chunks(k.grid_check_points, positions[..., 0].size, origins, spacing, self.S,
-                   self.P, positions, starts, interpolated)
+        k.grid_check_points(0, positions[..., 0].size, origins, spacing, self.S, self.P,
+                            positions, starts, interpolated)
         _S, P, margins, ok, start_pixels = _solve(view, rig, positions, starts)
         estimates = np.concatenate([interpolated, start_pixels], axis=-1)
         self.pixel_error = np.empty(checks)
         self.mirror_error = np.empty(checks)
         self.check_margins = np.empty(checks + (2,))
-        run_chunks(k.score_check_points, ok.size, ok.reshape(-1), P.reshape(-1, 2),
+        k.score_check_points(0, ok.size, ok.reshape(-1), P.reshape(-1, 2),
                    margins.reshape(-1, 2), estimates.reshape(-1, 4),
                    self.pixel_error.reshape(-1), self.mirror_error.reshape(-1),
                    self.check_margins.reshape(-1, 2))
 
-    def classify(self, half_tol, allow_edge):
+    def classify(self, view, size, half_tol, allow_edge):
         from . import _kernels as k
 
         G, _w, ny1, nx1 = self.pixel_error.shape
         self.cls = np.empty((G, ny1 - 1, nx1 - 1), np.int64)
         k.classify_cells(self.node_margins, self.check_margins, self.pixel_error,
                          self.mirror_error, half_tol, allow_edge, self.cls)
+        k.mark_cells_above_band(view, self.origins, self.spacing, size[0], size[1], self.cls)
         return self.cls
 
     def n_solved(self):
@@ -498,26 +500,30 @@ def _build_table(view, rig, size, step, mode, outputs, stats):
     ny, nx = (h + step - 1) // step, (w + step - 1) // step
     half_tol = 0.5 * TOLERANCE
     coarse = _GridStack(view, rig, np.zeros((1, 2)), float(step), (ny, nx))
-    cls = coarse.classify(half_tol, False)[0]
+    cls = coarse.classify(view, size, half_tol, False)[0]
     # refine the failing cells on grids FINE times finer (own nodes, checks and classes)
     cells = np.argwhere(cls == k.CELL_BAD).astype(np.int64)
     refined_index = np.full((ny, nx), -1, np.int64)
     refined_index[cells[:, 0], cells[:, 1]] = np.arange(len(cells))
     fine = _GridStack(view, rig, (cells[:, ::-1] * step).astype(np.float64),
                       float(step // k.FINE), (k.FINE, k.FINE), coarse, cells)
-    fine_cls = fine.classify(half_tol, True)
+    fine_cls = fine.classify(view, size, half_tol, True)
     # the pixels: interpolated, unseen, decided at the edge, or pending an exact solution
     column_cos, column_sin = np.empty(w), np.empty(w)
     weights, fine_weights = np.empty((4, step)), np.empty((4, step // k.FINE))
     k.table_weights(view, column_cos, column_sin, weights, fine_weights)
     pending = np.zeros((h, w), np.uint8)
+    pending_rows = np.empty(h, np.int64)
     outx, outy, out16, outf16 = outputs
-    run_chunks(k.fill_rows, h, view, rig, cls, refined_index, coarse.P[0], fine.S, fine.P, fine_cls, column_cos, column_sin, weights, fine_weights, mode, outx, outy,
-               out16, outf16, pending, min_chunk=16)
-    index = np.flatnonzero(pending)
+    run_chunks(k.fill_rows, h, view, rig, cls, refined_index, coarse.P[0], fine.S, fine.P,
+               fine_cls, column_cos, column_sin, weights, fine_weights, mode, outx, outy, out16,
+               outf16, pending, pending_rows, min_chunk=16)
+    rows = np.flatnonzero(pending_rows)
+    sub_rows, columns = np.nonzero(pending[rows])
+    index = rows[sub_rows] * w + columns
     positions = np.stack([index % w, index // w], axis=1).astype(np.float64)
     P = _solve(view, rig, positions, positions, pixels_only=True)[1]
-    run_chunks(k.store_entries, len(index), index, P, mode, outx, outy, out16, outf16)
+    k.store_entries(0, len(index), index, P, mode, outx, outy, out16, outf16)
     n_nodes, n_checks = coarse.n_solved()
     f_nodes, f_checks = fine.n_solved()
     stats[0] = n_nodes + f_nodes
