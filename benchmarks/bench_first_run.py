@@ -67,15 +67,29 @@ def cold_demo(tmp):
     wall, cpu, _o, err = run([*cli, "demo", "-o", out], env)
     print(f"demo (cold)   wall {wall:6.2f} s  cpu {cpu:6.2f} s   {notice(err)}")
     view = os.path.join(tmp, "view.png")
-    argv = [*cli, "unwarp", os.path.join(out, "mirror.png"), "-c",
-            os.path.join(out, "calibration.yaml"), "--perspective", "640x480", "--fov", "70",
-            "--yaw", "45", "-o", view]
+    argv = [
+        *cli,
+        "unwarp",
+        os.path.join(out, "mirror.png"),
+        "-c",
+        os.path.join(out, "calibration.yaml"),
+        "--perspective",
+        "640x480",
+        "--fov",
+        "70",
+        "--yaw",
+        "45",
+        "-o",
+        view,
+    ]
     wall_u, cpu_u, _o, err = run(argv, env)
     print(f"unwarp (next) wall {wall_u:6.2f} s  cpu {cpu_u:6.2f} s   {notice(err)}")
     wall_w, cpu_w, _o, err = run([*cli, "demo", "-o", out + "2"], env)
     print(f"demo (warm)   wall {wall_w:6.2f} s  cpu {cpu_w:6.2f} s   {notice(err)}")
-    print(f"compile time of the demo (cold - warm): wall {wall - wall_w:.2f} s, "
-          f"cpu {cpu - cpu_w:.2f} s; load average {os.getloadavg()[0]:.2f}")
+    print(
+        f"compile time of the demo (cold - warm): wall {wall - wall_w:.2f} s, "
+        f"cpu {cpu - cpu_w:.2f} s; load average {os.getloadavg()[0]:.2f}"
+    )
 
 
 def warm_first_table(tmp, n):
@@ -94,9 +108,11 @@ def warm_first_table(tmp, n):
         wall, _cpu, out, _err = run([sys.executable, "-c", code], env)
         whole.append(wall)
         inside.append(float(out.strip().splitlines()[-1]))
-    print(f"import omnicam .. table: median {np.median(inside):.3f} s (min {min(inside):.3f});"
-          f" whole process median {np.median(whole):.3f} s; load average "
-          f"{os.getloadavg()[0]:.2f}")
+    print(
+        f"import omnicam .. table: median {np.median(inside):.3f} s (min {min(inside):.3f});"
+        f" whole process median {np.median(whole):.3f} s; load average "
+        f"{os.getloadavg()[0]:.2f}"
+    )
 
 
 def main(argv=None):

@@ -12,6 +12,7 @@ Run: ``python benchmarks/bench_views.py [--repeat N]``
 * Fresh process with numba's cache warm: ``import omnicam`` + ``MisalignedHyperbolicCamera.load``
   + the first 2048x512 panorama table (time inside the process, and the whole process).
 """
+
 from __future__ import annotations
 
 import argparse
@@ -48,20 +49,27 @@ def cases(cam):
         "perspective 1024x768": (
             lambda t: views.init_perspective_maps(cam, Kp, PERSP, R=R, m1type=t),
             lambda t: cv2.omnidir.initUndistortRectifyMap(
-                Ko, Do, xi, R, Kp, PERSP, t, cv2.omnidir.RECTIFY_PERSPECTIVE)),
+                Ko, Do, xi, R, Kp, PERSP, t, cv2.omnidir.RECTIFY_PERSPECTIVE
+            ),
+        ),
         "panorama 2048x512 cylindrical": (
             lambda t: views.init_panorama_maps(cam, PANO, m1type=t),
             lambda t: cv2.omnidir.initUndistortRectifyMap(
-                Ko, Do, xi, np.eye(3), Kc, PANO, t, cv2.omnidir.RECTIFY_CYLINDRICAL)),
+                Ko, Do, xi, np.eye(3), Kc, PANO, t, cv2.omnidir.RECTIFY_CYLINDRICAL
+            ),
+        ),
         "panorama 2048x512 equirectangular": (
-            lambda t: views.init_panorama_maps(cam, PANO, projection="equirectangular",
-                                               m1type=t),
+            lambda t: views.init_panorama_maps(cam, PANO, projection="equirectangular", m1type=t),
             lambda t: cv2.omnidir.initUndistortRectifyMap(
-                Ko, Do, xi, np.eye(3), Kc, PANO, t, cv2.omnidir.RECTIFY_LONGLATI)),
+                Ko, Do, xi, np.eye(3), Kc, PANO, t, cv2.omnidir.RECTIFY_LONGLATI
+            ),
+        ),
         "perspective 1024x768, depth 2 m": (
             lambda t: views.init_perspective_maps(cam, Kp, PERSP, R=R, m1type=t, depth=2000.0),
             lambda t: cv2.omnidir.initUndistortRectifyMap(
-                Ko, Do, xi, R, Kp, PERSP, t, cv2.omnidir.RECTIFY_PERSPECTIVE)),
+                Ko, Do, xi, R, Kp, PERSP, t, cv2.omnidir.RECTIFY_PERSPECTIVE
+            ),
+        ),
         **straddling_cases(cam),
     }
 
@@ -71,16 +79,21 @@ def straddling_cases(cam):
     Ko, Do, xi = omnidir_params()
     K = np.array([[400.0, 0.0, 511.5], [0.0, 400.0, 383.5], [0.0, 0.0, 1.0]])
     out = {}
-    for name, ypr, depth in (("horizontal", (0.0, 0.0, 0.0), None),
-                             ("horizontal, depth 2 m", (0.0, 0.0, 0.0), 2000.0),
-                             ("up 20 deg", (30.0, 20.0, 0.0), None),
-                             ("down 30 deg", (-60.0, -30.0, 0.0), None)):
+    for name, ypr, depth in (
+        ("horizontal", (0.0, 0.0, 0.0), None),
+        ("horizontal, depth 2 m", (0.0, 0.0, 0.0), 2000.0),
+        ("up 20 deg", (30.0, 20.0, 0.0), None),
+        ("down 30 deg", (-60.0, -30.0, 0.0), None),
+    ):
         R = rotation_from_ypr(*ypr)
         out[f"straddling {name}"] = (
-            lambda t, R=R, depth=depth: views.init_perspective_maps(cam, K, PERSP, R=R, m1type=t,
-                                                                    depth=depth),
+            lambda t, R=R, depth=depth: views.init_perspective_maps(
+                cam, K, PERSP, R=R, m1type=t, depth=depth
+            ),
             lambda t, R=R: cv2.omnidir.initUndistortRectifyMap(
-                Ko, Do, xi, R, K, PERSP, t, cv2.omnidir.RECTIFY_PERSPECTIVE))
+                Ko, Do, xi, R, K, PERSP, t, cv2.omnidir.RECTIFY_PERSPECTIVE
+            ),
+        )
     return out
 
 
@@ -101,8 +114,10 @@ def timing(cam, repeat, only=None):
                 a.append(t1 - t0)
                 b.append(t2 - t1)
             ma, mb = np.median(a) * 1e3, np.median(b) * 1e3
-            print(f"{name:36s} {tname}: ours {ma:7.2f}  omnidir {mb:7.2f}  ratio {ma / mb:5.2f}"
-                  f"   (min {min(a) * 1e3:.2f} / {min(b) * 1e3:.2f})")
+            print(
+                f"{name:36s} {tname}: ours {ma:7.2f}  omnidir {mb:7.2f}  ratio {ma / mb:5.2f}"
+                f"   (min {min(a) * 1e3:.2f} / {min(b) * 1e3:.2f})"
+            )
 
 
 def accuracy(cam, n=200_000):
@@ -117,14 +132,16 @@ def accuracy(cam, n=200_000):
             vp = cam.best_fit_viewpoint()[0]
         for name in ("perspective", "cylindrical", "equirectangular"):
             if name == "perspective":
-                mx, my = views.init_perspective_maps(cam, Kp, PERSP, R=R, m1type=cv2.CV_32FC1,
-                                                     depth=depth)
+                mx, my = views.init_perspective_maps(
+                    cam, Kp, PERSP, R=R, m1type=cv2.CV_32FC1, depth=depth
+                )
                 h, w = mx.shape
                 ii, jj = rng.integers(0, h, n), rng.integers(0, w, n)
                 d = np.stack([jj, ii, np.ones(n)], axis=1) @ M.T
             else:
-                mx, my = views.init_panorama_maps(cam, PANO, projection=name,
-                                                  m1type=cv2.CV_32FC1, depth=depth)
+                mx, my = views.init_panorama_maps(
+                    cam, PANO, projection=name, m1type=cv2.CV_32FC1, depth=depth
+                )
                 lo, hi = views.visible_elevation_range(cam)
                 if name == "cylindrical":
                     lo = max(lo, views.CYLINDRICAL_MIN_ELEVATION)
@@ -132,8 +149,9 @@ def accuracy(cam, n=200_000):
                 ii, jj = rng.integers(0, h, n), rng.integers(0, w, n)
                 az = -2 * np.pi * jj / w
                 if name == "cylindrical":
-                    tz = np.tan(np.radians(hi)) + (np.tan(np.radians(lo))
-                                                   - np.tan(np.radians(hi))) * ii / (h - 1)
+                    tz = np.tan(np.radians(hi)) + (
+                        np.tan(np.radians(lo)) - np.tan(np.radians(hi))
+                    ) * ii / (h - 1)
                     d = np.stack([np.cos(az), np.sin(az), tz], axis=1)
                 else:
                     el = np.radians(hi + (lo - hi) * ii / (h - 1))
@@ -144,9 +162,11 @@ def accuracy(cam, n=200_000):
             seen = got[:, 0] != views.UNSEEN
             fin = np.isfinite(ref).all(axis=1)
             err = np.linalg.norm(got - ref, axis=1)[seen & fin]
-            print(f"{name:16s} depth={depth}: max error {err.max():.2e} px, "
-                  f"99.9% {np.quantile(err, 0.999):.1e} px, visibility disagreements "
-                  f"{int((seen != fin).sum())} of {n}")
+            print(
+                f"{name:16s} depth={depth}: max error {err.max():.2e} px, "
+                f"99.9% {np.quantile(err, 0.999):.1e} px, visibility disagreements "
+                f"{int((seen != fin).sum())} of {n}"
+            )
 
 
 FIRST = r"""
@@ -172,14 +192,19 @@ def first_table(n=5):
         inside, whole = [], []
         for _ in range(n):
             t0 = time.perf_counter()
-            out = subprocess.run([sys.executable, "-c", code], check=True, capture_output=True,
-                                 text=True)
+            out = subprocess.run(
+                [sys.executable, "-c", code], check=True, capture_output=True, text=True
+            )
             whole.append(time.perf_counter() - t0)
             inside.append(float(out.stdout.strip().splitlines()[-1]))
-    print(f"in-process (import .. table) median {np.median(inside):.3f} s, min {min(inside):.3f} s;"
-          f" whole process median {np.median(whole):.3f} s")
-    trivial = "import time; t0=time.perf_counter()\nfrom numba import njit\n" \
-              "@njit(cache=True)\ndef f(x):\n    return x + 1\nf(1)\nprint(time.perf_counter()-t0)"
+    print(
+        f"in-process (import .. table) median {np.median(inside):.3f} s, min {min(inside):.3f} s;"
+        f" whole process median {np.median(whole):.3f} s"
+    )
+    trivial = (
+        "import time; t0=time.perf_counter()\nfrom numba import njit\n"
+        "@njit(cache=True)\ndef f(x):\n    return x + 1\nf(1)\nprint(time.perf_counter()-t0)"
+    )
     with tempfile.TemporaryDirectory() as tmp:
         p = os.path.join(tmp, "triv.py")
         with open(p, "w") as fh:
@@ -201,8 +226,10 @@ def main(argv=None):
     ap.add_argument("--only", help="time only the cases whose name contains this")
     args = ap.parse_args(argv)
     cam = synthetic.misaligned_rig()
-    print(f"cv2 {cv2.__version__}, {os.cpu_count()} cpus, cv2 threads {cv2.getNumThreads()}, "
-          f"load average {os.getloadavg()[0]:.2f}")
+    print(
+        f"cv2 {cv2.__version__}, {os.cpu_count()} cpus, cv2 threads {cv2.getNumThreads()}, "
+        f"load average {os.getloadavg()[0]:.2f}"
+    )
     timing(cam, args.repeat, args.only)
     if not args.skip_accuracy:
         accuracy(cam)

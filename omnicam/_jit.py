@@ -1,9 +1,10 @@
 """How omnicam runs its numba kernels: the decorator, the first-compile notice and threads.
 
-* :func:`kernel` is ``numba.njit(cache=True, nogil=True, error_model="numpy")`` when numba can write its cache for
-  this package, else ``numba.njit(nogil=True)`` after one line on stderr saying so (numba raises
-  "cannot cache function ...: no locator available" when neither the package's ``__pycache__``
-  nor the user cache folder is writable and ``NUMBA_CACHE_DIR`` is unset).
+* :func:`kernel` is ``numba.njit(cache=True, nogil=True, error_model="numpy")`` when numba can
+  write its cache for this package, else the same without ``cache`` after one line on stderr
+  saying so (numba raises "cannot cache function ...: no locator available" when neither the
+  package's ``__pycache__`` nor the user cache folder is writable and ``NUMBA_CACHE_DIR`` is
+  unset).
 * :func:`notice_if_cold` prints, once per process, "omnicam: compiling kernels once (about N s);
   later runs start fast" before a kernel whose cache index is missing or stale is first called.
 * :func:`run_chunks` runs a ``nogil`` kernel over ``range(n)`` in chunks on a small thread pool

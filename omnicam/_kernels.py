@@ -5,6 +5,7 @@ public API are in :mod:`omnicam.raytrace` and :mod:`omnicam.camera`. Every cache
 helpers it inlines stay in this one module (numba's cache does not see changes in other files).
 The slow, obviously correct references are :mod:`omnicam.mirror` and ``tests/naive.py``.
 """
+
 from __future__ import annotations
 
 import math
@@ -207,8 +208,7 @@ def _reflection_point(Cx, Cy, Cz, Xx, Xy, Xz, at_infinity, a, b, rim_radius, tol
         s2 = rim_radius * Wy / h
     converged = False
     for _ in range(max_iter):
-        d1, d2, g1, g2, r1, convex = _newton_step(s1, s2, Cx, Cy, Cz, Xx, Xy, Xz, at_infinity,
-                                                  a, b)
+        d1, d2, g1, g2, r1, convex = _newton_step(s1, s2, Cx, Cy, Cz, Xx, Xy, Xz, at_infinity, a, b)
         if not convex:  # not convex here: a gradient step of the local length scale
             gn = math.sqrt(g1 * g1 + g2 * g2) + 1e-300
             step = GRADIENT_STEP_REL * min(r1, rim_radius)
@@ -275,8 +275,9 @@ def project_points(lo, hi, X, at_infinity, R, t, C, a, b, rim_radius, K, out):
             Xz /= nrm
         elif Xz > 0.0 and (Xx * Xx + Xy * Xy) / a2 - Xz * Xz / b2 + 1.0 < 0.0:
             continue  # inside the mirror body
-        s1, s2, ok = _reflection_point(C[0], C[1], C[2], Xx, Xy, Xz, at_infinity,
-                                       a, b, rim_radius, tol, NEWTON_MAX_ITER)
+        s1, s2, ok = _reflection_point(
+            C[0], C[1], C[2], Xx, Xy, Xz, at_infinity, a, b, rim_radius, tol, NEWTON_MAX_ITER
+        )
         if not ok or s1 * s1 + s2 * s2 > rim2:
             continue
         z = b * math.sqrt(1.0 + (s1 * s1 + s2 * s2) / a2)
@@ -334,16 +335,31 @@ def project_points(lo, hi, X, at_infinity, R, t, C, a, b, rim_radius, K, out):
 #: ``C`` (mirror frame), mirror -> camera motion ``R, t``, mirror ``a, b, rim_radius``, pinhole
 #: ``K`` (skew allowed), OpenCV distortion ``dist`` (14 values, zeros padded) and its ``tilt``
 #: matrix, ``has_dist``.
-RigArgs = namedtuple("RigArgs", ["C", "R", "t", "a", "b", "rim_radius", "K", "dist", "tilt",
-                                 "has_dist"])
+RigArgs = namedtuple(
+    "RigArgs", ["C", "R", "t", "a", "b", "rim_radius", "K", "dist", "tilt", "has_dist"]
+)
 
 #: What the table kernels know of the view (omnicam.views._view_args builds it): ``kind`` 0
 #: perspective, 1 cylindrical, 2 equirectangular, with ``A, p0, p1, az_step`` as in
 #: :func:`_view_direction`; targets at infinity or at ``depth`` from ``viewpoint``;
 #: ``sin_reject``: sine of the elevation above which nothing is seen; ``sin_try``: above which
 #: nodes are not solved; ``newton_tol``: Newton's step tolerance (mirror units).
-ViewArgs = namedtuple("ViewArgs", ["kind", "A", "p0", "p1", "az_step", "at_infinity", "depth",
-                                   "viewpoint", "sin_reject", "sin_try", "newton_tol"])
+ViewArgs = namedtuple(
+    "ViewArgs",
+    [
+        "kind",
+        "A",
+        "p0",
+        "p1",
+        "az_step",
+        "at_infinity",
+        "depth",
+        "viewpoint",
+        "sin_reject",
+        "sin_try",
+        "newton_tol",
+    ],
+)
 
 VIEW_RIM_MARGIN = 2e-3  # relative margin on s1^2 + s2^2 against rim_radius^2
 VIEW_COS_MARGIN = 1e-3  # margin on the cosines of the other visibility tests
@@ -488,8 +504,9 @@ def _newton_warm(rig, s1, s2, Xx, Xy, Xz, at_infinity, tol):
     a = rig.a
     b = rig.b
     for _ in range(NEWTON_WARM_MAX_ITER):
-        d1, d2, _g1, _g2, _r1, convex = _newton_step(s1, s2, C[0], C[1], C[2], Xx, Xy, Xz,
-                                                     at_infinity, a, b)
+        d1, d2, _g1, _g2, _r1, convex = _newton_step(
+            s1, s2, C[0], C[1], C[2], Xx, Xy, Xz, at_infinity, a, b
+        )
         if not convex:
             return s1, s2, False
         dn = math.sqrt(d1 * d1 + d2 * d2)
@@ -533,8 +550,20 @@ def _view_point(view, rig, u, v, g1, g2, pixels_only):
         s1, s2, ok = _newton_warm(rig, g1, g2, Xx, Xy, Xz, at_infinity, view.newton_tol)
     if not ok:
         C = rig.C
-        s1, s2, ok = _reflection_point(C[0], C[1], C[2], Xx, Xy, Xz, at_infinity, a, b,
-                                       rig.rim_radius, view.newton_tol, NEWTON_MAX_ITER)
+        s1, s2, ok = _reflection_point(
+            C[0],
+            C[1],
+            C[2],
+            Xx,
+            Xy,
+            Xz,
+            at_infinity,
+            a,
+            b,
+            rig.rim_radius,
+            view.newton_tol,
+            NEWTON_MAX_ITER,
+        )
     if not ok or (pixels_only and s1 * s1 + s2 * s2 > rim2):
         return False, _NAN, _NAN, _NAN, _NAN, _NAN, _NAN
     x, y, m = _view_pixel(rig, s1, s2, Xx, Xy, Xz, at_infinity)
@@ -557,8 +586,12 @@ def _view_point(view, rig, u, v, g1, g2, pixels_only):
 @kernel
 def _lagrange4(t):
     """Cubic Lagrange weights of nodes at -1, 0, 1, 2 for 0 <= t <= 1."""
-    return (-t * (t - 1.0) * (t - 2.0) / 6.0, (t + 1.0) * (t - 1.0) * (t - 2.0) / 2.0,
-            -(t + 1.0) * t * (t - 2.0) / 2.0, (t + 1.0) * t * (t - 1.0) / 6.0)
+    return (
+        -t * (t - 1.0) * (t - 2.0) / 6.0,
+        (t + 1.0) * (t - 1.0) * (t - 2.0) / 2.0,
+        -(t + 1.0) * t * (t - 2.0) / 2.0,
+        (t + 1.0) * t * (t - 1.0) / 6.0,
+    )
 
 
 @kernel
@@ -569,10 +602,18 @@ def _interp_weighted(S, r, k, v0, v1, v2, v3, u0, u1, u2, u3):
     o2 = 0.0
     for m in range(4):
         wv = v0 if m == 0 else (v1 if m == 1 else (v2 if m == 2 else v3))
-        row1 = u0 * S[r + m, k, 0] + u1 * S[r + m, k + 1, 0] + u2 * S[r + m, k + 2, 0] \
+        row1 = (
+            u0 * S[r + m, k, 0]
+            + u1 * S[r + m, k + 1, 0]
+            + u2 * S[r + m, k + 2, 0]
             + u3 * S[r + m, k + 3, 0]
-        row2 = u0 * S[r + m, k, 1] + u1 * S[r + m, k + 1, 1] + u2 * S[r + m, k + 2, 1] \
+        )
+        row2 = (
+            u0 * S[r + m, k, 1]
+            + u1 * S[r + m, k + 1, 1]
+            + u2 * S[r + m, k + 2, 1]
             + u3 * S[r + m, k + 3, 1]
+        )
         o1 += wv * row1
         o2 += wv * row2
     return o1, o2
@@ -631,8 +672,9 @@ def grid_node_points(lo, hi, origins, spacing, coarse_S, cells, positions, start
         s1 = _NAN
         s2 = _NAN
         if refine:
-            s1, s2 = _interp_cell(coarse_S, cells[c, 0], cells[c, 1], (p - 1.0) / FINE,
-                                  (q - 1.0) / FINE)
+            s1, s2 = _interp_cell(
+                coarse_S, cells[c, 0], cells[c, 1], (p - 1.0) / FINE, (q - 1.0) / FINE
+            )
         starts[c, p, q, 0] = s1
         starts[c, p, q, 1] = s2
 
@@ -692,8 +734,9 @@ def grid_check_points(lo, hi, origins, spacing, S, P, positions, starts, estimat
 
 
 @kernel
-def solve_view_points(lo, hi, view, rig, positions, starts, pixels_only, ok, S, P, margins,
-                      start_pixels):
+def solve_view_points(
+    lo, hi, view, rig, positions, starts, pixels_only, ok, S, P, margins, start_pixels
+):
     """Exact solutions at the output positions ``lo:hi`` (N, 2).
 
     :func:`_view_point` at each: the mirror point ``S``, its pixel ``P`` (the exact table
@@ -707,9 +750,9 @@ def solve_view_points(lo, hi, view, rig, positions, starts, pixels_only, ok, S, 
             x, y, _m = _view_pixel(rig, starts[n, 0], starts[n, 1], 1.0, 0.0, 0.0, True)
             start_pixels[n, 0] = x
             start_pixels[n, 1] = y
-        solved, s1, s2, x, y, vis, rim_m = _view_point(view, rig, positions[n, 0],
-                                                       positions[n, 1], starts[n, 0],
-                                                       starts[n, 1], pixels_only)
+        solved, s1, s2, x, y, vis, rim_m = _view_point(
+            view, rig, positions[n, 0], positions[n, 1], starts[n, 0], starts[n, 1], pixels_only
+        )
         ok[n] = solved
         S[n, 0] = s1
         S[n, 1] = s2
@@ -759,8 +802,9 @@ def _cell_check_extremes(node_margins, check_margins, r, k):
             vmin = min(vmin, node_margins[r + m, k + n, 0])
             rmax = max(rmax, node_margins[r + m, k + n, 1])
     for e in range(5):
-        which = CHECK_CENTRE if e == 0 else (CHECK_HORIZONTAL_EDGE if e <= 2
-                                             else CHECK_VERTICAL_EDGE)
+        which = (
+            CHECK_CENTRE if e == 0 else (CHECK_HORIZONTAL_EDGE if e <= 2 else CHECK_VERTICAL_EDGE)
+        )
         rr = r + 1 if e == 2 else r
         kk = k + 1 if e == 4 else k
         vmin = min(vmin, check_margins[which, rr, kk, 0])
@@ -772,14 +816,17 @@ def _cell_check_extremes(node_margins, check_margins, r, k):
 def _cell_error(errors, r, k):
     """Error estimate of cell (r, k): the tensor cubic's error ~ A(v) w(t) + B(u) w(s) peaks
     mid-cell and is bounded by the sum of its mid-edge values; also the centre's own error."""
-    return max(errors[CHECK_CENTRE, r, k],
-               max(errors[CHECK_HORIZONTAL_EDGE, r, k], errors[CHECK_HORIZONTAL_EDGE, r + 1, k])
-               + max(errors[CHECK_VERTICAL_EDGE, r, k], errors[CHECK_VERTICAL_EDGE, r, k + 1]))
+    return max(
+        errors[CHECK_CENTRE, r, k],
+        max(errors[CHECK_HORIZONTAL_EDGE, r, k], errors[CHECK_HORIZONTAL_EDGE, r + 1, k])
+        + max(errors[CHECK_VERTICAL_EDGE, r, k], errors[CHECK_VERTICAL_EDGE, r, k + 1]),
+    )
 
 
 @kernel
-def classify_cells(node_margins, check_margins, pixel_error, mirror_error, half_tol, allow_edge,
-                   cls):
+def classify_cells(
+    node_margins, check_margins, pixel_error, mirror_error, half_tol, allow_edge, cls
+):
     """Classes (the CELL_* constants) of the cells of a grid stack, ``cls`` (G, ny, nx).
 
     A cell needs all 16 of its nodes solved; it is SEEN when clearly seen with an error estimate
@@ -894,9 +941,29 @@ def _pixel_direction(view, i, j, row_z, row_cos, column_cos, column_sin):
 
 
 @kernel
-def _fill_refined_cell(view, rig, i, j0, j1, fine_row, fine_tv, fine_S, fine_P, fine_cls,
-                       fine_weights, row_z, row_cos, column_cos, column_sin, mode, outx, outy,
-                       out16, outf16, pending):
+def _fill_refined_cell(
+    view,
+    rig,
+    i,
+    j0,
+    j1,
+    fine_row,
+    fine_tv,
+    fine_S,
+    fine_P,
+    fine_cls,
+    fine_weights,
+    row_z,
+    row_cos,
+    column_cos,
+    column_sin,
+    mode,
+    outx,
+    outy,
+    out16,
+    outf16,
+    pending,
+):
     """Entries of row i, columns j0:j1 of a refined coarse cell, sub-cell by sub-cell.
 
     ``fine_S, fine_P`` (FINE + 3, FINE + 3, 2), ``fine_cls`` (FINE, FINE): the cell's refined
@@ -941,16 +1008,37 @@ def _fill_refined_cell(view, rig, i, j0, j1, fine_row, fine_tv, fine_S, fine_P, 
 
 
 @kernel
-def fill_rows(lo, hi, view, rig, cls, refined_index, P, fine_S, fine_P, fine_cls, column_cos,
-              column_sin, weights, fine_weights, mode, outx, outy, out16, outf16, pending,
-              pending_rows):
+def fill_rows(
+    lo,
+    hi,
+    view,
+    rig,
+    cls,
+    refined_index,
+    P,
+    fine_S,
+    fine_P,
+    fine_cls,
+    column_cos,
+    column_sin,
+    weights,
+    fine_weights,
+    mode,
+    outx,
+    outy,
+    out16,
+    outf16,
+    pending,
+    pending_rows,
+):
     """Table entries of rows ``lo:hi``; pixels that need an exact solution are marked pending.
 
     ``cls`` (ny, nx): classes of the coarse cells, whose nodes' pixels are ``P`` (NY, NX, 2);
     ``refined_index`` (ny, nx): which grid of the refined stack (``fine_*``) refines a BAD cell.
-    ``weights`` (4, step), ``fine_weights`` (4, step / FINE): :func:`table_weights`. ``mode`` 0 writes float32 ``outx, outy``
-    (H, W); mode 1 writes ``out16`` (H, W, 2) int16 and ``outf16`` (H, W) uint16 as
-    ``cv2.convertMaps(.., CV_16SC2)`` does. ``pending_rows`` (H,): pending pixels per row.
+    ``weights`` (4, step), ``fine_weights`` (4, step / FINE): :func:`table_weights`.
+    ``mode`` 0 writes float32 ``outx, outy`` (H, W); mode 1 writes ``out16`` (H, W, 2) int16
+    and ``outf16`` (H, W) uint16 as ``cv2.convertMaps(.., CV_16SC2)`` does.
+    ``pending_rows`` (H,): pending pixels per row.
     """
     h = weights.shape[1]
     g = fine_weights.shape[1]
@@ -964,8 +1052,12 @@ def fill_rows(lo, hi, view, rig, cls, refined_index, P, fine_S, fine_P, fine_cls
         v0, v1, v2, v3 = _lagrange4((i - r * h) / h)
         for q in range(NX):
             for cc in range(2):
-                row_P[q, cc] = v0 * P[r, q, cc] + v1 * P[r + 1, q, cc] + v2 * P[r + 2, q, cc] \
+                row_P[q, cc] = (
+                    v0 * P[r, q, cc]
+                    + v1 * P[r + 1, q, cc]
+                    + v2 * P[r + 2, q, cc]
                     + v3 * P[r + 3, q, cc]
+                )
         row_z = 0.0
         row_cos = 0.0
         if view.kind == 1:
@@ -993,17 +1085,33 @@ def fill_rows(lo, hi, view, rig, cls, refined_index, P, fine_S, fine_P, fine_cls
                 if mode == 0:  # the bulk of a table: a tight loop the compiler can vectorise
                     for j in range(j0, j1):
                         tu = j - j0
-                        outx[i, j] = np.float32(weights[0, tu] * a0 + weights[1, tu] * a1
-                                                + weights[2, tu] * a2 + weights[3, tu] * a3)
-                        outy[i, j] = np.float32(weights[0, tu] * b0 + weights[1, tu] * b1
-                                                + weights[2, tu] * b2 + weights[3, tu] * b3)
+                        outx[i, j] = np.float32(
+                            weights[0, tu] * a0
+                            + weights[1, tu] * a1
+                            + weights[2, tu] * a2
+                            + weights[3, tu] * a3
+                        )
+                        outy[i, j] = np.float32(
+                            weights[0, tu] * b0
+                            + weights[1, tu] * b1
+                            + weights[2, tu] * b2
+                            + weights[3, tu] * b3
+                        )
                 else:  # _view_store's fixed point; finite here (all 16 nodes solved)
                     for j in range(j0, j1):
                         tu = j - j0
-                        fx = np.float32(weights[0, tu] * a0 + weights[1, tu] * a1
-                                        + weights[2, tu] * a2 + weights[3, tu] * a3)
-                        fy = np.float32(weights[0, tu] * b0 + weights[1, tu] * b1
-                                        + weights[2, tu] * b2 + weights[3, tu] * b3)
+                        fx = np.float32(
+                            weights[0, tu] * a0
+                            + weights[1, tu] * a1
+                            + weights[2, tu] * a2
+                            + weights[3, tu] * a3
+                        )
+                        fy = np.float32(
+                            weights[0, tu] * b0
+                            + weights[1, tu] * b1
+                            + weights[2, tu] * b2
+                            + weights[3, tu] * b3
+                        )
                         ix = int(np.rint(np.float64(fx) * 32.0))
                         iy = int(np.rint(np.float64(fy) * 32.0))
                         out16[i, j, 0] = max(-32768, min(32767, ix >> 5))
@@ -1015,9 +1123,28 @@ def fill_rows(lo, hi, view, rig, cls, refined_index, P, fine_S, fine_P, fine_cls
             else:  # refined (coarse cells are never EDGE: classify_cells without allow_edge)
                 c = refined_index[r, k]
                 pending_rows[i] += _fill_refined_cell(
-                    view, rig, i, j0, j1, fine_row, fine_tv, fine_S[c], fine_P[c], fine_cls[c],
-                    fine_weights, row_z, row_cos, column_cos, column_sin, mode, outx, outy,
-                    out16, outf16, pending)
+                    view,
+                    rig,
+                    i,
+                    j0,
+                    j1,
+                    fine_row,
+                    fine_tv,
+                    fine_S[c],
+                    fine_P[c],
+                    fine_cls[c],
+                    fine_weights,
+                    row_z,
+                    row_cos,
+                    column_cos,
+                    column_sin,
+                    mode,
+                    outx,
+                    outy,
+                    out16,
+                    outf16,
+                    pending,
+                )
 
 
 @kernel

@@ -4,6 +4,7 @@ Pure functions over validated arrays: the camera class (:mod:`omnicam.camera`) c
 parameters once and calls these. Distortion is handled here with OpenCV's point functions;
 the per-point work runs in the numba kernels of :mod:`omnicam._kernels`.
 """
+
 from __future__ import annotations
 
 import cv2
@@ -36,10 +37,13 @@ def as_points(points, name, dim):
         Maps an ``(N, k)`` result back to the caller's layout: ``(N, k)`` or ``(N, 1, k)``.
     """
     arr = np.asarray(points)
-    if arr.dtype == object or not (np.issubdtype(arr.dtype, np.floating)
-                                   or np.issubdtype(arr.dtype, np.integer)):
-        raise ValueError(f"{name} must be a float array of shape (N, {dim}) or (N, 1, {dim}), "
-                         f"got dtype {arr.dtype}")
+    if arr.dtype == object or not (
+        np.issubdtype(arr.dtype, np.floating) or np.issubdtype(arr.dtype, np.integer)
+    ):
+        raise ValueError(
+            f"{name} must be a float array of shape (N, {dim}) or (N, 1, {dim}), "
+            f"got dtype {arr.dtype}"
+        )
     if arr.ndim == 2 and arr.shape[1] == dim:
         layout = 2
     elif arr.ndim == 3 and arr.shape[1] == 1 and arr.shape[2] == dim:
@@ -75,8 +79,9 @@ def undistort_normalized(pixels, K, D):
         if hasattr(cv2, "undistortPointsIter"):  # OpenCV 4
             und = cv2.undistortPointsIter(src, np.eye(3), D, None, None, _UNDISTORT_CRITERIA)
         else:  # OpenCV 5 takes the criteria in undistortPoints
-            und = cv2.undistortPoints(src, np.eye(3), D, R=None, P=None,
-                                      criteria=_UNDISTORT_CRITERIA)
+            und = cv2.undistortPoints(
+                src, np.eye(3), D, R=None, P=None, criteria=_UNDISTORT_CRITERIA
+            )
         out[ok] = und.reshape(-1, 2)
     return out
 
@@ -87,8 +92,9 @@ def distort_normalized(xn, K, D):
     out = np.full_like(xn, np.nan)
     if ok.any():
         obj = np.concatenate([xn[ok], np.ones((int(ok.sum()), 1))], axis=1)
-        xd, _ = cv2.projectPoints(obj.reshape(-1, 1, 3), np.zeros(3), np.zeros(3), np.eye(3),
-                                  np.asarray(D, np.float64))
+        xd, _ = cv2.projectPoints(
+            obj.reshape(-1, 1, 3), np.zeros(3), np.zeros(3), np.eye(3), np.asarray(D, np.float64)
+        )
         xd = xd.reshape(-1, 2)
         out[ok] = xd @ K[:2, :2].T + K[:2, 2]
     return out
@@ -125,8 +131,20 @@ def trace(pixels, K, D, R, C, mirror):
     origins = np.empty((n, 3))
     directions = np.empty((n, 3))
     notice_if_cold(_kernels.trace_rays)
-    run_chunks(_kernels.trace_rays, n, _f64(uv), _f64(Kinv), _f64(R), _f64(C), float(mirror.a),
-               float(mirror.b), float(mirror.rim_radius), origins, directions, min_chunk=4096)
+    run_chunks(
+        _kernels.trace_rays,
+        n,
+        _f64(uv),
+        _f64(Kinv),
+        _f64(R),
+        _f64(C),
+        float(mirror.a),
+        float(mirror.b),
+        float(mirror.rim_radius),
+        origins,
+        directions,
+        min_chunk=4096,
+    )
     return origins, directions
 
 
@@ -140,9 +158,21 @@ def project(points, at_infinity, K, D, R, t, C, mirror):
     out = np.empty((points.shape[0], 2))
     Kk = K if D is None else np.eye(3)
     notice_if_cold(_kernels.project_points)
-    run_chunks(_kernels.project_points, len(out), _f64(points), bool(at_infinity), _f64(R),
-               _f64(t), _f64(C), float(mirror.a), float(mirror.b), float(mirror.rim_radius),
-               _f64(Kk), out, min_chunk=256)
+    run_chunks(
+        _kernels.project_points,
+        len(out),
+        _f64(points),
+        bool(at_infinity),
+        _f64(R),
+        _f64(t),
+        _f64(C),
+        float(mirror.a),
+        float(mirror.b),
+        float(mirror.rim_radius),
+        _f64(Kk),
+        out,
+        min_chunk=256,
+    )
     if D is not None:
         out = distort_normalized(out, K, D)
     return out

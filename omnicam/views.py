@@ -27,6 +27,7 @@ compares whole tables with the exact projection of every pixel.
 The view conventions (azimuth, row order, ``R``, yaw/pitch/roll) are those of
 ``shared/reference/conventions.md``, section "Views".
 """
+
 from __future__ import annotations
 
 import functools
@@ -39,9 +40,19 @@ import numpy as np
 from ._jit import notice_if_cold, run_chunks
 from .camera import validate_K
 
-__all__ = ["init_panorama_maps", "init_perspective_maps", "rotation_from_ypr", "K_from_fov",
-           "visible_elevation_range", "PanoramaView", "PerspectiveView", "UNSEEN", "PROJECTIONS",
-           "M1TYPES", "TOLERANCE"]
+__all__ = [
+    "init_panorama_maps",
+    "init_perspective_maps",
+    "rotation_from_ypr",
+    "K_from_fov",
+    "visible_elevation_range",
+    "PanoramaView",
+    "PerspectiveView",
+    "UNSEEN",
+    "PROJECTIONS",
+    "M1TYPES",
+    "TOLERANCE",
+]
 
 #: Source coordinate written for output pixels whose direction the mirror does not see: well
 #: outside any image (at least 2 px) and inside the range of ``CV_16SC2``.
@@ -124,8 +135,9 @@ def K_from_fov(fov_deg, size):
     try:
         fov = float(fov_deg)
     except (TypeError, ValueError):
-        raise ValueError(f"fov_deg must be a number of degrees in (0, 180), "
-                         f"got {fov_deg!r}") from None
+        raise ValueError(
+            f"fov_deg must be a number of degrees in (0, 180), got {fov_deg!r}"
+        ) from None
     if not (0.0 < fov < 180.0):
         raise ValueError(f"fov_deg must be in (0, 180) degrees, got {fov_deg!r}")
     f = 0.5 * w / math.tan(math.radians(fov) / 2.0)
@@ -139,21 +151,28 @@ def _check_size(size, min_height=1):
         exact = all(isinstance(v, numbers.Integral) or float(v) == int(v) for v in (w, h))
         w, h = int(w), int(h)
     except (TypeError, ValueError):
-        raise ValueError(f"size must be (width, height), two positive integers, "
-                         f"got {size!r}") from None
+        raise ValueError(
+            f"size must be (width, height), two positive integers, got {size!r}"
+        ) from None
     if not exact or w < 1 or h < min_height:
-        raise ValueError(f"size must be (width, height), two integers with width >= 1 and "
-                         f"height >= {min_height}, got {size!r}")
+        raise ValueError(
+            f"size must be (width, height), two integers with width >= 1 and "
+            f"height >= {min_height}, got {size!r}"
+        )
     if w > 32767 or h > 32767:
         raise ValueError(f"size must be at most 32767 x 32767 (cv2.remap), got {size!r}")
     return w, h
 
 
 def _check_m1type(m1type):
-    if isinstance(m1type, bool) or not isinstance(m1type, numbers.Integral) \
-            or int(m1type) not in M1TYPES:
-        raise ValueError(f"m1type must be cv2.CV_16SC2, cv2.CV_32FC1 or cv2.CV_32FC2, "
-                         f"got {m1type!r}")
+    if (
+        isinstance(m1type, bool)
+        or not isinstance(m1type, numbers.Integral)
+        or int(m1type) not in M1TYPES
+    ):
+        raise ValueError(
+            f"m1type must be cv2.CV_16SC2, cv2.CV_32FC1 or cv2.CV_32FC2, got {m1type!r}"
+        )
     return int(m1type)
 
 
@@ -175,8 +194,9 @@ def _check_depth(depth):
     try:
         d = float(depth)
     except (TypeError, ValueError):
-        raise ValueError(f"depth must be None or a positive finite distance, "
-                         f"got {depth!r}") from None
+        raise ValueError(
+            f"depth must be None or a positive finite distance, got {depth!r}"
+        ) from None
     if not (math.isfinite(d) and d > 0.0):
         raise ValueError(f"depth must be None or a positive finite distance, got {depth!r}")
     return d
@@ -190,8 +210,9 @@ def _check_viewpoint(camera, viewpoint, depth):
     try:
         vp = np.array(viewpoint, dtype=np.float64).reshape(3)
     except (TypeError, ValueError):
-        raise ValueError(f"viewpoint must be None or 3 numbers (mirror frame), "
-                         f"got {viewpoint!r}") from None
+        raise ValueError(
+            f"viewpoint must be None or 3 numbers (mirror frame), got {viewpoint!r}"
+        ) from None
     if not np.isfinite(vp).all():
         raise ValueError(f"viewpoint must be finite, got {vp.tolist()}")
     return vp
@@ -201,17 +222,21 @@ def _check_elevation_range(elevation_range, projection):
     try:
         lo, hi = (float(v) for v in elevation_range)
     except (TypeError, ValueError):
-        raise ValueError(f"elevation_range must be None or (lo, hi) in degrees, "
-                         f"got {elevation_range!r}") from None
+        raise ValueError(
+            f"elevation_range must be None or (lo, hi) in degrees, got {elevation_range!r}"
+        ) from None
     if not (math.isfinite(lo) and math.isfinite(hi)) or lo >= hi:
         raise ValueError(f"elevation_range must be (lo, hi) with lo < hi, got {elevation_range!r}")
     if projection == "cylindrical":
         if not (-90.0 < lo and hi < 90.0):
-            raise ValueError(f"elevation_range must lie inside (-90, 90) degrees for a cylindrical "
-                             f"panorama, got {elevation_range!r}")
+            raise ValueError(
+                f"elevation_range must lie inside (-90, 90) degrees for a cylindrical "
+                f"panorama, got {elevation_range!r}"
+            )
     elif not (-90.0 <= lo and hi <= 90.0):
-        raise ValueError(f"elevation_range must lie inside [-90, 90] degrees, "
-                         f"got {elevation_range!r}")
+        raise ValueError(
+            f"elevation_range must lie inside [-90, 90] degrees, got {elevation_range!r}"
+        )
     return lo, hi
 
 
@@ -302,8 +327,9 @@ def _tilt_matrix(tau_x, tau_y):
     rot_x = np.array([[1.0, 0.0, 0.0], [0.0, cx, sx], [0.0, -sx, cx]])
     rot_y = np.array([[cy, 0.0, -sy], [0.0, 1.0, 0.0], [sy, 0.0, cy]])
     rot_xy = rot_y @ rot_x
-    proj_z = np.array([[rot_xy[2, 2], 0.0, -rot_xy[0, 2]], [0.0, rot_xy[2, 2], -rot_xy[1, 2]],
-                       [0.0, 0.0, 1.0]])
+    proj_z = np.array(
+        [[rot_xy[2, 2], 0.0, -rot_xy[0, 2]], [0.0, rot_xy[2, 2], -rot_xy[1, 2]], [0.0, 0.0, 1.0]]
+    )
     return proj_z @ rot_xy
 
 
@@ -351,8 +377,18 @@ def _rig_args(camera):
         if D.size == 14:
             tilt = _tilt_matrix(D[12], D[13])
     m = camera.mirror
-    return RigArgs(_arg(camera.camera_center), _arg(camera.R), _arg(camera.tvec), float(m.a),
-                   float(m.b), float(m.rim_radius), _arg(camera.K), dist, tilt, D is not None)
+    return RigArgs(
+        _arg(camera.camera_center),
+        _arg(camera.R),
+        _arg(camera.tvec),
+        float(m.a),
+        float(m.b),
+        float(m.rim_radius),
+        _arg(camera.K),
+        dist,
+        tilt,
+        D is not None,
+    )
 
 
 def _view_args(camera, kind, A, p0, p1, az_step, depth, viewpoint):
@@ -361,14 +397,22 @@ def _view_args(camera, kind, A, p0, p1, az_step, depth, viewpoint):
 
     sin_reject, sin_try = _reject_sines(camera, depth, viewpoint)
     m = camera.mirror
-    return ViewArgs(int(kind), _arg(A), float(p0), float(p1), float(az_step), depth is None,
-                    0.0 if depth is None else float(depth),
-                    np.zeros(3) if viewpoint is None else _arg(viewpoint), float(sin_reject),
-                    float(sin_try), NEWTON_TOL_REL * (float(m.a) + float(m.b)))
+    return ViewArgs(
+        int(kind),
+        _arg(A),
+        float(p0),
+        float(p1),
+        float(az_step),
+        depth is None,
+        0.0 if depth is None else float(depth),
+        np.zeros(3) if viewpoint is None else _arg(viewpoint),
+        float(sin_reject),
+        float(sin_try),
+        NEWTON_TOL_REL * (float(m.a) + float(m.b)),
+    )
 
 
-def _table(camera, kind, A, p0, p1, az_step, size, depth, viewpoint, m1type, step=None,
-           stats=None):
+def _table(camera, kind, A, p0, p1, az_step, size, depth, viewpoint, m1type, step=None, stats=None):
     """Build the table of a view (:func:`_build_table`) and return the maps for ``m1type``.
 
     ``kind, A, p0, p1, az_step`` define the output directions
@@ -434,39 +478,65 @@ class _GridStack:
             cells, coarse_S = np.zeros((0, 2), np.int64), np.zeros((1, 1, 2))
         else:
             coarse_S = coarse.S[0]
-        k.grid_node_points(0, positions[..., 0].size, origins, spacing, coarse_S, cells,
-                           positions, starts)
+        k.grid_node_points(
+            0, positions[..., 0].size, origins, spacing, coarse_S, cells, positions, starts
+        )
         self.S, self.P, self.node_margins, _ok, _sp = _solve(view, rig, positions, starts)
         checks = (G, 3, ny + 1, nx + 1)
         positions = np.empty(checks + (2,))
         starts = np.empty(checks + (2,))
         interpolated = np.empty(checks + (2,))
-        k.grid_check_points(0, positions[..., 0].size, origins, spacing, self.S, self.P,
-                            positions, starts, interpolated)
+        k.grid_check_points(
+            0,
+            positions[..., 0].size,
+            origins,
+            spacing,
+            self.S,
+            self.P,
+            positions,
+            starts,
+            interpolated,
+        )
         _S, P, margins, ok, start_pixels = _solve(view, rig, positions, starts)
         estimates = np.concatenate([interpolated, start_pixels], axis=-1)
         self.pixel_error = np.empty(checks)
         self.mirror_error = np.empty(checks)
         self.check_margins = np.empty(checks + (2,))
-        k.score_check_points(0, ok.size, ok.reshape(-1), P.reshape(-1, 2),
-                   margins.reshape(-1, 2), estimates.reshape(-1, 4),
-                   self.pixel_error.reshape(-1), self.mirror_error.reshape(-1),
-                   self.check_margins.reshape(-1, 2))
+        k.score_check_points(
+            0,
+            ok.size,
+            ok.reshape(-1),
+            P.reshape(-1, 2),
+            margins.reshape(-1, 2),
+            estimates.reshape(-1, 4),
+            self.pixel_error.reshape(-1),
+            self.mirror_error.reshape(-1),
+            self.check_margins.reshape(-1, 2),
+        )
 
     def classify(self, view, size, half_tol, allow_edge):
         from . import _kernels as k
 
         G, _w, ny1, nx1 = self.pixel_error.shape
         self.cls = np.empty((G, ny1 - 1, nx1 - 1), np.int64)
-        k.classify_cells(self.node_margins, self.check_margins, self.pixel_error,
-                         self.mirror_error, half_tol, allow_edge, self.cls)
+        k.classify_cells(
+            self.node_margins,
+            self.check_margins,
+            self.pixel_error,
+            self.mirror_error,
+            half_tol,
+            allow_edge,
+            self.cls,
+        )
         k.mark_cells_above_band(view, self.origins, self.spacing, size[0], size[1], self.cls)
         return self.cls
 
     def n_solved(self):
         """Nodes and check points with a solution."""
-        return (int(np.count_nonzero(self.node_margins[..., 0] > -np.inf)),
-                int(np.count_nonzero(self.check_margins[..., 0] > -np.inf)))
+        return (
+            int(np.count_nonzero(self.node_margins[..., 0] > -np.inf)),
+            int(np.count_nonzero(self.check_margins[..., 0] > -np.inf)),
+        )
 
 
 def _solve(view, rig, positions, starts, pixels_only=False):
@@ -480,10 +550,21 @@ def _solve(view, rig, positions, starts, pixels_only=False):
     P = np.empty(shape + (2,))
     margins = np.empty(shape + (2,))
     start_pixels = np.empty(shape + (2,))
-    run_chunks(k.solve_view_points, n, view, rig, positions.reshape(-1, 2),
-               starts.reshape(-1, 2), pixels_only, ok.reshape(-1), S.reshape(-1, 2),
-               P.reshape(-1, 2), margins.reshape(-1, 2), start_pixels.reshape(-1, 2),
-               min_chunk=32)
+    run_chunks(
+        k.solve_view_points,
+        n,
+        view,
+        rig,
+        positions.reshape(-1, 2),
+        starts.reshape(-1, 2),
+        pixels_only,
+        ok.reshape(-1),
+        S.reshape(-1, 2),
+        P.reshape(-1, 2),
+        margins.reshape(-1, 2),
+        start_pixels.reshape(-1, 2),
+        min_chunk=32,
+    )
     return S, P, margins, ok, start_pixels
 
 
@@ -505,8 +586,15 @@ def _build_table(view, rig, size, step, mode, outputs, stats):
     cells = np.argwhere(cls == k.CELL_BAD).astype(np.int64)
     refined_index = np.full((ny, nx), -1, np.int64)
     refined_index[cells[:, 0], cells[:, 1]] = np.arange(len(cells))
-    fine = _GridStack(view, rig, (cells[:, ::-1] * step).astype(np.float64),
-                      float(step // k.FINE), (k.FINE, k.FINE), coarse, cells)
+    fine = _GridStack(
+        view,
+        rig,
+        (cells[:, ::-1] * step).astype(np.float64),
+        float(step // k.FINE),
+        (k.FINE, k.FINE),
+        coarse,
+        cells,
+    )
     fine_cls = fine.classify(view, size, half_tol, True)
     # the pixels: interpolated, unseen, decided at the edge, or pending an exact solution
     column_cos, column_sin = np.empty(w), np.empty(w)
@@ -515,9 +603,30 @@ def _build_table(view, rig, size, step, mode, outputs, stats):
     pending = np.zeros((h, w), np.uint8)
     pending_rows = np.empty(h, np.int64)
     outx, outy, out16, outf16 = outputs
-    run_chunks(k.fill_rows, h, view, rig, cls, refined_index, coarse.P[0], fine.S, fine.P,
-               fine_cls, column_cos, column_sin, weights, fine_weights, mode, outx, outy, out16,
-               outf16, pending, pending_rows, min_chunk=16)
+    run_chunks(
+        k.fill_rows,
+        h,
+        view,
+        rig,
+        cls,
+        refined_index,
+        coarse.P[0],
+        fine.S,
+        fine.P,
+        fine_cls,
+        column_cos,
+        column_sin,
+        weights,
+        fine_weights,
+        mode,
+        outx,
+        outy,
+        out16,
+        outf16,
+        pending,
+        pending_rows,
+        min_chunk=16,
+    )
     rows = np.flatnonzero(pending_rows)
     sub_rows, columns = np.nonzero(pending[rows])
     index = rows[sub_rows] * w + columns
@@ -528,8 +637,9 @@ def _build_table(view, rig, size, step, mode, outputs, stats):
     f_nodes, f_checks = fine.n_solved()
     stats[0] = n_nodes + f_nodes
     stats[1] = n_checks + f_checks
-    stats[2:6] = [np.count_nonzero(cls == c)
-                  for c in (k.CELL_SEEN, k.CELL_UNSEEN, k.CELL_EDGE, k.CELL_BAD)]
+    stats[2:6] = [
+        np.count_nonzero(cls == c) for c in (k.CELL_SEEN, k.CELL_UNSEEN, k.CELL_EDGE, k.CELL_BAD)
+    ]
     stats[6] = np.count_nonzero(fine_cls == k.CELL_BAD)
     stats[7] = len(index)
 
@@ -546,8 +656,16 @@ def _panorama_params(size, lo, hi, projection):
 
 
 # -- public API ---------------------------------------------------------------------------------
-def init_panorama_maps(camera, size, elevation_range=None, projection="cylindrical", R=None,
-                       m1type=cv2.CV_16SC2, depth=None, viewpoint=None):
+def init_panorama_maps(
+    camera,
+    size,
+    elevation_range=None,
+    projection="cylindrical",
+    R=None,
+    m1type=cv2.CV_16SC2,
+    depth=None,
+    viewpoint=None,
+):
     """``cv2.remap`` tables of a 360-degree panorama (paper section 4.1, Fig. 7).
 
     Column ``j`` looks at azimuth ``-360 j / W`` degrees (measured in the panorama frame from +X
@@ -614,8 +732,10 @@ def init_panorama_maps(camera, size, elevation_range=None, projection="cylindric
             lo = max(lo, CYLINDRICAL_MIN_ELEVATION)
             hi = min(hi, 89.0)
         if not (math.isfinite(lo) and math.isfinite(hi) and lo < hi):
-            raise ValueError(f"elevation_range: the band this camera sees, ({lo}, {hi}) deg, "
-                             f"is not a usable default for a {projection} panorama; give one")
+            raise ValueError(
+                f"elevation_range: the band this camera sees, ({lo}, {hi}) deg, "
+                f"is not a usable default for a {projection} panorama; give one"
+            )
     else:
         lo, hi = _check_elevation_range(elevation_range, projection)
     vp = _check_viewpoint(camera, viewpoint, depth)
@@ -623,8 +743,9 @@ def init_panorama_maps(camera, size, elevation_range=None, projection="cylindric
     return _table(camera, _KIND[projection], Rm.T, p0, p1, az_step, (w, h), depth, vp, m1type)
 
 
-def init_perspective_maps(camera, K_new, size, R=None, m1type=cv2.CV_16SC2, depth=None,
-                          viewpoint=None):
+def init_perspective_maps(
+    camera, K_new, size, R=None, m1type=cv2.CV_16SC2, depth=None, viewpoint=None
+):
     """``cv2.remap`` tables of a virtual perspective view (paper section 4.1, Fig. 8).
 
     Output pixel ``u`` looks along ``d = R^T K_new^-1 (u, v, 1)`` in the mirror frame; each
@@ -688,27 +809,48 @@ class PanoramaView:
 
     __slots__ = ("size", "elevation_range", "projection", "R", "depth", "viewpoint")
 
-    def __init__(self, size, elevation_range=None, projection="cylindrical", R=None, depth=None,
-                 viewpoint=None):
+    def __init__(
+        self,
+        size,
+        elevation_range=None,
+        projection="cylindrical",
+        R=None,
+        depth=None,
+        viewpoint=None,
+    ):
         self.size = _check_size(size, min_height=2)
         if projection not in PROJECTIONS:
             raise ValueError(f"projection must be one of {PROJECTIONS}, got {projection!r}")
         self.projection = projection
-        self.elevation_range = (None if elevation_range is None
-                                else _check_elevation_range(elevation_range, projection))
+        self.elevation_range = (
+            None if elevation_range is None else _check_elevation_range(elevation_range, projection)
+        )
         self.R = None if R is None else _check_rotation(R)
         self.depth = _check_depth(depth)
-        self.viewpoint = (None if viewpoint is None
-                          else _check_viewpoint(None, viewpoint, 1.0 if depth is None else depth))
+        self.viewpoint = (
+            None
+            if viewpoint is None
+            else _check_viewpoint(None, viewpoint, 1.0 if depth is None else depth)
+        )
 
     def maps(self, camera, m1type=cv2.CV_16SC2):
         """``(map1, map2)`` of this view for ``camera``."""
-        return init_panorama_maps(camera, self.size, self.elevation_range, self.projection,
-                                  self.R, m1type, self.depth, self.viewpoint)
+        return init_panorama_maps(
+            camera,
+            self.size,
+            self.elevation_range,
+            self.projection,
+            self.R,
+            m1type,
+            self.depth,
+            self.viewpoint,
+        )
 
     def __repr__(self):
-        return (f"PanoramaView(size={self.size}, elevation_range={self.elevation_range}, "
-                f"projection={self.projection!r}, depth={self.depth})")
+        return (
+            f"PanoramaView(size={self.size}, elevation_range={self.elevation_range}, "
+            f"projection={self.projection!r}, depth={self.depth})"
+        )
 
 
 class PerspectiveView:
@@ -730,19 +872,33 @@ class PerspectiveView:
 
     __slots__ = ("size", "K_new", "R", "depth", "viewpoint")
 
-    def __init__(self, size, fov=90.0, yaw=0.0, pitch=0.0, roll=0.0, K_new=None, R=None,
-                 depth=None, viewpoint=None):
+    def __init__(
+        self,
+        size,
+        fov=90.0,
+        yaw=0.0,
+        pitch=0.0,
+        roll=0.0,
+        K_new=None,
+        R=None,
+        depth=None,
+        viewpoint=None,
+    ):
         self.size = _check_size(size)
         self.K_new = K_from_fov(fov, self.size) if K_new is None else validate_K(K_new, "K_new")
         self.R = rotation_from_ypr(yaw, pitch, roll) if R is None else _check_rotation(R)
         self.depth = _check_depth(depth)
-        self.viewpoint = (None if viewpoint is None
-                          else _check_viewpoint(None, viewpoint, 1.0 if depth is None else depth))
+        self.viewpoint = (
+            None
+            if viewpoint is None
+            else _check_viewpoint(None, viewpoint, 1.0 if depth is None else depth)
+        )
 
     def maps(self, camera, m1type=cv2.CV_16SC2):
         """``(map1, map2)`` of this view for ``camera``."""
-        return init_perspective_maps(camera, self.K_new, self.size, self.R, m1type, self.depth,
-                                     self.viewpoint)
+        return init_perspective_maps(
+            camera, self.K_new, self.size, self.R, m1type, self.depth, self.viewpoint
+        )
 
     def __repr__(self):
         return f"PerspectiveView(size={self.size}, K_new={self.K_new.tolist()}, depth={self.depth})"

@@ -21,25 +21,32 @@ def load_module(path, name):
     return mod
 
 
-@pytest.mark.skipif(not hasattr(numba.config, "CACHE_LOCATOR_CLASSES"),
-                    reason="numba without NUMBA_CACHE_LOCATOR_CLASSES")
+@pytest.mark.skipif(
+    not hasattr(numba.config, "CACHE_LOCATOR_CLASSES"),
+    reason="numba without NUMBA_CACHE_LOCATOR_CLASSES",
+)
 def test_cache_is_unavailable_when_numba_finds_no_locator(monkeypatch):
     assert _jit.cache_available()
     monkeypatch.setattr(numba.config, "CACHE_LOCATOR_CLASSES", NO_LOCATOR)
     assert not _jit.cache_available()
 
 
-@pytest.mark.skipif(not hasattr(numba.config, "CACHE_LOCATOR_CLASSES"),
-                    reason="numba without NUMBA_CACHE_LOCATOR_CLASSES")
+@pytest.mark.skipif(
+    not hasattr(numba.config, "CACHE_LOCATOR_CLASSES"),
+    reason="numba without NUMBA_CACHE_LOCATOR_CLASSES",
+)
 def test_import_and_kernels_work_without_a_writable_cache_with_one_line_saying_so(tmp_path):
-    code = ("import numpy as np, omnicam\n"
-            "from omnicam import synthetic\n"
-            "xy = synthetic.aligned_rig().project_directions(np.array([[1.0, 0.0, -0.5]]))\n"
-            "assert np.isfinite(xy).all()\n")
+    code = (
+        "import numpy as np, omnicam\n"
+        "from omnicam import synthetic\n"
+        "xy = synthetic.aligned_rig().project_directions(np.array([[1.0, 0.0, -0.5]]))\n"
+        "assert np.isfinite(xy).all()\n"
+    )
     env = dict(os.environ, NUMBA_CACHE_LOCATOR_CLASSES=NO_LOCATOR)
     env.pop("NUMBA_CACHE_DIR", None)
-    out = subprocess.run([sys.executable, "-c", code], env=env, capture_output=True, text=True,
-                         cwd=tmp_path)
+    out = subprocess.run(
+        [sys.executable, "-c", code], env=env, capture_output=True, text=True, cwd=tmp_path
+    )
     assert out.returncode == 0, out.stderr
     lines = [ln for ln in out.stderr.splitlines() if ln.strip()]
     assert len(lines) == 1 and lines[0].startswith("omnicam: numba cannot write its cache")
@@ -63,8 +70,9 @@ def test_cold_cache_is_detected_and_announced_once(tmp_path, monkeypatch, capsys
     _jit.notice_if_cold(first.f)
     _jit.notice_if_cold(first.f)
     err = capsys.readouterr().err.splitlines()
-    assert err == [f"omnicam: compiling kernels once (about {_jit.COMPILE_SECONDS} s); "
-                   "later runs start fast"]
+    assert err == [
+        f"omnicam: compiling kernels once (about {_jit.COMPILE_SECONDS} s); later runs start fast"
+    ]
     assert first.f(1) == 2  # compiles and writes the cache
     assert not _jit._is_cold(first.f)
     second = load_module(src, "tiny_kernels_b")  # a fresh process would see this
