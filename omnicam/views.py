@@ -528,7 +528,8 @@ class _GridStack:
             allow_edge,
             self.cls,
         )
-        k.mark_cells_above_band(view, self.origins, self.spacing, size[0], size[1], self.cls)
+        if view.kind == 0:  # a convex-cone argument that holds for perspective views
+            k.mark_cells_above_band(view, self.origins, self.spacing, size[0], size[1], self.cls)
         return self.cls
 
     def n_solved(self):
@@ -631,8 +632,9 @@ def _build_table(view, rig, size, step, mode, outputs, stats):
     sub_rows, columns = np.nonzero(pending[rows])
     index = rows[sub_rows] * w + columns
     positions = np.stack([index % w, index // w], axis=1).astype(np.float64)
-    P = _solve(view, rig, positions, positions, pixels_only=True)[1]
-    k.store_entries(0, len(index), index, P, mode, outx, outy, out16, outf16)
+    if len(index):
+        P = _solve(view, rig, positions, positions, pixels_only=True)[1]
+        k.store_entries(0, len(index), index, P, mode, outx, outy, out16, outf16)
     n_nodes, n_checks = coarse.n_solved()
     f_nodes, f_checks = fine.n_solved()
     stats[0] = n_nodes + f_nodes

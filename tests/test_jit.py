@@ -12,6 +12,7 @@ import pytest
 from omnicam import _jit
 
 NO_LOCATOR = "ZipCacheLocator"  # finds no cache folder for a plain .py file
+needs_jit = pytest.mark.skipif(numba.config.DISABLE_JIT, reason="nothing is cached without the JIT")
 
 
 def load_module(path, name):
@@ -21,6 +22,7 @@ def load_module(path, name):
     return mod
 
 
+@needs_jit
 @pytest.mark.skipif(
     not hasattr(numba.config, "CACHE_LOCATOR_CLASSES"),
     reason="numba without NUMBA_CACHE_LOCATOR_CLASSES",
@@ -31,6 +33,7 @@ def test_cache_is_unavailable_when_numba_finds_no_locator(monkeypatch):
     assert not _jit.cache_available()
 
 
+@needs_jit
 @pytest.mark.skipif(
     not hasattr(numba.config, "CACHE_LOCATOR_CLASSES"),
     reason="numba without NUMBA_CACHE_LOCATOR_CLASSES",
@@ -60,7 +63,7 @@ def test_cache_flag_falls_back_with_one_line(monkeypatch, capsys):
     assert len(err) == 1 and "NUMBA_CACHE_DIR" in err[0]
 
 
-@pytest.mark.skipif(numba.config.DISABLE_JIT, reason="nothing is compiled without the JIT")
+@needs_jit
 def test_cold_cache_is_detected_and_announced_once(tmp_path, monkeypatch, capsys):
     src = tmp_path / "tiny_kernels.py"
     src.write_text("from numba import njit\n\n@njit(cache=True)\ndef f(x):\n    return x + 1\n")
