@@ -21,7 +21,7 @@ import numba
 
 #: Cold compile time of everything the demo and a first unwarp use, seconds (benchmarks/
 #: bench_first_run.py on 2 cores), quoted by the first-compile notice.
-COMPILE_SECONDS = 10
+COMPILE_SECONDS = 15
 
 _state = {"noticed": False, "pool": None}
 
