@@ -32,7 +32,8 @@ def rig(request):
 
 
 # -- directions written from conventions.md -----------------------------------------------------
-def panorama_dirs(size, lo, hi, projection, R=np.eye(3)):
+def panorama_dirs(size, lo, hi, projection, R=None):
+    R = np.eye(3) if R is None else R
     w, h = size
     az = np.radians(-360.0 * np.arange(w) / w)
     if projection == "cylindrical":
