@@ -13,16 +13,16 @@ Each table entry is the *exact* non-central projection of that direction or poin
 The paper's uncalibrated baseline (eqs. 2-5, Fig. 7 (a), (b)) is the same function on
 ``MisalignedHyperbolicCamera.aligned(mirror, f_C, x_c, y_c)``.
 
-How a table is built (one numba kernel, :func:`omnicam._kernels.view_table`): the reflection
-point is solved exactly (Newton on Fermat's path length, the solver of ``project``) on a grid of
-nodes about ``CELL_DEGREES`` apart, on the mirror sheet extended past the rim so that it is
+How a table is built (:func:`_build_table`, phase by phase in :mod:`omnicam._kernels`): the
+reflection point is solved exactly (Newton on Fermat's path length, the solver of ``project``) on a
+grid of nodes about ``CELL_DEGREES`` apart, on the mirror sheet extended past the rim so that it is
 smooth across the edge of what the mirror sees. Each cell is interpolated by the cubic Lagrange
-polynomial of its 4x4 nodes, and its error is *measured* against the exact answer at the cell
-centre and the middles of its edges (where the error of that interpolant peaks); a cell whose
-estimate exceeds ``TOLERANCE / 2`` is refined on a grid 4 times finer, and what still fails is
-solved pixel by pixel. Visibility is decided per cell when all of it is clearly seen or clearly
-unseen, else per pixel with a margin, and exactly inside the margin. ``tests/test_views.py``
-compares whole tables with the exact projection of every pixel.
+polynomial of its 4x4 nodes, and its error is *measured* against the exact answer at the cell centre
+and the middles of its edges (where the error of that interpolant peaks); a cell whose estimate
+exceeds ``TOLERANCE / 2`` is refined on a grid 4 times finer, and what still fails is solved pixel
+by pixel. Visibility is decided per cell when all of it is clearly seen or clearly unseen, else per
+pixel with a margin, and exactly inside the margin. ``tests/test_views.py`` compares whole tables
+with the exact projection of every pixel.
 
 The view conventions (azimuth, row order, ``R``, yaw/pitch/roll) are those of
 ``shared/reference/conventions.md``, section "Views".
@@ -301,7 +301,7 @@ def visible_elevation_range(camera):
     return lo, hi
 
 
-# -- the fast path: one numba kernel (omnicam._kernels.view_table) -------------------------------
+# -- the fast path: the phases of omnicam._kernels -----------------------------------------------
 #: Angular size of a coarse cell, degrees: the node spacing is the multiple of 4 output pixels
 #: (between 8 and 64) closest to it. Cells whose measured interpolation error exceeds
 #: TOLERANCE / 2 are refined on a grid 4 times finer, and sub-cells that still fail are computed
