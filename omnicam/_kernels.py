@@ -5,17 +5,30 @@ public API are in :mod:`omnicam.raytrace` and :mod:`omnicam.camera`. Every cache
 helpers it inlines stay in this one module (numba's cache does not see changes in other files).
 The slow, obviously correct references are :mod:`omnicam.mirror` and ``tests/naive.py``.
 """
+
 from __future__ import annotations
 
 import math
+from collections import namedtuple
 
 import numpy as np
-from numba import njit, prange
+
+from ._jit import kernel
 
 _NAN = math.nan
 
+# -- Newton on Fermat's path length (_reflection_point): named tolerances and counts --------------
+NEWTON_TOL_REL = 1e-10  # converged when a step is shorter than this times (a + b)
+NEWTON_MAX_ITER = 50  # iterations from the aligned start
+NEWTON_WARM_MAX_ITER = 8  # iterations from a start interpolated from solved neighbours
+NEWTON_BASIN_REL = 1e-4  # steps shorter than this times (a + b) are taken whole (in the basin)
+LINE_SEARCH_HALVINGS = 30  # backtracking halvings before giving up on a descent step
+LINE_SEARCH_SLACK = 1e-15  # relative increase of the path length still taken as no increase
+GRADIENT_ZERO = 1e-9  # |grad L| under which a stalled line search counts as converged
+GRADIENT_STEP_REL = 0.1  # gradient step where L is not convex, times min(|C - P|, rim radius)
 
-@njit(cache=True, inline="always")
+
+@kernel
 def _first_hit_k(Fx, Fy, Fz, Vx, Vy, Vz, ia2, ib2):
     """Smallest k > 0 with Z > 0 where ``F + k V`` meets the sheet (eqs. 8-11); NaN if none."""
     alpha = (Vx * Vx + Vy * Vy) * ia2 - Vz * Vz * ib2
@@ -40,9 +53,9 @@ def _first_hit_k(Fx, Fy, Fz, Vx, Vy, Vz, ia2, ib2):
     return best
 
 
-@njit(cache=True, parallel=True)
-def trace_rays(uv, Kinv, R, C, a, b, rim_radius, origins, directions):
-    """Ray tracing of pixels to reflected rays, written into ``origins``/``directions``.
+@kernel
+def trace_rays(lo, hi, uv, Kinv, R, C, a, b, rim_radius, origins, directions):
+    """Ray tracing of pixels ``lo:hi`` to reflected rays, written into ``origins``/``directions``.
 
     ``uv`` (N, 2): pixel (or, with ``Kinv = I``, undistorted normalised) coordinates.
     Camera ray ``V_C = Kinv (u, v, 1)`` (eq. 6), ``V_M = R^T V_C`` and ``F_M = C`` (eqs. 16-17),
@@ -53,8 +66,7 @@ def trace_rays(uv, Kinv, R, C, a, b, rim_radius, origins, directions):
     ib2 = 1.0 / (b * b)
     b2a2 = b * b * ia2
     rim2 = rim_radius * rim_radius
-    n = uv.shape[0]
-    for i in prange(n):
+    for i in range(lo, hi):
         u = uv[i, 0]
         v = uv[i, 1]
         xc = Kinv[0, 0] * u + Kinv[0, 1] * v + Kinv[0, 2]
@@ -95,7 +107,7 @@ def trace_rays(uv, Kinv, R, C, a, b, rim_radius, origins, directions):
                 directions[i, j] = _NAN
 
 
-@njit(cache=True, inline="always")
+@kernel
 def _path_length(s1, s2, Cx, Cy, Cz, Xx, Xy, Xz, at_infinity, a, b):
     """Fermat path length camera -> mirror point (s1, s2, f(s)) -> scene point (or direction)."""
     z = b * math.sqrt(1.0 + (s1 * s1 + s2 * s2) / (a * a))
@@ -105,7 +117,7 @@ def _path_length(s1, s2, Cx, Cy, Cz, Xx, Xy, Xz, at_infinity, a, b):
     return r1 + math.sqrt((Xx - s1) ** 2 + (Xy - s2) ** 2 + (Xz - z) ** 2)
 
 
-@njit(cache=True, inline="always")
+@kernel
 def _newton_step(s1, s2, Cx, Cy, Cz, Xx, Xy, Xz, at_infinity, a, b):
     """Newton step on Fermat's path length ``L(s) = |C - P(s)| + |X - P(s)|`` at ``s``.
 
@@ -165,7 +177,7 @@ def _newton_step(s1, s2, Cx, Cy, Cz, Xx, Xy, Xz, at_infinity, a, b):
     return 0.0, 0.0, g1, g2, r1, False
 
 
-@njit(cache=True, inline="always")
+@kernel
 def _reflection_point(Cx, Cy, Cz, Xx, Xy, Xz, at_infinity, a, b, rim_radius, tol, max_iter):
     """Mirror point whose reflection joins the camera centre C and the scene point X.
 
@@ -196,16 +208,15 @@ def _reflection_point(Cx, Cy, Cz, Xx, Xy, Xz, at_infinity, a, b, rim_radius, tol
         s2 = rim_radius * Wy / h
     converged = False
     for _ in range(max_iter):
-        d1, d2, g1, g2, r1, convex = _newton_step(s1, s2, Cx, Cy, Cz, Xx, Xy, Xz, at_infinity,
-                                                  a, b)
+        d1, d2, g1, g2, r1, convex = _newton_step(s1, s2, Cx, Cy, Cz, Xx, Xy, Xz, at_infinity, a, b)
         if not convex:  # not convex here: a gradient step of the local length scale
             gn = math.sqrt(g1 * g1 + g2 * g2) + 1e-300
-            step = 0.1 * min(r1, rim_radius)
+            step = GRADIENT_STEP_REL * min(r1, rim_radius)
             d1 = -g1 / gn * step
             d2 = -g2 / gn * step
         t = 1.0
         dn = math.sqrt(d1 * d1 + d2 * d2)
-        if convex and dn < 1e-4 * (a + b):
+        if convex and dn < NEWTON_BASIN_REL * (a + b):
             # in Newton's basin: full steps (L changes below float precision here)
             s1 += d1
             s2 += d2
@@ -216,17 +227,17 @@ def _reflection_point(Cx, Cy, Cz, Xx, Xy, Xz, at_infinity, a, b, rim_radius, tol
         # far from the solution: backtracking on L keeps the iteration a descent
         L = _path_length(s1, s2, Cx, Cy, Cz, Xx, Xy, Xz, at_infinity, a, b)
         accepted = False
-        for _ls in range(30):
+        for _ls in range(LINE_SEARCH_HALVINGS):
             n1 = s1 + t * d1
             n2 = s2 + t * d2
             Ln = _path_length(n1, n2, Cx, Cy, Cz, Xx, Xy, Xz, at_infinity, a, b)
-            if Ln <= L + 1e-15 * abs(L):
+            if Ln <= L + LINE_SEARCH_SLACK * abs(L):
                 accepted = True
                 break
             t *= 0.5
         if not accepted:
             # no descent left at float precision: the gradient must vanish already
-            converged = math.sqrt(g1 * g1 + g2 * g2) < 1e-9
+            converged = math.sqrt(g1 * g1 + g2 * g2) < GRADIENT_ZERO
             break
         s1 = n1
         s2 = n2
@@ -236,9 +247,9 @@ def _reflection_point(Cx, Cy, Cz, Xx, Xy, Xz, at_infinity, a, b, rim_radius, tol
     return s1, s2, converged
 
 
-@njit(cache=True, parallel=True)
-def project_points(X, at_infinity, R, t, C, a, b, rim_radius, K, out):
-    """Exact non-central projection of scene points (or unit directions) to ``out`` (N, 2).
+@kernel
+def project_points(lo, hi, X, at_infinity, R, t, C, a, b, rim_radius, K, out):
+    """Exact non-central projection of scene points ``lo:hi`` (or directions) to ``out`` (N, 2).
 
     ``out = K * (x/z, y/z)`` of the reflection point in the camera frame (pass ``K = I`` to get
     normalised coordinates). Unseen points, points that do not converge and NaN input give NaN.
@@ -246,9 +257,8 @@ def project_points(X, at_infinity, R, t, C, a, b, rim_radius, K, out):
     a2 = a * a
     b2 = b * b
     rim2 = rim_radius * rim_radius
-    tol = 1e-10 * (a + b)
-    n = X.shape[0]
-    for i in prange(n):
+    tol = NEWTON_TOL_REL * (a + b)
+    for i in range(lo, hi):
         Xx = X[i, 0]
         Xy = X[i, 1]
         Xz = X[i, 2]
@@ -265,8 +275,9 @@ def project_points(X, at_infinity, R, t, C, a, b, rim_radius, K, out):
             Xz /= nrm
         elif Xz > 0.0 and (Xx * Xx + Xy * Xy) / a2 - Xz * Xz / b2 + 1.0 < 0.0:
             continue  # inside the mirror body
-        s1, s2, ok = _reflection_point(C[0], C[1], C[2], Xx, Xy, Xz, at_infinity,
-                                       a, b, rim_radius, tol, 50)
+        s1, s2, ok = _reflection_point(
+            C[0], C[1], C[2], Xx, Xy, Xz, at_infinity, a, b, rim_radius, tol, NEWTON_MAX_ITER
+        )
         if not ok or s1 * s1 + s2 * s2 > rim2:
             continue
         z = b * math.sqrt(1.0 + (s1 * s1 + s2 * s2) / a2)
@@ -295,47 +306,96 @@ def project_points(X, at_infinity, R, t, C, a, b, rim_radius, K, out):
 # -- view tables (omnicam.views): exact nodes, cubic interpolation with a verified error ----------
 #
 # A remap table entry is the exact projection (project_points) of the direction, or the point at
-# a given distance from a viewpoint, that an output pixel looks along. ``view_table`` solves the
-# reflection point exactly (``_reflection_point``, the same Newton as project_points) on a coarse
-# grid of nodes every ``step`` output pixels, on the mirror sheet extended beyond the rim, so the
-# mirror point s = (s1, s2) is a smooth function of the output pixel even across the edge of what
-# the mirror sees. Each cell is interpolated by the tensor-product cubic Lagrange polynomial of its
-# 4x4 nodes; its error (~ h^4 f^(4) w(t), largest mid-cell) is measured against the exact answer at
-# the cell centre and the middle of its four edges. A cell whose estimate exceeds ``tol / 2`` (or
-# that has a node without a solution) is refined once: the same construction on a grid ``_FINE``
-# times finer inside it; a sub-cell that still fails is computed exactly pixel by pixel.
+# a given distance from a viewpoint, that an output pixel looks along. The reflection point is
+# solved exactly (``_reflection_point``, the same Newton as project_points) on a coarse grid of
+# nodes every ``step`` output pixels, on the mirror sheet extended beyond the rim, so the mirror
+# point s = (s1, s2) is a smooth function of the output pixel even across the edge of what the
+# mirror sees. Each cell is interpolated by the tensor-product cubic Lagrange polynomial of its
+# 4x4 nodes; its error (~ h^4 f^(4) w(t), largest mid-cell) is measured against the exact answer
+# at the cell centre and the middle of its four edges. A cell whose estimate exceeds ``tol / 2``
+# (or that has a node without a solution) is refined once: the same construction on a grid
+# ``FINE`` times finer inside it; a sub-cell that still fails is computed exactly pixel by pixel.
 # Cells wholly and clearly seen interpolate the pixel itself; cells wholly and clearly unseen are
 # written unseen; in the others visibility (rim, eqs. 12 and 15, in front of the camera) is
 # decided per pixel from the interpolated mirror point with a margin, and pixels inside the
 # margin are solved exactly.
+#
+# The phases are separate kernels, run in this order by omnicam.views._build_table:
+#   grid_node_points   output positions of the nodes (and Newton starts of refined grids)
+#   grid_check_points  positions of the check points, the interpolated starts and estimates
+#   solve_view_points  the exact solutions (nodes, check points, pixels left undecided)
+#   score_check_points interpolation errors and margins at the check points
+#   classify_cells     each cell's class from its nodes and check points
+#   fill_rows          table entries of decided pixels; the others are marked pending
+#   store_entries      entries of the pending pixels once solved
+# A "grid stack" holds G grids of the same shape and spacing: the coarse grid (G = 1) or the
+# refined grids of the failing coarse cells (G = their number).
 
-_VIEW_RIM_MARGIN = 2e-3    # relative margin on s1^2 + s2^2 against rim_radius^2
-_VIEW_COS_MARGIN = 1e-3    # margin on the cosines of the other visibility tests
-_UNSEEN = -10.0            # omnicam.views.UNSEEN
+#: What the table kernels know of the rig (omnicam.views._rig_args builds it): camera centre
+#: ``C`` (mirror frame), mirror -> camera motion ``R, t``, mirror ``a, b, rim_radius``, pinhole
+#: ``K`` (skew allowed), OpenCV distortion ``dist`` (14 values, zeros padded) and its ``tilt``
+#: matrix, ``has_dist``.
+RigArgs = namedtuple(
+    "RigArgs", ["C", "R", "t", "a", "b", "rim_radius", "K", "dist", "tilt", "has_dist"]
+)
+
+#: What the table kernels know of the view (omnicam.views._view_args builds it): ``kind`` 0
+#: perspective, 1 cylindrical, 2 equirectangular, with ``A, p0, p1, az_step`` as in
+#: :func:`_view_direction`; targets at infinity or at ``depth`` from ``viewpoint``;
+#: ``sin_reject``: sine of the elevation above which nothing is seen; ``sin_try``: above which
+#: nodes are not solved; ``newton_tol``: Newton's step tolerance (mirror units).
+ViewArgs = namedtuple(
+    "ViewArgs",
+    [
+        "kind",
+        "A",
+        "p0",
+        "p1",
+        "az_step",
+        "at_infinity",
+        "depth",
+        "viewpoint",
+        "sin_reject",
+        "sin_try",
+        "newton_tol",
+    ],
+)
+
+VIEW_RIM_MARGIN = 2e-3  # relative margin on s1^2 + s2^2 against rim_radius^2
+VIEW_COS_MARGIN = 1e-3  # margin on the cosines of the other visibility tests
+VIEW_CLEAR = 0.05  # margins (relative rim, cosines, body) of cells wholly seen or unseen
+UNSEEN = -10.0  # omnicam.views.UNSEEN
+FINE = 4  # refinement factor of failing cells
+CELL_BAD = 0  # refined, else computed exactly pixel by pixel
+CELL_SEEN = 1  # pixels interpolated directly from the nodes' pixels
+CELL_UNSEEN = 2  # every pixel unseen
+CELL_EDGE = 3  # mirror point interpolated, visibility decided per pixel
+CHECK_CENTRE, CHECK_HORIZONTAL_EDGE, CHECK_VERTICAL_EDGE = 0, 1, 2  # kinds of check points
 
 
-@njit(cache=True)
-def _view_direction(kind, A, p0, p1, az_step, u, v):
+@kernel
+def _view_direction(view, u, v):
     """Unit mirror-frame direction of output pixel (u, v) (conventions.md, "Views").
 
     kind 0: perspective, ``d = A (u, v, 1)`` with ``A = R^T K_new^-1``.
     kind 1: cylindrical panorama, azimuth ``az_step u``, ``tan(elevation) = p0 + p1 v``.
     kind 2: equirectangular panorama, elevation ``p0 + p1 v`` (radians). For panoramas ``A = R^T``.
     """
-    if kind == 0:
+    A = view.A
+    if view.kind == 0:
         x = A[0, 0] * u + A[0, 1] * v + A[0, 2]
         y = A[1, 0] * u + A[1, 1] * v + A[1, 2]
         z = A[2, 0] * u + A[2, 1] * v + A[2, 2]
     else:
-        az = az_step * u
+        az = view.az_step * u
         ca = math.cos(az)
         sa = math.sin(az)
-        if kind == 1:
+        if view.kind == 1:
             x0 = ca
             y0 = sa
-            z0 = p0 + p1 * v
+            z0 = view.p0 + view.p1 * v
         else:
-            el = p0 + p1 * v
+            el = view.p0 + view.p1 * v
             ce = math.cos(el)
             x0 = ce * ca
             y0 = ce * sa
@@ -347,130 +407,233 @@ def _view_direction(kind, A, p0, p1, az_step, u, v):
     return x / n, y / n, z / n
 
 
-@njit(cache=True)
-def _view_target(dx, dy, dz, at_infinity, depth, vp):
-    """The scene target of a unit direction: itself at infinity, else ``vp + depth d``."""
-    if at_infinity:
+@kernel(inline="always")
+def _view_target(view, dx, dy, dz):
+    """The scene target of a unit direction: itself at infinity, else ``viewpoint + depth d``."""
+    if view.at_infinity:
         return dx, dy, dz
-    return vp[0] + depth * dx, vp[1] + depth * dy, vp[2] + depth * dz
+    vp = view.viewpoint
+    return vp[0] + view.depth * dx, vp[1] + view.depth * dy, vp[2] + view.depth * dz
 
 
-@njit(cache=True)
-def _view_pixel(s1, s2, Xx, Xy, Xz, at_infinity, C, Rc, tc, a, b, K, dist, tilt, has_dist):
+@kernel
+def _inside_mirror_body(Xx, Xy, Xz, a, b):
+    """Whether a finite point lies inside the mirror's body (above the sheet, eq. 1)."""
+    return Xz > 0.0 and (Xx * Xx + Xy * Xy) / (a * a) - Xz * Xz / (b * b) + 1.0 < 0.0
+
+
+@kernel(inline="always")
+def _distort(rig, xn, yn):
+    """OpenCV's distortion of normalised coordinates (``cv2.projectPoints``: k1..k6, p1, p2,
+    s1..s4, then the tilt of tau_x, tau_y)."""
+    dist = rig.dist
+    tilt = rig.tilt
+    r2 = xn * xn + yn * yn
+    r4 = r2 * r2
+    r6 = r4 * r2
+    cdist = 1.0 + dist[0] * r2 + dist[1] * r4 + dist[4] * r6
+    icdist = 1.0 / (1.0 + dist[5] * r2 + dist[6] * r4 + dist[7] * r6)
+    a1 = 2.0 * xn * yn
+    a2_ = r2 + 2.0 * xn * xn
+    a3 = r2 + 2.0 * yn * yn
+    xd = xn * cdist * icdist + dist[2] * a1 + dist[3] * a2_ + dist[8] * r2 + dist[9] * r4
+    yd = yn * cdist * icdist + dist[2] * a3 + dist[3] * a1 + dist[10] * r2 + dist[11] * r4
+    vx = tilt[0, 0] * xd + tilt[0, 1] * yd + tilt[0, 2]
+    vy = tilt[1, 0] * xd + tilt[1, 1] * yd + tilt[1, 2]
+    vz = tilt[2, 0] * xd + tilt[2, 1] * yd + tilt[2, 2]
+    ip = 1.0 / vz if vz != 0.0 else 1.0
+    return ip * vx, ip * vy
+
+
+@kernel(inline="always")
+def _view_pixel(rig, s1, s2, Xx, Xy, Xz, at_infinity):
     """Pixel of the mirror point (s1, s2, f(s)) and the smallest visibility cosine.
 
     The pixel is the pinhole image (eq. 6) of the mirror point, with OpenCV's distortion model
-    (``cv2.projectPoints``: k1..k6, p1, p2, s1..s4, tilt), then ``K`` with skew, as
-    :func:`omnicam.raytrace.project` does. The cosine is the least of: camera on the outer side
-    of the tangent plane (eq. 12), target on the outer side (eq. 15), mirror point in front of
-    the camera; all positive means project_points' tests pass. NaN pixel behind the camera.
+    (:func:`_distort`), then ``K`` with skew, as :func:`omnicam.raytrace.project` does. The
+    cosine is the least of: camera on the outer side of the tangent plane (eq. 12), target on
+    the outer side (eq. 15), mirror point in front of the camera; all positive means
+    project_points' tests pass. NaN pixel behind the camera.
     """
-    a2 = a * a
-    b2 = b * b
-    z = b * math.sqrt(1.0 + (s1 * s1 + s2 * s2) / a2)
+    a2 = rig.a * rig.a
+    b2 = rig.b * rig.b
+    C = rig.C
+    Rc = rig.R
+    tc = rig.t
+    K = rig.K
+    z = rig.b * math.sqrt(1.0 + (s1 * s1 + s2 * s2) / a2)
     Nx = b2 * s1 / (a2 * z)
     Ny = b2 * s2 / (a2 * z)
     nn2 = Nx * Nx + Ny * Ny + 1.0
     wx = C[0] - s1
     wy = C[1] - s2
     wz = C[2] - z
-    mc = (Nx * wx + Ny * wy - wz) / math.sqrt(nn2 * (wx * wx + wy * wy + wz * wz))
+    cos_camera = (Nx * wx + Ny * wy - wz) / math.sqrt(nn2 * (wx * wx + wy * wy + wz * wz))
     if at_infinity:
-        ms = (Nx * Xx + Ny * Xy - Xz) / math.sqrt(nn2)
+        cos_target = (Nx * Xx + Ny * Xy - Xz) / math.sqrt(nn2)
     else:
         ex = Xx - s1
         ey = Xy - s2
         ez = Xz - z
-        ms = (Nx * ex + Ny * ey - ez) / math.sqrt(nn2 * (ex * ex + ey * ey + ez * ez))
+        cos_target = (Nx * ex + Ny * ey - ez) / math.sqrt(nn2 * (ex * ex + ey * ey + ez * ez))
     xc = Rc[0, 0] * s1 + Rc[0, 1] * s2 + Rc[0, 2] * z + tc[0]
     yc = Rc[1, 0] * s1 + Rc[1, 1] * s2 + Rc[1, 2] * z + tc[1]
     zc = Rc[2, 0] * s1 + Rc[2, 1] * s2 + Rc[2, 2] * z + tc[2]
-    mz = zc / math.sqrt(xc * xc + yc * yc + zc * zc)
-    m = min(mc, min(ms, mz))
+    cos_front = zc / math.sqrt(xc * xc + yc * yc + zc * zc)
+    m = min(cos_camera, min(cos_target, cos_front))
     if not zc > 0.0:
         return _NAN, _NAN, m
     xn = xc / zc
     yn = yc / zc
-    if has_dist:
-        r2 = xn * xn + yn * yn
-        r4 = r2 * r2
-        r6 = r4 * r2
-        cdist = 1.0 + dist[0] * r2 + dist[1] * r4 + dist[4] * r6
-        icdist = 1.0 / (1.0 + dist[5] * r2 + dist[6] * r4 + dist[7] * r6)
-        a1 = 2.0 * xn * yn
-        a2_ = r2 + 2.0 * xn * xn
-        a3 = r2 + 2.0 * yn * yn
-        xd = xn * cdist * icdist + dist[2] * a1 + dist[3] * a2_ + dist[8] * r2 + dist[9] * r4
-        yd = yn * cdist * icdist + dist[2] * a3 + dist[3] * a1 + dist[10] * r2 + dist[11] * r4
-        vx = tilt[0, 0] * xd + tilt[0, 1] * yd + tilt[0, 2]
-        vy = tilt[1, 0] * xd + tilt[1, 1] * yd + tilt[1, 2]
-        vz = tilt[2, 0] * xd + tilt[2, 1] * yd + tilt[2, 2]
-        ip = 1.0 / vz if vz != 0.0 else 1.0
-        xn = ip * vx
-        yn = ip * vy
+    if rig.has_dist:
+        xn, yn = _distort(rig, xn, yn)
     return K[0, 0] * xn + K[0, 1] * yn + K[0, 2], K[1, 0] * xn + K[1, 1] * yn + K[1, 2], m
 
 
-@njit(cache=True)
-def _view_solve(C, Xx, Xy, Xz, at_infinity, a, b, rim_radius, tol):
-    """``_reflection_point`` for the camera centre C (compiled once, called from three places)."""
-    return _reflection_point(C[0], C[1], C[2], Xx, Xy, Xz, at_infinity, a, b, rim_radius, tol, 50)
+@kernel
+def _newton_warm(rig, s1, s2, Xx, Xy, Xz, at_infinity, tol):
+    """Newton's full steps of ``_reflection_point`` from a start already in its basin.
 
-
-@njit(cache=True)
-def _view_exact(dx, dy, dz, sin_reject, at_infinity, depth, vp, C, Rc, tc, a, b, rim_radius,
-                K, dist, tilt, has_dist, tol):
-    """Exact table entry of a unit direction: project_points' answer (NaN if unseen).
-
-    ``dz > sin_reject`` is above every elevation the rig can see (proved in omnicam.views):
-    unseen without solving.
+    The start comes from the interpolated neighbours, so the step is small from the first
+    iteration; the same gradient and Hessian of the path length and the same stopping rule as
+    ``_reflection_point``. Returns ``(s1, s2, ok)``; not ok (the caller then solves from the
+    aligned start) if a step is not a full Newton step of that basin or
+    ``NEWTON_WARM_MAX_ITER`` pass.
     """
-    if not dz <= sin_reject:
-        return _NAN, _NAN
-    Xx, Xy, Xz = _view_target(dx, dy, dz, at_infinity, depth, vp)
-    if not at_infinity and Xz > 0.0 and (Xx * Xx + Xy * Xy) / (a * a) - Xz * Xz / (b * b) + 1.0 < 0.0:
-        return _NAN, _NAN  # inside the mirror body
-    s1, s2, ok = _view_solve(C, Xx, Xy, Xz, at_infinity, a, b, rim_radius, tol)
-    if not ok or s1 * s1 + s2 * s2 > rim_radius * rim_radius:
-        return _NAN, _NAN
-    x, y, m = _view_pixel(s1, s2, Xx, Xy, Xz, at_infinity, C, Rc, tc, a, b, K, dist, tilt,
-                          has_dist)
-    if not m > 0.0:
-        return _NAN, _NAN
-    return x, y
+    C = rig.C
+    a = rig.a
+    b = rig.b
+    for _ in range(NEWTON_WARM_MAX_ITER):
+        d1, d2, _g1, _g2, _r1, convex = _newton_step(
+            s1, s2, C[0], C[1], C[2], Xx, Xy, Xz, at_infinity, a, b
+        )
+        if not convex:
+            return s1, s2, False
+        dn = math.sqrt(d1 * d1 + d2 * d2)
+        if not dn < NEWTON_BASIN_REL * (a + b):
+            return s1, s2, False
+        s1 += d1
+        s2 += d2
+        if dn < tol:
+            return s1, s2, True
+    return s1, s2, False
 
 
-@njit(cache=True)
+@kernel
+def _view_point(view, rig, u, v, g1, g2, pixels_only):
+    """Exact solution at output position (u, v): ``ok, s1, s2, x, y, vis, rim_m``.
+
+    The mirror point ``s`` whose reflection joins the camera centre and the pixel's target
+    (``_reflection_point``; from ``(g1, g2)`` first when not NaN, a start interpolated from
+    solved neighbours), and its (geometric) pixel ``(x, y)``.
+
+    Grid points (``pixels_only`` False) are solved on the sheet extended past the rim, up to
+    the elevation ``sin_try``, with their margins: ``vis`` = the least of the relative rim
+    margin, the cosines of :func:`_view_pixel` and the body test of finite targets, over
+    ``VIEW_CLEAR`` (>= 1: clearly seen), and ``rim_m = 1 - |s|^2 / rim_radius^2``.
+    Pixels (``pixels_only``) get project_points' answer: not ok (NaN) when unseen, i.e. above
+    ``sin_reject`` (proved in omnicam.views), inside the mirror body, outside the rim, or
+    failing a visibility test; no margins.
+    """
+    at_infinity = view.at_infinity
+    a = rig.a
+    b = rig.b
+    rim2 = rig.rim_radius * rig.rim_radius
+    dx, dy, dz = _view_direction(view, u, v)
+    if not dz <= (view.sin_reject if pixels_only else view.sin_try):
+        return False, _NAN, _NAN, _NAN, _NAN, _NAN, _NAN
+    Xx, Xy, Xz = _view_target(view, dx, dy, dz)
+    if pixels_only and not at_infinity and _inside_mirror_body(Xx, Xy, Xz, a, b):
+        return False, _NAN, _NAN, _NAN, _NAN, _NAN, _NAN
+    ok = False
+    if g1 == g1 and g2 == g2:
+        s1, s2, ok = _newton_warm(rig, g1, g2, Xx, Xy, Xz, at_infinity, view.newton_tol)
+    if not ok:
+        C = rig.C
+        s1, s2, ok = _reflection_point(
+            C[0],
+            C[1],
+            C[2],
+            Xx,
+            Xy,
+            Xz,
+            at_infinity,
+            a,
+            b,
+            rig.rim_radius,
+            view.newton_tol,
+            NEWTON_MAX_ITER,
+        )
+    if not ok or (pixels_only and s1 * s1 + s2 * s2 > rim2):
+        return False, _NAN, _NAN, _NAN, _NAN, _NAN, _NAN
+    x, y, m = _view_pixel(rig, s1, s2, Xx, Xy, Xz, at_infinity)
+    if pixels_only:
+        if not m > 0.0:
+            return False, _NAN, _NAN, _NAN, _NAN, _NAN, _NAN
+        return True, s1, s2, x, y, _NAN, _NAN
+    if not (x == x and y == y):
+        return False, _NAN, _NAN, _NAN, _NAN, _NAN, _NAN
+    rim_m = 1.0 - (s1 * s1 + s2 * s2) / rim2
+    vis = min(rim_m, m)
+    if not at_infinity:
+        rx = (Xx * Xx + Xy * Xy) / (a * a)
+        rz = Xz * Xz / (b * b)
+        if Xz > -VIEW_CLEAR * math.sqrt(Xx * Xx + Xy * Xy + Xz * Xz):
+            vis = min(vis, (rx - rz + 1.0) / (rx + rz + 1.0))
+    return True, s1, s2, x, y, vis / VIEW_CLEAR, rim_m
+
+
+@kernel
 def _lagrange4(t):
     """Cubic Lagrange weights of nodes at -1, 0, 1, 2 for 0 <= t <= 1."""
-    return (-t * (t - 1.0) * (t - 2.0) / 6.0, (t + 1.0) * (t - 1.0) * (t - 2.0) / 2.0,
-            -(t + 1.0) * t * (t - 2.0) / 2.0, (t + 1.0) * t * (t - 1.0) / 6.0)
+    return (
+        -t * (t - 1.0) * (t - 2.0) / 6.0,
+        (t + 1.0) * (t - 1.0) * (t - 2.0) / 2.0,
+        -(t + 1.0) * t * (t - 2.0) / 2.0,
+        (t + 1.0) * t * (t - 1.0) / 6.0,
+    )
 
 
-@njit(cache=True)
-def _interp_cell(S, r, k, tv, tu):
-    """Tensor cubic Lagrange interpolation of node values S (NY, NX, 2) in cell (r, k)."""
-    v0, v1, v2, v3 = _lagrange4(tv)
-    u0, u1, u2, u3 = _lagrange4(tu)
+@kernel
+def _interp_weighted(S, r, k, v0, v1, v2, v3, u0, u1, u2, u3):
+    """Tensor cubic interpolation of node values S (NY, NX, 2) in cell (r, k) with the row
+    weights ``v*`` and column weights ``u*`` (:func:`_lagrange4`)."""
     o1 = 0.0
     o2 = 0.0
     for m in range(4):
         wv = v0 if m == 0 else (v1 if m == 1 else (v2 if m == 2 else v3))
-        row1 = u0 * S[r + m, k, 0] + u1 * S[r + m, k + 1, 0] + u2 * S[r + m, k + 2, 0] \
+        row1 = (
+            u0 * S[r + m, k, 0]
+            + u1 * S[r + m, k + 1, 0]
+            + u2 * S[r + m, k + 2, 0]
             + u3 * S[r + m, k + 3, 0]
-        row2 = u0 * S[r + m, k, 1] + u1 * S[r + m, k + 1, 1] + u2 * S[r + m, k + 2, 1] \
+        )
+        row2 = (
+            u0 * S[r + m, k, 1]
+            + u1 * S[r + m, k + 1, 1]
+            + u2 * S[r + m, k + 2, 1]
             + u3 * S[r + m, k + 3, 1]
+        )
         o1 += wv * row1
         o2 += wv * row2
     return o1, o2
 
 
-@njit(cache=True, inline="always")
+@kernel
+def _interp_cell(S, r, k, tv, tu):
+    """Tensor cubic Lagrange interpolation of node values S (NY, NX, 2) in cell (r, k) at the
+    cell coordinates (tv, tu) in [0, 1]^2."""
+    v0, v1, v2, v3 = _lagrange4(tv)
+    u0, u1, u2, u3 = _lagrange4(tu)
+    return _interp_weighted(S, r, k, v0, v1, v2, v3, u0, u1, u2, u3)
+
+
+@kernel(inline="always")
 def _view_store(i, j, x, y, mode, outx, outy, out16, outf16):
     """Write one entry: float maps (mode 0) or cv2.convertMaps' CV_16SC2 fixed point (mode 1)."""
     if not (x == x and y == y):
-        x = _UNSEEN
-        y = _UNSEEN
+        x = UNSEEN
+        y = UNSEEN
     fx = np.float32(x)
     fy = np.float32(y)
     if mode == 0:
@@ -486,479 +649,509 @@ def _view_store(i, j, x, y, mode, outx, outy, out16, outf16):
         outf16[i, j] = (iy & 31) * 32 + (ix & 31)
 
 
-_VIEW_CLEAR = 0.05         # margins (relative rim, cosines, body) of cells wholly seen or unseen
-_FINE = 4                  # refinement factor of failing cells
-_CELL_BAD = 0              # refined, else computed exactly pixel by pixel
-_CELL_SEEN = 1             # pixels interpolated directly from the nodes' pixels
-_CELL_UNSEEN = 2           # every pixel unseen
-_CELL_EDGE = 3             # mirror point interpolated, visibility decided per pixel
+# -- the phases ---------------------------------------------------------------------------------
+@kernel
+def grid_node_points(lo, hi, origins, spacing, coarse_S, cells, positions, starts):
+    """Output positions and Newton starts of the nodes ``lo:hi`` of a grid stack.
 
-
-@njit(cache=True)
-def _newton_warm(s1, s2, C, Xx, Xy, Xz, at_infinity, a, b, tol, max_iter):
-    """Newton's full steps of ``_reflection_point`` from a start already in its basin.
-
-    The start comes from the interpolated neighbours, so the step is small from the first
-    iteration; the same gradient and Hessian of the path length and the same stopping rule as
-    ``_reflection_point``. Returns ``(s1, s2, ok)``; not ok (the caller then solves from the
-    aligned start) if a step is not a full Newton step of that basin or ``max_iter`` pass.
+    Grid ``c`` (of ``positions.shape[0]``) has node (p, q) at output pixel
+    ``origins[c] + ((q - 1) spacing, (p - 1) spacing)``. A refined grid (``cells`` (G, 2): the
+    coarse cell (row, column) it refines) starts Newton from the coarse grid's interpolation
+    ``coarse_S``; the coarse grid (``cells`` empty) has no start (NaN).
+    ``positions``, ``starts``: (G, NY, NX, 2), flat index ``lo:hi`` over (G, NY, NX).
     """
-    Cx = C[0]
-    Cy = C[1]
-    Cz = C[2]
-    for _ in range(max_iter):
-        d1, d2, _g1, _g2, _r1, convex = _newton_step(s1, s2, Cx, Cy, Cz, Xx, Xy, Xz, at_infinity,
-                                                     a, b)
-        if not convex:
-            return s1, s2, False
-        dn = math.sqrt(d1 * d1 + d2 * d2)
-        if not dn < 1e-4 * (a + b):
-            return s1, s2, False
-        s1 += d1
-        s2 += d2
-        if dn < tol:
-            return s1, s2, True
-    return s1, s2, False
+    NY = positions.shape[1]
+    NX = positions.shape[2]
+    refine = cells.shape[0] > 0
+    for n in range(lo, hi):
+        c = n // (NY * NX)
+        p = (n // NX) % NY
+        q = n % NX
+        positions[c, p, q, 0] = origins[c, 0] + (q - 1.0) * spacing
+        positions[c, p, q, 1] = origins[c, 1] + (p - 1.0) * spacing
+        s1 = _NAN
+        s2 = _NAN
+        if refine:
+            s1, s2 = _interp_cell(
+                coarse_S, cells[c, 0], cells[c, 1], (p - 1.0) / FINE, (q - 1.0) / FINE
+            )
+        starts[c, p, q, 0] = s1
+        starts[c, p, q, 1] = s2
 
 
-@njit(cache=True)
-def _view_eval(kind, A, p0, p1, az_step, u, v, sin_try, at_infinity, depth, vp, C, Rc, tc, a, b,
-               rim_radius, K, dist, tilt, has_dist, tol, g1, g2):
-    """Exact solution at output position (u, v) on the extended sheet, with its margins.
+@kernel
+def grid_check_points(lo, hi, origins, spacing, S, P, positions, starts, estimates):
+    """Check points ``lo:hi`` of a grid stack: positions, starts and interpolated pixels.
 
-    Returns ``ok, s1, s2, x, y, vis, rim_m``: the mirror point, its (geometric) pixel,
-    ``vis`` = the least of the visibility margins (relative rim, cosines of
-    :func:`_view_pixel`, the body test of finite targets) over ``_VIEW_CLEAR`` (>= 1: clearly
-    seen) and ``rim_m = 1 - |s|^2 / rim_radius^2``. ``ok`` is False when not solved.
-    ``(g1, g2)``: a start for Newton from interpolated neighbours, or NaN.
+    Check point (c, which, r, k) of grid c with ny x nx cells: ``which`` CHECK_CENTRE: centre of
+    cell (r, k); CHECK_HORIZONTAL_EDGE: middle of the horizontal edge above cell (r, k) (r = ny:
+    below the last row); CHECK_VERTICAL_EDGE: middle of the vertical edge left of it (k = nx:
+    right of the last column). Combinations that name no edge get NaN positions (never solved).
+    ``estimates``: the pixel interpolated from the nodes' pixels ``P``; ``starts``: the mirror
+    point interpolated from ``S`` (solve_view_points gives its pixel). Arrays are
+    (G, 3, ny + 1, nx + 1, k), flat index ``lo:hi``.
     """
-    dx, dy, dz = _view_direction(kind, A, p0, p1, az_step, u, v)
-    if not dz <= sin_try:
-        return False, _NAN, _NAN, _NAN, _NAN, _NAN, _NAN
-    Xx, Xy, Xz = _view_target(dx, dy, dz, at_infinity, depth, vp)
-    ok = False
-    if g1 == g1 and g2 == g2:
-        s1, s2, ok = _newton_warm(g1, g2, C, Xx, Xy, Xz, at_infinity, a, b, tol, 8)
-    if not ok:
-        s1, s2, ok = _view_solve(C, Xx, Xy, Xz, at_infinity, a, b, rim_radius, tol)
-    if not ok:
-        return False, _NAN, _NAN, _NAN, _NAN, _NAN, _NAN
-    x, y, m = _view_pixel(s1, s2, Xx, Xy, Xz, at_infinity, C, Rc, tc, a, b, K, dist, tilt,
-                          has_dist)
-    if not (x == x and y == y):
-        return False, _NAN, _NAN, _NAN, _NAN, _NAN, _NAN
-    rim_m = 1.0 - (s1 * s1 + s2 * s2) / (rim_radius * rim_radius)
-    vis = min(rim_m, m)
-    if not at_infinity:
-        rx = (Xx * Xx + Xy * Xy) / (a * a)
-        rz = Xz * Xz / (b * b)
-        if Xz > -_VIEW_CLEAR * math.sqrt(Xx * Xx + Xy * Xy + Xz * Xz):
-            vis = min(vis, (rx - rz + 1.0) / (rx + rz + 1.0))
-    return True, s1, s2, x, y, vis / _VIEW_CLEAR, rim_m
+    ny = positions.shape[2] - 1
+    nx = positions.shape[3] - 1
+    for n in range(lo, hi):
+        k = n % (nx + 1)
+        r = (n // (nx + 1)) % (ny + 1)
+        which = (n // ((nx + 1) * (ny + 1))) % 3
+        c = n // (3 * (nx + 1) * (ny + 1))
+        for m in range(2):
+            positions[c, which, r, k, m] = _NAN
+            starts[c, which, r, k, m] = _NAN
+        for m in range(2):
+            estimates[c, which, r, k, m] = _NAN
+        if which == CHECK_CENTRE and (r == ny or k == nx):
+            continue
+        if which == CHECK_HORIZONTAL_EDGE and k == nx:
+            continue
+        if which == CHECK_VERTICAL_EDGE and r == ny:
+            continue
+        cr = r
+        ck = k
+        tv = 0.5
+        tu = 0.5
+        if which == CHECK_HORIZONTAL_EDGE:
+            tv = 0.0
+            if cr == ny:
+                cr = ny - 1
+                tv = 1.0
+        elif which == CHECK_VERTICAL_EDGE:
+            tu = 0.0
+            if ck == nx:
+                ck = nx - 1
+                tu = 1.0
+        positions[c, which, r, k, 0] = origins[c, 0] + (ck + tu) * spacing
+        positions[c, which, r, k, 1] = origins[c, 1] + (cr + tv) * spacing
+        si1, si2 = _interp_cell(S[c], cr, ck, tv, tu)
+        starts[c, which, r, k, 0] = si1
+        starts[c, which, r, k, 1] = si2
+        xi, yi = _interp_cell(P[c], cr, ck, tv, tu)
+        estimates[c, which, r, k, 0] = xi
+        estimates[c, which, r, k, 1] = yi
 
 
-@njit(cache=True)
-def _grid_node_row(p, S, P, NV, u0, v0, g, SG, gr, gk, gf, kind, A, p0, p1, az_step, sin_try,
-                   at_infinity, depth, vp, C, Rc, tc, a, b, rim_radius, K, dist, tilt, has_dist,
-                   tol):
-    """Row ``p`` of a node grid: node (p, q) at output pixel (u0 + (q-1) g, v0 + (p-1) g).
+@kernel
+def solve_view_points(
+    lo, hi, view, rig, positions, starts, pixels_only, ok, S, P, margins, start_pixels
+):
+    """Exact solutions at the output positions ``lo:hi`` (N, 2).
 
-    With ``gf > 0`` the grid refines cell (gr, gk) of the coarser grid ``SG`` ``gf`` times,
-    whose interpolation starts Newton.
+    :func:`_view_point` at each: the mirror point ``S``, its pixel ``P`` (the exact table
+    entry for ``pixels_only``, NaN if unseen) and ``margins`` = (vis, rim_m) (``-inf, inf``
+    and ``ok`` False when not solved), Newton started from ``starts`` where not NaN.
+    ``start_pixels``: the pixels of the starts (grid points only).
     """
-    for q in range(S.shape[1]):
-        g1 = _NAN
-        g2 = _NAN
-        if gf > 0:
-            g1, g2 = _interp_cell(SG, gr, gk, (p - 1.0) / gf, (q - 1.0) / gf)
-        ok, s1, s2, x, y, vis, rim_m = _view_eval(
-            kind, A, p0, p1, az_step, u0 + (q - 1.0) * g, v0 + (p - 1.0) * g, sin_try,
-            at_infinity, depth, vp, C, Rc, tc, a, b, rim_radius, K, dist, tilt, has_dist, tol,
-            g1, g2)
-        S[p, q, 0] = s1
-        S[p, q, 1] = s2
-        P[p, q, 0] = x
-        P[p, q, 1] = y
-        NV[p, q, 0] = vis if ok else -np.inf
-        NV[p, q, 1] = rim_m if ok else np.inf
-
-
-@njit(cache=True)
-def _grid_check_row(r, S, P, CV, EP, ES, u0, v0, g, kind, A, p0, p1, az_step, sin_try,
-                    at_infinity, depth, vp, C, Rc, tc, a, b, rim_radius, K, dist, tilt, has_dist,
-                    tol):
-    """Check points of row ``r`` of a grid of ny x nx cells (CV, EP, ES are (3, ny+1, nx+1)).
-
-    which 0: cell centres; 1: middles of horizontal edges (rows 0..ny); 2: middles of vertical
-    edges (columns 0..nx). EP / ES: error of interpolating the pixel / the mirror point against
-    the exact answer there; CV: the exact margins (vis, rim_m).
-    """
-    ny = EP.shape[1] - 1
-    nx = EP.shape[2] - 1
-    for k in range(nx + 1):
-        for which in range(3):
-            CV[which, r, k, 0] = -np.inf
-            CV[which, r, k, 1] = np.inf
-            EP[which, r, k] = np.inf
-            ES[which, r, k] = np.inf
-            if which == 0 and (r == ny or k == nx):
-                continue
-            if which == 1 and k == nx:
-                continue
-            if which == 2 and r == ny:
-                continue
-            cr = r
-            ck = k
-            tv = 0.5
-            tu = 0.5
-            if which == 1:
-                tv = 0.0
-                if cr == ny:
-                    cr = ny - 1
-                    tv = 1.0
-            elif which == 2:
-                tu = 0.0
-                if ck == nx:
-                    ck = nx - 1
-                    tu = 1.0
-            si1, si2 = _interp_cell(S, cr, ck, tv, tu)
-            ok, s1, s2, xe, ye, vis, rim_m = _view_eval(
-                kind, A, p0, p1, az_step, u0 + (ck + tu) * g, v0 + (cr + tv) * g, sin_try,
-                at_infinity, depth, vp, C, Rc, tc, a, b, rim_radius, K, dist, tilt, has_dist, tol,
-                si1, si2)
-            if not ok:
-                continue
-            CV[which, r, k, 0] = vis
-            CV[which, r, k, 1] = rim_m
-            xi, yi = _interp_cell(P, cr, ck, tv, tu)
-            err = math.sqrt((xe - xi) ** 2 + (ye - yi) ** 2)
-            if err == err:
-                EP[which, r, k] = err
+    for n in range(lo, hi):
+        if not pixels_only:
             # the pixel of a mirror point does not depend on the target (margins only)
-            xi, yi, _m = _view_pixel(si1, si2, 1.0, 0.0, 0.0, True, C, Rc, tc, a, b, K, dist,
-                                     tilt, has_dist)
-            err = math.sqrt((xe - xi) ** 2 + (ye - yi) ** 2)
-            if err == err:
-                ES[which, r, k] = err
+            x, y, _m = _view_pixel(rig, starts[n, 0], starts[n, 1], 1.0, 0.0, 0.0, True)
+            start_pixels[n, 0] = x
+            start_pixels[n, 1] = y
+        solved, s1, s2, x, y, vis, rim_m = _view_point(
+            view, rig, positions[n, 0], positions[n, 1], starts[n, 0], starts[n, 1], pixels_only
+        )
+        ok[n] = solved
+        S[n, 0] = s1
+        S[n, 1] = s2
+        P[n, 0] = x
+        P[n, 1] = y
+        margins[n, 0] = vis if solved else -np.inf
+        margins[n, 1] = rim_m if solved else np.inf
 
 
-@njit(cache=True)
-def _grid_classify_row(r, cls, NV, CV, EP, ES, half, allow_edge):
-    """Classes of the cells of row ``r`` (see the _CELL_* constants); without ``allow_edge``
-    a cell on the edge of what the mirror sees is refined instead (``_CELL_BAD``).
+@kernel
+def score_check_points(lo, hi, ok, P, margins, estimates, pixel_error, mirror_error, check_margins):
+    """Interpolation errors at the check points ``lo:hi`` from their exact solutions.
 
-    The tensor cubic's error ~ A(v) w(t) + B(u) w(s) peaks mid-cell and is bounded by the sum of
-    its mid-edge values: both that sum and the centre's error must be within ``half``.
+    ``pixel_error``: |exact pixel - pixel interpolated from the nodes' pixels|;
+    ``mirror_error``: |exact pixel - pixel of the interpolated mirror point|;
+    ``check_margins``: the exact margins. inf / (-inf, inf) where not solved.
     """
-    for k in range(cls.shape[1]):
-        solved = True
-        for m in range(4):
-            for n in range(4):
-                if not NV[r + m, k + n, 0] > -np.inf:
-                    solved = False
-        # visibility of the cell's own area: its corners and its five check points (the
-        # margins are smooth; "clearly" means beyond _VIEW_CLEAR at all nine)
-        vmin = np.inf
-        rmax = -np.inf
-        for m in range(1, 3):
-            for n in range(1, 3):
-                vmin = min(vmin, NV[r + m, k + n, 0])
-                rmax = max(rmax, NV[r + m, k + n, 1])
-        for e_ in range(5):
-            w_ = 0 if e_ == 0 else (1 if e_ <= 2 else 2)
-            rr_ = r + 1 if e_ == 2 else r
-            kk_ = k + 1 if e_ == 4 else k
-            vmin = min(vmin, CV[w_, rr_, kk_, 0])
-            rmax = max(rmax, CV[w_, rr_, kk_, 1])
-        ep = max(EP[0, r, k], max(EP[1, r, k], EP[1, r + 1, k])
-                 + max(EP[2, r, k], EP[2, r, k + 1]))
-        es = max(ES[0, r, k], max(ES[1, r, k], ES[1, r + 1, k])
-                 + max(ES[2, r, k], ES[2, r, k + 1]))
-        c = _CELL_BAD
-        if solved:
-            if vmin >= 1.0 and ep <= half:
-                c = _CELL_SEEN
-            elif rmax <= -_VIEW_CLEAR:
-                c = _CELL_UNSEEN
-            elif es <= half and allow_edge:
-                c = _CELL_EDGE
-        cls[r, k] = c
+    for n in range(lo, hi):
+        check_margins[n, 0] = -np.inf
+        check_margins[n, 1] = np.inf
+        pixel_error[n] = np.inf
+        mirror_error[n] = np.inf
+        if not ok[n]:
+            continue
+        check_margins[n, 0] = margins[n, 0]
+        check_margins[n, 1] = margins[n, 1]
+        xe = P[n, 0]
+        ye = P[n, 1]
+        err = math.sqrt((xe - estimates[n, 0]) ** 2 + (ye - estimates[n, 1]) ** 2)
+        if err == err:
+            pixel_error[n] = err
+        err = math.sqrt((xe - estimates[n, 2]) ** 2 + (ye - estimates[n, 3]) ** 2)
+        if err == err:
+            mirror_error[n] = err
 
 
-@njit(cache=True)
-def _edge_pixel(s1, s2, dx, dy, dz, at_infinity, depth, vp, C, Rc, tc, a, b, rim_radius, K, dist,
-                tilt, has_dist):
+@kernel
+def _cell_check_extremes(node_margins, check_margins, r, k):
+    """Least visibility and largest rim margin over cell (r, k)'s corners and check points.
+
+    The margins are smooth; "clearly" seen or unseen means beyond ``VIEW_CLEAR`` at all nine.
+    """
+    vmin = np.inf
+    rmax = -np.inf
+    for m in range(1, 3):
+        for n in range(1, 3):
+            vmin = min(vmin, node_margins[r + m, k + n, 0])
+            rmax = max(rmax, node_margins[r + m, k + n, 1])
+    for e in range(5):
+        which = (
+            CHECK_CENTRE if e == 0 else (CHECK_HORIZONTAL_EDGE if e <= 2 else CHECK_VERTICAL_EDGE)
+        )
+        rr = r + 1 if e == 2 else r
+        kk = k + 1 if e == 4 else k
+        vmin = min(vmin, check_margins[which, rr, kk, 0])
+        rmax = max(rmax, check_margins[which, rr, kk, 1])
+    return vmin, rmax
+
+
+@kernel
+def _cell_error(errors, r, k):
+    """Error estimate of cell (r, k): the tensor cubic's error ~ A(v) w(t) + B(u) w(s) peaks
+    mid-cell and is bounded by the sum of its mid-edge values; also the centre's own error."""
+    return max(
+        errors[CHECK_CENTRE, r, k],
+        max(errors[CHECK_HORIZONTAL_EDGE, r, k], errors[CHECK_HORIZONTAL_EDGE, r + 1, k])
+        + max(errors[CHECK_VERTICAL_EDGE, r, k], errors[CHECK_VERTICAL_EDGE, r, k + 1]),
+    )
+
+
+@kernel
+def classify_cells(
+    node_margins, check_margins, pixel_error, mirror_error, half_tol, allow_edge, cls
+):
+    """Classes (the CELL_* constants) of the cells of a grid stack, ``cls`` (G, ny, nx).
+
+    A cell needs all 16 of its nodes solved; it is SEEN when clearly seen with an error estimate
+    (:func:`_cell_error`) of the pixels within ``half_tol``, UNSEEN when clearly unseen, EDGE
+    when that of the mirror points is within ``half_tol`` (only with ``allow_edge``: on the
+    coarse grid such a cell is refined instead), else BAD.
+    """
+    for c in range(cls.shape[0]):
+        for r in range(cls.shape[1]):
+            for k in range(cls.shape[2]):
+                solved = True
+                for m in range(4):
+                    for n in range(4):
+                        if not node_margins[c, r + m, k + n, 0] > -np.inf:
+                            solved = False
+                vmin, rmax = _cell_check_extremes(node_margins[c], check_margins[c], r, k)
+                cell_class = CELL_BAD
+                if solved:
+                    if vmin >= 1.0 and _cell_error(pixel_error[c], r, k) <= half_tol:
+                        cell_class = CELL_SEEN
+                    elif rmax <= -VIEW_CLEAR:
+                        cell_class = CELL_UNSEEN
+                    elif _cell_error(mirror_error[c], r, k) <= half_tol and allow_edge:
+                        cell_class = CELL_EDGE
+                cls[c, r, k] = cell_class
+
+
+@kernel
+def mark_cells_above_band(view, origins, spacing, W, H, cls):
+    """Make UNSEEN the BAD cells of a perspective grid stack whose every pixel looks above
+    ``sin_reject`` (where nothing is seen), so that they are neither refined nor visited.
+
+    With ``sin_reject > 0`` the directions above that elevation form a convex cone, and the
+    pixels whose directions lie in it a convex set of the image plane: a cell is in it when
+    its four corner pixels are (with a margin of ``1e-9`` for rounding).
+    """
+    if view.kind != 0 or not 0.0 < view.sin_reject < 1.0:
+        return
+    limit = view.sin_reject + 1e-9
+    for c in range(cls.shape[0]):
+        for r in range(cls.shape[1]):
+            for k in range(cls.shape[2]):
+                if cls[c, r, k] != CELL_BAD:
+                    continue
+                u0 = origins[c, 0] + k * spacing
+                v0 = origins[c, 1] + r * spacing
+                u1 = min(u0 + spacing - 1.0, W - 1.0)
+                v1 = min(v0 + spacing - 1.0, H - 1.0)
+                above = True
+                for corner in range(4):
+                    u = u0 if corner % 2 == 0 else u1
+                    v = v0 if corner < 2 else v1
+                    _dx, _dy, dz = _view_direction(view, u, v)
+                    if not dz > limit:
+                        above = False
+                if above:
+                    cls[c, r, k] = CELL_UNSEEN
+
+
+@kernel(inline="always")
+def _edge_pixel(view, rig, s1, s2, dx, dy, dz):
     """Entry from an interpolated mirror point: ``(x, y, decided)``; undecided near the edge."""
-    Xx, Xy, Xz = _view_target(dx, dy, dz, at_infinity, depth, vp)
-    if (not at_infinity) and Xz > 0.0 and \
-            (Xx * Xx + Xy * Xy) / (a * a) - Xz * Xz / (b * b) + 1.0 < 0.0:
+    Xx, Xy, Xz = _view_target(view, dx, dy, dz)
+    if (not view.at_infinity) and _inside_mirror_body(Xx, Xy, Xz, rig.a, rig.b):
         return _NAN, _NAN, True  # inside the mirror body, as project_points
-    rim2 = rim_radius * rim_radius
+    rim2 = rig.rim_radius * rig.rim_radius
     rim_m = (rim2 - (s1 * s1 + s2 * s2)) / rim2
-    xi, yi, m = _view_pixel(s1, s2, Xx, Xy, Xz, at_infinity, C, Rc, tc, a, b, K, dist, tilt,
-                            has_dist)
-    if rim_m < -_VIEW_RIM_MARGIN or m < -_VIEW_COS_MARGIN:
+    xi, yi, m = _view_pixel(rig, s1, s2, Xx, Xy, Xz, view.at_infinity)
+    if rim_m < -VIEW_RIM_MARGIN or m < -VIEW_COS_MARGIN:
         return _NAN, _NAN, True  # clearly unseen
-    if rim_m > _VIEW_RIM_MARGIN and m > _VIEW_COS_MARGIN and xi == xi and yi == yi:
+    if rim_m > VIEW_RIM_MARGIN and m > VIEW_COS_MARGIN and xi == xi and yi == yi:
         return xi, yi, True
     return _NAN, _NAN, False
 
 
-@njit(cache=True, parallel=True)
-def view_table(kind, A, p0, p1, az_step, W, H, step, at_infinity, depth, vp, sin_reject,
-               sin_try, C, Rc, tc, a, b, rim_radius, K, dist, tilt, has_dist, tol, mode,
-               outx, outy, out16, outf16, stats):
-    """Remap table of a view (see the section comment above); unseen entries are -10.
+@kernel
+def table_weights(view, column_cos, column_sin, weights, fine_weights):
+    """Per-column cos / sin of the azimuth (panoramas), and the cubic weights of the node
+    columns per column offset in a cell (``weights`` (4, step)) and in a refined sub-cell
+    (``fine_weights`` (4, step / FINE))."""
+    if view.kind != 0:
+        for j in range(column_cos.shape[0]):
+            column_cos[j] = math.cos(view.az_step * j)
+            column_sin[j] = math.sin(view.az_step * j)
+    for w in (weights, fine_weights):
+        step = w.shape[1]
+        for t in range(step):
+            w0, w1, w2, w3 = _lagrange4(t / step)
+            w[0, t] = w0
+            w[1, t] = w1
+            w[2, t] = w2
+            w[3, t] = w3
 
-    Parameters are prepared by :mod:`omnicam.views`: ``kind, A, p0, p1, az_step`` define the
-    output directions (:func:`_view_direction`), ``W, H`` the size, ``step`` the node spacing
-    (a multiple of ``_FINE``), ``at_infinity, depth, vp`` the targets, ``sin_reject`` the sine
-    of an elevation above which nothing is seen, ``sin_try`` the sine above which nodes are not
-    solved, ``C, Rc, tc`` the camera centre (mirror frame) and mirror -> camera motion,
-    ``K, dist (14), tilt (3x3), has_dist`` the pinhole and distortion, ``tol`` the entry
-    tolerance in pixels. ``mode`` 0 writes float32 ``outx, outy`` (H, W); mode 1 writes
-    ``out16`` (H, W, 2) int16 and ``outf16`` (H, W) uint16 as
-    ``cv2.convertMaps(.., CV_16SC2)`` does. ``stats`` (8,) int64 receives: nodes and check
-    points solved, coarse cells seen / unseen / edge / refined, fine cells computed exactly,
-    pixels solved exactly.
+
+@kernel(inline="always")
+def _pixel_direction(view, i, j, row_z, row_cos, column_cos, column_sin):
+    """Unit direction of output pixel (row i, column j), as :func:`_view_direction` with the
+    row's and columns' trigonometry precomputed."""
+    A = view.A
+    if view.kind == 0:
+        x0 = A[0, 0] * j + A[0, 1] * i + A[0, 2]
+        y0 = A[1, 0] * j + A[1, 1] * i + A[1, 2]
+        z0 = A[2, 0] * j + A[2, 1] * i + A[2, 2]
+    else:
+        px = row_cos * column_cos[j]
+        py = row_cos * column_sin[j]
+        x0 = A[0, 0] * px + A[0, 1] * py + A[0, 2] * row_z
+        y0 = A[1, 0] * px + A[1, 1] * py + A[1, 2] * row_z
+        z0 = A[2, 0] * px + A[2, 1] * py + A[2, 2] * row_z
+    nrm = math.sqrt(x0 * x0 + y0 * y0 + z0 * z0)
+    return x0 / nrm, y0 / nrm, z0 / nrm
+
+
+@kernel
+def _fill_refined_cell(
+    view,
+    rig,
+    i,
+    j0,
+    j1,
+    fine_row,
+    fine_tv,
+    fine_S,
+    fine_P,
+    fine_cls,
+    fine_weights,
+    row_z,
+    row_cos,
+    column_cos,
+    column_sin,
+    mode,
+    outx,
+    outy,
+    out16,
+    outf16,
+    pending,
+):
+    """Entries of row i, columns j0:j1 of a refined coarse cell, sub-cell by sub-cell.
+
+    ``fine_S, fine_P`` (FINE + 3, FINE + 3, 2), ``fine_cls`` (FINE, FINE): the cell's refined
+    grid; ``fine_row, fine_tv``: the sub-cell row and the position in it; ``fine_weights``
+    (4, g): column weights per column offset in a sub-cell. SEEN sub-cells interpolate the
+    pixel, UNSEEN ones are unseen, EDGE ones decide per pixel from the interpolated mirror point
+    (:func:`_edge_pixel`); what stays undecided is marked in ``pending`` (returns how many).
     """
-    h = step
-    ny = (H + h - 1) // h
-    nx = (W + h - 1) // h
-    NY = ny + 3
+    g = fine_weights.shape[1]
+    v0, v1, v2, v3 = _lagrange4(fine_tv)
+    n_pending = 0
+    for fb in range(FINE):
+        k0 = j0 + fb * g
+        k1 = min(j1, k0 + g)
+        fine_class = fine_cls[fine_row, fb]
+        for j in range(k0, k1):
+            tu = j - k0
+            u0 = fine_weights[0, tu]
+            u1 = fine_weights[1, tu]
+            u2 = fine_weights[2, tu]
+            u3 = fine_weights[3, tu]
+            if fine_class == CELL_SEEN:
+                x, y = _interp_weighted(fine_P, fine_row, fb, v0, v1, v2, v3, u0, u1, u2, u3)
+                _view_store(i, j, x, y, mode, outx, outy, out16, outf16)
+                continue
+            if fine_class == CELL_UNSEEN:
+                _view_store(i, j, _NAN, _NAN, mode, outx, outy, out16, outf16)
+                continue
+            dx, dy, dz = _pixel_direction(view, i, j, row_z, row_cos, column_cos, column_sin)
+            x = _NAN
+            y = _NAN
+            decided = not dz <= view.sin_reject  # above every elevation the rig sees
+            if not decided and fine_class == CELL_EDGE:
+                s1, s2 = _interp_weighted(fine_S, fine_row, fb, v0, v1, v2, v3, u0, u1, u2, u3)
+                x, y, decided = _edge_pixel(view, rig, s1, s2, dx, dy, dz)
+            if decided:
+                _view_store(i, j, x, y, mode, outx, outy, out16, outf16)
+            else:
+                pending[i, j] = 1
+                n_pending += 1
+    return n_pending
+
+
+@kernel
+def fill_rows(
+    lo,
+    hi,
+    view,
+    rig,
+    cls,
+    refined_index,
+    P,
+    fine_S,
+    fine_P,
+    fine_cls,
+    column_cos,
+    column_sin,
+    weights,
+    fine_weights,
+    mode,
+    outx,
+    outy,
+    out16,
+    outf16,
+    pending,
+    pending_rows,
+):
+    """Table entries of rows ``lo:hi``; pixels that need an exact solution are marked pending.
+
+    ``cls`` (ny, nx): classes of the coarse cells, whose nodes' pixels are ``P`` (NY, NX, 2);
+    ``refined_index`` (ny, nx): which grid of the refined stack (``fine_*``) refines a BAD cell.
+    ``weights`` (4, step), ``fine_weights`` (4, step / FINE): :func:`table_weights`.
+    ``mode`` 0 writes float32 ``outx, outy`` (H, W); mode 1 writes ``out16`` (H, W, 2) int16
+    and ``outf16`` (H, W) uint16 as ``cv2.convertMaps(.., CV_16SC2)`` does.
+    ``pending_rows`` (H,): pending pixels per row.
+    """
+    h = weights.shape[1]
+    g = fine_weights.shape[1]
+    W = pending.shape[1]
+    nx = cls.shape[1]
     NX = nx + 3
-    newton_tol = 1e-10 * (a + b)
-    half = 0.5 * tol
-    # 1. coarse nodes, 2. check points, 3. classes
-    S = np.empty((NY, NX, 2))
-    P = np.empty((NY, NX, 2))
-    NV = np.empty((NY, NX, 2))
-    for p_ in prange(NY):
-        p = np.int64(p_)  # prange indices may be unsigned
-        _grid_node_row(p, S, P, NV, 0.0, 0.0, float(h), S, 0, 0, 0, kind, A, p0, p1, az_step,
-                       sin_try, at_infinity, depth, vp, C, Rc, tc, a, b, rim_radius, K, dist,
-                       tilt, has_dist, newton_tol)
-    EP = np.empty((3, ny + 1, nx + 1))
-    ES = np.empty((3, ny + 1, nx + 1))
-    CV = np.empty((3, ny + 1, nx + 1, 2))
-    for r_ in prange(ny + 1):
-        r = np.int64(r_)
-        _grid_check_row(r, S, P, CV, EP, ES, 0.0, 0.0, float(h), kind, A, p0, p1, az_step,
-                        sin_try, at_infinity, depth, vp, C, Rc, tc, a, b, rim_radius, K, dist,
-                        tilt, has_dist, newton_tol)
-    cls = np.empty((ny, nx), dtype=np.int64)
-    for r in range(ny):
-        _grid_classify_row(r, cls, NV, CV, EP, ES, half, False)
-    # 4. refine failing cells on a grid _FINE times finer (its own nodes, checks and classes)
-    F = _FINE
-    g = h // F
-    ref = np.full((ny, nx), -1, dtype=np.int64)
-    nbad = 0
-    for r in range(ny):
-        for k in range(nx):
-            if cls[r, k] == _CELL_BAD:
-                ref[r, k] = nbad
-                nbad += 1
-    cells = np.empty((nbad, 2), dtype=np.int64)
-    for r in range(ny):
-        for k in range(nx):
-            if ref[r, k] >= 0:
-                cells[ref[r, k], 0] = r
-                cells[ref[r, k], 1] = k
-    fS = np.empty((nbad, F + 3, F + 3, 2))
-    fP = np.empty((nbad, F + 3, F + 3, 2))
-    fNV = np.empty((nbad, F + 3, F + 3, 2))
-    fcls = np.empty((nbad, F, F), dtype=np.int64)
-    n_fine_checks = np.zeros(max(nbad, 1), dtype=np.int64)
-    for c_ in prange(nbad):
-        c = np.int64(c_)
-        u0 = float(cells[c, 1] * h)
-        v0 = float(cells[c, 0] * h)
-        for p in range(F + 3):
-            _grid_node_row(p, fS[c], fP[c], fNV[c], u0, v0, float(g), S, cells[c, 0],
-                           cells[c, 1], F, kind, A, p0, p1, az_step, sin_try, at_infinity,
-                           depth, vp, C, Rc, tc, a, b, rim_radius, K, dist, tilt, has_dist,
-                           newton_tol)
-        fEP = np.empty((3, F + 1, F + 1))
-        fES = np.empty((3, F + 1, F + 1))
-        fCV = np.empty((3, F + 1, F + 1, 2))
-        for r in range(F + 1):
-            _grid_check_row(r, fS[c], fP[c], fCV, fEP, fES, u0, v0, float(g), kind, A, p0, p1,
-                            az_step, sin_try, at_infinity, depth, vp, C, Rc, tc, a, b,
-                            rim_radius, K, dist, tilt, has_dist, newton_tol)
-        for r in range(F):
-            _grid_classify_row(r, fcls[c], fNV[c], fCV, fEP, fES, half, True)
-        nc = 0
-        for r in range(F + 1):
-            for k in range(F + 1):
-                for w_ in range(3):
-                    if fCV[w_, r, k, 0] > -np.inf:
-                        nc += 1
-        n_fine_checks[c] = nc
-    # 5. pixels, rows interleaved over blocks so that threads share the exact work evenly
-    colc = np.empty(W)
-    cols = np.empty(W)
-    if kind != 0:
-        for j in range(W):
-            colc[j] = math.cos(az_step * j)
-            cols[j] = math.sin(az_step * j)
-    wu = np.empty((4, h))  # weights of the four node columns, per column offset
-    for t in range(h):
-        w0, w1, w2, w3 = _lagrange4(t / h)
-        wu[0, t] = w0
-        wu[1, t] = w1
-        wu[2, t] = w2
-        wu[3, t] = w3
-    nblk = 16
-    blk = (H + nblk - 1) // nblk
-    n_exact_rows = np.zeros(nblk * blk, dtype=np.int64)
-    for rr_ in prange(nblk * blk):
-        rr = np.int64(rr_)
-        i = (rr % nblk) * blk + rr // nblk
-        if i >= H:
-            continue
+    row_P = np.empty((NX, 2))
+    for i in range(lo, hi):
+        pending_rows[i] = 0
         r = i // h
         v0, v1, v2, v3 = _lagrange4((i - r * h) / h)
-        rp = np.empty((NX, 2))
-        rs = np.empty((NX, 2))
         for q in range(NX):
             for cc in range(2):
-                rp[q, cc] = v0 * P[r, q, cc] + v1 * P[r + 1, q, cc] + v2 * P[r + 2, q, cc] \
+                row_P[q, cc] = (
+                    v0 * P[r, q, cc]
+                    + v1 * P[r + 1, q, cc]
+                    + v2 * P[r + 2, q, cc]
                     + v3 * P[r + 3, q, cc]
-                rs[q, cc] = v0 * S[r, q, cc] + v1 * S[r + 1, q, cc] + v2 * S[r + 2, q, cc] \
-                    + v3 * S[r + 3, q, cc]
-        rowz = 0.0
-        rowc = 0.0
-        if kind == 1:
-            rowz = p0 + p1 * i
-            rowc = 1.0
-        elif kind == 2:
-            el = p0 + p1 * i
-            rowz = math.sin(el)
-            rowc = math.cos(el)
-        fa = (i - r * h) // g       # fine row of refined cells
-        ftv = (i - r * h - fa * g) / g
-        n_ex = 0
+                )
+        row_z = 0.0
+        row_cos = 0.0
+        if view.kind == 1:
+            row_z = view.p0 + view.p1 * i
+            row_cos = 1.0
+        elif view.kind == 2:
+            el = view.p0 + view.p1 * i
+            row_z = math.sin(el)
+            row_cos = math.cos(el)
+        fine_row = (i - r * h) // g  # row of the sub-cells of refined cells
+        fine_tv = (i - r * h - fine_row * g) / g
         for k in range(nx):
             j0 = k * h
             j1 = min(W, j0 + h)
-            c = cls[r, k]
-            if c == _CELL_SEEN:
-                a0 = rp[k, 0]
-                a1 = rp[k + 1, 0]
-                a2 = rp[k + 2, 0]
-                a3 = rp[k + 3, 0]
-                b0 = rp[k, 1]
-                b1 = rp[k + 1, 1]
-                b2 = rp[k + 2, 1]
-                b3 = rp[k + 3, 1]
+            cell_class = cls[r, k]
+            if cell_class == CELL_SEEN:
+                a0 = row_P[k, 0]
+                a1 = row_P[k + 1, 0]
+                a2 = row_P[k + 2, 0]
+                a3 = row_P[k + 3, 0]
+                b0 = row_P[k, 1]
+                b1 = row_P[k + 1, 1]
+                b2 = row_P[k + 2, 1]
+                b3 = row_P[k + 3, 1]
                 if mode == 0:  # the bulk of a table: a tight loop the compiler can vectorise
                     for j in range(j0, j1):
                         tu = j - j0
-                        outx[i, j] = np.float32(wu[0, tu] * a0 + wu[1, tu] * a1 + wu[2, tu] * a2
-                                                + wu[3, tu] * a3)
-                        outy[i, j] = np.float32(wu[0, tu] * b0 + wu[1, tu] * b1 + wu[2, tu] * b2
-                                                + wu[3, tu] * b3)
-                else:
+                        outx[i, j] = np.float32(
+                            weights[0, tu] * a0
+                            + weights[1, tu] * a1
+                            + weights[2, tu] * a2
+                            + weights[3, tu] * a3
+                        )
+                        outy[i, j] = np.float32(
+                            weights[0, tu] * b0
+                            + weights[1, tu] * b1
+                            + weights[2, tu] * b2
+                            + weights[3, tu] * b3
+                        )
+                else:  # _view_store's fixed point; finite here (all 16 nodes solved)
                     for j in range(j0, j1):
                         tu = j - j0
-                        x = wu[0, tu] * a0 + wu[1, tu] * a1 + wu[2, tu] * a2 + wu[3, tu] * a3
-                        y = wu[0, tu] * b0 + wu[1, tu] * b1 + wu[2, tu] * b2 + wu[3, tu] * b3
-                        _view_store(i, j, x, y, 1, outx, outy, out16, outf16)
-                continue
-            if c == _CELL_UNSEEN:
+                        fx = np.float32(
+                            weights[0, tu] * a0
+                            + weights[1, tu] * a1
+                            + weights[2, tu] * a2
+                            + weights[3, tu] * a3
+                        )
+                        fy = np.float32(
+                            weights[0, tu] * b0
+                            + weights[1, tu] * b1
+                            + weights[2, tu] * b2
+                            + weights[3, tu] * b3
+                        )
+                        ix = int(np.rint(np.float64(fx) * 32.0))
+                        iy = int(np.rint(np.float64(fy) * 32.0))
+                        out16[i, j, 0] = max(-32768, min(32767, ix >> 5))
+                        out16[i, j, 1] = max(-32768, min(32767, iy >> 5))
+                        outf16[i, j] = (iy & 31) * 32 + (ix & 31)
+            elif cell_class == CELL_UNSEEN:
                 for j in range(j0, j1):
                     _view_store(i, j, _NAN, _NAN, mode, outx, outy, out16, outf16)
-                continue
-            ci = ref[r, k]
-            for j in range(j0, j1):
-                x = _NAN
-                y = _NAN
-                decided = False
-                fc = _CELL_BAD
-                if c == _CELL_BAD:  # refined cell: its sub-cell's class first
-                    fb = (j - j0) // g
-                    fc = fcls[ci, fa, fb]
-                    if fc == _CELL_SEEN:
-                        x, y = _interp_cell(fP[ci], fa, fb, ftv, (j - j0 - fb * g) / g)
-                        decided = True
-                    elif fc == _CELL_UNSEEN:
-                        decided = True
-                if decided:
-                    _view_store(i, j, x, y, mode, outx, outy, out16, outf16)
-                    continue
-                if kind == 0:
-                    x0 = A[0, 0] * j + A[0, 1] * i + A[0, 2]
-                    y0 = A[1, 0] * j + A[1, 1] * i + A[1, 2]
-                    z0 = A[2, 0] * j + A[2, 1] * i + A[2, 2]
-                else:
-                    px = rowc * colc[j]
-                    py = rowc * cols[j]
-                    x0 = A[0, 0] * px + A[0, 1] * py + A[0, 2] * rowz
-                    y0 = A[1, 0] * px + A[1, 1] * py + A[1, 2] * rowz
-                    z0 = A[2, 0] * px + A[2, 1] * py + A[2, 2] * rowz
-                nrm = math.sqrt(x0 * x0 + y0 * y0 + z0 * z0)
-                dx = x0 / nrm
-                dy = y0 / nrm
-                dz = z0 / nrm
-                decided = not dz <= sin_reject  # above every elevation the rig sees
-                if not decided:
-                    if c == _CELL_EDGE:
-                        tu = j - j0
-                        s1 = wu[0, tu] * rs[k, 0] + wu[1, tu] * rs[k + 1, 0] \
-                            + wu[2, tu] * rs[k + 2, 0] + wu[3, tu] * rs[k + 3, 0]
-                        s2 = wu[0, tu] * rs[k, 1] + wu[1, tu] * rs[k + 1, 1] \
-                            + wu[2, tu] * rs[k + 2, 1] + wu[3, tu] * rs[k + 3, 1]
-                        x, y, decided = _edge_pixel(s1, s2, dx, dy, dz, at_infinity, depth, vp,
-                                                    C, Rc, tc, a, b, rim_radius, K, dist, tilt,
-                                                    has_dist)
-                    elif fc == _CELL_EDGE:
-                        fb = (j - j0) // g
-                        s1, s2 = _interp_cell(fS[ci], fa, fb, ftv, (j - j0 - fb * g) / g)
-                        x, y, decided = _edge_pixel(s1, s2, dx, dy, dz, at_infinity, depth, vp,
-                                                    C, Rc, tc, a, b, rim_radius, K, dist, tilt,
-                                                    has_dist)
-                if not decided:
-                    x, y = _view_exact(dx, dy, dz, sin_reject, at_infinity, depth, vp, C, Rc, tc,
-                                       a, b, rim_radius, K, dist, tilt, has_dist, newton_tol)
-                    n_ex += 1
-                _view_store(i, j, x, y, mode, outx, outy, out16, outf16)
-        n_exact_rows[rr] = n_ex
-    n = 0
-    for p in range(NY):
-        for q in range(NX):
-            if NV[p, q, 0] > -np.inf:
-                n += 1
-    for c in range(nbad):
-        for p in range(F + 3):
-            for q in range(F + 3):
-                if fNV[c, p, q, 0] > -np.inf:
-                    n += 1
-    stats[0] = n
-    n = 0
-    for c in range(nbad):
-        n += n_fine_checks[c]
-    for w_ in range(3):
-        for r in range(ny + 1):
-            for k in range(nx + 1):
-                if CV[w_, r, k, 0] > -np.inf:
-                    n += 1
-    stats[1] = n
-    for c in range(6):
-        stats[2 + c] = 0
-    for r in range(ny):
-        for k in range(nx):
-            if cls[r, k] == _CELL_SEEN:
-                stats[2] += 1
-            elif cls[r, k] == _CELL_UNSEEN:
-                stats[3] += 1
-            elif cls[r, k] == _CELL_EDGE:
-                stats[4] += 1
-            else:
-                stats[5] += 1
-    for c in range(nbad):
-        for r in range(F):
-            for k in range(F):
-                if fcls[c, r, k] == _CELL_BAD:
-                    stats[6] += 1
-    stats[7] = n_exact_rows.sum()
+            else:  # refined (coarse cells are never EDGE: classify_cells without allow_edge)
+                c = refined_index[r, k]
+                pending_rows[i] += _fill_refined_cell(
+                    view,
+                    rig,
+                    i,
+                    j0,
+                    j1,
+                    fine_row,
+                    fine_tv,
+                    fine_S[c],
+                    fine_P[c],
+                    fine_cls[c],
+                    fine_weights,
+                    row_z,
+                    row_cos,
+                    column_cos,
+                    column_sin,
+                    mode,
+                    outx,
+                    outy,
+                    out16,
+                    outf16,
+                    pending,
+                )
+
+
+@kernel
+def store_entries(lo, hi, pixel_index, P, mode, outx, outy, out16, outf16):
+    """Write the solved entries ``P[n]`` of the pending pixels ``pixel_index[n]`` (flat)."""
+    W = outf16.shape[1] if mode == 1 else outx.shape[1]
+    for n in range(lo, hi):
+        i = pixel_index[n] // W
+        j = pixel_index[n] % W
+        _view_store(i, j, P[n, 0], P[n, 1], mode, outx, outy, out16, outf16)

@@ -4,12 +4,14 @@ Pure functions over validated arrays: the camera class (:mod:`omnicam.camera`) c
 parameters once and calls these. Distortion is handled here with OpenCV's point functions;
 the per-point work runs in the numba kernels of :mod:`omnicam._kernels`.
 """
+
 from __future__ import annotations
 
 import cv2
 import numpy as np
 
 from . import _kernels
+from ._jit import notice_if_cold, run_chunks
 
 __all__ = ["as_points", "undistort_normalized", "distort_normalized", "trace", "trace_normalized",
            "project"]
@@ -36,10 +38,13 @@ def as_points(points, name, dim):
         Maps an ``(N, k)`` result back to the caller's layout: ``(N, k)`` or ``(N, 1, k)``.
     """
     arr = np.asarray(points)
-    if arr.dtype == object or not (np.issubdtype(arr.dtype, np.floating)
-                                   or np.issubdtype(arr.dtype, np.integer)):
-        raise ValueError(f"{name} must be a float array of shape (N, {dim}) or (N, 1, {dim}), "
-                         f"got dtype {arr.dtype}")
+    if arr.dtype == object or not (
+        np.issubdtype(arr.dtype, np.floating) or np.issubdtype(arr.dtype, np.integer)
+    ):
+        raise ValueError(
+            f"{name} must be a float array of shape (N, {dim}) or (N, 1, {dim}), "
+            f"got dtype {arr.dtype}"
+        )
     if arr.ndim == 2 and arr.shape[1] == dim:
         layout = 2
     elif arr.ndim == 3 and arr.shape[1] == 1 and arr.shape[2] == dim:
@@ -52,6 +57,12 @@ def as_points(points, name, dim):
         return result.reshape(-1, 1, result.shape[-1]) if layout == 3 else result
 
     return pts, restore
+
+
+def _f64(x):
+    """``x`` as a writable C-contiguous float64 array (a copy only if needed): every kernel call
+    has the same argument types, so each kernel compiles and caches one signature."""
+    return np.require(x, np.float64, ["C_CONTIGUOUS", "WRITEABLE", "ALIGNED"])
 
 
 def undistort_normalized(pixels, K, D):
@@ -69,8 +80,9 @@ def undistort_normalized(pixels, K, D):
         if hasattr(cv2, "undistortPointsIter"):  # OpenCV 4
             und = cv2.undistortPointsIter(src, np.eye(3), D, None, None, _UNDISTORT_CRITERIA)
         else:  # OpenCV 5 takes the criteria in undistortPoints
-            und = cv2.undistortPoints(src, np.eye(3), D, R=None, P=None,
-                                      criteria=_UNDISTORT_CRITERIA)
+            und = cv2.undistortPoints(
+                src, np.eye(3), D, R=None, P=None, criteria=_UNDISTORT_CRITERIA
+            )
         out[ok] = und.reshape(-1, 2)
     return out
 
@@ -81,8 +93,9 @@ def distort_normalized(xn, K, D):
     out = np.full_like(xn, np.nan)
     if ok.any():
         obj = np.concatenate([xn[ok], np.ones((int(ok.sum()), 1))], axis=1)
-        xd, _ = cv2.projectPoints(obj.reshape(-1, 1, 3), np.zeros(3), np.zeros(3), np.eye(3),
-                                  np.asarray(D, np.float64))
+        xd, _ = cv2.projectPoints(
+            obj.reshape(-1, 1, 3), np.zeros(3), np.zeros(3), np.eye(3), np.asarray(D, np.float64)
+        )
         xd = xd.reshape(-1, 2)
         out[ok] = xd @ K[:2, :2].T + K[:2, 2]
     return out
@@ -118,8 +131,21 @@ def trace(pixels, K, D, R, C, mirror):
     n = uv.shape[0]
     origins = np.empty((n, 3))
     directions = np.empty((n, 3))
-    _kernels.trace_rays(np.ascontiguousarray(uv), np.ascontiguousarray(Kinv), R, C,
-                        mirror.a, mirror.b, mirror.rim_radius, origins, directions)
+    notice_if_cold(_kernels.trace_rays)
+    run_chunks(
+        _kernels.trace_rays,
+        n,
+        _f64(uv),
+        _f64(Kinv),
+        _f64(R),
+        _f64(C),
+        float(mirror.a),
+        float(mirror.b),
+        float(mirror.rim_radius),
+        origins,
+        directions,
+        min_chunk=4096,
+    )
     return origins, directions
 
 
@@ -164,8 +190,22 @@ def project(points, at_infinity, K, D, R, t, C, mirror):
     """
     out = np.empty((points.shape[0], 2))
     Kk = K if D is None else np.eye(3)
-    _kernels.project_points(points, bool(at_infinity), R, t, C, mirror.a, mirror.b,
-                            mirror.rim_radius, np.ascontiguousarray(Kk), out)
+    notice_if_cold(_kernels.project_points)
+    run_chunks(
+        _kernels.project_points,
+        len(out),
+        _f64(points),
+        bool(at_infinity),
+        _f64(R),
+        _f64(t),
+        _f64(C),
+        float(mirror.a),
+        float(mirror.b),
+        float(mirror.rim_radius),
+        _f64(Kk),
+        out,
+        min_chunk=256,
+    )
     if D is not None:
         out = distort_normalized(out, K, D)
     return out

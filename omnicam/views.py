@@ -13,33 +13,46 @@ Each table entry is the *exact* non-central projection of that direction or poin
 The paper's uncalibrated baseline (eqs. 2-5, Fig. 7 (a), (b)) is the same function on
 ``MisalignedHyperbolicCamera.aligned(mirror, f_C, x_c, y_c)``.
 
-How a table is built (one numba kernel, :func:`omnicam._kernels.view_table`): the reflection
-point is solved exactly (Newton on Fermat's path length, the solver of ``project``) on a grid of
-nodes about ``CELL_DEGREES`` apart, on the mirror sheet extended past the rim so that it is
+How a table is built (:func:`_build_table`, phase by phase in :mod:`omnicam._kernels`): the
+reflection point is solved exactly (Newton on Fermat's path length, the solver of ``project``) on a
+grid of nodes about ``CELL_DEGREES`` apart, on the mirror sheet extended past the rim so that it is
 smooth across the edge of what the mirror sees. Each cell is interpolated by the cubic Lagrange
-polynomial of its 4x4 nodes, and its error is *measured* against the exact answer at the cell
-centre and the middles of its edges (where the error of that interpolant peaks); a cell whose
-estimate exceeds ``TOLERANCE / 2`` is refined on a grid 4 times finer, and what still fails is
-solved pixel by pixel. Visibility is decided per cell when all of it is clearly seen or clearly
-unseen, else per pixel with a margin, and exactly inside the margin. ``tests/test_views.py``
-compares whole tables with the exact projection of every pixel.
+polynomial of its 4x4 nodes, and its error is *measured* against the exact answer at the cell centre
+and the middles of its edges (where the error of that interpolant peaks); a cell whose estimate
+exceeds ``TOLERANCE / 2`` is refined on a grid 4 times finer, and what still fails is solved pixel
+by pixel. Visibility is decided per cell when all of it is clearly seen or clearly unseen, else per
+pixel with a margin, and exactly inside the margin. ``tests/test_views.py`` compares whole tables
+with the exact projection of every pixel.
 
 The view conventions (azimuth, row order, ``R``, yaw/pitch/roll) are those of
 ``shared/reference/conventions.md``, section "Views".
 """
+
 from __future__ import annotations
 
+import functools
 import math
 import numbers
 
 import cv2
 import numpy as np
 
+from ._jit import notice_if_cold, run_chunks
 from ._validate import finite_array, float_array, real_number, validate_K
 
-__all__ = ["init_panorama_maps", "init_perspective_maps", "rotation_from_ypr", "K_from_fov",
-           "visible_elevation_range", "PanoramaView", "PerspectiveView", "UNSEEN", "PROJECTIONS",
-           "M1TYPES", "TOLERANCE"]
+__all__ = [
+    "init_panorama_maps",
+    "init_perspective_maps",
+    "rotation_from_ypr",
+    "K_from_fov",
+    "visible_elevation_range",
+    "PanoramaView",
+    "PerspectiveView",
+    "UNSEEN",
+    "PROJECTIONS",
+    "M1TYPES",
+    "TOLERANCE",
+]
 
 #: Source coordinate written for output pixels whose direction the mirror does not see: well
 #: outside any image (at least 2 px) and inside the range of ``CV_16SC2``.
@@ -143,8 +156,10 @@ def _check_size(size, min_height=1):
         raise ValueError(f"size must be (width, height), two positive integers, "
                          f"got {size!r}") from None
     if not exact or w < 1 or h < min_height:
-        raise ValueError(f"size must be (width, height), two integers with width >= 1 and "
-                         f"height >= {min_height}, got {size!r}")
+        raise ValueError(
+            f"size must be (width, height), two integers with width >= 1 and "
+            f"height >= {min_height}, got {size!r}"
+        )
     if w > 32767 or h > 32767:
         raise ValueError(f"size must be at most 32767 x 32767 (cv2.remap), got {size!r}")
     return w, h
@@ -159,10 +174,14 @@ def _check_camera(camera):
 
 
 def _check_m1type(m1type):
-    if isinstance(m1type, bool) or not isinstance(m1type, numbers.Integral) \
-            or int(m1type) not in M1TYPES:
-        raise ValueError(f"m1type must be cv2.CV_16SC2, cv2.CV_32FC1 or cv2.CV_32FC2, "
-                         f"got {m1type!r}")
+    if (
+        isinstance(m1type, bool)
+        or not isinstance(m1type, numbers.Integral)
+        or int(m1type) not in M1TYPES
+    ):
+        raise ValueError(
+            f"m1type must be cv2.CV_16SC2, cv2.CV_32FC1 or cv2.CV_32FC2, got {m1type!r}"
+        )
     return int(m1type)
 
 
@@ -194,29 +213,45 @@ def _check_elevation_range(elevation_range, projection):
     try:
         lo, hi = (real_number(v, "elevation_range") for v in elevation_range)
     except (TypeError, ValueError):
-        raise ValueError(f"elevation_range must be None or (lo, hi) in degrees, "
-                         f"got {elevation_range!r}") from None
+        raise ValueError(
+            f"elevation_range must be None or (lo, hi) in degrees, got {elevation_range!r}"
+        ) from None
     if not (math.isfinite(lo) and math.isfinite(hi)) or lo >= hi:
         raise ValueError(f"elevation_range must be (lo, hi) with lo < hi, got {elevation_range!r}")
     if projection == "cylindrical":
         if not (-90.0 < lo and hi < 90.0):
-            raise ValueError(f"elevation_range must lie inside (-90, 90) degrees for a cylindrical "
-                             f"panorama, got {elevation_range!r}")
+            raise ValueError(
+                f"elevation_range must lie inside (-90, 90) degrees for a cylindrical "
+                f"panorama, got {elevation_range!r}"
+            )
     elif not (-90.0 <= lo and hi <= 90.0):
-        raise ValueError(f"elevation_range must lie inside [-90, 90] degrees, "
-                         f"got {elevation_range!r}")
+        raise ValueError(
+            f"elevation_range must lie inside [-90, 90] degrees, got {elevation_range!r}"
+        )
     return lo, hi
 
 
 # -- the band a mirror sees ---------------------------------------------------------------------
 def _rim_directions(camera, n=3600):
-    """Reflected directions of ``n`` rim points (eqs. 14-15 at the rim), mirror frame."""
+    """Reflected directions of ``n`` rim points (eqs. 14-15 at the rim), mirror frame.
+
+    They depend on the mirror and the camera centre only; the last few rigs' are kept (every
+    table needs them, and they cost about as much as a small table).
+    """
     m = camera.mirror
-    P = m.rim_points(n)
-    V = P - camera.camera_center
+    C = np.asarray(camera.camera_center, dtype=np.float64)
+    return _rim_directions_of(m, float(m.a), float(m.b), float(m.rim_radius), C.tobytes(), n)
+
+
+@functools.lru_cache(maxsize=8)
+def _rim_directions_of(mirror, a, b, rim_radius, centre_bytes, n):
+    P = mirror.rim_points(n)
+    V = P - np.frombuffer(centre_bytes, dtype=np.float64)
     V /= np.linalg.norm(V, axis=1, keepdims=True)
-    nrm = m.unit_normal(P)
-    return m.reflect(V, nrm)
+    nrm = mirror.unit_normal(P)
+    out = mirror.reflect(V, nrm)
+    out.flags.writeable = False
+    return out
 
 
 def _elevation_deg(d):
@@ -258,7 +293,7 @@ def visible_elevation_range(camera):
     return lo, hi
 
 
-# -- the fast path: one numba kernel (omnicam._kernels.view_table) -------------------------------
+# -- the fast path: the phases of omnicam._kernels -----------------------------------------------
 #: Angular size of a coarse cell, degrees: the node spacing is the multiple of 4 output pixels
 #: (between 8 and 64) closest to it. Cells whose measured interpolation error exceeds
 #: TOLERANCE / 2 are refined on a grid 4 times finer, and sub-cells that still fail are computed
@@ -284,8 +319,9 @@ def _tilt_matrix(tau_x, tau_y):
     rot_x = np.array([[1.0, 0.0, 0.0], [0.0, cx, sx], [0.0, -sx, cx]])
     rot_y = np.array([[cy, 0.0, -sy], [0.0, 1.0, 0.0], [sy, 0.0, cy]])
     rot_xy = rot_y @ rot_x
-    proj_z = np.array([[rot_xy[2, 2], 0.0, -rot_xy[0, 2]], [0.0, rot_xy[2, 2], -rot_xy[1, 2]],
-                       [0.0, 0.0, 1.0]])
+    proj_z = np.array(
+        [[rot_xy[2, 2], 0.0, -rot_xy[0, 2]], [0.0, rot_xy[2, 2], -rot_xy[1, 2]], [0.0, 0.0, 1.0]]
+    )
     return proj_z @ rot_xy
 
 
@@ -320,11 +356,62 @@ def _reject_sines(camera, depth, viewpoint):
     return math.sin(math.radians(limit)), math.sin(math.radians(min(limit + 30.0, 89.5)))
 
 
-def _table(camera, kind, A, p0, p1, az_step, size, depth, viewpoint, m1type, step=None,
-           stats=None):
-    """Run :func:`omnicam._kernels.view_table` and return the maps for ``m1type``."""
-    from . import _kernels
+def _rig_args(camera):
+    """:class:`omnicam._kernels.RigArgs` of a camera: float64 C-contiguous writable copies (the
+    kernels' one signature; numba types read-only arrays apart)."""
+    from ._kernels import RigArgs
 
+    D = camera.D
+    dist = np.zeros(14)
+    tilt = np.eye(3)
+    if D is not None:
+        dist[: D.size] = D
+        if D.size == 14:
+            tilt = _tilt_matrix(D[12], D[13])
+    m = camera.mirror
+    return RigArgs(
+        _arg(camera.camera_center),
+        _arg(camera.R),
+        _arg(camera.tvec),
+        float(m.a),
+        float(m.b),
+        float(m.rim_radius),
+        _arg(camera.K),
+        dist,
+        tilt,
+        D is not None,
+    )
+
+
+def _view_args(camera, kind, A, p0, p1, az_step, depth, viewpoint):
+    """:class:`omnicam._kernels.ViewArgs` of a view (see :func:`_table`)."""
+    from ._kernels import NEWTON_TOL_REL, ViewArgs
+
+    sin_reject, sin_try = _reject_sines(camera, depth, viewpoint)
+    m = camera.mirror
+    return ViewArgs(
+        int(kind),
+        _arg(A),
+        float(p0),
+        float(p1),
+        float(az_step),
+        depth is None,
+        0.0 if depth is None else float(depth),
+        np.zeros(3) if viewpoint is None else _arg(viewpoint),
+        float(sin_reject),
+        float(sin_try),
+        NEWTON_TOL_REL * (float(m.a) + float(m.b)),
+    )
+
+
+def _table(camera, kind, A, p0, p1, az_step, size, depth, viewpoint, m1type, step=None, stats=None):
+    """Build the table of a view (:func:`_build_table`) and return the maps for ``m1type``.
+
+    ``kind, A, p0, p1, az_step`` define the output directions
+    (:func:`omnicam._kernels._view_direction`), ``step`` the node spacing (a multiple of 4;
+    by default from ``CELL_DEGREES``), ``stats`` (8,) int64 receives the counts of
+    :func:`_build_table`.
+    """
     w, h = size
     if step is None:
         if kind == 0:
@@ -335,19 +422,8 @@ def _table(camera, kind, A, p0, p1, az_step, size, depth, viewpoint, m1type, ste
     step = int(step)
     if step < 4 or step % 4:
         raise ValueError(f"step must be a multiple of 4, got {step}")
-    D = camera.D
-    dist = np.zeros(14)
-    tilt = np.eye(3)
-    if D is not None:
-        dist[:D.size] = D
-        if D.size == 14:
-            tilt = _tilt_matrix(D[12], D[13])
-    sin_reject, sin_try = _reject_sines(camera, depth, viewpoint)
-    at_infinity = depth is None
-    # writable C-contiguous float64 copies everywhere: one kernel signature (numba types
-    # read-only arrays apart, and the camera's arrays are read-only), so one cache entry
-    vp = np.zeros(3) if viewpoint is None else _arg(viewpoint)
-    m = camera.mirror
+    view = _view_args(camera, kind, A, p0, p1, az_step, depth, viewpoint)
+    rig = _rig_args(camera)
     if m1type == cv2.CV_16SC2:
         mode = 1
         outx = outy = np.empty((1, 1), np.float32)
@@ -360,13 +436,7 @@ def _table(camera, kind, A, p0, p1, az_step, size, depth, viewpoint, m1type, ste
         out16 = np.empty((1, 1, 2), np.int16)
         outf16 = np.empty((1, 1), np.uint16)
     st = np.zeros(8, np.int64) if stats is None else stats
-    _kernels.view_table(
-        kind, _arg(A), float(p0), float(p1), float(az_step),
-        w, h, step, at_infinity, 0.0 if depth is None else float(depth), vp,
-        float(sin_reject), float(sin_try), _arg(camera.camera_center), _arg(camera.R),
-        _arg(camera.tvec), float(m.a), float(m.b), float(m.rim_radius), _arg(camera.K), dist,
-        tilt, D is not None,
-        float(TOLERANCE), mode, outx, outy, out16, outf16, st)
+    _build_table(view, rig, (w, h), step, mode, (outx, outy, out16, outf16), st)
     if mode == 1:
         return out16, outf16
     if m1type == cv2.CV_32FC2:
@@ -375,8 +445,197 @@ def _table(camera, kind, A, p0, p1, az_step, size, depth, viewpoint, m1type, ste
 
 
 def _arg(x):
-    """A writable C-contiguous float64 copy (the kernel's one signature)."""
+    """A writable C-contiguous float64 copy (the kernels' one signature)."""
     return np.array(x, dtype=np.float64, order="C", copy=True)
+
+
+class _GridStack:
+    """G node grids of one shape and spacing with their check points, solved and classified.
+
+    The coarse grid of a table (G = 1) or the refined grids of its failing cells; see the
+    section comment of :mod:`omnicam._kernels`. ``S``, ``P``, ``node_margins``: (G, NY, NX, 2)
+    mirror points, pixels and margins of the nodes; ``cls`` (G, ny, nx) the cells' classes.
+    """
+
+    def __init__(self, view, rig, origins, spacing, shape, coarse=None, cells=None):
+        from . import _kernels as k
+
+        G = origins.shape[0]
+        ny, nx = shape
+        self.origins, self.spacing = origins, spacing
+        nodes = (G, ny + 3, nx + 3)
+        positions = np.empty(nodes + (2,))
+        starts = np.empty(nodes + (2,))
+        if cells is None:
+            cells, coarse_S = np.zeros((0, 2), np.int64), np.zeros((1, 1, 2))
+        else:
+            coarse_S = coarse.S[0]
+        k.grid_node_points(
+            0, positions[..., 0].size, origins, spacing, coarse_S, cells, positions, starts
+        )
+        self.S, self.P, self.node_margins, _ok, _sp = _solve(view, rig, positions, starts)
+        checks = (G, 3, ny + 1, nx + 1)
+        positions = np.empty(checks + (2,))
+        starts = np.empty(checks + (2,))
+        interpolated = np.empty(checks + (2,))
+        k.grid_check_points(
+            0,
+            positions[..., 0].size,
+            origins,
+            spacing,
+            self.S,
+            self.P,
+            positions,
+            starts,
+            interpolated,
+        )
+        _S, P, margins, ok, start_pixels = _solve(view, rig, positions, starts)
+        estimates = np.concatenate([interpolated, start_pixels], axis=-1)
+        self.pixel_error = np.empty(checks)
+        self.mirror_error = np.empty(checks)
+        self.check_margins = np.empty(checks + (2,))
+        k.score_check_points(
+            0,
+            ok.size,
+            ok.reshape(-1),
+            P.reshape(-1, 2),
+            margins.reshape(-1, 2),
+            estimates.reshape(-1, 4),
+            self.pixel_error.reshape(-1),
+            self.mirror_error.reshape(-1),
+            self.check_margins.reshape(-1, 2),
+        )
+
+    def classify(self, view, size, half_tol, allow_edge):
+        from . import _kernels as k
+
+        G, _w, ny1, nx1 = self.pixel_error.shape
+        self.cls = np.empty((G, ny1 - 1, nx1 - 1), np.int64)
+        k.classify_cells(
+            self.node_margins,
+            self.check_margins,
+            self.pixel_error,
+            self.mirror_error,
+            half_tol,
+            allow_edge,
+            self.cls,
+        )
+        if view.kind == 0:  # a convex-cone argument that holds for perspective views
+            k.mark_cells_above_band(view, self.origins, self.spacing, size[0], size[1], self.cls)
+        return self.cls
+
+    def n_solved(self):
+        """Nodes and check points with a solution."""
+        return (
+            int(np.count_nonzero(self.node_margins[..., 0] > -np.inf)),
+            int(np.count_nonzero(self.check_margins[..., 0] > -np.inf)),
+        )
+
+
+def _solve(view, rig, positions, starts, pixels_only=False):
+    """:func:`omnicam._kernels.solve_view_points` over arrays of positions (..., 2)."""
+    from . import _kernels as k
+
+    shape = positions.shape[:-1]
+    n = int(np.prod(shape))
+    ok = np.zeros(shape, np.bool_)
+    S = np.empty(shape + (2,))
+    P = np.empty(shape + (2,))
+    margins = np.empty(shape + (2,))
+    start_pixels = np.empty(shape + (2,))
+    run_chunks(
+        k.solve_view_points,
+        n,
+        view,
+        rig,
+        positions.reshape(-1, 2),
+        starts.reshape(-1, 2),
+        pixels_only,
+        ok.reshape(-1),
+        S.reshape(-1, 2),
+        P.reshape(-1, 2),
+        margins.reshape(-1, 2),
+        start_pixels.reshape(-1, 2),
+        min_chunk=32,
+    )
+    return S, P, margins, ok, start_pixels
+
+
+def _build_table(view, rig, size, step, mode, outputs, stats):
+    """The phases of a table (section comment of :mod:`omnicam._kernels`), writing ``outputs``.
+
+    ``stats`` (8,) int64 receives: nodes and check points solved, coarse cells seen / unseen /
+    edge / refined, refined sub-cells left to exact pixels, pixels solved exactly.
+    """
+    from . import _kernels as k
+
+    notice_if_cold(k.solve_view_points, k.fill_rows)
+    w, h = size
+    ny, nx = (h + step - 1) // step, (w + step - 1) // step
+    half_tol = 0.5 * TOLERANCE
+    coarse = _GridStack(view, rig, np.zeros((1, 2)), float(step), (ny, nx))
+    cls = coarse.classify(view, size, half_tol, False)[0]
+    # refine the failing cells on grids FINE times finer (own nodes, checks and classes)
+    cells = np.argwhere(cls == k.CELL_BAD).astype(np.int64)
+    refined_index = np.full((ny, nx), -1, np.int64)
+    refined_index[cells[:, 0], cells[:, 1]] = np.arange(len(cells))
+    fine = _GridStack(
+        view,
+        rig,
+        (cells[:, ::-1] * step).astype(np.float64),
+        float(step // k.FINE),
+        (k.FINE, k.FINE),
+        coarse,
+        cells,
+    )
+    fine_cls = fine.classify(view, size, half_tol, True)
+    # the pixels: interpolated, unseen, decided at the edge, or pending an exact solution
+    column_cos, column_sin = np.empty(w), np.empty(w)
+    weights, fine_weights = np.empty((4, step)), np.empty((4, step // k.FINE))
+    k.table_weights(view, column_cos, column_sin, weights, fine_weights)
+    pending = np.zeros((h, w), np.uint8)
+    pending_rows = np.empty(h, np.int64)
+    outx, outy, out16, outf16 = outputs
+    run_chunks(
+        k.fill_rows,
+        h,
+        view,
+        rig,
+        cls,
+        refined_index,
+        coarse.P[0],
+        fine.S,
+        fine.P,
+        fine_cls,
+        column_cos,
+        column_sin,
+        weights,
+        fine_weights,
+        mode,
+        outx,
+        outy,
+        out16,
+        outf16,
+        pending,
+        pending_rows,
+        min_chunk=16,
+    )
+    rows = np.flatnonzero(pending_rows)
+    sub_rows, columns = np.nonzero(pending[rows])
+    index = rows[sub_rows] * w + columns
+    positions = np.stack([index % w, index // w], axis=1).astype(np.float64)
+    if len(index):
+        P = _solve(view, rig, positions, positions, pixels_only=True)[1]
+        k.store_entries(0, len(index), index, P, mode, outx, outy, out16, outf16)
+    n_nodes, n_checks = coarse.n_solved()
+    f_nodes, f_checks = fine.n_solved()
+    stats[0] = n_nodes + f_nodes
+    stats[1] = n_checks + f_checks
+    stats[2:6] = [
+        np.count_nonzero(cls == c) for c in (k.CELL_SEEN, k.CELL_UNSEEN, k.CELL_EDGE, k.CELL_BAD)
+    ]
+    stats[6] = np.count_nonzero(fine_cls == k.CELL_BAD)
+    stats[7] = len(index)
 
 
 def _panorama_params(size, lo, hi, projection):
@@ -391,8 +650,16 @@ def _panorama_params(size, lo, hi, projection):
 
 
 # -- public API ---------------------------------------------------------------------------------
-def init_panorama_maps(camera, size, elevation_range=None, projection="cylindrical", R=None,
-                       m1type=cv2.CV_16SC2, depth=None, viewpoint=None):
+def init_panorama_maps(
+    camera,
+    size,
+    elevation_range=None,
+    projection="cylindrical",
+    R=None,
+    m1type=cv2.CV_16SC2,
+    depth=None,
+    viewpoint=None,
+):
     """``cv2.remap`` tables of a 360-degree panorama (paper section 4.1, Fig. 7).
 
     Column ``j`` looks at azimuth ``-360 j / W`` degrees (measured in the panorama frame from +X
@@ -460,8 +727,10 @@ def init_panorama_maps(camera, size, elevation_range=None, projection="cylindric
             lo = max(lo, CYLINDRICAL_MIN_ELEVATION)
             hi = min(hi, 89.0)
         if not (math.isfinite(lo) and math.isfinite(hi) and lo < hi):
-            raise ValueError(f"elevation_range: the band this camera sees, ({lo}, {hi}) deg, "
-                             f"is not a usable default for a {projection} panorama; give one")
+            raise ValueError(
+                f"elevation_range: the band this camera sees, ({lo}, {hi}) deg, "
+                f"is not a usable default for a {projection} panorama; give one"
+            )
     else:
         lo, hi = _check_elevation_range(elevation_range, projection)
     vp = _check_viewpoint(camera, viewpoint, depth)
@@ -471,8 +740,9 @@ def init_panorama_maps(camera, size, elevation_range=None, projection="cylindric
     return maps
 
 
-def init_perspective_maps(camera, K_new, size, R=None, m1type=cv2.CV_16SC2, depth=None,
-                          viewpoint=None):
+def init_perspective_maps(
+    camera, K_new, size, R=None, m1type=cv2.CV_16SC2, depth=None, viewpoint=None
+):
     """``cv2.remap`` tables of a virtual perspective view (paper section 4.1, Fig. 8).
 
     Output pixel ``u`` looks along ``d = R^T K_new^-1 (u, v, 1)`` in the mirror frame; each
@@ -572,27 +842,48 @@ class PanoramaView:
 
     __slots__ = ("size", "elevation_range", "projection", "R", "depth", "viewpoint")
 
-    def __init__(self, size, elevation_range=None, projection="cylindrical", R=None, depth=None,
-                 viewpoint=None):
+    def __init__(
+        self,
+        size,
+        elevation_range=None,
+        projection="cylindrical",
+        R=None,
+        depth=None,
+        viewpoint=None,
+    ):
         self.size = _check_size(size, min_height=2)
         if projection not in PROJECTIONS:
             raise ValueError(f"projection must be one of {PROJECTIONS}, got {projection!r}")
         self.projection = projection
-        self.elevation_range = (None if elevation_range is None
-                                else _check_elevation_range(elevation_range, projection))
+        self.elevation_range = (
+            None if elevation_range is None else _check_elevation_range(elevation_range, projection)
+        )
         self.R = None if R is None else _check_rotation(R)
         self.depth = _check_depth(depth)
-        self.viewpoint = (None if viewpoint is None
-                          else _check_viewpoint(None, viewpoint, 1.0 if depth is None else depth))
+        self.viewpoint = (
+            None
+            if viewpoint is None
+            else _check_viewpoint(None, viewpoint, 1.0 if depth is None else depth)
+        )
 
     def maps(self, camera, m1type=cv2.CV_16SC2):
         """``(map1, map2)`` of this view for ``camera``."""
-        return init_panorama_maps(camera, self.size, self.elevation_range, self.projection,
-                                  self.R, m1type, self.depth, self.viewpoint)
+        return init_panorama_maps(
+            camera,
+            self.size,
+            self.elevation_range,
+            self.projection,
+            self.R,
+            m1type,
+            self.depth,
+            self.viewpoint,
+        )
 
     def __repr__(self):
-        return (f"PanoramaView(size={self.size}, elevation_range={self.elevation_range}, "
-                f"projection={self.projection!r}, depth={self.depth})")
+        return (
+            f"PanoramaView(size={self.size}, elevation_range={self.elevation_range}, "
+            f"projection={self.projection!r}, depth={self.depth})"
+        )
 
 
 class PerspectiveView:
@@ -625,13 +916,17 @@ class PerspectiveView:
         self.K_new = K_from_fov(fov, self.size) if K_new is None else validate_K(K_new, "K_new")
         self.R = rotation_from_ypr(yaw, pitch, roll) if R is None else _check_rotation(R)
         self.depth = _check_depth(depth)
-        self.viewpoint = (None if viewpoint is None
-                          else _check_viewpoint(None, viewpoint, 1.0 if depth is None else depth))
+        self.viewpoint = (
+            None
+            if viewpoint is None
+            else _check_viewpoint(None, viewpoint, 1.0 if depth is None else depth)
+        )
 
     def maps(self, camera, m1type=cv2.CV_16SC2):
         """``(map1, map2)`` of this view for ``camera``."""
-        return init_perspective_maps(camera, self.K_new, self.size, self.R, m1type, self.depth,
-                                     self.viewpoint)
+        return init_perspective_maps(
+            camera, self.K_new, self.size, self.R, m1type, self.depth, self.viewpoint
+        )
 
     def __repr__(self):
         return f"PerspectiveView(size={self.size}, K_new={self.K_new.tolist()}, depth={self.depth})"

@@ -32,7 +32,8 @@ def rig(request):
 
 
 # -- directions written from conventions.md -----------------------------------------------------
-def panorama_dirs(size, lo, hi, projection, R=np.eye(3)):
+def panorama_dirs(size, lo, hi, projection, R=None):
+    R = np.eye(3) if R is None else R
     w, h = size
     az = np.radians(-360.0 * np.arange(w) / w)
     if projection == "cylindrical":
@@ -116,6 +117,23 @@ def test_perspective_table_within_tolerance_of_exact_projection(rig, depth, size
     mapx, mapy = rig.init_perspective_maps(K, size, R=R, m1type=cv2.CV_32FC1, depth=depth)
     ref = exact(rig, perspective_dirs(K, size, R), depth)
     assert_matches_exact(rig, mapx, mapy, ref)
+
+
+@pytest.mark.parametrize("ypr", [(0.0, 0.0, 0.0), (30.0, 20.0, 0.0), (-60.0, -10.0, 0.0)])
+def test_views_across_the_edge_of_the_band_keep_the_bound(ypr):
+    """Issue 12's straddling views (f = 400 at 1024x768), scaled to 320x240: the band's upper
+    edge crosses the view, cells wholly above it are skipped, cells on it are refined."""
+    cam = synthetic.misaligned_rig()
+    size = (320, 240)
+    K = np.array([[125.0, 0.0, 159.5], [0.0, 125.0, 119.5], [0.0, 0.0, 1.0]])
+    R = rotation_from_ypr(*ypr)
+    stats = np.zeros(8, np.int64)
+    step = views._step_for(math.degrees(1.0 / 125.0))
+    mapx, mapy = views._table(cam, 0, R.T @ np.linalg.inv(K), 0.0, 0.0, 0.0, size, None, None,
+                              cv2.CV_32FC1, step=step, stats=stats)
+    assert (mapx == views.UNSEEN).any() and (mapx != views.UNSEEN).any()
+    assert stats[5] > 0  # cells on the edge were refined
+    assert_matches_exact(cam, mapx, mapy, exact(cam, perspective_dirs(K, size, R)))
 
 
 def test_explicit_viewpoint_is_used_for_finite_depth():

@@ -1,0 +1,133 @@
+"""How omnicam runs its numba kernels: the decorator, the first-compile notice and threads.
+
+* :func:`kernel` is ``numba.njit(cache=True, nogil=True, error_model="numpy")`` when numba can
+  write its cache for this package, else the same without ``cache`` after one line on stderr
+  saying so (numba raises "cannot cache function ...: no locator available" when neither the
+  package's ``__pycache__`` nor the user cache folder is writable and ``NUMBA_CACHE_DIR`` is
+  unset).
+* :func:`notice_if_cold` prints, once per process, "omnicam: compiling kernels once (about N s);
+  later runs start fast" before a kernel whose cache index is missing or stale is first called.
+* :func:`run_chunks` runs a ``nogil`` kernel over ``range(n)`` in chunks on a small thread pool
+  (the kernels take ``lo, hi`` first), in place of ``parallel=True``: numba's parallel loops
+  cost several times the compile time of the serial kernel.
+"""
+
+from __future__ import annotations
+
+import sys
+from concurrent.futures import ThreadPoolExecutor
+
+import numba
+
+#: Cold compile time of everything the demo and a first unwarp use, seconds (benchmarks/
+#: bench_first_run.py on 2 cores), quoted by the first-compile notice.
+COMPILE_SECONDS = 15
+
+_state = {"noticed": False, "pool": None}
+
+
+def _say(text):
+    print(f"omnicam: {text}", file=sys.stderr, flush=True)
+
+
+def cache_available(probe=None):
+    """Whether numba finds a writable cache folder for functions of this package.
+
+    ``probe`` is the function whose source file decides (numba looks next to it first); the
+    default is a function of this module, which lives beside ``omnicam._kernels``.
+    """
+
+    def _probe():  # pragma: no cover - never called, only located
+        return 0
+
+    try:
+        numba.njit(cache=True)(probe or _probe)
+    except RuntimeError as e:
+        if "no locator available" in str(e):
+            return False
+        raise
+    return True
+
+
+def _cache_flag():
+    if cache_available():
+        return True
+    _say(
+        "numba cannot write its cache (package folder and user cache folder read-only); "
+        "kernels compile in every process. Set NUMBA_CACHE_DIR to a writable folder to keep them"
+    )
+    return False
+
+
+CACHE = _cache_flag()
+
+
+def kernel(func=None, **options):
+    """``numba.njit`` with ``cache`` (when possible) and ``nogil``; ``options`` are passed on."""
+    options.setdefault("cache", CACHE)
+    options.setdefault("nogil", True)
+    # IEEE division (x / 0 is inf or NaN) as in numpy and in numba's parallel loops, not
+    # Python's ZeroDivisionError: no test-and-raise branch in every division
+    options.setdefault("error_model", "numpy")
+    if func is None:
+        return numba.njit(**options)
+    return numba.njit(**options)(func)
+
+
+def _is_cold(dispatcher):
+    """Whether calling ``dispatcher`` would compile: no fresh cache index for its function."""
+    if numba.config.DISABLE_JIT or not hasattr(dispatcher, "_cache"):
+        return False
+    if dispatcher.overloads:
+        return False
+    try:
+        return not dispatcher._cache._cache_file._load_index()
+    except Exception:  # numba internals moved: say nothing rather than fail
+        return False
+
+
+def notice_if_cold(*dispatchers):
+    """Print the first-compile notice once per process if any of ``dispatchers`` is cold."""
+    if _state["noticed"]:
+        return
+    if any(_is_cold(d) for d in dispatchers):
+        _state["noticed"] = True
+        _say(f"compiling kernels once (about {COMPILE_SECONDS} s); later runs start fast")
+
+
+def n_threads():
+    """Threads for kernels: numba's thread count (``NUMBA_NUM_THREADS``, default all cores)."""
+    return max(1, int(numba.config.NUMBA_NUM_THREADS))
+
+
+def _pool():
+    if _state["pool"] is None:
+        _state["pool"] = ThreadPoolExecutor(max_workers=n_threads(), thread_name_prefix="omnicam")
+    return _state["pool"]
+
+
+def run_chunks(func, n, *args, min_chunk=256, chunks_per_thread=4):
+    """Call ``func(lo, hi, *args)`` over ``range(n)`` in chunks, on the calling thread and the
+    pool's.
+
+    ``func`` must release the GIL (:func:`kernel` does) and write disjoint slices. Small ``n``
+    runs in the calling thread alone. Each thread takes the next chunk when it is done with
+    one, so uneven work balances, and the calling thread works too: on a busy machine a pool
+    thread that is not scheduled delays at most the chunk it holds.
+    """
+    threads = n_threads()
+    n_chunks = min(threads * chunks_per_thread, n // min_chunk) if threads > 1 else 1
+    if n_chunks <= 1 or numba.config.DISABLE_JIT:  # pure Python holds the GIL: no gain
+        func(0, n, *args)
+        return
+    bounds = [n * c // n_chunks for c in range(n_chunks + 1)]
+    chunks = iter(range(n_chunks))  # next() on it is atomic under the GIL
+
+    def work():
+        for c in chunks:
+            func(bounds[c], bounds[c + 1], *args)
+
+    helpers = [_pool().submit(work) for _ in range(min(threads, n_chunks) - 1)]
+    work()
+    for f in helpers:
+        f.result()
