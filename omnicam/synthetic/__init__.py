@@ -650,3 +650,4 @@ def far_line_pixels(camera, n_lines=3, n_points=30, distance=(10e3, 50e3),
         if len(px) >= 5:
             lines.append(px)
     return lines
+from .boards import board_corners, board_object_points, random_board_poses, render_board  # noqa: E402,F401,I001
