@@ -116,13 +116,12 @@ def accuracy_trial(truth, n_views, noise, seed, dist_model):
     ok = np.isfinite(d_fit[:, 0])
     axis, origin = posture_error(cam, truth)
     K_err = cam.K - truth.K
-    row["omnicam"] = dict(rms=rep.rms, dir=kabsch_angle_rms(d_fit[ok], d_true[ok]),
-                          cover=ok.mean(), fx=K_err[0, 0] / truth.K[0, 0] * 100,
-                          fy=K_err[1, 1] / truth.K[1, 1] * 100, pp=float(np.hypot(K_err[0, 2],
-                                                                               K_err[1, 2])),
-                          axis=axis, origin=origin, time=t_omni,
-                          std_axis=rep.std["axis_deg"], std_pp=math.hypot(rep.std["cx"],
-                                                                          rep.std["cy"]))
+    row["omnicam"] = {
+        "rms": rep.rms, "dir": kabsch_angle_rms(d_fit[ok], d_true[ok]), "cover": ok.mean(),
+        "fx": K_err[0, 0] / truth.K[0, 0] * 100, "fy": K_err[1, 1] / truth.K[1, 1] * 100,
+        "pp": float(np.hypot(K_err[0, 2], K_err[1, 2])), "axis": axis, "origin": origin,
+        "time": t_omni, "std_axis": rep.std["axis_deg"],
+        "std_pp": math.hypot(rep.std["cx"], rep.std["cy"])}
     t = time.perf_counter()
     try:
         rms, K, xi, D, idx = run_omnidir(obj, noisy)
@@ -133,10 +132,10 @@ def accuracy_trial(truth, n_views, noise, seed, dist_model):
                                             xi, D)
         assert np.nanmax(np.abs(back.reshape(-1, 2) - pix)) < 1e-4, "Mei lifting"
         ok = np.isfinite(d_cv).all(axis=1)
-        row["cv2.omnidir"] = dict(rms=rms, dir=kabsch_angle_rms(d_cv[ok], d_true[ok]),
-                                  cover=ok.mean(), used=len(idx), time=t_cv)
+        row["cv2.omnidir"] = {"rms": rms, "dir": kabsch_angle_rms(d_cv[ok], d_true[ok]),
+                              "cover": ok.mean(), "used": len(idx), "time": t_cv}
     except cv2.error as e:
-        row["cv2.omnidir"] = dict(error=str(e).strip().splitlines()[-1][:80])
+        row["cv2.omnidir"] = {"error": str(e).strip().splitlines()[-1][:80]}
     return row
 
 
@@ -167,9 +166,10 @@ def accuracy(args):
             print(f"median {name:<12} rms {med['rms']:.3f} px, direction error "
                   f"{med['dir']:.4f} deg ({len(vals)} of {len(rows)} trials)")
     o = [r["omnicam"] for r in rows]
-    print("omnicam median |fx| %.3f %%, |fy| %.3f %%, pp %.2f px, axis %.4f deg, origin %.3f mm"
-          % tuple(float(np.median(np.abs([v[k] for v in o])))
-                  for k in ("fx", "fy", "pp", "axis", "origin")))
+    m = {k: float(np.median(np.abs([v[k] for v in o]))) for k in ("fx", "fy", "pp", "axis",
+                                                                    "origin")}
+    print(f"omnicam median |fx| {m['fx']:.3f} %, |fy| {m['fy']:.3f} %, pp {m['pp']:.2f} px, "
+          f"axis {m['axis']:.4f} deg, origin {m['origin']:.3f} mm")
 
 
 def detect(args):

@@ -1,6 +1,4 @@
 """find_pattern: chessboard corners in omnidirectional renders, mapped back to the source image."""
-import math
-
 import numpy as np
 import pytest
 
@@ -16,17 +14,11 @@ ROUGH = synthetic.aligned_rig(SIZE)
 
 
 def _board_at(elevation_deg, azimuth_deg, distance, seed):
-    """A board facing the rig at the given elevation, tilted a little (mirror frame)."""
-    rng = np.random.default_rng(seed)
-    for _ in range(200):
-        poses = boards.random_board_poses(
-            RIG, 1, PATTERN, SQUARE, distance=(distance, distance * 1.1),
-            elevation=(elevation_deg - 3.0, elevation_deg + 3.0), max_tilt_deg=30.0, rng=rng)
-        t = poses[0][1]
-        az = math.degrees(math.atan2(t[1], t[0]))
-        if abs((az - azimuth_deg + 180.0) % 360.0 - 180.0) < 60.0:
-            return poses[0]
-    raise AssertionError("no pose")
+    """A board facing the rig at about the given elevation and azimuth (mirror frame)."""
+    return boards.random_board_poses(
+        RIG, 1, PATTERN, SQUARE, distance=(distance, distance * 1.1),
+        elevation=(elevation_deg - 3.0, elevation_deg + 3.0), max_tilt_deg=30.0, rng=seed,
+        azimuth=(azimuth_deg - 20.0, azimuth_deg + 20.0))[0]
 
 
 def _match(found, truth):
@@ -37,7 +29,7 @@ def _match(found, truth):
 
 
 @pytest.mark.parametrize("elevation, azimuth, distance", [
-    (5.0, 40.0, 500.0),     # next to the rim
+    (-8.0, 40.0, 1000.0),   # next to the rim
     (-25.0, 160.0, 450.0),  # the middle of the annulus
     (-55.0, 250.0, 350.0),  # towards the centre
 ], ids=["rim", "middle", "centre"])
@@ -76,3 +68,40 @@ def test_a_board_of_another_size_gives_none():
 def test_image_of_another_size_than_the_camera_raises():
     with pytest.raises(ValueError, match="image_size"):
         omnicam.find_pattern(np.zeros((300, 300), np.uint8), PATTERN, ROUGH)
+
+
+def test_cli_calibrates_from_chessboard_images_without_intrinsics(tmp_path, capsys):
+    import cv2
+
+    from omnicam.cli import main
+
+    poses = boards.random_board_poses(RIG, 4, PATTERN, SQUARE, distance=(350.0, 700.0),
+                                      max_tilt_deg=40.0, rng=11)
+    paths = []
+    for i, p in enumerate(poses):
+        path = tmp_path / f"board{i}.png"
+        cv2.imwrite(str(path), boards.render_board(RIG, PATTERN, SQUARE, *p, supersample=2))
+        paths.append(str(path))
+    calib = tmp_path / "rig.yaml"
+    code = main(["calibrate", "--chessboard", "7x5", "--square", "60", *paths, "--mirror",
+                 "23.4", "28.1", "30", "--dist-model", "none", "-o", str(calib)])
+    out = capsys.readouterr().out
+    assert code == 0, out
+    assert "rms px" in out and calib.exists()
+    assert len(list((tmp_path / "rig_views").glob("*.png"))) == 4
+    cam = omnicam.MisalignedHyperbolicCamera.load(str(calib))
+    assert abs(cam.K[0, 0] / RIG.K[0, 0] - 1.0) < 0.02
+
+
+def test_cli_chessboard_needs_square_and_one_image_without_it(tmp_path, capsys):
+    from omnicam.cli import main
+
+    args = ["calibrate", "a.png", "b.png", "--mirror", "23.4", "28.1", "30", "-o",
+            str(tmp_path / "r.yaml")]
+    assert main(args) == 2
+    assert "one IMAGE" in capsys.readouterr().err
+    assert main([*args, "--chessboard", "7x5"]) == 2
+    assert "--square" in capsys.readouterr().err
+    assert main(["calibrate", "a.png", "--mirror", "23.4", "28.1", "30", "-o",
+                 str(tmp_path / "r.yaml")]) == 2
+    assert "--intrinsics" in capsys.readouterr().err

@@ -35,8 +35,13 @@ import warnings as _warnings
 import cv2
 import numpy as np
 
-__all__ = ["calibrate_pattern", "PatternReport", "board_pose_from_rays", "object_points",
-           "DIST_MODELS"]
+__all__ = [
+    "DIST_MODELS",
+    "PatternReport",
+    "board_pose_from_rays",
+    "calibrate_pattern",
+    "object_points",
+]
 
 #: Distortion models: which of OpenCV's ``(k1, k2, p1, p2, k3)`` are estimated.
 DIST_MODELS = {
@@ -136,7 +141,7 @@ class PatternReport:
         if rep is not None:
             for p in np.asarray(rep).reshape(-1, 2):
                 if np.isfinite(p).all():
-                    cv2.drawMarker(img, tuple(int(round(v)) for v in p), (0, 0, 255),
+                    cv2.drawMarker(img, tuple(round(v) for v in p), (0, 0, 255),
                                    cv2.MARKER_CROSS, 6, 1)
         return img
 
@@ -231,10 +236,22 @@ def board_pose_from_rays(origins, directions, obj, viewpoint):
     return sol.x[:3].copy(), sol.x[3:].copy(), float(np.sqrt(np.mean(r * r) * 3))
 
 
+def _distort(xn, K, D):
+    """OpenCV's distortion with ``D = (k1, k2, p1, p2[, k3])`` then ``K`` (skew included), in
+    numpy: the same formula as ``cv2.projectPoints``, without its per-call overhead."""
+    x, y = xn[:, 0], xn[:, 1]
+    r2 = x * x + y * y
+    k1, k2, p1, p2 = D[:4]
+    k3 = D[4] if len(D) > 4 else 0.0
+    radial = 1.0 + r2 * (k1 + r2 * (k2 + r2 * k3))
+    xd = x * radial + 2.0 * p1 * x * y + p2 * (r2 + 2.0 * x * x)
+    yd = y * radial + p1 * (r2 + 2.0 * y * y) + 2.0 * p2 * x * y
+    return np.stack([K[0, 0] * xd + K[0, 1] * yd + K[0, 2], K[1, 1] * yd + K[1, 2]], axis=1)
+
+
 def _rim_foot(cam_K, D, R, t, mirror, u, phi):
     """Orthogonal distances of pixels ``u`` to the rim image, with foot parameters ``phi``
     refined in place by Newton's method. Returns signed distances (px)."""
-    from ..raytrace import distort_normalized
     r, z = mirror.rim_radius, mirror.z_rim
 
     def curve(ph):
@@ -242,7 +259,7 @@ def _rim_foot(cam_K, D, R, t, mirror, u, phi):
         xn = X[:, :2] / X[:, 2:3]
         if D is None:
             return xn @ cam_K[:2, :2].T + cam_K[:2, 2]
-        return distort_normalized(xn, cam_K, D)
+        return _distort(xn, cam_K, D)
 
     h = 1e-4
     for _ in range(4):
@@ -607,7 +624,8 @@ def calibrate_pattern(images, pattern_size, square_size, mirror, K=None, D=None,
     if not (math.isfinite(square) and square > 0):
         raise ValueError(f"square_size must be a positive number, got {square_size!r}")
     if not isinstance(mirror, HyperbolicMirror):
-        raise ValueError(f"mirror must be a HyperbolicMirror, got {type(mirror).__name__}")
+        raise ValueError(  # noqa: TRY004 (ValueError for bad arguments, as everywhere)
+            f"mirror must be a HyperbolicMirror, got {type(mirror).__name__}")
     if dist_model not in DIST_MODELS:
         raise ValueError(f"dist_model must be one of {sorted(DIST_MODELS)}, got {dist_model!r}")
     from .._validate import validate_D, validate_image_size, validate_K
@@ -698,6 +716,9 @@ def calibrate_pattern(images, pattern_size, square_size, mirror, K=None, D=None,
             continue
         pts.append(_check_points(p, n_corners, i, (cols, rows)))
     found = [i for i, p in enumerate(pts) if p is not None]
+    if found:  # (with no board at all the error below says it)
+        for i in sorted(dropped):
+            _warnings.warn(f"view {i} dropped: {dropped[i]}", RuntimeWarning, stacklevel=2)
     if not found:
         raise ValueError(f"no {cols}x{rows} chessboard was found in any of the {len(pts)} "
                          f"image(s): check pattern_size (inner corners (columns, rows), not "
@@ -709,12 +730,14 @@ def calibrate_pattern(images, pattern_size, square_size, mirror, K=None, D=None,
         P, d = cam0.unproject(pts[i])
         if not np.isfinite(d).all():
             dropped[i] = "corners outside the mirror rim"
+            _warnings.warn(f"view {i} dropped: {dropped[i]}", RuntimeWarning, stacklevel=2)
             continue
         rvec_b, tvec_b, _ = board_pose_from_rays(P, d, obj, viewpoint)
         n = _rodrigues(rvec_b)[:, 2]
         centre = obj.mean(axis=0) @ _rodrigues(rvec_b).T + tvec_b - viewpoint
         if abs(n @ centre) < _EDGE_ON_SIN * np.linalg.norm(centre):
             dropped[i] = "board seen edge-on (its plane passes through the camera)"
+            _warnings.warn(f"view {i} dropped: {dropped[i]}", RuntimeWarning, stacklevel=2)
             edge_on.append(i)
             continue
         poses[i] = (rvec_b, tvec_b)
@@ -833,7 +856,4 @@ def calibrate_pattern(images, pattern_size, square_size, mirror, K=None, D=None,
         image_points=image_points_out, reprojected=reprojected, rim_points=rim_px,
         rim_rms=float(np.sqrt(np.mean(rim_r ** 2))), std=std, warnings=tuple(warns),
         dropped=dict(sorted(dropped.items())), nfev=int(sol.nfev), camera=camera, start=cam0)
-    for i, why in sorted(dropped.items()):
-        if not why.startswith("RMS"):  # the outliers were warned about above
-            _warnings.warn(f"view {i} dropped: {why}", RuntimeWarning, stacklevel=2)
     return camera, report

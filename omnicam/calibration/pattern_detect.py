@@ -28,7 +28,7 @@ import math
 import cv2
 import numpy as np
 
-__all__ = ["find_pattern", "detection_views", "HOMOGRAPHY_RMS_PX"]
+__all__ = ["HOMOGRAPHY_RMS_PX", "detection_views", "find_pattern"]
 
 #: Largest RMS (view px) of the homography from the board grid to a view's corners.
 HOMOGRAPHY_RMS_PX = 1.5
@@ -74,7 +74,7 @@ def detection_views(camera, fov_deg=80.0, yaw_step_deg=30.0, pitches_deg=None, s
     rim = camera.rim_image_points(360)
     perimeter = float(np.sum(np.linalg.norm(np.diff(np.vstack([rim, rim[:1]]), axis=0), axis=1)))
     px_per_rad = scale * perimeter / (2 * math.pi)
-    n = max(8, int(round(2 * px_per_rad * math.tan(math.radians(fov_deg) / 2) / node_step)))
+    n = max(8, round(2 * px_per_rad * math.tan(math.radians(fov_deg) / 2) / node_step))
     size = n * node_step + 1  # nodes at 0, step, ..., size - 1
     K_new = K_from_fov(fov_deg, (size, size))
     g = np.arange(0, size, node_step, dtype=np.float64)
@@ -179,6 +179,9 @@ def _detect(gray, cols, rows, views):
     for yaw, pitch, (w, h), mx, my in views:
         view = cv2.remap(gray, mx, my, cv2.INTER_LINEAR, borderMode=cv2.BORDER_CONSTANT,
                          borderValue=0)
+        # OpenCV's own quick test (what CALIB_CB_FAST_CHECK runs) first: 8 ms per view
+        if not cv2.checkChessboard(view, (cols, rows)):
+            continue
         found, corners = cv2.findChessboardCorners(view, (cols, rows), flags=_FIND_FLAGS)
         if not found:
             continue
@@ -207,4 +210,6 @@ def _detect(gray, cols, rows, views):
             continue
         if margin > best_margin:
             best, best_margin = src, margin
+        if best_margin > 0.15 * min(w, h):  # well inside this view: no better one to find
+            break
     return best

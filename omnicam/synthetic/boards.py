@@ -27,8 +27,13 @@ import numpy as np
 
 from . import HOUSING_COLOR, _check_camera, _render, _sample_equirect, make_environment
 
-__all__ = ["board_object_points", "random_board_poses", "board_corners", "render_board",
-           "board_outline"]
+__all__ = [
+    "board_corners",
+    "board_object_points",
+    "board_outline",
+    "random_board_poses",
+    "render_board",
+]
 
 _BLACK, _WHITE = 25.0, 230.0
 
@@ -103,11 +108,11 @@ def _visible(camera, pattern_size, square_size, rvec, tvec, margin, min_spacing,
 
 def random_board_poses(camera, n, pattern_size, square_size, distance=(300.0, 1500.0),
                        elevation=(-65.0, 5.0), max_tilt_deg=40.0, min_spacing=6.0, margin=3.0,
-                       rng=0, max_tries=20000, body_radius=10.0):
+                       rng=0, max_tries=20000, body_radius=10.0, azimuth=(0.0, 360.0)):
     """``n`` board poses ``(rvec_b, tvec_b)`` (mirror frame), each wholly visible in ``camera``.
 
-    Each board's centre is at a distance in ``distance`` (mm) from the mirror origin, at a
-    uniform random azimuth and an elevation in ``elevation`` (degrees); the board faces the
+    Each board's centre is at a distance in ``distance`` (mm) from the mirror origin, at an
+    azimuth in ``azimuth`` and an elevation in ``elevation`` (degrees); the board faces the
     origin, tilted by up to ``max_tilt_deg`` and turned by a random angle in its plane. A pose is
     kept when every inner corner and the board's outer edge (white margin included) project
     inside the image with ``margin`` px to spare and the smallest corner spacing is at least
@@ -128,7 +133,7 @@ def random_board_poses(camera, n, pattern_size, square_size, distance=(300.0, 15
         if len(poses) == n:
             break
         dist = rng.uniform(*distance)
-        az = rng.uniform(0.0, 2.0 * math.pi)
+        az = math.radians(rng.uniform(*azimuth))
         el = math.radians(rng.uniform(*elevation))
         u = np.array([math.cos(el) * math.cos(az), math.cos(el) * math.sin(az), math.sin(el)])
         # board frame: z along the line of sight (away from the rig), x roughly horizontal
