@@ -3,7 +3,8 @@
 Accuracy (default): renders of a rig tilted 3 deg and offset 3 mm (1000x1000), ``--views``
 chessboards 0.3-1.5 m away; the ground-truth corners (exact projection) plus Gaussian noise of
 ``--noise`` px are given to both methods (the same corners), omnicam also gets the rim detected
-in a render of the scene. For each method: the reprojection RMS, the **direction error over the
+in a render of the scene, and the outline of the camera's reflection detected there (unless
+``--no-lens``). For each method: the reprojection RMS, the **direction error over the
 annulus** (RMS angle between each pixel's fitted and true ray direction, every 4th pixel inside
 the rim, after the best rotation between the two frames, Kabsch on the direction pairs), and
 omnicam's K, axis and origin errors (``omnicam.gauge.posture_error``). cv2.omnidir is Mei's
@@ -34,6 +35,7 @@ import numpy as np
 
 import omnicam
 from omnicam import synthetic
+from omnicam.calibration.lens import detect_lens
 from omnicam.calibration.rim import detect_rim
 from omnicam.gauge import posture_error
 from omnicam.raytrace import undistort_normalized
@@ -93,7 +95,7 @@ def run_omnidir(obj, image_points):
     return float(rms), K, float(np.ravel(xi)[0]), D, np.ravel(idx)
 
 
-def accuracy_trial(truth, n_views, noise, seed, dist_model):
+def accuracy_trial(truth, n_views, noise, seed, dist_model, use_lens=True):
     rng = np.random.default_rng(seed)
     poses = boards.random_board_poses(truth, n_views, PATTERN, SQUARE, max_tilt_deg=50.0,
                                       rng=rng)
@@ -101,7 +103,9 @@ def accuracy_trial(truth, n_views, noise, seed, dist_model):
     noisy = [p + rng.normal(0.0, noise, p.shape) for p in exact]
     scene = boards.render_board(truth, PATTERN, SQUARE, None, None, supersample=3, noise=1.0,
                                 seed=seed)
-    rim = detect_rim(scene).points
+    rim_fit = detect_rim(scene)
+    rim = rim_fit.points
+    lens = detect_lens(scene, rim_fit).points if use_lens else None
     pix, d_true = annulus_pixels(truth)
     obj = boards.board_object_points(PATTERN, SQUARE)
     row = {}
@@ -110,7 +114,7 @@ def accuracy_trial(truth, n_views, noise, seed, dist_model):
         warnings.simplefilter("ignore", RuntimeWarning)
         cam, rep = omnicam.calibrate_pattern(None, PATTERN, SQUARE, truth.mirror, image_size=SIZE,
                                              image_points=noisy, boundary_points=rim,
-                                             dist_model=dist_model)
+                                             dist_model=dist_model, lens=lens)
     t_omni = time.perf_counter() - t
     _, d_fit = cam.unproject(pix)
     ok = np.isfinite(d_fit[:, 0])
@@ -143,9 +147,10 @@ def accuracy(args):
     truth = target_rig()
     print(f"rig: tilt 3 deg, offset 3 mm, {SIZE[0]}x{SIZE[1]}; {args.views} views of a "
           f"{PATTERN[0]}x{PATTERN[1]} board ({SQUARE:g} mm squares) 0.3-1.5 m away; corner "
-          f"noise {args.noise} px; dist_model {args.dist_model}; {args.trials} trials")
-    rows = [accuracy_trial(truth, args.views, args.noise, args.seed + k, args.dist_model)
-            for k in range(args.trials)]
+          f"noise {args.noise} px; dist_model {args.dist_model}; camera's reflection "
+          f"{'not ' if args.no_lens else ''}used; {args.trials} trials")
+    rows = [accuracy_trial(truth, args.views, args.noise, args.seed + k, args.dist_model,
+                           not args.no_lens) for k in range(args.trials)]
     print(f"{'trial':>5} {'method':<12} {'rms px':>7} {'dir deg':>8} {'fx %':>7} {'fy %':>7} "
           f"{'pp px':>6} {'axis deg':>8} {'origin':>7} {'s_axis':>7} {'s_pp':>6} {'time s':>6}")
     for k, row in enumerate(rows):
@@ -251,6 +256,8 @@ def main():
     ap.add_argument("--detect", action="store_true")
     ap.add_argument("--renders", type=int, default=40)
     ap.add_argument("--timing", action="store_true")
+    ap.add_argument("--no-lens", action="store_true",
+                    help="omnicam without the camera's reflection (rim and corners only)")
     args = ap.parse_args()
     if args.detect:
         detect(args)

@@ -92,6 +92,10 @@ class PatternReport:
     camera : MisalignedHyperbolicCamera
     start : MisalignedHyperbolicCamera
         The start of the adjustment (K from the rim, posture from Chen's method).
+    lens_rms : float
+        RMS outline residual of the camera's reflection, px (NaN when not used).
+    lens_note : str
+        Whether and how the camera's reflection was used.
     """
 
     rms: float
@@ -108,6 +112,8 @@ class PatternReport:
     nfev: int
     camera: object
     start: object
+    lens_rms: float = math.nan
+    lens_note: str = ""
 
     def table(self):
         """The per-view table as text: index, corners, RMS px, distance and elevation of the
@@ -289,10 +295,11 @@ class _Adjustment:
     """
 
     def __init__(self, cam0, mirror, obj, views, rim_px, free_d, n_d, fit_skew, fit_shape,
-                 camera_cls):
+                 camera_cls, lens_px=None):
         from .refine import gauge_rotation
         self.gauge_rotation = gauge_rotation
         self.mirror, self.obj, self.views, self.rim_px = mirror, obj, views, rim_px
+        self.lens_px = lens_px
         self.free_d, self.n_d, self.fit_skew, self.fit_shape = free_d, n_d, fit_skew, fit_shape
         self.camera_cls = camera_cls
         self.R0 = cam0.R.copy()
@@ -385,8 +392,28 @@ class _Adjustment:
         phi = self.rim_phi.copy()
         return _rim_foot(K, D, R, tvec, mirror, self.rim_px, phi)
 
+    def lens_residuals(self, x):
+        """The camera's reflection (:mod:`.lens`): ``(d(u) - rho) / |grad d|`` px for every
+        outline pixel, ``d`` the distance of its reflected ray to the camera centre and
+        ``rho`` (the ball's radius) fitted in closed form at each evaluation."""
+        from ..raytrace import undistort_normalized
+        from .lens import fit_rho, ray_distances
+        K, D, R, tvec, mirror = self.unpack(x)
+        Ki = np.linalg.inv(K)
+        if D is None:
+            xn = self.lens_px @ Ki[:2, :2].T + Ki[:2, 2]
+        else:
+            xn = undistort_normalized(self.lens_px, K, D)
+        d, g = ray_distances(mirror, R, tvec, xn, Ki[:2, :2])
+        r = (d - fit_rho(d, g)) / g
+        r[~np.isfinite(r)] = 0.0
+        return r
+
     def residuals(self, x):
-        return np.concatenate([self.corner_residuals(x), self.rim_residuals(x)])
+        parts = [self.corner_residuals(x), self.rim_residuals(x)]
+        if self.lens_px is not None:
+            parts.append(self.lens_residuals(x))
+        return np.concatenate(parts)
 
     def steps(self, x):
         h = np.empty_like(x)
@@ -411,7 +438,8 @@ class _Adjustment:
         h = self.steps(x)
         g = self.n_global
         nv = len(self.views)
-        m = nv * self.n_rows_view + len(self.rim_px)
+        m = nv * self.n_rows_view + len(self.rim_px) + (
+            0 if self.lens_px is None else len(self.lens_px))
         J = np.zeros((m, len(x)))
         for k in range(g):
             if self.names[k] in self.fixed:
@@ -552,7 +580,7 @@ def calibrate_pattern(images, pattern_size, square_size, mirror, K=None, D=None,
                       image_size=None, image_points=None, refine_mirror_shape=False,
                       dist_model="k1k2p1p2", *, boundary_points=None, camera_cls=None,
                       fit_skew=False, drop_outlier_views=True, outlier_factor=3.0,
-                      outlier_min_px=1.0, f_scale=1.0):
+                      outlier_min_px=1.0, f_scale=1.0, lens="auto"):
     """Calibrate ``K``, ``D`` and the mirror posture from chessboards seen through the mirror.
 
     Parameters
@@ -593,6 +621,12 @@ def calibrate_pattern(images, pattern_size, square_size, mirror, K=None, D=None,
         again (else they are only reported); either way a ``RuntimeWarning`` names them.
     f_scale : float
         Scale of the robust ``soft_l1`` loss, px (residuals well below it count fully).
+    lens : "auto", None or (M, 2) array_like
+        The camera's own reflection (:mod:`.lens`): ``"auto"`` detects its outline in the
+        image where the rim was found (and goes on without it if there is none); an array gives
+        the outline pixels; ``None`` does not use it. Its residuals join the adjustment: they
+        separate a tilt of the mirror from a shift of the principal point, which corners and
+        rim alone determine only through second-order perspective (see the report's ``std``).
 
     Returns
     -------
@@ -668,6 +702,7 @@ def calibrate_pattern(images, pattern_size, square_size, mirror, K=None, D=None,
     warns = []
 
     # 1. the rim
+    rim_image = 0
     if boundary_points is not None:
         rim_seen = np.asarray(boundary_points, np.float64).reshape(-1, 2)
         if len(rim_seen) < 6 or not np.isfinite(rim_seen).all():
@@ -679,6 +714,7 @@ def calibrate_pattern(images, pattern_size, square_size, mirror, K=None, D=None,
         for i, im in enumerate(images):
             try:
                 rim_fit = detect_rim(im)
+                rim_image = i
                 break
             except ValueError as e:
                 errors.append(f"images[{i}]: {e}")
@@ -688,6 +724,27 @@ def calibrate_pattern(images, pattern_size, square_size, mirror, K=None, D=None,
         rim_seen = np.asarray(rim_fit.points, np.float64)
     if image_size is None:
         raise ValueError("image_size (width, height) is needed when no image is given")
+    # the camera's own reflection (its outline pins the tilt against the principal point)
+    lens_px, lens_note = None, "not used (lens=None)"
+    if isinstance(lens, str):
+        if lens != "auto":
+            raise ValueError(f"lens must be 'auto', None or an (M, 2) array of outline pixels, "
+                             f"got {lens!r}")
+        if not images:
+            lens_note = "not used: no image (give lens=outline pixels to use it)"
+        else:
+            from .lens import detect_lens
+            try:
+                lens_px = np.asarray(detect_lens(images[rim_image], rim_fit).points, np.float64)
+                lens_note = f"used: {len(lens_px)} outline points detected"
+            except ValueError as e:
+                lens_note = f"not used: {e}"
+    elif lens is not None and lens is not False:
+        lens_px = np.asarray(lens, np.float64).reshape(-1, 2)
+        if len(lens_px) < 8 or not np.isfinite(lens_px).all():
+            raise ValueError("lens must hold at least 8 finite pixels along the outline of the "
+                             "camera's reflection")
+        lens_note = f"used: {len(lens_px)} outline points given"
 
     # 2. the start: K from the rim, posture by Chen's method
     if K is None:
@@ -757,7 +814,7 @@ def calibrate_pattern(images, pattern_size, square_size, mirror, K=None, D=None,
 
     def adjust(view_ids, x_boards, x_global=None):
         adj = _Adjustment(cam0, mirror, obj, [pts[i] for i in view_ids], rim_px, free_d, n_d,
-                          fit_skew, refine_mirror_shape, camera_cls)
+                          fit_skew, refine_mirror_shape, camera_cls, lens_px)
         x0 = np.concatenate([adj.x0_global if x_global is None else x_global,
                              np.concatenate(x_boards)])
         if x_global is None:
@@ -831,7 +888,8 @@ def calibrate_pattern(images, pattern_size, square_size, mirror, K=None, D=None,
         G[:, k] = (centre(xp) - centre(xm)) / (2 * hk)
     std["origin"] = float(math.sqrt(max(np.trace(G @ cov[ip:ip + 5, ip:ip + 5] @ G.T), 0.0)))
     corner_r = r_all[:len(used) * nv_rows]
-    rim_r = r_all[len(used) * nv_rows:]
+    rim_r = r_all[len(used) * nv_rows:len(used) * nv_rows + len(rim_px)]
+    lens_r = r_all[len(used) * nv_rows + len(rim_px):]
     board_poses = {i: gauged[k] for k, i in enumerate(used)}
     reprojected = {i: camera.project(obj, *board_poses[i]).reshape(-1, 1, 2) for i in used}
     if len(used) < 6:
@@ -855,5 +913,7 @@ def calibrate_pattern(images, pattern_size, square_size, mirror, K=None, D=None,
         corners_used={i: n_corners for i in used}, board_poses=board_poses,
         image_points=image_points_out, reprojected=reprojected, rim_points=rim_px,
         rim_rms=float(np.sqrt(np.mean(rim_r ** 2))), std=std, warnings=tuple(warns),
+        lens_rms=float(np.sqrt(np.mean(lens_r ** 2))) if len(lens_r) else math.nan,
+        lens_note=lens_note,
         dropped=dict(sorted(dropped.items())), nfev=int(sol.nfev), camera=camera, start=cam0)
     return camera, report
