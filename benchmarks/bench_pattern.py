@@ -214,6 +214,11 @@ def detect(args):
                     key=lambda v: v.max())
             found += 1
             errs.append(e)
+            if e.max() > 0.5:
+                t_ = p[1]
+                print(f"  render {tried - 1}: corner error up to {e.max():.2f} px (corner "
+                      f"{int(np.argmax(e))}), distance {np.linalg.norm(t_):.0f} mm, elevation "
+                      f"{math.degrees(math.asin(t_[2] / np.linalg.norm(t_))):.1f} deg")
     e = np.concatenate(errs) if errs else np.array([np.nan])
     print(f"find_pattern: {found} of {tried} renders ({100.0 * found / tried:.0f} %), corner "
           f"error RMS {math.sqrt(np.mean(e ** 2)):.3f} px, 95th percentile "

@@ -166,3 +166,19 @@ def test_bad_arguments_name_what_to_change():
     with pytest.raises(ValueError, match="boundary_points"):
         omnicam.calibrate_pattern(None, PATTERN, SQUARE, RIG.mirror, image_points=_corners(),
                                   image_size=SIZE)
+
+
+def test_the_camera_reflection_pins_the_tilt_against_the_principal_point():
+    from omnicam.calibration.lens import outline_pixels
+
+    pts = _corners(noise=0.2, seed=6)
+    rng = np.random.default_rng(8)
+    lens = outline_pixels(RIG, 10.0, 120)[0] + rng.normal(0.0, 0.1, (120, 2))
+    _, without = _calibrate(pts, rim=_rim(0.1), dist_model="none", lens=None)
+    cam, report = _calibrate(pts, rim=_rim(0.1), dist_model="none", lens=lens)
+    assert report.std["axis_deg"] < 0.5 * without.std["axis_deg"]
+    assert report.std["cx"] < 0.5 * without.std["cx"]
+    axis, _ = posture_error(cam, RIG)
+    assert axis < 4.0 * report.std["axis_deg"]
+    assert abs(cam.K[0, 2] - RIG.K[0, 2]) < 4.0 * report.std["cx"]
+    assert report.lens_rms < 0.3 and report.lens_note.startswith("used")
