@@ -5,9 +5,10 @@ calibration (even a rough one), :func:`find_pattern` looks at the annulus throug
 perspective views (:func:`omnicam.views.init_perspective_maps`, scene at infinity), several yaws
 and pitches covering the band of elevations the mirror sees, where the board's lines are nearly
 straight again. In each view it runs ``cv2.findChessboardCorners`` (fast check first) and refines
-the corners with ``cv2.cornerSubPix``; a detection is accepted only if a homography fits the
-view's corners to the board's grid to better than :data:`HOMOGRAPHY_RMS_PX` (a wrong or partial
-grid does not). The view's corners are mapped back to the source image exactly through the
+the corners with ``cv2.cornerSubPix``; a detection is accepted only if a homography fits
+the view's corners to the board's grid to :data:`HOMOGRAPHY_RMS_PX` RMS with no corner
+standing out (:data:`HOMOGRAPHY_MAX_PX`): a wrong or partial grid, or one corner pulled off
+by cornerSubPix, does not. The view's corners are mapped back to the source image exactly through the
 view's own remap table: a feature at view pixel ``u`` was sampled from source pixel
 ``map(u)``, bilinear in the float tables, whatever the calibration's errors. They are then
 refined once more by ``cv2.cornerSubPix`` in the source image, where the corners are not
@@ -28,10 +29,13 @@ import math
 import cv2
 import numpy as np
 
-__all__ = ["HOMOGRAPHY_RMS_PX", "detection_views", "find_pattern"]
+__all__ = ["HOMOGRAPHY_MAX_PX", "HOMOGRAPHY_RMS_PX", "detection_views", "find_pattern"]
 
-#: Largest RMS (view px) of the homography from the board grid to a view's corners.
+#: Largest RMS (view px) of a view's corners about the board grid's best homography.
 HOMOGRAPHY_RMS_PX = 1.5
+#: A corner farther than this (view px) and than 6 times the median from that homography
+#: rejects the view's detection.
+HOMOGRAPHY_MAX_PX = 1.0
 _FIND_FLAGS = cv2.CALIB_CB_ADAPTIVE_THRESH | cv2.CALIB_CB_NORMALIZE_IMAGE | cv2.CALIB_CB_FAST_CHECK
 _CACHE = {}
 _CACHE_MAX = 8
@@ -195,7 +199,12 @@ def _detect(gray, cols, rows, views):
         if H is None:
             continue
         pr = cv2.perspectiveTransform(obj.reshape(-1, 1, 2), H).reshape(-1, 2)
-        if not np.sqrt(np.mean(np.sum((pr - c) ** 2, axis=1))) < HOMOGRAPHY_RMS_PX:
+        # every corner on the grid: a view is perspective up to the rig's non-centrality (a
+        # smooth deviation, spread over the board, for near boards), so a corner far off the
+        # board's homography, compared with the others, is a wrong corner
+        res = np.linalg.norm(pr - c, axis=1)
+        if not (np.sqrt(np.mean(res ** 2)) < HOMOGRAPHY_RMS_PX
+                and res.max() < max(HOMOGRAPHY_MAX_PX, 6.0 * np.median(res))):
             continue
         margin = float(min(c[:, 0].min(), c[:, 1].min(), w - 1 - c[:, 0].max(),
                            h - 1 - c[:, 1].max()))
