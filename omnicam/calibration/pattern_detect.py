@@ -16,8 +16,11 @@ resampled (a window of a third of the local corner spacing, 2..5 px, where the b
 straight to well under a pixel). Of several views that see the same board the one with the
 board farthest from its border is kept.
 
-Accuracy (``benchmarks/bench_pattern.py --detect``, renders of 1000x1000 with 4x4 supersampling
-and no noise): see the module's figures in the report of issue 9.
+Accuracy (``benchmarks/bench_pattern.py --detect --renders 40``: 40 renders of 1000x1000 of
+random rigs tilted up to 5 deg and offset up to 5 mm, a 9x6 board of 60 mm squares 0.3-1.5 m
+away, 4x4 supersampling, 1 grey level of noise, views aimed by the start of
+``calibrate_pattern``): found in 40 of 40, corner error RMS 0.074 px, 95th percentile 0.14 px,
+largest 0.29 px, 0.27 s per image.
 
 Corner order: OpenCV's (row by row); the board's 180-degree ambiguity is resolved so that the
 first row runs left to right in the view whose image-up is the mirror axis.
