@@ -37,6 +37,8 @@ _LAZY = {
     "RimFit": "omnicam.calibration.rim",
     "CalibrationReport": "omnicam.calibration",
     "calibrate_intrinsics": "omnicam.calibration.intrinsics",
+    "find_pattern": "omnicam.calibration.pattern_detect",
+    "PatternReport": "omnicam.calibration.pattern",
     "Unwarper": "omnicam.stream",
     "rotation_from_ypr": "omnicam.views",
     "K_from_fov": "omnicam.views",
@@ -51,7 +53,10 @@ _LAZY = {
     "write_far_lines": "omnicam.io",
 }
 
-__all__ = ["HyperbolicMirror", "MisalignedHyperbolicCamera", *_LAZY]
+# K, D and the posture from chessboards seen through the mirror (builds this camera class)
+calibrate_pattern = MisalignedHyperbolicCamera.calibrate_pattern
+
+__all__ = ["HyperbolicMirror", "MisalignedHyperbolicCamera", "calibrate_pattern", *_LAZY]
 
 
 def __getattr__(name):

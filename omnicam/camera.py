@@ -314,6 +314,22 @@ class MisalignedHyperbolicCamera:
                          far_lines=far_lines, D=D, image_size=image_size, refine=refine,
                          camera_cls=cls, lens=lens, **options)
 
+    @classmethod
+    def calibrate_pattern(cls, images, pattern_size, square_size, mirror, K=None, D=None,
+                          image_size=None, image_points=None, refine_mirror_shape=False,
+                          dist_model="k1k2p1p2", **kw):
+        """``K``, ``D`` and the posture from chessboards seen through the mirror.
+
+        Also ``omnicam.calibrate_pattern``. See
+        :func:`omnicam.calibration.pattern.calibrate_pattern` (keyword options there).
+        Returns ``(camera, report)``.
+        """
+        from .calibration.pattern import calibrate_pattern
+        return calibrate_pattern(images, pattern_size, square_size, mirror, K=K, D=D,
+                                 image_size=image_size, image_points=image_points,
+                                 refine_mirror_shape=refine_mirror_shape, dist_model=dist_model,
+                                 camera_cls=cls, **kw)
+
     def init_panorama_maps(self, size, elevation_range=None, projection="cylindrical", R=None,
                            m1type=cv2.CV_16SC2, depth=None, viewpoint=None):
         """``cv2.remap`` tables of a panorama; see :func:`omnicam.views.init_panorama_maps`."""

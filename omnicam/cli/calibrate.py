@@ -10,6 +10,7 @@ import os
 import cv2
 import numpy as np
 
+from . import pattern
 from ._common import (
     EXIT_OK,
     CliError,
@@ -30,6 +31,15 @@ def cmd_calibrate(args):
     from ..camera import MisalignedHyperbolicCamera, scale_K
     from ..io import SUFFIXES
     from ..mirror import HyperbolicMirror
+
+    # chessboards seen through the mirror: K, D and the posture (cli/pattern.py)
+    if args.chessboard is not None:
+        return pattern.cmd_calibrate_pattern(args)
+    if len(args.image) != 1:
+        raise CliError("calibrate: give one IMAGE (several only with --chessboard)", 2)
+    if args.intrinsics is None:
+        raise CliError("calibrate: --intrinsics is required (or use --chessboard)", 2)
+    args.image = args.image[0]
 
     calib = args.output
     if os.path.splitext(calib)[1].lower() not in SUFFIXES:
@@ -213,7 +223,9 @@ def add_parser(sub):
     p.add_argument(
         "image",
         metavar="IMAGE",
-        help="image of the mirror (any format cv2.imread reads)",
+        nargs="+",
+        help="image of the mirror (any format cv2.imread reads); with --chessboard, "
+        "the images of the board",
     )
     p.add_argument(
         "--mirror",
@@ -225,7 +237,6 @@ def add_parser(sub):
     )
     p.add_argument(
         "--intrinsics",
-        required=True,
         metavar="K.yaml",
         help="cv2.FileStorage file (yaml/yml/xml/json) with the camera matrix 'K' "
         "(or 'camera_matrix'), optional distortion 'D' (or 'dist_coeffs', "
@@ -296,5 +307,6 @@ def add_parser(sub):
     p.add_argument(
         "--overwrite", action="store_true", help="replace existing output files"
     )
+    pattern.add_arguments(p)
     p.set_defaults(func=cmd_calibrate)
     return p

@@ -650,4 +650,3 @@ def far_line_pixels(camera, n_lines=3, n_points=30, distance=(10e3, 50e3),
         if len(px) >= 5:
             lines.append(px)
     return lines
-

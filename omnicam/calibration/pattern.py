@@ -1,0 +1,962 @@
+"""K, D and the mirror posture from chessboards seen through the mirror (beyond the paper).
+
+For rigs whose camera cannot be calibrated without the mirror. The pipeline of
+:func:`calibrate_pattern`:
+
+1. **the rim** (eqs. 20-22): :func:`.rim.detect_rim` on the first image where it is found (or
+   the given ``boundary_points``);
+2. **a start without an initial-value problem**: without ``K``, the focal length from the rim's
+   size (an aligned rig images the rim circle of radius ``r`` at depth ``z_rim + c`` with radius
+   ``f r / (z_rim + c)`` px) and the principal point at the image centre; the posture from the
+   rim by :func:`omnicam.calibration.calibrate` (Chen's method, eqs. 23-42); every board's pose
+   from its corners' rays (:func:`board_pose_from_rays`: a central PnP from the best-fit
+   viewpoint, then the non-central point-to-ray fit);
+3. **the non-central bundle adjustment** (:class:`_Adjustment`): ``fx, fy, cx, cy`` (skew
+   optional), the free distortion coefficients, the 5-DOF posture (two small rotations of the
+   mirror frame about its own x and y axes and the three components of ``tvec``; the rotation
+   about the axis is put in the gauge of conventions.md once, at the end), every board's 6-DOF
+   pose and, optionally, the mirror's ``a, b`` (``rim_radius`` fixes the scale). Residuals, in
+   px: every corner's reprojection through the exact non-central projection
+   (:func:`omnicam.raytrace.project`, what ``camera.project`` runs), every rim point's
+   orthogonal distance to the image of the rim circle (so the rim keeps constraining) and,
+   when the camera's own reflection is seen, its outline residual (:mod:`.reflection`, a circle coaxial with the optical axis). Levenberg-
+   Marquardt with the robust ``soft_l1`` loss (IRLS weights) and a Jacobian by central
+   differences that uses its block structure: a board's pose moves only its own view's rows,
+   so the columns of all boards are perturbed together (6 groups instead of ``6 n``). A first
+   stage holds the principal point and the distortion at the start, a second frees them;
+4. views whose RMS stands out are dropped (or only reported) and the fit is run again;
+5. a :class:`PatternReport`: RMS overall and per view, poses, standard deviations from
+   ``sigma^2 (J^T J)^-1``, warnings.
+
+What the data determine (``benchmarks/bench_pattern.py``): a turn of the camera about its
+centre is a shift of the principal point to first order, for the boards and the rim alike; only
+second-order perspective over the camera's narrow field (the mirror fills about +-20 deg) tells
+them apart, and tangential distortion (``p1, p2``) absorbs even that. So at 0.2 px of corner
+noise the principal point and the mirror axis come out to several px and tenths of a degree
+from corners and rim, while the rays (what a panorama uses) stay accurate to a few hundredths
+of a degree. The outline of the camera's reflection separates the two (it moves with twice the
+tilt), and with it and ``dist_model="none"`` or ``"k1k2"`` the principal point comes to about
+a pixel and the axis to a few hundredths of a degree; the reported standard deviations say
+which case a calibration is in.
+"""
+from __future__ import annotations
+
+import dataclasses
+import math
+import os
+import warnings as _warnings
+
+import cv2
+import numpy as np
+
+from .intrinsics import _pattern  # one check of pattern_size (cv2.findChessboardCorners)
+
+__all__ = [
+    "DIST_MODELS",
+    "PatternReport",
+    "board_pose_from_rays",
+    "calibrate_pattern",
+    "object_points",
+]
+
+#: Distortion models: which of OpenCV's ``(k1, k2, p1, p2, k3)`` are estimated.
+DIST_MODELS = {
+    "none": (),
+    "k1": (0,),
+    "k1k2": (0, 1),
+    "k1k2p1p2": (0, 1, 2, 3),
+    "k1k2p1p2k3": (0, 1, 2, 3, 4),
+}
+_MIN_VIEWS = 3
+_EDGE_ON_SIN = math.sin(math.radians(5.0))  # a board plane within 5 deg of the viewpoint
+_N_RIM = 360  # rim points kept for the adjustment
+
+
+@dataclasses.dataclass(frozen=True, eq=False)
+class PatternReport:
+    """Outcome of :func:`calibrate_pattern`.
+
+    Attributes
+    ----------
+    rms : float
+        RMS corner reprojection error over the views used, px.
+    view_rms : dict
+        ``{image index: RMS px}`` of every view used.
+    corners_used : dict
+        ``{image index: number of corners}`` of every view used.
+    board_poses : dict
+        ``{image index: (rvec_b, tvec_b)}``, ``X_mirror = R(rvec_b) X_board + tvec_b``.
+    image_points : list
+        Per input image the ``(N, 1, 2)`` float32 corners detected or given (None if none).
+    reprojected : dict
+        ``{image index: (N, 1, 2) float64}`` corners reprojected by the calibrated camera.
+    rim_points : (M, 2) float64 ndarray
+        The rim points used.
+    rim_rms : float
+        RMS distance of the rim points to the calibrated rim image, px.
+    std : dict
+        Standard deviations (1 sigma, from ``sigma^2 (J^T J)^-1`` with ``sigma^2`` the residual
+        variance): ``fx, fy, cx, cy`` (px), ``skew`` if estimated, ``k1``... of the free
+        distortion coefficients, ``axis_deg`` (RMS angle of the mirror axis), ``origin`` (RMS
+        distance of the camera centre in the mirror frame, mirror units), ``a, b`` with
+        ``refine_mirror_shape``.
+    warnings : tuple of str
+    dropped : dict
+        ``{image index: reason}`` of the views left out.
+    nfev : int
+        Residual evaluations of the last adjustment.
+    camera : MisalignedHyperbolicCamera
+    start : MisalignedHyperbolicCamera
+        The start of the adjustment (K from the rim, posture from Chen's method).
+    lens_rms : float
+        RMS outline residual of the camera's reflection, px (NaN when not used).
+    lens_note : str
+        Whether and how the camera's reflection was used.
+    """
+
+    rms: float
+    view_rms: dict
+    corners_used: dict
+    board_poses: dict
+    image_points: list
+    reprojected: dict
+    rim_points: np.ndarray
+    rim_rms: float
+    std: dict
+    warnings: tuple
+    dropped: dict
+    nfev: int
+    camera: object
+    start: object
+    lens_rms: float = math.nan
+    lens_note: str = ""
+
+    def table(self):
+        """The per-view table as text: index, corners, RMS px, distance and elevation of the
+        board, or why the view was dropped."""
+        lines = [f"{'view':>5} {'corners':>7} {'rms px':>8} {'dist':>8} {'elev deg':>8}"]
+        for i in sorted(set(self.view_rms) | set(self.dropped)):
+            if i in self.view_rms:
+                t = np.asarray(self.board_poses[i][1])
+                el = math.degrees(math.atan2(t[2], math.hypot(t[0], t[1])))
+                lines.append(f"{i:>5} {self.corners_used[i]:>7} {self.view_rms[i]:>8.3f} "
+                             f"{np.linalg.norm(t):>8.1f} {el:>8.1f}")
+            else:
+                lines.append(f"{i:>5} {'-':>7} {'-':>8}   dropped: {self.dropped[i]}")
+        return "\n".join(lines)
+
+    def draw(self, image, index):
+        """BGR overlay of view ``index``: detected corners (green circles) and reprojected ones
+        (red crosses), with the rim (blue)."""
+        from .report import _to_bgr8
+        img = _to_bgr8(image, None).copy()
+        rim = self.camera.rim_image_points(720)
+        if np.isfinite(rim).all():
+            cv2.polylines(img, [np.round(rim * 16).astype(np.int32)], True, (255, 0, 0), 1,
+                          cv2.LINE_AA, 4)
+        det = self.image_points[index]
+        if det is not None:
+            for p in np.asarray(det).reshape(-1, 2):
+                cv2.circle(img, tuple(int(v) for v in np.round(p * 16)), 4 * 16, (0, 200, 0), 1,
+                           cv2.LINE_AA, 4)
+        rep = self.reprojected.get(index)
+        if rep is not None:
+            for p in np.asarray(rep).reshape(-1, 2):
+                if np.isfinite(p).all():
+                    cv2.drawMarker(img, tuple(round(v) for v in p), (0, 0, 255),
+                                   cv2.MARKER_CROSS, 6, 1)
+        return img
+
+
+# -- helpers ----------------------------------------------------------------------------------
+def object_points(pattern_size, square_size):
+    """OpenCV's object points of a board: ``(cols * rows, 3)``, ``(i s, j s, 0)`` row by row."""
+    cols, rows = _pattern(pattern_size)
+    obj = np.zeros((rows * cols, 3))
+    obj[:, :2] = np.mgrid[0:cols, 0:rows].T.reshape(-1, 2) * float(square_size)
+    return obj
+
+
+def _rotate(v, w):
+    """Rotate ``v`` by the rotation vector ``w`` (Rodrigues)."""
+    th = float(np.linalg.norm(w))
+    if th == 0.0:
+        return v.copy()
+    k = w / th
+    return v * math.cos(th) + np.cross(k, v) * math.sin(th) + k * (k @ v) * (1 - math.cos(th))
+
+
+def _perp_basis(v):
+    v = v / np.linalg.norm(v)
+    h = np.array([1.0, 0.0, 0.0]) if abs(v[0]) < 0.9 else np.array([0.0, 1.0, 0.0])
+    b1 = np.cross(v, h)
+    b1 /= np.linalg.norm(b1)
+    return b1, np.cross(v, b1)
+
+
+def _rodrigues(rvec):
+    return cv2.Rodrigues(np.asarray(rvec, np.float64).reshape(3, 1))[0]
+
+
+def board_pose_from_rays(origins, directions, obj, viewpoint):
+    """A board's pose ``(rvec_b, tvec_b)`` from its corners' reflected rays (non-central PnP).
+
+    Start: the central approximation from ``viewpoint`` (a virtual pinhole looking along the
+    mean ray, ``cv2.solvePnP`` with IPPE on the rays' normalised coordinates); then the pose
+    that minimises the distances of the board points ``R X_b + t`` to their rays
+    ``P_i + s d_i`` (``scipy.optimize.least_squares``).
+
+    Parameters
+    ----------
+    origins, directions : (N, 3) ndarray
+        Rays in the mirror frame (finite, unit directions).
+    obj : (N, 3) ndarray
+        Object points on the board's ``z = 0`` plane.
+    viewpoint : (3,) ndarray
+
+    Returns
+    -------
+    rvec, tvec : (3,) float64 ndarray
+    rms : float
+        RMS point-to-ray distance (mirror units).
+    """
+    from scipy.optimize import least_squares
+    m = directions.mean(axis=0)
+    m /= np.linalg.norm(m)
+    b1, b2 = _perp_basis(m)
+    Rv = np.stack([b1, b2, m])  # mirror -> virtual camera
+    dv = directions @ Rv.T
+    xn = (dv[:, :2] / dv[:, 2:3]).reshape(-1, 1, 2)
+    ok, rp, tp = cv2.solvePnP(obj.reshape(-1, 1, 3), xn, np.eye(3), None,
+                              flags=cv2.SOLVEPNP_IPPE)
+    if not ok:
+        ok, rp, tp = cv2.solvePnP(obj.reshape(-1, 1, 3), xn, np.eye(3), None)
+    Rb = Rv.T @ _rodrigues(rp.ravel())
+    tb = Rv.T @ tp.ravel() + viewpoint
+
+    def resid(x):
+        X = obj @ _rodrigues(x[:3]).T + x[3:]
+        w = X - origins
+        return (w - directions * np.einsum("ij,ij->i", w, directions)[:, None]).ravel()
+
+    x0 = np.concatenate([cv2.Rodrigues(Rb)[0].ravel(), tb])
+    sol = least_squares(resid, x0, method="lm", xtol=1e-15, ftol=1e-15, gtol=1e-15)
+    r = resid(sol.x)
+    return sol.x[:3].copy(), sol.x[3:].copy(), float(np.sqrt(np.mean(r * r) * 3))
+
+
+def _distort(xn, K, D):
+    """OpenCV's distortion with ``D = (k1, k2, p1, p2[, k3])`` then ``K`` (skew included), in
+    numpy: the same formula as ``cv2.projectPoints``, without its per-call overhead."""
+    x, y = xn[:, 0], xn[:, 1]
+    r2 = x * x + y * y
+    k1, k2, p1, p2 = D[:4]
+    k3 = D[4] if len(D) > 4 else 0.0
+    radial = 1.0 + r2 * (k1 + r2 * (k2 + r2 * k3))
+    xd = x * radial + 2.0 * p1 * x * y + p2 * (r2 + 2.0 * x * x)
+    yd = y * radial + p1 * (r2 + 2.0 * y * y) + 2.0 * p2 * x * y
+    return np.stack([K[0, 0] * xd + K[0, 1] * yd + K[0, 2], K[1, 1] * yd + K[1, 2]], axis=1)
+
+
+def _rim_foot(cam_K, D, R, t, mirror, u, phi):
+    """Orthogonal distances of pixels ``u`` to the rim image, with foot parameters ``phi``
+    refined in place by Newton's method. Returns signed distances (px)."""
+    r, z = mirror.rim_radius, mirror.z_rim
+
+    def curve(ph):
+        X = np.stack([r * np.cos(ph), r * np.sin(ph), np.full_like(ph, z)], axis=1) @ R.T + t
+        xn = X[:, :2] / X[:, 2:3]
+        if D is None:
+            return xn @ cam_K[:2, :2].T + cam_K[:2, 2]
+        return _distort(xn, cam_K, D)
+
+    h = 1e-4
+    for _ in range(4):
+        c0, cp, cm = curve(phi), curve(phi + h), curve(phi - h)
+        d1 = (cp - cm) / (2 * h)
+        d2 = (cp - 2 * c0 + cm) / (h * h)
+        w = c0 - u
+        g = np.einsum("ij,ij->i", w, d1)
+        gp = np.einsum("ij,ij->i", d1, d1) + np.einsum("ij,ij->i", w, d2)
+        phi -= g / gp
+    c0, cp, cm = curve(phi), curve(phi + h), curve(phi - h)
+    tang = cp - cm
+    nrm = np.stack([tang[:, 1], -tang[:, 0]], axis=1)
+    nrm /= np.linalg.norm(nrm, axis=1, keepdims=True)
+    return np.einsum("ij,ij->i", u - c0, nrm)
+
+
+def _normalized(pixels, K, D):
+    """Undistorted normalised coordinates of pixels (``inv(K)`` with skew)."""
+    from ..raytrace import undistort_normalized
+
+    if D is None:
+        Ki = np.linalg.inv(K)
+        return pixels @ Ki[:2, :2].T + Ki[:2, 2]
+    return undistort_normalized(np.ascontiguousarray(pixels, dtype=np.float64), K, D)
+
+
+class _Adjustment:
+    """Parameter vector, residuals and Jacobian of the non-central bundle adjustment.
+
+    ``x = [fx, fy, cx, cy, (skew), d_free..., w1, w2, t_x, t_y, t_z, (a, b), boards...]``
+    with ``R = R0 R(w1, w2, 0)``: the mirror frame of the start turned about its own x and y
+    axes, so the axis moves with no twist about it (the gauge's smallest rotation would add a
+    twist of second order, which turns every board about the axis and bends the valley the
+    fit must follow); ``tvec = t``; 6 numbers per board (``rvec_b, tvec_b``). The gauge of conventions.md is
+    imposed once, on the result (:meth:`to_gauge`).
+    """
+
+    def __init__(self, cam0, mirror, obj, views, rim_px, free_d, n_d, fit_skew, fit_shape,
+                 camera_cls, lens_px=None, lens_z=None):
+        from ..gauge import gauge_rotation
+        self.gauge_rotation = gauge_rotation
+        self.mirror, self.obj, self.views, self.rim_px = mirror, obj, views, rim_px
+        self.lens_px = lens_px
+        self.lens_z, self.lens_z_free = lens_z, lens_z is None
+        if lens_px is not None and lens_z is None:  # the circle's plane, fitted once under the start posture
+            from .reflection import fit_circle
+
+            Ki = np.linalg.inv(cam0.K)
+            circle = fit_circle(mirror, cam0.R, cam0.tvec, _normalized(lens_px, cam0.K, cam0.D),
+                                Ki[:2, :2])
+            self.lens_z = circle.z if math.isfinite(circle.rms) else None
+            if self.lens_z is None:
+                self.lens_px = None
+        self.free_d, self.n_d, self.fit_skew, self.fit_shape = free_d, n_d, fit_skew, fit_shape
+        self.camera_cls = camera_cls
+        self.R0 = cam0.R.copy()
+        self.D0 = np.zeros(n_d) if cam0.D is None else np.array(cam0.D, np.float64)
+        self.rim_phi = None
+        K = cam0.K
+        g = [K[0, 0], K[1, 1], K[0, 2], K[1, 2]] + ([K[0, 1]] if fit_skew else [])
+        g += [self.D0[i] for i in free_d]
+        g += [0.0, 0.0, *cam0.tvec]
+        if fit_shape:
+            g += [mirror.a, mirror.b]
+        self.n_global = len(g)
+        self.names = (["fx", "fy", "cx", "cy"] + (["skew"] if fit_skew else [])
+                      + [("k1", "k2", "p1", "p2", "k3")[i] for i in free_d]
+                      + ["w1", "w2", "tx", "ty", "tz"] + (["a", "b"] if fit_shape else []))
+        self.x0_global = np.array(g, np.float64)
+        self.fixed = set()  # names of global parameters held at their value
+        self.skew0 = K[0, 1]
+        n = len(obj)
+        self.n_rows_view = 2 * n
+
+    def unpack(self, x):
+        from ..mirror import HyperbolicMirror
+        i = 0
+        fx, fy, cx, cy = x[0:4]
+        i = 4
+        skew = self.skew0
+        if self.fit_skew:
+            skew = x[i]
+            i += 1
+        K = np.array([[fx, skew, cx], [0.0, fy, cy], [0.0, 0.0, 1.0]])
+        D = None
+        if self.n_d:
+            D = self.D0.copy()
+            for j in self.free_d:
+                D[j] = x[i]
+                i += 1
+        w1, w2 = x[i:i + 2]
+        R = self.R0 @ _rodrigues(np.array([w1, w2, 0.0]))
+        tvec = x[i + 2:i + 5].copy()
+        i += 5
+        mirror = self.mirror
+        if self.fit_shape:
+            mirror = HyperbolicMirror(x[i], x[i + 1], self.mirror.rim_radius)
+            i += 2
+        return K, D, R, tvec, mirror
+
+    def to_gauge(self, x, image_size=None):
+        """The camera in the gauge of conventions.md and the board poses in its mirror frame.
+
+        The fitted ``R`` and the gauge's ``R_g = gauge(R e_z)`` differ by a turn ``Z`` about
+        the mirror axis, ``R = R_g Z``: the gauge's mirror frame holds ``Z X`` for the fit's
+        ``X``, so every board becomes ``(Z R_b, Z t_b)``.
+        """
+        K, D, R, tvec, mirror = self.unpack(x)
+        Rg = self.gauge_rotation(R[:, 2])
+        Z = Rg.T @ R
+        cam = self.camera_cls(K, mirror, cv2.Rodrigues(Rg)[0].ravel(), tvec, D=D,
+                              image_size=image_size)
+        poses = [(cv2.Rodrigues(Z @ _rodrigues(b[:3]))[0].ravel(), Z @ b[3:])
+                 for b in self.boards(x)]
+        return cam, poses
+
+    def boards(self, x):
+        return x[self.n_global:].reshape(-1, 6)
+
+    def corner_residuals(self, x):
+        from .. import raytrace
+        K, D, R, tvec, mirror = self.unpack(x)
+        B = self.boards(x)
+        pts = np.concatenate([self.obj @ _rodrigues(b[:3]).T + b[3:] for b in B])
+        # the exact non-central projection of the camera's project(), on the fit's frame
+        px = raytrace.project(np.ascontiguousarray(pts), False, K, D, R, tvec, -R.T @ tvec,
+                              mirror)
+        obs = np.concatenate(self.views)
+        r = px - obs
+        r[~np.isfinite(r)] = 50.0  # a corner the rig cannot see: a large, constant residual
+        return r.ravel()
+
+    def rim_residuals(self, x):
+        K, D, R, tvec, mirror = self.unpack(x)
+        if self.rim_phi is None:  # foot points of the start, by dense sampling
+            ph = np.linspace(0, 2 * np.pi, 3600, endpoint=False)
+            X = np.stack([mirror.rim_radius * np.cos(ph), mirror.rim_radius * np.sin(ph),
+                          np.full_like(ph, mirror.z_rim)], axis=1) @ R.T + tvec
+            xn = X[:, :2] / X[:, 2:3]
+            c = xn @ K[:2, :2].T + K[:2, 2]
+            j = np.argmin(((self.rim_px[:, None, :] - c[None]) ** 2).sum(-1), axis=1)
+            self.rim_phi = ph[j]
+        phi = self.rim_phi.copy()
+        return _rim_foot(K, D, R, tvec, mirror, self.rim_px, phi)
+
+    def lens_residuals(self, x):
+        """The camera's reflection (:mod:`.reflection`): ``(rho(u) - r) / |grad rho|`` px for
+        every outline pixel, ``rho`` the radius at which its reflected ray crosses the plane of
+        the coaxial circle (``z`` fitted once under the start posture) and ``r`` fitted in
+        closed form at each evaluation."""
+        from .reflection import plane_radius
+
+        K, D, R, tvec, mirror = self.unpack(x)
+        Ki = np.linalg.inv(K)
+        xn = _normalized(self.lens_px, K, D)
+        z = self.lens_z
+        if self.lens_z_free:  # the circle's plane follows the posture (z is not known)
+            from .reflection import fit_circle
+
+            circle = fit_circle(mirror, R, tvec, xn, Ki[:2, :2])
+            z = circle.z if math.isfinite(circle.rms) else z
+        rho, g = plane_radius(mirror, R, tvec, xn, z, Ki[:2, :2])
+        ok = np.isfinite(rho) & np.isfinite(g) & (g > 0)
+        r = np.zeros(len(rho))
+        if ok.sum() >= 3:
+            w = 1.0 / g[ok] ** 2
+            r[ok] = (rho[ok] - float((w * rho[ok]).sum() / w.sum())) / g[ok]
+        return r
+
+    def residuals(self, x):
+        parts = [self.corner_residuals(x), self.rim_residuals(x)]
+        if self.lens_px is not None:
+            parts.append(self.lens_residuals(x))
+        return np.concatenate(parts)
+
+    def steps(self, x):
+        h = np.empty_like(x)
+        g = self.n_global
+        for k, name in enumerate(self.names):
+            if name in ("fx", "fy", "cx", "cy", "skew"):
+                h[k] = 1e-6 * max(abs(x[0]), 1.0)
+            elif name in ("w1", "w2"):
+                h[k] = 1e-7
+            elif name in ("tx", "ty", "tz", "a", "b"):
+                h[k] = 1e-6 * self.mirror.rim_radius
+            else:
+                h[k] = 1e-7
+        B = h[g:].reshape(-1, 6)
+        B[:, :3] = 1e-7
+        B[:, 3:] = 1e-6 * self.mirror.rim_radius
+        return h
+
+    def jacobian(self, x):
+        """Central differences; the boards' columns in 6 groups (block structure). Columns of
+        parameters held fixed (``self.fixed``) are zero."""
+        h = self.steps(x)
+        g = self.n_global
+        nv = len(self.views)
+        m = nv * self.n_rows_view + len(self.rim_px) + (
+            0 if self.lens_px is None else len(self.lens_px))
+        J = np.zeros((m, len(x)))
+        for k in range(g):
+            if self.names[k] in self.fixed:
+                continue
+            xp, xm = x.copy(), x.copy()
+            xp[k] += h[k]
+            xm[k] -= h[k]
+            J[:, k] = (self.residuals(xp) - self.residuals(xm)) / (2 * h[k])
+        rows = self.n_rows_view
+        for k in range(6):
+            xp, xm = x.copy(), x.copy()
+            xp[g + k::6] += h[g + k::6]
+            xm[g + k::6] -= h[g + k::6]
+            diff = self.corner_residuals(xp) - self.corner_residuals(xm)
+            for v in range(nv):
+                col = g + 6 * v + k
+                J[v * rows:(v + 1) * rows, col] = diff[v * rows:(v + 1) * rows] / (2 * h[col])
+        return J
+
+    def solve(self, x0, f_scale=1.0, max_iter=60):
+        """Levenberg-Marquardt on the ``soft_l1``-weighted residuals (IRLS weights
+        ``1 / sqrt(1 + (r / f_scale)^2)``), normal equations scaled by their diagonal.
+
+        Own loop rather than ``scipy.optimize.least_squares``: its trust-region step takes an
+        SVD of the Jacobian, which a multithreaded BLAS on a busy 2-core machine took 0.6-1.5 s
+        for 2000x85 (20 ms on one thread), more than the whole fit; here the normal equations
+        are formed with ``einsum`` (no BLAS threads) and solved in milliseconds.
+        """
+        free = np.ones(len(x0), bool)
+        free[[k for k, n in enumerate(self.names) if n in self.fixed]] = False
+        return levenberg_marquardt(self.residuals, self.jacobian, x0, f_scale, max_iter, free=free)
+
+
+def _soft_l1(r, f_scale):
+    z = (r / f_scale) ** 2
+    cost = f_scale ** 2 * float(np.sum(np.sqrt(1.0 + z) - 1.0))  # 0.5 * sum rho, rho = 2(...)
+    return cost, 1.0 / np.sqrt(1.0 + z)
+
+
+@dataclasses.dataclass
+class _Solution:
+    x: np.ndarray
+    cost: float
+    nfev: int
+    success: bool
+    message: str
+
+
+def levenberg_marquardt(fun, jac, x0, f_scale=1.0, max_iter=60, tol=1e-13, free=None):
+    """Minimise ``sum f^2 (sqrt(1 + (r/f)^2) - 1)`` (the ``soft_l1`` loss) by LM with IRLS.
+
+    The normal equations ``(J^T W J + lam diag) dx = -J^T W r`` (``W`` the soft_l1 weights at
+    the current point) are formed without BLAS threads (``einsum``) and solved by
+    ``numpy.linalg.solve`` (85x85 for 12 views). Stops when the scaled step or the relative
+    cost decrease falls below ``tol``.
+    """
+    x = np.array(x0, np.float64)
+    free = np.ones(len(x), bool) if free is None else np.asarray(free, bool)
+    r = fun(x)
+    nfev = 1
+    cost, w = _soft_l1(r, f_scale)
+    lam = 1e-3
+    message, success = "maximum number of iterations", False
+    for _ in range(max_iter):
+        J = jac(x)[:, free]
+        sw = np.sqrt(w)
+        Jw = J * sw[:, None]
+        A = np.einsum("ij,ik->jk", Jw, Jw)
+        g = np.einsum("ij,i->j", Jw, r * sw)
+        d = np.sqrt(np.diag(A))
+        d[d == 0] = 1.0
+        As = A / np.outer(d, d)
+        gs = g / d
+        improved = False
+        while lam < 1e16:
+            try:
+                step = -np.linalg.solve(As + lam * np.eye(len(d)), gs)
+            except np.linalg.LinAlgError:
+                lam *= 10.0
+                continue
+            xn = x.copy()
+            xn[free] += step / d
+            rn = fun(xn)
+            nfev += 1
+            cn, wn = _soft_l1(rn, f_scale)
+            if cn < cost or (cn == cost and np.max(np.abs(step)) < tol):
+                improved = True
+                break
+            lam *= 10.0
+        if not improved:
+            message, success = "no further decrease of the cost", True
+            break
+        small = np.max(np.abs(step)) < tol * (1.0 + np.max(np.abs(x[free] * d)))
+        flat = cost - cn <= tol * cost
+        x, r, cost, w = xn, rn, cn, wn
+        lam = max(lam / 10.0, 1e-12)
+        if small or flat:
+            message, success = "converged", True
+            break
+    return _Solution(x=x, cost=cost, nfev=nfev, success=success, message=message)
+
+
+# -- input handling ---------------------------------------------------------------------------
+def _load_image(image, index):
+    if isinstance(image, (str, os.PathLike)):
+        img = cv2.imread(os.fspath(image), cv2.IMREAD_COLOR | cv2.IMREAD_IGNORE_ORIENTATION)
+        if img is None:
+            raise ValueError(f"images[{index}]: cannot read image file {os.fspath(image)!r}")
+        return img
+    if not isinstance(image, np.ndarray) or image.ndim not in (2, 3) or image.size == 0:
+        raise ValueError(f"images[{index}] must be an image array (H, W) or (H, W, C) or a file "
+                         f"path, got {type(image).__name__}")
+    return image
+
+
+def _check_points(points, n, index, pattern_size):
+    arr = np.asarray(points, np.float64)
+    if arr.ndim == 3 and arr.shape[1:] == (1, 2):
+        arr = arr.reshape(-1, 2)
+    if arr.ndim != 2 or arr.shape[1] != 2:
+        raise ValueError(f"image_points[{index}] must be an (N, 1, 2) or (N, 2) array, got shape "
+                         f"{arr.shape}")
+    if len(arr) != n:
+        raise ValueError(f"image_points[{index}] has {len(arr)} corners but pattern_size "
+                         f"{tuple(pattern_size)} has {n}: fix pattern_size (inner corners "
+                         f"(columns, rows), not squares)")
+    if not np.isfinite(arr).all():
+        raise ValueError(f"image_points[{index}] has non-finite values")
+    return arr
+
+
+def _azimuth_gap_deg(centres):
+    az = np.sort(np.degrees(np.arctan2(centres[:, 1], centres[:, 0])))
+    gaps = np.diff(np.append(az, az[0] + 360.0))
+    return float(gaps.max())
+
+
+def calibrate_pattern(images, pattern_size, square_size, mirror, K=None, D=None,
+                      image_size=None, image_points=None, refine_mirror_shape=False,
+                      dist_model="k1k2p1p2", *, boundary_points=None, camera_cls=None,
+                      fit_skew=False, drop_outlier_views=True, outlier_factor=3.0,
+                      outlier_min_px=1.0, f_scale=1.0, lens="auto", lens_z=None):
+    """Calibrate ``K``, ``D`` and the mirror posture from chessboards seen through the mirror.
+
+    Parameters
+    ----------
+    images : sequence of ndarray or path, or None
+        Images of the rig (BGR or grey), each showing the whole board once; used to detect the
+        corners (:func:`omnicam.find_pattern`, unless ``image_points``) and the rim (unless
+        ``boundary_points``). ``None`` needs ``image_points``, ``boundary_points`` and
+        ``image_size``.
+    pattern_size : (int, int)
+        Inner corners ``(columns, rows)``, as ``cv2.findChessboardCorners``.
+    square_size : float
+        Side of a square in the mirror's length unit (mm by convention).
+    mirror : HyperbolicMirror
+    K : (3, 3) array_like, optional
+        Start of the camera matrix (refined). Default: from the rim (see the module docstring).
+    D : array_like, optional
+        Start of the distortion (4 or 5 coefficients); its free coefficients follow
+        ``dist_model``.
+    image_size : (int, int), optional
+        ``(width, height)``; defaults to the images' size.
+    image_points : sequence of (N, 1, 2) array_like or None, optional
+        Corners per image in OpenCV's order (None for an image without a board); skips
+        detection.
+    refine_mirror_shape : bool
+        Also estimate the mirror's ``a, b`` (``rim_radius`` fixes the scale). Experimental and
+        weak: on exact corners of a rig started from ``a, b`` 2 % off it stops at RMS 0.003 px
+        with ``a, b`` 6-12 % off and ``fx`` 95 px off (shape, focal length and distance trade
+        against each other); the report warns when it is used.
+    dist_model : str
+        One of ``"none", "k1", "k1k2", "k1k2p1p2", "k1k2p1p2k3"``: the OpenCV coefficients
+        estimated (the others stay at ``D``'s values, or 0).
+    boundary_points : (M, 2) array_like, optional
+        Pixels on the rim (as seen), instead of detecting it in the images.
+    camera_cls : type
+        The camera class to build (``MisalignedHyperbolicCamera``; its classmethod passes it).
+    fit_skew : bool
+        Also estimate the skew ``K[0, 1]``.
+    drop_outlier_views : bool
+        Drop views whose RMS exceeds ``max(outlier_factor * median, outlier_min_px)`` and fit
+        again (else they are only reported); either way a ``RuntimeWarning`` names them.
+    f_scale : float
+        Scale of the robust ``soft_l1`` loss, px (residuals well below it count fully).
+    lens : "auto", None or (M, 2) array_like
+        The camera's own reflection (:mod:`.reflection`, a circle coaxial with the optical
+        axis): ``"auto"`` detects its outline in the image where the rim was found (and goes
+        on without it if there is none); an array gives the outline pixels; ``None`` does not
+        use it. Its residuals join the adjustment, ``r`` fitted in closed form.
+    lens_z : float, optional
+        The circle's known axial distance from the camera centre (the front edge of the lens
+        barrel, mirror length unit). With it the reflection separates a tilt of the mirror
+        from a shift of the principal point, which corners and rim alone determine only
+        through second-order perspective (see the report's ``std``); without it ``z`` follows
+        the posture and the reflection adds little (a tilt trades with ``z``).
+
+    Returns
+    -------
+    camera : MisalignedHyperbolicCamera
+    report : PatternReport
+
+    Raises
+    ------
+    ValueError
+        Bad arguments, fewer than 3 usable views, no board found anywhere, all boards seen
+        edge-on (coplanar with the camera), corner arrays that do not match ``pattern_size``;
+        the message says what to change.
+    """
+    from ..mirror import HyperbolicMirror
+    from . import calibrate
+    from .rim import detect_rim, fit_rim
+
+    if camera_cls is None:
+        raise ValueError("camera_cls is required (omnicam.calibrate_pattern passes the camera "
+                         "class)")
+    cols, rows = _pattern(pattern_size)
+    n_corners = cols * rows
+    try:
+        square = float(square_size)
+    except (TypeError, ValueError):
+        raise ValueError(f"square_size must be a positive number, got {square_size!r}") from None
+    if not (math.isfinite(square) and square > 0):
+        raise ValueError(f"square_size must be a positive number, got {square_size!r}")
+    if not isinstance(mirror, HyperbolicMirror):
+        raise ValueError(  # noqa: TRY004 (ValueError for bad arguments, as everywhere)
+            f"mirror must be a HyperbolicMirror, got {type(mirror).__name__}")
+    if dist_model not in DIST_MODELS:
+        raise ValueError(f"dist_model must be one of {sorted(DIST_MODELS)}, got {dist_model!r}")
+    from .._validate import validate_D, validate_image_size, validate_K
+    D = validate_D(D)
+    if D is not None and D.size not in (4, 5):
+        raise ValueError(f"D must have 4 or 5 coefficients (k1, k2, p1, p2[, k3]) for pattern "
+                         f"calibration, got {D.size}")
+    free_d = DIST_MODELS[dist_model]
+    if not free_d and D is None:
+        n_d = 0
+    else:
+        n_d = 5 if (4 in free_d or (D is not None and D.size == 5)) else 4
+    if D is not None and D.size < n_d:
+        D = np.concatenate([D, np.zeros(n_d - D.size)])
+    if images is None:
+        images = []
+    elif isinstance(images, (str, os.PathLike)) or (isinstance(images, np.ndarray)
+                                                     and images.ndim in (2, 3)
+                                                     and images.dtype != object
+                                                     and (images.ndim == 2
+                                                          or images.shape[2] in (1, 3, 4))):
+        images = [images]
+    images = [_load_image(im, i) for i, im in enumerate(images)]
+    if image_points is not None:
+        image_points = list(image_points)
+        if images and len(images) != len(image_points):
+            raise ValueError(f"image_points has {len(image_points)} entries for {len(images)} "
+                             f"images: give one (or None) per image")
+    elif not images:
+        raise ValueError("give images (corners and rim are detected) or image_points with "
+                         "boundary_points and image_size")
+    if image_size is None and images:
+        image_size = (images[0].shape[1], images[0].shape[0])
+    image_size = validate_image_size(image_size)
+    for i, im in enumerate(images):
+        if (im.shape[1], im.shape[0]) != image_size:
+            raise ValueError(f"images[{i}] is {im.shape[1]}x{im.shape[0]}, expected "
+                             f"{image_size[0]}x{image_size[1]}: all images must come from the "
+                             f"same camera mode")
+    warns = []
+
+    # 1. the rim
+    rim_image = 0
+    if boundary_points is not None:
+        rim_seen = np.asarray(boundary_points, np.float64).reshape(-1, 2)
+        if len(rim_seen) < 6 or not np.isfinite(rim_seen).all():
+            raise ValueError("boundary_points must be at least 6 finite pixels on the rim")
+        rim_fit = fit_rim(rim_seen)
+        rim_seen = rim_seen[np.asarray(rim_fit.inliers, bool)]
+    else:
+        rim_fit, errors = None, []
+        for i, im in enumerate(images):
+            try:
+                rim_fit = detect_rim(im)
+                rim_image = i
+                break
+            except ValueError as e:
+                errors.append(f"images[{i}]: {e}")
+        if rim_fit is None:
+            raise ValueError("the mirror rim was not found in any image (" + "; ".join(errors[:2])
+                             + "); give boundary_points")
+        rim_seen = np.asarray(rim_fit.points, np.float64)
+    if image_size is None:
+        raise ValueError("image_size (width, height) is needed when no image is given")
+    # the camera's own reflection (its outline pins the tilt against the principal point)
+    lens_px, lens_note = None, "not used (lens=None)"
+    if isinstance(lens, str):
+        if lens != "auto":
+            raise ValueError(f"lens must be 'auto', None or an (M, 2) array of outline pixels, "
+                             f"got {lens!r}")
+        if not images:
+            lens_note = "not used: no image (give lens=outline pixels to use it)"
+        else:
+            from .reflection import detect_reflection
+            try:
+                lens_px = np.asarray(detect_reflection(images[rim_image], rim_fit).points,
+                                     np.float64)
+                lens_note = f"used: {len(lens_px)} outline points detected"
+            except ValueError as e:
+                lens_note = f"not used: {e}"
+    elif lens is not None and lens is not False:
+        lens_px = np.asarray(lens, np.float64).reshape(-1, 2)
+        if len(lens_px) < 8 or not np.isfinite(lens_px).all():
+            raise ValueError("lens must hold at least 8 finite pixels along the outline of the "
+                             "camera's reflection")
+        lens_note = f"used: {len(lens_px)} outline points given"
+
+    # 2. the start: K from the rim, posture by Chen's method
+    if K is None:
+        r_px = math.sqrt(float(rim_fit.axes[0] * rim_fit.axes[1]))
+        f0 = r_px * (mirror.z_rim + mirror.c) / mirror.rim_radius
+        w, h = image_size
+        K0 = np.array([[f0, 0.0, (w - 1) / 2.0], [0.0, f0, (h - 1) / 2.0], [0.0, 0.0, 1.0]])
+    else:
+        K0 = validate_K(K)
+    try:
+        cam0, _ = calibrate(K0, mirror, boundary_points=rim_seen, D=D, image_size=image_size,
+                            refine=True, camera_cls=camera_cls, lens=None)
+    except ValueError as e:
+        raise ValueError(f"the posture could not be started from the rim: {e}") from None
+
+    # 3. the corners
+    dropped = {}
+    if image_points is None:
+        from .pattern_detect import find_pattern
+        image_points = [find_pattern(im, (cols, rows), cam0) for im in images]
+    pts = []
+    for i, p in enumerate(image_points):
+        if p is None:
+            pts.append(None)
+            dropped[i] = "no board found"
+            continue
+        pts.append(_check_points(p, n_corners, i, (cols, rows)))
+    found = [i for i, p in enumerate(pts) if p is not None]
+    if found:  # (with no board at all the error below says it)
+        for i in sorted(dropped):
+            _warnings.warn(f"view {i} dropped: {dropped[i]}", RuntimeWarning, stacklevel=2)
+    if not found:
+        raise ValueError(f"no {cols}x{rows} chessboard was found in any of the {len(pts)} "
+                         f"image(s): check pattern_size (inner corners (columns, rows), not "
+                         f"squares) and that the whole board is seen in the mirror")
+    obj = object_points((cols, rows), square)
+    viewpoint, _ = cam0.best_fit_viewpoint()
+    poses, edge_on = {}, []
+    for i in found:
+        P, d = cam0.unproject(pts[i])
+        if not np.isfinite(d).all():
+            dropped[i] = "corners outside the mirror rim"
+            _warnings.warn(f"view {i} dropped: {dropped[i]}", RuntimeWarning, stacklevel=2)
+            continue
+        rvec_b, tvec_b, _ = board_pose_from_rays(P, d, obj, viewpoint)
+        n = _rodrigues(rvec_b)[:, 2]
+        centre = obj.mean(axis=0) @ _rodrigues(rvec_b).T + tvec_b - viewpoint
+        if abs(n @ centre) < _EDGE_ON_SIN * np.linalg.norm(centre):
+            dropped[i] = "board seen edge-on (its plane passes through the camera)"
+            _warnings.warn(f"view {i} dropped: {dropped[i]}", RuntimeWarning, stacklevel=2)
+            edge_on.append(i)
+            continue
+        poses[i] = (rvec_b, tvec_b)
+    if edge_on and len(edge_on) == len(found):
+        raise ValueError("all boards are seen edge-on (their planes pass through the camera): "
+                         "turn the board towards the mirror")
+    used = sorted(poses)
+    if len(used) < _MIN_VIEWS:
+        raise ValueError(f"only {len(used)} usable view(s) of the board (need at least "
+                         f"{_MIN_VIEWS}; dropped: {dropped}): take more views of the whole "
+                         f"board around the mirror")
+
+    # 4. the bundle adjustment
+    rim_px = rim_seen
+    if len(rim_px) > _N_RIM:
+        rim_px = rim_px[np.linspace(0, len(rim_px) - 1, _N_RIM).round().astype(int)]
+
+    def adjust(view_ids, x_boards, x_global=None):
+        adj = _Adjustment(cam0, mirror, obj, [pts[i] for i in view_ids], rim_px, free_d, n_d,
+                          fit_skew, refine_mirror_shape, camera_cls, lens_px, lens_z)
+        x0 = np.concatenate([adj.x0_global if x_global is None else x_global,
+                             np.concatenate(x_boards)])
+        if x_global is None:
+            # stage 1: principal point, skew and distortion held at the start, so the fit does
+            # not first wander along the valley where a shift of the principal point (or
+            # tangential distortion) trades against a tilt of the mirror
+            adj.fixed = {"cx", "cy", "skew", "k1", "k2", "p1", "p2", "k3"}
+            x0 = adj.solve(x0, f_scale=f_scale, max_iter=20).x
+            adj.fixed = set()
+        return adj, adj.solve(x0, f_scale=f_scale)
+
+    adj, sol = adjust(used, [np.concatenate(poses[i]) for i in used])
+    nv_rows = adj.n_rows_view
+
+    def view_rms(sol, ids):
+        r = adj.corner_residuals(sol.x).reshape(len(ids), -1)
+        return {i: float(np.sqrt(np.mean(r[k] ** 2) * 2)) for k, i in enumerate(ids)}
+
+    vr = view_rms(sol, used)
+    med = float(np.median(list(vr.values())))
+    limit = max(outlier_factor * med, outlier_min_px)
+    outliers = [i for i in used if vr[i] > limit]
+    if outliers:
+        what = "dropped" if drop_outlier_views else "kept"
+        msg = (f"view(s) {outliers} reproject with RMS "
+               f"{', '.join(f'{vr[i]:.2f}' for i in outliers)} px against a median of "
+               f"{med:.3f} px ({what}; check their corners)")
+        warns.append(msg)
+        _warnings.warn(msg, RuntimeWarning, stacklevel=2)
+        if drop_outlier_views and len(used) - len(outliers) >= _MIN_VIEWS:
+            B = adj.boards(sol.x)
+            keep = [k for k, i in enumerate(used) if i not in outliers]
+            for i in outliers:
+                dropped[i] = f"RMS {vr[i]:.2f} px stands out (median {med:.3f} px)"
+            used = [used[k] for k in keep]
+            adj, sol = adjust(used, [B[k] for k in keep], sol.x[:adj.n_global])
+            vr = view_rms(sol, used)
+        elif drop_outlier_views:
+            warns.append("too few views would remain: the outliers were kept")
+
+    # 5. the report
+    camera, gauged = adj.to_gauge(sol.x, image_size)
+    r_all = adj.residuals(sol.x)
+    m, n = len(r_all), len(sol.x)
+    J = adj.jacobian(sol.x)
+    sigma2 = float(r_all @ r_all) / max(m - n, 1)
+    scale = np.linalg.norm(J, axis=0)
+    scale[scale == 0] = 1.0
+    Js = J / scale
+    N = np.einsum("ij,ik->jk", Js, Js)
+    cov = np.linalg.solve(N + 1e-12 * np.eye(n), np.eye(n)) / np.outer(scale, scale) * sigma2
+    var = np.diag(cov)
+    std = {}
+    for k, name in enumerate(adj.names):
+        if name in ("w1", "w2", "tx", "ty", "tz"):
+            continue
+        std[name] = float(math.sqrt(max(var[k], 0.0)))
+    ip = adj.names.index("w1")
+    std["axis_deg"] = math.degrees(math.sqrt(max(var[ip] + var[ip + 1], 0.0)))
+    # the camera centre C = -R^T tvec (eq. 17), linearised over the 5 posture parameters
+    def centre(x):
+        _, _, R, t, _ = adj.unpack(x)
+        return -R.T @ t
+
+    G = np.zeros((3, 5))
+    for k in range(5):
+        hk = 1e-7 if k < 2 else 1e-6 * mirror.rim_radius
+        xp, xm = sol.x.copy(), sol.x.copy()
+        xp[ip + k] += hk
+        xm[ip + k] -= hk
+        G[:, k] = (centre(xp) - centre(xm)) / (2 * hk)
+    std["origin"] = float(math.sqrt(max(np.trace(G @ cov[ip:ip + 5, ip:ip + 5] @ G.T), 0.0)))
+    corner_r = r_all[:len(used) * nv_rows]
+    rim_r = r_all[len(used) * nv_rows:len(used) * nv_rows + len(rim_px)]
+    lens_r = r_all[len(used) * nv_rows + len(rim_px):]
+    board_poses = {i: gauged[k] for k, i in enumerate(used)}
+    reprojected = {i: camera.project(obj, *board_poses[i]).reshape(-1, 1, 2) for i in used}
+    if len(used) < 6:
+        warns.append(f"only {len(used)} views: take 10 or more, spread around the mirror, for a "
+                     f"reliable K and posture")
+    centres = np.array([obj.mean(axis=0) @ _rodrigues(p[0]).T + p[1] for p in
+                        board_poses.values()])
+    if _azimuth_gap_deg(centres) > 180.0:
+        warns.append("all boards are on one side of the mirror (an azimuth gap over 180 deg): "
+                     "add views on the other side, or the principal point and the tilt are "
+                     "poorly separated")
+    if max(std["cx"], std["cy"]) > 1.0:
+        warns.append(f"the principal point is weakly determined (std {std['cx']:.2f}, "
+                     f"{std['cy']:.2f} px): add views at other azimuths and elevations")
+    if not sol.success:
+        warns.append(f"the adjustment did not converge: {sol.message}")
+    if refine_mirror_shape:
+        warns.append(f"the mirror's a, b were estimated (a = {camera.mirror.a:.3f} +- "
+                     f"{std['a']:.3f}, b = {camera.mirror.b:.3f} +- {std['b']:.3f}): "
+                     f"experimental, they trade against K and the posture; prefer the data "
+                     f"sheet's values")
+    image_points_out = [None if p is None else p.reshape(-1, 1, 2).astype(np.float32)
+                        for p in pts]
+    report = PatternReport(
+        rms=float(np.sqrt(np.mean(corner_r ** 2) * 2)), view_rms=vr,
+        corners_used={i: n_corners for i in used}, board_poses=board_poses,
+        image_points=image_points_out, reprojected=reprojected, rim_points=rim_px,
+        rim_rms=float(np.sqrt(np.mean(rim_r ** 2))), std=std, warnings=tuple(warns),
+        lens_rms=float(np.sqrt(np.mean(lens_r ** 2))) if len(lens_r) else math.nan,
+        lens_note=lens_note,
+        dropped=dict(sorted(dropped.items())), nfev=int(sol.nfev), camera=camera, start=cam0)
+    return camera, report

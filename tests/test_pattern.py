@@ -1,0 +1,190 @@
+"""calibrate_pattern: K, D and the posture from chessboard corners seen through the mirror."""
+import math
+
+import cv2
+import numpy as np
+import pytest
+
+import omnicam
+from omnicam import MisalignedHyperbolicCamera, synthetic
+from omnicam.gauge import posture_error
+from omnicam.synthetic import boards
+
+PATTERN, SQUARE = (7, 5), 60.0
+SIZE = (800, 800)
+
+
+def _rig():
+    """Tilted 3 deg, offset 3 mm, principal point off the image centre, fx != fy."""
+    cam = synthetic.misaligned_rig(3.0, 30.0, (1.5, -2.0, 1.9), image_size=SIZE)
+    K = cam.K.copy()
+    K[0, 2] += 9.0
+    K[1, 2] -= 6.0
+    K[1, 1] *= 1.003
+    return cam.replace(K=K)
+
+
+RIG = _rig()
+POSES = boards.random_board_poses(RIG, 10, PATTERN, SQUARE, distance=(300.0, 900.0),
+                                  max_tilt_deg=50.0, rng=3)
+
+
+def _corners(noise=0.0, seed=0, poses=POSES):
+    rng = np.random.default_rng(seed)
+    pts = [boards.board_corners(RIG, PATTERN, SQUARE, *p) for p in poses]
+    return [p + rng.normal(0.0, noise, p.shape) for p in pts]
+
+
+def _rim(noise=0.0, seed=1):
+    return RIG.rim_image_points(720) + np.random.default_rng(seed).normal(0.0, noise, (720, 2))
+
+
+def _calibrate(image_points, rim=None, **kw):
+    return omnicam.calibrate_pattern(None, PATTERN, SQUARE, RIG.mirror, image_size=SIZE,
+                                     image_points=image_points,
+                                     boundary_points=_rim() if rim is None else rim, **kw)
+
+
+@pytest.fixture(scope="module")
+def exact():
+    return _calibrate(_corners())
+
+
+def test_exact_corners_give_K_posture_and_board_poses(exact):
+    cam, report = exact
+    f = RIG.K[0, 0]
+    assert np.abs(cam.K - RIG.K).max() < 1e-6 * f
+    assert np.abs(cam.D).max() < 1e-8  # the rig has no distortion; 4 coefficients were free
+    axis, origin = posture_error(cam, RIG)
+    assert axis < 1e-6 and origin < 1e-6
+    for i, (rvec, tvec) in enumerate(POSES):
+        rb, tb = report.board_poses[i]
+        assert np.abs(tb - tvec).max() < 1e-6 * np.linalg.norm(tvec)
+        assert np.abs(rb - rvec).max() < 1e-8
+    assert report.rms < 1e-6 and report.rim_rms < 1e-6
+    # the start was far: K from the rim, the posture by Chen's method with that K
+    assert posture_error(report.start, RIG)[0] > 1.0
+
+
+def test_exact_result_is_in_the_gauge_and_reprojects_the_corners(exact):
+    cam, report = exact
+    assert abs(cam.rvec[2]) < 1e-15  # the smallest rotation from +z to the mirror axis
+    for i, pts in enumerate(_corners()):
+        assert np.abs(report.reprojected[i] - pts).max() < 1e-5
+
+
+def test_noisy_corners_give_parameters_within_their_reported_uncertainty():
+    cam, report = _calibrate(_corners(noise=0.2, seed=5), rim=_rim(0.1), dist_model="none")
+    assert 0.2 < report.rms < 0.35  # sqrt(2) * 0.2 px: at the noise floor
+    s = report.std
+    for k, (i, j) in {"fx": (0, 0), "fy": (1, 1), "cx": (0, 2), "cy": (1, 2)}.items():
+        assert abs(cam.K[i, j] - RIG.K[i, j]) < 4.0 * s[k], k
+    axis, origin = posture_error(cam, RIG)
+    assert axis < 4.0 * s["axis_deg"]
+    assert origin < 4.0 * s["origin"]
+    assert 0.0 < s["axis_deg"] < 1.0 and 0.0 < s["fx"] < 0.01 * RIG.K[0, 0]
+
+
+def test_classmethod_builds_the_given_class():
+    class Sub(MisalignedHyperbolicCamera):
+        __slots__ = ()
+
+    cam, _ = Sub.calibrate_pattern(None, PATTERN, SQUARE, RIG.mirror, image_size=SIZE,
+                                   image_points=_corners()[:4], boundary_points=_rim(),
+                                   dist_model="none")
+    assert type(cam) is Sub
+    assert np.abs(cam.K - RIG.K).max() < 1e-5
+
+
+def test_fewer_than_three_views_raise():
+    pts = _corners()[:2] + [None]
+    with pytest.warns(RuntimeWarning, match="no board found"), \
+            pytest.raises(ValueError, match="at least 3"):
+        _calibrate(pts)
+
+
+def test_no_board_anywhere_raises():
+    with pytest.raises(ValueError, match="pattern_size"):
+        _calibrate([None, None, None])
+
+
+def test_corner_count_that_does_not_match_pattern_size_raises():
+    pts = _corners()[:4]
+    pts[2] = pts[2][:-3]
+    with pytest.raises(ValueError, match=r"image_points\[2\].*pattern_size"):
+        _calibrate(pts)
+
+
+def test_boards_seen_edge_on_raise():
+    vp = np.array([0.0, 0.0, RIG.mirror.c])
+    poses = []
+    for az in (0.3, 2.0, 4.0):
+        u = np.array([math.cos(az) * 0.9, math.sin(az) * 0.9, -0.43])
+        u /= np.linalg.norm(u)
+        x = u  # the board's x axis along the line of sight: its plane holds the viewpoint
+        z = np.cross(u, [0.0, 0.0, 1.0])
+        z /= np.linalg.norm(z)
+        Rb = np.stack([x, np.cross(z, x), z], axis=1)
+        rvec = cv2.Rodrigues(Rb)[0].ravel()
+        poses.append((rvec, vp + 500.0 * u))
+    pts = _corners(poses=poses)
+    assert all(np.isfinite(p).all() for p in pts)
+    with pytest.warns(RuntimeWarning, match="edge-on"), \
+            pytest.raises(ValueError, match="edge-on"):
+        _calibrate(pts)
+
+
+def test_a_view_with_bad_corners_is_dropped_with_a_warning():
+    pts = _corners(noise=0.1, seed=2)
+    pts[4] = pts[4] + np.random.default_rng(9).normal(0.0, 4.0, pts[4].shape)
+    with pytest.warns(RuntimeWarning, match=r"view\(s\) \[4\]"):
+        _, report = _calibrate(pts, rim=_rim(0.1), dist_model="none")
+    assert 4 in report.dropped and 4 not in report.view_rms
+    assert report.rms < 0.25
+    assert any("[4]" in w for w in report.warnings)
+    assert "dropped" in report.table()
+
+
+def test_boards_all_on_one_side_are_warned_about():
+    rng = np.random.default_rng(4)
+    poses = [p for p in POSES if math.atan2(p[1][1], p[1][0]) > 0.0]
+    if len(poses) < 3:  # make sure the case exists whatever the random poses
+        poses = boards.random_board_poses(RIG, 12, PATTERN, SQUARE, distance=(300.0, 900.0),
+                                          rng=rng)
+        poses = [p for p in poses if math.atan2(p[1][1], p[1][0]) > 0.0]
+    _, report = _calibrate(_corners(poses=poses), dist_model="none")
+    assert any("one side" in w for w in report.warnings)
+
+
+def test_bad_arguments_name_what_to_change():
+    with pytest.raises(ValueError, match="pattern_size"):
+        omnicam.calibrate_pattern(None, (1, 5), SQUARE, RIG.mirror, image_points=_corners())
+    with pytest.raises(ValueError, match="square_size"):
+        omnicam.calibrate_pattern(None, PATTERN, -1.0, RIG.mirror, image_points=_corners())
+    with pytest.raises(ValueError, match="dist_model"):
+        _calibrate(_corners(), dist_model="fisheye")
+    with pytest.raises(ValueError, match="boundary_points"):
+        omnicam.calibrate_pattern(None, PATTERN, SQUARE, RIG.mirror, image_points=_corners(),
+                                  image_size=SIZE)
+
+
+def test_the_camera_reflection_with_a_known_plane_pins_the_tilt_against_the_principal_point():
+    from omnicam.calibration.reflection import outline_pixels
+
+    pts = _corners(noise=0.2, seed=6)
+    rng = np.random.default_rng(8)
+    # the front edge of a lens barrel: a circle of radius 10 at 8 along the optical axis
+    lens = outline_pixels(RIG, 10.0, 8.0, 120)[0]
+    lens = lens[np.isfinite(lens).all(axis=1)]
+    lens = lens + rng.normal(0.0, 0.1, lens.shape)
+    _, without = _calibrate(pts, rim=_rim(0.1), dist_model="none", lens=None)
+    free, free_report = _calibrate(pts, rim=_rim(0.1), dist_model="none", lens=lens)
+    # z unknown: the plane follows the posture, the estimate stays within its uncertainty
+    assert posture_error(free, RIG)[0] < 4.0 * free_report.std["axis_deg"]
+    cam, report = _calibrate(pts, rim=_rim(0.1), dist_model="none", lens=lens, lens_z=8.0)
+    assert report.std["axis_deg"] < 0.5 * without.std["axis_deg"]
+    assert report.std["cx"] < 0.5 * without.std["cx"]
+    axis, _ = posture_error(cam, RIG)
+    assert axis < 4.0 * report.std["axis_deg"]
+    assert abs(cam.K[0, 2] - RIG.K[0, 2]) < 4.0 * report.std["cx"]
+    assert report.lens_rms < 0.3 and report.lens_note.startswith("used")
