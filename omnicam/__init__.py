@@ -1,6 +1,6 @@
 """omnicam: calibrate and unwarp misaligned hyperbolic-mirror catadioptric cameras.
 
-Public names only; the contract is README.md and ``shared/reference/conventions.md``.
+Public names only; the contract is README.md and ``docs/conventions.md``.
 Modules that pull in scikit-image or build views load on first use, so ``import omnicam``
 stays fast.
 """
@@ -19,13 +19,6 @@ if os.path.basename(sys.argv[0] if sys.argv else "") in ("omnicam", "omnicam.exe
 
     signal.signal(signal.SIGINT, _interrupted_while_loading)
 
-# numba's OpenMP threads spin after each parallel region by default; on a loaded 2-core machine
-# the spinning thread competes with the one still working and a remap table takes several times
-# longer. Passive waiting costs microseconds per region. libgomp reads this once, when numba
-# first launches a parallel kernel, so it is set before any omnicam kernel exists; a value the
-# user set wins.
-os.environ.setdefault("OMP_WAIT_POLICY", "PASSIVE")
-
 from .camera import MisalignedHyperbolicCamera
 from .mirror import HyperbolicMirror
 
@@ -36,6 +29,7 @@ _LAZY = {
     "detect_rim": "omnicam.calibration.rim",
     "RimFit": "omnicam.calibration.rim",
     "CalibrationReport": "omnicam.calibration",
+    "EstimationError": "omnicam.calibration.errors",
     "calibrate_intrinsics": "omnicam.calibration.intrinsics",
     "find_pattern": "omnicam.calibration.pattern_detect",
     "PatternReport": "omnicam.calibration.pattern",

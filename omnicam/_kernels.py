@@ -375,7 +375,7 @@ CHECK_CENTRE, CHECK_HORIZONTAL_EDGE, CHECK_VERTICAL_EDGE = 0, 1, 2  # kinds of c
 
 @kernel
 def _view_direction(view, u, v):
-    """Unit mirror-frame direction of output pixel (u, v) (conventions.md, "Views").
+    """Unit mirror-frame direction of output pixel (u, v) (docs/conventions.md, "Views").
 
     kind 0: perspective, ``d = A (u, v, 1)`` with ``A = R^T K_new^-1``.
     kind 1: cylindrical panorama, azimuth ``az_step u``, ``tan(elevation) = p0 + p1 v``.

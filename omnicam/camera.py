@@ -1,6 +1,6 @@
 """The misaligned hyperbolic catadioptric camera: a thin, validated, immutable value object.
 
-Model contract (the binding text is ``shared/reference/conventions.md``):
+Model contract (the binding text is ``docs/conventions.md``):
 
 * **Parameters**: pinhole ``K`` (3x3, skew allowed) and optional OpenCV distortion ``D``; a
   :class:`~omnicam.mirror.HyperbolicMirror` ``(a, b, rim_radius)``; the mirror posture
@@ -65,7 +65,7 @@ class MisalignedHyperbolicCamera:
     mirror : HyperbolicMirror
     rvec, tvec : (3,) array_like
         Mirror posture in the camera frame, as ``cv2.solvePnP`` returns it with the mirror as
-        the object. ``rvec`` is stored in the gauge of conventions.md (see :func:`canonical_rvec`).
+        the object. ``rvec`` is stored in the gauge of docs/conventions.md (see :func:`canonical_rvec`).
     D : array_like or None
         OpenCV distortion coefficients (4, 5, 8, 12 or 14 values).
     image_size : (int, int) or None

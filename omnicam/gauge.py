@@ -16,7 +16,7 @@ __all__ = ["canonical_rvec", "gauge_rotation", "posture_error"]
 
 
 def canonical_rvec(rvec):
-    """The gauge of conventions.md: the smallest rotation taking +z to the mirror axis ``R e_z``.
+    """The gauge of docs/conventions.md: the smallest rotation taking +z to the mirror axis ``R e_z``.
 
     Rotations about the mirror axis are unobservable (5 DOF); this picks the representative.
     """

@@ -1,6 +1,6 @@
 """The hyperboloidal mirror: surface, normal, ray intersection and reflection.
 
-Mirror frame (``conventions.md``): origin at the centre of the hyperboloid
+Mirror frame (``docs/conventions.md``): origin at the centre of the hyperboloid
 
     (X^2 + Y^2) / a^2 - Z^2 / b^2 = -1                         (eq. 1)
 
@@ -110,7 +110,7 @@ class HyperbolicMirror:
         """Unnormalised surface normal ``N = (f_X, f_Y, -1)`` at points of the sheet (eq. 14).
 
         ``N`` points down and out of the mirror, towards the camera. Eq. 15 needs it normalised
-        (paper erratum in ``conventions.md``); use :meth:`unit_normal` for that.
+        (paper erratum in ``docs/conventions.md``); use :meth:`unit_normal` for that.
 
         Parameters
         ----------

@@ -25,7 +25,7 @@ pixel with a margin, and exactly inside the margin. ``tests/test_views.py`` comp
 with the exact projection of every pixel.
 
 The view conventions (azimuth, row order, ``R``, yaw/pitch/roll) are those of
-``shared/reference/conventions.md``, section "Views".
+``docs/conventions.md``, section "Views".
 """
 
 from __future__ import annotations
@@ -74,7 +74,7 @@ CYLINDRICAL_MIN_ELEVATION = -60.0
 
 # -- helpers for view specs ----------------------------------------------------------------------
 def rotation_from_ypr(yaw=0.0, pitch=0.0, roll=0.0):
-    """``R`` of a virtual view from yaw, pitch and roll in degrees (conventions.md, "Views").
+    """``R`` of a virtual view from yaw, pitch and roll in degrees (docs/conventions.md, "Views").
 
     The optical axis looks at azimuth ``-yaw`` (positive yaw turns right, as a panorama does
     when its column grows) and elevation ``pitch`` (positive looks up); image-up is as close to

@@ -51,7 +51,7 @@ def hyperomni_direction(u, v, a, b, f_C, x_c, y_c):
     """Direction seen by pixel (u, v) of the aligned HyperOmni rig, eqs. 2-5 as printed.
 
     In our frame eq. 2 is ``Y/X = +(y - y_c)/(x - x_c)`` and eq. 4's alpha is the elevation
-    (conventions.md). Returns the unit direction and the point where the ray crosses the axis.
+    (docs/conventions.md). Returns the unit direction and the point where the ray crosses the axis.
     """
     c = math.hypot(a, b)
     rho = math.hypot(u - x_c, v - y_c)

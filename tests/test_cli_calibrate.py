@@ -227,3 +227,24 @@ def test_help_documents_the_new_options(capsys):
                   "--max-offset MM", "--force", "JSON list of [x, y] pixels",
                   "'boundary_points'"):
         assert words in out
+
+
+def test_intrinsics_as_numbers_instead_of_a_file(tmp_path, capsys):
+    """--fx --fy --cx --cy [--dist] stand for an intrinsics file (issue 11)."""
+    from omnicam import synthetic
+
+    truth = synthetic.misaligned_rig()
+    image = tmp_path / "mirror.png"
+    cv2.imwrite(str(image), synthetic.render_environment(truth, supersample=1))
+    K = truth.K
+    out = tmp_path / "rig.yaml"
+    code = main(["calibrate", str(image), "--mirror", str(truth.mirror.a), str(truth.mirror.b),
+                 str(truth.mirror.rim_radius), "--fx", repr(float(K[0, 0])), "--fy", repr(float(K[1, 1])),
+                 "--cx", repr(float(K[0, 2])), "--cy", repr(float(K[1, 2])), "-o", str(out), "--force"])
+    assert code == 0, capsys.readouterr().err
+    cam = MisalignedHyperbolicCamera.load(out)
+    np.testing.assert_allclose(cam.K, K)
+    assert cam.D is None
+    code = main(["calibrate", str(image), "--mirror", "28", "23", "30", "--fx", "400",
+                 "-o", str(tmp_path / "x.yaml")])
+    assert code == 2 and "--fx --fy --cx --cy" in capsys.readouterr().err

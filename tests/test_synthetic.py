@@ -283,7 +283,7 @@ def test_cube_face_edges_are_subpixel_true():
 
 
 def test_true_equirectangular_panorama_reproduces_the_environment(rigs, environment):
-    # the environment's mapping is the panorama convention of conventions.md over (-90, 90)
+    # the environment's mapping is the panorama convention of docs/conventions.md over (-90, 90)
     cam = rigs["misaligned"]
     img = synthetic.render_environment(cam, environment, supersample=4)
     h, w = environment.shape[:2]

@@ -2,7 +2,7 @@
 
 The reference is the camera's own exact projection (``project_directions`` / ``project``,
 Newton on Fermat's path length) of the direction each output pixel looks along, with the
-directions written here from conventions.md ("Views"), independently of ``omnicam.views``.
+directions written here from docs/conventions.md ("Views"), independently of ``omnicam.views``.
 """
 import math
 
@@ -31,7 +31,7 @@ def rig(request):
     return RIGS[request.param]()
 
 
-# -- directions written from conventions.md -----------------------------------------------------
+# -- directions written from docs/conventions.md -----------------------------------------------------
 def panorama_dirs(size, lo, hi, projection, R=None):
     R = np.eye(3) if R is None else R
     w, h = size

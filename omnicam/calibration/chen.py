@@ -22,7 +22,7 @@ orientations of its normal. Which orientation is physical follows from the rig's
 Candidates failing a test are kept and marked ``physical = False`` with the reason. The two
 physical candidates are the two circular sections; section 3.2 (:mod:`.selection`) picks one.
 
-Paper errata followed here (``conventions.md``): the conic's sign is fixed so that ``Q_e`` has
+Paper errata followed here (``docs/conventions.md``): the conic's sign is fixed so that ``Q_e`` has
 exactly one negative eigenvalue; ``V`` is made a rotation (``det V = +1``) so ``R = V U`` is one;
 the free variable of eqs. 39-40 is ``theta`` (the unobservable rotation about the mirror axis,
 set to 0 and then replaced by the gauge of :func:`omnicam.gauge.canonical_rvec`); the third
@@ -52,7 +52,7 @@ class Candidate:
     Attributes
     ----------
     rvec : (3,) float64 ndarray
-        Mirror rotation (mirror -> camera), in the gauge of conventions.md.
+        Mirror rotation (mirror -> camera), in the gauge of docs/conventions.md.
     tvec : (3,) float64 ndarray
         Mirror origin in the camera frame, ``rim_centre - z_rim * axis``.
     axis : (3,) float64 ndarray

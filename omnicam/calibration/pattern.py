@@ -14,7 +14,7 @@ For rigs whose camera cannot be calibrated without the mirror. The pipeline of
 3. **the non-central bundle adjustment** (:class:`_Adjustment`): ``fx, fy, cx, cy`` (skew
    optional), the free distortion coefficients, the 5-DOF posture (two small rotations of the
    mirror frame about its own x and y axes and the three components of ``tvec``; the rotation
-   about the axis is put in the gauge of conventions.md once, at the end), every board's 6-DOF
+   about the axis is put in the gauge of docs/conventions.md once, at the end), every board's 6-DOF
    pose and, optionally, the mirror's ``a, b`` (``rim_radius`` fixes the scale). Residuals, in
    px: every corner's reprojection through the exact non-central projection
    (:func:`omnicam.raytrace.project`, what ``camera.project`` runs), every rim point's
@@ -303,7 +303,7 @@ class _Adjustment:
     with ``R = R0 R(w1, w2, 0)``: the mirror frame of the start turned about its own x and y
     axes, so the axis moves with no twist about it (the gauge's smallest rotation would add a
     twist of second order, which turns every board about the axis and bends the valley the
-    fit must follow); ``tvec = t``; 6 numbers per board (``rvec_b, tvec_b``). The gauge of conventions.md is
+    fit must follow); ``tvec = t``; 6 numbers per board (``rvec_b, tvec_b``). The gauge of docs/conventions.md is
     imposed once, on the result (:meth:`to_gauge`).
     """
 
@@ -371,7 +371,7 @@ class _Adjustment:
         return K, D, R, tvec, mirror
 
     def to_gauge(self, x, image_size=None):
-        """The camera in the gauge of conventions.md and the board poses in its mirror frame.
+        """The camera in the gauge of docs/conventions.md and the board poses in its mirror frame.
 
         The fitted ``R`` and the gauge's ``R_g = gauge(R e_z)`` differ by a turn ``Z`` about
         the mirror axis, ``R = R_g Z``: the gauge's mirror frame holds ``Z X`` for the fit's

@@ -25,7 +25,7 @@ Each kind of residual is one class (:class:`RimTerm`, :class:`FarLineTerm`,
 Parameters: two small rotations of the mirror axis (about two axes perpendicular to it), the
 three components of the mirror origin ``tvec``, and per line a rotation of ``e`` (2) and a shift
 of ``Q`` perpendicular to ``e`` (2). The rotation about the mirror axis is not observable and
-stays in the gauge of conventions.md. ``scipy.optimize.least_squares`` (imported lazily;
+stays in the gauge of docs/conventions.md. ``scipy.optimize.least_squares`` (imported lazily;
 MINPACK's Levenberg-Marquardt) solves it. The Jacobian of the rim rows follows from the
 envelope theorem at the foot points; the far-line rows use forward differences, the lines'
 nuisance columns in 4 groups (they share no rows). The lines are started from the rays of the
@@ -49,6 +49,9 @@ import math
 
 import cv2
 import numpy as np
+
+from ..gauge import gauge_rotation  # re-exported: refine.gauge_rotation
+from .robust import mad_sigma
 
 __all__ = ["RefineResult", "Uncertainty", "RimTerm", "FarLineTerm", "ReflectionTerm",
            "refine_posture", "posture_uncertainty", "gauge_rotation"]
@@ -104,18 +107,6 @@ class RefineResult:
     rim_cost: float = math.nan
     rim_cost_initial: float = math.nan
     n_rim: int = 0
-
-
-def gauge_rotation(axis):
-    """The smallest rotation taking ``e_z`` to the unit ``axis`` (the gauge of conventions.md)."""
-    a = np.asarray(axis, np.float64)
-    a = a / np.linalg.norm(a)
-    v = np.array([-a[1], a[0], 0.0])  # e_z x a
-    s = float(np.linalg.norm(v))
-    ang = math.atan2(s, a[2])
-    if s < 1e-300:
-        return np.eye(3) if a[2] > 0 else np.diag([1.0, -1.0, -1.0])
-    return cv2.Rodrigues((v / s * ang).reshape(3, 1))[0]
 
 
 def _perp_basis(v):
@@ -265,7 +256,7 @@ class RimTerm:
         step): ``w = min(1, k s / |r|)``, ``s = 1.4826 MAD``."""
         self.w = np.ones(len(self.px))
         r = np.abs(self.residuals(R, t))
-        s = 1.4826 * float(np.median(r))
+        s = mad_sigma(r)
         if s > 0:
             self.w = np.sqrt(np.minimum(1.0, k * s / np.maximum(r, 1e-300)))
 

@@ -3,7 +3,7 @@
 The camera and its lens are bodies of revolution about the optical axis. Seen in the mirror, the
 outline of their reflection is formed by one circle of the body (the front edge of the lens
 barrel or of the body): radius ``r`` at the axial distance ``z`` from the camera centre along
-the camera's +z axis (conventions.md, "The camera's own reflection"). An outline pixel ``u``
+the camera's +z axis (docs/conventions.md, "The camera's own reflection"). An outline pixel ``u``
 lies on it exactly when its reflected ray ``(P(u), V(u))`` (eqs. 6-19) passes through that
 circle. In the camera frame (``P_c = R P + t``, ``V_c = R V``) the ray meets the circle's plane
 ``z_c = z`` at ``X = P_c + s V_c``, ``s = (z - P_c,z) / V_c,z > 0``, and
@@ -36,6 +36,7 @@ import cv2
 import numpy as np
 
 from .errors import EstimationError
+from .robust import mad_sigma
 
 __all__ = [
     "ReflectionCircle",
@@ -435,7 +436,7 @@ def detect_reflection(
         )
     dark, scene = float(np.nanmedian(centre)), float(np.nanmedian(ring))
     contrast = scene - dark
-    noise = 1.4826 * float(np.nanmedian(near))
+    noise = mad_sigma(near)
     if not (np.isfinite(contrast) and contrast > max(10.0, 4.0 * noise)):
         raise EstimationError(
             f"no camera reflection found: the centre (grey {dark:.0f}) is not clearly darker "
@@ -545,7 +546,7 @@ def _refine_silhouette(gray, G, pts, c_est, r_est, bw, sig, contrast, rng):
         if len(p) < 12:
             raise EstimationError("no camera reflection found: its outline faded on refinement")
         dist = np.abs(fit.distance(p))
-        mask = dist <= max(0.5, 3.5 * 1.4826 * float(np.median(dist)))
+        mask = dist <= max(0.5, 3.5 * mad_sigma(dist))
         try:
             fit = fit_rim(p[mask], robust=False)  # outliers already cut by the ellipse
         except ValueError as err:

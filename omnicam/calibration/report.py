@@ -282,7 +282,23 @@ class CalibrationReport:
             text += f"  ({len(self.warnings)} warning(s))"
         cv2.putText(canvas, text, (int(8 * scale), int(20 * scale)), cv2.FONT_HERSHEY_SIMPLEX,
                     0.5 * scale, (255, 255, 255), thick, cv2.LINE_AA)
+        _legend(canvas, scale, thick, [
+            (_RIM, "fitted rim"), (_POINTS, "rim and reflection points"),
+            (_LINES, "far-line pixels"), (_CHOSEN, "far lines under the chosen posture"),
+            (_OTHER, "... under the other posture")])
         return canvas
+
+
+def _legend(canvas, scale, thick, entries):
+    """What each colour of :meth:`CalibrationReport.draw` means, bottom left."""
+    h = canvas.shape[0]
+    step = int(16 * scale)
+    for k, (colour, label) in enumerate(reversed(entries)):
+        y = h - int(8 * scale) - k * step
+        x = int(8 * scale)
+        cv2.rectangle(canvas, (x, y - int(9 * scale)), (x + int(9 * scale), y), colour, -1)
+        cv2.putText(canvas, label, (x + int(14 * scale), y), cv2.FONT_HERSHEY_SIMPLEX,
+                    0.4 * scale, (255, 255, 255), max(1, thick - 1), cv2.LINE_AA)
 
 
 def _to_bgr8(image, image_size):

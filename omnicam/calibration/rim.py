@@ -38,6 +38,7 @@ from .ellipse import (
     ransac_conic,
     refine_geometric,
 )
+from .robust import mad_sigma
 
 __all__ = ["RimFit", "check_hint", "conic_distance", "conic_from_ellipse", "detect_rim",
            "ellipse_from_conic", "fit_rim"]
@@ -218,7 +219,7 @@ def _fit_with_mask(pts, N, mask, robust, threshold):
             break
         d, _, _ = orthogonal_residuals(pts, center, S, iters=6)  # to classify
         ad = np.abs(d)
-        sigma = 1.4826 * np.median(ad[mask])
+        sigma = mad_sigma(ad[mask])
         new = ad <= max(threshold, 3.5 * sigma)
         if new.sum() < 5:
             raise ValueError("no ellipse found among the boundary points; give points along the "
@@ -684,7 +685,7 @@ def _detect_one(gray, coarse, hint, sigma, threshold, rng, absolute=False):
                 # the points are now precise: a tighter floor for the cut (0.5 px) drops
                 # partial edges, e.g. where a holder arm meets the rim
                 cut_floor = min(threshold, 0.5)
-                mask = d <= max(cut_floor, 3.5 * 1.4826 * float(np.median(d)))
+                mask = d <= max(cut_floor, 3.5 * mad_sigma(d))
                 if mask.sum() < 6:
                     raise ValueError("too few edge points near the rim found in the last round")
                 fit = _fit_with_mask(pts, hartley_normalization(pts), mask, True, cut_floor)

@@ -2,8 +2,12 @@
 
 ::
 
-    omnicam calibrate IMAGE --mirror A B RIM --intrinsics K.yaml [--far-lines LINES.json]
+    omnicam calibrate IMAGE --mirror A B RIM (--intrinsics K.yaml | --fx F --fy F --cx X --cy Y
+                      [--dist D ...]) [--far-lines LINES.json] [--rim-hint CX,CY,R]
+                      [--boundary-points FILE] [--max-tilt DEG] [--max-offset MM] [--force]
                       -o CALIB [--no-refine] [--overlay PATH] [--overwrite]
+    omnicam calibrate --chessboard CxR --square S IMAGES... --mirror A B RIM [--intrinsics K]
+                      -o CALIB
     omnicam unwarp INPUT -c CALIB VIEW [VIEW ...] [--overwrite] [--max-frames N]
                    [--fourcc CODE] [--preview N] [--quiet]
         VIEW: (--panorama WxH [--elevation LO HI] [--projection P]

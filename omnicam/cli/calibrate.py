@@ -15,6 +15,7 @@ from ._common import (
     EXIT_OK,
     CliError,
     _check_output,
+    _finite,
     _one_line,
     _positive,
     _read_image,
@@ -37,8 +38,12 @@ def cmd_calibrate(args):
         return pattern.cmd_calibrate_pattern(args)
     if len(args.image) != 1:
         raise CliError("calibrate: give one IMAGE (several only with --chessboard)", 2)
-    if args.intrinsics is None:
-        raise CliError("calibrate: --intrinsics is required (or use --chessboard)", 2)
+    given = [n for n in ("fx", "fy", "cx", "cy") if getattr(args, n) is not None]
+    if args.intrinsics is not None and (given or args.dist is not None):
+        raise CliError("calibrate: give --intrinsics or --fx --fy --cx --cy [--dist], not both", 2)
+    if args.intrinsics is None and len(given) != 4:
+        raise CliError("calibrate: give the camera's intrinsics: --intrinsics K.yaml, or all of "
+                       "--fx --fy --cx --cy [--dist ...] (or use --chessboard)", 2)
     args.image = args.image[0]
 
     calib = args.output
@@ -63,7 +68,10 @@ def cmd_calibrate(args):
         mirror = HyperbolicMirror(*args.mirror)
     except ValueError as e:
         raise CliError(f"--mirror: {e}") from None
-    K, D, size = read_intrinsics(args.intrinsics)
+    if args.intrinsics is not None:
+        K, D, size = read_intrinsics(args.intrinsics)
+    else:
+        K, D, size = _intrinsics_from_numbers(args)
     far_lines = read_far_lines(args.far_lines) if args.far_lines else None
     boundary = (
         read_boundary_points(args.boundary_points) if args.boundary_points else None
@@ -208,6 +216,17 @@ def _overlay_path(calib):
     return os.path.join(os.path.dirname(calib), f"{stem}_overlay.png")
 
 
+def _intrinsics_from_numbers(args):
+    """``K, D, None`` from ``--fx --fy --cx --cy [--dist ...]`` (the image gives the size)."""
+    from .._validate import validate_D, validate_K
+
+    K = [[args.fx, 0.0, args.cx], [0.0, args.fy, args.cy], [0.0, 0.0, 1.0]]
+    try:
+        return validate_K(K), validate_D(args.dist), None
+    except ValueError as e:
+        raise CliError(f"--fx --fy --cx --cy --dist: {_one_line(e)}") from None
+
+
 def add_parser(sub):
     """Register the ``calibrate`` subcommand on ``sub`` (argparse sub-parsers)."""
     p = sub.add_parser(
@@ -244,6 +263,14 @@ def add_parser(sub):
         "'image_width' and 'image_height'); K is rescaled if image_size differs "
         "from IMAGE's size. An omnicam calibration file also works.",
     )
+    p.add_argument("--fx", type=_positive, metavar="PX", help="focal length in x, px "
+                   "(with --fy --cx --cy instead of --intrinsics)")
+    p.add_argument("--fy", type=_positive, metavar="PX", help="focal length in y, px")
+    p.add_argument("--cx", type=_finite, metavar="PX", help="principal point x, px")
+    p.add_argument("--cy", type=_finite, metavar="PX", help="principal point y, px")
+    p.add_argument("--dist", type=_finite, nargs="+", metavar="D",
+                   help="OpenCV distortion coefficients k1 k2 p1 p2 [k3 ...] (4, 5, 8, 12 or "
+                   "14 values) with --fx --fy --cx --cy")
     p.add_argument(
         "--far-lines",
         metavar="LINES.json",

@@ -15,7 +15,7 @@ The renderer shows what such a rig sees, by ray tracing every subpixel with
   camera centre, with a darker lens facing the mirror), ``s x s`` supersampling and optional
   seeded noise.
 
-Equirectangular mapping (the panorama convention of ``conventions.md`` over the full sphere):
+Equirectangular mapping (the panorama convention of ``docs/conventions.md`` over the full sphere):
 in an environment of ``W x H`` pixels, pixel centres at integer coordinates, column ``x`` looks
 at azimuth ``-360 * x / W`` degrees (azimuth in the mirror frame from +X towards +Y; wraps
 around) and row ``y`` at elevation ``90 - 180 * y / (H - 1)`` degrees (row 0 is the zenith

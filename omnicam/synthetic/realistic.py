@@ -20,7 +20,7 @@ mirror's ``a, b, rim_radius``) and traces every subpixel itself:
 Hostile elements (:data:`VARIANTS`), each switchable: the camera body, a holder ring around the
 rim, struts across the mirror, a dark floor, a clipped rim, Gaussian blur, vignetting, sensor
 noise, JPEG compression and mild lens distortion. The ground truth comes back with the image:
-the truth camera, the coaxial circles ``(r, z)`` (camera frame, conventions.md "The camera's own
+the truth camera, the coaxial circles ``(r, z)`` (camera frame, docs/conventions.md "The camera's own
 reflection") whose reflections make the outermost round dark silhouette, far-line pixels of
 the room's straight edges (:func:`far_line_pixels`, own bisection) and a label per pixel.
 
@@ -392,7 +392,7 @@ def intersect_mirror(a, b, rim, origins, dirs):
 
 def mirror_normal(a, b, points):
     """Unit normal of eq. 1 at ``points``: the gradient ``(X/a^2, Y/a^2, -Z/b^2)`` (eq. 14),
-    normalised (conventions.md erratum to eq. 15)."""
+    normalised (docs/conventions.md erratum to eq. 15)."""
     p = np.asarray(points, np.float64)
     n = np.stack([p[:, 0] / (a * a), p[:, 1] / (a * a), -p[:, 2] / (b * b)], axis=1)
     return n / np.linalg.norm(n, axis=1, keepdims=True)

@@ -416,8 +416,15 @@ def case_cli(ctx, spec, cap):
     return _cli_outcome(rc, cap.text(1), spec)
 
 
+def _without_notices(err):
+    """stderr without omnicam's own one-time notices (the first compilation of its kernels, a
+    cache folder that cannot be written): they are meant for the user, once per process."""
+    return "\n".join(ln for ln in err.replace("\r", "\n").splitlines()
+                     if not ln.startswith(("omnicam: compiling kernels", "omnicam: numba cannot write")))
+
+
 def _cli_outcome(rc, err, spec):
-    lines = [ln for ln in err.replace("\r", "\n").splitlines() if ln.strip()]
+    lines = [ln for ln in _without_notices(err).splitlines() if ln.strip()]
     lines = [ln for ln in lines if not re.match(r"^\[[#.]*\] \d+|^\d+ frames", ln.strip())]
     allowed = spec.get("rc", (0, 1, 2))
     if rc not in allowed:
@@ -550,7 +557,7 @@ def worker_main(workdir, as_user=None):
                 status = "bad"
                 detail = f"uncaught {type(e).__name__}: {str(e)[:300]} | " + " / ".join(
                     traceback.format_exc().splitlines()[-4:-1])
-            err = cap.text(1)
+            err = _without_notices(cap.text(1))
         if status == "ok" and spec["kind"] not in ("cli", "cli_write") and err.strip():
             status, detail = "bad", f"stderr output during the call: {err.strip()[:300]!r}"
         out.write(json.dumps({"status": status, "detail": detail,
