@@ -19,6 +19,7 @@ with the same noise on it (z fitted).
 
     python benchmarks/bench_calibrate.py --accuracy 100
 """
+
 import argparse
 import math
 import statistics
@@ -66,16 +67,19 @@ def rms(values):
     return float(np.sqrt(np.mean(np.square(values))))
 
 
-SWEEP_HEADER = ("  sigma px | axis deg analytic  refined | origin mm analytic  refined | "
-                "chosen right | wrong without warning | mean reported RMS axis")
+SWEEP_HEADER = (
+    "  sigma px | axis deg analytic  refined | origin mm analytic  refined | "
+    "chosen right | wrong without warning | mean reported RMS axis"
+)
 
 
 def sweep_row(rigs, sigma, inputs):
     """Calibrate every rig from ``inputs(truth, sigma)`` and print one row of the noise sweep."""
     ea, er, oa, orr, right, silent, std = [], [], [], [], 0, 0, []
     for truth in rigs:
-        cam, report = MisalignedHyperbolicCamera.calibrate(truth.K, truth.mirror,
-                                                           **inputs(truth, sigma))
+        cam, report = MisalignedHyperbolicCamera.calibrate(
+            truth.K, truth.mirror, **inputs(truth, sigma)
+        )
         cand = report.candidates[report.chosen]
         a = errors(cam.replace(rvec=cand.rvec, tvec=cand.tvec), truth)
         b = errors(cam, truth)
@@ -84,9 +88,11 @@ def sweep_row(rigs, sigma, inputs):
         right += ok
         silent += (not ok) and not report.warnings
         std.append(report.axis_std_deg)
-    print(f"  {sigma:8.2f} | {rms(ea):17.4f} {rms(er):8.4f} | {rms(oa):18.4f} "
-          f"{rms(orr):8.4f} | {right:5d}/{len(rigs):<6d} | {silent:21d} | "
-          f"{np.mean(std):.4f}")
+    print(
+        f"  {sigma:8.2f} | {rms(ea):17.4f} {rms(er):8.4f} | {rms(oa):18.4f} "
+        f"{rms(orr):8.4f} | {right:5d}/{len(rigs):<6d} | {silent:21d} | "
+        f"{np.mean(std):.4f}"
+    )
 
 
 def accuracy(n, seed):
@@ -99,30 +105,49 @@ def accuracy(n, seed):
         t0 = time.perf_counter()
         for truth in rigs:
             cam, report = MisalignedHyperbolicCamera.calibrate(
-                truth.K, truth.mirror, boundary_points=truth.rim_image_points(360),
-                far_lines=synthetic.far_line_pixels(truth, rng=rng), refine=refine)
+                truth.K,
+                truth.mirror,
+                boundary_points=truth.rim_image_points(360),
+                far_lines=synthetic.far_line_pixels(truth, rng=rng),
+                refine=refine,
+            )
             axis, origin = errors(cam, truth)
             worst_axis, worst_origin = max(worst_axis, axis), max(worst_origin, origin)
             right += true_choice(report, truth)
         dt = (time.perf_counter() - t0) / n
-        print(f"  refine={refine!s:<5}: worst axis error {worst_axis:.2e} deg, worst origin "
-              f"error {worst_origin:.2e} mm, true candidate chosen {right}/{n}, "
-              f"{dt * 1e3:.1f} ms per calibration")
-    print("rim noise sweep (Gaussian, per coordinate), 360 points, 3 exact far lines; "
-          "RMS over rigs")
+        print(
+            f"  refine={refine!s:<5}: worst axis error {worst_axis:.2e} deg, worst origin "
+            f"error {worst_origin:.2e} mm, true candidate chosen {right}/{n}, "
+            f"{dt * 1e3:.1f} ms per calibration"
+        )
+    print(
+        "rim noise sweep (Gaussian, per coordinate), 360 points, 3 exact far lines; RMS over rigs"
+    )
     print(SWEEP_HEADER)
     for sigma in (0.05, 0.1, 0.2, 0.4, 0.8):
-        sweep_row(rigs, sigma, lambda truth, sigma: dict(
-            boundary_points=truth.rim_image_points(360) + rng.normal(size=(360, 2)) * sigma,
-            far_lines=synthetic.far_line_pixels(truth, rng=rng)))
-    print("the same without far lines, with the camera's reflection (exact outline of a "
-          "coaxial circle r 9 at z 12, 64 points, same noise, z fitted) as lens; RMS over rigs")
+        sweep_row(
+            rigs,
+            sigma,
+            lambda truth, sigma: dict(
+                boundary_points=truth.rim_image_points(360) + rng.normal(size=(360, 2)) * sigma,
+                far_lines=synthetic.far_line_pixels(truth, rng=rng),
+            ),
+        )
+    print(
+        "the same without far lines, with the camera's reflection (exact outline of a "
+        "coaxial circle r 9 at z 12, 64 points, same noise, z fitted) as lens; RMS over rigs"
+    )
     print(SWEEP_HEADER)
     outlines = {id(truth): outline_pixels(truth, 9.0, 12.0, 64)[0] for truth in rigs}
     for sigma in (0.0, 0.05, 0.1, 0.2, 0.4, 0.8):
-        sweep_row(rigs, sigma, lambda truth, sigma: dict(
-            boundary_points=truth.rim_image_points(360) + rng.normal(size=(360, 2)) * sigma,
-            lens=outlines[id(truth)] + rng.normal(size=(64, 2)) * sigma))
+        sweep_row(
+            rigs,
+            sigma,
+            lambda truth, sigma: dict(
+                boundary_points=truth.rim_image_points(360) + rng.normal(size=(360, 2)) * sigma,
+                lens=outlines[id(truth)] + rng.normal(size=(64, 2)) * sigma,
+            ),
+        )
     return 0
 
 
@@ -130,52 +155,76 @@ def main(argv=None):
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--size", type=int, default=1000)
     ap.add_argument("--repeat", type=int, default=7)
-    ap.add_argument("--rigs", type=int, default=3, help="rigs: the default misaligned one, "
-                    "then random ones")
+    ap.add_argument(
+        "--rigs", type=int, default=3, help="rigs: the default misaligned one, then random ones"
+    )
     ap.add_argument("--seed", type=int, default=0)
-    ap.add_argument("--accuracy", type=int, default=0, metavar="N",
-                    help="measure accuracy on N random rigs from boundary points instead")
+    ap.add_argument(
+        "--accuracy",
+        type=int,
+        default=0,
+        metavar="N",
+        help="measure accuracy on N random rigs from boundary points instead",
+    )
     args = ap.parse_args(argv)
     if args.accuracy:
         return accuracy(args.accuracy, args.seed)
     size = (args.size, args.size)
     rng = np.random.default_rng(args.seed)
 
-    print(f"calibrate() from a rendered {size[0]}x{size[1]} image, median (min) of "
-          f"{args.repeat} runs")
+    print(
+        f"calibrate() from a rendered {size[0]}x{size[1]} image, median (min) of {args.repeat} runs"
+    )
     medians = []
     for k in range(args.rigs):
-        truth = (synthetic.misaligned_rig(image_size=size) if k == 0 else
-                 synthetic.random_misaligned_rig(rng, 5.0, 5.0, image_size=size))
+        truth = (
+            synthetic.misaligned_rig(image_size=size)
+            if k == 0
+            else synthetic.random_misaligned_rig(rng, 5.0, 5.0, image_size=size)
+        )
         t0 = time.perf_counter()
         image = synthetic.render_environment(truth)
         t_render = time.perf_counter() - t0
         lines = synthetic.far_line_pixels(truth, rng=rng)
         C = truth.camera_center
-        print(f"rig {k}: tilt {errors(synthetic.aligned_rig(image_size=size), truth)[0]:.2f} deg,"
-              f" camera {math.hypot(C[0], C[1]):.2f} mm off the axis (render {t_render:.1f} s)")
+        print(
+            f"rig {k}: tilt {errors(synthetic.aligned_rig(image_size=size), truth)[0]:.2f} deg,"
+            f" camera {math.hypot(C[0], C[1]):.2f} mm off the axis (render {t_render:.1f} s)"
+        )
         med, lo, fit = timed(lambda: detect_rim(image), args.repeat)
-        print(f"  detect_rim alone                      {med * 1e3:7.1f} ms ({lo * 1e3:.1f})"
-              f"  {len(fit.points)} points, RMS {fit.rms:.3f} px")
-        for name, kw in (("far lines, refine (the default use)", dict(far_lines=lines)),
-                         ("far lines, refine, lens=None", dict(far_lines=lines, lens=None)),
-                         ("far lines, no refinement", dict(far_lines=lines, refine=False)),
-                         ("no far lines, refine", dict()),
-                         ("no far lines, refine, lens=None", dict(lens=None))):
-            med, lo, (cam, report) = timed(lambda: MisalignedHyperbolicCamera.calibrate(
-                truth.K, truth.mirror, image=image, **kw), args.repeat)
+        print(
+            f"  detect_rim alone                      {med * 1e3:7.1f} ms ({lo * 1e3:.1f})"
+            f"  {len(fit.points)} points, RMS {fit.rms:.3f} px"
+        )
+        for name, kw in (
+            ("far lines, refine (the default use)", dict(far_lines=lines)),
+            ("far lines, refine, lens=None", dict(far_lines=lines, lens=None)),
+            ("far lines, no refinement", dict(far_lines=lines, refine=False)),
+            ("no far lines, refine", dict()),
+            ("no far lines, refine, lens=None", dict(lens=None)),
+        ):
+            med, lo, (cam, report) = timed(
+                lambda: MisalignedHyperbolicCamera.calibrate(
+                    truth.K, truth.mirror, image=image, **kw
+                ),
+                args.repeat,
+            )
             if name.startswith("far lines, refine"):
                 medians.append(med)
             axis, origin = errors(cam, truth)
-            print(f"  {name:<37} {med * 1e3:7.1f} ms ({lo * 1e3:.1f})  axis error "
-                  f"{axis:.4f} deg, origin error {origin:.4f} mm, chosen {report.chosen} "
-                  f"(confidence {report.confidence:.3f}), RMS uncertainty "
-                  f"{report.axis_std_deg:.3f} deg, lens "
-                  f"{'r %.2f' % report.lens_r if report.lens_used else 'off'}, "
-                  f"{len(report.warnings)} warning(s)")
+            print(
+                f"  {name:<37} {med * 1e3:7.1f} ms ({lo * 1e3:.1f})  axis error "
+                f"{axis:.4f} deg, origin error {origin:.4f} mm, chosen {report.chosen} "
+                f"(confidence {report.confidence:.3f}), RMS uncertainty "
+                f"{report.axis_std_deg:.3f} deg, lens "
+                + (f"r {report.lens_r:.2f}, " if report.lens_used else "off, ")
+                + f"{len(report.warnings)} warning(s)"
+            )
     worst = max(medians)
-    print(f"slowest median of the default use: {worst * 1e3:.1f} ms (target <= 500 ms): "
-          f"{'OK' if worst <= 0.5 else 'MISSED'}")
+    print(
+        f"slowest median of the default use: {worst * 1e3:.1f} ms (target <= 500 ms): "
+        f"{'OK' if worst <= 0.5 else 'MISSED'}"
+    )
     return 0
 
 

@@ -9,6 +9,7 @@ frame; and (d) one run per view, each decoding the video again (what several ``o
 unwarp`` calls would cost). Encoding is left out of all four (it is the same work in (c) and
 (d)). Each figure is the best of ``--rounds`` runs, in ms per frame.
 """
+
 from __future__ import annotations
 
 import argparse
@@ -111,15 +112,19 @@ def main(argv=None):
         t_separate = timed(one_run_per_view, args.rounds)
 
     ms = 1000.0 / n
-    print(f"{n} frames of {w}x{h} MJPG, views: " +
-          ", ".join(f"{k} {v.size[0]}x{v.size[1]}" for k, v in VIEWS.items()))
+    print(
+        f"{n} frames of {w}x{h} MJPG, views: "
+        + ", ".join(f"{k} {v.size[0]}x{v.size[1]}" for k, v in VIEWS.items())
+    )
     print(f"  decode alone                      {t_decode * ms:8.2f} ms/frame")
     for name, t in t_remap.items():
         print(f"  remap {name:<27} {t * ms:8.2f} ms/frame")
     budget = t_decode + sum(t_remap.values())
     print(f"  decode + sum of remaps            {budget * ms:8.2f} ms/frame")
-    print(f"  one decode, all views (omnicam)   {t_multi * ms:8.2f} ms/frame "
-          f"({100 * (t_multi / budget - 1):+.1f}% vs decode + sum of remaps)")
+    print(
+        f"  one decode, all views (omnicam)   {t_multi * ms:8.2f} ms/frame "
+        f"({100 * (t_multi / budget - 1):+.1f}% vs decode + sum of remaps)"
+    )
     print(f"  one run per view (decode {len(VIEWS)}x)     {t_separate * ms:8.2f} ms/frame")
     return 0
 

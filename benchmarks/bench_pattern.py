@@ -23,6 +23,7 @@ Run from the repository root::
     OPENBLAS_NUM_THREADS=1 python benchmarks/bench_pattern.py --detect --renders 40
     OPENBLAS_NUM_THREADS=1 python benchmarks/bench_pattern.py --timing
 """
+
 from __future__ import annotations
 
 import argparse
@@ -71,7 +72,7 @@ def kabsch_angle_rms(a, b):
         Q = Vt.T @ np.diag([1.0, 1.0, s]) @ U.T
         qa = a @ Q.T
         ang = np.arctan2(np.linalg.norm(np.cross(qa, b), axis=1), np.einsum("ij,ij->i", qa, b))
-        best = min(best, math.degrees(math.sqrt(np.mean(ang ** 2))))
+        best = min(best, math.degrees(math.sqrt(np.mean(ang**2))))
     return best
 
 
@@ -90,19 +91,20 @@ def run_omnidir(obj, image_points):
     objp = [obj.reshape(1, -1, 3).astype(np.float64) for _ in image_points]
     imgp = [p.reshape(1, -1, 2).astype(np.float64) for p in image_points]
     crit = (cv2.TERM_CRITERIA_COUNT | cv2.TERM_CRITERIA_EPS, 300, 1e-10)
-    rms, K, xi, D, _, _, idx = cv2.omnidir.calibrate(objp, imgp, SIZE, None, None, None,
-                                                     cv2.omnidir.CALIB_FIX_SKEW, crit)
+    rms, K, xi, D, _, _, idx = cv2.omnidir.calibrate(
+        objp, imgp, SIZE, None, None, None, cv2.omnidir.CALIB_FIX_SKEW, crit
+    )
     return float(rms), K, float(np.ravel(xi)[0]), D, np.ravel(idx)
 
 
 def accuracy_trial(truth, n_views, noise, seed, dist_model, use_lens=True):
     rng = np.random.default_rng(seed)
-    poses = boards.random_board_poses(truth, n_views, PATTERN, SQUARE, max_tilt_deg=50.0,
-                                      rng=rng)
+    poses = boards.random_board_poses(truth, n_views, PATTERN, SQUARE, max_tilt_deg=50.0, rng=rng)
     exact = [boards.board_corners(truth, PATTERN, SQUARE, *p) for p in poses]
     noisy = [p + rng.normal(0.0, noise, p.shape) for p in exact]
-    scene = boards.render_board(truth, PATTERN, SQUARE, None, None, supersample=3, noise=1.0,
-                                seed=seed)
+    scene = boards.render_board(
+        truth, PATTERN, SQUARE, None, None, supersample=3, noise=1.0, seed=seed
+    )
     rim_fit = detect_rim(scene)
     rim = rim_fit.points
     lens = detect_reflection(scene, rim_fit).points if use_lens else None
@@ -112,32 +114,53 @@ def accuracy_trial(truth, n_views, noise, seed, dist_model, use_lens=True):
     t = time.perf_counter()
     with warnings.catch_warnings():
         warnings.simplefilter("ignore", RuntimeWarning)
-        cam, rep = omnicam.calibrate_pattern(None, PATTERN, SQUARE, truth.mirror, image_size=SIZE,
-                                             image_points=noisy, boundary_points=rim,
-                                             dist_model=dist_model, lens=lens)
+        cam, rep = omnicam.calibrate_pattern(
+            None,
+            PATTERN,
+            SQUARE,
+            truth.mirror,
+            image_size=SIZE,
+            image_points=noisy,
+            boundary_points=rim,
+            dist_model=dist_model,
+            lens=lens,
+        )
     t_omni = time.perf_counter() - t
     _, d_fit = cam.unproject(pix)
     ok = np.isfinite(d_fit[:, 0])
     axis, origin = posture_error(cam, truth)
     K_err = cam.K - truth.K
     row["omnicam"] = {
-        "rms": rep.rms, "dir": kabsch_angle_rms(d_fit[ok], d_true[ok]), "cover": ok.mean(),
-        "fx": K_err[0, 0] / truth.K[0, 0] * 100, "fy": K_err[1, 1] / truth.K[1, 1] * 100,
-        "pp": float(np.hypot(K_err[0, 2], K_err[1, 2])), "axis": axis, "origin": origin,
-        "time": t_omni, "std_axis": rep.std["axis_deg"],
-        "std_pp": math.hypot(rep.std["cx"], rep.std["cy"])}
+        "rms": rep.rms,
+        "dir": kabsch_angle_rms(d_fit[ok], d_true[ok]),
+        "cover": ok.mean(),
+        "fx": K_err[0, 0] / truth.K[0, 0] * 100,
+        "fy": K_err[1, 1] / truth.K[1, 1] * 100,
+        "pp": float(np.hypot(K_err[0, 2], K_err[1, 2])),
+        "axis": axis,
+        "origin": origin,
+        "time": t_omni,
+        "std_axis": rep.std["axis_deg"],
+        "std_pp": math.hypot(rep.std["cx"], rep.std["cy"]),
+    }
     t = time.perf_counter()
     try:
         rms, K, xi, D, idx = run_omnidir(obj, noisy)
         t_cv = time.perf_counter() - t
         d_cv = omnidir_directions(pix, K, D, xi)
         # the lifting is Mei's model inverted: cv2.omnidir.projectPoints gives the pixels back
-        back, _ = cv2.omnidir.projectPoints(d_cv.reshape(-1, 1, 3), np.zeros(3), np.zeros(3), K,
-                                            xi, D)
+        back, _ = cv2.omnidir.projectPoints(
+            d_cv.reshape(-1, 1, 3), np.zeros(3), np.zeros(3), K, xi, D
+        )
         assert np.nanmax(np.abs(back.reshape(-1, 2) - pix)) < 1e-4, "Mei lifting"
         ok = np.isfinite(d_cv).all(axis=1)
-        row["cv2.omnidir"] = {"rms": rms, "dir": kabsch_angle_rms(d_cv[ok], d_true[ok]),
-                              "cover": ok.mean(), "used": len(idx), "time": t_cv}
+        row["cv2.omnidir"] = {
+            "rms": rms,
+            "dir": kabsch_angle_rms(d_cv[ok], d_true[ok]),
+            "cover": ok.mean(),
+            "used": len(idx),
+            "time": t_cv,
+        }
     except cv2.error as e:
         row["cv2.omnidir"] = {"error": str(e).strip().splitlines()[-1][:80]}
     return row
@@ -145,36 +168,53 @@ def accuracy_trial(truth, n_views, noise, seed, dist_model, use_lens=True):
 
 def accuracy(args):
     truth = target_rig()
-    print(f"rig: tilt 3 deg, offset 3 mm, {SIZE[0]}x{SIZE[1]}; {args.views} views of a "
-          f"{PATTERN[0]}x{PATTERN[1]} board ({SQUARE:g} mm squares) 0.3-1.5 m away; corner "
-          f"noise {args.noise} px; dist_model {args.dist_model}; camera's reflection "
-          f"{'not ' if args.no_lens else ''}used; {args.trials} trials")
-    rows = [accuracy_trial(truth, args.views, args.noise, args.seed + k, args.dist_model,
-                           not args.no_lens) for k in range(args.trials)]
-    print(f"{'trial':>5} {'method':<12} {'rms px':>7} {'dir deg':>8} {'fx %':>7} {'fy %':>7} "
-          f"{'pp px':>6} {'axis deg':>8} {'origin':>7} {'s_axis':>7} {'s_pp':>6} {'time s':>6}")
+    print(
+        f"rig: tilt 3 deg, offset 3 mm, {SIZE[0]}x{SIZE[1]}; {args.views} views of a "
+        f"{PATTERN[0]}x{PATTERN[1]} board ({SQUARE:g} mm squares) 0.3-1.5 m away; corner "
+        f"noise {args.noise} px; dist_model {args.dist_model}; camera's reflection "
+        f"{'not ' if args.no_lens else ''}used; {args.trials} trials"
+    )
+    rows = [
+        accuracy_trial(
+            truth, args.views, args.noise, args.seed + k, args.dist_model, not args.no_lens
+        )
+        for k in range(args.trials)
+    ]
+    print(
+        f"{'trial':>5} {'method':<12} {'rms px':>7} {'dir deg':>8} {'fx %':>7} {'fy %':>7} "
+        f"{'pp px':>6} {'axis deg':>8} {'origin':>7} {'s_axis':>7} {'s_pp':>6} {'time s':>6}"
+    )
     for k, row in enumerate(rows):
         o = row["omnicam"]
-        print(f"{k:>5} {'omnicam':<12} {o['rms']:>7.3f} {o['dir']:>8.4f} {o['fx']:>7.3f} "
-              f"{o['fy']:>7.3f} {o['pp']:>6.2f} {o['axis']:>8.4f} {o['origin']:>7.3f} "
-              f"{o['std_axis']:>7.4f} {o['std_pp']:>6.2f} {o['time']:>6.1f}")
+        print(
+            f"{k:>5} {'omnicam':<12} {o['rms']:>7.3f} {o['dir']:>8.4f} {o['fx']:>7.3f} "
+            f"{o['fy']:>7.3f} {o['pp']:>6.2f} {o['axis']:>8.4f} {o['origin']:>7.3f} "
+            f"{o['std_axis']:>7.4f} {o['std_pp']:>6.2f} {o['time']:>6.1f}"
+        )
         c = row["cv2.omnidir"]
         if "error" in c:
             print(f"{k:>5} {'cv2.omnidir':<12} failed: {c['error']}")
         else:
-            print(f"{k:>5} {'cv2.omnidir':<12} {c['rms']:>7.3f} {c['dir']:>8.4f} "
-                  f"{'':>7} {'':>7} {'':>6} {'':>8} {'':>7} {'':>7} {'':>6} {c['time']:>6.1f}")
+            print(
+                f"{k:>5} {'cv2.omnidir':<12} {c['rms']:>7.3f} {c['dir']:>8.4f} "
+                f"{'':>7} {'':>7} {'':>6} {'':>8} {'':>7} {'':>7} {'':>6} {c['time']:>6.1f}"
+            )
     for name in ("omnicam", "cv2.omnidir"):
         vals = [r[name] for r in rows if "error" not in r[name]]
         if vals:
             med = {k: float(np.median([v[k] for v in vals])) for k in ("rms", "dir")}
-            print(f"median {name:<12} rms {med['rms']:.3f} px, direction error "
-                  f"{med['dir']:.4f} deg ({len(vals)} of {len(rows)} trials)")
+            print(
+                f"median {name:<12} rms {med['rms']:.3f} px, direction error "
+                f"{med['dir']:.4f} deg ({len(vals)} of {len(rows)} trials)"
+            )
     o = [r["omnicam"] for r in rows]
-    m = {k: float(np.median(np.abs([v[k] for v in o]))) for k in ("fx", "fy", "pp", "axis",
-                                                                    "origin")}
-    print(f"omnicam median |fx| {m['fx']:.3f} %, |fy| {m['fy']:.3f} %, pp {m['pp']:.2f} px, "
-          f"axis {m['axis']:.4f} deg, origin {m['origin']:.3f} mm")
+    m = {
+        k: float(np.median(np.abs([v[k] for v in o]))) for k in ("fx", "fy", "pp", "axis", "origin")
+    }
+    print(
+        f"omnicam median |fx| {m['fx']:.3f} %, |fy| {m['fy']:.3f} %, pp {m['pp']:.2f} px, "
+        f"axis {m['axis']:.4f} deg, origin {m['origin']:.3f} mm"
+    )
 
 
 def detect(args):
@@ -190,15 +230,18 @@ def detect(args):
         m = truth.mirror
         f0 = r_px * (m.z_rim + m.c) / m.rim_radius
         K0 = np.array([[f0, 0, (SIZE[0] - 1) / 2], [0, f0, (SIZE[1] - 1) / 2], [0, 0, 1.0]])
-        start, _ = omnicam.MisalignedHyperbolicCamera.calibrate(K0, m, boundary_points=rim.points,
-                                                                image_size=SIZE, lens=None)
-        poses = boards.random_board_poses(truth, per_rig, PATTERN, SQUARE, max_tilt_deg=50.0,
-                                          rng=rng)
+        start, _ = omnicam.MisalignedHyperbolicCamera.calibrate(
+            K0, m, boundary_points=rim.points, image_size=SIZE, lens=None
+        )
+        poses = boards.random_board_poses(
+            truth, per_rig, PATTERN, SQUARE, max_tilt_deg=50.0, rng=rng
+        )
         for p in poses:
             if tried >= args.renders:
                 break
-            img = boards.render_board(truth, PATTERN, SQUARE, *p, supersample=4, noise=1.0,
-                                      seed=tried)
+            img = boards.render_board(
+                truth, PATTERN, SQUARE, *p, supersample=4, noise=1.0, seed=tried
+            )
             gt = boards.board_corners(truth, PATTERN, SQUARE, *p).reshape(-1, 2)
             t = time.perf_counter()
             c = omnicam.find_pattern(img, PATTERN, start)
@@ -206,47 +249,59 @@ def detect(args):
             tried += 1
             if c is None:
                 t_ = p[1]
-                print(f"  missed: distance {np.linalg.norm(t_):.0f} mm, elevation "
-                      f"{math.degrees(math.asin(t_[2] / np.linalg.norm(t_))):.1f} deg")
+                print(
+                    f"  missed: distance {np.linalg.norm(t_):.0f} mm, elevation "
+                    f"{math.degrees(math.asin(t_[2] / np.linalg.norm(t_))):.1f} deg"
+                )
                 continue
             c = c.reshape(-1, 2).astype(np.float64)
-            e = min((np.linalg.norm(c - gt, axis=1), np.linalg.norm(c[::-1] - gt, axis=1)),
-                    key=lambda v: v.max())
+            e = min(
+                (np.linalg.norm(c - gt, axis=1), np.linalg.norm(c[::-1] - gt, axis=1)),
+                key=lambda v: v.max(),
+            )
             found += 1
             errs.append(e)
             if e.max() > 0.5:
                 t_ = p[1]
-                print(f"  render {tried - 1}: corner error up to {e.max():.2f} px (corner "
-                      f"{int(np.argmax(e))}), distance {np.linalg.norm(t_):.0f} mm, elevation "
-                      f"{math.degrees(math.asin(t_[2] / np.linalg.norm(t_))):.1f} deg")
+                print(
+                    f"  render {tried - 1}: corner error up to {e.max():.2f} px (corner "
+                    f"{int(np.argmax(e))}), distance {np.linalg.norm(t_):.0f} mm, elevation "
+                    f"{math.degrees(math.asin(t_[2] / np.linalg.norm(t_))):.1f} deg"
+                )
     e = np.concatenate(errs) if errs else np.array([np.nan])
-    print(f"find_pattern: {found} of {tried} renders ({100.0 * found / tried:.0f} %), corner "
-          f"error RMS {math.sqrt(np.mean(e ** 2)):.3f} px, 95th percentile "
-          f"{np.percentile(e, 95):.3f} px, max {e.max():.3f} px; median time "
-          f"{np.median(times):.2f} s per image")
+    print(
+        f"find_pattern: {found} of {tried} renders ({100.0 * found / tried:.0f} %), corner "
+        f"error RMS {math.sqrt(np.mean(e**2)):.3f} px, 95th percentile "
+        f"{np.percentile(e, 95):.3f} px, max {e.max():.3f} px; median time "
+        f"{np.median(times):.2f} s per image"
+    )
 
 
 def timing(args):
     truth = target_rig()
-    poses = boards.random_board_poses(truth, 12, PATTERN, SQUARE, max_tilt_deg=50.0,
-                                      rng=args.seed)
-    imgs = [boards.render_board(truth, PATTERN, SQUARE, *p, supersample=3, noise=1.0, seed=i)
-            for i, p in enumerate(poses)]
+    poses = boards.random_board_poses(truth, 12, PATTERN, SQUARE, max_tilt_deg=50.0, rng=args.seed)
+    imgs = [
+        boards.render_board(truth, PATTERN, SQUARE, *p, supersample=3, noise=1.0, seed=i)
+        for i, p in enumerate(poses)
+    ]
     t = time.perf_counter()
     with warnings.catch_warnings():
         warnings.simplefilter("ignore", RuntimeWarning)
-        cam, rep = omnicam.calibrate_pattern(imgs, PATTERN, SQUARE, truth.mirror,
-                                             dist_model=args.dist_model)
+        cam, rep = omnicam.calibrate_pattern(
+            imgs, PATTERN, SQUARE, truth.mirror, dist_model=args.dist_model
+        )
     dt = time.perf_counter() - t
     pix, d_true = annulus_pixels(truth)
     _, d_fit = cam.unproject(pix)
     ok = np.isfinite(d_fit[:, 0])
     axis, origin = posture_error(cam, truth)
     print(rep.table())
-    print(f"12 views of {SIZE[0]}x{SIZE[1]}, detection included: {dt:.1f} s; {len(rep.view_rms)} "
-          f"views used, RMS {rep.rms:.3f} px, direction error "
-          f"{kabsch_angle_rms(d_fit[ok], d_true[ok]):.4f} deg, axis {axis:.4f} deg, origin "
-          f"{origin:.3f} mm, fx {100 * (cam.K[0, 0] / truth.K[0, 0] - 1):.3f} %")
+    print(
+        f"12 views of {SIZE[0]}x{SIZE[1]}, detection included: {dt:.1f} s; {len(rep.view_rms)} "
+        f"views used, RMS {rep.rms:.3f} px, direction error "
+        f"{kabsch_angle_rms(d_fit[ok], d_true[ok]):.4f} deg, axis {axis:.4f} deg, origin "
+        f"{origin:.3f} mm, fx {100 * (cam.K[0, 0] / truth.K[0, 0] - 1):.3f} %"
+    )
     for w in rep.warnings:
         print("warning:", w)
 
@@ -261,8 +316,11 @@ def main():
     ap.add_argument("--detect", action="store_true")
     ap.add_argument("--renders", type=int, default=40)
     ap.add_argument("--timing", action="store_true")
-    ap.add_argument("--no-lens", action="store_true",
-                    help="omnicam without the camera's reflection (rim and corners only)")
+    ap.add_argument(
+        "--no-lens",
+        action="store_true",
+        help="omnicam without the camera's reflection (rim and corners only)",
+    )
     args = ap.parse_args()
     if args.detect:
         detect(args)

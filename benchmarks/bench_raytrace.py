@@ -5,6 +5,7 @@ Targets (issue 2): unproject >= 3x cv2.omnidir.undistortPoints; the exact non-ce
 
     python benchmarks/bench_raytrace.py [--n 1000000] [--repeat 7]
 """
+
 import argparse
 import statistics
 import time
@@ -52,26 +53,42 @@ def main(argv=None):
     rvec, tvec = np.zeros((3, 1)), np.zeros((3, 1))
 
     rows = [
-        ("cv2.omnidir.undistortPoints",
-         median_time(lambda: cv2.omnidir.undistortPoints(pix_cv, K, D, xi, np.eye(3)), args.repeat)),
+        (
+            "cv2.omnidir.undistortPoints",
+            median_time(
+                lambda: cv2.omnidir.undistortPoints(pix_cv, K, D, xi, np.eye(3)), args.repeat
+            ),
+        ),
         ("omnicam unproject", median_time(lambda: cam.unproject(pix), args.repeat)),
-        ("cv2.omnidir.projectPoints",
-         median_time(lambda: cv2.omnidir.projectPoints(X_cv, rvec, tvec, K, float(xi[0, 0]), D),
-                     args.repeat)),
+        (
+            "cv2.omnidir.projectPoints",
+            median_time(
+                lambda: cv2.omnidir.projectPoints(X_cv, rvec, tvec, K, float(xi[0, 0]), D),
+                args.repeat,
+            ),
+        ),
         ("omnicam project (exact)", median_time(lambda: cam.project(X), args.repeat)),
     ]
-    print(f"{n} points, median of {args.repeat} runs, numba threads: "
-          f"{__import__('numba').get_num_threads()}")
+    print(
+        f"{n} points, median of {args.repeat} runs, numba threads: "
+        f"{__import__('numba').get_num_threads()}"
+    )
     for name, t in rows:
         print(f"  {name:30s} {t * 1e3:8.1f} ms  {n / t / 1e6:7.2f} Mpts/s")
     t = dict(rows)
-    print(f"unproject / omnidir.undistortPoints throughput ratio: "
-          f"{t['cv2.omnidir.undistortPoints'] / t['omnicam unproject']:.2f}x (target >= 3)")
-    print(f"project / omnidir.projectPoints throughput ratio:     "
-          f"{t['cv2.omnidir.projectPoints'] / t['omnicam project (exact)']:.2f}x (target >= 0.5)")
+    print(
+        f"unproject / omnidir.undistortPoints throughput ratio: "
+        f"{t['cv2.omnidir.undistortPoints'] / t['omnicam unproject']:.2f}x (target >= 3)"
+    )
+    print(
+        f"project / omnidir.projectPoints throughput ratio:     "
+        f"{t['cv2.omnidir.projectPoints'] / t['omnicam project (exact)']:.2f}x (target >= 0.5)"
+    )
     err = np.linalg.norm(cam.project(X) - pix, axis=1)
-    print(f"round trip project(unproject(x)) - x: max {np.nanmax(err):.2e} px, "
-          f"NaN {int(np.isnan(err).sum())}")
+    print(
+        f"round trip project(unproject(x)) - x: max {np.nanmax(err):.2e} px, "
+        f"NaN {int(np.isnan(err).sum())}"
+    )
     return 0
 
 

@@ -7,6 +7,7 @@ images; eqs. 20-22) and, when ``omnicam.calibration.calibrate`` exists, the whol
 
     python benchmarks/bench_rim.py [--repeat 7] [--real PATH]
 """
+
 import argparse
 import pathlib
 import statistics
@@ -18,8 +19,13 @@ import numpy as np
 from omnicam import synthetic
 from omnicam.calibration.rim import conic_distance, detect_rim
 
-REAL = (pathlib.Path(__file__).resolve().parents[2]
-        / "shared" / "data" / "real" / "office_catadioptric_1920x1080.jpg")
+REAL = (
+    pathlib.Path(__file__).resolve().parents[2]
+    / "shared"
+    / "data"
+    / "real"
+    / "office_catadioptric_1920x1080.jpg"
+)
 
 
 def median_time(fn, repeat):
@@ -40,24 +46,29 @@ def main(argv=None):
 
     cases = [
         ("500x500 misaligned, environment", synthetic.misaligned_rig(), "env"),
-        ("1000x1000 misaligned, environment",
-         synthetic.misaligned_rig(image_size=(1000, 1000)), "env"),
+        (
+            "1000x1000 misaligned, environment",
+            synthetic.misaligned_rig(image_size=(1000, 1000)),
+            "env",
+        ),
         ("1000x1000 misaligned, room", synthetic.misaligned_rig(image_size=(1000, 1000)), "room"),
     ]
     try:
         from omnicam import MisalignedHyperbolicCamera
+
         calibrate = MisalignedHyperbolicCamera.calibrate
     except ImportError:
         calibrate = None
     for name, cam, kind in cases:
-        img = (synthetic.render_environment(cam) if kind == "env"
-               else synthetic.render_room(cam))
+        img = synthetic.render_environment(cam) if kind == "env" else synthetic.render_room(cam)
         fit = detect_rim(img)
         d = conic_distance(fit.conic, cam.rim_image_points(2000))
         med, best = median_time(lambda: detect_rim(img), args.repeat)
-        line = (f"{name:36s} detect_rim median {1e3 * med:6.1f} ms (min {1e3 * best:6.1f})  "
-                f"true rim to conic RMS {np.sqrt(np.mean(d ** 2)):.4f} px, max "
-                f"{np.abs(d).max():.4f} px, fit RMS {fit.rms:.3f} px")
+        line = (
+            f"{name:36s} detect_rim median {1e3 * med:6.1f} ms (min {1e3 * best:6.1f})  "
+            f"true rim to conic RMS {np.sqrt(np.mean(d**2)):.4f} px, max "
+            f"{np.abs(d).max():.4f} px, fit RMS {fit.rms:.3f} px"
+        )
         if calibrate is not None:
             med_c, _ = median_time(lambda: calibrate(cam.K, cam.mirror, image=img), args.repeat)
             line += f"  | calibrate median {1e3 * med_c:6.1f} ms"
@@ -67,9 +78,11 @@ def main(argv=None):
         img = cv2.imread(str(real))
         fit = detect_rim(img)
         med, best = median_time(lambda: detect_rim(img), args.repeat)
-        print(f"{'real photo ' + real.name:36s} detect_rim median {1e3 * med:6.1f} ms (min "
-              f"{1e3 * best:6.1f})  centre ({fit.center[0]:.2f}, {fit.center[1]:.2f}) px, "
-              f"mean diameter {fit.diameter:.2f} px, fit RMS {fit.rms:.3f} px")
+        print(
+            f"{'real photo ' + real.name:36s} detect_rim median {1e3 * med:6.1f} ms (min "
+            f"{1e3 * best:6.1f})  centre ({fit.center[0]:.2f}, {fit.center[1]:.2f}) px, "
+            f"mean diameter {fit.diameter:.2f} px, fit RMS {fit.rms:.3f} px"
+        )
     return 0
 
 

@@ -12,17 +12,18 @@ plausibility warning (or an error), and whether a good one was wrongly flagged.
 
 Needs ``omnicam.synthetic.realistic`` (branch ``realistic``).
 """
+
 import argparse
 import math
 
 import numpy as np
 
 from omnicam import MisalignedHyperbolicCamera
-
-calibrate = MisalignedHyperbolicCamera.calibrate
 from omnicam.calibration.ellipse import conic_distance
 from omnicam.calibration.plausibility import expected_rim
 from omnicam.calibration.rim import detect_rim
+
+calibrate = MisalignedHyperbolicCamera.calibrate
 
 
 def rim_rms(truth, conic):
@@ -44,8 +45,10 @@ def main():
         r = realistic.render_case(case)
         truth = r.camera
         row = {"i": case.index, "holder": "holder" in r.flags}
-        for key, kw in (("unguided", {}), ("guided", {"expected": expected_rim(
-                truth.K, truth.mirror, truth.D).radius_range})):
+        for key, kw in (
+            ("unguided", {}),
+            ("guided", {"expected": expected_rim(truth.K, truth.mirror, truth.D).radius_range}),
+        ):
             try:
                 row[key] = rim_rms(truth, detect_rim(r.image, **kw).conic)
             except ValueError:
@@ -57,20 +60,27 @@ def main():
         except ValueError:
             row["axis"], row["flagged"] = math.nan, True
         rows.append(row)
-        print(f"{case.index:3d} {','.join(sorted(r.flags)):60s} rim unguided "
-              f"{row['unguided']:8.3f} guided {row['guided']:8.3f} px  axis {row['axis']:7.3f} "
-              f"deg {'FLAGGED' if row['flagged'] else ''}", flush=True)
+        print(
+            f"{case.index:3d} {','.join(sorted(r.flags)):60s} rim unguided "
+            f"{row['unguided']:8.3f} guided {row['guided']:8.3f} px  axis {row['axis']:7.3f} "
+            f"deg {'FLAGGED' if row['flagged'] else ''}",
+            flush=True,
+        )
     n = len(rows)
     hold = [r for r in rows if r["holder"]]
     for key in ("unguided", "guided"):
-        print(f"rim {key:9s}: RMS > 1 px in {sum(not r[key] < 1 for r in rows)}/{n} renders "
-              f"({sum(not r[key] < 1 for r in hold)}/{len(hold)} with a holder); median "
-              f"{np.median([r[key] for r in rows]):.3f} px")
+        print(
+            f"rim {key:9s}: RMS > 1 px in {sum(not r[key] < 1 for r in rows)}/{n} renders "
+            f"({sum(not r[key] < 1 for r in hold)}/{len(hold)} with a holder); median "
+            f"{np.median([r[key] for r in rows]):.3f} px"
+        )
     off = [r for r in rows if not r["axis"] < 1.0]
-    print(f"calibrate: axis off by > 1 deg (or failed) in {len(off)}/{n}, of which "
-          f"{sum(r['flagged'] for r in off)} flagged implausible; > 10 deg and silent: "
-          f"{sum(r['axis'] > 10 and not r['flagged'] for r in rows)}; flagged with axis < 0.5 deg: "
-          f"{sum(r['flagged'] and r['axis'] < 0.5 for r in rows)}")
+    print(
+        f"calibrate: axis off by > 1 deg (or failed) in {len(off)}/{n}, of which "
+        f"{sum(r['flagged'] for r in off)} flagged implausible; > 10 deg and silent: "
+        f"{sum(r['axis'] > 10 and not r['flagged'] for r in rows)}; flagged with axis < 0.5 deg: "
+        f"{sum(r['flagged'] and r['axis'] < 0.5 for r in rows)}"
+    )
 
 
 if __name__ == "__main__":

@@ -47,7 +47,10 @@ REFERENCE = "ref"  # lens=False and one far line: the rim and the line alone (--
 
 
 def posture_errors(camera, truth):
-    """Mirror-axis angle (deg) and camera-centre distance (mm): :func:`omnicam.gauge.posture_error`."""
+    """Mirror-axis angle (deg) and camera-centre distance (mm).
+
+    :func:`omnicam.gauge.posture_error`, the one metric of the project.
+    """
     return posture_error(camera, truth)
 
 

@@ -5,6 +5,7 @@
 Writes `calib_files/*.yaml` (the source) and the copies shipped inside the package
 (`omnicam/data/`), which `omnicam.samples` reads; a test checks the two stay identical.
 """
+
 import pathlib
 import shutil
 

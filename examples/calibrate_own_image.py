@@ -38,6 +38,7 @@ Writes ``calibration.yaml`` (``MisalignedHyperbolicCamera.load`` reads it; so do
 ``omnicam unwarp -c``) and ``overlay.png`` (fitted rim, far lines, the candidates' line
 predictions) into ``--out``, and prints the report.
 """
+
 from __future__ import annotations
 
 import argparse
@@ -64,8 +65,11 @@ def room_example(out):
     omnicam.write_intrinsics(intrinsics, truth.K, image_size=truth.image_size)
     # the room's vertical corner edges, 3.5 m away: 3-D straight lines projected exactly
     lo, hi = np.asarray(room.box_min), np.asarray(room.box_max)
-    lines = [np.round(synthetic.line_pixels(truth, (x, y, lo[2] + 50.0), (x, y, hi[2] - 50.0), 25), 2)
-             for x in (lo[0], hi[0]) for y in (lo[1], hi[1])]
+    lines = [
+        np.round(synthetic.line_pixels(truth, (x, y, lo[2] + 50.0), (x, y, hi[2] - 50.0), 25), 2)
+        for x in (lo[0], hi[0])
+        for y in (lo[1], hi[1])
+    ]
     lines_path = os.path.join(out, "lines.json")
     omnicam.write_far_lines(lines_path, lines)
     m = truth.mirror
@@ -74,15 +78,24 @@ def room_example(out):
 
 def main(argv=None):
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
-    parser.add_argument("--out", default=os.path.join(OUT, "own_image"),
-                        help="output folder (default %(default)s)")
+    parser.add_argument(
+        "--out", default=os.path.join(OUT, "own_image"), help="output folder (default %(default)s)"
+    )
     parser.add_argument("--image", help="your mirror image (default: a rendered room)")
     parser.add_argument("--intrinsics", help="YAML with K (and D, image_size) of your camera")
-    parser.add_argument("--mirror", type=float, nargs=3, metavar=("A", "B", "RIM"),
-                        help="mirror a, b and rim radius (mm)")
+    parser.add_argument(
+        "--mirror",
+        type=float,
+        nargs=3,
+        metavar=("A", "B", "RIM"),
+        help="mirror a, b and rim radius (mm)",
+    )
     parser.add_argument("--far-lines", help="JSON file of far-line pixels (see above)")
-    parser.add_argument("--small", action="store_true", help="accepted for symmetry with the "
-                        "other examples (the rendered room is already 500 px)")
+    parser.add_argument(
+        "--small",
+        action="store_true",
+        help="accepted for symmetry with the other examples (the rendered room is already 500 px)",
+    )
     args = parser.parse_args(argv)
     os.makedirs(args.out, exist_ok=True)
 
@@ -96,13 +109,16 @@ def main(argv=None):
         raise SystemExit(f"cannot read {args.image}")
     K, D, size = omnicam.read_intrinsics(args.intrinsics)
     if size is not None and tuple(size) != (image.shape[1], image.shape[0]):
-        raise SystemExit(f"intrinsics are for {size}, the image is "
-                         f"{image.shape[1]}x{image.shape[0]}; scale K or recalibrate")
+        raise SystemExit(
+            f"intrinsics are for {size}, the image is "
+            f"{image.shape[1]}x{image.shape[0]}; scale K or recalibrate"
+        )
     far_lines = omnicam.read_far_lines(args.far_lines) if args.far_lines else None
     mirror = omnicam.HyperbolicMirror(*args.mirror)
 
     camera, report = omnicam.MisalignedHyperbolicCamera.calibrate(
-        K, mirror, image=image, far_lines=far_lines, D=D)
+        K, mirror, image=image, far_lines=far_lines, D=D
+    )
     print(report.summary())
     calib = os.path.join(args.out, "calibration.yaml")
     camera.save(calib)
@@ -112,10 +128,13 @@ def main(argv=None):
     if truth is not None:
         cosang = float(np.clip(camera.R[:, 2] @ truth.R[:, 2], -1.0, 1.0))
         result["axis_error_deg"] = float(np.degrees(np.arccos(cosang)))
-        result["centre_error_mm"] = float(np.linalg.norm(camera.camera_center
-                                                         - truth.camera_center))
-        print(f"against the rendered truth: mirror axis off by {result['axis_error_deg']:.3f} "
-              f"deg, camera centre off by {result['centre_error_mm']:.3f} mm")
+        result["centre_error_mm"] = float(
+            np.linalg.norm(camera.camera_center - truth.camera_center)
+        )
+        print(
+            f"against the rendered truth: mirror axis off by {result['axis_error_deg']:.3f} "
+            f"deg, camera centre off by {result['centre_error_mm']:.3f} mm"
+        )
     return result
 
 

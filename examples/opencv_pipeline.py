@@ -18,6 +18,7 @@ Run::
 
     python examples/opencv_pipeline.py --out examples/out/opencv
 """
+
 from __future__ import annotations
 
 import argparse
@@ -42,8 +43,9 @@ def segment_bows(gray, min_length):
     curve's sagitta over the segment, ``|c| (L/2)^2``.
     """
     edges = cv2.Canny(gray, 50, 150)
-    segments = cv2.HoughLinesP(edges, 1, np.pi / 720, threshold=60, minLineLength=min_length,
-                               maxLineGap=3)
+    segments = cv2.HoughLinesP(
+        edges, 1, np.pi / 720, threshold=60, minLineLength=min_length, maxLineGap=3
+    )
     if segments is None:
         return []
     ys, xs = np.nonzero(edges)
@@ -66,25 +68,33 @@ def segment_bows(gray, min_length):
 
 def main(argv=None):
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
-    parser.add_argument("--out", default=os.path.join(OUT, "opencv"),
-                        help="output folder (default %(default)s)")
-    parser.add_argument("--size", type=int, default=1000,
-                        help="mirror image width = height in px (default %(default)s)")
+    parser.add_argument(
+        "--out", default=os.path.join(OUT, "opencv"), help="output folder (default %(default)s)"
+    )
+    parser.add_argument(
+        "--size",
+        type=int,
+        default=1000,
+        help="mirror image width = height in px (default %(default)s)",
+    )
     parser.add_argument("--small", action="store_true", help="a 500 px image (fast)")
     args = parser.parse_args(argv)
     size = 500 if args.small else args.size
     os.makedirs(args.out, exist_ok=True)
 
     calibrated = omnicam.samples.load("hyperomni_misaligned").scaled((size, size))
-    image = synthetic.render_room(calibrated)        # what this rig sees of the room
+    image = synthetic.render_room(calibrated)  # what this rig sees of the room
     m, K = calibrated.mirror, calibrated.K
-    models = {"calibrated": calibrated,
-              "uncalibrated": omnicam.MisalignedHyperbolicCamera.aligned(
-                  m, K[0, 0], K[0, 2], K[1, 2], calibrated.image_size)}
+    models = {
+        "calibrated": calibrated,
+        "uncalibrated": omnicam.MisalignedHyperbolicCamera.aligned(
+            m, K[0, 0], K[0, 2], K[1, 2], calibrated.image_size
+        ),
+    }
 
     view_size = (size * 4 // 5, size * 3 // 5)
     K_new = omnicam.K_from_fov(90.0, view_size)
-    yaws = (0.0, 90.0, 180.0, 270.0)          # four views around the room, 25 deg down
+    yaws = (0.0, 90.0, 180.0, 270.0)  # four views around the room, 25 deg down
     results = {}
     for name, cam in models.items():
         panels, bows, n_corners, n_orb = [], [], 0, 0
@@ -97,8 +107,9 @@ def main(argv=None):
 
             # the OpenCV pipeline, unchanged: lines, corners, ORB
             segments = segment_bows(gray, min_length=view_size[0] // 6)
-            corners = cv2.goodFeaturesToTrack(gray, maxCorners=200, qualityLevel=0.05,
-                                              minDistance=8)
+            corners = cv2.goodFeaturesToTrack(
+                gray, maxCorners=200, qualityLevel=0.05, minDistance=8
+            )
             keypoints = cv2.ORB_create(nfeatures=500).detect(gray, None)
 
             bows += [seg[4] for seg in segments]
@@ -108,26 +119,41 @@ def main(argv=None):
             for x1, y1, x2, y2, bow in segments:
                 colour = (0, 200, 0) if bow < 0.5 else (0, 0, 255)
                 cv2.line(drawn, (x1, y1), (x2, y2), colour, 2, cv2.LINE_AA)
-            for x, y in (corners.reshape(-1, 2) if corners is not None else []):
+            for x, y in corners.reshape(-1, 2) if corners is not None else []:
                 cv2.circle(drawn, (int(x), int(y)), 3, (255, 0, 255), -1, cv2.LINE_AA)
-            cv2.putText(drawn, f"{name}, yaw {yaw:g}", (10, 30), cv2.FONT_HERSHEY_SIMPLEX, 0.8,
-                        (255, 255, 255), 2, cv2.LINE_AA)
+            cv2.putText(
+                drawn,
+                f"{name}, yaw {yaw:g}",
+                (10, 30),
+                cv2.FONT_HERSHEY_SIMPLEX,
+                0.8,
+                (255, 255, 255),
+                2,
+                cv2.LINE_AA,
+            )
             panels.append(drawn)
             if yaw == yaws[0]:
                 cv2.imwrite(os.path.join(args.out, f"view_{name}.png"), view)
         grid = np.vstack([np.hstack(panels[:2]), np.hstack(panels[2:])])
         cv2.imwrite(os.path.join(args.out, f"features_{name}.png"), grid)
         b = np.array(bows)
-        results[name] = {"segments": len(b),
-                         "median_bow_px": float(np.median(b)) if len(b) else float("nan"),
-                         "p90_bow_px": float(np.percentile(b, 90)) if len(b) else float("nan"),
-                         "corners": n_corners, "orb": n_orb}
+        results[name] = {
+            "segments": len(b),
+            "median_bow_px": float(np.median(b)) if len(b) else float("nan"),
+            "p90_bow_px": float(np.percentile(b, 90)) if len(b) else float("nan"),
+            "corners": n_corners,
+            "orb": n_orb,
+        }
         r = results[name]
-        print(f"{name:12s}: {r['segments']:3d} long Hough segments in 4 views, bow median "
-              f"{r['median_bow_px']:.2f} px, 90th percentile {r['p90_bow_px']:.2f} px; "
-              f"{r['corners']} corners, {r['orb']} ORB keypoints")
-    print(f"wrote view_*.png (yaw 0) and features_*.png (the four views; segments green: bow "
-          f"< 0.5 px, red: curved; magenta: corners; blue: ORB) in {args.out}")
+        print(
+            f"{name:12s}: {r['segments']:3d} long Hough segments in 4 views, bow median "
+            f"{r['median_bow_px']:.2f} px, 90th percentile {r['p90_bow_px']:.2f} px; "
+            f"{r['corners']} corners, {r['orb']} ORB keypoints"
+        )
+    print(
+        f"wrote view_*.png (yaw 0) and features_*.png (the four views; segments green: bow "
+        f"< 0.5 px, red: curved; magenta: corners; blue: ORB) in {args.out}"
+    )
     return results
 
 

@@ -14,6 +14,7 @@ Run::
 With your own camera, replace step 1 by ``cv2.imread`` and the rig's ``K`` by your camera matrix
 (see ``calibrate_own_image.py``).
 """
+
 from __future__ import annotations
 
 import argparse
@@ -47,10 +48,15 @@ def far_vertical_lines(camera, azimuths_deg=(0.0, 120.0, 240.0), n=30):
 
 def main(argv=None):
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
-    parser.add_argument("--out", default=os.path.join(OUT, "quickstart"),
-                        help="output folder (default %(default)s)")
-    parser.add_argument("--size", type=int, default=800,
-                        help="mirror image width = height in px (default %(default)s)")
+    parser.add_argument(
+        "--out", default=os.path.join(OUT, "quickstart"), help="output folder (default %(default)s)"
+    )
+    parser.add_argument(
+        "--size",
+        type=int,
+        default=800,
+        help="mirror image width = height in px (default %(default)s)",
+    )
     parser.add_argument("--small", action="store_true", help="a 400 px image (fast)")
     args = parser.parse_args(argv)
     size = 400 if args.small else args.size
@@ -63,7 +69,8 @@ def main(argv=None):
 
     # 2. calibrate from the image: K and the mirror are known, the posture is found
     camera, report = omnicam.MisalignedHyperbolicCamera.calibrate(
-        truth.K, truth.mirror, image=image, far_lines=far_vertical_lines(truth))
+        truth.K, truth.mirror, image=image, far_lines=far_vertical_lines(truth)
+    )
     print(report.summary())
     camera.save(os.path.join(args.out, "calibration.yaml"))
     cv2.imwrite(os.path.join(args.out, "overlay.png"), report.draw(image))
@@ -73,16 +80,20 @@ def main(argv=None):
     # 3. unwarp: a panorama and a perspective view (cv2.remap tables, built once)
     pano_w = 2 * size
     map1, map2 = camera.init_panorama_maps((pano_w, pano_w // 4))
-    cv2.imwrite(os.path.join(args.out, "panorama.png"), cv2.remap(image, map1, map2,
-                                                                  cv2.INTER_LINEAR))
+    cv2.imwrite(
+        os.path.join(args.out, "panorama.png"), cv2.remap(image, map1, map2, cv2.INTER_LINEAR)
+    )
     view_size = (size, size * 3 // 4)
     K_new = omnicam.K_from_fov(90.0, view_size)
     R = omnicam.rotation_from_ypr(yaw=30.0, pitch=-25.0)
     map1, map2 = camera.init_perspective_maps(K_new, view_size, R=R)
-    cv2.imwrite(os.path.join(args.out, "perspective.png"), cv2.remap(image, map1, map2,
-                                                                     cv2.INTER_LINEAR))
-    print(f"wrote mirror.png, overlay.png, calibration.yaml, panorama.png, perspective.png "
-          f"in {args.out}")
+    cv2.imwrite(
+        os.path.join(args.out, "perspective.png"), cv2.remap(image, map1, map2, cv2.INTER_LINEAR)
+    )
+    print(
+        f"wrote mirror.png, overlay.png, calibration.yaml, panorama.png, perspective.png "
+        f"in {args.out}"
+    )
     return {"camera": camera, "report": report, "axis_error_deg": axis_error}
 
 

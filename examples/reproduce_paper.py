@@ -37,6 +37,7 @@ Writes ``fig6*.png``, ``fig7*.png``, ``room.png``, ``table1_views.png`` (the inp
 views with the detected corners, as the paper's Fig. 8) and ``table1.md`` (the table generated
 from the measurement, beside the paper's real-image result).
 """
+
 from __future__ import annotations
 
 import argparse
@@ -54,13 +55,16 @@ from omnicam import synthetic
 OUT = os.path.join(os.path.dirname(os.path.abspath(__file__)), "out")
 
 #: The paper's Table 1 (real image, TOM-02-0013 mirror and a SONY VX-2000), for comparison only.
-PAPER_TABLE1 = {"Uncalibrated": (58.4, 88.1, 126.9), "Hand adjusted": (81.4, 79.3, 134.8),
-                "Calibrated": (84.9, 89.9, 82.9)}
+PAPER_TABLE1 = {
+    "Uncalibrated": (58.4, 88.1, 126.9),
+    "Hand adjusted": (81.4, 79.3, 134.8),
+    "Calibrated": (84.9, 89.9, 82.9),
+}
 #: Gaussian noise (px, seeded) added to the far-line pixels. 0: exact projections of the lines.
 #: (With 0.2 px the eq. 31 choice between this rig's two physical postures is a coin flip.)
 CLICK_NOISE_PX = 0.0
 PAPER_METHOD = "Calibrated, rim + far lines only"
-POLE_AZIMUTHS_DEG = (0.0, 120.0, 240.0)   # far vertical poles of make_environment used as lines
+POLE_AZIMUTHS_DEG = (0.0, 120.0, 240.0)  # far vertical poles of make_environment used as lines
 
 
 # -- far lines ---------------------------------------------------------------------------------
@@ -93,15 +97,16 @@ def room_corner_lines(camera, room, rng, n=30):
 def posture_error(camera, truth):
     """(mirror axis error in deg, mirror origin error in mm) of ``camera`` against ``truth``."""
     cosang = float(np.clip(camera.R[:, 2] @ truth.R[:, 2], -1.0, 1.0))
-    return math.degrees(math.acos(cosang)), float(np.linalg.norm(camera.camera_center
-                                                                  - truth.camera_center))
+    return math.degrees(math.acos(cosang)), float(
+        np.linalg.norm(camera.camera_center - truth.camera_center)
+    )
 
 
 def panorama_error(camera, truth, size):
     """RMS distance (source px) between the panorama tables of ``camera`` and the true rig."""
     a = camera.init_panorama_maps(size, elevation_range=(-60.0, 10.0), m1type=cv2.CV_32FC2)[0]
     b = truth.init_panorama_maps(size, elevation_range=(-60.0, 10.0), m1type=cv2.CV_32FC2)[0]
-    ok = (a[..., 0] > -5) & (b[..., 0] > -5)       # both see the mirror (unseen maps to -10)
+    ok = (a[..., 0] > -5) & (b[..., 0] > -5)  # both see the mirror (unseen maps to -10)
     d = (a - b)[ok]
     return float(np.sqrt(np.mean(np.sum(d * d, axis=-1))))
 
@@ -109,8 +114,13 @@ def panorama_error(camera, truth, size):
 # -- cube corners in a view --------------------------------------------------------------------
 def _sample(image, pts):
     """Bilinear colours of ``image`` at float points of shape (S, O, 2) -> (S, O, C) float32."""
-    out = cv2.remap(image, np.ascontiguousarray(pts, np.float32), None, cv2.INTER_LINEAR,
-                    borderMode=cv2.BORDER_REPLICATE)
+    out = cv2.remap(
+        image,
+        np.ascontiguousarray(pts, np.float32),
+        None,
+        cv2.INTER_LINEAR,
+        borderMode=cv2.BORDER_REPLICATE,
+    )
     return out.reshape(pts.shape[0], pts.shape[1], -1).astype(np.float32)
 
 
@@ -121,8 +131,9 @@ def _coarse_quad(view, colour, tol=40.0):
     if n < 2:
         return None
     k = 1 + int(np.argmax(stats[1:, cv2.CC_STAT_AREA]))
-    cnts, _ = cv2.findContours((lab == k).astype(np.uint8), cv2.RETR_EXTERNAL,
-                               cv2.CHAIN_APPROX_NONE)
+    cnts, _ = cv2.findContours(
+        (lab == k).astype(np.uint8), cv2.RETR_EXTERNAL, cv2.CHAIN_APPROX_NONE
+    )
     hull = cv2.convexHull(max(cnts, key=len))
     peri = cv2.arcLength(hull, True)
     for eps in np.linspace(0.005, 0.2, 80):
@@ -141,7 +152,7 @@ def _edge_points(view, colour, p0, p1, outward, half, blend, min_contrast=30.0):
     """
     t = (p1 - p0) / np.linalg.norm(p1 - p0)
     length = float(np.linalg.norm(p1 - p0))
-    s = np.arange(0.12 * length, 0.88 * length, 1.0)           # stay away from the corners
+    s = np.arange(0.12 * length, 0.88 * length, 1.0)  # stay away from the corners
     o = np.arange(-half, half + 1e-9, 0.25)
     pts = p0 + s[:, None, None] * t + o[None, :, None] * outward
     col = _sample(view, pts)
@@ -150,9 +161,9 @@ def _edge_points(view, colour, p0, p1, outward, half, blend, min_contrast=30.0):
     dc = face - neighbour
     den = np.einsum("sc,sc->s", dc, dc)
     alpha = np.einsum("soc,sc->so", col - neighbour[:, None], dc) / np.maximum(den, 1e-9)[:, None]
-    inner = o <= -blend                                       # well inside the face
+    inner = o <= -blend  # well inside the face
     out = []
-    for i in np.flatnonzero(den >= min_contrast ** 2):
+    for i in np.flatnonzero(den >= min_contrast**2):
         a = alpha[i]
         if a[inner].min() < 0.8:
             continue
@@ -186,8 +197,9 @@ def face_corners(view, colour, blend):
             pts = _edge_points(view, colour, p0, p1, outward, half, blend)
             if len(pts) < 10:
                 return None
-            vx, vy, x0, y0 = cv2.fitLine(pts.astype(np.float32), cv2.DIST_HUBER, 0, 0.01,
-                                         0.01).ravel()
+            vx, vy, x0, y0 = cv2.fitLine(
+                pts.astype(np.float32), cv2.DIST_HUBER, 0, 0.01, 0.01
+            ).ravel()
             lines.append((np.array([x0, y0], np.float64), np.array([vx, vy], np.float64)))
         corners = []
         for i in range(4):
@@ -202,7 +214,7 @@ def square_normal(corners, side, K_new):
     """Unit normal (view frame, towards the camera) of a square from its 4 image corners."""
     centre = corners.mean(axis=0)
     order = np.argsort(np.arctan2(corners[:, 1] - centre[1], corners[:, 0] - centre[0]))
-    img = corners[order]                                     # clockwise on screen (y down)
+    img = corners[order]  # clockwise on screen (y down)
     h = side / 2.0
     obj = np.array([[-h, h, 0.0], [h, h, 0.0], [h, -h, 0.0], [-h, -h, 0.0]])
     ok, rvec, tvec = cv2.solvePnP(obj, img, K_new, None, flags=cv2.SOLVEPNP_IPPE_SQUARE)
@@ -243,12 +255,13 @@ def cube_table(image, models, room, depth, view_size, fov):
     results = {}
     for name, cam in models.items():
         R = aim_at(cam, centroid, depth)
-        map1, map2 = cam.init_perspective_maps(K_new, (view_size, view_size), R=R,
-                                               m1type=cv2.CV_32FC1, depth=depth)
+        map1, map2 = cam.init_perspective_maps(
+            K_new, (view_size, view_size), R=R, m1type=cv2.CV_32FC1, depth=depth
+        )
         view = cv2.remap(image, map1, map2, cv2.INTER_LINEAR, borderMode=cv2.BORDER_CONSTANT)
         c = view_size // 2
         step = math.hypot(map1[c, c + 1] - map1[c, c], map2[c, c + 1] - map2[c, c])
-        blend = 2.0 / step      # an edge is ~2 source px wide: pixel area + interpolation
+        blend = 2.0 / step  # an edge is ~2 source px wide: pixel area + interpolation
         corners, normals = {}, {}
         for f in faces:
             q = face_corners(view, room.cube_colors[f], blend)
@@ -276,7 +289,7 @@ def angles(normals, order):
 def face_order(room, results):
     """(top, left, right) face indices: top is the cube's +Z face, left/right as seen in a view."""
     faces = list(room.visible_faces(np.zeros(3)))
-    top = 4                                                     # +Z of the cube frame
+    top = 4  # +Z of the cube frame
     sides = [f for f in faces if f != top]
     any_view = next(iter(results.values()))["corners"]
     if all(f in any_view for f in sides):
@@ -289,11 +302,25 @@ def draw_view(view, corners, title, angles_deg):
     out = view.copy()
     scale = out.shape[0] / 400.0
     for q in corners.values():
-        cv2.polylines(out, [np.round(q * 16).astype(np.int32).reshape(-1, 1, 2)], True,
-                      (0, 0, 255), 1, cv2.LINE_AA, 4)
+        cv2.polylines(
+            out,
+            [np.round(q * 16).astype(np.int32).reshape(-1, 1, 2)],
+            True,
+            (0, 0, 255),
+            1,
+            cv2.LINE_AA,
+            4,
+        )
         for p in q:
-            cv2.circle(out, (int(round(p[0] * 16)), int(round(p[1] * 16))), int(5 * scale * 16),
-                       (0, 0, 255), max(1, int(scale)), cv2.LINE_AA, 4)
+            cv2.circle(
+                out,
+                (int(round(p[0] * 16)), int(round(p[1] * 16))),
+                int(5 * scale * 16),
+                (0, 0, 255),
+                max(1, int(scale)),
+                cv2.LINE_AA,
+                4,
+            )
     text = ", ".join("-" if math.isnan(a) else f"{a:.1f}" for a in angles_deg)
     return label(out, f"{title}: {text} deg", scale=scale * 0.7)
 
@@ -306,12 +333,16 @@ def table_markdown(rows, size, view_size, fov, depth, extra):
     ]
     for name, ang in rows.items():
         dev = max((abs(a - 90.0) for a in ang), default=math.nan)
-        lines.append(f"| {name} (omnicam, synthetic) | {fmt(ang[0])} | {fmt(ang[1])} | "
-                     f"{fmt(ang[2])} | {fmt(dev)} |")
+        lines.append(
+            f"| {name} (omnicam, synthetic) | {fmt(ang[0])} | {fmt(ang[1])} | "
+            f"{fmt(ang[2])} | {fmt(dev)} |"
+        )
     for name, ang in PAPER_TABLE1.items():
         dev = max(abs(a - 90.0) for a in ang)
-        lines.append(f"| {name} (paper, real image) | {ang[0]:.1f} | {ang[1]:.1f} | {ang[2]:.1f} "
-                     f"| {dev:.1f} |")
+        lines.append(
+            f"| {name} (paper, real image) | {ang[0]:.1f} | {ang[1]:.1f} | {ang[2]:.1f} "
+            f"| {dev:.1f} |"
+        )
     lines += [
         "",
         f"omnicam rows: generated by `examples/reproduce_paper.py` on a {size}x{size} render of "
@@ -342,13 +373,21 @@ def label(image, text, scale=None):
 
 def main(argv=None):
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
-    parser.add_argument("--out", default=os.path.join(OUT, "paper"),
-                        help="output folder (default %(default)s)")
-    parser.add_argument("--small", action="store_true",
-                        help="700x700 mirror images and smaller views and panoramas: fast")
-    parser.add_argument("--size", type=int, default=None,
-                        help="mirror image size in px (default 1000, or 700 with --small; the "
-                             "paper's synthetic images are 500)")
+    parser.add_argument(
+        "--out", default=os.path.join(OUT, "paper"), help="output folder (default %(default)s)"
+    )
+    parser.add_argument(
+        "--small",
+        action="store_true",
+        help="700x700 mirror images and smaller views and panoramas: fast",
+    )
+    parser.add_argument(
+        "--size",
+        type=int,
+        default=None,
+        help="mirror image size in px (default 1000, or 700 with --small; the "
+        "paper's synthetic images are 500)",
+    )
     args = parser.parse_args(argv)
     size = args.size or (700 if args.small else 1000)
     view_size = 400 if args.small else 800
@@ -363,25 +402,38 @@ def main(argv=None):
         return name
 
     # Fig. 6: the aligned and the misaligned rig see a scene at infinity
-    rigs = {"aligned": synthetic.aligned_rig(image_size=(size, size)),
-            "misaligned": synthetic.misaligned_rig(image_size=(size, size))}
+    rigs = {
+        "aligned": synthetic.aligned_rig(image_size=(size, size)),
+        "misaligned": synthetic.misaligned_rig(image_size=(size, size)),
+    }
     images = {name: synthetic.render_environment(rig) for name, rig in rigs.items()}
     written = [save(f"fig6_{name}.png", img) for name, img in images.items()]
-    small = {n: cv2.resize(img, (500, 500), interpolation=cv2.INTER_AREA)
-             for n, img in images.items()}
-    written.append(save("fig6.png", np.hstack([label(small["aligned"], "(a) aligned mirror", 1.0),
-                                               label(small["misaligned"],
-                                                     "(b) misaligned mirror", 1.0)])))
+    small = {
+        n: cv2.resize(img, (500, 500), interpolation=cv2.INTER_AREA) for n, img in images.items()
+    }
+    written.append(
+        save(
+            "fig6.png",
+            np.hstack(
+                [
+                    label(small["aligned"], "(a) aligned mirror", 1.0),
+                    label(small["misaligned"], "(b) misaligned mirror", 1.0),
+                ]
+            ),
+        )
+    )
 
     # Fig. 7: panoramas, uncalibrated (eqs. 2-5, nominal f_C, x_c, y_c) vs calibrated
     print("Fig. 7: panorama geometry vs the true rig (RMS over the panorama table, source px)")
     fig7, pano_rows = [], []
     for name, rig in rigs.items():
         m, K = rig.mirror, rig.K
-        uncalibrated = omnicam.MisalignedHyperbolicCamera.aligned(m, K[0, 0], K[0, 2], K[1, 2],
-                                                                  rig.image_size)
+        uncalibrated = omnicam.MisalignedHyperbolicCamera.aligned(
+            m, K[0, 0], K[0, 2], K[1, 2], rig.image_size
+        )
         calibrated, report = omnicam.MisalignedHyperbolicCamera.calibrate(
-            K, m, image=images[name], far_lines=pole_far_lines(rig, rng))
+            K, m, image=images[name], far_lines=pole_far_lines(rig, rng)
+        )
         axis_err, origin_err = posture_error(calibrated, rig)
         for kind, cam in (("uncalibrated", uncalibrated), ("calibrated", calibrated)):
             map1, map2 = cam.init_panorama_maps(pano_size, elevation_range=(-60.0, 10.0))
@@ -390,12 +442,18 @@ def main(argv=None):
             err = panorama_error(cam, rig, (512, 128))
             pano_rows.append(f"| {name} | {kind} | {err:.2f} |")
             print(f"  {name:10s} {kind:12s} {err:7.2f} px")
-            fig7.append(label(cv2.resize(pano, (1024, 128), interpolation=cv2.INTER_AREA),
-                              f"{name} mirror, {kind}"))
-        print(f"  calibrated {name}: mirror axis off by {axis_err:.4f} deg, camera centre off by "
-              f"{origin_err:.4f} mm (rim RMS {report.rim_rms:.3f} px, confidence "
-              f"{report.confidence:.3f})")
-    order = [0, 2, 1, 3]        # (a) uncal aligned, (b) uncal misaligned, (c) cal aligned, (d) ...
+            fig7.append(
+                label(
+                    cv2.resize(pano, (1024, 128), interpolation=cv2.INTER_AREA),
+                    f"{name} mirror, {kind}",
+                )
+            )
+        print(
+            f"  calibrated {name}: mirror axis off by {axis_err:.4f} deg, camera centre off by "
+            f"{origin_err:.4f} mm (rim RMS {report.rim_rms:.3f} px, confidence "
+            f"{report.confidence:.3f})"
+        )
+    order = [0, 2, 1, 3]  # (a) uncal aligned, (b) uncal misaligned, (c) cal aligned, (d) ...
     written.append(save("fig7.png", np.vstack([fig7[i] for i in order])))
 
     # Table 1: the cube in the room, seen by the misaligned rig
@@ -408,19 +466,23 @@ def main(argv=None):
     m, K = truth.mirror, truth.K
     rim = omnicam.detect_rim(image)
     r_mean = 0.5 * float(rim.axes[0] + rim.axes[1])
-    f_hand = r_mean * (m.z_rim + m.c) / m.rim_radius       # aligned rim radius = f r / (z_rim + c)
+    f_hand = r_mean * (m.z_rim + m.c) / m.rim_radius  # aligned rim radius = f r / (z_rim + c)
     lines = room_corner_lines(truth, room, rng)
     # omnicam's default: the rim, the camera's own reflection (lens="auto") and the far lines
     calibrated, report = omnicam.MisalignedHyperbolicCamera.calibrate(
-        K, m, image=image, far_lines=lines)
+        K, m, image=image, far_lines=lines
+    )
     # the paper's information only: the rim and the far lines
     rim_and_lines, report_paper = omnicam.MisalignedHyperbolicCamera.calibrate(
-        K, m, image=image, far_lines=lines, lens=False)
+        K, m, image=image, far_lines=lines, lens=False
+    )
     models = {
-        "Uncalibrated": omnicam.MisalignedHyperbolicCamera.aligned(m, K[0, 0], K[0, 2], K[1, 2],
-                                                                   truth.image_size),
+        "Uncalibrated": omnicam.MisalignedHyperbolicCamera.aligned(
+            m, K[0, 0], K[0, 2], K[1, 2], truth.image_size
+        ),
         "Hand adjusted": omnicam.MisalignedHyperbolicCamera.aligned(
-            m, f_hand, rim.center[0], rim.center[1], truth.image_size),
+            m, f_hand, rim.center[0], rim.center[1], truth.image_size
+        ),
         PAPER_METHOD: rim_and_lines,
         "Calibrated": calibrated,
     }
@@ -449,18 +511,31 @@ def main(argv=None):
     with open(os.path.join(args.out, "table1.md"), "w", encoding="utf-8") as f:
         f.write(md)
     written.append("table1.md")
-    panels = [draw_view(r["view"], r["corners"], f"({'bcde'[i]}) {name}", rows[name])
-              for i, (name, r) in enumerate(results.items())]
+    panels = [
+        draw_view(r["view"], r["corners"], f"({'bcde'[i]}) {name}", rows[name])
+        for i, (name, r) in enumerate(results.items())
+    ]
     panels = [cv2.resize(p, (400, 400), interpolation=cv2.INTER_AREA) for p in panels]
-    panels.insert(0, label(cv2.resize(image, (400, 400), interpolation=cv2.INTER_AREA),
-                           "(a) misaligned rig, room with the cube", 0.7))
-    written.append(save("table1_views.png", np.hstack(panels)))      # as the paper's Fig. 8
+    panels.insert(
+        0,
+        label(
+            cv2.resize(image, (400, 400), interpolation=cv2.INTER_AREA),
+            "(a) misaligned rig, room with the cube",
+            0.7,
+        ),
+    )
+    written.append(save("table1_views.png", np.hstack(panels)))  # as the paper's Fig. 8
     print("\nTable 1: angles between the cube's face normals\n")
     print(md)
     print(f"wrote {', '.join(written)} in {args.out} ({time.perf_counter() - t0:.1f} s)")
-    return {"rows": rows, "panorama": pano_rows, "axis_error_deg": axis_err,
-            "origin_error_mm": origin_err, "axis_error_paper_deg": axis_err_paper,
-            "origin_error_paper_mm": origin_err_paper}
+    return {
+        "rows": rows,
+        "panorama": pano_rows,
+        "axis_error_deg": axis_err,
+        "origin_error_mm": origin_err,
+        "axis_error_paper_deg": axis_err_paper,
+        "origin_error_paper_mm": origin_err_paper,
+    }
 
 
 if __name__ == "__main__":

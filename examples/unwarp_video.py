@@ -15,6 +15,7 @@ Run::
 With ``--input`` the video is yours and ``--calib`` its calibration (``calibrate_own_image.py``);
 a video of another resolution than the calibration uses ``camera.scaled`` (same sensor).
 """
+
 from __future__ import annotations
 
 import argparse
@@ -41,7 +42,7 @@ def make_video(path, camera, frames, fps=15.0, degrees_per_frame=4.0, supersampl
     try:
         for i in range(frames):
             shift = int(round(i * degrees_per_frame / 360.0 * env.shape[1]))
-            turned = np.roll(env, shift, axis=1)       # azimuth turns with the column
+            turned = np.roll(env, shift, axis=1)  # azimuth turns with the column
             writer.write(synthetic.render_environment(camera, turned, supersample=supersample))
     finally:
         writer.release()
@@ -49,18 +50,23 @@ def make_video(path, camera, frames, fps=15.0, degrees_per_frame=4.0, supersampl
 
 def main(argv=None):
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
-    parser.add_argument("--out", default=os.path.join(OUT, "video"),
-                        help="output folder (default %(default)s)")
+    parser.add_argument(
+        "--out", default=os.path.join(OUT, "video"), help="output folder (default %(default)s)"
+    )
     parser.add_argument("--input", help="your mirror video (default: make a synthetic one)")
-    parser.add_argument("--calib", help="calibration file of --input (default: the misaligned "
-                                        "sample calibration)")
+    parser.add_argument(
+        "--calib", help="calibration file of --input (default: the misaligned sample calibration)"
+    )
     parser.add_argument("--frames", type=int, default=48, help="frames of the synthetic video")
     parser.add_argument("--small", action="store_true", help="a 6-frame 250 px video (fast)")
     args = parser.parse_args(argv)
     os.makedirs(args.out, exist_ok=True)
 
-    camera = (omnicam.MisalignedHyperbolicCamera.load(args.calib) if args.calib
-              else omnicam.samples.load("hyperomni_misaligned"))
+    camera = (
+        omnicam.MisalignedHyperbolicCamera.load(args.calib)
+        if args.calib
+        else omnicam.samples.load("hyperomni_misaligned")
+    )
     source = args.input
     if source is None:
         size = (250, 250) if args.small else camera.image_size
@@ -68,8 +74,10 @@ def main(argv=None):
         source = os.path.join(args.out, "mirror.avi")
         t = time.perf_counter()
         make_video(source, camera.scaled(size), frames)
-        print(f"made {source}: {frames} frames of {size[0]}x{size[1]} "
-              f"({time.perf_counter() - t:.1f} s)")
+        print(
+            f"made {source}: {frames} frames of {size[0]}x{size[1]} "
+            f"({time.perf_counter() - t:.1f} s)"
+        )
 
     cap = cv2.VideoCapture(source)
     if not cap.isOpened():
@@ -81,20 +89,24 @@ def main(argv=None):
     # calibration's): a panorama and a perspective view looking 30 deg down. Even sizes: some
     # codecs, MJPG among them, silently drop an odd last row or column.
     width, height = frame_size[0] // 2 * 2, frame_size[0] * 3 // 8 * 2
-    specs = {"panorama": omnicam.PanoramaView((2 * width, width // 4 * 2)),
-             "perspective": omnicam.PerspectiveView((width, height), fov=80.0, pitch=-30.0)}
+    specs = {
+        "panorama": omnicam.PanoramaView((2 * width, width // 4 * 2)),
+        "perspective": omnicam.PerspectiveView((width, height), fov=80.0, pitch=-30.0),
+    }
     unwarper = omnicam.Unwarper.from_camera(camera, specs, frame_size=frame_size)
     outputs = {name: os.path.join(args.out, f"{name}.avi") for name in unwarper.names}
     t = time.perf_counter()
     n = 0
     for i, views in unwarper.stream(source, outputs, fourcc="MJPG"):
-        if i == 0:                                 # keep the first frame's views as pictures
+        if i == 0:  # keep the first frame's views as pictures
             for name, img in views.items():
                 cv2.imwrite(os.path.join(args.out, f"{name}_first.png"), img)
         n = i + 1
     dt = time.perf_counter() - t
-    print(f"unwarped {n} frames in {dt:.2f} s ({n / dt:.1f} fps, decode and encode included) "
-          f"into {', '.join(outputs.values())}")
+    print(
+        f"unwarped {n} frames in {dt:.2f} s ({n / dt:.1f} fps, decode and encode included) "
+        f"into {', '.join(outputs.values())}"
+    )
     return {"frames": n, "outputs": outputs, "frame_size": frame_size}
 
 

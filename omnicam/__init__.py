@@ -4,6 +4,7 @@ Public names only; the contract is README.md and ``docs/conventions.md``.
 Modules that pull in scikit-image or build views load on first use, so ``import omnicam``
 stays fast.
 """
+
 import os
 import sys
 from importlib import import_module

@@ -17,6 +17,7 @@ Any failure removes the temporary file, leaves the old target untouched and rais
 :class:`OutputError` (a ``ValueError``) naming the file and the cause. Temporary files left by a
 killed process are removed by the next write into the same folder (:func:`remove_stale`).
 """
+
 from __future__ import annotations
 
 import contextlib
@@ -25,8 +26,14 @@ import os
 import secrets
 import time
 
-__all__ = ["OutputError", "atomic_output", "write_bytes", "temp_beside", "remove_stale",
-           "TEMP_MARK"]
+__all__ = [
+    "OutputError",
+    "atomic_output",
+    "write_bytes",
+    "temp_beside",
+    "remove_stale",
+    "TEMP_MARK",
+]
 
 TEMP_MARK = ".omnicam-tmp-"
 STALE_AFTER_S = 60.0  # a temporary file of a process that is gone, or this old, is litter
@@ -99,8 +106,9 @@ def temp_beside(path):
         path.encode("utf-8")
     except UnicodeEncodeError:  # OpenCV's writers crash (SIGSEGV) on such names
         shown = path.encode("utf-8", "surrogateescape").decode("utf-8", "backslashreplace")
-        raise OutputError(f"cannot write {shown}: the file name is not valid UTF-8; rename "
-                          f"it") from None
+        raise OutputError(
+            f"cannot write {shown}: the file name is not valid UTF-8; rename it"
+        ) from None
     folder = os.path.dirname(os.path.abspath(path))
     base, ext = os.path.splitext(os.path.basename(path))
     if not os.path.isdir(folder):
@@ -189,26 +197,34 @@ def atomic_output(path, *, what="file", overwrite=True, verify=None, allow_empty
         try:
             yield tmp
         except OSError as e:  # the writer's own failure, e.g. ENOSPC from f.write
-            raise OutputError(f"cannot write {what} {path}: {_describe(e)}; the previous file "
-                              f"is unchanged") from None
+            raise OutputError(
+                f"cannot write {what} {path}: {_describe(e)}; the previous file is unchanged"
+            ) from None
         try:
             _fsync(tmp)
             size = os.path.getsize(tmp)
         except OSError as e:
-            raise OutputError(f"cannot write {what} {path}: {_describe(e)}; "
-                              f"the previous file is unchanged") from None
+            raise OutputError(
+                f"cannot write {what} {path}: {_describe(e)}; the previous file is unchanged"
+            ) from None
         if size == 0 and not allow_empty:
-            raise OutputError(f"cannot write {what} {path}: nothing was written (is the disk "
-                              f"full?); the previous file is unchanged")
+            raise OutputError(
+                f"cannot write {what} {path}: nothing was written (is the disk "
+                f"full?); the previous file is unchanged"
+            )
         if verify is not None:
             try:
                 ok = verify(tmp)
             except Exception as e:  # noqa: BLE001 - any failure to read back means a bad write
-                raise OutputError(f"cannot write {what} {path}: the written file does not read "
-                                  f"back ({_describe(e)}); the previous file is unchanged") from None
+                raise OutputError(
+                    f"cannot write {what} {path}: the written file does not read "
+                    f"back ({_describe(e)}); the previous file is unchanged"
+                ) from None
             if ok is False:
-                raise OutputError(f"cannot write {what} {path}: the written file does not read "
-                                  f"back; the previous file is unchanged")
+                raise OutputError(
+                    f"cannot write {what} {path}: the written file does not read "
+                    f"back; the previous file is unchanged"
+                )
         try:
             _publish(tmp, path, overwrite)
         except OSError as e:
@@ -224,15 +240,18 @@ def write_bytes(path, data, *, what="file", overwrite=True, verify=None):
     if isinstance(data, str):
         data = data.encode("utf-8")
 
-    with atomic_output(path, what=what, overwrite=overwrite, verify=verify,
-                       allow_empty=len(data) == 0) as tmp:
+    with atomic_output(
+        path, what=what, overwrite=overwrite, verify=verify, allow_empty=len(data) == 0
+    ) as tmp:
         try:
             with open(tmp, "wb") as f:
                 f.write(data)
                 f.flush()
         except OSError as e:
-            raise OutputError(f"cannot write {what} {path}: {_describe(e)}; the previous file "
-                              f"is unchanged") from None
+            raise OutputError(
+                f"cannot write {what} {path}: {_describe(e)}; the previous file is unchanged"
+            ) from None
         if os.path.getsize(tmp) != len(data):
-            raise OutputError(f"cannot write {what} {path}: short write; the previous file is "
-                              f"unchanged")
+            raise OutputError(
+                f"cannot write {what} {path}: short write; the previous file is unchanged"
+            )

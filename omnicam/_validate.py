@@ -20,6 +20,7 @@ Sane magnitudes (a camera outside them is refused at construction and at load):
 * integers in YAML and XML files within 32 bits (OpenCV's parser wraps larger ones around:
   4294967297 reads as 1), see :mod:`omnicam.io`.
 """
+
 from __future__ import annotations
 
 import math
@@ -27,10 +28,22 @@ import numbers
 
 import numpy as np
 
-__all__ = ["validate_K", "validate_D", "validate_image_size", "finite_array", "float_array",
-           "real_number",
-           "validate_rng", "validate_posture", "D_LENGTHS", "FOCAL_RANGE", "LENGTH_RANGE",
-           "MAX_SIDE", "MAX_PIXELS", "MAX_RIM_SPAN"]
+__all__ = [
+    "validate_K",
+    "validate_D",
+    "validate_image_size",
+    "finite_array",
+    "float_array",
+    "real_number",
+    "validate_rng",
+    "validate_posture",
+    "D_LENGTHS",
+    "FOCAL_RANGE",
+    "LENGTH_RANGE",
+    "MAX_SIDE",
+    "MAX_PIXELS",
+    "MAX_RIM_SPAN",
+]
 
 D_LENGTHS = (4, 5, 8, 12, 14)  # as cv2.projectPoints takes them
 FOCAL_RANGE = (1e-2, 1e7)  # px
@@ -41,8 +54,10 @@ MAX_DISTORTION = 1e6
 MAX_SIDE = 100_000  # px per side of an image
 MAX_PIXELS = 2**31
 MAX_RIM_SPAN = 20_000  # px across the rim's image
-_COS, _SIN = np.cos(np.linspace(0.0, 2.0 * math.pi, 72, endpoint=False)), np.sin(
-    np.linspace(0.0, 2.0 * math.pi, 72, endpoint=False))
+_COS, _SIN = (
+    np.cos(np.linspace(0.0, 2.0 * math.pi, 72, endpoint=False)),
+    np.sin(np.linspace(0.0, 2.0 * math.pi, 72, endpoint=False)),
+)
 MIN_RIM_SPAN = 8  # px: a smaller mirror image holds too few pixels for any use
 
 
@@ -106,11 +121,14 @@ def validate_K(K, name="K"):
     lo, hi = FOCAL_RANGE
     for label, f in (("fx", arr[0, 0]), ("fy", arr[1, 1])):
         if not lo <= f <= hi:
-            raise ValueError(f"{name} must be non-singular with {label} in [{lo:g}, {hi:g}] px, "
-                             f"got {f:g}")
+            raise ValueError(
+                f"{name} must be non-singular with {label} in [{lo:g}, {hi:g}] px, got {f:g}"
+            )
     if np.abs(arr[:2, 1:]).max() > PIXEL_LIMIT:
-        raise ValueError(f"{name} must have |cx|, |cy| and |skew| at most {PIXEL_LIMIT:g} px, "
-                         f"got {arr[:2, 1:].ravel().tolist()}")
+        raise ValueError(
+            f"{name} must have |cx|, |cy| and |skew| at most {PIXEL_LIMIT:g} px, "
+            f"got {arr[:2, 1:].ravel().tolist()}"
+        )
     if abs(np.linalg.det(arr)) < 1e-12:
         raise ValueError(f"{name} must be non-singular")
     return arr
@@ -123,13 +141,17 @@ def validate_D(D, name="D"):
     expected = "None or 4, 5, 8, 12 or 14 numbers"
     arr = float_array(D, name, expected).ravel()
     if arr.size not in D_LENGTHS:
-        raise ValueError(f"{name} must have 4, 5, 8, 12 or 14 coefficients (as "
-                         f"cv2.projectPoints), got {arr.size}")
+        raise ValueError(
+            f"{name} must have 4, 5, 8, 12 or 14 coefficients (as "
+            f"cv2.projectPoints), got {arr.size}"
+        )
     if not np.isfinite(arr).all():
         raise ValueError(f"{name} must be finite")
     if np.abs(arr).max() > MAX_DISTORTION:
-        raise ValueError(f"{name} coefficients must be at most {MAX_DISTORTION:g} in magnitude, "
-                         f"got {arr.tolist()}")
+        raise ValueError(
+            f"{name} coefficients must be at most {MAX_DISTORTION:g} in magnitude, "
+            f"got {arr.tolist()}"
+        )
     return arr
 
 
@@ -157,20 +179,24 @@ def validate_image_size(image_size, name="image_size"):
         out.append(int(v))
     w, h = out
     if w > MAX_SIDE or h > MAX_SIDE or w * h > MAX_PIXELS:
-        raise ValueError(f"{name} must be at most {MAX_SIDE} px per side and {MAX_PIXELS} "
-                         f"pixels, got {image_size!r}")
+        raise ValueError(
+            f"{name} must be at most {MAX_SIDE} px per side and {MAX_PIXELS} "
+            f"pixels, got {image_size!r}"
+        )
     return (w, h)
 
 
 def validate_rng(rng, name="rng"):
     """A seed for ``numpy.random.default_rng``: None, a non-negative int or a Generator."""
-    if rng is None or isinstance(rng, (np.random.Generator, np.random.BitGenerator,
-                                       np.random.SeedSequence)):
+    if rng is None or isinstance(
+        rng, (np.random.Generator, np.random.BitGenerator, np.random.SeedSequence)
+    ):
         return rng
     if isinstance(rng, numbers.Integral) and not isinstance(rng, bool) and int(rng) >= 0:
         return int(rng)
-    raise ValueError(f"{name} must be None, a non-negative integer seed or a "
-                     f"numpy.random.Generator, got {rng!r}")
+    raise ValueError(
+        f"{name} must be None, a non-negative integer seed or a numpy.random.Generator, got {rng!r}"
+    )
 
 
 def validate_posture(R, tvec, mirror, rim_points):
@@ -195,23 +221,33 @@ def validate_posture(R, tvec, mirror, rim_points):
     if not np.isfinite(R).all() or np.abs(R @ R.T - np.eye(3)).max() > 1e-9:
         raise ValueError("rvec must give a finite rotation matrix")
     if np.abs(tvec).max() > MAX_DISTANCE or np.linalg.norm(tvec) > MAX_DISTANCE:
-        raise ValueError(f"tvec must be at most {MAX_DISTANCE:g} from the camera (mirror "
-                         f"units), got {tvec.tolist()}")
+        raise ValueError(
+            f"tvec must be at most {MAX_DISTANCE:g} from the camera (mirror "
+            f"units), got {tvec.tolist()}"
+        )
     C = -R.T @ tvec
     sheet = mirror.b * math.sqrt(1.0 + (C[0] ** 2 + C[1] ** 2) / mirror.a**2)
     if not C[2] < sheet:
-        raise ValueError(f"tvec, rvec: the camera centre {C.tolist()} (mirror frame) must lie "
-                         f"below the mirror sheet (Z < {sheet:g} there), looking up at it")
+        raise ValueError(
+            f"tvec, rvec: the camera centre {C.tolist()} (mirror frame) must lie "
+            f"below the mirror sheet (Z < {sheet:g} there), looking up at it"
+        )
     # camera-frame z of rim points: R[2] . (r cos t, r sin t, z_rim) + tvec[2]
     z = mirror.rim_radius * (R[2, 0] * _COS + R[2, 1] * _SIN) + R[2, 2] * mirror.z_rim + tvec[2]
     if not (z > 0).all():
-        raise ValueError("rvec, tvec: the mirror's rim must lie in front of the camera "
-                         "(camera-frame z > 0 at every rim point)")
+        raise ValueError(
+            "rvec, tvec: the mirror's rim must lie in front of the camera "
+            "(camera-frame z > 0 at every rim point)"
+        )
     pix = rim_points()
     span = np.ptp(pix, axis=0) if np.isfinite(pix).all() else np.array([np.inf, np.inf])
     if not span.max() <= MAX_RIM_SPAN:
-        raise ValueError(f"K, tvec: the rim's image must span at most {MAX_RIM_SPAN} px, got "
-                         f"{np.round(span, 1).tolist()} px (a scale mistake?)")
+        raise ValueError(
+            f"K, tvec: the rim's image must span at most {MAX_RIM_SPAN} px, got "
+            f"{np.round(span, 1).tolist()} px (a scale mistake?)"
+        )
     if not span.min() >= MIN_RIM_SPAN:
-        raise ValueError(f"K, tvec: the rim's image must span at least {MIN_RIM_SPAN} px, got "
-                         f"{np.round(span, 3).tolist()} px (a scale mistake?)")
+        raise ValueError(
+            f"K, tvec: the rim's image must span at least {MIN_RIM_SPAN} px, got "
+            f"{np.round(span, 3).tolist()} px (a scale mistake?)"
+        )

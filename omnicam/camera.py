@@ -16,6 +16,7 @@ Model contract (the binding text is ``docs/conventions.md``):
 * **Shapes**: ``(N, 2)``/``(N, 1, 2)`` pixels and ``(N, 3)``/``(N, 1, 3)`` points, float32 or
   float64; results are float64 in the matching layout.
 """
+
 from __future__ import annotations
 
 import cv2
@@ -27,9 +28,15 @@ from .gauge import canonical_rvec
 from .io import MODEL_NAME
 from .mirror import HyperbolicMirror
 
-__all__ = ["MisalignedHyperbolicCamera", "MODEL_NAME", "canonical_rvec", "scale_K", "validate_D",
-           "validate_K", "validate_image_size"]  # the last five re-exported for callers
-
+__all__ = [
+    "MisalignedHyperbolicCamera",
+    "MODEL_NAME",
+    "canonical_rvec",
+    "scale_K",
+    "validate_D",
+    "validate_K",
+    "validate_image_size",
+]  # the last five re-exported for callers
 
 
 def scale_K(K, from_size, to_size):
@@ -65,7 +72,8 @@ class MisalignedHyperbolicCamera:
     mirror : HyperbolicMirror
     rvec, tvec : (3,) array_like
         Mirror posture in the camera frame, as ``cv2.solvePnP`` returns it with the mirror as
-        the object. ``rvec`` is stored in the gauge of docs/conventions.md (see :func:`canonical_rvec`).
+        the object. ``rvec`` is stored in the gauge of docs/conventions.md (see
+        :func:`canonical_rvec`).
     D : array_like or None
         OpenCV distortion coefficients (4, 5, 8, 12 or 14 values).
     image_size : (int, int) or None
@@ -128,13 +136,25 @@ class MisalignedHyperbolicCamera:
         new = validate_image_size(image_size)
         if new is None:
             raise ValueError("image_size must be (width, height)")
-        return type(self)(scale_K(self._K, self._image_size, new), self._mirror, self._rvec,
-                          self._tvec, self._D, new)
+        return type(self)(
+            scale_K(self._K, self._image_size, new),
+            self._mirror,
+            self._rvec,
+            self._tvec,
+            self._D,
+            new,
+        )
 
     def replace(self, **changes):
         """A copy with some of ``K, mirror, rvec, tvec, D, image_size`` changed."""
-        args = dict(K=self._K, mirror=self._mirror, rvec=self._rvec, tvec=self._tvec,
-                    D=self._D, image_size=self._image_size)
+        args = dict(
+            K=self._K,
+            mirror=self._mirror,
+            rvec=self._rvec,
+            tvec=self._tvec,
+            D=self._D,
+            image_size=self._image_size,
+        )
         unknown = set(changes) - set(args)
         if unknown:
             raise ValueError(f"unknown parameter(s) {sorted(unknown)}")
@@ -145,7 +165,9 @@ class MisalignedHyperbolicCamera:
     K = property(lambda self: self._K, doc="(3, 3) camera matrix.")
     D = property(lambda self: self._D, doc="Distortion coefficients, or None.")
     mirror = property(lambda self: self._mirror, doc="The HyperbolicMirror.")
-    rvec = property(lambda self: self._rvec, doc="(3,) mirror rotation (mirror -> camera), gauge-fixed.")
+    rvec = property(
+        lambda self: self._rvec, doc="(3,) mirror rotation (mirror -> camera), gauge-fixed."
+    )
     tvec = property(lambda self: self._tvec, doc="(3,) mirror origin in the camera frame.")
     R = property(lambda self: self._R, doc="(3, 3) ``cv2.Rodrigues(rvec)``: R of eq. 29.")
     image_size = property(lambda self: self._image_size, doc="(width, height) or None.")
@@ -156,18 +178,27 @@ class MisalignedHyperbolicCamera:
         return self._C
 
     def __repr__(self):
-        return (f"MisalignedHyperbolicCamera(K={self._K.tolist()}, mirror={self._mirror!r}, "
-                f"rvec={self._rvec.tolist()}, tvec={self._tvec.tolist()}, "
-                f"D={None if self._D is None else self._D.tolist()}, image_size={self._image_size})")
+        return (
+            f"MisalignedHyperbolicCamera(K={self._K.tolist()}, mirror={self._mirror!r}, "
+            f"rvec={self._rvec.tolist()}, tvec={self._tvec.tolist()}, "
+            f"D={None if self._D is None else self._D.tolist()}, image_size={self._image_size})"
+        )
 
     def __eq__(self, other):
         if not isinstance(other, MisalignedHyperbolicCamera):
             return NotImplemented
         same_D = (self._D is None and other._D is None) or (
-            self._D is not None and other._D is not None and np.array_equal(self._D, other._D))
-        return (same_D and self._mirror == other._mirror and self._image_size == other._image_size
-                and all(np.array_equal(getattr(self, n), getattr(other, n))
-                        for n in ("_K", "_rvec", "_tvec")))
+            self._D is not None and other._D is not None and np.array_equal(self._D, other._D)
+        )
+        return (
+            same_D
+            and self._mirror == other._mirror
+            and self._image_size == other._image_size
+            and all(
+                np.array_equal(getattr(self, n), getattr(other, n))
+                for n in ("_K", "_rvec", "_tvec")
+            )
+        )
 
     __hash__ = None
 
@@ -219,8 +250,11 @@ class MisalignedHyperbolicCamera:
         if rvec is not None:
             Rm = cv2.Rodrigues(finite_array(rvec, "rvec", (3,), "3 numbers").reshape(3, 1))[0]
             pts = np.ascontiguousarray(pts @ Rm.T + finite_array(tvec, "tvec", (3,), "3 numbers"))
-        return restore(raytrace.project(pts, False, self._K, self._D, self._R, self._tvec,
-                                        self._C, self._mirror))
+        return restore(
+            raytrace.project(
+                pts, False, self._K, self._D, self._R, self._tvec, self._C, self._mirror
+            )
+        )
 
     def project_directions(self, directions):
         """Project points at infinity: the pixel whose reflected ray has the given direction.
@@ -236,8 +270,11 @@ class MisalignedHyperbolicCamera:
             NaN for directions the mirror does not show (above its horizon, zero vectors, NaN).
         """
         pts, restore = raytrace.as_points(directions, "directions", 3)
-        return restore(raytrace.project(pts, True, self._K, self._D, self._R, self._tvec,
-                                        self._C, self._mirror))
+        return restore(
+            raytrace.project(
+                pts, True, self._K, self._D, self._R, self._tvec, self._C, self._mirror
+            )
+        )
 
     # -- the rim and the viewpoint ------------------------------------------------------
     def rim_image_points(self, n=360):
@@ -300,8 +337,19 @@ class MisalignedHyperbolicCamera:
 
     # -- calibration and views (implemented in omnicam.calibration and omnicam.views) ----
     @classmethod
-    def calibrate(cls, K, mirror, image=None, boundary_points=None, far_lines=None, D=None,
-                  image_size=None, refine=True, lens="auto", **options):
+    def calibrate(
+        cls,
+        K,
+        mirror,
+        image=None,
+        boundary_points=None,
+        far_lines=None,
+        D=None,
+        image_size=None,
+        refine=True,
+        lens="auto",
+        **options,
+    ):
         """Mirror posture from one image: rim, Chen's method, selection, refinement, checks.
 
         See :func:`omnicam.calibration.calibrate` for ``options`` (``lens_r``, ``lens_z``,
@@ -310,14 +358,35 @@ class MisalignedHyperbolicCamera:
         """
         from .calibration import calibrate
 
-        return calibrate(K, mirror, image=image, boundary_points=boundary_points,
-                         far_lines=far_lines, D=D, image_size=image_size, refine=refine,
-                         camera_cls=cls, lens=lens, **options)
+        return calibrate(
+            K,
+            mirror,
+            image=image,
+            boundary_points=boundary_points,
+            far_lines=far_lines,
+            D=D,
+            image_size=image_size,
+            refine=refine,
+            camera_cls=cls,
+            lens=lens,
+            **options,
+        )
 
     @classmethod
-    def calibrate_pattern(cls, images, pattern_size, square_size, mirror, K=None, D=None,
-                          image_size=None, image_points=None, refine_mirror_shape=False,
-                          dist_model="k1k2p1p2", **kw):
+    def calibrate_pattern(
+        cls,
+        images,
+        pattern_size,
+        square_size,
+        mirror,
+        K=None,
+        D=None,
+        image_size=None,
+        image_points=None,
+        refine_mirror_shape=False,
+        dist_model="k1k2p1p2",
+        **kw,
+    ):
         """``K``, ``D`` and the posture from chessboards seen through the mirror.
 
         Also ``omnicam.calibrate_pattern``. See
@@ -325,26 +394,56 @@ class MisalignedHyperbolicCamera:
         Returns ``(camera, report)``.
         """
         from .calibration.pattern import calibrate_pattern
-        return calibrate_pattern(images, pattern_size, square_size, mirror, K=K, D=D,
-                                 image_size=image_size, image_points=image_points,
-                                 refine_mirror_shape=refine_mirror_shape, dist_model=dist_model,
-                                 camera_cls=cls, **kw)
 
-    def init_panorama_maps(self, size, elevation_range=None, projection="cylindrical", R=None,
-                           m1type=cv2.CV_16SC2, depth=None, viewpoint=None):
+        return calibrate_pattern(
+            images,
+            pattern_size,
+            square_size,
+            mirror,
+            K=K,
+            D=D,
+            image_size=image_size,
+            image_points=image_points,
+            refine_mirror_shape=refine_mirror_shape,
+            dist_model=dist_model,
+            camera_cls=cls,
+            **kw,
+        )
+
+    def init_panorama_maps(
+        self,
+        size,
+        elevation_range=None,
+        projection="cylindrical",
+        R=None,
+        m1type=cv2.CV_16SC2,
+        depth=None,
+        viewpoint=None,
+    ):
         """``cv2.remap`` tables of a panorama; see :func:`omnicam.views.init_panorama_maps`."""
         from .views import init_panorama_maps
-        return init_panorama_maps(self, size, elevation_range=elevation_range,
-                                  projection=projection, R=R, m1type=m1type, depth=depth,
-                                  viewpoint=viewpoint)
 
-    def init_perspective_maps(self, K_new, size, R=None, m1type=cv2.CV_16SC2, depth=None,
-                              viewpoint=None):
+        return init_panorama_maps(
+            self,
+            size,
+            elevation_range=elevation_range,
+            projection=projection,
+            R=R,
+            m1type=m1type,
+            depth=depth,
+            viewpoint=viewpoint,
+        )
+
+    def init_perspective_maps(
+        self, K_new, size, R=None, m1type=cv2.CV_16SC2, depth=None, viewpoint=None
+    ):
         """``cv2.remap`` tables of a virtual perspective view; see
         :func:`omnicam.views.init_perspective_maps`."""
         from .views import init_perspective_maps
-        return init_perspective_maps(self, K_new, size, R=R, m1type=m1type, depth=depth,
-                                     viewpoint=viewpoint)
+
+        return init_perspective_maps(
+            self, K_new, size, R=R, m1type=m1type, depth=depth, viewpoint=viewpoint
+        )
 
     def to_omnidir(self, depth=None):
         """The unified (Mei) model of ``cv2.omnidir`` closest to this rig, and its RMS error.
@@ -354,6 +453,7 @@ class MisalignedHyperbolicCamera:
         :func:`omnicam.export.fit_omnidir`, which also gives the maximum error.
         """
         from .export import fit_omnidir
+
         return fit_omnidir(self, depth=depth).as_tuple()
 
     # -- files ----------------------------------------------------------------------------
@@ -370,6 +470,7 @@ class MisalignedHyperbolicCamera:
             disk, ...), naming the file; the old file at ``path`` is then unchanged.
         """
         from .io import save_camera
+
         save_camera(self, path)
 
     @classmethod
@@ -384,4 +485,5 @@ class MisalignedHyperbolicCamera:
             Anything else (see :func:`omnicam.io.load_camera`), naming the file and the field.
         """
         from .io import load_camera
+
         return load_camera(path, cls)

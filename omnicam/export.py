@@ -30,6 +30,7 @@ OCamCalib's Scaramuzza model (:func:`fit_ocamcalib`) has its own frame: x along 
 (down), y along columns (right), z out of the image, so there too ``det M = -1`` in general
 (``[[0, 1, 0], [1, 0, 0], [0, 0, 1]]`` for the aligned rig).
 """
+
 from __future__ import annotations
 
 import math
@@ -75,8 +76,9 @@ def sample_pixels(camera, max_points=20000):
         inside = (pix[:, 0] >= 0) & (pix[:, 0] <= w - 1) & (pix[:, 1] >= 0) & (pix[:, 1] <= h - 1)
         pix = pix[inside]
     if len(pix) < 50:
-        raise ValueError("camera: fewer than 50 pixels see the mirror inside the frame; "
-                         "nothing to fit")
+        raise ValueError(
+            "camera: fewer than 50 pixels see the mirror inside the frame; nothing to fit"
+        )
     if len(pix) > max_points:
         idx = np.round(np.linspace(0, len(pix) - 1, max_points)).astype(np.int64)
         pix = pix[idx]
@@ -116,7 +118,7 @@ def _errors(pred, pix):
     if bad.all():
         return math.inf, math.inf, int(bad.sum())
     good = e[~bad]
-    return float(np.sqrt(np.mean(good ** 2))), float(good.max()), int(bad.sum())
+    return float(np.sqrt(np.mean(good**2))), float(good.max()), int(bad.sum())
 
 
 # -- the unified (Mei) model -------------------------------------------------------------------
@@ -200,8 +202,9 @@ class OmnidirFit:
         if self.depth is not None:
             X = X - self.origin
         Xo = (X @ self.M.T).reshape(1, -1, 3)
-        ip, _ = cv2.omnidir.projectPoints(Xo, np.zeros(3), np.zeros(3), self.K, float(self.xi),
-                                          self.D)
+        ip, _ = cv2.omnidir.projectPoints(
+            Xo, np.zeros(3), np.zeros(3), self.K, float(self.xi), self.D
+        )
         return ip.reshape(-1, 2)
 
 
@@ -232,7 +235,7 @@ def _omni_linear_start(Y, pix, xi):
     B = np.stack([y, one], axis=1)
     cv_, *_ = np.linalg.lstsq(B, pix[ok, 1], rcond=None)
     res = np.concatenate([A @ cu - pix[ok, 0], B @ cv_ - pix[ok, 1]])
-    cost = float(np.mean(res ** 2)) if ok.mean() > 0.99 else math.inf
+    cost = float(np.mean(res**2)) if ok.mean() > 0.99 else math.inf
     return cost, (cu[0], cv_[0], cu[1], cu[2], cv_[1])
 
 
@@ -273,8 +276,10 @@ def fit_omnidir(camera, depth=None, skew=True, distortion=True, max_points=20000
     Y0 = Y0 / np.linalg.norm(Y0, axis=1, keepdims=True)
     Yf = Y0 @ F_OMNI.T
     # xi scan with a linear K, then the full nonlinear fit
-    best = min((_omni_linear_start(Yf, pix, xi) + (xi,) for xi in np.linspace(0.3, 1.5, 49)),
-               key=lambda t: t[0])
+    best = min(
+        (_omni_linear_start(Yf, pix, xi) + (xi,) for xi in np.linspace(0.3, 1.5, 49)),
+        key=lambda t: t[0],
+    )
     fx, fy, s, cx, cy = best[1]
     xi0 = best[2]
     head = [fx, fy, s, cx, cy] if skew else [fx, fy, cx, cy]
@@ -282,7 +287,7 @@ def fit_omnidir(camera, depth=None, skew=True, distortion=True, max_points=20000
     n_k = 5 if skew else 4
     free = np.ones(p0.size, bool)
     if not distortion:
-        free[n_k + 1:n_k + 5] = False
+        free[n_k + 1 : n_k + 5] = False
     # Jacobian columns of cv2.omnidir.projectPoints: om(3), T(3), fx, fy, s, cx, cy, xi, D(4)
     jcols = ([6, 7, 8, 9, 10] if skew else [6, 7, 9, 10]) + [11, 12, 13, 14, 15, 0, 1, 2]
     jcols = np.array(jcols)[free]
@@ -307,8 +312,17 @@ def fit_omnidir(camera, depth=None, skew=True, distortion=True, max_points=20000
         return model(q)[1][:, jcols]
 
     q0 = p0[free]
-    sol = least_squares(resid, q0, jac=jac, method="lm", xtol=1e-15, ftol=1e-15, gtol=1e-15,
-                        max_nfev=400, x_scale="jac")
+    sol = least_squares(
+        resid,
+        q0,
+        jac=jac,
+        method="lm",
+        xtol=1e-15,
+        ftol=1e-15,
+        gtol=1e-15,
+        max_nfev=400,
+        x_scale="jac",
+    )
     K, xi, D, w = _omni_unpack(full(sol.x), skew)
     M = cv2.Rodrigues(w)[0] @ F_OMNI
     # errors over every pixel that sees the mirror
@@ -316,10 +330,18 @@ def fit_omnidir(camera, depth=None, skew=True, distortion=True, max_points=20000
     eY = _target_directions(eP, ed, origin, depth)
     pred = omnidir_project(eY @ M.T, K, xi, D)
     rms, mx, n_bad = _errors(pred, epix)
-    return OmnidirFit(K=K, xi=xi, D=D, M=M, origin=origin, rms_px=rms, max_px=mx,
-                      n_points=len(epix), depth=depth,
-                      extra={"undefined_points": n_bad, "fit_rms_px": float(
-                          np.sqrt(np.mean(sol.fun ** 2)))})
+    return OmnidirFit(
+        K=K,
+        xi=xi,
+        D=D,
+        M=M,
+        origin=origin,
+        rms_px=rms,
+        max_px=mx,
+        n_points=len(epix),
+        depth=depth,
+        extra={"undefined_points": n_bad, "fit_rms_px": float(np.sqrt(np.mean(sol.fun**2)))},
+    )
 
 
 # -- OCamCalib's Scaramuzza model --------------------------------------------------------------
@@ -428,15 +450,16 @@ def fit_ocamcalib(camera, n_invpol=12, n_pol=5, max_points=5000, omnidir=None):
         r = (ocam_world2cam(dirs @ M.T, inv, xc, yc, c, d, e) - pix).reshape(-1)
         return np.where(np.isfinite(r), r, 1e3)
 
-    sol = least_squares(resid, p0, method="lm", xtol=1e-14, ftol=1e-14, max_nfev=2000,
-                        x_scale="jac")
+    sol = least_squares(
+        resid, p0, method="lm", xtol=1e-14, ftol=1e-14, max_nfev=2000, x_scale="jac"
+    )
     xc, yc, c, d, e, M, invpol = unpack(sol.x)
     # pol: cam2world along the fitted world2cam, z = rho tan(theta), a1 = 0
     th = np.linspace(-math.pi / 2 + 1e-3, float(theta0.max()) + 0.02, 400)
     rho = np.polynomial.polynomial.polyval(th, invpol)
     z = rho * np.tan(th)
     powers = [0] + list(range(2, n_pol))
-    A = np.stack([rho ** k for k in powers], axis=1)
+    A = np.stack([rho**k for k in powers], axis=1)
     coef, *_ = np.linalg.lstsq(A, z, rcond=None)
     pol = np.zeros(n_pol)
     pol[powers] = coef
@@ -445,9 +468,21 @@ def fit_ocamcalib(camera, n_invpol=12, n_pol=5, max_points=5000, omnidir=None):
     w_rms, w_max, _ = _errors(ocam_world2cam(ed @ M.T, invpol, xc, yc, c, d, e), epix)
     back = ocam_cam2world(epix, pol, xc, yc, c, d, e) @ M  # M orthogonal: M^T x as rows
     c_rms, c_max, _ = _errors(camera.project_directions(back), epix)
-    return OcamFit(pol=pol, invpol=invpol, xc=float(xc), yc=float(yc), c=float(c), d=float(d),
-                   e=float(e), M=M, world2cam_rms_px=w_rms, world2cam_max_px=w_max,
-                   cam2world_rms_px=c_rms, cam2world_max_px=c_max, n_points=len(epix))
+    return OcamFit(
+        pol=pol,
+        invpol=invpol,
+        xc=float(xc),
+        yc=float(yc),
+        c=float(c),
+        d=float(d),
+        e=float(e),
+        M=M,
+        world2cam_rms_px=w_rms,
+        world2cam_max_px=w_max,
+        cam2world_rms_px=c_rms,
+        cam2world_max_px=c_max,
+        n_points=len(epix),
+    )
 
 
 # -- writers -------------------------------------------------------------------------------------
@@ -457,11 +492,13 @@ def _fmt(x):
 
 def _error_comment(fit, prefix="# "):
     where = "at infinity" if fit.depth is None else f"at depth {fit.depth:g} from the origin"
-    return (f"{prefix}central approximation of a non-central omnicam rig (scene {where}): "
-            f"RMS {fit.rms_px:.3g} px, max {fit.max_px:.3g} px over {fit.n_points} pixels\n"
-            f"{prefix}frame: X_cam = M (X_mirror - origin), M = "
-            f"{np.round(fit.M, 12).tolist()}, origin = {np.round(fit.origin, 9).tolist()} "
-            f"(det M = {np.linalg.det(fit.M):+.0f})\n")
+    return (
+        f"{prefix}central approximation of a non-central omnicam rig (scene {where}): "
+        f"RMS {fit.rms_px:.3g} px, max {fit.max_px:.3g} px over {fit.n_points} pixels\n"
+        f"{prefix}frame: X_cam = M (X_mirror - origin), M = "
+        f"{np.round(fit.M, 12).tolist()}, origin = {np.round(fit.origin, 9).tolist()} "
+        f"(det M = {np.linalg.det(fit.M):+.0f})\n"
+    )
 
 
 def write_omnidir(path, fit, image_size=None, overwrite=True):
@@ -471,19 +508,24 @@ def write_omnidir(path, fit, image_size=None, overwrite=True):
     def verify(tmp):
         fs = cv2.FileStorage(tmp, cv2.FILE_STORAGE_READ)
         try:
-            return np.allclose(fs.getNode("K").mat(), fit.K) and \
-                abs(fs.getNode("xi").real() - fit.xi) < 1e-12
+            return (
+                np.allclose(fs.getNode("K").mat(), fit.K)
+                and abs(fs.getNode("xi").real() - fit.xi) < 1e-12
+            )
         finally:
             fs.release()
 
     with atomic_output(path, what="omnidir file", overwrite=overwrite, verify=verify) as tmp:
         fs = cv2.FileStorage(tmp, cv2.FILE_STORAGE_WRITE)
         if not fs.isOpened():
-            raise OutputError(f"cannot write omnidir file {path}: unknown extension "
-                              f"(use .yaml, .yml, .xml or .json)")
+            raise OutputError(
+                f"cannot write omnidir file {path}: unknown extension "
+                f"(use .yaml, .yml, .xml or .json)"
+            )
         fs.write("model", "omnidir_mei")
-        fs.writeComment("X_omni = M (X_mirror - origin); cv2.omnidir.projectPoints(X_omni, 0, 0,"
-                        " K, xi, D)")
+        fs.writeComment(
+            "X_omni = M (X_mirror - origin); cv2.omnidir.projectPoints(X_omni, 0, 0, K, xi, D)"
+        )
         fs.write("K", fit.K)
         fs.write("xi", float(fit.xi))
         fs.write("D", np.asarray(fit.D, dtype=np.float64).reshape(1, 4))
@@ -503,16 +545,17 @@ def kalibr_text(fit, image_size, rostopic="/cam0/image_raw"):
         raise ValueError("fit: Kalibr's omni model has no skew; fit with skew=False")
     K, D = fit.K, np.ravel(fit.D)
     w, h = image_size
-    return ("# Kalibr camchain written by omnicam\n" + _error_comment(fit) +
-            "cam0:\n"
-            "  camera_model: omni\n"
-            f"  intrinsics: [{_fmt(fit.xi)}, {_fmt(K[0, 0])}, {_fmt(K[1, 1])}, {_fmt(K[0, 2])}, "
-            f"{_fmt(K[1, 2])}]\n"
-            "  distortion_model: radtan\n"
-            f"  distortion_coeffs: [{', '.join(_fmt(v) for v in D)}]\n"
-            f"  resolution: [{int(w)}, {int(h)}]\n"
-            f"  rostopic: {rostopic}\n"
-            "  cam_overlaps: []\n")
+    return (
+        "# Kalibr camchain written by omnicam\n" + _error_comment(fit) + "cam0:\n"
+        "  camera_model: omni\n"
+        f"  intrinsics: [{_fmt(fit.xi)}, {_fmt(K[0, 0])}, {_fmt(K[1, 1])}, {_fmt(K[0, 2])}, "
+        f"{_fmt(K[1, 2])}]\n"
+        "  distortion_model: radtan\n"
+        f"  distortion_coeffs: [{', '.join(_fmt(v) for v in D)}]\n"
+        f"  resolution: [{int(w)}, {int(h)}]\n"
+        f"  rostopic: {rostopic}\n"
+        "  cam_overlaps: []\n"
+    )
 
 
 def camodocal_text(fit, image_size, camera_name="omnicam"):
@@ -521,19 +564,20 @@ def camodocal_text(fit, image_size, camera_name="omnicam"):
         raise ValueError("fit: camodocal's MEI model has no skew; fit with skew=False")
     K, D = fit.K, np.ravel(fit.D)
     w, h = image_size
-    return ("%YAML:1.0\n---\n" + _error_comment(fit) +
-            "model_type: MEI\n"
-            f"camera_name: {camera_name}\n"
-            f"image_width: {int(w)}\n"
-            f"image_height: {int(h)}\n"
-            "mirror_parameters:\n"
-            f"   xi: {_fmt(fit.xi)}\n"
-            "distortion_parameters:\n"
-            f"   k1: {_fmt(D[0])}\n   k2: {_fmt(D[1])}\n   p1: {_fmt(D[2])}\n"
-            f"   p2: {_fmt(D[3])}\n"
-            "projection_parameters:\n"
-            f"   gamma1: {_fmt(K[0, 0])}\n   gamma2: {_fmt(K[1, 1])}\n"
-            f"   u0: {_fmt(K[0, 2])}\n   v0: {_fmt(K[1, 2])}\n")
+    return (
+        "%YAML:1.0\n---\n" + _error_comment(fit) + "model_type: MEI\n"
+        f"camera_name: {camera_name}\n"
+        f"image_width: {int(w)}\n"
+        f"image_height: {int(h)}\n"
+        "mirror_parameters:\n"
+        f"   xi: {_fmt(fit.xi)}\n"
+        "distortion_parameters:\n"
+        f"   k1: {_fmt(D[0])}\n   k2: {_fmt(D[1])}\n   p1: {_fmt(D[2])}\n"
+        f"   p2: {_fmt(D[3])}\n"
+        "projection_parameters:\n"
+        f"   gamma1: {_fmt(K[0, 0])}\n   gamma2: {_fmt(K[1, 1])}\n"
+        f"   u0: {_fmt(K[0, 2])}\n   v0: {_fmt(K[1, 2])}\n"
+    )
 
 
 def ocamcalib_text(fit, image_size):
@@ -545,23 +589,25 @@ def ocamcalib_text(fit, image_size):
     w, h = image_size
     pol = " ".join(f"{v:.12e}" for v in fit.pol)
     inv = " ".join(f"{v:.12e}" for v in fit.invpol)
-    return ("#polynomial coefficients for the DIRECT mapping function (ocam_model.ss in MATLAB). "
-            "These are used by cam2world\n\n"
-            f"{len(fit.pol)} {pol} \n\n"
-            "#polynomial coefficients for the inverse mapping function (ocam_model.invpol in "
-            "MATLAB). These are used by world2cam\n\n"
-            f"{len(fit.invpol)} {inv} \n\n"
-            "#center: \"row\" and \"column\", starting from 0 (C convention)\n\n"
-            f"{fit.xc:.6f} {fit.yc:.6f}\n\n"
-            "#affine parameters \"c\", \"d\", \"e\"\n\n"
-            f"{fit.c:.6f} {fit.d:.6f} {fit.e:.6f}\n\n"
-            "#image size: \"height\" and \"width\"\n\n"
-            f"{int(h)} {int(w)}\n\n"
-            "#written by omnicam: central approximation of a non-central rig (scene at infinity)"
-            f"\n#world2cam: RMS {fit.world2cam_rms_px:.3g} px, max {fit.world2cam_max_px:.3g} px;"
-            f" cam2world: RMS {fit.cam2world_rms_px:.3g} px, max {fit.cam2world_max_px:.3g} px"
-            f" over {fit.n_points} pixels\n"
-            f"#frame: X_ocam = M X_mirror, M = {np.round(fit.M, 12).tolist()}\n")
+    return (
+        "#polynomial coefficients for the DIRECT mapping function (ocam_model.ss in MATLAB). "
+        "These are used by cam2world\n\n"
+        f"{len(fit.pol)} {pol} \n\n"
+        "#polynomial coefficients for the inverse mapping function (ocam_model.invpol in "
+        "MATLAB). These are used by world2cam\n\n"
+        f"{len(fit.invpol)} {inv} \n\n"
+        '#center: "row" and "column", starting from 0 (C convention)\n\n'
+        f"{fit.xc:.6f} {fit.yc:.6f}\n\n"
+        '#affine parameters "c", "d", "e"\n\n'
+        f"{fit.c:.6f} {fit.d:.6f} {fit.e:.6f}\n\n"
+        '#image size: "height" and "width"\n\n'
+        f"{int(h)} {int(w)}\n\n"
+        "#written by omnicam: central approximation of a non-central rig (scene at infinity)"
+        f"\n#world2cam: RMS {fit.world2cam_rms_px:.3g} px, max {fit.world2cam_max_px:.3g} px;"
+        f" cam2world: RMS {fit.cam2world_rms_px:.3g} px, max {fit.cam2world_max_px:.3g} px"
+        f" over {fit.n_points} pixels\n"
+        f"#frame: X_ocam = M X_mirror, M = {np.round(fit.M, 12).tolist()}\n"
+    )
 
 
 def _camodocal_verify(fit):
@@ -571,6 +617,7 @@ def _camodocal_verify(fit):
             return abs(fs.getNode("mirror_parameters").getNode("xi").real() - fit.xi) < 1e-9
         finally:
             fs.release()
+
     return verify
 
 
@@ -584,24 +631,37 @@ def _image_size(camera, image_size):
 def write_kalibr(path, camera, fit=None, image_size=None, overwrite=True):
     """Kalibr camchain of the best skew-free unified model; returns the fit."""
     fit = fit or fit_omnidir(camera, skew=False)
-    write_bytes(path, kalibr_text(fit, _image_size(camera, image_size)), what="Kalibr camchain",
-                overwrite=overwrite)
+    write_bytes(
+        path,
+        kalibr_text(fit, _image_size(camera, image_size)),
+        what="Kalibr camchain",
+        overwrite=overwrite,
+    )
     return fit
 
 
 def write_camodocal(path, camera, fit=None, image_size=None, overwrite=True):
     """camodocal MEI yaml of the best skew-free unified model; returns the fit."""
     fit = fit or fit_omnidir(camera, skew=False)
-    write_bytes(path, camodocal_text(fit, _image_size(camera, image_size)),
-                what="camodocal file", overwrite=overwrite, verify=_camodocal_verify(fit))
+    write_bytes(
+        path,
+        camodocal_text(fit, _image_size(camera, image_size)),
+        what="camodocal file",
+        overwrite=overwrite,
+        verify=_camodocal_verify(fit),
+    )
     return fit
 
 
 def write_ocamcalib(path, camera, fit=None, image_size=None, overwrite=True):
     """OCamCalib ``calib_results.txt``; returns the :class:`OcamFit`."""
     fit = fit or fit_ocamcalib(camera)
-    write_bytes(path, ocamcalib_text(fit, _image_size(camera, image_size)),
-                what="OCamCalib file", overwrite=overwrite)
+    write_bytes(
+        path,
+        ocamcalib_text(fit, _image_size(camera, image_size)),
+        what="OCamCalib file",
+        overwrite=overwrite,
+    )
     return fit
 
 

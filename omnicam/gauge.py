@@ -5,6 +5,7 @@ smallest rotation taking the camera's +z axis to the mirror axis, so an aligned 
 ``rvec = 0`` and a panorama's azimuth 0 is stable from run to run. Also here: the one posture
 error metric that tests, benchmarks and examples use.
 """
+
 from __future__ import annotations
 
 import math
@@ -16,7 +17,7 @@ __all__ = ["canonical_rvec", "gauge_rotation", "posture_error"]
 
 
 def canonical_rvec(rvec):
-    """The gauge of docs/conventions.md: the smallest rotation taking +z to the mirror axis ``R e_z``.
+    """The gauge (docs/conventions.md): the smallest rotation taking +z to the mirror axis.
 
     Rotations about the mirror axis are unobservable (5 DOF); this picks the representative.
     """
@@ -75,6 +76,10 @@ def posture_error(camera, truth):
     m1 = np.asarray(camera.R, np.float64)[:, 2]
     m2 = np.asarray(truth.R, np.float64)[:, 2]
     axis = math.degrees(math.atan2(float(np.linalg.norm(np.cross(m1, m2))), float(m1 @ m2)))
-    origin = float(np.linalg.norm(np.asarray(camera.camera_center, np.float64)
-                                  - np.asarray(truth.camera_center, np.float64)))
+    origin = float(
+        np.linalg.norm(
+            np.asarray(camera.camera_center, np.float64)
+            - np.asarray(truth.camera_center, np.float64)
+        )
+    )
     return axis, origin

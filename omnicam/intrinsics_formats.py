@@ -17,6 +17,7 @@ Kalibr is not OpenCV's (no ``%YAML:1.0`` header, no ``!!opencv-matrix``), so it 
 :func:`parse_yaml`, a small reader of the block/flow subset those tools write (mappings,
 sequences, flow lists, numbers, strings, comments) -- not a general YAML parser.
 """
+
 from __future__ import annotations
 
 import math
@@ -118,8 +119,9 @@ def _logical_lines(text):
         line = _strip_comment(raw.replace("\t", "    "))
         if pending is not None:
             pending[1] += " " + line.strip()
-            if pending[1].count("[") + pending[1].count("{") <= \
-                    pending[1].count("]") + pending[1].count("}"):
+            if pending[1].count("[") + pending[1].count("{") <= pending[1].count("]") + pending[
+                1
+            ].count("}"):
                 out.append(tuple(pending))
                 pending = None
             continue
@@ -151,8 +153,11 @@ def _block(lines, i, indent):
     """Parse the block starting at ``lines[i]`` with this ``indent``; ``(value, next_i)``."""
     if lines[i][1].startswith("- ") or lines[i][1] == "-":
         seq = []
-        while i < len(lines) and lines[i][0] == indent and (
-                lines[i][1].startswith("- ") or lines[i][1] == "-"):
+        while (
+            i < len(lines)
+            and lines[i][0] == indent
+            and (lines[i][1].startswith("- ") or lines[i][1] == "-")
+        ):
             rest = lines[i][1][1:].strip()
             if not rest:
                 if i + 1 < len(lines) and lines[i + 1][0] > indent:
@@ -183,8 +188,12 @@ def _block(lines, i, indent):
         tag_only = re.fullmatch(r"!!?[\w.:-]+", rest.strip() or "x") is not None
         if (not rest.strip() or tag_only) and i < len(lines) and lines[i][0] > indent:
             mapping[key], i = _block(lines, i, lines[i][0])
-        elif (not rest.strip() or tag_only) and i < len(lines) and lines[i][0] == indent \
-                and lines[i][1].startswith("- "):
+        elif (
+            (not rest.strip() or tag_only)
+            and i < len(lines)
+            and lines[i][0] == indent
+            and lines[i][1].startswith("- ")
+        ):
             mapping[key], i = _block(lines, i, indent)  # a sequence at the key's own indent
         else:
             mapping[key] = None if tag_only else _value_text(rest)
@@ -229,8 +238,13 @@ def _numbers(value, what, count=None):
 
 
 def _int(value, what):
-    if isinstance(value, bool) or not isinstance(value, (int, float)) or not math.isfinite(value) \
-            or value != int(value) or value <= 0:
+    if (
+        isinstance(value, bool)
+        or not isinstance(value, (int, float))
+        or not math.isfinite(value)
+        or value != int(value)
+        or value <= 0
+    ):
         raise ValueError(f"{what} must be a positive integer, got {value!r}")
     return int(value)
 
@@ -243,16 +257,20 @@ def _from_ros(doc):
     dist = doc.get("distortion_coefficients", doc.get("D"))
     model = str(doc.get("distortion_model", "plumb_bob"))
     if model not in ("plumb_bob", "rational_polynomial"):
-        raise ValueError(f"field 'distortion_model' is {model!r}; omnicam reads OpenCV's "
-                         f"plumb_bob and rational_polynomial (equidistant is a fisheye model)")
+        raise ValueError(
+            f"field 'distortion_model' is {model!r}; omnicam reads OpenCV's "
+            f"plumb_bob and rational_polynomial (equidistant is a fisheye model)"
+        )
     if dist is not None:
         data = dist.get("data") if isinstance(dist, dict) else dist
         if data:
             D = _numbers(data, "field 'distortion_coefficients.data'")
     size = None
     if "image_width" in doc or "image_height" in doc:
-        size = (_int(doc.get("image_width"), "field 'image_width'"),
-                _int(doc.get("image_height"), "field 'image_height'"))
+        size = (
+            _int(doc.get("image_width"), "field 'image_width'"),
+            _int(doc.get("image_height"), "field 'image_height'"),
+        )
     return K, D, size
 
 
@@ -261,8 +279,10 @@ def _from_kalibr(doc):
     cam = doc["cam0"] if "cam0" in doc else doc[min(cams)] if cams else doc
     model = cam.get("camera_model")
     if model != "pinhole":
-        raise ValueError(f"field 'camera_model' is {model!r}; omnicam reads Kalibr's pinhole "
-                         f"cameras (its lens under the mirror)")
+        raise ValueError(
+            f"field 'camera_model' is {model!r}; omnicam reads Kalibr's pinhole "
+            f"cameras (its lens under the mirror)"
+        )
     fu, fv, pu, pv = _numbers(cam.get("intrinsics"), "field 'intrinsics'", 4)
     K = np.array([[fu, 0.0, pu], [0.0, fv, pv], [0.0, 0.0, 1.0]])
     dm = cam.get("distortion_model", "none")
@@ -270,8 +290,10 @@ def _from_kalibr(doc):
     if dm == "radtan":
         D = _numbers(cam.get("distortion_coeffs"), "field 'distortion_coeffs'", 4)
     elif dm not in ("none", None):
-        raise ValueError(f"field 'distortion_model' is {dm!r}; omnicam reads Kalibr's radtan "
-                         f"(OpenCV's k1 k2 p1 p2)")
+        raise ValueError(
+            f"field 'distortion_model' is {dm!r}; omnicam reads Kalibr's radtan "
+            f"(OpenCV's k1 k2 p1 p2)"
+        )
     size = None
     if cam.get("resolution") is not None:
         w, h = _numbers(cam.get("resolution"), "field 'resolution'", 2)
@@ -322,8 +344,12 @@ def read_other_intrinsics(path):
         names the file and the field.
     """
     path = os.fspath(path)
-    if not os.path.splitext(path)[1].lower() in (".yaml", ".yml", ".xml", ".json") \
-            or not os.path.isfile(path):
+    if os.path.splitext(path)[1].lower() not in (
+        ".yaml",
+        ".yml",
+        ".xml",
+        ".json",
+    ) or not os.path.isfile(path):
         return None
     if os.path.getsize(path) > MAX_BYTES:
         return None
@@ -334,8 +360,11 @@ def read_other_intrinsics(path):
     except (OSError, UnicodeDecodeError):
         return None
     yaml = os.path.splitext(path)[1].lower() in (".yaml", ".yml")
-    if yaml and "!!opencv-matrix" not in text and re.search(
-            r"^\s*(camera_matrix|camera_model)\s*:", text, re.MULTILINE):
+    if (
+        yaml
+        and "!!opencv-matrix" not in text
+        and re.search(r"^\s*(camera_matrix|camera_model)\s*:", text, re.MULTILINE)
+    ):
         try:
             doc = parse_yaml(text)
         except ValueError as e:
@@ -348,7 +377,9 @@ def read_other_intrinsics(path):
         except ValueError as e:
             raise ValueError(f"intrinsics file {path}: {e}") from None
         except (KeyError, TypeError, AttributeError):
-            raise ValueError(f"intrinsics file {path}: a ROS camera_info or Kalibr camchain "
-                             f"without its camera fields") from None
+            raise ValueError(
+                f"intrinsics file {path}: a ROS camera_info or Kalibr camchain "
+                f"without its camera fields"
+            ) from None
         return None
     return None

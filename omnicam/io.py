@@ -43,6 +43,7 @@ Writing goes through :func:`omnicam._atomic.atomic_output` and is verified by re
 temporary file back with the same reader: a failure (full disk, read-only folder, ...) raises
 ``ValueError`` naming the file and keeps the old file.
 """
+
 from __future__ import annotations
 
 import contextlib
@@ -60,9 +61,19 @@ from ._atomic import OutputError, atomic_output, write_bytes
 from ._validate import validate_D, validate_image_size, validate_K
 from .mirror import HyperbolicMirror
 
-__all__ = ["save_camera", "load_camera", "read_intrinsics", "write_intrinsics", "read_far_lines",
-           "write_far_lines", "FORMAT_VERSION", "MODEL_NAME", "SUFFIXES", "MAX_FILE_BYTES",
-           "MAX_DEPTH"]
+__all__ = [
+    "save_camera",
+    "load_camera",
+    "read_intrinsics",
+    "write_intrinsics",
+    "read_far_lines",
+    "write_far_lines",
+    "FORMAT_VERSION",
+    "MODEL_NAME",
+    "SUFFIXES",
+    "MAX_FILE_BYTES",
+    "MAX_DEPTH",
+]
 
 FORMAT_VERSION = 1
 MODEL_NAME = "misaligned_hyperbolic"  # the model tag of a calibration file
@@ -76,9 +87,15 @@ MAX_VALUES = 4096  # items of a sequence (our matrices hold at most 14)
 K_FIELDS = ("K", "camera_matrix", "cameraMatrix")
 D_FIELDS = ("D", "dist_coeffs", "distortion_coefficients", "distCoeffs")
 # OpenCV matrix element types (dt) and the values they hold
-_DT_RANGES = {"u": (0, 255), "c": (-128, 127), "w": (0, 65535), "s": (-32768, 32767),
-              "i": (-(2**31), 2**31 - 1), "f": (-3.4028234663852886e38, 3.4028234663852886e38),
-              "d": (-math.inf, math.inf)}
+_DT_RANGES = {
+    "u": (0, 255),
+    "c": (-128, 127),
+    "w": (0, 65535),
+    "s": (-32768, 32767),
+    "i": (-(2**31), 2**31 - 1),
+    "f": (-3.4028234663852886e38, 3.4028234663852886e38),
+    "d": (-math.inf, math.inf),
+}
 _MAX_MATRIX_VALUES = MAX_VALUES
 _BOOLEAN = re.compile(r"(?m)(?:^|[:\[,>-])[ \t]*(true|false)[ \t]*(?=$|[,\]#<])")
 _LONG_INT = re.compile(r"(?<![\w.+-])[-+]?\d{10,}(?![\w.])")  # 10+ digits, not part of a real
@@ -96,8 +113,9 @@ def _fspath(path, what):
     try:
         path = os.fspath(path)
     except TypeError:
-        raise ValueError(f"{what} path must be a file name (str or os.PathLike), "
-                         f"got {path!r}") from None
+        raise ValueError(
+            f"{what} path must be a file name (str or os.PathLike), got {path!r}"
+        ) from None
     if isinstance(path, bytes):
         path = os.fsdecode(path)
     if "\0" in path:
@@ -105,8 +123,10 @@ def _fspath(path, what):
     try:
         path.encode("utf-8")
     except UnicodeEncodeError:
-        raise ValueError(f"{what} {shown(path)}: the file name is not valid UTF-8 "
-                         f"(OpenCV cannot handle it); rename the file") from None
+        raise ValueError(
+            f"{what} {shown(path)}: the file name is not valid UTF-8 "
+            f"(OpenCV cannot handle it); rename the file"
+        ) from None
     return path
 
 
@@ -172,8 +192,9 @@ def _nesting(text):
     elements = 0
     if "<" in text:
         depth = 0
-        for m in re.finditer(r"<(/?)[A-Za-z_:][^<>]*?(/?)>", re.sub(r"<!--.*?-->", "", text,
-                                                                      flags=re.DOTALL)):
+        for m in re.finditer(
+            r"<(/?)[A-Za-z_:][^<>]*?(/?)>", re.sub(r"<!--.*?-->", "", text, flags=re.DOTALL)
+        ):
             if m.group(1):
                 depth -= 1
             elif not m.group(2):
@@ -198,18 +219,28 @@ def _prescan(path, what, json_only=False):
     except FileNotFoundError:
         raise FileNotFoundError(f"{what} {name} does not exist") from None
     except NotADirectoryError:
-        raise FileNotFoundError(f"{what} {name} does not exist (a parent is not a "
-                                f"folder)") from None
+        raise FileNotFoundError(
+            f"{what} {name} does not exist (a parent is not a folder)"
+        ) from None
     except OSError as e:
         raise ValueError(f"{what} {name}: cannot read it ({e.strerror or e})") from None
     if not stat.S_ISREG(st.st_mode):
-        kind = ("a folder" if stat.S_ISDIR(st.st_mode) else "a FIFO" if stat.S_ISFIFO(st.st_mode)
-                else "a device" if stat.S_ISCHR(st.st_mode) or stat.S_ISBLK(st.st_mode)
-                else "a socket" if stat.S_ISSOCK(st.st_mode) else "not a file")
+        kind = (
+            "a folder"
+            if stat.S_ISDIR(st.st_mode)
+            else "a FIFO"
+            if stat.S_ISFIFO(st.st_mode)
+            else "a device"
+            if stat.S_ISCHR(st.st_mode) or stat.S_ISBLK(st.st_mode)
+            else "a socket"
+            if stat.S_ISSOCK(st.st_mode)
+            else "not a file"
+        )
         raise ValueError(f"{what} {name} is not a regular file ({kind})")
     if st.st_size > MAX_FILE_BYTES:
-        raise ValueError(f"{what} {name}: too large ({st.st_size} bytes; at most "
-                         f"{MAX_FILE_BYTES} are read)")
+        raise ValueError(
+            f"{what} {name}: too large ({st.st_size} bytes; at most {MAX_FILE_BYTES} are read)"
+        )
     try:
         with open(path, "rb") as f:
             data = f.read(MAX_FILE_BYTES + 1)
@@ -224,32 +255,41 @@ def _prescan(path, what, json_only=False):
     try:
         text = data.decode("utf-8")
     except UnicodeDecodeError as e:
-        raise ValueError(f"{what} {name}: not UTF-8 text (byte {e.start}); a corrupt or "
-                         f"binary file") from None
+        raise ValueError(
+            f"{what} {name}: not UTF-8 text (byte {e.start}); a corrupt or binary file"
+        ) from None
     depth, indent = _nesting(text)
     if depth > MAX_DEPTH or (not json_only and indent > MAX_INDENT):
-        raise ValueError(f"{what} {name}: nested too deeply ({max(depth, indent)} levels or "
-                         f"columns; at most {MAX_DEPTH}); not a file omnicam writes")
+        raise ValueError(
+            f"{what} {name}: nested too deeply ({max(depth, indent)} levels or "
+            f"columns; at most {MAX_DEPTH}); not a file omnicam writes"
+        )
     if not json_only and "$base64$" in text:
         raise ValueError(f"{what} {name}: base64-encoded data is not supported")
     if not json_only and not text.lstrip().startswith("{"):
         m = _BOOLEAN.search(text)
         if m:
-            raise ValueError(f"{what} {name}: {m.group(1)!r} where a value is expected; OpenCV "
-                             f"would read it as the number {int(m.group(1) == 'true')}")
+            raise ValueError(
+                f"{what} {name}: {m.group(1)!r} where a value is expected; OpenCV "
+                f"would read it as the number {int(m.group(1) == 'true')}"
+            )
         for m in _LONG_INT.finditer(text):
             if abs(int(m.group())) > 2**31 - 1:
-                raise ValueError(f"{what} {name}: the integer {m.group()} does not fit in 32 "
-                                 f"bits (OpenCV would read it wrapped around); write it as a "
-                                 f"real number such as {m.group()}.")
+                raise ValueError(
+                    f"{what} {name}: the integer {m.group()} does not fit in 32 "
+                    f"bits (OpenCV would read it wrapped around); write it as a "
+                    f"real number such as {m.group()}."
+                )
     return text
 
 
 def _suffix(path, what="calibration file"):
     ext = os.path.splitext(str(path))[1].lower()
     if ext not in SUFFIXES:
-        raise ValueError(f"{what} {shown(path)}: extension must be one of {', '.join(SUFFIXES)}"
-                         f" (the format follows it), got {ext or 'none'!r}")
+        raise ValueError(
+            f"{what} {shown(path)}: extension must be one of {', '.join(SUFFIXES)}"
+            f" (the format follows it), got {ext or 'none'!r}"
+        )
     return ext
 
 
@@ -316,8 +356,9 @@ def _parse(text, path, what, ext):
         except RecursionError:
             raise ValueError(f"{what} {name}: nested too deeply") from None
         except ValueError as e:
-            raise ValueError(f"{what} {name}: not a readable OpenCV FileStorage file (not valid "
-                             f"JSON: {e})") from None
+            raise ValueError(
+                f"{what} {name}: not a readable OpenCV FileStorage file (not valid JSON: {e})"
+            ) from None
         if not isinstance(data, dict):
             raise ValueError(f"{what} {name}: expected a map of named fields at the top level")
         return data
@@ -329,13 +370,16 @@ def _parse(text, path, what, ext):
         except (cv2.error, SystemError):
             opened = root_is_map = False
     if not opened:
-        raise ValueError(f"{what} {name}: not a readable OpenCV FileStorage file "
-                         f"(yaml, yml, xml or json)")
+        raise ValueError(
+            f"{what} {name}: not a readable OpenCV FileStorage file (yaml, yml, xml or json)"
+        )
     if not root_is_map:
         raise ValueError(f"{what} {name}: expected a map of named fields at the top level")
     if fs.root().size() > MAX_FIELDS:
-        raise ValueError(f"{what} {name}: more than {MAX_FIELDS} top-level fields; not a "
-                         f"calibration or intrinsics file")
+        raise ValueError(
+            f"{what} {name}: more than {MAX_FIELDS} top-level fields; not a "
+            f"calibration or intrinsics file"
+        )
     return _Fields(fs)
 
 
@@ -403,12 +447,15 @@ class _Reader:
     def _opencv_matrix(self, field, m):
         """Rebuild an ``opencv-matrix`` map, every value checked against its ``dt``."""
         rows, cols, dt, data = (m.get(k) for k in ("rows", "cols", "dt", "data"))
-        if not all(isinstance(v, int) and not isinstance(v, bool) and 0 < v <= _MAX_MATRIX_VALUES
-                   for v in (rows, cols)):
+        if not all(
+            isinstance(v, int) and not isinstance(v, bool) and 0 < v <= _MAX_MATRIX_VALUES
+            for v in (rows, cols)
+        ):
             raise self.fail(field, "must have positive integer rows and cols")
         if dt not in _DT_RANGES:
-            raise self.fail(field, f"must have a one-channel dt ({', '.join(_DT_RANGES)}), "
-                            f"got {dt!r}")
+            raise self.fail(
+                field, f"must have a one-channel dt ({', '.join(_DT_RANGES)}), got {dt!r}"
+            )
         lo, hi = _DT_RANGES[dt]
         values = self._numbers(field, data, lo, hi, integer=dt not in "fd")
         if values.size != rows * cols:
@@ -419,11 +466,16 @@ class _Reader:
         """An ``opencv-nd-matrix`` (``fs.write`` of a 1-D array) with one size, as a column."""
         sizes = m.get("sizes")
         sizes = [sizes] if isinstance(sizes, int) else sizes  # XML gives one size as a scalar
-        if not (isinstance(sizes, list) and len(sizes) == 1 and isinstance(sizes[0], int)
-                and not isinstance(sizes[0], bool)):
+        if not (
+            isinstance(sizes, list)
+            and len(sizes) == 1
+            and isinstance(sizes[0], int)
+            and not isinstance(sizes[0], bool)
+        ):
             raise self.fail(field, "must be a one-dimensional opencv-nd-matrix")
-        return self._opencv_matrix(field, {"rows": sizes[0], "cols": 1, "dt": m.get("dt"),
-                                           "data": m.get("data")})
+        return self._opencv_matrix(
+            field, {"rows": sizes[0], "cols": 1, "dt": m.get("dt"), "data": m.get("data")}
+        )
 
     def matrix(self, field, shape=None, required=True, allow_list=False):
         """An ``!!opencv-matrix`` (or, with ``allow_list``, a plain list of numbers)."""
@@ -437,10 +489,17 @@ class _Reader:
         elif allow_list and isinstance(value, list):
             mat = self._numbers(field, value)
         else:
-            raise self.fail(field, "must be an OpenCV matrix (!!opencv-matrix)"
-                            + (" or a list of numbers" if allow_list else ""))
-        if shape is not None and len(shape) == 2 and mat.shape != shape and not (
-                allow_list and mat.size == shape[0] * shape[1] and mat.ndim == 1):
+            raise self.fail(
+                field,
+                "must be an OpenCV matrix (!!opencv-matrix)"
+                + (" or a list of numbers" if allow_list else ""),
+            )
+        if (
+            shape is not None
+            and len(shape) == 2
+            and mat.shape != shape
+            and not (allow_list and mat.size == shape[0] * shape[1] and mat.ndim == 1)
+        ):
             raise self.fail(field, f"must be a {shape[0]}x{shape[1]} matrix, got {mat.shape}")
         if shape is not None and mat.size != int(np.prod(shape)):
             raise self.fail(field, f"must have {int(np.prod(shape))} values, got shape {mat.shape}")
@@ -455,8 +514,11 @@ class _Reader:
                 raise self.fail("image_size", "must be (width, height), two integers")
             return (int(m[0]), int(m[1]))
         if value is not None:
-            if not (isinstance(value, list) and len(value) == 2 and all(
-                    isinstance(v, int) and not isinstance(v, bool) for v in value)):
+            if not (
+                isinstance(value, list)
+                and len(value) == 2
+                and all(isinstance(v, int) and not isinstance(v, bool) for v in value)
+            ):
                 raise self.fail("image_size", "must be a sequence [width, height] of integers")
             return tuple(value)
         if self.node("image_width", required=False) is not None:
@@ -609,10 +671,16 @@ def _far_lines(data, name):
             arr = None
         if arr is not None and arr.ndim == 3 and arr.shape[1:] == (1, 2):
             arr = arr.reshape(-1, 2)  # OpenCV's (N, 1, 2)
-        if arr is None or arr.dtype.kind not in "iuf" or arr.ndim != 2 or arr.shape[1] != 2 \
-                or arr.shape[0] < 3:
-            raise ValueError(f"{name}: line {i} must be a list of at least 3 [x, y] pixels "
-                             f"({expected})")
+        if (
+            arr is None
+            or arr.dtype.kind not in "iuf"
+            or arr.ndim != 2
+            or arr.shape[1] != 2
+            or arr.shape[0] < 3
+        ):
+            raise ValueError(
+                f"{name}: line {i} must be a list of at least 3 [x, y] pixels ({expected})"
+            )
         arr = arr.astype(np.float64)
         if not np.isfinite(arr).all():
             raise ValueError(f"{name}: line {i} has non-finite coordinates")
@@ -635,8 +703,9 @@ def _atomic_filestorage(path, what, write, read_back):
         fs = cv2.FileStorage(tmp, cv2.FILE_STORAGE_WRITE)
         try:
             if not fs.isOpened():
-                raise OutputError(f"cannot write {what} {shown(path)}: OpenCV cannot open it "
-                                  f"for writing")
+                raise OutputError(
+                    f"cannot write {what} {shown(path)}: OpenCV cannot open it for writing"
+                )
             write(fs)
         finally:
             fs.release()
@@ -694,8 +763,11 @@ def _close(a, b):
 
 
 def _same_camera(a, b):
-    return (a.mirror == b.mirror and a.image_size == b.image_size
-            and all(_close(getattr(a, n), getattr(b, n)) for n in ("K", "D", "rvec", "tvec")))
+    return (
+        a.mirror == b.mirror
+        and a.image_size == b.image_size
+        and all(_close(getattr(a, n), getattr(b, n)) for n in ("K", "D", "rvec", "tvec"))
+    )
 
 
 def write_intrinsics(path, K, D=None, image_size=None):
@@ -720,8 +792,11 @@ def write_intrinsics(path, K, D=None, image_size=None):
 
     def read_back(tmp):
         K2, D2, size2 = read_intrinsics(tmp)
-        return _close(K2, K) and size2 == image_size and (
-            _close(D2, D) if D2 is not None or D is None or np.any(D) else True)
+        return (
+            _close(K2, K)
+            and size2 == image_size
+            and (_close(D2, D) if D2 is not None or D is None or np.any(D) else True)
+        )
 
     _atomic_filestorage(path, "intrinsics file", write, read_back)
 

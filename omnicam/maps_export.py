@@ -22,6 +22,7 @@ significant byte first, as the Netpbm format defines 16-bit PGM), which ffmpeg r
 ``gray16be``. Supersampling: build the tables at ``k`` times the output size, remap, then let
 ffmpeg scale down (``scale=W:H:flags=area``): nearest-neighbour picks averaged over ``k x k``.
 """
+
 from __future__ import annotations
 
 import os
@@ -91,8 +92,9 @@ def pgm_bytes(image):
     """A 16-bit binary PGM (``P5``, maxval 65535, big-endian) of a uint16 image."""
     image = np.asarray(image)
     if image.ndim != 2 or image.dtype != np.uint16 or image.size == 0:
-        raise ValueError(f"image must be a non-empty 2-D uint16 array, got {image.dtype} "
-                         f"{image.shape}")
+        raise ValueError(
+            f"image must be a non-empty 2-D uint16 array, got {image.dtype} {image.shape}"
+        )
     h, w = image.shape
     return f"P5\n{w} {h}\n65535\n".encode("ascii") + image.astype(">u2").tobytes()
 
@@ -103,13 +105,13 @@ def read_pgm(path):
         data = f.read()
     tokens, pos = [], 0
     while len(tokens) < 4:
-        while pos < len(data) and data[pos:pos + 1].isspace():
+        while pos < len(data) and data[pos : pos + 1].isspace():
             pos += 1
-        if data[pos:pos + 1] == b"#":
+        if data[pos : pos + 1] == b"#":
             pos = data.index(b"\n", pos) + 1
             continue
         end = pos
-        while end < len(data) and not data[end:end + 1].isspace():
+        while end < len(data) and not data[end : end + 1].isspace():
             end += 1
         tokens.append(data[pos:end])
         pos = end
@@ -154,8 +156,10 @@ def write_npy_maps(prefix, map_x, map_y, overwrite=True):
         def verify(tmp, arr=arr):
             return np.array_equal(np.load(tmp), arr)
 
-        with atomic_output(path, what="map", overwrite=overwrite, verify=verify) as tmp, \
-                open(tmp, "wb") as f:
+        with (
+            atomic_output(path, what="map", overwrite=overwrite, verify=verify) as tmp,
+            open(tmp, "wb") as f,
+        ):
             np.save(f, arr)
         paths.append(path)
     return paths
@@ -170,7 +174,8 @@ def write_filestorage_maps(path, map_x, map_y, overwrite=True):
         fs = cv2.FileStorage(tmp, cv2.FILE_STORAGE_READ)
         try:
             return np.array_equal(fs.getNode("map_x").mat(), map_x) and np.array_equal(
-                fs.getNode("map_y").mat(), map_y)
+                fs.getNode("map_y").mat(), map_y
+            )
         finally:
             fs.release()
 
@@ -185,8 +190,9 @@ def write_filestorage_maps(path, map_x, map_y, overwrite=True):
     return path
 
 
-def ffmpeg_command(x_pgm, y_pgm, output_size=None, supersample=1, input_name="in.mp4",
-                   output_name="out.mp4"):
+def ffmpeg_command(
+    x_pgm, y_pgm, output_size=None, supersample=1, input_name="in.mp4", output_name="out.mp4"
+):
     """The ffmpeg command line that applies the maps (``format=yuv444p,remap``), as a string.
 
     ``yuv444p`` keeps chroma at full resolution, so every output pixel is one source pixel.
@@ -196,5 +202,7 @@ def ffmpeg_command(x_pgm, y_pgm, output_size=None, supersample=1, input_name="in
     if supersample > 1 and output_size is not None:
         chain += f",scale={output_size[0]}:{output_size[1]}:flags=area"
     q = shlex.quote
-    return (f"ffmpeg -i {q(input_name)} -i {q(os.fspath(x_pgm))} -i {q(os.fspath(y_pgm))} "
-            f'-lavfi "{chain}" {q(output_name)}')
+    return (
+        f"ffmpeg -i {q(input_name)} -i {q(os.fspath(x_pgm))} -i {q(os.fspath(y_pgm))} "
+        f'-lavfi "{chain}" {q(output_name)}'
+    )

@@ -11,6 +11,7 @@ The physical mirror is the cap of that sheet inside the rim, the circle of radiu
 These are vectorised numpy functions: the readable reference of the model. The per-pixel
 hot loops use the same formulas in :mod:`omnicam._kernels`.
 """
+
 from __future__ import annotations
 
 import math
@@ -25,8 +26,9 @@ __all__ = ["HyperbolicMirror"]
 
 def _positive_finite(name, value):
     lo, hi = LENGTH_RANGE
-    return real_number(value, name, lo, hi,
-                       expected=f"a positive finite number in [{lo:g}, {hi:g}] (mirror units)")
+    return real_number(
+        value, name, lo, hi, expected=f"a positive finite number in [{lo:g}, {hi:g}] (mirror units)"
+    )
 
 
 class HyperbolicMirror:
@@ -206,8 +208,7 @@ class HyperbolicMirror:
         """
         if isinstance(n, bool) or not isinstance(n, numbers.Integral) or not 1 <= n <= 10**7:
             if not (isinstance(n, float) and n.is_integer() and 1 <= n <= 10**7):
-                raise ValueError(f"n must be an integer number of points in [1, 10**7], "
-                                 f"got {n!r}")
+                raise ValueError(f"n must be an integer number of points in [1, 10**7], got {n!r}")
         t = np.linspace(0.0, 2.0 * np.pi, int(n), endpoint=False)
         r = self._rim_radius
         return np.stack([r * np.cos(t), r * np.sin(t), np.full_like(t, self.z_rim)], axis=1)

@@ -13,8 +13,14 @@ import numpy as np
 from . import _kernels
 from ._jit import notice_if_cold, run_chunks
 
-__all__ = ["as_points", "undistort_normalized", "distort_normalized", "trace", "trace_normalized",
-           "project"]
+__all__ = [
+    "as_points",
+    "undistort_normalized",
+    "distort_normalized",
+    "trace",
+    "trace_normalized",
+    "project",
+]
 
 # docs/conventions.md: OpenCV's default 5 iterations of undistortPoints leave up to 0.1 px of error
 _UNDISTORT_CRITERIA = (cv2.TERM_CRITERIA_COUNT | cv2.TERM_CRITERIA_EPS, 200, 1e-15)

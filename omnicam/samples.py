@@ -2,6 +2,7 @@
 
 >>> cam = omnicam.samples.load("hyperomni_misaligned")            # doctest: +SKIP
 """
+
 from __future__ import annotations
 
 from importlib import resources

@@ -15,6 +15,7 @@
   entry (:func:`inject_spherical_mp4`). Chunk offsets (``stco``/``co64``) are moved when
   ``moov`` precedes ``mdat``.
 """
+
 from __future__ import annotations
 
 import math
@@ -57,16 +58,20 @@ def equirect_view(size, depth=None):
     except (TypeError, ValueError):
         raise ValueError(f"size must be (width, height), got {size!r}") from None
     if w != 2 * h or h < 2:
-        raise ValueError(f"size of an equirectangular 360 image must be 2:1 (W = 2 H), "
-                         f"got {w}x{h}")
+        raise ValueError(f"size of an equirectangular 360 image must be 2:1 (W = 2 H), got {w}x{h}")
     half_row = 90.0 / h
     # panorama column j looks at azimuth -360 j / W in its frame; the mirror azimuth is
     # -(360 (j + 0.5) / W - 180) = that + delta, i.e. R^T = Rz(delta)
     delta = math.radians(180.0 - 180.0 / w)
     c, s = math.cos(delta), math.sin(delta)
     Rz = np.array([[c, -s, 0.0], [s, c, 0.0], [0.0, 0.0, 1.0]])
-    return PanoramaView((w, h), elevation_range=(-90.0 + half_row, 90.0 - half_row),
-                        projection="equirectangular", R=Rz.T, depth=depth)
+    return PanoramaView(
+        (w, h),
+        elevation_range=(-90.0 + half_row, 90.0 - half_row),
+        projection="equirectangular",
+        R=Rz.T,
+        depth=depth,
+    )
 
 
 # -- stills: Photo Sphere XMP ------------------------------------------------------------------
@@ -83,10 +88,16 @@ def photosphere_xmp(full_size, cropped=None):
     W, H = (int(v) for v in full_size)
     left, top, cw, ch = (0, 0, W, H) if cropped is None else (int(v) for v in cropped)
     fields = {
-        "UsePanoramaViewer": "True", "ProjectionType": "equirectangular",
-        "PoseHeadingDegrees": "0.0", "CroppedAreaLeftPixels": left, "CroppedAreaTopPixels": top,
-        "CroppedAreaImageWidthPixels": cw, "CroppedAreaImageHeightPixels": ch,
-        "FullPanoWidthPixels": W, "FullPanoHeightPixels": H, "StitchingSoftware": SOFTWARE,
+        "UsePanoramaViewer": "True",
+        "ProjectionType": "equirectangular",
+        "PoseHeadingDegrees": "0.0",
+        "CroppedAreaLeftPixels": left,
+        "CroppedAreaTopPixels": top,
+        "CroppedAreaImageWidthPixels": cw,
+        "CroppedAreaImageHeightPixels": ch,
+        "FullPanoWidthPixels": W,
+        "FullPanoHeightPixels": H,
+        "StitchingSoftware": SOFTWARE,
     }
     attrs = "\n    ".join(f'GPano:{k}="{v}"' for k, v in fields.items())
     return (
@@ -96,7 +107,8 @@ def photosphere_xmp(full_size, cropped=None):
         '  <rdf:Description rdf:about="" xmlns:GPano="http://ns.google.com/photos/1.0/panorama/"'
         f"\n    {attrs}/>\n"
         " </rdf:RDF>\n</x:xmpmeta>\n"
-        '<?xpacket end="w"?>').encode()
+        '<?xpacket end="w"?>'
+    ).encode()
 
 
 def jpeg_with_photosphere_xmp(jpeg, full_size, cropped=None):
@@ -122,10 +134,10 @@ def read_jpeg_xmp(jpeg):
         marker = jpeg[pos + 1]
         if marker == 0xDA:  # start of scan: no more metadata
             break
-        length = struct.unpack(">H", jpeg[pos + 2:pos + 4])[0]
-        body = jpeg[pos + 4:pos + 2 + length]
+        length = struct.unpack(">H", jpeg[pos + 2 : pos + 4])[0]
+        body = jpeg[pos + 4 : pos + 2 + length]
         if marker == 0xE1 and body.startswith(XMP_HEADER):
-            return body[len(XMP_HEADER):]
+            return body[len(XMP_HEADER) :]
         pos += 2 + length
     return None
 
@@ -135,14 +147,15 @@ def spherical_v1_xml():
     """RDF/XML of Spherical Video V1 (as spatial-media's ``spherical_metadata`` writes it)."""
     return (
         '<?xml version="1.0"?>'
-        '<rdf:SphericalVideo\n'
+        "<rdf:SphericalVideo\n"
         'xmlns:rdf="http://www.w3.org/1999/02/22-rdf-syntax-ns#"\n'
         'xmlns:GSpherical="http://ns.google.com/videos/1.0/spherical/">'
         "<GSpherical:Spherical>true</GSpherical:Spherical>"
         "<GSpherical:Stitched>true</GSpherical:Stitched>"
         f"<GSpherical:StitchingSoftware>{SOFTWARE}</GSpherical:StitchingSoftware>"
         "<GSpherical:ProjectionType>equirectangular</GSpherical:ProjectionType>"
-        "</rdf:SphericalVideo>").encode()
+        "</rdf:SphericalVideo>"
+    ).encode()
 
 
 def _box(kind, payload):
@@ -165,10 +178,32 @@ def _st3d_box():
 
 
 # containers whose payload is a list of boxes; stsd has 8 bytes first, sample entries 78
-_CONTAINERS = {b"moov": 0, b"trak": 0, b"mdia": 0, b"minf": 0, b"stbl": 0, b"edts": 0,
-               b"udta": 0, b"stsd": 8, b"sv3d": 0, b"proj": 0}
-_VISUAL_ENTRIES = {b"avc1", b"avc3", b"hvc1", b"hev1", b"mp4v", b"mjpg", b"jpeg", b"vp09",
-                   b"av01", b"encv", b"s263", b"h263"}
+_CONTAINERS = {
+    b"moov": 0,
+    b"trak": 0,
+    b"mdia": 0,
+    b"minf": 0,
+    b"stbl": 0,
+    b"edts": 0,
+    b"udta": 0,
+    b"stsd": 8,
+    b"sv3d": 0,
+    b"proj": 0,
+}
+_VISUAL_ENTRIES = {
+    b"avc1",
+    b"avc3",
+    b"hvc1",
+    b"hev1",
+    b"mp4v",
+    b"mjpg",
+    b"jpeg",
+    b"vp09",
+    b"av01",
+    b"encv",
+    b"s263",
+    b"h263",
+}
 
 
 class Box:
@@ -181,8 +216,11 @@ class Box:
         self.kind, self.head, self.children, self.payload = kind, head, children, payload
 
     def to_bytes(self):
-        body = self.head + (b"".join(c.to_bytes() for c in self.children)
-                            if self.children is not None else self.payload)
+        body = self.head + (
+            b"".join(c.to_bytes() for c in self.children)
+            if self.children is not None
+            else self.payload
+        )
         if 8 + len(body) > 0xFFFFFFFF:
             return struct.pack(">I", 1) + self.kind + struct.pack(">Q", 16 + len(body)) + body
         return _box(self.kind, body)
@@ -197,10 +235,10 @@ def parse_boxes(data, start=0, end=None, parent=None):
     out = []
     pos = start
     while pos + 8 <= end:
-        size, kind = struct.unpack(">I4s", data[pos:pos + 8])
+        size, kind = struct.unpack(">I4s", data[pos : pos + 8])
         hdr = 8
         if size == 1:
-            size = struct.unpack(">Q", data[pos + 8:pos + 16])[0]
+            size = struct.unpack(">Q", data[pos + 8 : pos + 16])[0]
             hdr = 16
         elif size == 0:
             size = end - pos
@@ -211,8 +249,13 @@ def parse_boxes(data, start=0, end=None, parent=None):
         if skip is None and parent == b"stsd" and kind in _VISUAL_ENTRIES:
             skip = 78
         if skip is not None:
-            out.append(Box(kind, data[body_start:body_start + skip],
-                           parse_boxes(data, body_start + skip, body_end, kind)))
+            out.append(
+                Box(
+                    kind,
+                    data[body_start : body_start + skip],
+                    parse_boxes(data, body_start + skip, body_end, kind),
+                )
+            )
         else:
             out.append(Box(kind, payload=data[body_start:body_end]))
         pos = body_end
@@ -238,13 +281,13 @@ def _shift_chunk_offsets(boxes, delta):
     for stco in find_boxes(boxes, [b"moov", b"trak", b"mdia", b"minf", b"stbl", b"stco"]):
         p = stco.payload
         n = struct.unpack(">I", p[4:8])[0]
-        offs = np.frombuffer(p[8:8 + 4 * n], ">u4").astype(np.int64) + delta
-        stco.payload = p[:8] + offs.astype(">u4").tobytes() + p[8 + 4 * n:]
+        offs = np.frombuffer(p[8 : 8 + 4 * n], ">u4").astype(np.int64) + delta
+        stco.payload = p[:8] + offs.astype(">u4").tobytes() + p[8 + 4 * n :]
     for co64 in find_boxes(boxes, [b"moov", b"trak", b"mdia", b"minf", b"stbl", b"co64"]):
         p = co64.payload
         n = struct.unpack(">I", p[4:8])[0]
-        offs = np.frombuffer(p[8:8 + 8 * n], ">u8").astype(np.int64) + delta
-        co64.payload = p[:8] + offs.astype(">u8").tobytes() + p[8 + 8 * n:]
+        offs = np.frombuffer(p[8 : 8 + 8 * n], ">u8").astype(np.int64) + delta
+        co64.payload = p[:8] + offs.astype(">u8").tobytes() + p[8 + 8 * n :]
 
 
 def inject_spherical_mp4(data):
@@ -264,14 +307,14 @@ def inject_spherical_mp4(data):
         raise ValueError("the MP4 has no video track")
     old_moov = len(next(b for b in boxes if b.kind == b"moov").to_bytes())
     for trak in traks:
-        trak.children = [c for c in trak.children
-                         if not (c.kind == b"uuid" and c.payload[:16] == SPHERICAL_UUID)]
+        trak.children = [
+            c for c in trak.children if not (c.kind == b"uuid" and c.payload[:16] == SPHERICAL_UUID)
+        ]
         trak.children.append(Box(b"uuid", payload=SPHERICAL_UUID + spherical_v1_xml()))
         for stsd in find_boxes(trak.children, [b"mdia", b"minf", b"stbl", b"stsd"]):
             for entry in stsd.children:
                 if entry.kind in _VISUAL_ENTRIES and entry.children is not None:
-                    entry.children = [c for c in entry.children
-                                      if c.kind not in (b"sv3d", b"st3d")]
+                    entry.children = [c for c in entry.children if c.kind not in (b"sv3d", b"st3d")]
                     entry.children += parse_boxes(_st3d_box() + _sv3d_box())
     moov = next(b for b in boxes if b.kind == b"moov")
     delta = len(moov.to_bytes()) - old_moov

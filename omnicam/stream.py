@@ -11,6 +11,7 @@ uses ``camera.image_size``, or, with ``frame_size=``, ``camera.scaled(frame_size
 sensor at another resolution). A frame of any other size raises ``ValueError``: a crop or a
 different camera cannot be told from a rescale, so we do not guess.
 """
+
 from __future__ import annotations
 
 import math
@@ -24,8 +25,14 @@ from .views import PanoramaView, PerspectiveView
 __all__ = ["Unwarper", "open_capture"]
 
 _INTERPOLATIONS = (cv2.INTER_NEAREST, cv2.INTER_LINEAR, cv2.INTER_CUBIC, cv2.INTER_LANCZOS4)
-_BORDERS = (cv2.BORDER_CONSTANT, cv2.BORDER_REPLICATE, cv2.BORDER_REFLECT, cv2.BORDER_WRAP,
-            cv2.BORDER_REFLECT_101, cv2.BORDER_TRANSPARENT)
+_BORDERS = (
+    cv2.BORDER_CONSTANT,
+    cv2.BORDER_REPLICATE,
+    cv2.BORDER_REFLECT,
+    cv2.BORDER_WRAP,
+    cv2.BORDER_REFLECT_101,
+    cv2.BORDER_TRANSPARENT,
+)
 
 
 def _check_maps(name, maps):
@@ -37,10 +44,12 @@ def _check_maps(name, maps):
         raise ValueError(f"view {name!r}: map1 must be a non-empty 2-D or (h, w, 2) array")
     h, w = map1.shape[:2]
     if map1.ndim == 3 and map1.shape[2] == 2 and map1.dtype == np.int16:
-        if map2 is not None and (not isinstance(map2, np.ndarray) or map2.dtype != np.uint16
-                                 or map2.shape != (h, w)):
-            raise ValueError(f"view {name!r}: a CV_16SC2 map1 needs map2 uint16 of shape {(h, w)}"
-                             " or None")
+        if map2 is not None and (
+            not isinstance(map2, np.ndarray) or map2.dtype != np.uint16 or map2.shape != (h, w)
+        ):
+            raise ValueError(
+                f"view {name!r}: a CV_16SC2 map1 needs map2 uint16 of shape {(h, w)} or None"
+            )
     elif map1.ndim == 3 and map1.shape[2] == 2 and map1.dtype == np.float32:
         if map2 is not None:
             raise ValueError(f"view {name!r}: a CV_32FC2 map1 takes map2=None")
@@ -48,8 +57,10 @@ def _check_maps(name, maps):
         if not isinstance(map2, np.ndarray) or map2.dtype != np.float32 or map2.shape != (h, w):
             raise ValueError(f"view {name!r}: a CV_32FC1 map1 needs map2 float32 of shape {(h, w)}")
     else:
-        raise ValueError(f"view {name!r}: map1 must be CV_16SC2, CV_32FC1 or CV_32FC2 "
-                         f"(as cv2.convertMaps), got {map1.dtype} of shape {map1.shape}")
+        raise ValueError(
+            f"view {name!r}: map1 must be CV_16SC2, CV_32FC1 or CV_32FC2 "
+            f"(as cv2.convertMaps), got {map1.dtype} of shape {map1.shape}"
+        )
     return map1, map2
 
 
@@ -72,8 +83,9 @@ def open_capture(source):
             raise ValueError(f"source {src}: no such file")
         cap = cv2.VideoCapture(src)
     else:
-        raise ValueError(f"source must be a camera index, a path, a URL or a cv2.VideoCapture, "
-                         f"got {source!r}")
+        raise ValueError(
+            f"source must be a camera index, a path, a URL or a cv2.VideoCapture, got {source!r}"
+        )
     if not cap.isOpened():
         raise ValueError(f"source {source!r}: cannot be opened by cv2.VideoCapture")
     return cap
@@ -85,13 +97,18 @@ def _check_border_value(value):
     try:
         out = tuple(values)
         ok = 1 <= len(out) <= 4 and all(
-            isinstance(v, (int, float, np.integer, np.floating)) and not isinstance(v, bool)
-            and math.isfinite(float(v)) for v in out)
+            isinstance(v, (int, float, np.integer, np.floating))
+            and not isinstance(v, bool)
+            and math.isfinite(float(v))
+            for v in out
+        )
     except TypeError:
         ok = False
     if not ok:
-        raise ValueError(f"border_value must be a finite number or 1 to 4 finite numbers (one "
-                         f"per channel, as cv2.remap's borderValue), got {value!r}")
+        raise ValueError(
+            f"border_value must be a finite number or 1 to 4 finite numbers (one "
+            f"per channel, as cv2.remap's borderValue), got {value!r}"
+        )
     out = tuple(float(v) for v in out)
     return out * 4 if len(out) == 1 else out + (0.0,) * (4 - len(out))
 
@@ -100,14 +117,21 @@ def _check_frame_size(frame_size):
     """``frame_size`` as ``(width, height)`` positive ints, or ``ValueError`` naming it."""
     try:
         w, h = frame_size
-        ok = all(isinstance(v, (int, float, np.integer, np.floating)) and not isinstance(v, bool)
-                 and math.isfinite(float(v)) and float(v) == int(v) and 0 < v <= 100_000
-                 for v in (w, h))
+        ok = all(
+            isinstance(v, (int, float, np.integer, np.floating))
+            and not isinstance(v, bool)
+            and math.isfinite(float(v))
+            and float(v) == int(v)
+            and 0 < v <= 100_000
+            for v in (w, h)
+        )
     except (TypeError, ValueError):
         ok = False
     if not ok:
-        raise ValueError(f"frame_size must be (width, height), two positive integers up to "
-                         f"100000, got {frame_size!r}")
+        raise ValueError(
+            f"frame_size must be (width, height), two positive integers up to "
+            f"100000, got {frame_size!r}"
+        )
     return int(w), int(h)
 
 
@@ -134,8 +158,14 @@ class Unwarper:
     next one); copy a view to keep it.
     """
 
-    def __init__(self, maps, source_size=None, interpolation=cv2.INTER_LINEAR,
-                 border_mode=cv2.BORDER_CONSTANT, border_value=0):
+    def __init__(
+        self,
+        maps,
+        source_size=None,
+        interpolation=cv2.INTER_LINEAR,
+        border_mode=cv2.BORDER_CONSTANT,
+        border_value=0,
+    ):
         if not isinstance(maps, dict) or not maps:
             raise ValueError("maps must be a non-empty dict of name -> (map1, map2)")
         self._maps = {str(k): _check_maps(k, v) for k, v in maps.items()}
@@ -143,15 +173,18 @@ class Unwarper:
             try:
                 w, h = (int(v) for v in source_size)
             except (TypeError, ValueError):
-                raise ValueError(f"source_size must be (width, height), "
-                                 f"got {source_size!r}") from None
+                raise ValueError(
+                    f"source_size must be (width, height), got {source_size!r}"
+                ) from None
             if w <= 0 or h <= 0:
                 raise ValueError(f"source_size must be positive, got {source_size!r}")
             source_size = (w, h)
         self._source_size = source_size
         if interpolation not in _INTERPOLATIONS:
-            raise ValueError(f"interpolation must be one of cv2.INTER_NEAREST, INTER_LINEAR, "
-                             f"INTER_CUBIC, INTER_LANCZOS4, got {interpolation!r}")
+            raise ValueError(
+                f"interpolation must be one of cv2.INTER_NEAREST, INTER_LINEAR, "
+                f"INTER_CUBIC, INTER_LANCZOS4, got {interpolation!r}"
+            )
         if border_mode not in _BORDERS:
             raise ValueError(f"border_mode must be a cv2.BORDER_* constant, got {border_mode!r}")
         self._interp = int(interpolation)
@@ -180,12 +213,15 @@ class Unwarper:
             ``interpolation``, ``border_mode``, ``border_value`` of :class:`Unwarper`.
         """
         if not isinstance(views, dict) or not views:
-            raise ValueError("views must be a non-empty dict of name -> PanoramaView or "
-                             "PerspectiveView")
+            raise ValueError(
+                "views must be a non-empty dict of name -> PanoramaView or PerspectiveView"
+            )
         for name, spec in views.items():
             if not isinstance(spec, (PanoramaView, PerspectiveView)):
-                raise ValueError(f"view {name!r} must be a PanoramaView or PerspectiveView, "
-                                 f"got {type(spec).__name__}")
+                raise ValueError(
+                    f"view {name!r} must be a PanoramaView or PerspectiveView, "
+                    f"got {type(spec).__name__}"
+                )
         if frame_size is not None:
             frame_size = _check_frame_size(frame_size)
             if camera.image_size is not None and tuple(camera.image_size) != frame_size:
@@ -218,8 +254,9 @@ class Unwarper:
     # -- per frame ----------------------------------------------------------------------------
     def _allocate(self, frame):
         key = (frame.dtype, frame.shape[2:])
-        self._out = {n: np.empty(shape + frame.shape[2:], frame.dtype)
-                     for n, _, _, shape in self._plan}
+        self._out = {
+            n: np.empty(shape + frame.shape[2:], frame.dtype) for n, _, _, shape in self._plan
+        }
         self._out_key = key
 
     def unwarp(self, frame, copy=False):
@@ -242,21 +279,28 @@ class Unwarper:
             The preallocated outputs, overwritten by the next call (unless ``copy``).
         """
         if not isinstance(frame, np.ndarray) or frame.ndim not in (2, 3) or frame.size == 0:
-            raise ValueError(f"frame must be a non-empty (H, W) or (H, W, C) image array, "
-                             f"got {type(frame).__name__}")
+            raise ValueError(
+                f"frame must be a non-empty (H, W) or (H, W, C) image array, "
+                f"got {type(frame).__name__}"
+            )
         if self._source_size is not None and (
-                frame.shape[1] != self._source_size[0] or frame.shape[0] != self._source_size[1]):
-            raise ValueError(f"frame is {frame.shape[1]}x{frame.shape[0]} but the tables are for "
-                             f"{self._source_size[0]}x{self._source_size[1]} frames; build the "
-                             f"Unwarper with frame_size=({frame.shape[1]}, {frame.shape[0]})")
-        if self._out_key is None or self._out_key[0] != frame.dtype \
-                or self._out_key[1] != frame.shape[2:]:
+            frame.shape[1] != self._source_size[0] or frame.shape[0] != self._source_size[1]
+        ):
+            raise ValueError(
+                f"frame is {frame.shape[1]}x{frame.shape[0]} but the tables are for "
+                f"{self._source_size[0]}x{self._source_size[1]} frames; build the "
+                f"Unwarper with frame_size=({frame.shape[1]}, {frame.shape[0]})"
+            )
+        if (
+            self._out_key is None
+            or self._out_key[0] != frame.dtype
+            or self._out_key[1] != frame.shape[2:]
+        ):
             self._allocate(frame)
         out = self._out
         interp, border, value = self._interp, self._border, self._border_value
         for name, m1, m2, _ in self._plan:
-            cv2.remap(frame, m1, m2, interp, dst=out[name], borderMode=border,
-                      borderValue=value)
+            cv2.remap(frame, m1, m2, interp, dst=out[name], borderMode=border, borderValue=value)
         if copy:
             return {name: view.copy() for name, view in out.items()}
         return out
@@ -297,14 +341,17 @@ class Unwarper:
         outputs = {} if outputs is None else dict(outputs)
         unknown = set(outputs) - set(self._maps)
         if unknown:
-            raise ValueError(f"outputs name unknown view(s) {sorted(unknown)}; views are "
-                             f"{self.names}")
+            raise ValueError(
+                f"outputs name unknown view(s) {sorted(unknown)}; views are {self.names}"
+            )
         if not (isinstance(fourcc, str) and len(fourcc) == 4):
             raise ValueError(f"fourcc must be a 4-character code, got {fourcc!r}")
         odd = {n: self.view_size(n) for n in outputs if any(v % 2 for v in self.view_size(n))}
         if odd:
-            raise ValueError(f"video outputs need an even width and height (cv2.VideoWriter "
-                             f"silently drops an odd last row or column); got {odd}")
+            raise ValueError(
+                f"video outputs need an even width and height (cv2.VideoWriter "
+                f"silently drops an odd last row or column); got {odd}"
+            )
         own = not isinstance(source, cv2.VideoCapture)
         cap = open_capture(source)
         writers = {}
@@ -322,12 +369,19 @@ class Unwarper:
                 if outputs and not writers:
                     color = frame.ndim == 3 and frame.shape[2] == 3
                     for name, path in outputs.items():
-                        w = cv2.VideoWriter(os.fspath(path), cv2.VideoWriter_fourcc(*fourcc),
-                                            float(fps), self.view_size(name), color)
+                        w = cv2.VideoWriter(
+                            os.fspath(path),
+                            cv2.VideoWriter_fourcc(*fourcc),
+                            float(fps),
+                            self.view_size(name),
+                            color,
+                        )
                         writers[name] = w
                         if not w.isOpened():
-                            raise ValueError(f"output {os.fspath(path)}: cv2.VideoWriter cannot "
-                                             f"write it (fourcc {fourcc!r})")
+                            raise ValueError(
+                                f"output {os.fspath(path)}: cv2.VideoWriter cannot "
+                                f"write it (fourcc {fourcc!r})"
+                            )
                 for name, w in writers.items():
                     w.write(views[name])
                 yield i, views
@@ -340,7 +394,4 @@ class Unwarper:
 
     def run(self, source, outputs, **kwargs):
         """Unwarp a whole source into ``outputs`` (see :meth:`stream`); returns the frame count."""
-        n = 0
-        for n, _ in enumerate(self.stream(source, outputs, **kwargs), start=1):
-            pass
-        return n
+        return sum(1 for _ in self.stream(source, outputs, **kwargs))

@@ -135,8 +135,9 @@ def K_from_fov(fov_deg, size):
     try:
         fov = float(fov_deg)
     except (TypeError, ValueError, OverflowError):
-        raise ValueError(f"fov_deg must be a number of degrees in (0, 180), "
-                         f"got {fov_deg!r}") from None
+        raise ValueError(
+            f"fov_deg must be a number of degrees in (0, 180), got {fov_deg!r}"
+        ) from None
     if not (0.0 < fov < 180.0):
         raise ValueError(f"fov_deg must be in (0, 180) degrees, got {fov_deg!r}")
     f = 0.5 * w / math.tan(math.radians(fov) / 2.0)
@@ -147,14 +148,16 @@ def K_from_fov(fov_deg, size):
 def _check_size(size, min_height=1):
     try:
         w, h = size
-        if not all(isinstance(v, numbers.Real) and not isinstance(v, (bool, np.bool_))
-                   for v in (w, h)):
+        if not all(
+            isinstance(v, numbers.Real) and not isinstance(v, (bool, np.bool_)) for v in (w, h)
+        ):
             raise TypeError
         exact = all(isinstance(v, numbers.Integral) or float(v) == int(v) for v in (w, h))
         w, h = int(w), int(h)
     except (TypeError, ValueError, OverflowError):
-        raise ValueError(f"size must be (width, height), two positive integers, "
-                         f"got {size!r}") from None
+        raise ValueError(
+            f"size must be (width, height), two positive integers, got {size!r}"
+        ) from None
     if not exact or w < 1 or h < min_height:
         raise ValueError(
             f"size must be (width, height), two integers with width >= 1 and "
@@ -168,8 +171,9 @@ def _check_size(size, min_height=1):
 def _check_camera(camera):
     """A camera (duck-typed: views sit below the camera class and do not import it)."""
     if not all(hasattr(camera, a) for a in ("mirror", "K", "R", "unproject", "rim_image_points")):
-        raise ValueError(f"camera must be a MisalignedHyperbolicCamera, got "
-                         f"{type(camera).__name__}")
+        raise ValueError(
+            f"camera must be a MisalignedHyperbolicCamera, got {type(camera).__name__}"
+        )
     return camera
 
 
@@ -197,8 +201,9 @@ def _check_rotation(R, name="R"):
 def _check_depth(depth):
     if depth is None:
         return None
-    return real_number(depth, "depth", 0.0, lo_open=True,
-                       expected="None or a positive finite distance")
+    return real_number(
+        depth, "depth", 0.0, lo_open=True, expected="None or a positive finite distance"
+    )
 
 
 def _check_viewpoint(camera, viewpoint, depth):
@@ -803,8 +808,9 @@ def _refuse_swapped(matrix_arg, size_arg, signature):
     except ValueError:  # ragged nesting: the validators name the argument
         return
     if np.ndim(size_arg) == 2 and np.shape(size_arg) == (3, 3):
-        raise ValueError(f"size: got a 3x3 matrix where (width, height) goes; the order is "
-                         f"{signature}")
+        raise ValueError(
+            f"size: got a 3x3 matrix where (width, height) goes; the order is {signature}"
+        )
     if np.ndim(matrix_arg) == 1 and np.shape(matrix_arg) == (2,) and np.ndim(size_arg) == 0:
         raise ValueError(f"got (width, height) first; the order is {signature}")
 
@@ -822,10 +828,13 @@ def _warn_if_unseen(camera, maps, what):
         import warnings
 
         lo, hi = visible_elevation_range(camera)
-        warnings.warn(f"{what}: {frac:.0%} of its pixels are outside what the mirror sees "
-                      f"(visible_elevation_range: {lo:.1f} to {hi:.1f} deg elevation); "
-                      f"aim it lower or use a smaller elevation range", RuntimeWarning,
-                      stacklevel=3)
+        warnings.warn(
+            f"{what}: {frac:.0%} of its pixels are outside what the mirror sees "
+            f"(visible_elevation_range: {lo:.1f} to {hi:.1f} deg elevation); "
+            f"aim it lower or use a smaller elevation range",
+            RuntimeWarning,
+            stacklevel=3,
+        )
 
 
 # -- view specs (what the Unwarper and the CLI hold) ----------------------------------------------
@@ -905,13 +914,29 @@ class PerspectiveView:
 
     __slots__ = ("size", "K_new", "R", "depth", "viewpoint")
 
-    def __init__(self, size, fov=90.0, yaw=0.0, pitch=0.0, roll=0.0, K_new=None, R=None,
-                 depth=None, viewpoint=None):
-        _refuse_swapped(fov, size, "PerspectiveView(size, fov=90.0, ..., K_new=None, R=None, "
-                        "...); pass a camera matrix as K_new=")
+    def __init__(
+        self,
+        size,
+        fov=90.0,
+        yaw=0.0,
+        pitch=0.0,
+        roll=0.0,
+        K_new=None,
+        R=None,
+        depth=None,
+        viewpoint=None,
+    ):
+        _refuse_swapped(
+            fov,
+            size,
+            "PerspectiveView(size, fov=90.0, ..., K_new=None, R=None, "
+            "...); pass a camera matrix as K_new=",
+        )
         if np.shape(fov) == (3, 3):
-            raise ValueError("fov: got a 3x3 matrix; pass a camera matrix as K_new= (the order "
-                             "is PerspectiveView(size, fov=90.0, ..., K_new=None, R=None, ...))")
+            raise ValueError(
+                "fov: got a 3x3 matrix; pass a camera matrix as K_new= (the order "
+                "is PerspectiveView(size, fov=90.0, ..., K_new=None, R=None, ...))"
+            )
         self.size = _check_size(size)
         self.K_new = K_from_fov(fov, self.size) if K_new is None else validate_K(K_new, "K_new")
         self.R = rotation_from_ypr(yaw, pitch, roll) if R is None else _check_rotation(R)

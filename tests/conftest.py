@@ -1,4 +1,5 @@
 """Shared fixtures: the canonical rigs every generic model test runs over."""
+
 import cv2
 import numpy as np
 import pytest
@@ -14,8 +15,8 @@ def _rigs():
     rigs["max_tilt_offset"] = synthetic.misaligned_rig(5.0, 200.0, (3.0, -4.0, 0.0))
     base = synthetic.misaligned_rig(4.0, 100.0, (-2.0, 1.0, 2.0))
     K = base.K.copy()
-    K[0, 1] = 0.8          # skew
-    K[1, 1] *= 1.02        # non-square pixels
+    K[0, 1] = 0.8  # skew
+    K[1, 1] *= 1.02  # non-square pixels
     rigs["skew"] = base.replace(K=K)
     rigs["distorted"] = base.replace(D=[-0.12, 0.05, 0.001, -0.0015, -0.01])
     rigs["rational"] = base.replace(D=[0.05, -0.02, 0.0, 0.0, 0.0, 0.02, -0.01, 0.003])
@@ -38,8 +39,10 @@ def annulus_pixels(cam, step=4.0, rim_samples=720, inset=(0.05, 0.5, 1.0)):
     gx, gy = np.meshgrid(np.arange(lo[0], hi[0], step), np.arange(lo[1], hi[1], step))
     grid = np.stack([gx.ravel(), gy.ravel()], axis=1)
     centre = rim.mean(axis=0)
-    rings = [centre + (rim - centre) * (1 - s / np.linalg.norm(rim - centre, axis=1))[:, None]
-             for s in inset]
+    rings = [
+        centre + (rim - centre) * (1 - s / np.linalg.norm(rim - centre, axis=1))[:, None]
+        for s in inset
+    ]
     pix = np.concatenate([grid, *rings])
     _, d = cam.unproject(pix)
     return pix[np.isfinite(d[:, 0])]

@@ -2,6 +2,7 @@
 
 Nothing here is fast or vectorised on purpose: it is what the numba kernels are checked against.
 """
+
 import math
 
 import numpy as np
@@ -10,10 +11,10 @@ from scipy.optimize import least_squares
 
 def trace_pixel(u, v, K, R, tvec, a, b, rim_radius):
     """Ray tracing of one pixel (eqs. 6-19) with ``numpy.roots``; returns (P, d) or None."""
-    Vc = np.linalg.solve(K, [u, v, 1.0])                 # eq. 6
-    V = R.T @ Vc                                          # eq. 16
+    Vc = np.linalg.solve(K, [u, v, 1.0])  # eq. 6
+    V = R.T @ Vc  # eq. 16
     V = V / np.linalg.norm(V)
-    F = -R.T @ tvec                                       # eq. 17
+    F = -R.T @ tvec  # eq. 17
     # (F + kV) on (X^2+Y^2)/a^2 - Z^2/b^2 + 1 = 0, as a polynomial in k (eqs. 8-11)
     A = (V[0] ** 2 + V[1] ** 2) / a**2 - V[2] ** 2 / b**2
     B = 2 * ((V[0] * F[0] + V[1] * F[1]) / a**2 - V[2] * F[2] / b**2)
@@ -28,14 +29,15 @@ def trace_pixel(u, v, K, R, tvec, a, b, rim_radius):
         return None
     _, P = min(hits, key=lambda h: h[0])
     N = np.array([b**2 * P[0] / (a**2 * P[2]), b**2 * P[1] / (a**2 * P[2]), -1.0])  # eq. 14
-    if N @ V >= 0 or P[0] ** 2 + P[1] ** 2 > rim_radius**2:                        # eq. 12, rim
+    if N @ V >= 0 or P[0] ** 2 + P[1] ** 2 > rim_radius**2:  # eq. 12, rim
         return None
     n = N / np.linalg.norm(N)
-    return P, V - 2 * n * (n @ V)                                                   # eq. 15
+    return P, V - 2 * n * (n @ V)  # eq. 15
 
 
 def project_point(X, K, R, tvec, a, b, rim_radius, guess):
     """The pixel whose traced ray passes through X, by generic least squares on the pixel."""
+
     def residual(uv):
         hit = trace_pixel(uv[0], uv[1], K, R, tvec, a, b, rim_radius)
         if hit is None:
@@ -43,6 +45,7 @@ def project_point(X, K, R, tvec, a, b, rim_radius, guess):
         P, d = hit
         w = X - P
         return np.cross(w / np.linalg.norm(w), d)  # sine of the angle between ray and P->X
+
     sol = least_squares(residual, guess, xtol=1e-15, ftol=1e-15, gtol=1e-15)
     return sol.x
 
@@ -55,10 +58,12 @@ def hyperomni_direction(u, v, a, b, f_C, x_c, y_c):
     """
     c = math.hypot(a, b)
     rho = math.hypot(u - x_c, v - y_c)
-    beta = math.atan2(f_C, rho)                                                        # eq. 5
-    alpha = math.atan(((b**2 + c**2) * math.sin(beta) - 2 * b * c)
-                      / ((b**2 - c**2) * math.cos(beta)))                              # eq. 4
-    azimuth = math.atan2(v - y_c, u - x_c)                                             # eq. 2
-    d = np.array([math.cos(alpha) * math.cos(azimuth), math.cos(alpha) * math.sin(azimuth),
-                  math.sin(alpha)])
-    return d, np.array([0.0, 0.0, c])                                                  # eq. 3
+    beta = math.atan2(f_C, rho)  # eq. 5
+    alpha = math.atan(
+        ((b**2 + c**2) * math.sin(beta) - 2 * b * c) / ((b**2 - c**2) * math.cos(beta))
+    )  # eq. 4
+    azimuth = math.atan2(v - y_c, u - x_c)  # eq. 2
+    d = np.array(
+        [math.cos(alpha) * math.cos(azimuth), math.cos(alpha) * math.sin(azimuth), math.sin(alpha)]
+    )
+    return d, np.array([0.0, 0.0, c])  # eq. 3

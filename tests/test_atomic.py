@@ -1,4 +1,5 @@
 """omnicam._atomic: a file is replaced whole or not at all, and failures say so."""
+
 import errno
 import os
 import subprocess
@@ -80,8 +81,12 @@ def test_missing_folder_is_named(tmp_path):
 
 
 def test_temporaries_of_dead_writers_are_removed_by_the_next_write(tmp_path):
-    dead = subprocess.run([sys.executable, "-c", "import os; print(os.getpid())"],
-                          capture_output=True, text=True, check=True)
+    dead = subprocess.run(
+        [sys.executable, "-c", "import os; print(os.getpid())"],
+        capture_output=True,
+        text=True,
+        check=True,
+    )
     litter = tmp_path / f".a{TEMP_MARK}{int(dead.stdout)}-deadbeef.yaml"
     litter.write_text("half")
     mine = tmp_path / f".b{TEMP_MARK}{os.getpid()}-00000000.yaml"

@@ -1,20 +1,22 @@
 """calibrate(): rim -> Chen -> selection -> refinement -> report, end to end."""
 
+import conftest
 import numpy as np
 import pytest
+from test_chen import RIGS, axis_angle_deg
 
 import omnicam
 from omnicam import MisalignedHyperbolicCamera, synthetic
 
 calibrate = MisalignedHyperbolicCamera.calibrate
-import conftest
-from test_chen import RIGS, axis_angle_deg
 
 
 def posture_errors(cam, truth):
     """(axis angle error in degrees, origin error in mm)."""
-    return (axis_angle_deg(cam.R[:, 2], truth.R[:, 2]),
-            float(np.linalg.norm(cam.tvec - truth.tvec)))
+    return (
+        axis_angle_deg(cam.R[:, 2], truth.R[:, 2]),
+        float(np.linalg.norm(cam.tvec - truth.tvec)),
+    )
 
 
 def chose_true_candidate(report, truth):
@@ -31,16 +33,21 @@ def test_exact_rim_points_give_the_posture_with_refine_off_and_on():
         lines = synthetic.far_line_pixels(truth, rng=rng)
         for refine in (False, True):
             cam, report = MisalignedHyperbolicCamera.calibrate(
-                truth.K, truth.mirror, boundary_points=truth.rim_image_points(360),
-                far_lines=lines, image_size=(500, 500), refine=refine)
+                truth.K,
+                truth.mirror,
+                boundary_points=truth.rim_image_points(360),
+                far_lines=lines,
+                image_size=(500, 500),
+                refine=refine,
+            )
             assert chose_true_candidate(report, truth)
             assert report.warnings == []
             axis, origin = posture_errors(cam, truth)
             worst[refine] = [max(worst[refine][0], axis), max(worst[refine][1], origin)]
             assert np.allclose(cam.rvec, truth.rvec, atol=1e-8)  # same gauge
     for refine in (False, True):
-        assert worst[refine][0] < 1e-6, (refine, worst)   # degrees
-        assert worst[refine][1] < 1e-6, (refine, worst)   # mm
+        assert worst[refine][0] < 1e-6, (refine, worst)  # degrees
+        assert worst[refine][1] < 1e-6, (refine, worst)  # mm
 
 
 def test_refinement_is_never_worse_than_the_analytic_result_on_exact_data():
@@ -48,23 +55,30 @@ def test_refinement_is_never_worse_than_the_analytic_result_on_exact_data():
     for truth in RIGS[:20]:
         lines = synthetic.far_line_pixels(truth, rng=rng)
         pts = truth.rim_image_points(360)
-        a, _ = calibrate(truth.K, truth.mirror, boundary_points=pts, far_lines=lines,
-                         refine=False)
+        a, _ = calibrate(truth.K, truth.mirror, boundary_points=pts, far_lines=lines, refine=False)
         b, rep = calibrate(truth.K, truth.mirror, boundary_points=pts, far_lines=lines)
         assert rep.refinement.cost_final <= rep.refinement.cost_initial + 1e-20
         ea, eb = posture_errors(a, truth), posture_errors(b, truth)
         assert eb[0] <= ea[0] + 1e-9 and eb[1] <= ea[1] + 1e-9
 
 
-@pytest.mark.parametrize("D", [[-0.12, 0.05, 0.001, -0.0015, -0.01],
-                               [0.05, -0.02, 0.0, 0.0, 0.0, 0.02, -0.01, 0.003]],
-                         ids=["5-coeff", "rational"])
+@pytest.mark.parametrize(
+    "D",
+    [[-0.12, 0.05, 0.001, -0.0015, -0.01], [0.05, -0.02, 0.0, 0.0, 0.0, 0.02, -0.01, 0.003]],
+    ids=["5-coeff", "rational"],
+)
 @pytest.mark.parametrize("refine", [False, True])
 def test_distorted_rim_points_give_the_posture(D, refine):
     truth = synthetic.misaligned_rig(4.0, 100.0, (-2.0, 1.0, 2.0)).replace(D=D)
     lines = synthetic.far_line_pixels(truth, rng=3)
-    cam, report = calibrate(truth.K, truth.mirror, boundary_points=truth.rim_image_points(360),
-                            far_lines=lines, D=D, refine=refine)
+    cam, report = calibrate(
+        truth.K,
+        truth.mirror,
+        boundary_points=truth.rim_image_points(360),
+        far_lines=lines,
+        D=D,
+        refine=refine,
+    )
     axis, origin = posture_errors(cam, truth)
     assert axis < 1e-6 and origin < 1e-6
     assert np.array_equal(cam.D, truth.D)
@@ -78,8 +92,12 @@ def test_rim_clipped_by_the_frame_gives_the_posture():
         pts = truth.rim_image_points(720)
         y0, y1 = np.percentile(pts[:, 1], [20, 80])
         arcs = pts[(pts[:, 1] > y0) & (pts[:, 1] < y1)]
-        cam, report = calibrate(truth.K, truth.mirror, boundary_points=arcs,
-                                far_lines=synthetic.far_line_pixels(truth, rng=rng))
+        cam, report = calibrate(
+            truth.K,
+            truth.mirror,
+            boundary_points=arcs,
+            far_lines=synthetic.far_line_pixels(truth, rng=rng),
+        )
         axis, origin = posture_errors(cam, truth)
         assert axis < 1e-6 and origin < 1e-6
         assert chose_true_candidate(report, truth)
@@ -141,8 +159,9 @@ def test_refinement_never_hurts_on_noisy_rims(sweep):
         er = _rms([r[1][0] for r in sweep[s]])
         assert er <= 1.01 * ea, (s, ea, er)
         for _, _, _, rb, _ in sweep[s]:
-            assert rb.refinement.cost_final <= rb.refinement.cost_initial or \
-                not rb.refinement.accepted
+            assert (
+                rb.refinement.cost_final <= rb.refinement.cost_initial or not rb.refinement.accepted
+            )
 
 
 def test_reported_uncertainty_matches_the_errors(sweep):
@@ -180,8 +199,13 @@ def test_outliers_on_the_rim_are_ignored():
 def calibrated():
     truth = synthetic.misaligned_rig()
     lines = synthetic.far_line_pixels(truth, rng=6)
-    cam, report = calibrate(truth.K, truth.mirror, boundary_points=truth.rim_image_points(360),
-                            far_lines=lines, image_size=(500, 500))
+    cam, report = calibrate(
+        truth.K,
+        truth.mirror,
+        boundary_points=truth.rim_image_points(360),
+        far_lines=lines,
+        image_size=(500, 500),
+    )
     return truth, cam, report
 
 
@@ -210,16 +234,22 @@ def test_report_summary_is_readable(calibrated):
 @pytest.mark.parametrize("kind", ["none", "grey8", "bgr8", "uint16", "float"])
 def test_report_draw_gives_an_overlay(calibrated, kind):
     _, cam, report = calibrated
-    images = {"none": None, "grey8": np.zeros((500, 500), np.uint8),
-              "bgr8": np.zeros((500, 500, 3), np.uint8),
-              "uint16": np.full((500, 500), 1000, np.uint16),
-              "float": np.full((500, 500), 0.25, np.float32)}
+    images = {
+        "none": None,
+        "grey8": np.zeros((500, 500), np.uint8),
+        "bgr8": np.zeros((500, 500, 3), np.uint8),
+        "uint16": np.full((500, 500), 1000, np.uint16),
+        "float": np.full((500, 500), 0.25, np.float32),
+    }
     out = report.draw(images[kind])
     assert out.shape == (500, 500, 3) and out.dtype == np.uint8
     assert (out != out[0, 0]).any(axis=2).sum() > 1000  # something was drawn
     rim = np.round(cam.rim_image_points(8)).astype(int)
-    near = [out[max(y - 1, 0):y + 2, max(x - 1, 0):x + 2].reshape(-1, 3) for x, y in rim
-            if 0 <= x < 500 and 0 <= y < 500]
+    near = [
+        out[max(y - 1, 0) : y + 2, max(x - 1, 0) : x + 2].reshape(-1, 3)
+        for x, y in rim
+        if 0 <= x < 500 and 0 <= y < 500
+    ]
     assert all((n[:, 1] > 100).any() for n in near)  # the green rim is there
 
 
@@ -254,8 +284,9 @@ def test_image_path_with_distortion_refits_the_undistorted_rim(monkeypatch):
 
     monkeypatch.setattr(rim, "detect_rim", fake_detect)
     lines = synthetic.far_line_pixels(truth, rng=8)
-    cam, report = calibrate(truth.K, truth.mirror, image=np.zeros((500, 500, 3), np.uint8),
-                            far_lines=lines, D=D)
+    cam, report = calibrate(
+        truth.K, truth.mirror, image=np.zeros((500, 500, 3), np.uint8), far_lines=lines, D=D
+    )
     axis, origin = posture_errors(cam, truth)
     assert axis < 1e-6 and origin < 1e-6 and chose_true_candidate(report, truth)
     assert np.allclose(report.boundary_points, truth.rim_image_points(360))
@@ -318,11 +349,18 @@ def rendered_rigs():
     pixels."""
     rng = np.random.default_rng(0)
     size = (1000, 1000)
-    rigs = [synthetic.misaligned_rig(image_size=size),
-            synthetic.random_misaligned_rig(rng, 5.0, 5.0, image_size=size)]
-    return [(truth, synthetic.render_environment(truth, supersample=2),
-             synthetic.far_line_pixels(truth, rng=rng))
-            for truth in rigs]
+    rigs = [
+        synthetic.misaligned_rig(image_size=size),
+        synthetic.random_misaligned_rig(rng, 5.0, 5.0, image_size=size),
+    ]
+    return [
+        (
+            truth,
+            synthetic.render_environment(truth, supersample=2),
+            synthetic.far_line_pixels(truth, rng=rng),
+        )
+        for truth in rigs
+    ]
 
 
 def test_rendered_images_give_the_axis_within_0_05_deg_and_origin_within_0_1_mm(rendered_rigs):
@@ -331,13 +369,14 @@ def test_rendered_images_give_the_axis_within_0_05_deg_and_origin_within_0_1_mm(
     images); the camera's own reflection (``lens="auto"``, on here) pins it (500x500 rigs in
     ``test_lens.py``; ``benchmarks/bench_calibrate.py`` compares lens on and off)."""
     for truth, image, lines in rendered_rigs:
-        cam, report = MisalignedHyperbolicCamera.calibrate(truth.K, truth.mirror, image=image,
-                                                           far_lines=lines)
+        cam, report = MisalignedHyperbolicCamera.calibrate(
+            truth.K, truth.mirror, image=image, far_lines=lines
+        )
         axis, origin = posture_errors(cam, truth)
         assert chose_true_candidate(report, truth)
         # at most the note that the axis is uncertain by ~0.05 deg (RMS), which it is
         assert all(w.startswith("the mirror axis is uncertain") for w in report.warnings)
         assert cam.image_size == (1000, 1000)
-        assert axis < 0.05, axis      # degrees
-        assert origin < 0.1, origin   # mm
+        assert axis < 0.05, axis  # degrees
+        assert origin < 0.1, origin  # mm
         assert report.rim_rms < 0.1

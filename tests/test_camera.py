@@ -1,12 +1,13 @@
 """The camera model: ray tracing (eqs. 6-19), the exact inverse, NaN rules, shapes, validation."""
+
 import math
 
 import cv2
+import naive
 import numpy as np
 import pytest
-
-import naive
 from conftest import RIGS, annulus_pixels
+
 from omnicam import HyperbolicMirror, MisalignedHyperbolicCamera, synthetic
 
 PX_TOL = 1e-6
@@ -50,7 +51,7 @@ def test_unproject_of_project_passes_through_the_point(rig):
     X = vp + v * rng.uniform(30.0, 5000.0, size=(len(v), 1))
     pix = rig.project(X)
     seen = np.isfinite(pix[:, 0])
-    assert seen.sum() > 1000   # the mirror sees most of the lower hemisphere
+    assert seen.sum() > 1000  # the mirror sees most of the lower hemisphere
     P, d = rig.unproject(pix[seen])
     dist = point_to_ray_distance(X[seen], P, d)
     in_front = np.einsum("ij,ij->i", X[seen] - P, d)
@@ -70,8 +71,9 @@ def test_project_matches_slow_reference_least_squares():
     centre = cam.rim_image_points().mean(axis=0)
     for x, p in zip(X, fast):
         start = p + 0.5 * (centre - p) / np.linalg.norm(centre - p)  # half a pixel off, inside
-        ref = naive.project_point(x, cam.K, cam.R, cam.tvec, cam.mirror.a, cam.mirror.b,
-                                  cam.mirror.rim_radius, start)
+        ref = naive.project_point(
+            x, cam.K, cam.R, cam.tvec, cam.mirror.a, cam.mirror.b, cam.mirror.rim_radius, start
+        )
         assert np.linalg.norm(ref - p) < 1e-6
 
 
@@ -85,8 +87,9 @@ def test_unproject_matches_slow_reference_ray_tracer(rig):
         crit = (cv2.TERM_CRITERIA_COUNT | cv2.TERM_CRITERIA_EPS, 500, 1e-16)
         Kn = rig.K.copy()
         Kn[0, 1] = 0.0
-        pinhole = cv2.undistortPoints(pix.reshape(-1, 1, 2), Kn, rig.D, R=None, P=Kn,
-                                      criteria=crit).reshape(-1, 2)
+        pinhole = cv2.undistortPoints(
+            pix.reshape(-1, 1, 2), Kn, rig.D, R=None, P=Kn, criteria=crit
+        ).reshape(-1, 2)
     for i, (u, v) in enumerate(pinhole):
         ref = naive.trace_pixel(u, v, rig.K, rig.R, rig.tvec, m.a, m.b, m.rim_radius)
         if ref is None:
@@ -104,8 +107,9 @@ def test_reflected_rays_obey_the_reflection_law(rig):
     incoming = P - rig.camera_center
     incoming /= np.linalg.norm(incoming, axis=1, keepdims=True)
     # equal angles with the normal, on opposite sides
-    np.testing.assert_allclose(np.einsum("ij,ij->i", d, n), -np.einsum("ij,ij->i", incoming, n),
-                               atol=1e-12)
+    np.testing.assert_allclose(
+        np.einsum("ij,ij->i", d, n), -np.einsum("ij,ij->i", incoming, n), atol=1e-12
+    )
     # incoming, normal and reflected ray are coplanar
     np.testing.assert_allclose(np.einsum("ij,ij->i", np.cross(incoming, n), d), 0, atol=1e-12)
     np.testing.assert_allclose(np.linalg.norm(d, axis=1), 1, atol=1e-12)
@@ -165,12 +169,14 @@ def test_pixel_outside_rim_gives_nan(rig):
 
 def test_unseen_point_gives_nan(rig):
     m = rig.mirror
-    X = np.array([
-        [0.0, 0.0, m.z_rim + 1000.0],      # straight above the mirror: behind it
-        [1.0, 2.0, m.b + 5.0],             # inside the mirror body
-        [np.nan, 0.0, -100.0],             # NaN input
-        [0.0, 0.0, np.inf],
-    ])
+    X = np.array(
+        [
+            [0.0, 0.0, m.z_rim + 1000.0],  # straight above the mirror: behind it
+            [1.0, 2.0, m.b + 5.0],  # inside the mirror body
+            [np.nan, 0.0, -100.0],  # NaN input
+            [0.0, 0.0, np.inf],
+        ]
+    )
     assert np.isnan(rig.project(X)).all()
     dirs = np.array([[0.0, 0.0, 1.0], [0.2, 0.1, 0.95], [0.0, 0.0, 0.0], [np.nan, 1, 0]])
     assert np.isnan(rig.project_directions(dirs)).all()
@@ -201,8 +207,16 @@ def test_opencv_point_layouts_and_float32_are_accepted():
     assert cam.project(np.zeros((0, 3))).shape == (0, 2)
 
 
-@pytest.mark.parametrize("bad", [np.zeros((5, 3)), np.zeros((5,)), np.zeros((5, 2, 2)),
-                                 np.array([["a", "b"]]), np.zeros((5, 1, 3))])
+@pytest.mark.parametrize(
+    "bad",
+    [
+        np.zeros((5, 3)),
+        np.zeros((5,)),
+        np.zeros((5, 2, 2)),
+        np.array([["a", "b"]]),
+        np.zeros((5, 1, 3)),
+    ],
+)
 def test_wrong_pixel_shape_raises_value_error(bad):
     with pytest.raises(ValueError, match="image_points"):
         RIGS["aligned"].unproject(bad)
@@ -251,13 +265,17 @@ def test_gauge_rotation_about_the_mirror_axis_is_removed():
     spun = MisalignedHyperbolicCamera(cam.K, cam.mirror, cv2.Rodrigues(R_spun)[0], cam.tvec)
     np.testing.assert_allclose(spun.rvec, cam.rvec, atol=1e-12)
     axis = cam.R[:, 2]
-    np.testing.assert_allclose(cam.rvec, np.cross([0, 0, 1], axis) / np.linalg.norm(
-        np.cross([0, 0, 1], axis)) * math.acos(axis[2]), atol=1e-12)
+    np.testing.assert_allclose(
+        cam.rvec,
+        np.cross([0, 0, 1], axis) / np.linalg.norm(np.cross([0, 0, 1], axis)) * math.acos(axis[2]),
+        atol=1e-12,
+    )
     assert not np.any(RIGS["aligned"].rvec)
     # the gauge is idempotent to the last bit: a saved and reloaded camera compares equal
     for cam in RIGS.values():
-        assert np.array_equal(MisalignedHyperbolicCamera(cam.K, cam.mirror, cam.rvec,
-                                                         cam.tvec).rvec, cam.rvec)
+        assert np.array_equal(
+            MisalignedHyperbolicCamera(cam.K, cam.mirror, cam.rvec, cam.tvec).rvec, cam.rvec
+        )
 
 
 def test_camera_is_immutable():
@@ -288,27 +306,36 @@ def test_aligned_constructor_is_the_hyperomni_rig():
     np.testing.assert_allclose(cam.camera_center, [0, 0, -m.c])
 
 
-@pytest.mark.parametrize("K, match", [
-    (np.eye(2), "3x3"), (np.zeros((3, 3)), "K"), (np.full((3, 3), np.nan), "finite"),
-    ([[500, 0, 10], [0, 500, 10], [0, 0, 2]], "last row"),
-])
+@pytest.mark.parametrize(
+    "K, match",
+    [
+        (np.eye(2), "3x3"),
+        (np.zeros((3, 3)), "K"),
+        (np.full((3, 3), np.nan), "finite"),
+        ([[500, 0, 10], [0, 500, 10], [0, 0, 2]], "last row"),
+    ],
+)
 def test_bad_K_raises_value_error(K, match):
     with pytest.raises(ValueError, match=match):
         MisalignedHyperbolicCamera(K, synthetic.default_mirror(), np.zeros(3), [0, 0, 40])
 
 
-@pytest.mark.parametrize("kwargs, match", [
-    (dict(D=[0.1, 0.2, 0.3]), "D must have"),
-    (dict(D=[0.1] * 6), "D must have"),
-    (dict(rvec=[0, 0]), "rvec"),
-    (dict(tvec=[0, np.inf, 1]), "tvec"),
-    (dict(image_size=(0, 10)), "image_size"),
-    (dict(image_size=(10.5, 10)), "image_size"),
-    (dict(mirror=(1, 2, 3)), "mirror"),
-])
+@pytest.mark.parametrize(
+    "kwargs, match",
+    [
+        (dict(D=[0.1, 0.2, 0.3]), "D must have"),
+        (dict(D=[0.1] * 6), "D must have"),
+        (dict(rvec=[0, 0]), "rvec"),
+        (dict(tvec=[0, np.inf, 1]), "tvec"),
+        (dict(image_size=(0, 10)), "image_size"),
+        (dict(image_size=(10.5, 10)), "image_size"),
+        (dict(mirror=(1, 2, 3)), "mirror"),
+    ],
+)
 def test_bad_parameters_raise_value_error(kwargs, match):
-    args = dict(K=RIGS["aligned"].K, mirror=synthetic.default_mirror(), rvec=np.zeros(3),
-                tvec=[0, 0, 40.0])
+    args = dict(
+        K=RIGS["aligned"].K, mirror=synthetic.default_mirror(), rvec=np.zeros(3), tvec=[0, 0, 40.0]
+    )
     args.update(kwargs)
     with pytest.raises(ValueError, match=match):
         MisalignedHyperbolicCamera(**args)

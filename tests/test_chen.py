@@ -1,12 +1,13 @@
 """Chen's conic method (paper section 3.1 and appendix): four candidates, one of them exact."""
+
 import math
 
+import conftest
 import numpy as np
 import pytest
 
 from omnicam import HyperbolicMirror, synthetic
 from omnicam.calibration import chen
-import conftest
 
 
 def axis_angle_deg(a, b):
@@ -47,16 +48,17 @@ def test_exact_conic_gives_the_true_posture_among_four_candidates():
     for cam in RIGS:
         cands = candidates_of(cam)
         assert len(cands) == 4
-        errs = [(axis_angle_deg(c.axis, cam.R[:, 2]), np.linalg.norm(c.tvec - cam.tvec))
-                for c in cands]
+        errs = [
+            (axis_angle_deg(c.axis, cam.R[:, 2]), np.linalg.norm(c.tvec - cam.tvec)) for c in cands
+        ]
         best = min(range(4), key=lambda i: errs[i][0] + errs[i][1])
         assert cands[best].physical
         worst_axis = max(worst_axis, errs[best][0])
         worst_origin = max(worst_origin, errs[best][1])
         # the candidate's rvec is the camera's rvec (same gauge)
         assert np.allclose(cands[best].rvec, cam.rvec, atol=1e-9)
-    assert worst_axis < 1e-6      # degrees
-    assert worst_origin < 1e-6    # mm
+    assert worst_axis < 1e-6  # degrees
+    assert worst_origin < 1e-6  # mm
 
 
 def test_two_candidates_are_physical_and_two_face_away():
@@ -89,8 +91,9 @@ def test_conic_scale_and_sign_do_not_matter():
     for s in (-1.0, 1e-6, -3e4):
         other = chen.chen_candidates(chen.normalized_conic(s * Q_I, cam.K), cam.mirror)
         for a, b in zip(ref, other):
-            assert np.allclose(a.tvec, b.tvec, atol=1e-9) and np.allclose(a.rvec, b.rvec,
-                                                                           atol=1e-12)
+            assert np.allclose(a.tvec, b.tvec, atol=1e-9) and np.allclose(
+                a.rvec, b.rvec, atol=1e-12
+            )
 
 
 def test_normalized_conic_has_one_negative_eigenvalue_and_positive_block():
@@ -112,8 +115,10 @@ def test_aligned_rig_gives_rvec_zero_and_tvec_at_the_focus():
 
 def test_skewed_K_gives_the_true_posture():
     cam = conftest.RIGS["skew"]  # skew 0.8, fy 2 % longer than fx
-    errs = [np.linalg.norm(c.tvec - cam.tvec) + axis_angle_deg(c.axis, cam.R[:, 2])
-            for c in candidates_of(cam)]
+    errs = [
+        np.linalg.norm(c.tvec - cam.tvec) + axis_angle_deg(c.axis, cam.R[:, 2])
+        for c in candidates_of(cam)
+    ]
     assert min(errs) < 1e-8
 
 

@@ -1,4 +1,5 @@
 """The ``omnicam`` command line, called as ``main([...])`` (py360convert style), on small inputs."""
+
 from __future__ import annotations
 
 import json
@@ -8,11 +9,11 @@ import sys
 import cv2
 import numpy as np
 import pytest
+from conftest import video_frames
 
 from omnicam import synthetic
 from omnicam.cli import main
 from omnicam.io import read_intrinsics
-from conftest import video_frames
 
 SIZE = (200, 200)  # frames of the small test videos and images
 
@@ -25,7 +26,7 @@ def make_frame(i, size=SIZE):
     img = np.stack([(x * 255 // w), (y * 255 // h), np.full_like(x, 40 * (i % 6))], axis=-1)
     img = img.astype(np.uint8)
     s = 10 * i % (w - 20)
-    img[s:s + 20, s:s + 20] = 255
+    img[s : s + 20, s : s + 20] = 255
     return img
 
 
@@ -73,8 +74,18 @@ def data(tmp_path_factory, rig):
 # -- unwarp -----------------------------------------------------------------------------------
 def test_unwarp_video_panorama_keeps_frame_count_and_size(data, tmp_path, capsys):
     out = tmp_path / "pano.avi"
-    code = main(["unwarp", str(data["video"]), "-c", str(data["calib"]), "--panorama", "96x24",
-                 "-o", str(out)])
+    code = main(
+        [
+            "unwarp",
+            str(data["video"]),
+            "-c",
+            str(data["calib"]),
+            "--panorama",
+            "96x24",
+            "-o",
+            str(out),
+        ]
+    )
     captured = capsys.readouterr()
     assert code == 0, captured.err
     assert video_frames(out) == (10, (96, 24))
@@ -84,9 +95,27 @@ def test_unwarp_video_panorama_keeps_frame_count_and_size(data, tmp_path, capsys
 
 def test_unwarp_video_perspective_keeps_frame_count_and_size(data, tmp_path, capsys):
     out = tmp_path / "view.avi"
-    code = main(["unwarp", str(data["video"]), "-c", str(data["calib"]), "--perspective", "48x32",
-                 "--fov", "90", "--yaw", "30", "--pitch", "-10", "--roll", "5", "--quiet",
-                 "-o", str(out)])
+    code = main(
+        [
+            "unwarp",
+            str(data["video"]),
+            "-c",
+            str(data["calib"]),
+            "--perspective",
+            "48x32",
+            "--fov",
+            "90",
+            "--yaw",
+            "30",
+            "--pitch",
+            "-10",
+            "--roll",
+            "5",
+            "--quiet",
+            "-o",
+            str(out),
+        ]
+    )
     assert code == 0, capsys.readouterr().err
     assert video_frames(out) == (10, (48, 32))
 
@@ -95,28 +124,67 @@ def test_unwarp_image_sequence_pattern(data, tmp_path, capsys):
     for i in range(5):
         cv2.imwrite(str(tmp_path / f"img_{i:03d}.png"), make_frame(i))
     out = tmp_path / "seq.avi"
-    code = main(["unwarp", str(tmp_path / "img_%03d.png"), "-c", str(data["calib"]),
-                 "--panorama", "64x16", "-q", "-o", str(out)])
+    code = main(
+        [
+            "unwarp",
+            str(tmp_path / "img_%03d.png"),
+            "-c",
+            str(data["calib"]),
+            "--panorama",
+            "64x16",
+            "-q",
+            "-o",
+            str(out),
+        ]
+    )
     assert code == 0, capsys.readouterr().err
     assert video_frames(out) == (5, (64, 16))
 
 
 def test_unwarp_video_max_frames(data, tmp_path, capsys):
     out = tmp_path / "short.avi"
-    code = main(["unwarp", str(data["video"]), "-c", str(data["calib"]), "--panorama", "64x16",
-                 "--max-frames", "3", "-o", str(out)])
+    code = main(
+        [
+            "unwarp",
+            str(data["video"]),
+            "-c",
+            str(data["calib"]),
+            "--panorama",
+            "64x16",
+            "--max-frames",
+            "3",
+            "-o",
+            str(out),
+        ]
+    )
     assert code == 0, capsys.readouterr().err
     assert video_frames(out) == (3, (64, 16))
 
 
 def test_unwarp_image_is_cv2_remap_with_the_calibration_tables(data, rig, tmp_path, capsys):
     out = tmp_path / "pano.png"
-    code = main(["unwarp", str(data["image"]), "-c", str(data["calib"]), "--panorama", "120x30",
-                 "--elevation", "-60", "10", "--projection", "equirectangular", "-o", str(out)])
+    code = main(
+        [
+            "unwarp",
+            str(data["image"]),
+            "-c",
+            str(data["calib"]),
+            "--panorama",
+            "120x30",
+            "--elevation",
+            "-60",
+            "10",
+            "--projection",
+            "equirectangular",
+            "-o",
+            str(out),
+        ]
+    )
     assert code == 0, capsys.readouterr().err
     got = cv2.imread(str(out))
-    m1, m2 = rig.init_panorama_maps((120, 30), elevation_range=(-60, 10),
-                                    projection="equirectangular")
+    m1, m2 = rig.init_panorama_maps(
+        (120, 30), elevation_range=(-60, 10), projection="equirectangular"
+    )
     expected = cv2.remap(cv2.imread(str(data["image"])), m1, m2, cv2.INTER_LINEAR)
     assert got.shape == (30, 120, 3)
     np.testing.assert_array_equal(got, expected)
@@ -124,12 +192,28 @@ def test_unwarp_image_is_cv2_remap_with_the_calibration_tables(data, rig, tmp_pa
 
 def test_unwarp_image_with_depth_builds_finite_depth_tables(data, rig, tmp_path, capsys):
     out = tmp_path / "near.png"
-    code = main(["unwarp", str(data["image"]), "-c", str(data["calib"]), "--perspective", "40x30",
-                 "--fov", "70", "--depth", "500", "-o", str(out)])
+    code = main(
+        [
+            "unwarp",
+            str(data["image"]),
+            "-c",
+            str(data["calib"]),
+            "--perspective",
+            "40x30",
+            "--fov",
+            "70",
+            "--depth",
+            "500",
+            "-o",
+            str(out),
+        ]
+    )
     assert code == 0, capsys.readouterr().err
     from omnicam.views import K_from_fov, rotation_from_ypr
-    m1, m2 = rig.init_perspective_maps(K_from_fov(70, (40, 30)), (40, 30),
-                                       R=rotation_from_ypr(0, 0, 0), depth=500.0)
+
+    m1, m2 = rig.init_perspective_maps(
+        K_from_fov(70, (40, 30)), (40, 30), R=rotation_from_ypr(0, 0, 0), depth=500.0
+    )
     expected = cv2.remap(cv2.imread(str(data["image"])), m1, m2, cv2.INTER_LINEAR)
     np.testing.assert_array_equal(cv2.imread(str(out)), expected)
 
@@ -151,8 +235,19 @@ def test_unwarp_warns_when_the_frames_have_another_aspect_ratio(rig, data, tmp_p
     calib = tmp_path / "wide.yaml"
     rig.scaled((400, 300)).save(calib)
     out = tmp_path / "pano.avi"
-    code = main(["unwarp", str(data["video"]), "-c", str(calib), "--panorama", "64x16", "-q",
-                 "-o", str(out)])
+    code = main(
+        [
+            "unwarp",
+            str(data["video"]),
+            "-c",
+            str(calib),
+            "--panorama",
+            "64x16",
+            "-q",
+            "-o",
+            str(out),
+        ]
+    )
     err = capsys.readouterr().err
     assert code == 0, err
     assert "warning" in err and "aspect ratio" in err and len(err.splitlines()) == 1
@@ -163,8 +258,16 @@ def test_unwarp_warns_when_the_frames_have_another_aspect_ratio(rig, data, tmp_p
 def test_existing_output_is_replaced_only_with_overwrite(data, tmp_path, capsys, kind):
     out = tmp_path / ("out.png" if kind == "image" else "out.avi")
     out.write_bytes(b"precious")
-    argv = ["unwarp", str(data[kind]), "-c", str(data["calib"]), "--panorama", "64x16",
-            "-o", str(out)]
+    argv = [
+        "unwarp",
+        str(data[kind]),
+        "-c",
+        str(data["calib"]),
+        "--panorama",
+        "64x16",
+        "-o",
+        str(out),
+    ]
     assert main(argv) != 0
     line = one_error_line(capsys.readouterr().err)
     assert "exists" in line and "--overwrite" in line
@@ -186,8 +289,9 @@ def test_truncated_video_keeps_the_frames_so_far(data, tmp_path, capsys):
     n_in, _ = video_frames(truncated)
     assert 0 < n_in < 10  # the fixture really is truncated, and OpenCV still decodes the start
     out = tmp_path / "out.avi"
-    code = main(["unwarp", str(truncated), "-c", str(data["calib"]), "--panorama", "64x16",
-                 "-o", str(out)])
+    code = main(
+        ["unwarp", str(truncated), "-c", str(data["calib"]), "--panorama", "64x16", "-o", str(out)]
+    )
     err = capsys.readouterr().err
     assert code == 0, err
     assert "warning" in err and "truncated" in err
@@ -221,8 +325,18 @@ def test_ctrl_c_keeps_the_frames_so_far(data, tmp_path, capsys, monkeypatch, whe
 
         monkeypatch.setattr(stream.Unwarper, "unwarp", interrupt)
     out = tmp_path / "out.avi"
-    code = main(["unwarp", str(data["video"]), "-c", str(data["calib"]), "--panorama", "64x16",
-                 "-o", str(out)])
+    code = main(
+        [
+            "unwarp",
+            str(data["video"]),
+            "-c",
+            str(data["calib"]),
+            "--panorama",
+            "64x16",
+            "-o",
+            str(out),
+        ]
+    )
     err = capsys.readouterr().err
     assert code == 130
     assert "interrupted: kept the 4 frames" in err and "Traceback" not in err
@@ -235,8 +349,22 @@ def test_outputs_get_the_mode_of_a_new_file_not_the_temp_file_mode(data, tmp_pat
     try:
         for name in ("out.png", "out.avi"):
             src = data["image"] if name.endswith(".png") else data["video"]
-            assert main(["unwarp", str(src), "-c", str(data["calib"]), "--panorama", "64x16",
-                         "-q", "-o", str(tmp_path / name)]) == 0
+            assert (
+                main(
+                    [
+                        "unwarp",
+                        str(src),
+                        "-c",
+                        str(data["calib"]),
+                        "--panorama",
+                        "64x16",
+                        "-q",
+                        "-o",
+                        str(tmp_path / name),
+                    ]
+                )
+                == 0
+            )
             assert (tmp_path / name).stat().st_mode & 0o777 == 0o644
     finally:
         os.umask(umask)
@@ -252,8 +380,15 @@ BAD_UNWARP = {
     "perspective without fov": ["--perspective", "64x48"],
     "fov out of range": ["--perspective", "64x48", "--fov", "180"],
     "elevation reversed": ["--panorama", "64x16", "--elevation", "10", "-40"],
-    "elevation with perspective": ["--perspective", "64x48", "--fov", "90", "--elevation", "-40",
-                                   "10"],
+    "elevation with perspective": [
+        "--perspective",
+        "64x48",
+        "--fov",
+        "90",
+        "--elevation",
+        "-40",
+        "10",
+    ],
     "fov with panorama": ["--panorama", "64x16", "--fov", "90"],
     "unknown projection": ["--panorama", "64x16", "--projection", "fisheye"],
     "negative depth": ["--panorama", "64x16", "--depth", "-5"],
@@ -272,16 +407,36 @@ def test_bad_view_spec_is_one_line_and_writes_nothing(data, tmp_path, capsys, vi
 
 def test_odd_video_size_is_refused_before_writing(data, tmp_path, capsys):
     out = tmp_path / "out.avi"
-    code = main(["unwarp", str(data["video"]), "-c", str(data["calib"]), "--panorama", "96x25",
-                 "-o", str(out)])
+    code = main(
+        [
+            "unwarp",
+            str(data["video"]),
+            "-c",
+            str(data["calib"]),
+            "--panorama",
+            "96x25",
+            "-o",
+            str(out),
+        ]
+    )
     assert code == 1
     assert "even" in one_error_line(capsys.readouterr().err)
     assert list(tmp_path.iterdir()) == []
 
 
 def test_missing_calibration_file(data, tmp_path, capsys):
-    code = main(["unwarp", str(data["video"]), "-c", str(tmp_path / "nope.yaml"), "--panorama",
-                 "64x16", "-o", str(tmp_path / "out.avi")])
+    code = main(
+        [
+            "unwarp",
+            str(data["video"]),
+            "-c",
+            str(tmp_path / "nope.yaml"),
+            "--panorama",
+            "64x16",
+            "-o",
+            str(tmp_path / "out.avi"),
+        ]
+    )
     assert code == 1
     assert "nope.yaml" in one_error_line(capsys.readouterr().err)
     assert list(tmp_path.iterdir()) == []
@@ -290,38 +445,81 @@ def test_missing_calibration_file(data, tmp_path, capsys):
 def test_malformed_calibration_file(data, tmp_path, capsys):
     bad = tmp_path / "bad.yaml"
     bad.write_text("%YAML:1.0\n---\nformat_version: 1\nmodel: misaligned_hyperbolic\n")
-    code = main(["unwarp", str(data["video"]), "-c", str(bad), "--panorama", "64x16",
-                 "-o", str(tmp_path / "out.avi")])
+    code = main(
+        [
+            "unwarp",
+            str(data["video"]),
+            "-c",
+            str(bad),
+            "--panorama",
+            "64x16",
+            "-o",
+            str(tmp_path / "out.avi"),
+        ]
+    )
     assert code == 1
     assert "bad.yaml" in one_error_line(capsys.readouterr().err)
     assert sorted(p.name for p in tmp_path.iterdir()) == ["bad.yaml"]
 
 
-@pytest.mark.parametrize("content", [b"", b"RIFF\x00\x00\x00\x00AVI garbage" * 20],
-                         ids=["empty", "garbage"])
+@pytest.mark.parametrize(
+    "content", [b"", b"RIFF\x00\x00\x00\x00AVI garbage" * 20], ids=["empty", "garbage"]
+)
 def test_unreadable_video(data, tmp_path, capsys, content):
     src = tmp_path / "broken.avi"
     src.write_bytes(content)
-    code = main(["unwarp", str(src), "-c", str(data["calib"]), "--panorama", "64x16",
-                 "-o", str(tmp_path / "out.avi")])
+    code = main(
+        [
+            "unwarp",
+            str(src),
+            "-c",
+            str(data["calib"]),
+            "--panorama",
+            "64x16",
+            "-o",
+            str(tmp_path / "out.avi"),
+        ]
+    )
     assert code == 1
     assert "broken.avi" in one_error_line(capsys.readouterr().err)
     assert sorted(p.name for p in tmp_path.iterdir()) == ["broken.avi"]
 
 
 def test_missing_input(data, tmp_path, capsys):
-    code = main(["unwarp", str(tmp_path / "nope.mp4"), "-c", str(data["calib"]), "--panorama",
-                 "64x16", "-o", str(tmp_path / "out.avi")])
+    code = main(
+        [
+            "unwarp",
+            str(tmp_path / "nope.mp4"),
+            "-c",
+            str(data["calib"]),
+            "--panorama",
+            "64x16",
+            "-o",
+            str(tmp_path / "out.avi"),
+        ]
+    )
     assert code == 1
     assert "does not exist" in one_error_line(capsys.readouterr().err)
 
 
-@pytest.mark.parametrize("source, words", [("7", "camera 7"),
-                                           ("http://127.0.0.1:9/x.mjpg", "stream")],
-                         ids=["camera index", "stream URL"])
+@pytest.mark.parametrize(
+    "source, words",
+    [("7", "camera 7"), ("http://127.0.0.1:9/x.mjpg", "stream")],
+    ids=["camera index", "stream URL"],
+)
 def test_camera_or_stream_that_cannot_be_opened(data, tmp_path, capsys, source, words):
-    code = main(["unwarp", source, "-c", str(data["calib"]), "--panorama", "64x16",
-                 "-o", str(tmp_path / "out.avi")])
+    code = main(
+        [
+            "unwarp",
+            source,
+            "-c",
+            str(data["calib"]),
+            "--panorama",
+            "64x16",
+            "-o",
+            str(tmp_path / "out.avi"),
+        ]
+    )
     assert code == 1
     assert words in one_error_line(capsys.readouterr().err)
     assert list(tmp_path.iterdir()) == []
@@ -329,8 +527,19 @@ def test_camera_or_stream_that_cannot_be_opened(data, tmp_path, capsys, source, 
 
 def test_output_is_a_folder(data, tmp_path, capsys):
     (tmp_path / "out.avi").mkdir()
-    code = main(["unwarp", str(data["video"]), "-c", str(data["calib"]), "--panorama", "64x16",
-                 "-o", str(tmp_path / "out.avi"), "--overwrite"])
+    code = main(
+        [
+            "unwarp",
+            str(data["video"]),
+            "-c",
+            str(data["calib"]),
+            "--panorama",
+            "64x16",
+            "-o",
+            str(tmp_path / "out.avi"),
+            "--overwrite",
+        ]
+    )
     assert code == 1
     assert "folder" in one_error_line(capsys.readouterr().err)
     assert [p.name for p in tmp_path.iterdir()] == ["out.avi"]
@@ -341,36 +550,69 @@ def test_output_file_that_cannot_be_created(data, tmp_path, capsys, monkeypatch,
     real_open = os.open
 
     def refuse_in_tmp_path(path, flags, *args, **kwargs):  # a read-only mount, even for root
-        if flags & os.O_CREAT and os.path.samefile(os.path.dirname(os.path.abspath(path)),
-                                                   tmp_path):
+        if flags & os.O_CREAT and os.path.samefile(
+            os.path.dirname(os.path.abspath(path)), tmp_path
+        ):
             raise PermissionError(13, "Permission denied")
         return real_open(path, flags, *args, **kwargs)
 
     monkeypatch.setattr(os, "open", refuse_in_tmp_path)
     out = tmp_path / ("out.png" if kind == "image" else "out.avi")
-    code = main(["unwarp", str(data[kind]), "-c", str(data["calib"]), "--panorama", "64x16",
-                 "-q", "-o", str(out)])
+    code = main(
+        [
+            "unwarp",
+            str(data[kind]),
+            "-c",
+            str(data["calib"]),
+            "--panorama",
+            "64x16",
+            "-q",
+            "-o",
+            str(out),
+        ]
+    )
     assert code == 1
     assert "Permission denied" in one_error_line(capsys.readouterr().err)
     assert list(tmp_path.iterdir()) == []
 
 
 def test_output_folder_missing(data, tmp_path, capsys):
-    code = main(["unwarp", str(data["video"]), "-c", str(data["calib"]), "--panorama", "64x16",
-                 "-o", str(tmp_path / "no" / "such" / "out.avi")])
+    code = main(
+        [
+            "unwarp",
+            str(data["video"]),
+            "-c",
+            str(data["calib"]),
+            "--panorama",
+            "64x16",
+            "-o",
+            str(tmp_path / "no" / "such" / "out.avi"),
+        ]
+    )
     assert code == 1
     assert "does not exist" in one_error_line(capsys.readouterr().err)
 
 
-@pytest.mark.skipif(sys.platform == "win32" or os.geteuid() == 0,
-                    reason="needs POSIX permissions as a normal user")
+@pytest.mark.skipif(
+    sys.platform == "win32" or os.geteuid() == 0, reason="needs POSIX permissions as a normal user"
+)
 def test_output_folder_not_writable(data, tmp_path, capsys):
     folder = tmp_path / "ro"
     folder.mkdir()
     folder.chmod(0o500)
     try:
-        code = main(["unwarp", str(data["video"]), "-c", str(data["calib"]), "--panorama",
-                     "64x16", "-o", str(folder / "out.avi")])
+        code = main(
+            [
+                "unwarp",
+                str(data["video"]),
+                "-c",
+                str(data["calib"]),
+                "--panorama",
+                "64x16",
+                "-o",
+                str(folder / "out.avi"),
+            ]
+        )
     finally:
         folder.chmod(0o700)
     assert code == 1
@@ -378,11 +620,22 @@ def test_output_folder_not_writable(data, tmp_path, capsys):
     assert list(folder.iterdir()) == []
 
 
-@pytest.mark.parametrize("kind, name", [("image", "out.nope"), ("video", "out.png"),
-                                        ("video", "out.nope")])
+@pytest.mark.parametrize(
+    "kind, name", [("image", "out.nope"), ("video", "out.png"), ("video", "out.nope")]
+)
 def test_output_extension_that_cannot_be_written(data, tmp_path, capsys, kind, name):
-    code = main(["unwarp", str(data[kind]), "-c", str(data["calib"]), "--panorama", "64x16",
-                 "-o", str(tmp_path / name)])
+    code = main(
+        [
+            "unwarp",
+            str(data[kind]),
+            "-c",
+            str(data["calib"]),
+            "--panorama",
+            "64x16",
+            "-o",
+            str(tmp_path / name),
+        ]
+    )
     assert code == 1
     assert name in one_error_line(capsys.readouterr().err)
     assert list(tmp_path.iterdir()) == []
@@ -391,8 +644,19 @@ def test_output_extension_that_cannot_be_written(data, tmp_path, capsys, kind, n
 def test_output_same_as_input_is_refused(data, tmp_path, capsys):
     src = write_video(tmp_path / "clip.avi", 2)
     before = src.read_bytes()
-    code = main(["unwarp", str(src), "-c", str(data["calib"]), "--panorama", "64x16",
-                 "-o", str(src), "--overwrite"])
+    code = main(
+        [
+            "unwarp",
+            str(src),
+            "-c",
+            str(data["calib"]),
+            "--panorama",
+            "64x16",
+            "-o",
+            str(src),
+            "--overwrite",
+        ]
+    )
     assert code == 1
     one_error_line(capsys.readouterr().err)
     assert src.read_bytes() == before
@@ -465,8 +729,9 @@ def test_read_intrinsics_accepts_our_names_and_opencv_sample_names(tmp_path, rig
     np.testing.assert_array_equal(K, rig.K)
     np.testing.assert_array_equal(got_D, D)
     assert size == (640, 480)
-    sample = write_intrinsics(tmp_path / "k.xml", rig.K, D, (640, 480),
-                              names=("camera_matrix", "distortion_coefficients"))
+    sample = write_intrinsics(
+        tmp_path / "k.xml", rig.K, D, (640, 480), names=("camera_matrix", "distortion_coefficients")
+    )
     K, got_D, size = read_intrinsics(str(sample))
     np.testing.assert_array_equal(K, rig.K)
     np.testing.assert_array_equal(got_D, D)
@@ -484,8 +749,9 @@ def calib_inputs(tmp_path, rig, data):
     """IMAGE, K.yaml, LINES.json for the calibrate command (image: any readable picture)."""
     k = write_intrinsics(tmp_path / "k.yaml", rig.K, image_size=SIZE)
     lines = tmp_path / "lines.json"
-    lines.write_text(json.dumps([[[10, 20], [30, 40], [50, 55]],
-                                 [[100.5, 10], [120, 12.25], [140, 15]]]))
+    lines.write_text(
+        json.dumps([[[10, 20], [30, 40], [50, 55]], [[100.5, 10], [120, 12.25], [140, 15]]])
+    )
     return {"image": str(data["image"]), "k": str(k), "lines": str(lines)}
 
 
@@ -505,20 +771,23 @@ BAD_CALIBRATE = {
 
 
 @pytest.mark.parametrize("change", BAD_CALIBRATE.values(), ids=BAD_CALIBRATE.keys())
-def test_calibrate_bad_input_is_one_line_and_writes_nothing(calib_inputs, tmp_path, capsys,
-                                                           change):
+def test_calibrate_bad_input_is_one_line_and_writes_nothing(calib_inputs, tmp_path, capsys, change):
     (tmp_path / "empty.yaml").write_text("%YAML:1.0\n---\nD: [0, 0, 0, 0]\n")
     (tmp_path / "junk.yaml").write_text("this: is: not: a: FileStorage\n\t-")
     (tmp_path / "junk.json").write_text("[[1, 2], ")
     (tmp_path / "shape.json").write_text("[[[1, 2, 3], [4, 5, 6]]]")
     (tmp_path / "short.json").write_text("[[[1, 2], [4, 5]]]")
     before = sorted(p.name for p in tmp_path.iterdir())
-    opts = {"--mirror": ["23.4", "28.1", "30"], "--intrinsics": [calib_inputs["k"]],
-            "--far-lines": [calib_inputs["lines"]], "-o": [str(tmp_path / "calib.yaml")]}
+    opts = {
+        "--mirror": ["23.4", "28.1", "30"],
+        "--intrinsics": [calib_inputs["k"]],
+        "--far-lines": [calib_inputs["lines"]],
+        "-o": [str(tmp_path / "calib.yaml")],
+    }
     image = calib_inputs["image"]
     change = [c.format(tmp=tmp_path) for c in change]
     if change[0].startswith("IMAGE="):
-        image = change[0][len("IMAGE="):]
+        image = change[0][len("IMAGE=") :]
     else:
         opts[change[0]] = change[1:]
     argv = ["calibrate", image] + [x for k, v in opts.items() for x in (k, *v)]
@@ -531,8 +800,20 @@ def test_calibrate_bad_input_is_one_line_and_writes_nothing(calib_inputs, tmp_pa
 def test_calibrate_refuses_existing_output_without_overwrite(calib_inputs, tmp_path, capsys):
     calib = tmp_path / "calib.yaml"
     calib.write_text("precious")
-    code = main(["calibrate", calib_inputs["image"], "--mirror", "23.4", "28.1", "30",
-                 "--intrinsics", calib_inputs["k"], "-o", str(calib)])
+    code = main(
+        [
+            "calibrate",
+            calib_inputs["image"],
+            "--mirror",
+            "23.4",
+            "28.1",
+            "30",
+            "--intrinsics",
+            calib_inputs["k"],
+            "-o",
+            str(calib),
+        ]
+    )
     assert code == 1
     assert "--overwrite" in one_error_line(capsys.readouterr().err)
     assert calib.read_text() == "precious"
@@ -547,8 +828,7 @@ def scene(tmp_path_factory):
     folder = tmp_path_factory.mktemp("calibrate")
     truth = synthetic.misaligned_rig(image_size=(300, 300))
     image = folder / "mirror.png"
-    cv2.imwrite(str(image), synthetic.render_environment(truth, demo_environment(),
-                                                         supersample=2))
+    cv2.imwrite(str(image), synthetic.render_environment(truth, demo_environment(), supersample=2))
     lines = folder / "lines.json"  # pixels along the scene's far straight lines
     lines.write_text(json.dumps([line.tolist() for line in demo_far_lines(truth)]))
     return {"truth": truth, "image": str(image), "lines": str(lines)}
@@ -564,8 +844,22 @@ def test_calibrate_writes_calibration_and_overlay(scene, tmp_path, capsys):
     truth = scene["truth"]
     k = write_intrinsics(tmp_path / "k.yaml", truth.K, image_size=truth.image_size)
     calib = tmp_path / "calib.yaml"
-    code = main(["calibrate", scene["image"], "--mirror", "23.4", "28.1", "30", "--intrinsics",
-                 str(k), "--far-lines", scene["lines"], "-o", str(calib)])
+    code = main(
+        [
+            "calibrate",
+            scene["image"],
+            "--mirror",
+            "23.4",
+            "28.1",
+            "30",
+            "--intrinsics",
+            str(k),
+            "--far-lines",
+            scene["lines"],
+            "-o",
+            str(calib),
+        ]
+    )
     captured = capsys.readouterr()
     assert code == 0, captured.err
     assert "confidence" in captured.out  # the report
@@ -581,13 +875,33 @@ def test_calibrate_rescales_K_given_at_another_resolution(scene, tmp_path, capsy
 
     truth = scene["truth"]
     big = truth.scaled((600, 600))  # intrinsics calibrated at twice the resolution
-    k = write_intrinsics(tmp_path / "k.xml", big.K, image_size=(600, 600),
-                         names=("camera_matrix", "distortion_coefficients"))
+    k = write_intrinsics(
+        tmp_path / "k.xml",
+        big.K,
+        image_size=(600, 600),
+        names=("camera_matrix", "distortion_coefficients"),
+    )
     calib = tmp_path / "calib.json"
     overlay = tmp_path / "look.jpg"
-    code = main(["calibrate", scene["image"], "--mirror", "23.4", "28.1", "30", "--intrinsics",
-                 str(k), "--far-lines", scene["lines"], "--no-refine", "--overlay", str(overlay),
-                 "-o", str(calib)])
+    code = main(
+        [
+            "calibrate",
+            scene["image"],
+            "--mirror",
+            "23.4",
+            "28.1",
+            "30",
+            "--intrinsics",
+            str(k),
+            "--far-lines",
+            scene["lines"],
+            "--no-refine",
+            "--overlay",
+            str(overlay),
+            "-o",
+            str(calib),
+        ]
+    )
     captured = capsys.readouterr()
     assert code == 0, captured.err
     assert "K rescaled" in captured.err
@@ -604,11 +918,17 @@ def test_demo_writes_every_output(tmp_path, capsys):
     captured = capsys.readouterr()
     assert code == 0, captured.err
     names = sorted(p.name for p in out.iterdir())
-    for expected in ("calibration.yaml", "mirror.png", "overlay.png", "panorama.png",
-                     "perspective.png"):
+    for expected in (
+        "calibration.yaml",
+        "mirror.png",
+        "overlay.png",
+        "panorama.png",
+        "perspective.png",
+    ):
         assert expected in names
     assert "posture error" in captured.out
     from omnicam import MisalignedHyperbolicCamera
+
     cam = MisalignedHyperbolicCamera.load(out / "calibration.yaml")
     truth = synthetic.misaligned_rig()
     assert axis_error_deg(cam, truth) < 0.2

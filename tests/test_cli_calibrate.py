@@ -1,4 +1,5 @@
 """``omnicam calibrate``: rim hints, boundary points, plausibility limits and --force."""
+
 from __future__ import annotations
 
 import json
@@ -53,9 +54,14 @@ def scene(tmp_path_factory):
     tilted = synthetic.misaligned_rig(12.0, 100.0, (1.0, 0.5, 0.0), image_size=SIZE, fill=0.7)
     tilted_image = folder / "tilted.png"
     cv2.imwrite(str(tilted_image), synthetic.render_environment(tilted, seed=2))
-    return {"truth": truth, "image": str(image), "k": write_K(folder / "k.yaml", truth.K),
-            "tilted": tilted, "tilted_image": str(tilted_image),
-            "tilted_k": write_K(folder / "tk.yaml", tilted.K)}
+    return {
+        "truth": truth,
+        "image": str(image),
+        "k": write_K(folder / "k.yaml", truth.K),
+        "tilted": tilted,
+        "tilted_image": str(tilted_image),
+        "tilted_k": write_K(folder / "tk.yaml", tilted.K),
+    }
 
 
 def run(image, k, out, *extra):
@@ -99,8 +105,20 @@ def test_force_writes_an_implausible_calibration_with_the_warnings(scene, tmp_pa
 
 def test_a_and_b_swapped_exit_one(scene, tmp_path, capsys):
     calib = tmp_path / "calib.yaml"
-    code = main(["calibrate", scene["image"], "--mirror", "28.1", "23.4", "30", "--intrinsics",
-                 scene["k"], "-o", str(calib)])
+    code = main(
+        [
+            "calibrate",
+            scene["image"],
+            "--mirror",
+            "28.1",
+            "23.4",
+            "30",
+            "--intrinsics",
+            scene["k"],
+            "-o",
+            str(calib),
+        ]
+    )
     captured = capsys.readouterr()
     assert code == 1 and not calib.exists()
     assert "a and b swapped (a = 23.4, b = 28.1)" in captured.err
@@ -114,14 +132,21 @@ def test_max_tilt_and_max_offset_set_the_limits(scene, tmp_path, capsys):
     captured = capsys.readouterr()
     assert code == 1 and not calib.exists()
     assert re.search(r"tilted 1[12]\.\d deg from the optical axis \(limit 10 deg", captured.err)
-    code = run(scene["tilted_image"], scene["tilted_k"], calib, "--max-tilt", "15",
-               "--overwrite")
+    code = run(scene["tilted_image"], scene["tilted_k"], calib, "--max-tilt", "15", "--overwrite")
     captured = capsys.readouterr()
     assert code == 0, captured.err
     cam = MisalignedHyperbolicCamera.load(calib)
     assert axis_error_deg(cam, scene["tilted"]) < 0.3
-    code = run(scene["tilted_image"], scene["tilted_k"], calib, "--max-tilt", "15",
-               "--max-offset", "0.5", "--overwrite")
+    code = run(
+        scene["tilted_image"],
+        scene["tilted_k"],
+        calib,
+        "--max-tilt",
+        "15",
+        "--max-offset",
+        "0.5",
+        "--overwrite",
+    )
     captured = capsys.readouterr()
     assert code == 1 and "(limit 0.5, mirror units)" in captured.err
 
@@ -138,22 +163,29 @@ def test_rim_hint_finds_the_rim_inside_a_white_holder(tmp_path, capsys):
     assert code == 0, captured.err
     assert axis_error_deg(MisalignedHyperbolicCamera.load(calib), truth) < 0.3
     # the hint names the circle: at the holder's outer edge the result is refused
-    code = run(str(tmp_path / "holder.png"), k, tmp_path / "edge.yaml", "--rim-hint",
-               f"{rim.center[0]:.1f},{rim.center[1]:.1f},134")
+    code = run(
+        str(tmp_path / "holder.png"),
+        k,
+        tmp_path / "edge.yaml",
+        "--rim-hint",
+        f"{rim.center[0]:.1f},{rim.center[1]:.1f},134",
+    )
     captured = capsys.readouterr()
     assert code == 1 and "the rim found has semi-axes 13" in captured.err
     assert not (tmp_path / "edge.yaml").exists()
 
 
-@pytest.mark.parametrize("hint, status, words", [
-    ("900,100,50", 1, "--rim-hint: hint centre (900, 100) is outside the 320x240 image"),
-    ("100,100,0", 2, "positive R"),
-    ("100,100", 2, "expected CX,CY,R"),
-    ("a,b,c", 2, "expected CX,CY,R"),
-    ("nan,1,2", 2, "finite"),
-])
-def test_bad_rim_hint_is_one_line_and_writes_nothing(scene, tmp_path, capsys, hint, status,
-                                                     words):
+@pytest.mark.parametrize(
+    "hint, status, words",
+    [
+        ("900,100,50", 1, "--rim-hint: hint centre (900, 100) is outside the 320x240 image"),
+        ("100,100,0", 2, "positive R"),
+        ("100,100", 2, "expected CX,CY,R"),
+        ("a,b,c", 2, "expected CX,CY,R"),
+        ("nan,1,2", 2, "finite"),
+    ],
+)
+def test_bad_rim_hint_is_one_line_and_writes_nothing(scene, tmp_path, capsys, hint, status, words):
     code = run(scene["image"], scene["k"], tmp_path / "calib.yaml", "--rim-hint", hint)
     assert code == status
     assert words in error_line(capsys.readouterr().err)
@@ -164,8 +196,9 @@ def test_bad_rim_hint_is_one_line_and_writes_nothing(scene, tmp_path, capsys, hi
 def test_boundary_points_from_json_or_filestorage(scene, tmp_path, capsys, fmt):
     truth = scene["truth"]
     pts = truth.rim_image_points(200)
-    pts = pts[(pts[:, 0] > 0) & (pts[:, 0] < SIZE[0] - 1) & (pts[:, 1] > 0)
-              & (pts[:, 1] < SIZE[1] - 1)]
+    pts = pts[
+        (pts[:, 0] > 0) & (pts[:, 0] < SIZE[0] - 1) & (pts[:, 1] > 0) & (pts[:, 1] < SIZE[1] - 1)
+    ]
     path = tmp_path / f"rim.{fmt}"
     if fmt == "json":
         path.write_text(json.dumps(pts.tolist()))
@@ -192,14 +225,14 @@ BAD_POINTS = {
 
 
 @pytest.mark.parametrize("content, words", BAD_POINTS.values(), ids=BAD_POINTS.keys())
-def test_bad_boundary_points_file_is_one_line_and_writes_nothing(scene, tmp_path, capsys,
-                                                                 content, words):
+def test_bad_boundary_points_file_is_one_line_and_writes_nothing(
+    scene, tmp_path, capsys, content, words
+):
     path = tmp_path / "rim.json"
     if content is not None:
         path.write_text(content)
     before = sorted(p.name for p in tmp_path.iterdir())
-    code = run(scene["image"], scene["k"], tmp_path / "calib.yaml", "--boundary-points",
-               str(path))
+    code = run(scene["image"], scene["k"], tmp_path / "calib.yaml", "--boundary-points", str(path))
     assert code == 1
     line = error_line(capsys.readouterr().err)
     assert words in line and "rim.json" in line
@@ -223,9 +256,15 @@ def test_photo_without_a_mirror_exits_one(tmp_path, capsys):
 def test_help_documents_the_new_options(capsys):
     assert main(["calibrate", "--help"]) == 0
     out = " ".join(capsys.readouterr().out.split())
-    for words in ("--rim-hint CX,CY,R", "--boundary-points FILE", "--max-tilt DEG",
-                  "--max-offset MM", "--force", "JSON list of [x, y] pixels",
-                  "'boundary_points'"):
+    for words in (
+        "--rim-hint CX,CY,R",
+        "--boundary-points FILE",
+        "--max-tilt DEG",
+        "--max-offset MM",
+        "--force",
+        "JSON list of [x, y] pixels",
+        "'boundary_points'",
+    ):
         assert words in out
 
 
@@ -238,13 +277,43 @@ def test_intrinsics_as_numbers_instead_of_a_file(tmp_path, capsys):
     cv2.imwrite(str(image), synthetic.render_environment(truth, supersample=1))
     K = truth.K
     out = tmp_path / "rig.yaml"
-    code = main(["calibrate", str(image), "--mirror", str(truth.mirror.a), str(truth.mirror.b),
-                 str(truth.mirror.rim_radius), "--fx", repr(float(K[0, 0])), "--fy", repr(float(K[1, 1])),
-                 "--cx", repr(float(K[0, 2])), "--cy", repr(float(K[1, 2])), "-o", str(out), "--force"])
+    code = main(
+        [
+            "calibrate",
+            str(image),
+            "--mirror",
+            str(truth.mirror.a),
+            str(truth.mirror.b),
+            str(truth.mirror.rim_radius),
+            "--fx",
+            repr(float(K[0, 0])),
+            "--fy",
+            repr(float(K[1, 1])),
+            "--cx",
+            repr(float(K[0, 2])),
+            "--cy",
+            repr(float(K[1, 2])),
+            "-o",
+            str(out),
+            "--force",
+        ]
+    )
     assert code == 0, capsys.readouterr().err
     cam = MisalignedHyperbolicCamera.load(out)
     np.testing.assert_allclose(cam.K, K)
     assert cam.D is None
-    code = main(["calibrate", str(image), "--mirror", "28", "23", "30", "--fx", "400",
-                 "-o", str(tmp_path / "x.yaml")])
+    code = main(
+        [
+            "calibrate",
+            str(image),
+            "--mirror",
+            "28",
+            "23",
+            "30",
+            "--fx",
+            "400",
+            "-o",
+            str(tmp_path / "x.yaml"),
+        ]
+    )
     assert code == 2 and "--fx --fy --cx --cy" in capsys.readouterr().err

@@ -1,5 +1,6 @@
 """``omnicam unwarp``: several views per call, sequences, previews, 360 output, warnings, and
 video output that is never lost (Ctrl-C, a full disk)."""
+
 from __future__ import annotations
 
 import os
@@ -28,7 +29,7 @@ def make_frame(i, size=SIZE):
     img = np.stack([(x * 255 // w), (y * 255 // h), np.full_like(x, 40 * (i % 6))], axis=-1)
     img = img.astype(np.uint8)
     s = 10 * i % (w - 20)
-    img[s:s + 20, s:s + 20] = 255
+    img[s : s + 20, s : s + 20] = 255
     return img
 
 
@@ -67,12 +68,31 @@ def data(tmp_path_factory, rig):
 
 
 # -- several views, one decode -------------------------------------------------------------
-def test_two_views_of_an_image_each_with_its_own_options_and_output(data, rig, tmp_path,
-                                                                    capsys):
+def test_two_views_of_an_image_each_with_its_own_options_and_output(data, rig, tmp_path, capsys):
     a, b = tmp_path / "pano.png", tmp_path / "view.png"
-    code = main(["unwarp", str(data["image"]), "-c", str(data["calib"]),
-                 "--panorama", "120x30", "--elevation", "-50", "10", "-o", str(a),
-                 "--perspective", "40x30", "--fov", "70", "--yaw", "20", "-o", str(b)])
+    code = main(
+        [
+            "unwarp",
+            str(data["image"]),
+            "-c",
+            str(data["calib"]),
+            "--panorama",
+            "120x30",
+            "--elevation",
+            "-50",
+            "10",
+            "-o",
+            str(a),
+            "--perspective",
+            "40x30",
+            "--fov",
+            "70",
+            "--yaw",
+            "20",
+            "-o",
+            str(b),
+        ]
+    )
     assert code == 0, capsys.readouterr().err
     src = cv2.imread(str(data["image"]))
     m = rig.init_panorama_maps((120, 30), elevation_range=(-50, 10))
@@ -100,10 +120,31 @@ def test_several_video_views_decode_each_frame_once(data, tmp_path, capsys, monk
 
     monkeypatch.setattr(unwarp, "_open_capture", lambda s: Counting(real_open(s)))
     outs = [tmp_path / "a.avi", tmp_path / "b.mp4", tmp_path / "c.avi"]
-    code = main(["unwarp", str(data["video"]), "-c", str(data["calib"]), "-q",
-                 "--panorama", "64x16", "-o", str(outs[0]),
-                 "--perspective", "48x32", "--fov", "90", "-o", str(outs[1]),
-                 "--panorama", "96x24", "--projection", "equirectangular", "-o", str(outs[2])])
+    code = main(
+        [
+            "unwarp",
+            str(data["video"]),
+            "-c",
+            str(data["calib"]),
+            "-q",
+            "--panorama",
+            "64x16",
+            "-o",
+            str(outs[0]),
+            "--perspective",
+            "48x32",
+            "--fov",
+            "90",
+            "-o",
+            str(outs[1]),
+            "--panorama",
+            "96x24",
+            "--projection",
+            "equirectangular",
+            "-o",
+            str(outs[2]),
+        ]
+    )
     assert code == 0, capsys.readouterr().err
     assert video_frames(outs[0]) == (10, (64, 16))
     assert video_frames(outs[1]) == (10, (48, 32))
@@ -112,16 +153,37 @@ def test_several_video_views_decode_each_frame_once(data, tmp_path, capsys, monk
     assert hidden(tmp_path) == []
 
 
-@pytest.mark.parametrize("argv, words", [
-    (["--panorama", "64x16", "-o", "a.avi", "--panorama", "32x8"], "has no -o"),
-    (["--panorama", "64x16", "-o", "a.avi", "--panorama", "32x8", "-o", "a.avi"], "same output"),
-    (["--panorama", "64x16", "--fov", "90", "-o", "a.avi"], "--fov"),
-    (["--panorama", "64x16", "--elevation", "-40", "10", "--elevation", "-30", "5", "-o",
-      "a.avi"], "twice"),
-    (["-o", "a.avi"], "give a view"),
-], ids=["missing -o", "same output", "option of another view", "option twice", "no view"])
-def test_bad_multi_view_command_lines_are_usage_errors(data, tmp_path, capsys, argv, words,
-                                                       monkeypatch):
+@pytest.mark.parametrize(
+    "argv, words",
+    [
+        (["--panorama", "64x16", "-o", "a.avi", "--panorama", "32x8"], "has no -o"),
+        (
+            ["--panorama", "64x16", "-o", "a.avi", "--panorama", "32x8", "-o", "a.avi"],
+            "same output",
+        ),
+        (["--panorama", "64x16", "--fov", "90", "-o", "a.avi"], "--fov"),
+        (
+            [
+                "--panorama",
+                "64x16",
+                "--elevation",
+                "-40",
+                "10",
+                "--elevation",
+                "-30",
+                "5",
+                "-o",
+                "a.avi",
+            ],
+            "twice",
+        ),
+        (["-o", "a.avi"], "give a view"),
+    ],
+    ids=["missing -o", "same output", "option of another view", "option twice", "no view"],
+)
+def test_bad_multi_view_command_lines_are_usage_errors(
+    data, tmp_path, capsys, argv, words, monkeypatch
+):
     monkeypatch.chdir(tmp_path)
     code = main(["unwarp", str(data["video"]), "-c", str(data["calib"]), *argv])
     assert code == 2
@@ -131,8 +193,21 @@ def test_bad_multi_view_command_lines_are_usage_errors(data, tmp_path, capsys, a
 
 def test_options_before_the_first_view_belong_to_it(data, rig, tmp_path, capsys):
     out = tmp_path / "p.png"
-    code = main(["unwarp", str(data["image"]), "-c", str(data["calib"]), "-o", str(out),
-                 "--elevation", "-50", "10", "--panorama", "120x30"])
+    code = main(
+        [
+            "unwarp",
+            str(data["image"]),
+            "-c",
+            str(data["calib"]),
+            "-o",
+            str(out),
+            "--elevation",
+            "-50",
+            "10",
+            "--panorama",
+            "120x30",
+        ]
+    )
     assert code == 0, capsys.readouterr().err
     m = rig.init_panorama_maps((120, 30), elevation_range=(-50, 10))
     src = cv2.imread(str(data["image"]))
@@ -142,8 +217,21 @@ def test_options_before_the_first_view_belong_to_it(data, rig, tmp_path, capsys)
 # -- sequences and previews ----------------------------------------------------------------
 def test_video_to_an_image_sequence_and_previews(data, rig, tmp_path, capsys):
     pattern = tmp_path / "out_%03d.png"
-    code = main(["unwarp", str(data["video"]), "-c", str(data["calib"]), "-q",
-                 "--panorama", "64x16", "-o", str(pattern), "--preview", "4"])
+    code = main(
+        [
+            "unwarp",
+            str(data["video"]),
+            "-c",
+            str(data["calib"]),
+            "-q",
+            "--panorama",
+            "64x16",
+            "-o",
+            str(pattern),
+            "--preview",
+            "4",
+        ]
+    )
     assert code == 0, capsys.readouterr().err
     frames = sorted(p.name for p in tmp_path.glob("out_*.png"))
     assert frames == [f"out_{i:03d}.png" for i in range(10)]
@@ -151,19 +239,34 @@ def test_video_to_an_image_sequence_and_previews(data, rig, tmp_path, capsys):
     m = rig.init_panorama_maps((64, 16))
     for i in range(10):
         _, frame = cap.read()
-        np.testing.assert_array_equal(cv2.imread(str(tmp_path / f"out_{i:03d}.png")),
-                                      cv2.remap(frame, *m, cv2.INTER_LINEAR))
+        np.testing.assert_array_equal(
+            cv2.imread(str(tmp_path / f"out_{i:03d}.png")), cv2.remap(frame, *m, cv2.INTER_LINEAR)
+        )
     cap.release()
     previews = sorted(p.name for p in tmp_path.glob("*.preview_*.png"))
-    assert previews == ["out.preview_000000.png", "out.preview_000004.png",
-                        "out.preview_000008.png"]
+    assert previews == [
+        "out.preview_000000.png",
+        "out.preview_000004.png",
+        "out.preview_000008.png",
+    ]
     assert hidden(tmp_path) == []
 
 
 def test_sequence_output_refuses_to_overwrite_without_overwrite(data, tmp_path, capsys):
     (tmp_path / "out_000.png").write_bytes(b"precious")
-    code = main(["unwarp", str(data["video"]), "-c", str(data["calib"]), "-q",
-                 "--panorama", "64x16", "-o", str(tmp_path / "out_%03d.png")])
+    code = main(
+        [
+            "unwarp",
+            str(data["video"]),
+            "-c",
+            str(data["calib"]),
+            "-q",
+            "--panorama",
+            "64x16",
+            "-o",
+            str(tmp_path / "out_%03d.png"),
+        ]
+    )
     assert code == 1
     assert "exists" in one_error_line(capsys.readouterr().err)
     assert (tmp_path / "out_000.png").read_bytes() == b"precious"
@@ -174,8 +277,18 @@ def test_equirect_jpeg_carries_photo_sphere_xmp(data, tmp_path, capsys):
     from omnicam.spherical import read_jpeg_xmp
 
     out = tmp_path / "360.jpg"
-    code = main(["unwarp", str(data["image"]), "-c", str(data["calib"]), "--equirect", "128x64",
-                 "-o", str(out)])
+    code = main(
+        [
+            "unwarp",
+            str(data["image"]),
+            "-c",
+            str(data["calib"]),
+            "--equirect",
+            "128x64",
+            "-o",
+            str(out),
+        ]
+    )
     assert code == 0, capsys.readouterr().err
     assert cv2.imread(str(out)).shape == (64, 128, 3)
     xmp = read_jpeg_xmp(out.read_bytes()).decode()
@@ -187,8 +300,19 @@ def test_equirect_mp4_carries_spherical_video_metadata(data, tmp_path, capsys):
     from omnicam.spherical import find_boxes, parse_boxes
 
     out = tmp_path / "360.mp4"
-    code = main(["unwarp", str(data["video"]), "-c", str(data["calib"]), "-q",
-                 "--equirect", "128x64", "-o", str(out)])
+    code = main(
+        [
+            "unwarp",
+            str(data["video"]),
+            "-c",
+            str(data["calib"]),
+            "-q",
+            "--equirect",
+            "128x64",
+            "-o",
+            str(out),
+        ]
+    )
     assert code == 0, capsys.readouterr().err
     assert video_frames(out) == (10, (128, 64))
     boxes = parse_boxes(out.read_bytes())
@@ -200,8 +324,18 @@ def test_equirect_mp4_carries_spherical_video_metadata(data, tmp_path, capsys):
 
 
 def test_equirect_must_be_two_to_one_on_the_command_line(data, tmp_path, capsys):
-    code = main(["unwarp", str(data["image"]), "-c", str(data["calib"]), "--equirect", "128x60",
-                 "-o", str(tmp_path / "x.jpg")])
+    code = main(
+        [
+            "unwarp",
+            str(data["image"]),
+            "-c",
+            str(data["calib"]),
+            "--equirect",
+            "128x60",
+            "-o",
+            str(tmp_path / "x.jpg"),
+        ]
+    )
     assert code == 2
     assert "2:1" in one_error_line(capsys.readouterr().err)
 
@@ -209,8 +343,7 @@ def test_equirect_must_be_two_to_one_on_the_command_line(data, tmp_path, capsys)
 # -- views that see nothing ----------------------------------------------------------------
 def test_view_mostly_outside_the_band_warns_in_the_api(rig):
     with pytest.warns(RuntimeWarning, match="visible_elevation_range"):
-        rig.init_perspective_maps(K_from_fov(60, (40, 30)), (40, 30),
-                                  R=rotation_from_ypr(0, 70, 0))
+        rig.init_perspective_maps(K_from_fov(60, (40, 30)), (40, 30), R=rotation_from_ypr(0, 70, 0))
     with pytest.warns(RuntimeWarning, match="visible_elevation_range"):
         rig.init_panorama_maps((64, 16), elevation_range=(30, 80))
     with warnings.catch_warnings():
@@ -219,8 +352,22 @@ def test_view_mostly_outside_the_band_warns_in_the_api(rig):
 
 
 def test_view_mostly_outside_the_band_warns_in_the_cli(data, tmp_path, capsys):
-    code = main(["unwarp", str(data["image"]), "-c", str(data["calib"]), "--perspective",
-                 "40x30", "--fov", "60", "--pitch", "70", "-o", str(tmp_path / "sky.png")])
+    code = main(
+        [
+            "unwarp",
+            str(data["image"]),
+            "-c",
+            str(data["calib"]),
+            "--perspective",
+            "40x30",
+            "--fov",
+            "60",
+            "--pitch",
+            "70",
+            "-o",
+            str(tmp_path / "sky.png"),
+        ]
+    )
     captured = capsys.readouterr()
     assert code == 0, captured.err
     lines = [ln for ln in captured.err.splitlines() if ln.strip()]
@@ -258,8 +405,20 @@ def test_frames_lost_on_write_fail_and_keep_the_old_output(data, tmp_path, capsy
     write_video(out, 2, (64, 16))
     before = out.read_bytes()
     monkeypatch.setattr(unwarp.cv2, "VideoWriter", DroppingWriter)
-    code = main(["unwarp", str(data["video"]), "-c", str(data["calib"]), "-q",
-                 "--panorama", "64x16", "-o", str(out), "--overwrite"])
+    code = main(
+        [
+            "unwarp",
+            str(data["video"]),
+            "-c",
+            str(data["calib"]),
+            "-q",
+            "--panorama",
+            "64x16",
+            "-o",
+            str(out),
+            "--overwrite",
+        ]
+    )
     line = one_error_line(capsys.readouterr().err)
     assert code == 1
     assert "only 3 of 10 frames" in line and "unchanged" in line
@@ -275,8 +434,20 @@ def test_full_disk_stops_early_and_keeps_the_old_output(data, tmp_path, capsys, 
     before = out.read_bytes()
     long_video = write_video(tmp_path / "long.avi", 40)
     monkeypatch.setattr(unwarp, "_free_bytes", lambda path: 1000)
-    code = main(["unwarp", str(long_video), "-c", str(data["calib"]), "-q",
-                 "--panorama", "64x16", "-o", str(out), "--overwrite"])
+    code = main(
+        [
+            "unwarp",
+            str(long_video),
+            "-c",
+            str(data["calib"]),
+            "-q",
+            "--panorama",
+            "64x16",
+            "-o",
+            str(out),
+            "--overwrite",
+        ]
+    )
     line = one_error_line(capsys.readouterr().err)
     assert code == 1 and "no space left" in line and "after 16 frames" in line
     assert out.read_bytes() == before
@@ -284,7 +455,8 @@ def test_full_disk_stops_early_and_keeps_the_old_output(data, tmp_path, capsys, 
 
 
 def test_ctrl_c_with_an_earlier_output_keeps_it_and_writes_a_partial_file(
-        data, tmp_path, capsys, monkeypatch):
+    data, tmp_path, capsys, monkeypatch
+):
     from omnicam import cli
 
     out = tmp_path / "out.avi"
@@ -298,8 +470,19 @@ def test_ctrl_c_with_an_earlier_output_keeps_it_and_writes_a_partial_file(
             os.kill(os.getpid(), signal.SIGINT)  # a real signal, delivered to our handler
 
     monkeypatch.setattr(cli.Progress, "update", interrupt)
-    code = main(["unwarp", str(data["video"]), "-c", str(data["calib"]), "--panorama", "64x16",
-                 "-o", str(out), "--overwrite"])
+    code = main(
+        [
+            "unwarp",
+            str(data["video"]),
+            "-c",
+            str(data["calib"]),
+            "--panorama",
+            "64x16",
+            "-o",
+            str(out),
+            "--overwrite",
+        ]
+    )
     err = capsys.readouterr().err
     assert code == 130, err
     assert "Traceback" not in err
@@ -319,16 +502,32 @@ def _long_video(folder, n=400):
     return write_video(folder / "long.avi", n, (400, 400))
 
 
-@pytest.mark.skipif(_omnicam() is None or sys.platform == "win32",
-                    reason="needs the omnicam console script and POSIX signals")
+@pytest.mark.skipif(
+    _omnicam() is None or sys.platform == "win32",
+    reason="needs the omnicam console script and POSIX signals",
+)
 def test_sigint_mid_stream_in_a_real_process(data, tmp_path):
     src = _long_video(tmp_path)
     calib = tmp_path / "rig.yaml"
     synthetic.misaligned_rig(image_size=(400, 400)).save(calib)
     out = tmp_path / "out.avi"
-    p = subprocess.Popen([_omnicam(), "unwarp", str(src), "-c", str(calib), "-q",
-                          "--panorama", "512x128", "-o", str(out)],
-                         stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    p = subprocess.Popen(
+        [
+            _omnicam(),
+            "unwarp",
+            str(src),
+            "-c",
+            str(calib),
+            "-q",
+            "--panorama",
+            "512x128",
+            "-o",
+            str(out),
+        ],
+        stdout=subprocess.PIPE,
+        stderr=subprocess.PIPE,
+        text=True,
+    )
     deadline = time.time() + 120
     while time.time() < deadline and p.poll() is None:  # wait until frames are being written
         tmp = [f for f in tmp_path.iterdir() if f.name.startswith(".out")]
@@ -348,14 +547,30 @@ def test_sigint_mid_stream_in_a_real_process(data, tmp_path):
     assert hidden(tmp_path) == []
 
 
-@pytest.mark.skipif(_omnicam() is None or sys.platform == "win32",
-                    reason="needs the omnicam console script and POSIX signals")
+@pytest.mark.skipif(
+    _omnicam() is None or sys.platform == "win32",
+    reason="needs the omnicam console script and POSIX signals",
+)
 @pytest.mark.parametrize("delay", [0.15, 0.3])
 def test_sigint_while_starting_is_one_line_and_exit_130(data, tmp_path, delay):
     src = _long_video(tmp_path, 60)
-    p = subprocess.Popen([_omnicam(), "unwarp", str(src), "-c", str(data["calib"]), "-q",
-                          "--panorama", "64x16", "-o", str(tmp_path / "out.avi")],
-                         stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    p = subprocess.Popen(
+        [
+            _omnicam(),
+            "unwarp",
+            str(src),
+            "-c",
+            str(data["calib"]),
+            "-q",
+            "--panorama",
+            "64x16",
+            "-o",
+            str(tmp_path / "out.avi"),
+        ],
+        stdout=subprocess.PIPE,
+        stderr=subprocess.PIPE,
+        text=True,
+    )
     time.sleep(delay)
     p.send_signal(signal.SIGINT)
     _, err = p.communicate(timeout=120)
@@ -375,8 +590,11 @@ def small_tmpfs(tmp_path):
     mnt.mkdir()
     if sys.platform != "linux" or os.geteuid() != 0:
         pytest.skip("mounting a tmpfs needs root on Linux")
-    r = subprocess.run(["mount", "-t", "tmpfs", "-o", "size=300k", "tmpfs", str(mnt)],
-                       capture_output=True, check=False)
+    r = subprocess.run(
+        ["mount", "-t", "tmpfs", "-o", "size=300k", "tmpfs", str(mnt)],
+        capture_output=True,
+        check=False,
+    )
     if r.returncode != 0:
         pytest.skip("cannot mount a tmpfs here")
     try:
@@ -385,10 +603,14 @@ def small_tmpfs(tmp_path):
         subprocess.run(["umount", str(mnt)], check=False)
 
 
-@pytest.mark.parametrize("ext, min_free", [("avi", None), ("avi", 0), ("mp4", 0)],
-                         ids=["free-space check", "read-back check avi", "read-back check mp4"])
-def test_a_really_full_disk_never_replaces_the_old_output(data, tmp_path, small_tmpfs, capsys,
-                                                          monkeypatch, ext, min_free):
+@pytest.mark.parametrize(
+    "ext, min_free",
+    [("avi", None), ("avi", 0), ("mp4", 0)],
+    ids=["free-space check", "read-back check avi", "read-back check mp4"],
+)
+def test_a_really_full_disk_never_replaces_the_old_output(
+    data, tmp_path, small_tmpfs, capsys, monkeypatch, ext, min_free
+):
     from omnicam.cli import unwarp
 
     if min_free is not None:
@@ -397,8 +619,20 @@ def test_a_really_full_disk_never_replaces_the_old_output(data, tmp_path, small_
     out = small_tmpfs / f"out.{ext}"
     write_video(out, 20, (128, 32))
     before = out.read_bytes()
-    code = main(["unwarp", str(src), "-c", str(data["calib"]), "-q", "--panorama", "512x128",
-                 "-o", str(out), "--overwrite"])
+    code = main(
+        [
+            "unwarp",
+            str(src),
+            "-c",
+            str(data["calib"]),
+            "-q",
+            "--panorama",
+            "512x128",
+            "-o",
+            str(out),
+            "--overwrite",
+        ]
+    )
     line = one_error_line(capsys.readouterr().err)
     assert code == 1 and "unchanged" in line
     assert ("no space left" in line) if min_free is None else ("can be read back" in line)
@@ -406,8 +640,9 @@ def test_a_really_full_disk_never_replaces_the_old_output(data, tmp_path, small_
     assert sorted(p.name for p in small_tmpfs.iterdir()) == [out.name]
 
 
-@pytest.mark.parametrize("tilt, offset", [(0.0, (0.0, 0.0, 0.0)), (3.0, (1.5, -1.0, 1.0)),
-                                          (5.0, (3.0, -4.0, 0.0))])
+@pytest.mark.parametrize(
+    "tilt, offset", [(0.0, (0.0, 0.0, 0.0)), (3.0, (1.5, -1.0, 1.0)), (5.0, (3.0, -4.0, 0.0))]
+)
 def test_default_panorama_leaves_out_the_cameras_own_reflection(tilt, offset):
     """No pixel of the default panorama sees a camera body of radius 30 mm (a ball about the
     camera centre; the synthetic renders use 10 mm), while the nadir rows of a full band do."""
@@ -418,10 +653,11 @@ def test_default_panorama_leaves_out_the_cameras_own_reflection(tilt, offset):
         P, d = cam.unproject(np.stack([mx[seen], my[seen]], axis=1).astype(np.float64))
         w = P - cam.camera_center
         b = np.einsum("ij,ij->i", w, d)
-        disc = b * b - (np.einsum("ij,ij->i", w, w) - 30.0 ** 2)
+        disc = b * b - (np.einsum("ij,ij->i", w, w) - 30.0**2)
         return int(np.count_nonzero((disc >= 0) & (-b - np.sqrt(np.maximum(disc, 0)) > 0)))
 
     assert body_pixels(*cam.init_panorama_maps((360, 90), m1type=cv2.CV_32FC1)) == 0
-    full = cam.init_panorama_maps((360, 90), elevation_range=(-90, 10),
-                                  projection="equirectangular", m1type=cv2.CV_32FC1)
+    full = cam.init_panorama_maps(
+        (360, 90), elevation_range=(-90, 10), projection="equirectangular", m1type=cv2.CV_32FC1
+    )
     assert body_pixels(*full) > 0

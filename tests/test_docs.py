@@ -1,4 +1,5 @@
 """The README quotes the reproduction table exactly as examples/reproduce_paper.py wrote it."""
+
 import pathlib
 
 ROOT = pathlib.Path(__file__).resolve().parent.parent

@@ -1,4 +1,5 @@
 """Every example in ``examples/`` runs headless in its small mode and does what it says."""
+
 from __future__ import annotations
 
 import importlib.util
@@ -7,9 +8,9 @@ import pathlib
 
 import cv2
 import pytest
+from conftest import video_frames
 
 import omnicam
-from conftest import video_frames
 
 EXAMPLES = pathlib.Path(__file__).resolve().parent.parent / "examples"
 
@@ -34,8 +35,9 @@ def test_quickstart_calibrates_the_render_and_writes_the_views(tmp_path):
     assert all(w.startswith("the mirror axis is uncertain") for w in result["report"].warnings)
     for name in ("mirror.png", "overlay.png", "panorama.png", "perspective.png"):
         assert read_png(tmp_path / name).size
-    assert omnicam.MisalignedHyperbolicCamera.load(tmp_path / "calibration.yaml") == \
-        result["camera"]
+    assert (
+        omnicam.MisalignedHyperbolicCamera.load(tmp_path / "calibration.yaml") == result["camera"]
+    )
 
 
 def test_unwarp_video_writes_every_frame_of_both_views(tmp_path):
@@ -58,8 +60,9 @@ def test_calibrate_own_image_reads_far_lines_json_and_saves_the_calibration(tmp_
     # outline no longer refines the tilt; with the ball model it was 0.09 deg and 0.15 mm)
     assert result["axis_error_deg"] < 0.3 and result["centre_error_mm"] < 0.45
     assert result["axis_error_deg"] < 3 * result["report"].axis_std_deg
-    assert omnicam.MisalignedHyperbolicCamera.load(tmp_path / "calibration.yaml") == \
-        result["camera"]
+    assert (
+        omnicam.MisalignedHyperbolicCamera.load(tmp_path / "calibration.yaml") == result["camera"]
+    )
     assert read_png(tmp_path / "overlay.png").shape == (500, 500, 3)
 
 
@@ -67,9 +70,22 @@ def test_calibrate_own_image_on_a_given_image(tmp_path):
     example = load_example("calibrate_own_image")
     first = example.main(["--out", str(tmp_path / "a")])
     a = tmp_path / "a"
-    again = example.main(["--out", str(tmp_path / "b"), "--image", str(a / "mirror.png"),
-                          "--intrinsics", str(a / "camera.yaml"), "--mirror", "23.4", "28.1", "30",
-                          "--far-lines", str(a / "lines.json")])
+    again = example.main(
+        [
+            "--out",
+            str(tmp_path / "b"),
+            "--image",
+            str(a / "mirror.png"),
+            "--intrinsics",
+            str(a / "camera.yaml"),
+            "--mirror",
+            "23.4",
+            "28.1",
+            "30",
+            "--far-lines",
+            str(a / "lines.json"),
+        ]
+    )
     assert again["camera"] == first["camera"]
 
 
@@ -107,12 +123,20 @@ def test_reproduce_paper_uncalibrated_views_are_worse(paper):
 
 def test_reproduce_paper_writes_the_figures_and_the_generated_table(paper):
     out, result = paper
-    for name in ("fig6.png", "fig6_aligned.png", "fig6_misaligned.png", "fig7.png",
-                 "fig7_misaligned_uncalibrated.png", "fig7_misaligned_calibrated.png",
-                 "room.png", "table1_views.png"):
+    for name in (
+        "fig6.png",
+        "fig6_aligned.png",
+        "fig6_misaligned.png",
+        "fig7.png",
+        "fig7_misaligned_uncalibrated.png",
+        "fig7_misaligned_calibrated.png",
+        "room.png",
+        "table1_views.png",
+    ):
         assert read_png(out / name).size
     table = (out / "table1.md").read_text(encoding="utf-8")
     row = next(line for line in table.splitlines() if line.startswith("| Calibrated (omnicam"))
-    assert [f"{a:.1f}" for a in result["rows"]["Calibrated"]] == \
-        [cell.strip() for cell in row.split("|")[2:5]]
+    assert [f"{a:.1f}" for a in result["rows"]["Calibrated"]] == [
+        cell.strip() for cell in row.split("|")[2:5]
+    ]
     assert "| Calibrated (paper, real image) | 84.9 | 89.9 | 82.9 |" in table

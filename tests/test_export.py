@@ -1,4 +1,5 @@
 """Central approximations (cv2.omnidir / Kalibr / camodocal / OCamCalib) and their files."""
+
 import math
 import re
 
@@ -83,7 +84,7 @@ def test_aligned_rig_fit_at_a_depth_maps_those_points_exactly():
     # points 2 m from the viewpoint along each ray
     w = P - fit.origin
     b = np.einsum("ij,ij->i", w, d)
-    t = -b + np.sqrt(b * b - (np.einsum("ij,ij->i", w, w) - 2000.0 ** 2))
+    t = -b + np.sqrt(b * b - (np.einsum("ij,ij->i", w, w) - 2000.0**2))
     X = P + t[:, None] * d
     np.testing.assert_allclose(np.linalg.norm(X - fit.origin, axis=1), 2000.0)
     assert np.abs(fit.project(X) - pix).max() < 1e-6
@@ -94,9 +95,9 @@ def test_tilted_rig_states_its_error_honestly(tilted_fit):
     least-squares fit of all 13 parameters from another start does better."""
     from scipy.optimize import least_squares
 
-    epix, _, ed = sample_pixels(TILTED, max_points=10 ** 6)
+    epix, _, ed = sample_pixels(TILTED, max_points=10**6)
     err = np.linalg.norm(_cv_project(tilted_fit, ed) - epix, axis=1)
-    assert tilted_fit.rms_px == pytest.approx(float(np.sqrt(np.mean(err ** 2))), rel=1e-6)
+    assert tilted_fit.rms_px == pytest.approx(float(np.sqrt(np.mean(err**2))), rel=1e-6)
     assert tilted_fit.max_px == pytest.approx(float(err.max()), rel=1e-6)
     assert tilted_fit.rms_px > 1e-3  # a non-central rig is not central: it costs something
 
@@ -108,14 +109,15 @@ def test_tilted_rig_states_its_error_honestly(tilted_fit):
 
     def resid(p):
         K = np.array([[p[0], p[2], p[3]], [0.0, p[1], p[4]], [0.0, 0.0, 1.0]])
-        ip, _ = cv2.omnidir.projectPoints(Y, p[10:13].copy(), np.zeros(3), K, float(p[5]),
-                                          p[6:10].reshape(1, 4).copy())
+        ip, _ = cv2.omnidir.projectPoints(
+            Y, p[10:13].copy(), np.zeros(3), K, float(p[5]), p[6:10].reshape(1, 4).copy()
+        )
         return (ip.reshape(-1, 2) - pix).ravel()
 
     direct = least_squares(resid, p0, method="trf", x_scale="jac", xtol=1e-12, ftol=1e-12)
-    direct_rms = float(np.sqrt(np.mean(direct.fun ** 2) * 2))  # per-point distance
+    direct_rms = float(np.sqrt(np.mean(direct.fun**2) * 2))  # per-point distance
     ours = np.linalg.norm(_cv_project(tilted_fit, d) - pix, axis=1)
-    ours_rms = float(np.sqrt(np.mean(ours ** 2)))
+    ours_rms = float(np.sqrt(np.mean(ours**2)))
     assert ours_rms <= direct_rms * 1.01 + 1e-9
 
 
@@ -129,7 +131,8 @@ def test_kalibr_camchain_reads_back_with_the_fit_and_its_errors(tmp_path):
     assert cam["camera_model"] == "omni" and cam["distortion_model"] == "radtan"
     xi, fu, fv, pu, pv = cam["intrinsics"]
     assert (xi, fu, fv, pu, pv) == pytest.approx(
-        (fit.xi, fit.K[0, 0], fit.K[1, 1], fit.K[0, 2], fit.K[1, 2]), rel=1e-15)
+        (fit.xi, fit.K[0, 0], fit.K[1, 1], fit.K[0, 2], fit.K[1, 2]), rel=1e-15
+    )
     assert cam["distortion_coeffs"] == pytest.approx(np.ravel(fit.D).tolist(), rel=1e-15)
     assert cam["resolution"] == [320, 320]
     text = path.read_text()
@@ -205,10 +208,11 @@ def test_ocamcalib_error_figures_are_measured_on_the_tilted_rig(tmp_path):
     fit = fit_ocamcalib(TILTED)
     from omnicam.export import ocam_world2cam
 
-    epix, _, ed = sample_pixels(TILTED, max_points=10 ** 6)
-    err = np.linalg.norm(ocam_world2cam(ed @ fit.M.T, fit.invpol, fit.xc, fit.yc, fit.c, fit.d,
-                                        fit.e) - epix, axis=1)
-    assert fit.world2cam_rms_px == pytest.approx(float(np.sqrt(np.mean(err ** 2))), rel=1e-6)
+    epix, _, ed = sample_pixels(TILTED, max_points=10**6)
+    err = np.linalg.norm(
+        ocam_world2cam(ed @ fit.M.T, fit.invpol, fit.xc, fit.yc, fit.c, fit.d, fit.e) - epix, axis=1
+    )
+    assert fit.world2cam_rms_px == pytest.approx(float(np.sqrt(np.mean(err**2))), rel=1e-6)
     assert fit.world2cam_max_px == pytest.approx(float(err.max()), rel=1e-6)
     # no tangential terms in Scaramuzza's model: the tilted rig costs more than with omnidir
     assert fit.world2cam_rms_px > fit_omnidir(TILTED, skew=False).rms_px
@@ -230,17 +234,22 @@ def test_export_refuses_unknown_format(tmp_path):
         export(ALIGNED, "fisheye", tmp_path / "x.yaml")
 
 
-@pytest.mark.parametrize("fmt, name", [("omnidir", "omni.yaml"), ("kalibr", "camchain.yaml"),
-                                       ("camodocal", "mei.yaml"),
-                                       ("ocamcalib", "calib_results.txt")])
+@pytest.mark.parametrize(
+    "fmt, name",
+    [
+        ("omnidir", "omni.yaml"),
+        ("kalibr", "camchain.yaml"),
+        ("camodocal", "mei.yaml"),
+        ("ocamcalib", "calib_results.txt"),
+    ],
+)
 def test_cli_export_writes_the_file_and_prints_its_error(tmp_path, capsys, fmt, name):
     from omnicam.cli import main
 
     calib = tmp_path / "rig.yaml"
     ALIGNED.save(calib)
     out = tmp_path / name
-    assert main(["export", str(calib), "--to", fmt, "-o", str(out)]) == 0, \
-        capsys.readouterr().err
+    assert main(["export", str(calib), "--to", fmt, "-o", str(out)]) == 0, capsys.readouterr().err
     printed = capsys.readouterr().out
     assert out.exists() and "RMS" in printed and "max" in printed
     assert main(["export", str(calib), "--to", fmt, "-o", str(out)]) == 1  # exists

@@ -1,4 +1,5 @@
 """Maps for ffmpeg's remap filter (16-bit PGM), .npy and FileStorage; ffmpeg itself if present."""
+
 import shutil
 import subprocess
 
@@ -40,11 +41,11 @@ def test_pgm_header_maxval_and_big_endian_values(tmp_path, maps):
     ymap, _ = read_pgm(py)
     assert maxval == 65535
     with open(px, "rb") as f:
-        raw = f.read()[len(b"P5\n96 32\n65535\n"):]
+        raw = f.read()[len(b"P5\n96 32\n65535\n") :]
     assert len(raw) == 96 * 32 * 2
     assert raw[0] * 256 + raw[1] == xmap[0, 0]  # most significant byte first
     map_x, map_y = maps
-    seen = (xmap != UNSEEN_PGM)
+    seen = xmap != UNSEEN_PGM
     assert seen.any() and (~seen).any()
     np.testing.assert_array_equal(xmap[seen], np.rint(map_x[seen]))
     np.testing.assert_array_equal(ymap[seen], np.rint(map_y[seen]))
@@ -71,8 +72,13 @@ def test_npy_and_filestorage_maps_round_trip(tmp_path, maps):
 
 
 def _run(args):
-    r = subprocess.run(["ffmpeg", "-v", "error", "-y", *map(str, args)], capture_output=True,
-                       text=True, timeout=120, check=False)
+    r = subprocess.run(
+        ["ffmpeg", "-v", "error", "-y", *map(str, args)],
+        capture_output=True,
+        text=True,
+        timeout=120,
+        check=False,
+    )
     assert r.returncode == 0, r.stderr
 
 
@@ -83,14 +89,26 @@ def test_ffmpeg_remap_equals_cv2_remap_nearest_pixel_for_pixel(tmp_path, maps, f
     src = rng.integers(0, 256, (160, 160) if fmt == "gray" else (160, 160, 3), dtype=np.uint8)
     cv2.imwrite(str(tmp_path / "src.png"), src)
     px, py = write_ffmpeg_maps(tmp_path / "m", *maps, RIG.image_size)
-    _run(["-i", tmp_path / "src.png", "-i", px, "-i", py, "-lavfi", f"format={fmt},remap",
-          "-frames:v", "1", tmp_path / "out.png"])
+    _run(
+        [
+            "-i",
+            tmp_path / "src.png",
+            "-i",
+            px,
+            "-i",
+            py,
+            "-lavfi",
+            f"format={fmt},remap",
+            "-frames:v",
+            "1",
+            tmp_path / "out.png",
+        ]
+    )
     got = cv2.imread(str(tmp_path / "out.png"), cv2.IMREAD_UNCHANGED)
     if fmt == "gray" and got.ndim == 3:  # ffmpeg may store gray PNG as RGB: all planes equal
         assert (got == got[..., :1]).all()
         got = got[..., 0]
-    ref = cv2.remap(src, *maps, cv2.INTER_NEAREST, borderMode=cv2.BORDER_CONSTANT,
-                    borderValue=0)
+    ref = cv2.remap(src, *maps, cv2.INTER_NEAREST, borderMode=cv2.BORDER_CONSTANT, borderValue=0)
     assert np.array_equal(got, ref)
 
 
@@ -101,27 +119,64 @@ def test_ffmpeg_yuv444p_pipeline_equals_cv2_remap_per_plane(tmp_path, maps):
     rng = np.random.default_rng(4)
     src = rng.integers(0, 256, (160, 160, 3), dtype=np.uint8)
     cv2.imwrite(str(tmp_path / "src.png"), src)
-    _run(["-i", tmp_path / "src.png", "-vf", "format=yuv444p", "-f", "rawvideo",
-          tmp_path / "src.yuv"])
+    _run(
+        [
+            "-i",
+            tmp_path / "src.png",
+            "-vf",
+            "format=yuv444p",
+            "-f",
+            "rawvideo",
+            tmp_path / "src.yuv",
+        ]
+    )
     yuv = np.fromfile(tmp_path / "src.yuv", np.uint8).reshape(3, 160, 160)
     px, py = write_ffmpeg_maps(tmp_path / "m", *maps, RIG.image_size)
-    _run(["-i", tmp_path / "src.png", "-i", px, "-i", py, "-lavfi", "format=yuv444p,remap",
-          "-f", "rawvideo", "-pix_fmt", "yuv444p", tmp_path / "out.yuv"])
+    _run(
+        [
+            "-i",
+            tmp_path / "src.png",
+            "-i",
+            px,
+            "-i",
+            py,
+            "-lavfi",
+            "format=yuv444p,remap",
+            "-f",
+            "rawvideo",
+            "-pix_fmt",
+            "yuv444p",
+            tmp_path / "out.yuv",
+        ]
+    )
     got = np.fromfile(tmp_path / "out.yuv", np.uint8).reshape(3, SIZE[1], SIZE[0])
     for plane, fill in zip(range(3), (16, 128, 128)):
-        ref = cv2.remap(yuv[plane], *maps, cv2.INTER_NEAREST, borderMode=cv2.BORDER_CONSTANT,
-                        borderValue=fill)
+        ref = cv2.remap(
+            yuv[plane], *maps, cv2.INTER_NEAREST, borderMode=cv2.BORDER_CONSTANT, borderValue=fill
+        )
         assert np.array_equal(got[plane], ref), plane
 
 
 def test_cli_maps_writes_pgms_and_prints_the_ffmpeg_command(tmp_path, capsys):
     calib = tmp_path / "rig.yaml"
     RIG.save(calib)
-    code = main(["maps", str(calib), "--panorama", "96x32", "--elevation", "-60", "40",
-                 "--ffmpeg", "-o", str(tmp_path / "pano")])
+    code = main(
+        [
+            "maps",
+            str(calib),
+            "--panorama",
+            "96x32",
+            "--elevation",
+            "-60",
+            "40",
+            "--ffmpeg",
+            "-o",
+            str(tmp_path / "pano"),
+        ]
+    )
     out, err = capsys.readouterr()
     assert code == 0, err
-    assert 'format=yuv444p,remap' in out and "pano_x.pgm" in out and "pano_y.pgm" in out
+    assert "format=yuv444p,remap" in out and "pano_x.pgm" in out and "pano_y.pgm" in out
     xmap, maxval = read_pgm(tmp_path / "pano_x.pgm")
     assert maxval == 65535 and xmap.shape == (32, 96)
 
@@ -129,8 +184,21 @@ def test_cli_maps_writes_pgms_and_prints_the_ffmpeg_command(tmp_path, capsys):
 def test_cli_maps_supersampling_makes_k_times_larger_maps(tmp_path, capsys):
     calib = tmp_path / "rig.yaml"
     RIG.save(calib)
-    code = main(["maps", str(calib), "--perspective", "40x30", "--fov", "80", "--ffmpeg",
-                 "--supersample", "2", "-o", str(tmp_path / "p")])
+    code = main(
+        [
+            "maps",
+            str(calib),
+            "--perspective",
+            "40x30",
+            "--fov",
+            "80",
+            "--ffmpeg",
+            "--supersample",
+            "2",
+            "-o",
+            str(tmp_path / "p"),
+        ]
+    )
     out, err = capsys.readouterr()
     assert code == 0, err
     xmap, _ = read_pgm(tmp_path / "p_x.pgm")
@@ -141,14 +209,17 @@ def test_cli_maps_supersampling_makes_k_times_larger_maps(tmp_path, capsys):
 def test_cli_maps_npy(tmp_path, capsys):
     calib = tmp_path / "rig.yaml"
     RIG.save(calib)
-    assert main(["maps", str(calib), "--panorama", "96x32", "--npy", "-o",
-                 str(tmp_path / "m")]) == 0, capsys.readouterr().err
+    assert (
+        main(["maps", str(calib), "--panorama", "96x32", "--npy", "-o", str(tmp_path / "m")]) == 0
+    ), capsys.readouterr().err
     ref = RIG.init_panorama_maps((96, 32), m1type=cv2.CV_32FC1)
     np.testing.assert_array_equal(np.load(tmp_path / "m_x.npy"), ref[0])
 
 
-@pytest.mark.parametrize("argv", [["--panorama", "48x16"], ["--perspective", "40x30", "--fov", "80"],
-                                  ["--equirect", "64x32"]])
+@pytest.mark.parametrize(
+    "argv",
+    [["--panorama", "48x16"], ["--perspective", "40x30", "--fov", "80"], ["--equirect", "64x32"]],
+)
 def test_supersampled_maps_average_to_the_plain_ones(argv):
     """The k x k blocks of the fine maps are centred on the coarse pixels."""
     import argparse
@@ -183,7 +254,12 @@ def test_the_printed_command_runs(tmp_path, maps):
     cmd = ffmpeg_command(px, py, SIZE, 1, input_name=str(src), output_name=str(tmp_path / "o.png"))
     assert '-lavfi "format=yuv444p,remap"' in cmd
     args = shlex.split(cmd)
-    r = subprocess.run([args[0], "-v", "error", "-y", *args[1:]], capture_output=True, text=True,
-                       timeout=120, check=False)
+    r = subprocess.run(
+        [args[0], "-v", "error", "-y", *args[1:]],
+        capture_output=True,
+        text=True,
+        timeout=120,
+        check=False,
+    )
     assert r.returncode == 0, r.stderr
     assert cv2.imread(str(tmp_path / "o.png")).shape == (SIZE[1], SIZE[0], 3)

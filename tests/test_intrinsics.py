@@ -1,4 +1,5 @@
 """calibrate_intrinsics: OpenCV chessboard calibration of the camera alone (K, D of eq. 24)."""
+
 import cv2
 import numpy as np
 import pytest
@@ -8,9 +9,9 @@ from omnicam.calibration.intrinsics import find_chessboard
 
 K_TRUE = np.array([[820.0, 0.0, 331.5], [0.0, 815.0, 236.0], [0.0, 0.0, 1.0]])
 SIZE = (640, 480)
-PATTERN = (9, 6)      # inner corners
-SQUARE = 25.0         # mm
-SS = 4                # supersampling of the renders
+PATTERN = (9, 6)  # inner corners
+SQUARE = 25.0  # mm
+SS = 4  # supersampling of the renders
 
 
 def _board_texture(px=40, margin=40):
@@ -21,11 +22,16 @@ def _board_texture(px=40, margin=40):
         for c in range(cols):
             if (r + c) % 2 == 0:
                 y, x = margin + r * px, margin + c * px
-                tex[y:y + px, x:x + px] = 0
+                tex[y : y + px, x : x + px] = 0
     # texture pixel (u, v) centre <-> board point ((u + 0.5 - margin - px) / px * SQUARE, ...):
     # the first inner corner is the board origin
-    T = np.array([[SQUARE / px, 0, (0.5 - margin - px) * SQUARE / px],
-                  [0, SQUARE / px, (0.5 - margin - px) * SQUARE / px], [0, 0, 1.0]])
+    T = np.array(
+        [
+            [SQUARE / px, 0, (0.5 - margin - px) * SQUARE / px],
+            [0, SQUARE / px, (0.5 - margin - px) * SQUARE / px],
+            [0, 0, 1.0],
+        ]
+    )
     return tex, T
 
 
@@ -38,7 +44,7 @@ def _render_views(n=10, D=None, seed=0, with_corners=False):
     A = np.array([[SS, 0, (SS - 1) / 2], [0, SS, (SS - 1) / 2], [0, 0, 1.0]])  # px -> subpx
     images, corners = [], []
     grid = np.zeros((PATTERN[0] * PATTERN[1], 3))
-    grid[:, :2] = np.mgrid[0:PATTERN[0], 0:PATTERN[1]].T.reshape(-1, 2) * SQUARE
+    grid[:, :2] = np.mgrid[0 : PATTERN[0], 0 : PATTERN[1]].T.reshape(-1, 2) * SQUARE
     for i in range(n):
         rvec = np.deg2rad(rng.uniform(-30, 30, 3)) * np.array([1, 1, 0.3])
         R = cv2.Rodrigues(rvec)[0]
@@ -48,19 +54,31 @@ def _render_views(n=10, D=None, seed=0, with_corners=False):
         z = rng.uniform(560, 700)
         t = -R @ centre + z * np.linalg.solve(K_TRUE, np.r_[target + rng.uniform(-15, 15, 2), 1])
         H = K_TRUE @ np.c_[R[:, 0], R[:, 1], t] @ T
-        big = cv2.warpPerspective(tex, A @ H, (SIZE[0] * SS, SIZE[1] * SS),
-                                  flags=cv2.INTER_LINEAR, borderValue=128)
+        big = cv2.warpPerspective(
+            tex, A @ H, (SIZE[0] * SS, SIZE[1] * SS), flags=cv2.INTER_LINEAR, borderValue=128
+        )
         img = cv2.resize(big, SIZE, interpolation=cv2.INTER_AREA)
         if D is not None:
             # each distorted pixel shows the ideal pixel it comes from
-            xs, ys = np.meshgrid(np.arange(SIZE[0], dtype=np.float64),
-                                 np.arange(SIZE[1], dtype=np.float64))
+            xs, ys = np.meshgrid(
+                np.arange(SIZE[0], dtype=np.float64), np.arange(SIZE[1], dtype=np.float64)
+            )
             pts = np.stack([xs.ravel(), ys.ravel()], 1).reshape(-1, 1, 2)
-            und = cv2.undistortPoints(pts, K_TRUE, np.asarray(D, float), R=None, P=K_TRUE,
-                                      criteria=(cv2.TERM_CRITERIA_COUNT | cv2.TERM_CRITERIA_EPS,
-                                                100, 1e-12)).reshape(SIZE[1], SIZE[0], 2)
-            img = cv2.remap(img, und[..., 0].astype(np.float32), und[..., 1].astype(np.float32),
-                            cv2.INTER_LINEAR, borderValue=128)
+            und = cv2.undistortPoints(
+                pts,
+                K_TRUE,
+                np.asarray(D, float),
+                R=None,
+                P=K_TRUE,
+                criteria=(cv2.TERM_CRITERIA_COUNT | cv2.TERM_CRITERIA_EPS, 100, 1e-12),
+            ).reshape(SIZE[1], SIZE[0], 2)
+            img = cv2.remap(
+                img,
+                und[..., 0].astype(np.float32),
+                und[..., 1].astype(np.float32),
+                cv2.INTER_LINEAR,
+                borderValue=128,
+            )
         images.append(img)
         corners.append(cv2.projectPoints(grid, rvec, t, K_TRUE, D)[0].reshape(-1, 2))
     return (images, np.array(corners)) if with_corners else images
@@ -72,7 +90,7 @@ def _model_error(K, D, true_corners):
     judges K and D together (k1, k2, k3 and the principal point trade off against each other
     and the poses)."""
     grid = np.zeros((PATTERN[0] * PATTERN[1], 3))
-    grid[:, :2] = np.mgrid[0:PATTERN[0], 0:PATTERN[1]].T.reshape(-1, 2) * SQUARE
+    grid[:, :2] = np.mgrid[0 : PATTERN[0], 0 : PATTERN[1]].T.reshape(-1, 2) * SQUARE
     worst = 0.0
     for c in true_corners:
         ok, rvec, tvec = cv2.solvePnP(grid, c, K, D)
@@ -112,8 +130,10 @@ def test_calibrate_intrinsics_recovers_radial_distortion_bgr_and_paths(tmp_path)
 
 def test_calibrate_intrinsics_uint16_and_float_images():
     images = _render_views(6, seed=2)
-    mixed = [im.astype(np.uint16) * 257 if i % 2 else im.astype(np.float32) / 255
-             for i, im in enumerate(images)]
+    mixed = [
+        im.astype(np.uint16) * 257 if i % 2 else im.astype(np.float32) / 255
+        for i, im in enumerate(images)
+    ]
     rms, K, _ = calibrate_intrinsics(mixed, PATTERN, SQUARE)
     assert rms < 0.1
     np.testing.assert_allclose(np.diag(K)[:2], np.diag(K_TRUE)[:2], rtol=0.01)
@@ -136,25 +156,29 @@ def test_find_chessboard_subpixel_corners_match_projection():
     big = cv2.warpPerspective(tex, A @ H, (SIZE[0] * SS, SIZE[1] * SS), borderValue=128)
     img = cv2.resize(big, SIZE, interpolation=cv2.INTER_AREA)
     corners = find_chessboard(img, PATTERN).reshape(-1, 2)
-    grid = np.mgrid[0:PATTERN[0], 0:PATTERN[1]].T.reshape(-1, 2) * SQUARE
-    proj = cv2.perspectiveTransform(grid.reshape(-1, 1, 2).astype(np.float64),
-                                    K_TRUE @ np.c_[R[:, 0], R[:, 1], t]).reshape(-1, 2)
+    grid = np.mgrid[0 : PATTERN[0], 0 : PATTERN[1]].T.reshape(-1, 2) * SQUARE
+    proj = cv2.perspectiveTransform(
+        grid.reshape(-1, 1, 2).astype(np.float64), K_TRUE @ np.c_[R[:, 0], R[:, 1], t]
+    ).reshape(-1, 2)
     # OpenCV may start the ordering at either end of the board
     err = min(np.abs(corners - proj).max(), np.abs(corners[::-1] - proj).max())
     assert err < 0.1
 
 
-@pytest.mark.parametrize("images, pattern, square, match", [
-    ([], PATTERN, SQUARE, "no images"),
-    ([np.full((480, 640), 128, np.uint8)] * 4, PATTERN, SQUARE, "found in 0 of 4"),
-    (None, (6, 9, 1), SQUARE, "pattern_size"),
-    (None, (1, 9), SQUARE, "pattern_size"),
-    (None, PATTERN, 0.0, "square_size"),
-    (None, PATTERN, float("nan"), "square_size"),
-    ([np.zeros((480, 640, 2), np.uint8)], PATTERN, SQUARE, "shape"),
-    (["/nonexistent/board.png"], PATTERN, SQUARE, "cannot read"),
-    ([object()], PATTERN, SQUARE, "image array"),
-])
+@pytest.mark.parametrize(
+    "images, pattern, square, match",
+    [
+        ([], PATTERN, SQUARE, "no images"),
+        ([np.full((480, 640), 128, np.uint8)] * 4, PATTERN, SQUARE, "found in 0 of 4"),
+        (None, (6, 9, 1), SQUARE, "pattern_size"),
+        (None, (1, 9), SQUARE, "pattern_size"),
+        (None, PATTERN, 0.0, "square_size"),
+        (None, PATTERN, float("nan"), "square_size"),
+        ([np.zeros((480, 640, 2), np.uint8)], PATTERN, SQUARE, "shape"),
+        (["/nonexistent/board.png"], PATTERN, SQUARE, "cannot read"),
+        ([object()], PATTERN, SQUARE, "image array"),
+    ],
+)
 def test_calibrate_intrinsics_bad_input_raises_value_error(images, pattern, square, match):
     if images is None:
         images = [np.zeros((480, 640), np.uint8)]

@@ -1,4 +1,5 @@
 """read_intrinsics also reads ROS camera_info, Kalibr camchains and OpenCV's other layouts."""
+
 import cv2
 import numpy as np
 import pytest
@@ -146,18 +147,28 @@ def test_image_size_matrix_of_three_values_is_refused(tmp_path):
 
 
 def test_parse_yaml_subset():
-    doc = parse_yaml("a: 1\nb:\n  - x: 2\n    y: [1, 2.5, 'q']\n  - 3\nc: {d: true, e: null}\n"
-                     "f: 'hi # not a comment'  # a comment\n")
-    assert doc == {"a": 1, "b": [{"x": 2, "y": [1, 2.5, "q"]}, 3],
-                   "c": {"d": True, "e": None}, "f": "hi # not a comment"}
+    doc = parse_yaml(
+        "a: 1\nb:\n  - x: 2\n    y: [1, 2.5, 'q']\n  - 3\nc: {d: true, e: null}\n"
+        "f: 'hi # not a comment'  # a comment\n"
+    )
+    assert doc == {
+        "a": 1,
+        "b": [{"x": 2, "y": [1, 2.5, "q"]}, 3],
+        "c": {"d": True, "e": None},
+        "f": "hi # not a comment",
+    }
     with pytest.raises(ValueError):
         parse_yaml("a: [1, 2\n")
 
 
-@pytest.mark.parametrize("body", ["camera_matrix: " + "[" * 5000 + "]" * 5000,
-                                  "camera_matrix:\n" + "".join(" " * i + f"k{i}:\n"
-                                                                 for i in range(3000))],
-                         ids=["flow", "indentation"])
+@pytest.mark.parametrize(
+    "body",
+    [
+        "camera_matrix: " + "[" * 5000 + "]" * 5000,
+        "camera_matrix:\n" + "".join(" " * i + f"k{i}:\n" for i in range(3000)),
+    ],
+    ids=["flow", "indentation"],
+)
 def test_deeply_nested_ros_yaml_is_a_value_error_not_a_crash(tmp_path, body):
     p = tmp_path / "camera_info.yaml"
     p.write_text(body)

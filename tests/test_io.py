@@ -1,11 +1,12 @@
 """Calibration files: cv2.FileStorage round trips, strict validation, atomic saves."""
+
 import os
 
 import cv2
 import numpy as np
 import pytest
-
 from conftest import RIGS
+
 from omnicam import MisalignedHyperbolicCamera
 
 
@@ -27,8 +28,9 @@ def test_loaded_camera_is_in_the_gauge(tmp_path):
     cam.save(path)
     # rewrite rvec with an extra spin about the mirror axis: same rig, other gauge
     spun = cv2.Rodrigues(cam.R @ cv2.Rodrigues(np.array([0.0, 0.0, 1.1]))[0])[0]
-    path.write_text(path.read_text().replace(
-        _yaml_matrix(cam.rvec.reshape(3, 1)), _yaml_matrix(spun)))
+    path.write_text(
+        path.read_text().replace(_yaml_matrix(cam.rvec.reshape(3, 1)), _yaml_matrix(spun))
+    )
     assert "1.1" not in _yaml_matrix(cam.rvec.reshape(3, 1))
     np.testing.assert_allclose(MisalignedHyperbolicCamera.load(path).rvec, cam.rvec, atol=1e-12)
 
@@ -51,22 +53,25 @@ def _saved(tmp_path, ext=".yaml"):
     return path, path.read_text()
 
 
-@pytest.mark.parametrize("edit, field", [
-    (lambda t: "", "readable"),
-    (lambda t: "{{{ not yaml", "readable"),
-    (lambda t: t.replace("format_version: 1", "format_version: 7"), "format_version"),
-    (lambda t: t.replace("format_version: 1", "format_version: one"), "format_version"),
-    (lambda t: t.replace("misaligned_hyperbolic", "parabolic"), "model"),
-    (lambda t: t.replace("   a: ", "   aa: "), "mirror.a"),
-    (lambda t: t.replace("   b: ", "   b: -"), "mirror"),
-    (lambda t: t.replace("rows: 3\n   cols: 3", "rows: 1\n   cols: 9"), None),
-    (lambda t: t.replace("K: !!opencv-matrix", "Kx: !!opencv-matrix"), "'K'"),
-    (lambda t: t.replace("K: !!opencv-matrix", "K: 3\nKold: !!opencv-matrix"), "'K'"),
-    (lambda t: t.replace("data: [ 582.64687717031461,", "data: [ .nan,"), "finite"),
-    (lambda t: t.replace("tvec:", "tvecs:"), "'tvec'"),
-    (lambda t: t.replace("   - 500\n   - 500", "   - 500\n   - 0"), "image_size"),
-    (lambda t: t.replace("   - 500\n   - 500", "   - 500"), "image_size"),
-])
+@pytest.mark.parametrize(
+    "edit, field",
+    [
+        (lambda t: "", "readable"),
+        (lambda t: "{{{ not yaml", "readable"),
+        (lambda t: t.replace("format_version: 1", "format_version: 7"), "format_version"),
+        (lambda t: t.replace("format_version: 1", "format_version: one"), "format_version"),
+        (lambda t: t.replace("misaligned_hyperbolic", "parabolic"), "model"),
+        (lambda t: t.replace("   a: ", "   aa: "), "mirror.a"),
+        (lambda t: t.replace("   b: ", "   b: -"), "mirror"),
+        (lambda t: t.replace("rows: 3\n   cols: 3", "rows: 1\n   cols: 9"), None),
+        (lambda t: t.replace("K: !!opencv-matrix", "Kx: !!opencv-matrix"), "'K'"),
+        (lambda t: t.replace("K: !!opencv-matrix", "K: 3\nKold: !!opencv-matrix"), "'K'"),
+        (lambda t: t.replace("data: [ 582.64687717031461,", "data: [ .nan,"), "finite"),
+        (lambda t: t.replace("tvec:", "tvecs:"), "'tvec'"),
+        (lambda t: t.replace("   - 500\n   - 500", "   - 500\n   - 0"), "image_size"),
+        (lambda t: t.replace("   - 500\n   - 500", "   - 500"), "image_size"),
+    ],
+)
 def test_malformed_file_raises_value_error_naming_file_and_field(tmp_path, edit, field):
     path, text = _saved(tmp_path)
     new = edit(text)
@@ -114,6 +119,7 @@ def test_failed_save_leaves_the_old_file_and_no_temporary(tmp_path, monkeypatch)
             return getattr(self.fs, name)
 
     import omnicam.io
+
     monkeypatch.setattr(omnicam.io.cv2, "FileStorage", Broken)
     with pytest.raises(RuntimeError, match="disk full"):
         RIGS["misaligned"].save(path)
@@ -139,6 +145,7 @@ def test_saved_file_has_the_usual_permissions(tmp_path):
 def test_intrinsics_file_round_trip(tmp_path):
     cam = RIGS["rational"]
     from omnicam.io import read_intrinsics, write_intrinsics
+
     write_intrinsics(tmp_path / "k.json", cam.K, cam.D, cam.image_size)
     K, D, size = read_intrinsics(tmp_path / "k.json")
     np.testing.assert_array_equal(K, cam.K)
@@ -146,14 +153,18 @@ def test_intrinsics_file_round_trip(tmp_path):
     assert size == cam.image_size
 
 
-@pytest.mark.parametrize("text, field", [
-    ("%YAML:1.0\nD: [0.1, 0.2]\n", "'K'"),
-    ("%YAML:1.0\nK: [1, 0, 0, 0, 1, 0, 0, 0, 1]\nD: [0.1, 0.2, 0.3]\n", "'D'"),
-    ("%YAML:1.0\nK: [0, 0, 0, 0, 1, 0, 0, 0, 1]\n", "'K'"),
-    ("%YAML:1.0\nK: [1, 0, 0, 0, 1, 0, 0, 0, 1]\nimage_size: [640]\n", "image_size"),
-])
+@pytest.mark.parametrize(
+    "text, field",
+    [
+        ("%YAML:1.0\nD: [0.1, 0.2]\n", "'K'"),
+        ("%YAML:1.0\nK: [1, 0, 0, 0, 1, 0, 0, 0, 1]\nD: [0.1, 0.2, 0.3]\n", "'D'"),
+        ("%YAML:1.0\nK: [0, 0, 0, 0, 1, 0, 0, 0, 1]\n", "'K'"),
+        ("%YAML:1.0\nK: [1, 0, 0, 0, 1, 0, 0, 0, 1]\nimage_size: [640]\n", "image_size"),
+    ],
+)
 def test_bad_intrinsics_file_raises_value_error_naming_the_field(tmp_path, text, field):
     from omnicam.io import read_intrinsics
+
     path = tmp_path / "k.yaml"
     path.write_text(text)
     with pytest.raises(ValueError, match=field) as err:
@@ -179,12 +190,20 @@ def test_non_utf8_file_name_is_refused_before_opencv_sees_it(tmp_path):
     assert sorted(os.listdir(os.fsencode(tmp_path))) == [b"c.yaml", b"c\xff.yaml"]
 
 
-@pytest.mark.parametrize("name, text", [
-    ("deep.json", "[" * 100_000 + "]" * 100_000),
-    ("deep.xml", '<?xml version="1.0"?>\n<opencv_storage>' + "<a>" * 30_000 + "</a>" * 30_000
-     + "</opencv_storage>\n"),
-    ("deep.yaml", "%YAML:1.0\n---\nK: " + "[" * 100_000 + "]" * 100_000 + "\n"),
-])
+@pytest.mark.parametrize(
+    "name, text",
+    [
+        ("deep.json", "[" * 100_000 + "]" * 100_000),
+        (
+            "deep.xml",
+            '<?xml version="1.0"?>\n<opencv_storage>'
+            + "<a>" * 30_000
+            + "</a>" * 30_000
+            + "</opencv_storage>\n",
+        ),
+        ("deep.yaml", "%YAML:1.0\n---\nK: " + "[" * 100_000 + "]" * 100_000 + "\n"),
+    ],
+)
 def test_deep_nesting_is_refused_without_crashing(tmp_path, name, text):
     path = tmp_path / name
     path.write_text(text)
@@ -195,10 +214,13 @@ def test_deep_nesting_is_refused_without_crashing(tmp_path, name, text):
 def test_matrix_value_out_of_its_dt_range_is_refused_not_saturated(tmp_path):
     path, text = _saved(tmp_path)
     K = RIGS["distorted"].K
-    new = text.replace("K: !!opencv-matrix\n   rows: 3\n   cols: 3\n   dt: d\n   data: [ "
-                       + _yaml_matrix(K).split("data: [ ", 1)[1].split("]", 1)[0] + "]",
-                       "K: !!opencv-matrix\n   rows: 3\n   cols: 3\n   dt: u\n"
-                       "   data: [ 583, 0, 250, 0, 583, 250, 0, 0, 1 ]")
+    new = text.replace(
+        "K: !!opencv-matrix\n   rows: 3\n   cols: 3\n   dt: d\n   data: [ "
+        + _yaml_matrix(K).split("data: [ ", 1)[1].split("]", 1)[0]
+        + "]",
+        "K: !!opencv-matrix\n   rows: 3\n   cols: 3\n   dt: u\n"
+        "   data: [ 583, 0, 250, 0, 583, 250, 0, 0, 1 ]",
+    )
     assert new != text
     path.write_text(new)
     message = _load_error(path)
@@ -222,16 +244,20 @@ def test_a_non_regular_file_named_yaml_is_not_a_regular_file(tmp_path, kind):
         path.symlink_to("/dev/null")
     assert "is not a regular file" in _load_error(path)
     from omnicam.io import read_intrinsics
+
     with pytest.raises(ValueError, match="is not a regular file"):
         read_intrinsics(path)
 
 
-@pytest.mark.parametrize("data, words", [
-    (b"%YAML:1.0\n#" + b"x" * (2 << 20), "too large"),
-    (bytes(range(256)) * 4, "binary"),
-    (b"%YAML:1.0\nmodel: \"misaligned_\xffhyperbolic\"\n", "not UTF-8"),
-    (b"", "empty"),
-])
+@pytest.mark.parametrize(
+    "data, words",
+    [
+        (b"%YAML:1.0\n#" + b"x" * (2 << 20), "too large"),
+        (bytes(range(256)) * 4, "binary"),
+        (b'%YAML:1.0\nmodel: "misaligned_\xffhyperbolic"\n', "not UTF-8"),
+        (b"", "empty"),
+    ],
+)
 def test_oversized_binary_and_non_utf8_files_are_refused(tmp_path, data, words):
     for ext in (".yaml", ".json"):
         path = tmp_path / f"c{ext}"
@@ -253,6 +279,7 @@ def test_save_that_does_not_read_back_equal_keeps_the_old_file(tmp_path, monkeyp
     RIGS["aligned"].save(path)
     before = path.read_bytes()
     import omnicam.io
+
     monkeypatch.setattr(omnicam.io, "_same_camera", lambda a, b: False)
     with pytest.raises(ValueError, match="does not read back"):
         RIGS["misaligned"].save(path)
@@ -264,10 +291,15 @@ def _tmpfs(tmp_path, size="64k"):
     if os.geteuid() != 0:
         pytest.skip("needs root to mount a tmpfs")
     import subprocess
+
     mnt = tmp_path / "mnt"
     mnt.mkdir()
-    if subprocess.run(["mount", "-t", "tmpfs", "-o", f"size={size}", "tmpfs", str(mnt)],
-                      capture_output=True).returncode != 0:
+    if (
+        subprocess.run(
+            ["mount", "-t", "tmpfs", "-o", f"size={size}", "tmpfs", str(mnt)], capture_output=True
+        ).returncode
+        != 0
+    ):
         pytest.skip("mount -t tmpfs is not permitted here")
     return mnt
 
@@ -275,6 +307,7 @@ def _tmpfs(tmp_path, size="64k"):
 @pytest.mark.parametrize("ext", [".yaml", ".xml", ".json"])
 def test_save_on_a_full_disk_raises_and_keeps_the_old_file(tmp_path, ext):
     import subprocess
+
     mnt = _tmpfs(tmp_path)
     try:
         path = mnt / f"c{ext}"
@@ -296,6 +329,7 @@ def test_save_on_a_full_disk_raises_and_keeps_the_old_file(tmp_path, ext):
 
 def test_save_into_a_read_only_folder_raises_and_keeps_the_old_file(tmp_path):
     import subprocess
+
     mnt = _tmpfs(tmp_path)
     try:
         path = mnt / "c.yaml"
@@ -312,6 +346,7 @@ def test_save_into_a_read_only_folder_raises_and_keeps_the_old_file(tmp_path):
 
 def test_far_lines_round_trip_also_from_opencv_shaped_arrays(tmp_path):
     from omnicam.io import read_far_lines, write_far_lines
+
     lines = [np.arange(10.0).reshape(5, 1, 2) + i for i in range(3)]
     write_far_lines(tmp_path / "l.json", lines)
     back = read_far_lines(tmp_path / "l.json")
@@ -322,6 +357,7 @@ def test_far_lines_round_trip_also_from_opencv_shaped_arrays(tmp_path):
 
 def test_image_size_written_as_an_opencv_matrix_is_read(tmp_path):
     from omnicam.io import read_intrinsics
+
     K = RIGS["aligned"].K
     for ext in (".yaml", ".xml", ".json"):
         fs = cv2.FileStorage(str(tmp_path / f"k{ext}"), cv2.FILE_STORAGE_WRITE)

@@ -4,6 +4,7 @@ Every ``import`` statement of every module under ``omnicam/`` is an edge, wherev
 the file; a package edge points at its ``__init__``. The graph must have no strongly connected
 component with more than one module (the layers of docs/architecture in README.md).
 """
+
 import ast
 from pathlib import Path
 
@@ -36,8 +37,10 @@ def import_graph():
                     base = ".".join(anchor + ([base] if base else []))
                 # ``from pkg import submodule`` imports the submodule; ``from mod import name``
                 # the module that defines the name
-                targets = [f"{base}.{a.name}" if f"{base}.{a.name}" in modules else base
-                           for a in node.names]
+                targets = [
+                    f"{base}.{a.name}" if f"{base}.{a.name}" in modules else base
+                    for a in node.names
+                ]
             for t in targets:
                 while t and t not in modules:
                     t = t.rpartition(".")[0]
@@ -87,6 +90,13 @@ def test_the_circle_finder_finds_a_circle():
 
 def test_low_layers_import_nothing_of_the_camera():
     graph = import_graph()
-    for low in ("omnicam._validate", "omnicam.gauge", "omnicam.mirror", "omnicam.io",
-                "omnicam.raytrace", "omnicam.views", "omnicam._kernels"):
+    for low in (
+        "omnicam._validate",
+        "omnicam.gauge",
+        "omnicam.mirror",
+        "omnicam.io",
+        "omnicam.raytrace",
+        "omnicam.views",
+        "omnicam._kernels",
+    ):
         assert "omnicam.camera" not in graph[low], low

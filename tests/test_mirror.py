@@ -1,9 +1,10 @@
 """The hyperboloidal mirror (eqs. 1, 8-15): the numpy reference the kernels are checked against."""
+
 import math
 
 import numpy as np
-
 from conftest import RIGS, annulus_pixels
+
 from omnicam import HyperbolicMirror
 
 

@@ -1,4 +1,5 @@
 """calibrate_pattern: K, D and the posture from chessboard corners seen through the mirror."""
+
 import math
 
 import cv2
@@ -25,8 +26,9 @@ def _rig():
 
 
 RIG = _rig()
-POSES = boards.random_board_poses(RIG, 10, PATTERN, SQUARE, distance=(300.0, 900.0),
-                                  max_tilt_deg=50.0, rng=3)
+POSES = boards.random_board_poses(
+    RIG, 10, PATTERN, SQUARE, distance=(300.0, 900.0), max_tilt_deg=50.0, rng=3
+)
 
 
 def _corners(noise=0.0, seed=0, poses=POSES):
@@ -40,9 +42,16 @@ def _rim(noise=0.0, seed=1):
 
 
 def _calibrate(image_points, rim=None, **kw):
-    return omnicam.calibrate_pattern(None, PATTERN, SQUARE, RIG.mirror, image_size=SIZE,
-                                     image_points=image_points,
-                                     boundary_points=_rim() if rim is None else rim, **kw)
+    return omnicam.calibrate_pattern(
+        None,
+        PATTERN,
+        SQUARE,
+        RIG.mirror,
+        image_size=SIZE,
+        image_points=image_points,
+        boundary_points=_rim() if rim is None else rim,
+        **kw,
+    )
 
 
 @pytest.fixture(scope="module")
@@ -89,17 +98,26 @@ def test_classmethod_builds_the_given_class():
     class Sub(MisalignedHyperbolicCamera):
         __slots__ = ()
 
-    cam, _ = Sub.calibrate_pattern(None, PATTERN, SQUARE, RIG.mirror, image_size=SIZE,
-                                   image_points=_corners()[:4], boundary_points=_rim(),
-                                   dist_model="none")
+    cam, _ = Sub.calibrate_pattern(
+        None,
+        PATTERN,
+        SQUARE,
+        RIG.mirror,
+        image_size=SIZE,
+        image_points=_corners()[:4],
+        boundary_points=_rim(),
+        dist_model="none",
+    )
     assert type(cam) is Sub
     assert np.abs(cam.K - RIG.K).max() < 1e-5
 
 
 def test_fewer_than_three_views_raise():
     pts = _corners()[:2] + [None]
-    with pytest.warns(RuntimeWarning, match="no board found"), \
-            pytest.raises(ValueError, match="at least 3"):
+    with (
+        pytest.warns(RuntimeWarning, match="no board found"),
+        pytest.raises(ValueError, match="at least 3"),
+    ):
         _calibrate(pts)
 
 
@@ -129,8 +147,7 @@ def test_boards_seen_edge_on_raise():
         poses.append((rvec, vp + 500.0 * u))
     pts = _corners(poses=poses)
     assert all(np.isfinite(p).all() for p in pts)
-    with pytest.warns(RuntimeWarning, match="edge-on"), \
-            pytest.raises(ValueError, match="edge-on"):
+    with pytest.warns(RuntimeWarning, match="edge-on"), pytest.raises(ValueError, match="edge-on"):
         _calibrate(pts)
 
 
@@ -149,8 +166,9 @@ def test_boards_all_on_one_side_are_warned_about():
     rng = np.random.default_rng(4)
     poses = [p for p in POSES if math.atan2(p[1][1], p[1][0]) > 0.0]
     if len(poses) < 3:  # make sure the case exists whatever the random poses
-        poses = boards.random_board_poses(RIG, 12, PATTERN, SQUARE, distance=(300.0, 900.0),
-                                          rng=rng)
+        poses = boards.random_board_poses(
+            RIG, 12, PATTERN, SQUARE, distance=(300.0, 900.0), rng=rng
+        )
         poses = [p for p in poses if math.atan2(p[1][1], p[1][0]) > 0.0]
     _, report = _calibrate(_corners(poses=poses), dist_model="none")
     assert any("one side" in w for w in report.warnings)
@@ -164,8 +182,9 @@ def test_bad_arguments_name_what_to_change():
     with pytest.raises(ValueError, match="dist_model"):
         _calibrate(_corners(), dist_model="fisheye")
     with pytest.raises(ValueError, match="boundary_points"):
-        omnicam.calibrate_pattern(None, PATTERN, SQUARE, RIG.mirror, image_points=_corners(),
-                                  image_size=SIZE)
+        omnicam.calibrate_pattern(
+            None, PATTERN, SQUARE, RIG.mirror, image_points=_corners(), image_size=SIZE
+        )
 
 
 def test_the_camera_reflection_with_a_known_plane_pins_the_tilt_against_the_principal_point():

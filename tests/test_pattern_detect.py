@@ -1,4 +1,5 @@
 """find_pattern: chessboard corners in omnidirectional renders, mapped back to the source image."""
+
 import numpy as np
 import pytest
 
@@ -16,9 +17,16 @@ ROUGH = synthetic.aligned_rig(SIZE)
 def _board_at(elevation_deg, azimuth_deg, distance, seed):
     """A board facing the rig at about the given elevation and azimuth (mirror frame)."""
     return boards.random_board_poses(
-        RIG, 1, PATTERN, SQUARE, distance=(distance, distance * 1.1),
-        elevation=(elevation_deg - 3.0, elevation_deg + 3.0), max_tilt_deg=30.0, rng=seed,
-        azimuth=(azimuth_deg - 20.0, azimuth_deg + 20.0))[0]
+        RIG,
+        1,
+        PATTERN,
+        SQUARE,
+        distance=(distance, distance * 1.1),
+        elevation=(elevation_deg - 3.0, elevation_deg + 3.0),
+        max_tilt_deg=30.0,
+        rng=seed,
+        azimuth=(azimuth_deg - 20.0, azimuth_deg + 20.0),
+    )[0]
 
 
 def _match(found, truth):
@@ -28,11 +36,15 @@ def _match(found, truth):
     return min(np.abs(f - t).max(), np.abs(f[::-1] - t).max())
 
 
-@pytest.mark.parametrize("elevation, azimuth, distance", [
-    (-8.0, 40.0, 1000.0),   # next to the rim
-    (-25.0, 160.0, 450.0),  # the middle of the annulus
-    (-55.0, 250.0, 350.0),  # towards the centre
-], ids=["rim", "middle", "centre"])
+@pytest.mark.parametrize(
+    "elevation, azimuth, distance",
+    [
+        (-8.0, 40.0, 1000.0),  # next to the rim
+        (-25.0, 160.0, 450.0),  # the middle of the annulus
+        (-55.0, 250.0, 350.0),  # towards the centre
+    ],
+    ids=["rim", "middle", "centre"],
+)
 def test_board_is_found_from_the_rim_to_the_centre_of_the_annulus(elevation, azimuth, distance):
     rvec, tvec = _board_at(elevation, azimuth, distance, seed=int(distance))
     img = boards.render_board(RIG, PATTERN, SQUARE, rvec, tvec, supersample=3, noise=1.0, seed=1)
@@ -47,8 +59,9 @@ def test_corners_come_row_by_row_as_opencv_orders_them():
     rvec, tvec = _board_at(-20.0, 90.0, 450.0, seed=7)
     img = boards.render_board(RIG, PATTERN, SQUARE, rvec, tvec, supersample=3)
     found = omnicam.find_pattern(img, PATTERN, ROUGH).reshape(PATTERN[1], PATTERN[0], 2)
-    truth = boards.board_corners(RIG, PATTERN, SQUARE, rvec, tvec).reshape(PATTERN[1],
-                                                                           PATTERN[0], 2)
+    truth = boards.board_corners(RIG, PATTERN, SQUARE, rvec, tvec).reshape(
+        PATTERN[1], PATTERN[0], 2
+    )
     if np.abs(found - truth).max() > 1.0:
         truth = truth[::-1, ::-1]  # the board turned by 180 degrees: the same grid
     assert np.abs(found - truth).max() < 0.3
@@ -75,16 +88,33 @@ def test_cli_calibrates_from_chessboard_images_without_intrinsics(tmp_path, caps
 
     from omnicam.cli import main
 
-    poses = boards.random_board_poses(RIG, 4, PATTERN, SQUARE, distance=(350.0, 700.0),
-                                      max_tilt_deg=40.0, rng=11)
+    poses = boards.random_board_poses(
+        RIG, 4, PATTERN, SQUARE, distance=(350.0, 700.0), max_tilt_deg=40.0, rng=11
+    )
     paths = []
     for i, p in enumerate(poses):
         path = tmp_path / f"board{i}.png"
         cv2.imwrite(str(path), boards.render_board(RIG, PATTERN, SQUARE, *p, supersample=2))
         paths.append(str(path))
     calib = tmp_path / "rig.yaml"
-    code = main(["calibrate", "--chessboard", "7x5", "--square", "60", *paths, "--mirror",
-                 "23.4", "28.1", "30", "--dist-model", "none", "-o", str(calib)])
+    code = main(
+        [
+            "calibrate",
+            "--chessboard",
+            "7x5",
+            "--square",
+            "60",
+            *paths,
+            "--mirror",
+            "23.4",
+            "28.1",
+            "30",
+            "--dist-model",
+            "none",
+            "-o",
+            str(calib),
+        ]
+    )
     out = capsys.readouterr().out
     assert code == 0, out
     assert "rms px" in out and calib.exists()
@@ -96,12 +126,25 @@ def test_cli_calibrates_from_chessboard_images_without_intrinsics(tmp_path, caps
 def test_cli_chessboard_needs_square_and_one_image_without_it(tmp_path, capsys):
     from omnicam.cli import main
 
-    args = ["calibrate", "a.png", "b.png", "--mirror", "23.4", "28.1", "30", "-o",
-            str(tmp_path / "r.yaml")]
+    args = [
+        "calibrate",
+        "a.png",
+        "b.png",
+        "--mirror",
+        "23.4",
+        "28.1",
+        "30",
+        "-o",
+        str(tmp_path / "r.yaml"),
+    ]
     assert main(args) == 2
     assert "one IMAGE" in capsys.readouterr().err
     assert main([*args, "--chessboard", "7x5"]) == 2
     assert "--square" in capsys.readouterr().err
-    assert main(["calibrate", "a.png", "--mirror", "23.4", "28.1", "30", "-o",
-                 str(tmp_path / "r.yaml")]) == 2
+    assert (
+        main(
+            ["calibrate", "a.png", "--mirror", "23.4", "28.1", "30", "-o", str(tmp_path / "r.yaml")]
+        )
+        == 2
+    )
     assert "--intrinsics" in capsys.readouterr().err

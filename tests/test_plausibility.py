@@ -1,4 +1,5 @@
 """Plausibility of a calibration: what no real rig gives is warned about, a good rig is not."""
+
 import math
 import re
 
@@ -6,8 +7,6 @@ import numpy as np
 import pytest
 
 from omnicam import HyperbolicMirror, MisalignedHyperbolicCamera, synthetic
-
-calibrate = MisalignedHyperbolicCamera.calibrate
 from omnicam.calibration.plausibility import (
     PlausibilityWarning,
     check_plausibility,
@@ -19,6 +18,8 @@ from omnicam.calibration.plausibility import (
 from omnicam.calibration.rim import fit_rim
 from omnicam.camera import scale_K
 
+calibrate = MisalignedHyperbolicCamera.calibrate
+
 SIZE = (400, 300)
 
 
@@ -27,8 +28,11 @@ def scene():
     """A rig within the limits (tilt 3 deg, camera 2.3 mm from the lower focus), its render and
     far lines."""
     cam = synthetic.misaligned_rig(3.0, 30.0, (1.5, -1.0, 1.0), image_size=SIZE)
-    return {"cam": cam, "image": synthetic.render_environment(cam, seed=1),
-            "lines": synthetic.far_line_pixels(cam, 3, rng=2)}
+    return {
+        "cam": cam,
+        "image": synthetic.render_environment(cam, seed=1),
+        "lines": synthetic.far_line_pixels(cam, 3, rng=2),
+    }
 
 
 def kinds(report):
@@ -75,8 +79,11 @@ def test_good_rig_gives_no_plausibility_warning(scene, with_lines):
 
 
 def test_true_rigs_at_moderate_misalignment_pass_every_check():
-    for cam in (synthetic.aligned_rig(), synthetic.misaligned_rig(),
-                synthetic.misaligned_rig(8.0, 200.0, (4.0, -5.0, 3.0))):
+    for cam in (
+        synthetic.aligned_rig(),
+        synthetic.misaligned_rig(),
+        synthetic.misaligned_rig(8.0, 200.0, (4.0, -5.0, 3.0)),
+    ):
         assert check_plausibility(cam, true_rim(cam)) == []
 
 
@@ -133,8 +140,7 @@ def test_principal_point_far_from_the_rim_centre(scene):
 
 def test_principal_point_outside_the_image():
     cam = synthetic.aligned_rig((400, 300))
-    moved = cam.replace(K=np.array([[cam.K[0, 0], 0, 700.0], [0, cam.K[1, 1], 150.0],
-                                    [0, 0, 1]]))
+    moved = cam.replace(K=np.array([[cam.K[0, 0], 0, 700.0], [0, cam.K[1, 1], 150.0], [0, 0, 1]]))
     ws = check_plausibility(moved, true_rim(moved), (400, 300))
     assert [w.kind for w in ws] == ["intrinsics"]
     assert "outside the 400x300 image" in str(ws[0])
@@ -161,8 +167,7 @@ def test_image_without_a_mirror_is_never_a_quiet_calibration():
         assert "ellipse" in str(err) or "rim" in str(err)
         return
     assert report.plausibility, f"quiet calibration: tilt {tilt_deg(camera.R):.1f} deg"
-    assert any("that the ellipse found is the mirror's rim" in str(w)
-               for w in report.plausibility)
+    assert any("that the ellipse found is the mirror's rim" in str(w) for w in report.plausibility)
 
 
 @pytest.mark.parametrize("seed", [0, 1])
@@ -189,8 +194,12 @@ def test_rim_hint_outside_the_image_raises_value_error_naming_hint(scene):
 def test_rim_hint_is_passed_to_detect_rim(scene):
     cam = scene["cam"]
     rim = true_rim(cam)
-    _, report = calibrate(cam.K, cam.mirror, image=scene["image"],
-                          rim_hint=(*(rim.center + 5.0), rim.axes.mean() * 1.1))
+    _, report = calibrate(
+        cam.K,
+        cam.mirror,
+        image=scene["image"],
+        rim_hint=(*(rim.center + 5.0), rim.axes.mean() * 1.1),
+    )
     assert abs(fit_rim(report.boundary_points).axes.mean() - rim.axes.mean()) < 0.5
     with pytest.raises(ValueError, match="near the hint"):  # nothing there at that size
         calibrate(cam.K, cam.mirror, image=scene["image"], rim_hint=(60.0, 60.0, 50.0))
@@ -213,11 +222,14 @@ def test_tilt_and_offset_limits_are_settable():
 
 def test_residuals_above_the_limit_warn_by_name():
     cam = synthetic.misaligned_rig()
-    ws = check_plausibility(cam, true_rim(cam), residuals={"far lines": 4.2,
-                                                           "outline": 0.3, "x": math.nan})
+    ws = check_plausibility(
+        cam, true_rim(cam), residuals={"far lines": 4.2, "outline": 0.3, "x": math.nan}
+    )
     assert [w.kind for w in ws] == ["residual"] and "far lines" in str(ws[0])
-    assert check_plausibility(cam, true_rim(cam), residuals={"far lines": 4.2},
-                              max_residual_px=5) == []
+    assert (
+        check_plausibility(cam, true_rim(cam), residuals={"far lines": 4.2}, max_residual_px=5)
+        == []
+    )
 
 
 def test_check_plausibility_takes_the_conic_as_well_as_a_rim_fit():
@@ -227,9 +239,16 @@ def test_check_plausibility_takes_the_conic_as_well_as_a_rim_fit():
     assert [str(w) for w in a] == [str(w) for w in b] and a
 
 
-@pytest.mark.parametrize("kwargs", [{"max_tilt_deg": 0}, {"max_offset_mm": -1},
-                                    {"max_tilt_deg": math.nan}, {"max_residual_px": "a"},
-                                    {"max_aspect_deviation": math.inf}])
+@pytest.mark.parametrize(
+    "kwargs",
+    [
+        {"max_tilt_deg": 0},
+        {"max_offset_mm": -1},
+        {"max_tilt_deg": math.nan},
+        {"max_residual_px": "a"},
+        {"max_aspect_deviation": math.inf},
+    ],
+)
 def test_bad_limits_raise_value_error_naming_them(kwargs):
     cam = synthetic.aligned_rig()
     with pytest.raises(ValueError, match=next(iter(kwargs))):
@@ -245,8 +264,9 @@ def test_swapped_mirror_warnings_compare_costs_and_postures():
     assert swapped_mirror_warnings(m, g, s)[0].kind == "swapped_ab"
     assert swapped_mirror_warnings(m, s, g) == []
     assert swapped_mirror_warnings(m, g, None) == []
-    posture = swapped_mirror_warnings(m, {"camera": bad, "costs": {}},
-                                      {"camera": good, "costs": {}})
+    posture = swapped_mirror_warnings(
+        m, {"camera": bad, "costs": {}}, {"camera": good, "costs": {}}
+    )
     assert "would be plausible" in str(posture[0])
 
 

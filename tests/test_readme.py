@@ -1,4 +1,5 @@
 """README's quick start runs as written."""
+
 import pathlib
 import re
 

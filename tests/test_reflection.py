@@ -11,10 +11,10 @@ from test_chen import RIGS
 
 from omnicam import MisalignedHyperbolicCamera, synthetic
 from omnicam.calibration import EstimationError, reflection
-
-calibrate = MisalignedHyperbolicCamera.calibrate
 from omnicam.calibration.refine import refine_posture
 from omnicam.calibration.rim import detect_rim
+
+calibrate = MisalignedHyperbolicCamera.calibrate
 
 R_C, Z_C = 9.0, 12.0  # the barrel's front edge in tests/barrel.py
 

@@ -1,4 +1,5 @@
 """The rim ellipse Q_I (eqs. 20-22): fit to given points, and detection in images."""
+
 import pathlib
 
 import cv2
@@ -6,8 +7,14 @@ import numpy as np
 import pytest
 
 from omnicam import synthetic
-from omnicam.calibration.rim import (RimFit, conic_distance, conic_from_ellipse, detect_rim,
-                                     ellipse_from_conic, fit_rim)
+from omnicam.calibration.rim import (
+    RimFit,
+    conic_distance,
+    conic_from_ellipse,
+    detect_rim,
+    ellipse_from_conic,
+    fit_rim,
+)
 
 
 def _conic_residual(Q, pts):
@@ -84,23 +91,31 @@ def test_fit_rim_without_robust_uses_every_point():
     assert fit.inliers.all() and len(fit.points) == 51 and fit.rms > 0.1
 
 
-@pytest.mark.parametrize("points, match", [
-    (np.zeros((4, 2)), "at least 6"),
-    (np.zeros((10, 3)), "shape"),
-    (np.full((10, 2), np.nan), "finite"),
-    (np.c_[np.arange(10.0), 2 * np.arange(10.0)], "ellipse"),
-    (np.c_[np.arange(10.0), np.arange(10.0) ** 2], "ellipse"),
-    (np.zeros((10, 2)), "ellipse"),
-    ("rim", "array"),
-])
+@pytest.mark.parametrize(
+    "points, match",
+    [
+        (np.zeros((4, 2)), "at least 6"),
+        (np.zeros((10, 3)), "shape"),
+        (np.full((10, 2), np.nan), "finite"),
+        (np.c_[np.arange(10.0), 2 * np.arange(10.0)], "ellipse"),
+        (np.c_[np.arange(10.0), np.arange(10.0) ** 2], "ellipse"),
+        (np.zeros((10, 2)), "ellipse"),
+        ("rim", "array"),
+    ],
+)
 def test_fit_rim_bad_input_raises_value_error(points, match):
     with pytest.raises(ValueError, match=match):
         fit_rim(points)
 
 
-@pytest.mark.parametrize("kwargs, match", [({"threshold": 0.0}, "threshold"),
-                                            ({"threshold": float("nan")}, "threshold"),
-                                            ({"max_trials": 0}, "max_trials")])
+@pytest.mark.parametrize(
+    "kwargs, match",
+    [
+        ({"threshold": 0.0}, "threshold"),
+        ({"threshold": float("nan")}, "threshold"),
+        ({"max_trials": 0}, "max_trials"),
+    ],
+)
 def test_fit_rim_bad_parameters_raise_value_error(kwargs, match):
     with pytest.raises(ValueError, match=match):
         fit_rim(synthetic.aligned_rig().rim_image_points(20), **kwargs)
@@ -115,8 +130,13 @@ def test_fit_rim_too_few_points_non_robust():
 
 # -- detect_rim on images ------------------------------------------------------------------------
 # the shared data folder next to the repository (see shared/data/real/README.md)
-REAL_PHOTO = (pathlib.Path(__file__).resolve().parents[2]
-              / "shared" / "data" / "real" / "office_catadioptric_1920x1080.jpg")
+REAL_PHOTO = (
+    pathlib.Path(__file__).resolve().parents[2]
+    / "shared"
+    / "data"
+    / "real"
+    / "office_catadioptric_1920x1080.jpg"
+)
 
 # A careful manual fit of the real photograph's rim (the outer edge of the bright mirror against
 # the black holder), made before detect_rim was written. How it was made: radial intensity
@@ -127,10 +147,32 @@ REAL_PHOTO = (pathlib.Path(__file__).resolve().parents[2]
 # mirror content next to the rim is as dark as the holder (40-55 deg, 245-300 deg) or where a
 # specular streak or a two-step edge made the reading ambiguous (20, -50, 235, 240 deg) were left
 # out. Angle (deg, image y down) -> offset (px) from radius 595:
-MANUAL_PICKS = {-65: 4.1, -60: 4.1, -55: 4.4, -40: -0.5, -30: 0.1, -20: -0.6, -10: 0.3, 0: -1.6,
-                10: -0.9, 30: -0.6, 60: 2.3, 120: 2.4, 125: 1.85, 130: 1.35, 140: 0.25, 150: 0.07,
-                160: -1.1, 170: -1.85, 180: -2.3, 190: -1.55, 200: -0.5, 210: -0.6, 220: 0.6,
-                230: 1.0}
+MANUAL_PICKS = {
+    -65: 4.1,
+    -60: 4.1,
+    -55: 4.4,
+    -40: -0.5,
+    -30: 0.1,
+    -20: -0.6,
+    -10: 0.3,
+    0: -1.6,
+    10: -0.9,
+    30: -0.6,
+    60: 2.3,
+    120: 2.4,
+    125: 1.85,
+    130: 1.35,
+    140: 0.25,
+    150: 0.07,
+    160: -1.1,
+    170: -1.85,
+    180: -2.3,
+    190: -1.55,
+    200: -0.5,
+    210: -0.6,
+    220: 0.6,
+    230: 1.0,
+}
 # fit_rim(manual points, robust=False): centre, semi-axes, mean diameter (px); residual RMS 0.65 px
 MANUAL_CENTER = (981.31, 553.52)
 MANUAL_AXES = (599.22, 593.39)
@@ -150,8 +192,9 @@ def _texture(d):
     return 175 + 45 * np.sin(7 * az) * np.cos(5 * el) + 15 * np.cos(23 * az + 3 * el)
 
 
-def _render(cam, supersample=8, housing=30.0, lens_frac=0.25, clutter=False, struts=(), noise=0.0,
-            seed=0):
+def _render(
+    cam, supersample=8, housing=30.0, lens_frac=0.25, clutter=False, struts=(), noise=0.0, seed=0
+):
     """A rendered catadioptric image with an exact rim (float64 grey, 0..255).
 
     Pixels whose ray (``cam.unproject``) is finite see the textured scene, the others the dark
@@ -176,7 +219,7 @@ def _render(cam, supersample=8, housing=30.0, lens_frac=0.25, clutter=False, str
     vb = np.full(len(bp), housing)
     ok = np.isfinite(db[:, 0])
     vb[ok] = _texture(db[ok])
-    val[band] = vb.reshape(-1, supersample ** 2).mean(1)
+    val[band] = vb.reshape(-1, supersample**2).mean(1)
     img = val.reshape(h, w)
     img[np.hypot(gx - truth.center[0], gy - truth.center[1]) < lens_frac * truth.axes.mean()] = 12
     for ang in struts:
@@ -225,8 +268,9 @@ def test_detect_rim_ignores_lens_reflection_and_clipping():
     cam = synthetic.misaligned_rig(5.0, 0.0, (5.0, 0.0, 0.0), image_size=(640, 400), fill=1.2)
     rim = cam.rim_image_points(2000)
     assert rim[:, 1].min() < 0 and rim[:, 1].max() > 399 and rim[:, 0].max() > 639  # clipped
-    img = np.round(_render(cam, lens_frac=0.45, clutter=True, struts=(200, 290, 340),
-                           seed=1)).astype(np.uint8)
+    img = np.round(
+        _render(cam, lens_frac=0.45, clutter=True, struts=(200, 290, 340), seed=1)
+    ).astype(np.uint8)
     fit = detect_rim(img)
     assert _rms_to_conic(fit.conic, rim) < 0.05
     # every point used is on the rim, in the frame, none on the border, the lens or the clutter
@@ -276,7 +320,7 @@ def test_detect_rim_any_circular_rim_strongly_oblique_ellipse():
     for dy in sub:
         for dx in sub:
             q = np.stack([xs + dx - center[0], ys + dy - center[1]], -1) @ Sinv.T
-            cover += (q ** 2).sum(-1) < 1
+            cover += (q**2).sum(-1) < 1
     cover /= n * n
     img = 40 + 160 * cover + 30 * cover * np.sin(xs / 9.0) * np.cos(ys / 13.0)
     img[np.hypot(xs - 270, ys - 215) < 45] = 10
@@ -308,8 +352,9 @@ def test_detect_rim_real_photo_variants_match_manual_fit(variant):
     img = cv2.imread(str(REAL_PHOTO))
     center, diameter = np.array(MANUAL_CENTER), MANUAL_DIAMETER
     if variant == "half_size_grey":
-        img = cv2.cvtColor(cv2.resize(img, (960, 540), interpolation=cv2.INTER_AREA),
-                           cv2.COLOR_BGR2GRAY)
+        img = cv2.cvtColor(
+            cv2.resize(img, (960, 540), interpolation=cv2.INTER_AREA), cv2.COLOR_BGR2GRAY
+        )
         center, diameter = (center + 0.5) / 2 - 0.5, diameter / 2
     elif variant == "cropped_more":
         img = img[100:-100, 300:]
@@ -336,14 +381,17 @@ def test_detect_rim_on_synthetic_renderer_images(scene, noise):
     assert _rms_to_conic(fit.conic, cam.rim_image_points(1000)) < 0.05
 
 
-@pytest.mark.parametrize("image, match", [
-    (np.zeros((200, 200), np.uint8), "no ellipse"),
-    (np.random.default_rng(0).integers(0, 255, (200, 200)).astype(np.uint8), "no ellipse"),
-    (np.zeros((10, 10), np.uint8), "too small"),
-    (np.zeros((200, 200, 2), np.uint8), "grey"),
-    (np.zeros((200, 200), bool), "dtype"),
-    ([[0, 1], [1, 0]], "numpy array"),
-])
+@pytest.mark.parametrize(
+    "image, match",
+    [
+        (np.zeros((200, 200), np.uint8), "no ellipse"),
+        (np.random.default_rng(0).integers(0, 255, (200, 200)).astype(np.uint8), "no ellipse"),
+        (np.zeros((10, 10), np.uint8), "too small"),
+        (np.zeros((200, 200, 2), np.uint8), "grey"),
+        (np.zeros((200, 200), bool), "dtype"),
+        ([[0, 1], [1, 0]], "numpy array"),
+    ],
+)
 def test_detect_rim_bad_input_raises_value_error(image, match):
     with pytest.raises(ValueError, match=match):
         detect_rim(image)
@@ -358,23 +406,28 @@ def test_detect_rim_no_circle_in_image_raises():
 
 
 # -- a white holder ring with struts; hints and the expected size --------------------------------
-def white_holder_render(size=400, rim_px=130, holder_px=167, struts=(20, 140, 260), noise=0.0,
-                        seed=0, holder=235.0):
+def white_holder_render(
+    size=400, rim_px=130, holder_px=167, struts=(20, 140, 260), noise=0.0, seed=0, holder=235.0
+):
     """A rig in a white holder ring (``holder_px`` outer radius) on a darker textured room, three
     dark struts crossing holder and mirror (radial bars), rendered by ``omnicam.synthetic``
     (environment at infinity, camera's reflection): ``(image, camera)``. The mirror's content
     near the rim (bright sky) is only ~25 grey levels darker than the holder, while the holder's
     outer edge is a 165-level step: the edge a bright-mirror detector takes for the rim."""
-    cam = synthetic.misaligned_rig(2.0, 40.0, (1.0, -0.5, 0.5), image_size=(size, size),
-                                   fill=2 * rim_px / size)
+    cam = synthetic.misaligned_rig(
+        2.0, 40.0, (1.0, -0.5, 0.5), image_size=(size, size), fill=2 * rim_px / size
+    )
     c = cam.rim_image_points(720).mean(axis=0)
     yy, xx = np.mgrid[0:size, 0:size].astype(np.float32)
     rng = np.random.default_rng(seed)
     room = 70 + 25 * np.sin(xx / 23.0) * np.cos(yy / 31.0) + rng.normal(0, 3, (size, size))
     bg = np.repeat(room[..., None], 3, axis=2)
     ring = np.hypot(xx - c[0], yy - c[1]) < holder_px
-    bg[ring] = (holder(xx, yy) if callable(holder) else holder)[..., None][ring] \
-        if callable(holder) else holder
+    bg[ring] = (
+        (holder(xx, yy) if callable(holder) else holder)[..., None][ring]
+        if callable(holder)
+        else holder
+    )
     img = synthetic.render_environment(cam, background=bg, noise=noise, seed=seed)
     q = np.stack([xx - c[0], yy - c[1]], -1)
     for ang in struts:
@@ -403,8 +456,11 @@ def test_detect_rim_unguided_takes_a_white_holders_outer_edge(holder):
     assert abs(detect_rim(holder[0]).axes.mean() - 167.0) < 1.5
 
 
-@pytest.mark.parametrize("kwargs", [{"expected": (115.0, 150.0)}, {"expected": 130.0}],
-                         ids=["expected_range", "expected_radius"])
+@pytest.mark.parametrize(
+    "kwargs",
+    [{"expected": (115.0, 150.0)}, {"expected": 130.0}],
+    ids=["expected_range", "expected_radius"],
+)
 def test_detect_rim_white_holder_finds_the_rim_not_the_holder_edge(holder, kwargs):
     img, cam = holder
     fit = detect_rim(img, **kwargs)
@@ -445,17 +501,20 @@ def test_detect_rim_no_rim_near_the_hint_raises(holder):
         detect_rim(img, hint=(60.0, 60.0, 40.0))
 
 
-@pytest.mark.parametrize("hint, match", [
-    ((500.0, 200.0, 100.0), "outside"),
-    ((200.0, -3.0, 100.0), "outside"),
-    ((float("nan"), 200.0, 100.0), "finite"),
-    ((200.0, 200.0, float("inf")), "finite"),
-    ((200.0, 200.0, 0.0), "positive"),
-    ((200.0, 200.0, -5.0), "positive"),
-    ((200.0, 200.0, 1000.0), "diagonal"),
-    ((200.0, 200.0), r"\(cx, cy, r\)"),
-    ("centre", r"\(cx, cy, r\)"),
-])
+@pytest.mark.parametrize(
+    "hint, match",
+    [
+        ((500.0, 200.0, 100.0), "outside"),
+        ((200.0, -3.0, 100.0), "outside"),
+        ((float("nan"), 200.0, 100.0), "finite"),
+        ((200.0, 200.0, float("inf")), "finite"),
+        ((200.0, 200.0, 0.0), "positive"),
+        ((200.0, 200.0, -5.0), "positive"),
+        ((200.0, 200.0, 1000.0), "diagonal"),
+        ((200.0, 200.0), r"\(cx, cy, r\)"),
+        ("centre", r"\(cx, cy, r\)"),
+    ],
+)
 def test_detect_rim_bad_hint_raises_value_error_naming_hint(holder, hint, match):
     img, _ = holder
     with pytest.raises(ValueError, match="hint") as err:
@@ -463,8 +522,9 @@ def test_detect_rim_bad_hint_raises_value_error_naming_hint(holder, hint, match)
     assert err.match(match)
 
 
-@pytest.mark.parametrize("expected", [(0.0, 10.0), (20.0, 10.0), (float("nan"), 5.0), -3.0,
-                                      (1.0, 2.0, 3.0), "big"])
+@pytest.mark.parametrize(
+    "expected", [(0.0, 10.0), (20.0, 10.0), (float("nan"), 5.0), -3.0, (1.0, 2.0, 3.0), "big"]
+)
 def test_detect_rim_bad_expected_raises_value_error_naming_it(holder, expected):
     with pytest.raises(ValueError, match="expected"):
         detect_rim(holder[0], expected=expected)

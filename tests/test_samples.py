@@ -1,4 +1,5 @@
 """Shipped calibration files: loadable, and the package copies equal the top-level source."""
+
 import pathlib
 
 import pytest

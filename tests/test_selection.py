@@ -1,17 +1,19 @@
 """Selection of the posture with far lines (paper section 3.2, eq. 31)."""
+
 import math
 
 import numpy as np
 import pytest
+from test_chen import RIGS, candidates_of
 
 from omnicam import synthetic
 from omnicam.calibration import EstimationError, selection
-from test_chen import RIGS, candidates_of
 
 
 def _select(cam, lines):
     def make(c):
         return cam.replace(rvec=c.rvec, tvec=c.tvec)
+
     sel = selection.select_candidate(candidates_of(cam), make, lines, (0.0, 0.0, -cam.mirror.c))
     return list(sel.candidates), sel.chosen, sel.confidence, list(sel.warnings)
 
@@ -54,8 +56,11 @@ def test_without_lines_the_fallback_warns_that_the_choice_is_ambiguous():
     assert cands[chosen].physical and conf == 0.0
     assert len(warnings) == 1 and "ambiguous" in warnings[0]
     # the fallback: the camera nearest the lower focus
-    dist = {i: np.linalg.norm(-c.R.T @ c.tvec - [0, 0, -cam.mirror.c])
-            for i, c in enumerate(cands) if c.physical}
+    dist = {
+        i: np.linalg.norm(-c.R.T @ c.tvec - [0, 0, -cam.mirror.c])
+        for i, c in enumerate(cands)
+        if c.physical
+    }
     assert chosen == min(dist, key=dist.get)
 
 
@@ -65,8 +70,9 @@ def test_far_line_with_two_points_raises():
 
 
 def test_far_lines_accept_opencv_shapes_and_reject_bad_ones():
-    lines = selection.validate_far_lines([np.zeros((4, 1, 2), np.float32), [[0, 0], [1, 1],
-                                                                           [2, 2]]])
+    lines = selection.validate_far_lines(
+        [np.zeros((4, 1, 2), np.float32), [[0, 0], [1, 1], [2, 2]]]
+    )
     assert [x.shape for x in lines] == [(4, 2), (3, 2)]
     assert selection.validate_far_lines(None) == []
     # a bare array is one line; an (L, N, 2) array is L lines
@@ -82,8 +88,9 @@ def test_far_lines_accept_opencv_shapes_and_reject_bad_ones():
 def test_far_line_outside_the_rim_raises():
     selection.check_lines_inside_rim([np.array([-5.0, -0.1, 1.9])], 2.0)
     with pytest.raises(ValueError, match="outside the mirror rim"):
-        selection.check_lines_inside_rim([np.array([-5.0, -0.1, 1.9]),
-                                          np.array([-3.0, 2.5, -1.0])], 2.0)
+        selection.check_lines_inside_rim(
+            [np.array([-5.0, -0.1, 1.9]), np.array([-3.0, 2.5, -1.0])], 2.0
+        )
     with pytest.raises(ValueError, match="outside the mirror rim"):
         selection.check_lines_inside_rim([np.array([-5.0, np.nan, -1.0])], 2.0)
 
@@ -99,8 +106,10 @@ def test_single_physical_candidate_has_full_confidence():
     cam = synthetic.misaligned_rig()
     cands = candidates_of(cam)
     first = next(i for i, c in enumerate(cands) if c.physical)
-    cands = [c if i == first else c.__class__(**{**c.__dict__, "physical": False})
-             for i, c in enumerate(cands)]
+    cands = [
+        c if i == first else c.__class__(**{**c.__dict__, "physical": False})
+        for i, c in enumerate(cands)
+    ]
     sel = selection.select_candidate(cands, None, [], (0, 0, -cam.mirror.c))
     assert sel.chosen == first and sel.confidence == 1.0 and not sel.warnings
     assert not sel.ambiguous
@@ -128,8 +137,7 @@ def test_reflection_chooses_without_far_lines_and_adds_to_the_far_lines():
     assert sel.sigma["reflection"] == pytest.approx(math.sqrt(800.0))
     assert sel.scores_per_cue["reflection rms px"] == {true: 0.1, other: 0.3}
     # barely separated (1.5 sigma): chosen, flagged ambiguous, with a warning
-    spec = {"rms": {true: 0.1, other: 0.1 * math.sqrt(1 + 2.25 / 100)}, "n": 200,
-            "sigma": 0.1}
+    spec = {"rms": {true: 0.1, other: 0.1 * math.sqrt(1 + 2.25 / 100)}, "n": 200, "sigma": 0.1}
     sel = selection.select_candidate(cands, None, [], (0, 0, -cam.mirror.c), spec)
     assert sel.chosen == true and sel.ambiguous and sel.warnings
     assert sel.sigma["reflection"] == pytest.approx(1.5)

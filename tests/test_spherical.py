@@ -1,4 +1,5 @@
 """360 output: the equirectangular layout, Photo Sphere XMP in JPEG, spherical MP4 metadata."""
+
 import math
 import re
 import shutil
@@ -32,8 +33,13 @@ def test_equirect_pixels_look_at_their_longitude_and_latitude():
         lon = 360.0 * (j + 0.5) / W - 180.0
         lat = 90.0 - 180.0 * (i + 0.5) / H
         az = math.radians(-lon)  # forward at the centre, turning right as j grows
-        d = np.array([math.cos(math.radians(lat)) * math.cos(az),
-                      math.cos(math.radians(lat)) * math.sin(az), math.sin(math.radians(lat))])
+        d = np.array(
+            [
+                math.cos(math.radians(lat)) * math.cos(az),
+                math.cos(math.radians(lat)) * math.sin(az),
+                math.sin(math.radians(lat)),
+            ]
+        )
         exact = RIG.project_directions(d[None])[0]
         if np.isfinite(exact).all():
             np.testing.assert_allclose([mx[i, j], my[i, j]], exact, atol=0.01)
@@ -50,8 +56,9 @@ def test_equirect_centre_column_is_forward():
     i = H // 2  # latitude -2.8 deg
     lat = math.radians(90.0 - 180.0 * (i + 0.5) / H)
     exact = RIG.project_directions(np.array([[math.cos(lat), 0.0, math.sin(lat)]]))[0]
-    mid = 0.5 * (np.array([mx[i, W // 2 - 1], my[i, W // 2 - 1]])
-                 + np.array([mx[i, W // 2], my[i, W // 2]]))
+    mid = 0.5 * (
+        np.array([mx[i, W // 2 - 1], my[i, W // 2 - 1]]) + np.array([mx[i, W // 2], my[i, W // 2]])
+    )
     np.testing.assert_allclose(mid, exact, atol=0.2)
 
 
@@ -78,7 +85,7 @@ def test_photosphere_xmp_is_an_app1_segment_after_soi_and_parses_back():
     pos = 2
     if out[2:4] == b"\xff\xe0":
         pos = 4 + struct.unpack(">H", out[4:6])[0]
-    assert out[pos:pos + 2] == b"\xff\xe1"
+    assert out[pos : pos + 2] == b"\xff\xe1"
 
 
 def _mp4(path, frames=4, size=(64, 32)):
@@ -135,8 +142,22 @@ def test_spherical_mp4_boxes_v1_and_v2_parse_back(tmp_path):
 @pytest.mark.skipif(shutil.which("ffmpeg") is None, reason="ffmpeg is not installed")
 def test_moov_before_mdat_gets_its_chunk_offsets_moved(tmp_path):
     _mp4(tmp_path / "v.mp4")
-    subprocess.run(["ffmpeg", "-v", "error", "-y", "-i", str(tmp_path / "v.mp4"), "-c", "copy",
-                    "-movflags", "+faststart", str(tmp_path / "fs.mp4")], check=True)
+    subprocess.run(
+        [
+            "ffmpeg",
+            "-v",
+            "error",
+            "-y",
+            "-i",
+            str(tmp_path / "v.mp4"),
+            "-c",
+            "copy",
+            "-movflags",
+            "+faststart",
+            str(tmp_path / "fs.mp4"),
+        ],
+        check=True,
+    )
     data = (tmp_path / "fs.mp4").read_bytes()
     kinds = [b.kind for b in parse_boxes(data)]
     assert kinds.index(b"moov") < kinds.index(b"mdat")
@@ -148,8 +169,12 @@ def test_moov_before_mdat_gets_its_chunk_offsets_moved(tmp_path):
 @pytest.mark.skipif(shutil.which("ffprobe") is None, reason="ffprobe is not installed")
 def test_ffprobe_sees_an_equirectangular_spherical_stream(tmp_path):
     (tmp_path / "v360.mp4").write_bytes(inject_spherical_mp4(_mp4(tmp_path / "v.mp4")))
-    out = subprocess.run(["ffprobe", "-v", "error", "-show_streams", str(tmp_path / "v360.mp4")],
-                         capture_output=True, text=True, check=True).stdout
+    out = subprocess.run(
+        ["ffprobe", "-v", "error", "-show_streams", str(tmp_path / "v360.mp4")],
+        capture_output=True,
+        text=True,
+        check=True,
+    ).stdout
     assert "Spherical Mapping" in out and "projection=equirectangular" in out
 
 

@@ -1,4 +1,5 @@
 """Unwarper: the views of frames equal bare cv2.remap with the same tables; video in and out."""
+
 import contextlib
 
 import cv2
@@ -63,8 +64,9 @@ def test_unwarp_copy_true_returns_arrays_later_frames_do_not_touch(unwarper):
     assert not np.array_equal(kept["pano"], again["pano"])
 
 
-@pytest.mark.parametrize("bad", [None, [[1, 2], [3, 4]], np.zeros((0, 5, 3), np.uint8)],
-                         ids=["None", "list", "empty"])
+@pytest.mark.parametrize(
+    "bad", [None, [[1, 2], [3, 4]], np.zeros((0, 5, 3), np.uint8)], ids=["None", "list", "empty"]
+)
 def test_unwarp_refuses_what_is_not_an_image_with_value_error(unwarper, bad):
     with pytest.raises(ValueError, match="frame"):
         unwarper.unwarp(bad)
@@ -72,8 +74,9 @@ def test_unwarp_refuses_what_is_not_an_image_with_value_error(unwarper, bad):
 
 def test_unseen_pixels_get_the_border_value(cam):
     with pytest.warns(RuntimeWarning, match="visible_elevation_range"):  # it sees nothing
-        u = Unwarper.from_camera(cam, {"up": PerspectiveView((40, 30), fov=60.0, pitch=85.0)},
-                                 border_value=(1, 2, 3))
+        u = Unwarper.from_camera(
+            cam, {"up": PerspectiveView((40, 30), fov=60.0, pitch=85.0)}, border_value=(1, 2, 3)
+        )
     out = u.unwarp(frames(1)[0])["up"]
     assert (out == (1, 2, 3)).all()
 
@@ -145,8 +148,9 @@ def test_stream_over_a_video_writes_every_view(tmp_path, unwarper):
             assert fr.shape[1::-1] == unwarper.view_size(name)
         cap.release()
         assert n == 6
-    assert unwarper.run(str(src), {"pano": tmp_path / "again.avi"}, fourcc="MJPG",
-                        max_frames=4) == 4
+    assert (
+        unwarper.run(str(src), {"pano": tmp_path / "again.avi"}, fourcc="MJPG", max_frames=4) == 4
+    )
 
 
 def test_stopping_early_keeps_a_valid_file(tmp_path, unwarper):

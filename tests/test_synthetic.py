@@ -12,8 +12,10 @@ SMALL = (200, 200)
 
 @pytest.fixture(scope="module")
 def rigs():
-    return {"aligned": synthetic.aligned_rig(SMALL), "misaligned": synthetic.misaligned_rig(
-        image_size=SMALL)}
+    return {
+        "aligned": synthetic.aligned_rig(SMALL),
+        "misaligned": synthetic.misaligned_rig(image_size=SMALL),
+    }
 
 
 @pytest.fixture(scope="module")
@@ -25,14 +27,15 @@ def _step_environment(size=(2048, 1024), row=620):
     """Black above ``row``, white below: the 50 % level at elevation of row + 1/2."""
     w, h = size
     env = np.zeros((h, w, 3), np.uint8)
-    env[row + 1:] = 255
+    env[row + 1 :] = 255
     return env, 90.0 - 180.0 * (row + 0.5) / (h - 1)
 
 
 def _directions(az_deg, el_deg):
     az, el = np.deg2rad(az_deg), np.deg2rad(el_deg)
-    return np.stack(np.broadcast_arrays(np.cos(el) * np.cos(az), np.cos(el) * np.sin(az),
-                                        np.sin(el)), axis=-1)
+    return np.stack(
+        np.broadcast_arrays(np.cos(el) * np.cos(az), np.cos(el) * np.sin(az), np.sin(el)), axis=-1
+    )
 
 
 def test_equirect_coords_invert_equirect_directions():
@@ -62,9 +65,9 @@ def test_housing_is_dark_exactly_outside_rim_ellipse(rigs, environment, name):
     dist = np.einsum("...i,...i", Qp, p) / (2 * np.hypot(Qp[..., 0], Qp[..., 1]))  # signed px
     housing = (img == synthetic.HOUSING_COLOR).all(axis=-1)
     assert housing[dist > 0.75].all()
-    ring = (dist < -0.75) & (dist > -5)       # just inside the rim: the bright sky
+    ring = (dist < -0.75) & (dist > -5)  # just inside the rim: the bright sky
     assert ring.sum() > 100 and not housing[ring].any()
-    assert np.median(img[ring]) > 150        # (poles and a line cross it too)
+    assert np.median(img[ring]) > 150  # (poles and a line cross it too)
 
 
 def test_background_replaces_housing_outside_the_rim_only(rigs, environment):
@@ -75,9 +78,10 @@ def test_background_replaces_housing_outside_the_rim_only(rigs, environment):
     img = synthetic.render_environment(cam, environment, supersample=2, background=clutter)
     housing = (plain == synthetic.HOUSING_COLOR).all(axis=-1)
     assert np.array_equal(img[housing], clutter[housing])
-    inside = synthetic.render_environment(cam, environment, supersample=2,
-                                          housing_color=(200, 0, 200))
-    mirror = ~housing & (inside == plain).all(axis=-1)   # no housing share: untouched
+    inside = synthetic.render_environment(
+        cam, environment, supersample=2, housing_color=(200, 0, 200)
+    )
+    mirror = ~housing & (inside == plain).all(axis=-1)  # no housing share: untouched
     assert mirror.sum() > 0.5 * SMALL[0] * SMALL[1]
     assert np.array_equal(img[mirror], plain[mirror])
     with pytest.raises(ValueError, match="background"):
@@ -117,8 +121,9 @@ def test_edges_are_subpixel_true(rigs, name):
     # white below an elevation: the white area equals the area inside the projected boundary
     cam = rigs[name]
     env, el = _step_environment()
-    img = synthetic.render_environment(cam, env, supersample=4, housing_color=(0, 0, 0),
-                                       body_radius=None)
+    img = synthetic.render_environment(
+        cam, env, supersample=4, housing_color=(0, 0, 0), body_radius=None
+    )
     p = cam.project_directions(_directions(np.linspace(0, 360, 3600, endpoint=False), el))
     x, y = p.T
     area = 0.5 * abs(x @ np.roll(y, -1) - y @ np.roll(x, -1))
@@ -167,7 +172,7 @@ def test_room_cube_faces_and_normals():
     faces = room.cube_faces()
     n = room.face_normals()
     for f, normal in zip(faces, n):
-        assert np.allclose(np.cross(f[1] - f[0], f[2] - f[1]) / room.cube_size ** 2, normal)
+        assert np.allclose(np.cross(f[1] - f[0], f[2] - f[1]) / room.cube_size**2, normal)
         assert np.allclose(np.linalg.norm(f - np.roll(f, 1, axis=0), axis=1), room.cube_size)
     viewpoint = synthetic.aligned_rig().best_fit_viewpoint()[0]
     assert list(room.visible_faces(viewpoint)) == [1, 2, 4]
@@ -216,8 +221,11 @@ def test_cube_corner_is_where_three_colours_meet():
     faces = room.visible_faces(cam.best_fit_viewpoint()[0])
     corners = room.cube_corners()
     # the corner shared by the three visible faces (nearest the viewpoint)
-    shared = [i for i in range(8)
-              if all(np.isclose(room.cube_faces()[f], corners[i]).all(axis=1).any() for f in faces)]
+    shared = [
+        i
+        for i in range(8)
+        if all(np.isclose(room.cube_faces()[f], corners[i]).all(axis=1).any() for f in faces)
+    ]
     assert len(shared) == 1
     px = cam.project(corners[shared])[0]
     colours = np.asarray(room.cube_colors, float)[faces]
@@ -266,11 +274,11 @@ def test_cube_face_edges_are_subpixel_true():
     # channel's area (sum / 255) is its face's projected area
     cam = synthetic.misaligned_rig()
     black = ((0, 0, 0), (0, 0, 0))
-    room = synthetic.Room(wall_colors=(black,) * 6,
-                          cube_colors=((0, 0, 0), (255, 0, 0), (0, 255, 0), (0, 0, 0),
-                                       (0, 0, 255), (0, 0, 0)))
-    img = synthetic.render_room(cam, room, supersample=4, housing_color=(0, 0, 0),
-                                body_radius=None)
+    room = synthetic.Room(
+        wall_colors=(black,) * 6,
+        cube_colors=((0, 0, 0), (255, 0, 0), (0, 255, 0), (0, 0, 0), (0, 0, 255), (0, 0, 0)),
+    )
+    img = synthetic.render_room(cam, room, supersample=4, housing_color=(0, 0, 0), body_radius=None)
     t = np.linspace(0, 1, 100, endpoint=False)[:, None]
     for channel, face in enumerate([1, 2, 4]):
         f = room.cube_faces()[face]
@@ -287,14 +295,15 @@ def test_true_equirectangular_panorama_reproduces_the_environment(rigs, environm
     cam = rigs["misaligned"]
     img = synthetic.render_environment(cam, environment, supersample=4)
     h, w = environment.shape[:2]
-    m1, m2 = cam.init_panorama_maps((w, h), elevation_range=(-90.0, 90.0),
-                                    projection="equirectangular", m1type=cv2.CV_32FC1)
+    m1, m2 = cam.init_panorama_maps(
+        (w, h), elevation_range=(-90.0, 90.0), projection="equirectangular", m1type=cv2.CV_32FC1
+    )
     pano = cv2.remap(img, m1, m2, cv2.INTER_LINEAR)
     el = 90.0 - 180.0 * np.arange(h) / (h - 1)
-    band = (el > -60) & (el < 5)                           # seen all around, lens excluded
+    band = (el > -60) & (el < 5)  # seen all around, lens excluded
     diff = np.abs(pano[band].astype(int) - environment[band]).max(axis=-1)
     assert np.median(diff) <= 2
-    assert np.mean(diff > 40) < 0.1                     # only near edges (200 px image)
+    assert np.mean(diff > 40) < 0.1  # only near edges (200 px image)
 
 
 def test_far_line_pixels_are_images_of_straight_lines():
@@ -306,5 +315,7 @@ def test_far_line_pixels_are_images_of_straight_lines():
         P, d = cam.unproject(px)
         # the rays meet one 3-D line: their directions are nearly coplanar (far away, eq. 31)
         assert np.linalg.svd(d, compute_uv=False)[-1] < 1e-5
-    assert all(np.array_equal(a, b) for a, b in zip(lines, synthetic.far_line_pixels(
-        cam, n_lines=4, rng=3)))
+    assert all(
+        np.array_equal(a, b)
+        for a, b in zip(lines, synthetic.far_line_pixels(cam, n_lines=4, rng=3))
+    )

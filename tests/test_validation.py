@@ -1,4 +1,5 @@
 """Physical validation of cameras and one error type (ValueError naming the argument)."""
+
 import glob
 import math
 import os
@@ -6,8 +7,8 @@ import warnings
 
 import numpy as np
 import pytest
-
 from conftest import RIGS
+
 from omnicam import HyperbolicMirror, MisalignedHyperbolicCamera, synthetic
 
 REPO = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
@@ -24,18 +25,22 @@ def test_every_canonical_rig_and_shipped_file_passes_validation():
     for cam in RIGS.values():
         assert cam.replace() == cam
     files = glob.glob(os.path.join(REPO, "calib_files", "*.yaml")) + glob.glob(
-        os.path.join(REPO, "omnicam", "data", "*.yaml"))
+        os.path.join(REPO, "omnicam", "data", "*.yaml")
+    )
     assert len(files) >= 4
     for path in files:
         MisalignedHyperbolicCamera.load(path)
 
 
-@pytest.mark.parametrize("rvec, tvec, field", [
-    ((0, 0, 0), "upper_focus", "tvec"),                 # the camera at the upper focus
-    ((0, 0, 0), (0, 0, -100.0), "tvec"),                # above the mirror, looking away
-    ((math.pi, 0, 0), None, "rvec"),                     # turned round: the rim behind it
-    ((0, math.pi / 2 + 0.3, 0), None, "rim"),            # looking sideways past the mirror
-])
+@pytest.mark.parametrize(
+    "rvec, tvec, field",
+    [
+        ((0, 0, 0), "upper_focus", "tvec"),  # the camera at the upper focus
+        ((0, 0, 0), (0, 0, -100.0), "tvec"),  # above the mirror, looking away
+        ((math.pi, 0, 0), None, "rvec"),  # turned round: the rim behind it
+        ((0, math.pi / 2 + 0.3, 0), None, "rim"),  # looking sideways past the mirror
+    ],
+)
 def test_impossible_postures_are_refused(rvec, tvec, field):
     c = synthetic.misaligned_rig()
     if tvec == "upper_focus":
@@ -80,16 +85,31 @@ def test_rim_image_too_large_to_enumerate_is_refused():
 @pytest.mark.parametrize("field", ["K", "rvec", "tvec", "D"])
 def test_complex_parameters_are_refused_without_a_warning(field):
     c = synthetic.misaligned_rig()
-    value = {"K": c.K.astype(complex), "rvec": np.array([0, 0, 0j]),
-             "tvec": np.asarray(c.tvec) + 0j, "D": np.zeros(5, complex)}[field]
+    value = {
+        "K": c.K.astype(complex),
+        "rvec": np.array([0, 0, 0j]),
+        "tvec": np.asarray(c.tvec) + 0j,
+        "D": np.zeros(5, complex),
+    }[field]
     with warnings.catch_warnings():
         warnings.simplefilter("error")
         with pytest.raises(ValueError, match=field):
             _cam(**{field: value})
 
 
-@pytest.mark.parametrize("size", [(float("inf"), 500), ("640", 480), "ab", (1e6, 1e6),
-                                  (640.5, 480), (True, 480), (70000, 70000), (640,)])
+@pytest.mark.parametrize(
+    "size",
+    [
+        (float("inf"), 500),
+        ("640", 480),
+        "ab",
+        (1e6, 1e6),
+        (640.5, 480),
+        (True, 480),
+        (70000, 70000),
+        (640,),
+    ],
+)
 def test_bad_image_sizes_are_value_errors_naming_image_size(size):
     with pytest.raises(ValueError, match="image_size"):
         _cam(image_size=size)
@@ -107,14 +127,24 @@ def test_rim_point_count_is_bounded(n):
         synthetic.misaligned_rig().rim_image_points(n)
 
 
-@pytest.mark.parametrize("kw, name", [
-    ({"sigma": "a"}, "sigma"), ({"sigma": 1e6}, "sigma"), ({"sigma": 20.0}, "sigma"),
-    ({"sigma": -1}, "sigma"), ({"threshold": "a"}, "threshold"), ({"threshold": 0}, "threshold"),
-    ({"rng": "abc"}, "rng"), ({"rng": -1}, "rng"),
-])
+@pytest.mark.parametrize(
+    "kw, name",
+    [
+        ({"sigma": "a"}, "sigma"),
+        ({"sigma": 1e6}, "sigma"),
+        ({"sigma": 20.0}, "sigma"),
+        ({"sigma": -1}, "sigma"),
+        ({"threshold": "a"}, "threshold"),
+        ({"threshold": 0}, "threshold"),
+        ({"rng": "abc"}, "rng"),
+        ({"rng": -1}, "rng"),
+    ],
+)
 def test_detect_rim_refuses_bad_arguments_at_once(kw, name):
-    from omnicam import detect_rim
     import cv2
+
+    from omnicam import detect_rim
+
     image = np.zeros((96, 96), np.uint8)  # sigma 20 exceeds 1/8 of its shorter side
     cv2.circle(image, (48, 48), 35, 200, -1)
     with pytest.raises(ValueError, match=name):
@@ -125,14 +155,29 @@ def test_detect_rim_refuses_bad_arguments_at_once(kw, name):
 def test_cli_unreadable_png_is_one_line_naming_it_without_opencv_noise(tmp_path, content):
     import subprocess
     import sys
+
     calib = tmp_path / "c.yaml"
     synthetic.misaligned_rig().save(calib)
     image = tmp_path / "in.png"
     image.write_bytes(content)
-    r = subprocess.run([sys.executable, "-c", "import sys; from omnicam.cli import main; "
-                        "sys.exit(main(sys.argv[1:]))", "unwarp", str(image), "-c", str(calib),
-                        "--panorama", "128x32", "-o", str(tmp_path / "out.png")],
-                       capture_output=True, text=True, timeout=300)
+    r = subprocess.run(
+        [
+            sys.executable,
+            "-c",
+            "import sys; from omnicam.cli import main; sys.exit(main(sys.argv[1:]))",
+            "unwarp",
+            str(image),
+            "-c",
+            str(calib),
+            "--panorama",
+            "128x32",
+            "-o",
+            str(tmp_path / "out.png"),
+        ],
+        capture_output=True,
+        text=True,
+        timeout=300,
+    )
     assert r.returncode == 1
     lines = r.stderr.splitlines()
     assert len(lines) == 1 and lines[0].startswith("omnicam: error: cannot read image"), lines

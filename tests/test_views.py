@@ -4,6 +4,7 @@ The reference is the camera's own exact projection (``project_directions`` / ``p
 Newton on Fermat's path length) of the direction each output pixel looks along, with the
 directions written here from docs/conventions.md ("Views"), independently of ``omnicam.views``.
 """
+
 import math
 
 import cv2
@@ -18,11 +19,14 @@ RIGS = {
     "aligned": synthetic.aligned_rig,
     "misaligned": synthetic.misaligned_rig,
     "distorted": lambda: synthetic.misaligned_rig(
-        tilt_deg=4.0, tilt_azimuth_deg=-70.0, offset_mm=(-2.0, 1.0, -1.5),
-        D=[-0.05, 0.01, 0.001, -0.0015, 0.002]),
+        tilt_deg=4.0,
+        tilt_azimuth_deg=-70.0,
+        offset_mm=(-2.0, 1.0, -1.5),
+        D=[-0.05, 0.01, 0.001, -0.0015, 0.002],
+    ),
     "tilted_sensor": lambda: synthetic.misaligned_rig(
-        D=[-0.03, 0.004, 0.0005, 0.0002, 0.0, 0.01, 0.0, 0.0, 0.001, 0.0, -0.001, 0.0, 0.01,
-           -0.02]),
+        D=[-0.03, 0.004, 0.0005, 0.0002, 0.0, 0.01, 0.0, 0.0, 0.001, 0.0, -0.001, 0.0, 0.01, -0.02]
+    ),
 }
 
 
@@ -31,7 +35,7 @@ def rig(request):
     return RIGS[request.param]()
 
 
-# -- directions written from docs/conventions.md -----------------------------------------------------
+# -- directions written from docs/conventions.md ------------------------------------------------
 def panorama_dirs(size, lo, hi, projection, R=None):
     R = np.eye(3) if R is None else R
     w, h = size
@@ -68,8 +72,8 @@ def rim_distance(cam, xy):
     rim = cam.rim_image_points(20000)
     d = np.full(len(xy), np.inf)
     for i in range(0, len(xy), 256):
-        chunk = xy[i:i + 256]
-        d[i:i + 256] = np.min(np.linalg.norm(chunk[:, None, :] - rim[None], axis=2), axis=1)
+        chunk = xy[i : i + 256]
+        d[i : i + 256] = np.min(np.linalg.norm(chunk[:, None, :] - rim[None], axis=2), axis=1)
     return d
 
 
@@ -98,8 +102,9 @@ def assert_matches_exact(cam, mapx, mapy, ref):
 @pytest.mark.parametrize("depth", [None, 600.0])
 @pytest.mark.parametrize("size", [(256, 64), (1024, 256)])
 def test_panorama_table_within_tolerance_of_exact_projection(rig, projection, depth, size):
-    mapx, mapy = rig.init_panorama_maps(size, projection=projection, m1type=cv2.CV_32FC1,
-                                        depth=depth)
+    mapx, mapy = rig.init_panorama_maps(
+        size, projection=projection, m1type=cv2.CV_32FC1, depth=depth
+    )
     lo, hi = views.visible_elevation_range(rig)
     if projection == "cylindrical":
         lo = max(lo, views.CYLINDRICAL_MIN_ELEVATION)
@@ -108,9 +113,14 @@ def test_panorama_table_within_tolerance_of_exact_projection(rig, projection, de
 
 
 @pytest.mark.parametrize("depth", [None, 600.0])
-@pytest.mark.parametrize("size, fov, ypr", [((160, 120), 90.0, (0.0, 0.0, 0.0)),
-                                            ((640, 480), 110.0, (25.0, -20.0, 10.0)),
-                                            ((320, 240), 60.0, (-100.0, 8.0, -5.0))])
+@pytest.mark.parametrize(
+    "size, fov, ypr",
+    [
+        ((160, 120), 90.0, (0.0, 0.0, 0.0)),
+        ((640, 480), 110.0, (25.0, -20.0, 10.0)),
+        ((320, 240), 60.0, (-100.0, 8.0, -5.0)),
+    ],
+)
 def test_perspective_table_within_tolerance_of_exact_projection(rig, depth, size, fov, ypr):
     K = K_from_fov(fov, size)
     R = rotation_from_ypr(*ypr)
@@ -129,8 +139,20 @@ def test_views_across_the_edge_of_the_band_keep_the_bound(ypr):
     R = rotation_from_ypr(*ypr)
     stats = np.zeros(8, np.int64)
     step = views._step_for(math.degrees(1.0 / 125.0))
-    mapx, mapy = views._table(cam, 0, R.T @ np.linalg.inv(K), 0.0, 0.0, 0.0, size, None, None,
-                              cv2.CV_32FC1, step=step, stats=stats)
+    mapx, mapy = views._table(
+        cam,
+        0,
+        R.T @ np.linalg.inv(K),
+        0.0,
+        0.0,
+        0.0,
+        size,
+        None,
+        None,
+        cv2.CV_32FC1,
+        step=step,
+        stats=stats,
+    )
     assert (mapx == views.UNSEEN).any() and (mapx != views.UNSEEN).any()
     assert stats[5] > 0  # cells on the edge were refined
     assert_matches_exact(cam, mapx, mapy, exact(cam, perspective_dirs(K, size, R)))
@@ -141,8 +163,9 @@ def test_explicit_viewpoint_is_used_for_finite_depth():
     vp = np.array([1.0, -2.0, 30.0])
     K = K_from_fov(90.0, (160, 120))
     R = rotation_from_ypr(40.0, -30.0, 0.0)
-    mapx, mapy = cam.init_perspective_maps(K, (160, 120), R=R, m1type=cv2.CV_32FC1, depth=80.0,
-                                           viewpoint=vp)
+    mapx, mapy = cam.init_perspective_maps(
+        K, (160, 120), R=R, m1type=cv2.CV_32FC1, depth=80.0, viewpoint=vp
+    )
     ref = exact(cam, perspective_dirs(K, (160, 120), R), 80.0, vp)
     assert_matches_exact(cam, mapx, mapy, ref)
 
@@ -154,12 +177,13 @@ def test_large_tables_are_interpolated_and_keep_the_bound():
     lo, hi = views.visible_elevation_range(cam)
     p0, p1, az = views._panorama_params(size, lo, hi, "equirectangular")
     stats = np.zeros(8, np.int64)
-    mapx, mapy = views._table(cam, 2, np.eye(3), p0, p1, az, size, None, None, cv2.CV_32FC1,
-                              stats=stats)
+    mapx, mapy = views._table(
+        cam, 2, np.eye(3), p0, p1, az, size, None, None, cv2.CV_32FC1, stats=stats
+    )
     n_pixels = size[0] * size[1]
-    assert stats[2] > 0                       # cells interpolated from the nodes
+    assert stats[2] > 0  # cells interpolated from the nodes
     assert stats[0] + stats[1] < 0.1 * n_pixels  # exact solutions at nodes and check points
-    assert stats[7] < 0.02 * n_pixels         # few pixels solved one by one
+    assert stats[7] < 0.02 * n_pixels  # few pixels solved one by one
     ref = exact(cam, panorama_dirs(size, lo, hi, "equirectangular"))
     assert_matches_exact(cam, mapx, mapy, ref)
 
@@ -168,14 +192,17 @@ def test_large_tables_are_interpolated_and_keep_the_bound():
 def test_panorama_column_quarter_looks_towards_minus_Y():
     cam = synthetic.misaligned_rig()
     W, H = 400, 51
-    mapx, mapy = cam.init_panorama_maps((W, H), elevation_range=(-50.0, 0.0),
-                                        projection="equirectangular", m1type=cv2.CV_32FC1)
+    mapx, mapy = cam.init_panorama_maps(
+        (W, H), elevation_range=(-50.0, 0.0), projection="equirectangular", m1type=cv2.CV_32FC1
+    )
     for row, el in ((0, 0.0), (25, -25.0), (50, -50.0)):
         e = math.radians(el)
-        for col, d in ((0, (math.cos(e), 0.0, math.sin(e))),
-                       (W // 4, (0.0, -math.cos(e), math.sin(e))),
-                       (W // 2, (-math.cos(e), 0.0, math.sin(e))),
-                       (3 * W // 4, (0.0, math.cos(e), math.sin(e)))):
+        for col, d in (
+            (0, (math.cos(e), 0.0, math.sin(e))),
+            (W // 4, (0.0, -math.cos(e), math.sin(e))),
+            (W // 2, (-math.cos(e), 0.0, math.sin(e))),
+            (3 * W // 4, (0.0, math.cos(e), math.sin(e))),
+        ):
             ref = cam.project_directions(np.array([d]))[0]
             assert np.hypot(mapx[row, col] - ref[0], mapy[row, col] - ref[1]) < TOL
 
@@ -183,8 +210,9 @@ def test_panorama_column_quarter_looks_towards_minus_Y():
 def test_panorama_turns_right_and_is_not_mirrored():
     """Aligned rig: azimuth 0 (+X) is image right of centre, -90 deg (-Y) is image up."""
     cam = synthetic.aligned_rig()
-    mapx, mapy = cam.init_panorama_maps((400, 40), elevation_range=(-40.0, 0.0),
-                                        m1type=cv2.CV_32FC1)
+    mapx, mapy = cam.init_panorama_maps(
+        (400, 40), elevation_range=(-40.0, 0.0), m1type=cv2.CV_32FC1
+    )
     cx, cy = cam.K[0, 2], cam.K[1, 2]
     assert mapx[20, 0] > cx + 50 and abs(mapy[20, 0] - cy) < 1
     assert mapy[20, 100] < cy - 50 and abs(mapx[20, 100] - cx) < 1
@@ -195,11 +223,13 @@ def test_panorama_rows_from_hi_to_lo_with_the_projection_spacing(projection):
     cam = synthetic.misaligned_rig()
     lo, hi = -50.0, 10.0
     H = 41
-    mapx, mapy = cam.init_panorama_maps((64, H), elevation_range=(lo, hi), projection=projection,
-                                        m1type=cv2.CV_32FC1)
+    mapx, mapy = cam.init_panorama_maps(
+        (64, H), elevation_range=(lo, hi), projection=projection, m1type=cv2.CV_32FC1
+    )
     if projection == "cylindrical":
-        mid = math.degrees(math.atan(0.5 * (math.tan(math.radians(lo))
-                                            + math.tan(math.radians(hi)))))
+        mid = math.degrees(
+            math.atan(0.5 * (math.tan(math.radians(lo)) + math.tan(math.radians(hi))))
+        )
     else:
         mid = 0.5 * (lo + hi)
     for row, el in ((0, hi), (H // 2, mid), (H - 1, lo)):
@@ -212,8 +242,9 @@ def test_panorama_R_rotates_the_panorama_frame():
     cam = synthetic.misaligned_rig()
     R = rotation_from_ypr(0.0, 0.0, 0.0) @ cv2.Rodrigues(np.array([0.1, -0.2, 0.3]))[0]
     size = (128, 32)
-    mapx, mapy = cam.init_panorama_maps(size, elevation_range=(-60.0, 5.0), R=R,
-                                        m1type=cv2.CV_32FC1)
+    mapx, mapy = cam.init_panorama_maps(
+        size, elevation_range=(-60.0, 5.0), R=R, m1type=cv2.CV_32FC1
+    )
     ref = exact(cam, panorama_dirs(size, -60.0, 5.0, "cylindrical", R))
     assert_matches_exact(cam, mapx, mapy, ref)
 
@@ -229,8 +260,7 @@ def test_default_elevation_range_is_the_band_the_mirror_sees():
     lo_m, hi_m = views.visible_elevation_range(synthetic.misaligned_rig())
     assert lo_m == -90.0 and 10.0 < hi_m < 30.0
     # the highest seen row is seen somewhere, and nothing above hi is seen
-    mapx, _ = cam.init_panorama_maps((360, 90), projection="equirectangular",
-                                     m1type=cv2.CV_32FC1)
+    mapx, _ = cam.init_panorama_maps((360, 90), projection="equirectangular", m1type=cv2.CV_32FC1)
     assert (mapx[1] != views.UNSEEN).all()
     assert (mapx[-1] != views.UNSEEN).all()
 
@@ -295,8 +325,9 @@ def test_m1type_variants_agree(kind):
         make = lambda t: cam.init_panorama_maps((300, 80), m1type=t)  # noqa: E731
     else:
         K = K_from_fov(100.0, (200, 150))
-        make = lambda t: cam.init_perspective_maps(K, (200, 150), R=rotation_from_ypr(5, 10, 0),
-                                                   m1type=t)  # noqa: E731
+        make = lambda t: cam.init_perspective_maps(
+            K, (200, 150), R=rotation_from_ypr(5, 10, 0), m1type=t
+        )  # noqa: E731
     fx, fy = make(cv2.CV_32FC1)
     assert fx.dtype == np.float32 and fx.shape == (fx.shape[0], fx.shape[1])
     xy, none = make(cv2.CV_32FC2)
@@ -330,8 +361,9 @@ def test_unseen_directions_map_outside_and_remap_to_the_border():
         with pytest.warns(RuntimeWarning, match="visible_elevation_range"):
             m1, m2 = cam.init_perspective_maps(K, size, R=up, m1type=m1type)
         img = np.full((500, 500, 3), 200, np.uint8)
-        out = cv2.remap(img, m1, m2, cv2.INTER_LINEAR, borderMode=cv2.BORDER_CONSTANT,
-                        borderValue=(7, 7, 7))
+        out = cv2.remap(
+            img, m1, m2, cv2.INTER_LINEAR, borderMode=cv2.BORDER_CONSTANT, borderValue=(7, 7, 7)
+        )
         assert (out == 7).all()
     with pytest.warns(RuntimeWarning, match="100% of its pixels"):
         mapx, mapy = cam.init_perspective_maps(K, size, R=up, m1type=cv2.CV_32FC1)
@@ -349,44 +381,57 @@ def test_panorama_bad_size_raises(size):
         synthetic.aligned_rig().init_panorama_maps(size)
 
 
-@pytest.mark.parametrize("kwargs, name", [
-    (dict(projection="spherical"), "projection"),
-    (dict(projection=None), "projection"),
-    (dict(m1type=cv2.CV_8UC1), "m1type"),
-    (dict(m1type=5.0), "m1type"),
-    (dict(m1type=True), "m1type"),
-    (dict(elevation_range=(10.0, 10.0)), "elevation_range"),
-    (dict(elevation_range=(20.0, -10.0)), "elevation_range"),
-    (dict(elevation_range=(-95.0, 10.0)), "elevation_range"),
-    (dict(elevation_range=(-10.0, 91.0)), "elevation_range"),
-    (dict(elevation_range=(-90.0, 10.0)), "elevation_range"),  # cylindrical: tan(-90)
-    (dict(elevation_range=(float("nan"), 10.0)), "elevation_range"),
-    (dict(elevation_range=(1.0, 2.0, 3.0)), "elevation_range"),
-    (dict(R=np.eye(2)), "R"),
-    (dict(R=2 * np.eye(3)), "R"),
-    (dict(depth=0.0), "depth"),
-    (dict(depth=-5.0), "depth"),
-    (dict(depth="far"), "depth"),
-    (dict(depth=100.0, viewpoint=(1.0, 2.0)), "viewpoint"),
-])
+@pytest.mark.parametrize(
+    "kwargs, name",
+    [
+        (dict(projection="spherical"), "projection"),
+        (dict(projection=None), "projection"),
+        (dict(m1type=cv2.CV_8UC1), "m1type"),
+        (dict(m1type=5.0), "m1type"),
+        (dict(m1type=True), "m1type"),
+        (dict(elevation_range=(10.0, 10.0)), "elevation_range"),
+        (dict(elevation_range=(20.0, -10.0)), "elevation_range"),
+        (dict(elevation_range=(-95.0, 10.0)), "elevation_range"),
+        (dict(elevation_range=(-10.0, 91.0)), "elevation_range"),
+        (dict(elevation_range=(-90.0, 10.0)), "elevation_range"),  # cylindrical: tan(-90)
+        (dict(elevation_range=(float("nan"), 10.0)), "elevation_range"),
+        (dict(elevation_range=(1.0, 2.0, 3.0)), "elevation_range"),
+        (dict(R=np.eye(2)), "R"),
+        (dict(R=2 * np.eye(3)), "R"),
+        (dict(depth=0.0), "depth"),
+        (dict(depth=-5.0), "depth"),
+        (dict(depth="far"), "depth"),
+        (dict(depth=100.0, viewpoint=(1.0, 2.0)), "viewpoint"),
+    ],
+)
 def test_panorama_bad_arguments_raise_naming_them(kwargs, name):
     with pytest.raises(ValueError, match=name):
         synthetic.aligned_rig().init_panorama_maps((64, 16), **kwargs)
 
 
-@pytest.mark.parametrize("K_new", [np.zeros((3, 3)), np.diag([0.0, 100.0, 1.0]), np.eye(2),
-                                   [[100, 0, 50], [0, 100, 50], [0, 0, 2]],
-                                   np.full((3, 3), np.nan)])
+@pytest.mark.parametrize(
+    "K_new",
+    [
+        np.zeros((3, 3)),
+        np.diag([0.0, 100.0, 1.0]),
+        np.eye(2),
+        [[100, 0, 50], [0, 100, 50], [0, 0, 2]],
+        np.full((3, 3), np.nan),
+    ],
+)
 def test_perspective_bad_K_new_raises(K_new):
     with pytest.raises(ValueError, match="K_new"):
         synthetic.aligned_rig().init_perspective_maps(K_new, (64, 48))
 
 
-@pytest.mark.parametrize("kwargs, name", [
-    (dict(size=(0, 48)), "size"),
-    (dict(m1type=cv2.CV_16UC1), "m1type"),
-    (dict(R=np.diag([1.0, 1.0, -1.0])), "R"),
-])
+@pytest.mark.parametrize(
+    "kwargs, name",
+    [
+        (dict(size=(0, 48)), "size"),
+        (dict(m1type=cv2.CV_16UC1), "m1type"),
+        (dict(R=np.diag([1.0, 1.0, -1.0])), "R"),
+    ],
+)
 def test_perspective_bad_arguments_raise_naming_them(kwargs, name):
     args = dict(size=(64, 48))
     args.update(kwargs)
@@ -396,8 +441,9 @@ def test_perspective_bad_arguments_raise_naming_them(kwargs, name):
 
 def test_equirectangular_accepts_the_poles():
     cam = synthetic.aligned_rig()
-    mapx, mapy = cam.init_panorama_maps((64, 33), elevation_range=(-90.0, 0.0),
-                                        projection="equirectangular", m1type=cv2.CV_32FC1)
+    mapx, mapy = cam.init_panorama_maps(
+        (64, 33), elevation_range=(-90.0, 0.0), projection="equirectangular", m1type=cv2.CV_32FC1
+    )
     nadir = cam.project_directions(np.array([[0.0, 0.0, -1.0]]))[0]
     assert np.abs(mapx[-1] - nadir[0]).max() < TOL and np.abs(mapy[-1] - nadir[1]).max() < TOL
 
@@ -421,11 +467,13 @@ def test_random_rigs_keep_the_bound(seed):
     cam = synthetic.random_misaligned_rig(rng, max_tilt_deg=5.0, max_offset_mm=5.0)
     depth = None if seed % 2 else float(rng.uniform(200.0, 3000.0))
     size = (768, 192)
-    mapx, mapy = cam.init_panorama_maps(size, projection="equirectangular",
-                                        m1type=cv2.CV_32FC1, depth=depth)
+    mapx, mapy = cam.init_panorama_maps(
+        size, projection="equirectangular", m1type=cv2.CV_32FC1, depth=depth
+    )
     lo, hi = views.visible_elevation_range(cam)
-    assert_matches_exact(cam, mapx, mapy,
-                         exact(cam, panorama_dirs(size, lo, hi, "equirectangular"), depth))
+    assert_matches_exact(
+        cam, mapx, mapy, exact(cam, panorama_dirs(size, lo, hi, "equirectangular"), depth)
+    )
     size = (400, 300)
     K = K_from_fov(rng.uniform(40.0, 140.0), size)
     R = rotation_from_ypr(rng.uniform(-180, 180), rng.uniform(-80, 10), rng.uniform(-30, 30))

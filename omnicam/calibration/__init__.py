@@ -23,6 +23,7 @@
 :class:`~.errors.EstimationError` (a ``ValueError``) means valid input from which the posture
 cannot be estimated (no rim, no physical posture); a plain ``ValueError`` means bad input.
 """
+
 from __future__ import annotations
 
 import dataclasses
@@ -37,14 +38,29 @@ __all__ = ["calibrate", "CalibrationReport", "EstimationError"]
 def __getattr__(name):
     if name == "CalibrationReport":  # lazily, so ``import omnicam`` stays light
         from .report import CalibrationReport
+
         return CalibrationReport
     raise AttributeError(f"module 'omnicam.calibration' has no attribute {name!r}")
 
 
-def calibrate(K, mirror, image=None, boundary_points=None, far_lines=None, D=None,
-              image_size=None, refine=True, camera_cls=None, lens="auto",
-              lens_r=None, lens_z=None, rim_hint=None, max_tilt_deg=10.0, max_offset_mm=10.0,
-              check_plausibility=True):
+def calibrate(
+    K,
+    mirror,
+    image=None,
+    boundary_points=None,
+    far_lines=None,
+    D=None,
+    image_size=None,
+    refine=True,
+    camera_cls=None,
+    lens="auto",
+    lens_r=None,
+    lens_z=None,
+    rim_hint=None,
+    max_tilt_deg=10.0,
+    max_offset_mm=10.0,
+    check_plausibility=True,
+):
     """Mirror posture from one image: rim ellipse, Chen's method, far-line selection, refinement.
 
     Parameters
@@ -117,15 +133,18 @@ def calibrate(K, mirror, image=None, boundary_points=None, far_lines=None, D=Non
     from .report import CalibrationReport
 
     if not isinstance(camera_cls, type):
-        raise ValueError("camera_cls must be the camera class to build; call "
-                         "omnicam.MisalignedHyperbolicCamera.calibrate(...)")
+        raise ValueError(
+            "camera_cls must be the camera class to build; call "
+            "omnicam.MisalignedHyperbolicCamera.calibrate(...)"
+        )
     K = validate_K(K)
     D = validate_D(D)
     if not isinstance(mirror, HyperbolicMirror):
         raise ValueError(f"mirror must be a HyperbolicMirror, got {type(mirror).__name__}")
     if image is None and boundary_points is None:
-        raise ValueError("give the image (the rim is detected) or boundary_points (pixels on the "
-                         "mirror rim)")
+        raise ValueError(
+            "give the image (the rim is detected) or boundary_points (pixels on the mirror rim)"
+        )
     if image_size is None and image is not None:
         shape = np.shape(image)
         if len(shape) >= 2:
@@ -133,35 +152,53 @@ def calibrate(K, mirror, image=None, boundary_points=None, far_lines=None, D=Non
     image_size = validate_image_size(image_size)
     lines = selection.validate_far_lines(far_lines)
 
-    rim = steps.rim_step(K, D, image, boundary_points, rim_hint, mirror, max_tilt_deg,
-                         max_offset_mm)
+    rim = steps.rim_step(
+        K, D, image, boundary_points, rim_hint, mirror, max_tilt_deg, max_offset_mm
+    )
     lines_xn = [steps.normalize(line, K, D) for line in lines]
     # far-line pixels outside the fitted rim by more than its noise cannot see the mirror
     selection.check_lines_inside_rim(
         [rim.fit.distance(x @ K[:2, :2].T + K[:2, 2]) for x in lines_xn],
-        max(2.0, 3.0 * rim.fit.rms))
+        max(2.0, 3.0 * rim.fit.rms),
+    )
     cands = steps.candidates_step(rim, K, mirror)
-    cue = steps.reflection_step(lens, image, rim.detected or rim.fit, K, D, lens_r, lens_z,
-                                cands, mirror)
+    cue = steps.reflection_step(
+        lens, image, rim.detected or rim.fit, K, D, lens_r, lens_z, cands, mirror
+    )
 
     def make_camera(c):
         return camera_cls(K, mirror, c.rvec, c.tvec, D=D, image_size=image_size)
 
     sel, circles = steps.selection_step(cands, cue, lines, mirror, K, D, make_camera)
-    ref = steps.refinement_step(K, mirror, cands.all[sel.chosen], rim, lines_xn, cue,
-                                circles.get(sel.chosen), refine)
+    ref = steps.refinement_step(
+        K, mirror, cands.all[sel.chosen], rim, lines_xn, cue, circles.get(sel.chosen), refine
+    )
     warnings = steps.warnings_step(rim, cue, sel, ref, cands)
     camera = camera_cls(K, mirror, ref.rvec, ref.tvec, D=D, image_size=image_size)
-    report = CalibrationReport.from_steps(rim, cue, cands, sel, ref, list(warnings), camera,
-                                          lines)
+    report = CalibrationReport.from_steps(rim, cue, cands, sel, ref, list(warnings), camera, lines)
     if check_plausibility:  # (.plausibility) a second calibration only when suspicious
         from .plausibility import assess
 
-        implausible = assess(report, image_size, lambda m: calibrate(
-            K, m, boundary_points=rim.seen, far_lines=lines or None, D=D, image_size=image_size,
-            refine=refine, camera_cls=camera_cls, lens=cue.points if cue.used else False,
-            lens_r=lens_r, lens_z=lens_z, check_plausibility=False),
-            max_tilt_deg=max_tilt_deg, max_offset_mm=max_offset_mm)
+        implausible = assess(
+            report,
+            image_size,
+            lambda m: calibrate(
+                K,
+                m,
+                boundary_points=rim.seen,
+                far_lines=lines or None,
+                D=D,
+                image_size=image_size,
+                refine=refine,
+                camera_cls=camera_cls,
+                lens=cue.points if cue.used else False,
+                lens_r=lens_r,
+                lens_z=lens_z,
+                check_plausibility=False,
+            ),
+            max_tilt_deg=max_tilt_deg,
+            max_offset_mm=max_offset_mm,
+        )
         report.warnings.extend(str(w) for w in implausible)
         report = dataclasses.replace(report, plausibility=tuple(implausible))
     return camera, report

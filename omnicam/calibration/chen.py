@@ -29,6 +29,7 @@ set to 0 and then replaced by the gauge of :func:`omnicam.gauge.canonical_rvec`)
 column of ``U`` (printed as a second ``u2``, eq. 41) is ``u3``; ``delta`` of eq. 42 is the
 square root of the printed ratio.
 """
+
 from __future__ import annotations
 
 import dataclasses
@@ -41,8 +42,14 @@ from .._validate import validate_K
 from ..gauge import canonical_rvec
 from ..mirror import HyperbolicMirror
 
-__all__ = ["Candidate", "normalized_conic", "chen_candidates", "rim_cone", "rim_conic",
-           "physical_reasons"]
+__all__ = [
+    "Candidate",
+    "normalized_conic",
+    "chen_candidates",
+    "rim_cone",
+    "rim_conic",
+    "physical_reasons",
+]
 
 
 @dataclasses.dataclass(frozen=True, eq=False)
@@ -91,8 +98,10 @@ class Candidate:
 
     def __repr__(self):
         tag = "physical" if self.physical else "impossible: " + "; ".join(self.reasons)
-        return (f"Candidate(l={self.l}, m={self.m}, rvec={np.round(self.rvec, 9).tolist()}, "
-                f"tvec={np.round(self.tvec, 9).tolist()}, score={self.score:.6g}, {tag})")
+        return (
+            f"Candidate(l={self.l}, m={self.m}, rvec={np.round(self.rvec, 9).tolist()}, "
+            f"tvec={np.round(self.tvec, 9).tolist()}, score={self.score:.6g}, {tag})"
+        )
 
 
 # -- the conic ---------------------------------------------------------------------------------
@@ -129,19 +138,25 @@ def normalized_conic(Q_I, K):
     Qe = Qe / nrm
     lam = np.linalg.eigvalsh(Qe)
     if np.min(np.abs(lam)) < 1e-12 * np.max(np.abs(lam)):
-        raise ValueError("the rim conic is degenerate (a pair of lines or a point); give boundary "
-                         "points spread along the whole mirror rim")
+        raise ValueError(
+            "the rim conic is degenerate (a pair of lines or a point); give boundary "
+            "points spread along the whole mirror rim"
+        )
     # errata: the conic's sign is free; make exactly one eigenvalue negative  (eqs. 32-33)
     if np.count_nonzero(lam < 0) == 2:
         Qe, lam = -Qe, -lam[::-1]
     if np.count_nonzero(lam < 0) != 1:
-        raise ValueError("the rim conic is an imaginary ellipse (no real points); fit it to "
-                         "points along the mirror boundary")
+        raise ValueError(
+            "the rim conic is an imaginary ellipse (no real points); fit it to "
+            "points along the mirror boundary"
+        )
     # a real ellipse in the image plane z = 1: the upper-left 2x2 block is positive definite
     if np.linalg.det(Qe[:2, :2]) <= 0 or Qe[0, 0] <= 0:
-        raise ValueError("the rim conic is not an ellipse in the image (a hyperbola or parabola "
-                         "means the rim would cross the camera's plane); check the boundary "
-                         "points and K")
+        raise ValueError(
+            "the rim conic is not an ellipse in the image (a hyperbola or parabola "
+            "means the rim would cross the camera's plane); check the boundary "
+            "points and K"
+        )
     return Qe
 
 
@@ -162,9 +177,9 @@ def _chen_U(delta, l, m, theta=0.0):
     s = math.sqrt(max(0.0, 1.0 - delta * delta))
     ct, st = math.cos(theta), math.sin(theta)
     sl, sm, slm = (-1.0) ** l, (-1.0) ** m, (-1.0) ** (l - m)
-    u1 = np.array([delta * ct, st, slm * s * ct])          # eq. 39
+    u1 = np.array([delta * ct, st, slm * s * ct])  # eq. 39
     u2 = np.array([sm * delta * st, -sm * ct, sl * s * st])  # eq. 40
-    u3 = np.array([sl * s, 0.0, -sm * delta])              # eq. 41 (printed as u2: erratum)
+    u3 = np.array([sl * s, 0.0, -sm * delta])  # eq. 41 (printed as u2: erratum)
     return np.stack([u1, u2, u3], axis=1)
 
 
@@ -231,8 +246,10 @@ def chen_candidates(Qe, mirror):
             q = M[2, 2] / k  # (x0^2 + y0^2 - r^2) / z0^2
             rz2 = x0z * x0z + y0z * y0z - q  # r^2 / z0^2
             if not (np.isfinite(rz2) and rz2 > 0):
-                raise ValueError("the rim conic does not fit a circle seen by this camera "
-                                 "(numerically degenerate); check K and the boundary points")
+                raise ValueError(
+                    "the rim conic does not fit a circle seen by this camera "
+                    "(numerically degenerate); check K and the boundary points"
+                )
             z0 = r / math.sqrt(rz2)
             R = V @ U  # eq. 29
             C = R @ (z0 * np.array([x0z, y0z, 1.0]))  # C_C = R C_0
@@ -243,8 +260,18 @@ def chen_candidates(Qe, mirror):
             rvec = canonical_rvec(cv2.Rodrigues(R)[0].ravel())
             Rg = cv2.Rodrigues(rvec.reshape(3, 1))[0]
             reasons = physical_reasons(Rg, tvec, mirror, C)
-            out.append(Candidate(rvec=rvec, tvec=tvec, axis=axis, rim_centre=C,
-                                 physical=not reasons, reasons=reasons, l=l, m=m))
+            out.append(
+                Candidate(
+                    rvec=rvec,
+                    tvec=tvec,
+                    axis=axis,
+                    rim_centre=C,
+                    physical=not reasons,
+                    reasons=reasons,
+                    l=l,
+                    m=m,
+                )
+            )
     return out
 
 
@@ -262,7 +289,7 @@ def rim_cone(R, tvec, mirror):
     w1 = np.array([h, 0.0, -b[0]])
     w2 = np.array([0.0, h, -b[1]])
     e3 = np.array([0.0, 0.0, 1.0])
-    W = np.outer(w1, w1) + np.outer(w2, w2) - mirror.rim_radius ** 2 * np.outer(e3, e3)
+    W = np.outer(w1, w1) + np.outer(w2, w2) - mirror.rim_radius**2 * np.outer(e3, e3)
     Q = R @ W @ R.T
     return Q / np.linalg.norm(Q)
 

@@ -4,6 +4,7 @@ Used by the rim detector (:mod:`.rim`) and the camera's-reflection detector: the
 is sampled along the normals of a predicted ellipse, and each normal's strongest (or outermost)
 edge is located to a fraction of a pixel.
 """
+
 from __future__ import annotations
 
 import cv2
@@ -21,13 +22,17 @@ def as_gray(image):
     if image.ndim == 3 and image.shape[2] == 1:
         image = image[:, :, 0]
     if image.ndim not in (2, 3) or (image.ndim == 3 and image.shape[2] not in (3, 4)):
-        raise ValueError(f"image must be grey (H, W) or BGR/BGRA (H, W, 3|4), got shape "
-                         f"{image.shape}")
+        raise ValueError(
+            f"image must be grey (H, W) or BGR/BGRA (H, W, 3|4), got shape {image.shape}"
+        )
     if min(image.shape[:2]) < 32:
-        raise ValueError(f"image is too small to hold a mirror rim: {image.shape[1]}x"
-                         f"{image.shape[0]} px (need at least 32x32)")
-    if image.dtype == np.bool_ or not (np.issubdtype(image.dtype, np.integer)
-                                       or np.issubdtype(image.dtype, np.floating)):
+        raise ValueError(
+            f"image is too small to hold a mirror rim: {image.shape[1]}x"
+            f"{image.shape[0]} px (need at least 32x32)"
+        )
+    if image.dtype == np.bool_ or not (
+        np.issubdtype(image.dtype, np.integer) or np.issubdtype(image.dtype, np.floating)
+    ):
         raise ValueError(f"image must be uint8, uint16 or float, got dtype {image.dtype}")
     img = image.astype(np.float32, copy=False)
     if img.ndim == 3:
@@ -40,8 +45,9 @@ def as_gray(image):
     return (img - lo) * np.float32(1.0 / (hi - lo))
 
 
-def edge_points_along_normals(G, center, S, half_width, step=0.25, outermost=False,
-                               centroid=0.0, absolute=False):
+def edge_points_along_normals(
+    G, center, S, half_width, step=0.25, outermost=False, centroid=0.0, absolute=False
+):
     """Subpixel rim points: strongest outward intensity drop along the ellipse normals.
 
     The ellipse is sampled every pixel of arc length; along each outward normal the smoothed
@@ -73,8 +79,12 @@ def edge_points_along_normals(G, center, S, half_width, step=0.25, outermost=Fal
     inside = np.ones(len(e), bool)
     for end in (tau[0], tau[-1]):  # a segment is inside the (convex) frame iff its ends are
         q = e + end * nrm
-        inside &= ((q[:, 0] >= margin) & (q[:, 0] <= w - 1 - margin) &
-                   (q[:, 1] >= margin) & (q[:, 1] <= h - 1 - margin))
+        inside &= (
+            (q[:, 0] >= margin)
+            & (q[:, 0] <= w - 1 - margin)
+            & (q[:, 1] >= margin)
+            & (q[:, 1] <= h - 1 - margin)
+        )
     if inside.sum() < 6:
         return np.empty((0, 2)), 0
     e, nrm = e[inside], nrm[inside]
@@ -91,8 +101,11 @@ def edge_points_along_normals(G, center, S, half_width, step=0.25, outermost=Fal
         locmax = np.zeros_like(drop, bool)
         locmax[:, 1:-1] = (drop[:, 1:-1] >= drop[:, :-2]) & (drop[:, 1:-1] > drop[:, 2:])
         cand = locmax & (drop >= 0.5 * dmax)
-        k = np.where(cand.any(axis=1), drop.shape[1] - 1 - np.argmax(cand[:, ::-1], axis=1),
-                     np.argmax(drop, axis=1))
+        k = np.where(
+            cand.any(axis=1),
+            drop.shape[1] - 1 - np.argmax(cand[:, ::-1], axis=1),
+            np.argmax(drop, axis=1),
+        )
     else:
         k = np.argmax(drop, axis=1)
     rows = np.arange(len(k))
@@ -105,8 +118,11 @@ def edge_points_along_normals(G, center, S, half_width, step=0.25, outermost=Fal
     l0, l1, l2 = (np.log(np.where(pos, v, 1.0)) for v in (d0, d1, d2))
     den_log = l0 - 2 * l1 + l2
     den_lin = d0 - 2 * d1 + d2
-    off = np.where(pos & (den_log < 0), 0.5 * (l0 - l2) / np.where(den_log < 0, den_log, -1.0),
-                   0.5 * (d0 - d2) / np.where(den_lin < 0, den_lin, -1.0))
+    off = np.where(
+        pos & (den_log < 0),
+        0.5 * (l0 - l2) / np.where(den_log < 0, den_log, -1.0),
+        0.5 * (d0 - d2) / np.where(den_lin < 0, den_lin, -1.0),
+    )
     off = np.clip(off, -1.0, 1.0)
     where = tau[1:-1][k] + off * step
     ok &= strength > 0

@@ -5,16 +5,28 @@ same ellipse as a centre and shape matrix ``S`` (``|S^-1 (p - center)| = 1``). F
 normalised direct fit, RANSAC over five-point conics with Sampson distances, and the
 orthogonal (geometric) refinement used by :func:`omnicam.calibration.rim.fit_rim`.
 """
+
 from __future__ import annotations
 
 import math
 
 import numpy as np
 
-__all__ = ["conic_from_ellipse", "ellipse_from_conic", "conic_distance", "axes_angle",
-           "hartley_normalization", "direct_ellipse", "is_ellipse", "orthogonal_residuals",
-           "refine_geometric", "conics_through_5", "sampson_distances", "ransac_conic",
-           "coeffs_to_conic"]
+__all__ = [
+    "conic_from_ellipse",
+    "ellipse_from_conic",
+    "conic_distance",
+    "axes_angle",
+    "hartley_normalization",
+    "direct_ellipse",
+    "is_ellipse",
+    "orthogonal_residuals",
+    "refine_geometric",
+    "conics_through_5",
+    "sampson_distances",
+    "ransac_conic",
+    "coeffs_to_conic",
+]
 
 
 def conic_from_ellipse(center, S):
@@ -44,13 +56,16 @@ def ellipse_from_conic(Q):
     Q = 0.5 * (Q + Q.T)
     A = Q[:2, :2]
     if not np.isfinite(Q).all() or np.linalg.det(A) <= 0.0:
-        raise ValueError("the fitted conic is not an ellipse (degenerate, hyperbola or parabola); "
-                         "give points spread along a clearly elliptic boundary")
+        raise ValueError(
+            "the fitted conic is not an ellipse (degenerate, hyperbola or parabola); "
+            "give points spread along a clearly elliptic boundary"
+        )
     center = np.linalg.solve(A, -Q[:2, 2])
     F = Q[2, 2] + Q[:2, 2] @ center  # value of the conic at the centre
     if not F < 0.0 < A[0, 0] and not F > 0.0 > A[0, 0]:
-        raise ValueError("the fitted conic is a point or an imaginary ellipse; give points along "
-                         "the rim")
+        raise ValueError(
+            "the fitted conic is a point or an imaginary ellipse; give points along the rim"
+        )
     M = A / -F
     w, V = np.linalg.eigh(M)
     if not (np.isfinite(w).all() and w[0] > 0.0):
@@ -149,8 +164,8 @@ def orthogonal_residuals(pts, center, S, iters=12):
     s11, s12, s22 = S[0, 0], S[0, 1], S[1, 1]
     for _ in range(iters):
         c, s = np.cos(t), np.sin(t)
-        xx, xy = s11 * c + s12 * s, s12 * c + s22 * s        # S u
-        dx, dy = -s11 * s + s12 * c, -s12 * s + s22 * c      # S u'
+        xx, xy = s11 * c + s12 * s, s12 * c + s22 * s  # S u
+        dx, dy = -s11 * s + s12 * c, -s12 * s + s22 * c  # S u'
         ex, ey = xx - q[:, 0], xy - q[:, 1]
         f = ex * dx + ey * dy
         tt = dx * dx + dy * dy
@@ -184,8 +199,16 @@ def refine_geometric(pts, center, S, iters=50):
         if np.linalg.det(Sm) <= 0 or Sm[0, 0] <= 0:
             return None, None
         r, u, n = orthogonal_residuals(pts, c, Sm)
-        J = -np.stack([n[:, 0], n[:, 1], n[:, 0] * u[:, 0],
-                       n[:, 0] * u[:, 1] + n[:, 1] * u[:, 0], n[:, 1] * u[:, 1]], axis=1)
+        J = -np.stack(
+            [
+                n[:, 0],
+                n[:, 1],
+                n[:, 0] * u[:, 0],
+                n[:, 0] * u[:, 1] + n[:, 1] * u[:, 0],
+                n[:, 1] * u[:, 1],
+            ],
+            axis=1,
+        )
         return r, J
 
     r, J = evaluate(p)
@@ -206,8 +229,9 @@ def refine_geometric(pts, center, S, iters=50):
             if r_new is not None and r_new @ r_new <= cost:
                 p, r, J = p + step, r_new, J_new
                 new_cost = r @ r
-                converged = cost - new_cost <= 1e-14 * max(cost, 1e-30) or \
-                    np.max(np.abs(step)) < 1e-11 * max(1.0, np.abs(p).max())
+                converged = cost - new_cost <= 1e-14 * max(cost, 1e-30) or np.max(
+                    np.abs(step)
+                ) < 1e-11 * max(1.0, np.abs(p).max())
                 cost = new_cost
                 lam = max(lam / 10.0, 1e-12)
                 improved = True
@@ -253,8 +277,11 @@ def ransac_conic(pts_n, thr_n, rng, max_trials, confidence=0.999, batch=64):
     needed, trials = max_trials, 0
     while trials < min(needed, max_trials):
         b = min(batch, max_trials - trials)
-        idx = np.argsort(rng.random((b, n)), axis=1)[:, :5] if n <= 64 else \
-            rng.integers(0, n, size=(b, 5))
+        idx = (
+            np.argsort(rng.random((b, n)), axis=1)[:, :5]
+            if n <= 64
+            else rng.integers(0, n, size=(b, 5))
+        )
         Qs = conics_through_5(pts_n[idx])
         A = Qs[:, :2, :2]
         ell = (A[:, 0, 0] * A[:, 1, 1] - A[:, 0, 1] ** 2) > 0
@@ -268,7 +295,7 @@ def ransac_conic(pts_n, thr_n, rng, max_trials, confidence=0.999, batch=64):
         if counts[k] > best_count:
             best_count, best_Q = int(counts[k]), Qs[k]
             w = best_count / m_eval
-            denom = math.log(max(1e-12, 1.0 - w ** 5)) if w < 1.0 else -np.inf
+            denom = math.log(max(1e-12, 1.0 - w**5)) if w < 1.0 else -np.inf
             needed = 0 if w >= 1.0 else int(math.ceil(math.log(1.0 - confidence) / denom))
     if best_Q is None:
         return None

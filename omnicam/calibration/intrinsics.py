@@ -4,6 +4,7 @@ The paper assumes a calibrated camera: ``K`` (and here ``D``) enter Chen's metho
 ``Q_e = K^T Q_I K`` (eq. 24, after undistorting the rim points). This module is a thin, validated
 wrapper of OpenCV: ``cv2.findChessboardCorners`` + ``cv2.cornerSubPix`` + ``cv2.calibrateCamera``.
 """
+
 from __future__ import annotations
 
 import os
@@ -21,11 +22,14 @@ def _pattern(pattern_size):
         cols, rows = (int(v) for v in pattern_size)
         exact = all(float(v) == int(v) for v in pattern_size)
     except (TypeError, ValueError):
-        raise ValueError(f"pattern_size must be (columns, rows) of inner corners, got "
-                         f"{pattern_size!r}") from None
+        raise ValueError(
+            f"pattern_size must be (columns, rows) of inner corners, got {pattern_size!r}"
+        ) from None
     if not exact or cols < 2 or rows < 2:
-        raise ValueError(f"pattern_size must be two integers >= 2 (inner corners per row and "
-                         f"per column, as cv2.findChessboardCorners), got {pattern_size!r}")
+        raise ValueError(
+            f"pattern_size must be two integers >= 2 (inner corners per row and "
+            f"per column, as cv2.findChessboardCorners), got {pattern_size!r}"
+        )
     return cols, rows
 
 
@@ -38,21 +42,29 @@ def _gray8(image, index):
             raise ValueError(f"images[{index}]: cannot read image file {path!r}")
         image = img
     if not isinstance(image, np.ndarray):
-        raise ValueError(f"images[{index}] must be an image array or a file path, got "
-                         f"{type(image).__name__}")
+        raise ValueError(
+            f"images[{index}] must be an image array or a file path, got {type(image).__name__}"
+        )
     if image.ndim == 3 and image.shape[2] == 1:
         image = image[:, :, 0]
-    if image.ndim not in (2, 3) or (image.ndim == 3 and image.shape[2] not in (3, 4)) \
-            or image.size == 0:
-        raise ValueError(f"images[{index}] must be grey (H, W) or BGR/BGRA (H, W, 3|4), got shape "
-                         f"{image.shape}")
+    if (
+        image.ndim not in (2, 3)
+        or (image.ndim == 3 and image.shape[2] not in (3, 4))
+        or image.size == 0
+    ):
+        raise ValueError(
+            f"images[{index}] must be grey (H, W) or BGR/BGRA (H, W, 3|4), got shape {image.shape}"
+        )
     if image.dtype == np.uint8:
         img = image
     elif np.issubdtype(image.dtype, np.integer) or np.issubdtype(image.dtype, np.floating):
         f = np.nan_to_num(image.astype(np.float32))
         lo, hi = float(f.min()), float(f.max())
-        img = np.zeros(f.shape, np.uint8) if hi <= lo else \
-            np.round((f - lo) * (255.0 / (hi - lo))).astype(np.uint8)
+        img = (
+            np.zeros(f.shape, np.uint8)
+            if hi <= lo
+            else np.round((f - lo) * (255.0 / (hi - lo))).astype(np.uint8)
+        )
     else:
         raise ValueError(f"images[{index}] must be uint8, uint16 or float, got dtype {image.dtype}")
     if img.ndim == 3:
@@ -80,8 +92,10 @@ def find_chessboard(gray, pattern_size):
     cols, rows = pattern_size
     grid = corners.reshape(rows, cols, 2)
     # a search window of ~40 % of the smallest corner spacing, 2..11 px half-size
-    spacing = min(np.linalg.norm(np.diff(grid, axis=0), axis=2).min(),
-                  np.linalg.norm(np.diff(grid, axis=1), axis=2).min())
+    spacing = min(
+        np.linalg.norm(np.diff(grid, axis=0), axis=2).min(),
+        np.linalg.norm(np.diff(grid, axis=1), axis=2).min(),
+    )
     half = int(np.clip(0.4 * spacing, 2, 11))
     criteria = (cv2.TERM_CRITERIA_EPS + cv2.TERM_CRITERIA_MAX_ITER, 100, 1e-4)
     return cv2.cornerSubPix(gray, corners, (half, half), (-1, -1), criteria)
@@ -134,16 +148,18 @@ def calibrate_intrinsics(images, pattern_size, square_size, flags=0, min_views=3
         raise ValueError(f"min_views must be an integer >= 3, got {min_views!r}")
     if isinstance(images, (str, os.PathLike)):
         images = [images]  # one image file given alone
-    elif isinstance(images, np.ndarray) and (images.ndim == 2 or (
-            images.ndim == 3 and images.shape[2] in (1, 3, 4))):
+    elif isinstance(images, np.ndarray) and (
+        images.ndim == 2 or (images.ndim == 3 and images.shape[2] in (1, 3, 4))
+    ):
         images = [images]  # one image given alone; (N, H, W) and (N, H, W, C) are stacks
     try:
         images = list(images)
     except TypeError:
         raise ValueError("images must be a sequence of images or image files") from None
     if not images:
-        raise ValueError("no images given: pass images of a chessboard taken by the camera "
-                         "without the mirror")
+        raise ValueError(
+            "no images given: pass images of a chessboard taken by the camera without the mirror"
+        )
     obj = np.zeros((rows * cols, 3), np.float32)
     obj[:, :2] = np.mgrid[0:cols, 0:rows].T.reshape(-1, 2) * square
     size = None
@@ -153,8 +169,10 @@ def calibrate_intrinsics(images, pattern_size, square_size, flags=0, min_views=3
         if size is None:
             size = gray.shape[::-1]
         elif gray.shape[::-1] != size:
-            raise ValueError(f"images[{i}] is {gray.shape[1]}x{gray.shape[0]} but images[0] is "
-                             f"{size[0]}x{size[1]}: all images must come from the same camera mode")
+            raise ValueError(
+                f"images[{i}] is {gray.shape[1]}x{gray.shape[0]} but images[0] is "
+                f"{size[0]}x{size[1]}: all images must come from the same camera mode"
+            )
         corners = find_chessboard(gray, (cols, rows))
         if corners is None:
             missed.append(i)
@@ -162,9 +180,12 @@ def calibrate_intrinsics(images, pattern_size, square_size, flags=0, min_views=3
         object_points.append(obj)
         image_points.append(corners)
     if len(image_points) < min_views:
-        raise ValueError(f"the {cols}x{rows} chessboard was found in {len(image_points)} of "
-                         f"{len(images)} images, need at least {min_views}: check pattern_size "
-                         f"(inner corners, not squares) and take more views of the whole board")
-    rms, K, D, _, _ = cv2.calibrateCamera(object_points, image_points, size, None, None,
-                                          flags=int(flags))
+        raise ValueError(
+            f"the {cols}x{rows} chessboard was found in {len(image_points)} of "
+            f"{len(images)} images, need at least {min_views}: check pattern_size "
+            f"(inner corners, not squares) and take more views of the whole board"
+        )
+    rms, K, D, _, _ = cv2.calibrateCamera(
+        object_points, image_points, size, None, None, flags=int(flags)
+    )
     return float(rms), np.asarray(K, np.float64), np.asarray(D, np.float64).ravel()

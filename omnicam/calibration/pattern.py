@@ -19,9 +19,10 @@ For rigs whose camera cannot be calibrated without the mirror. The pipeline of
    px: every corner's reprojection through the exact non-central projection
    (:func:`omnicam.raytrace.project`, what ``camera.project`` runs), every rim point's
    orthogonal distance to the image of the rim circle (so the rim keeps constraining) and,
-   when the camera's own reflection is seen, its outline residual (:mod:`.reflection`, a circle coaxial with the optical axis). Levenberg-
-   Marquardt with the robust ``soft_l1`` loss (IRLS weights) and a Jacobian by central
-   differences that uses its block structure: a board's pose moves only its own view's rows,
+   when the camera's own reflection is seen, its outline residual (:mod:`.reflection`, a
+   circle coaxial with the optical axis). Levenberg-Marquardt with the robust ``soft_l1``
+   loss (IRLS weights) and a Jacobian by central differences that uses its block structure: a
+   board's pose moves only its own view's rows,
    so the columns of all boards are perturbed together (6 groups instead of ``6 n``). A first
    stage holds the principal point and the distortion at the start, a second frees them;
 4. views whose RMS stands out are dropped (or only reported) and the fit is run again;
@@ -39,6 +40,7 @@ tilt), and with it and ``dist_model="none"`` or ``"k1k2"`` the principal point c
 a pixel and the axis to a few hundredths of a degree; the reported standard deviations say
 which case a calibration is in.
 """
+
 from __future__ import annotations
 
 import dataclasses
@@ -139,8 +141,10 @@ class PatternReport:
             if i in self.view_rms:
                 t = np.asarray(self.board_poses[i][1])
                 el = math.degrees(math.atan2(t[2], math.hypot(t[0], t[1])))
-                lines.append(f"{i:>5} {self.corners_used[i]:>7} {self.view_rms[i]:>8.3f} "
-                             f"{np.linalg.norm(t):>8.1f} {el:>8.1f}")
+                lines.append(
+                    f"{i:>5} {self.corners_used[i]:>7} {self.view_rms[i]:>8.3f} "
+                    f"{np.linalg.norm(t):>8.1f} {el:>8.1f}"
+                )
             else:
                 lines.append(f"{i:>5} {'-':>7} {'-':>8}   dropped: {self.dropped[i]}")
         return "\n".join(lines)
@@ -149,22 +153,32 @@ class PatternReport:
         """BGR overlay of view ``index``: detected corners (green circles) and reprojected ones
         (red crosses), with the rim (blue)."""
         from .report import _to_bgr8
+
         img = _to_bgr8(image, None).copy()
         rim = self.camera.rim_image_points(720)
         if np.isfinite(rim).all():
-            cv2.polylines(img, [np.round(rim * 16).astype(np.int32)], True, (255, 0, 0), 1,
-                          cv2.LINE_AA, 4)
+            cv2.polylines(
+                img, [np.round(rim * 16).astype(np.int32)], True, (255, 0, 0), 1, cv2.LINE_AA, 4
+            )
         det = self.image_points[index]
         if det is not None:
             for p in np.asarray(det).reshape(-1, 2):
-                cv2.circle(img, tuple(int(v) for v in np.round(p * 16)), 4 * 16, (0, 200, 0), 1,
-                           cv2.LINE_AA, 4)
+                cv2.circle(
+                    img,
+                    tuple(int(v) for v in np.round(p * 16)),
+                    4 * 16,
+                    (0, 200, 0),
+                    1,
+                    cv2.LINE_AA,
+                    4,
+                )
         rep = self.reprojected.get(index)
         if rep is not None:
             for p in np.asarray(rep).reshape(-1, 2):
                 if np.isfinite(p).all():
-                    cv2.drawMarker(img, tuple(round(v) for v in p), (0, 0, 255),
-                                   cv2.MARKER_CROSS, 6, 1)
+                    cv2.drawMarker(
+                        img, tuple(round(v) for v in p), (0, 0, 255), cv2.MARKER_CROSS, 6, 1
+                    )
         return img
 
 
@@ -221,14 +235,14 @@ def board_pose_from_rays(origins, directions, obj, viewpoint):
         RMS point-to-ray distance (mirror units).
     """
     from scipy.optimize import least_squares
+
     m = directions.mean(axis=0)
     m /= np.linalg.norm(m)
     b1, b2 = _perp_basis(m)
     Rv = np.stack([b1, b2, m])  # mirror -> virtual camera
     dv = directions @ Rv.T
     xn = (dv[:, :2] / dv[:, 2:3]).reshape(-1, 1, 2)
-    ok, rp, tp = cv2.solvePnP(obj.reshape(-1, 1, 3), xn, np.eye(3), None,
-                              flags=cv2.SOLVEPNP_IPPE)
+    ok, rp, tp = cv2.solvePnP(obj.reshape(-1, 1, 3), xn, np.eye(3), None, flags=cv2.SOLVEPNP_IPPE)
     if not ok:
         ok, rp, tp = cv2.solvePnP(obj.reshape(-1, 1, 3), xn, np.eye(3), None)
     Rb = Rv.T @ _rodrigues(rp.ravel())
@@ -303,23 +317,38 @@ class _Adjustment:
     with ``R = R0 R(w1, w2, 0)``: the mirror frame of the start turned about its own x and y
     axes, so the axis moves with no twist about it (the gauge's smallest rotation would add a
     twist of second order, which turns every board about the axis and bends the valley the
-    fit must follow); ``tvec = t``; 6 numbers per board (``rvec_b, tvec_b``). The gauge of docs/conventions.md is
-    imposed once, on the result (:meth:`to_gauge`).
+    fit must follow); ``tvec = t``; 6 numbers per board (``rvec_b, tvec_b``). The gauge of
+    docs/conventions.md is imposed once, on the result (:meth:`to_gauge`).
     """
 
-    def __init__(self, cam0, mirror, obj, views, rim_px, free_d, n_d, fit_skew, fit_shape,
-                 camera_cls, lens_px=None, lens_z=None):
+    def __init__(
+        self,
+        cam0,
+        mirror,
+        obj,
+        views,
+        rim_px,
+        free_d,
+        n_d,
+        fit_skew,
+        fit_shape,
+        camera_cls,
+        lens_px=None,
+        lens_z=None,
+    ):
         from ..gauge import gauge_rotation
+
         self.gauge_rotation = gauge_rotation
         self.mirror, self.obj, self.views, self.rim_px = mirror, obj, views, rim_px
         self.lens_px = lens_px
         self.lens_z, self.lens_z_free = lens_z, lens_z is None
-        if lens_px is not None and lens_z is None:  # the circle's plane, fitted once under the start posture
+        if lens_px is not None and lens_z is None:  # its plane, fitted at the start
             from .reflection import fit_circle
 
             Ki = np.linalg.inv(cam0.K)
-            circle = fit_circle(mirror, cam0.R, cam0.tvec, _normalized(lens_px, cam0.K, cam0.D),
-                                Ki[:2, :2])
+            circle = fit_circle(
+                mirror, cam0.R, cam0.tvec, _normalized(lens_px, cam0.K, cam0.D), Ki[:2, :2]
+            )
             self.lens_z = circle.z if math.isfinite(circle.rms) else None
             if self.lens_z is None:
                 self.lens_px = None
@@ -335,9 +364,13 @@ class _Adjustment:
         if fit_shape:
             g += [mirror.a, mirror.b]
         self.n_global = len(g)
-        self.names = (["fx", "fy", "cx", "cy"] + (["skew"] if fit_skew else [])
-                      + [("k1", "k2", "p1", "p2", "k3")[i] for i in free_d]
-                      + ["w1", "w2", "tx", "ty", "tz"] + (["a", "b"] if fit_shape else []))
+        self.names = (
+            ["fx", "fy", "cx", "cy"]
+            + (["skew"] if fit_skew else [])
+            + [("k1", "k2", "p1", "p2", "k3")[i] for i in free_d]
+            + ["w1", "w2", "tx", "ty", "tz"]
+            + (["a", "b"] if fit_shape else [])
+        )
         self.x0_global = np.array(g, np.float64)
         self.fixed = set()  # names of global parameters held at their value
         self.skew0 = K[0, 1]
@@ -346,6 +379,7 @@ class _Adjustment:
 
     def unpack(self, x):
         from ..mirror import HyperbolicMirror
+
         i = 0
         fx, fy, cx, cy = x[0:4]
         i = 4
@@ -360,9 +394,9 @@ class _Adjustment:
             for j in self.free_d:
                 D[j] = x[i]
                 i += 1
-        w1, w2 = x[i:i + 2]
+        w1, w2 = x[i : i + 2]
         R = self.R0 @ _rodrigues(np.array([w1, w2, 0.0]))
-        tvec = x[i + 2:i + 5].copy()
+        tvec = x[i + 2 : i + 5].copy()
         i += 5
         mirror = self.mirror
         if self.fit_shape:
@@ -380,23 +414,25 @@ class _Adjustment:
         K, D, R, tvec, mirror = self.unpack(x)
         Rg = self.gauge_rotation(R[:, 2])
         Z = Rg.T @ R
-        cam = self.camera_cls(K, mirror, cv2.Rodrigues(Rg)[0].ravel(), tvec, D=D,
-                              image_size=image_size)
-        poses = [(cv2.Rodrigues(Z @ _rodrigues(b[:3]))[0].ravel(), Z @ b[3:])
-                 for b in self.boards(x)]
+        cam = self.camera_cls(
+            K, mirror, cv2.Rodrigues(Rg)[0].ravel(), tvec, D=D, image_size=image_size
+        )
+        poses = [
+            (cv2.Rodrigues(Z @ _rodrigues(b[:3]))[0].ravel(), Z @ b[3:]) for b in self.boards(x)
+        ]
         return cam, poses
 
     def boards(self, x):
-        return x[self.n_global:].reshape(-1, 6)
+        return x[self.n_global :].reshape(-1, 6)
 
     def corner_residuals(self, x):
         from .. import raytrace
+
         K, D, R, tvec, mirror = self.unpack(x)
         B = self.boards(x)
         pts = np.concatenate([self.obj @ _rodrigues(b[:3]).T + b[3:] for b in B])
         # the exact non-central projection of the camera's project(), on the fit's frame
-        px = raytrace.project(np.ascontiguousarray(pts), False, K, D, R, tvec, -R.T @ tvec,
-                              mirror)
+        px = raytrace.project(np.ascontiguousarray(pts), False, K, D, R, tvec, -R.T @ tvec, mirror)
         obs = np.concatenate(self.views)
         r = px - obs
         r[~np.isfinite(r)] = 50.0  # a corner the rig cannot see: a large, constant residual
@@ -406,8 +442,18 @@ class _Adjustment:
         K, D, R, tvec, mirror = self.unpack(x)
         if self.rim_phi is None:  # foot points of the start, by dense sampling
             ph = np.linspace(0, 2 * np.pi, 3600, endpoint=False)
-            X = np.stack([mirror.rim_radius * np.cos(ph), mirror.rim_radius * np.sin(ph),
-                          np.full_like(ph, mirror.z_rim)], axis=1) @ R.T + tvec
+            X = (
+                np.stack(
+                    [
+                        mirror.rim_radius * np.cos(ph),
+                        mirror.rim_radius * np.sin(ph),
+                        np.full_like(ph, mirror.z_rim),
+                    ],
+                    axis=1,
+                )
+                @ R.T
+                + tvec
+            )
             xn = X[:, :2] / X[:, 2:3]
             c = xn @ K[:2, :2].T + K[:2, 2]
             j = np.argmin(((self.rim_px[:, None, :] - c[None]) ** 2).sum(-1), axis=1)
@@ -468,8 +514,11 @@ class _Adjustment:
         h = self.steps(x)
         g = self.n_global
         nv = len(self.views)
-        m = nv * self.n_rows_view + len(self.rim_px) + (
-            0 if self.lens_px is None else len(self.lens_px))
+        m = (
+            nv * self.n_rows_view
+            + len(self.rim_px)
+            + (0 if self.lens_px is None else len(self.lens_px))
+        )
         J = np.zeros((m, len(x)))
         for k in range(g):
             if self.names[k] in self.fixed:
@@ -481,12 +530,12 @@ class _Adjustment:
         rows = self.n_rows_view
         for k in range(6):
             xp, xm = x.copy(), x.copy()
-            xp[g + k::6] += h[g + k::6]
-            xm[g + k::6] -= h[g + k::6]
+            xp[g + k :: 6] += h[g + k :: 6]
+            xm[g + k :: 6] -= h[g + k :: 6]
             diff = self.corner_residuals(xp) - self.corner_residuals(xm)
             for v in range(nv):
                 col = g + 6 * v + k
-                J[v * rows:(v + 1) * rows, col] = diff[v * rows:(v + 1) * rows] / (2 * h[col])
+                J[v * rows : (v + 1) * rows, col] = diff[v * rows : (v + 1) * rows] / (2 * h[col])
         return J
 
     def solve(self, x0, f_scale=1.0, max_iter=60):
@@ -505,7 +554,7 @@ class _Adjustment:
 
 def _soft_l1(r, f_scale):
     z = (r / f_scale) ** 2
-    cost = f_scale ** 2 * float(np.sum(np.sqrt(1.0 + z) - 1.0))  # 0.5 * sum rho, rho = 2(...)
+    cost = f_scale**2 * float(np.sum(np.sqrt(1.0 + z) - 1.0))  # 0.5 * sum rho, rho = 2(...)
     return cost, 1.0 / np.sqrt(1.0 + z)
 
 
@@ -580,8 +629,10 @@ def _load_image(image, index):
             raise ValueError(f"images[{index}]: cannot read image file {os.fspath(image)!r}")
         return img
     if not isinstance(image, np.ndarray) or image.ndim not in (2, 3) or image.size == 0:
-        raise ValueError(f"images[{index}] must be an image array (H, W) or (H, W, C) or a file "
-                         f"path, got {type(image).__name__}")
+        raise ValueError(
+            f"images[{index}] must be an image array (H, W) or (H, W, C) or a file "
+            f"path, got {type(image).__name__}"
+        )
     return image
 
 
@@ -590,12 +641,15 @@ def _check_points(points, n, index, pattern_size):
     if arr.ndim == 3 and arr.shape[1:] == (1, 2):
         arr = arr.reshape(-1, 2)
     if arr.ndim != 2 or arr.shape[1] != 2:
-        raise ValueError(f"image_points[{index}] must be an (N, 1, 2) or (N, 2) array, got shape "
-                         f"{arr.shape}")
+        raise ValueError(
+            f"image_points[{index}] must be an (N, 1, 2) or (N, 2) array, got shape {arr.shape}"
+        )
     if len(arr) != n:
-        raise ValueError(f"image_points[{index}] has {len(arr)} corners but pattern_size "
-                         f"{tuple(pattern_size)} has {n}: fix pattern_size (inner corners "
-                         f"(columns, rows), not squares)")
+        raise ValueError(
+            f"image_points[{index}] has {len(arr)} corners but pattern_size "
+            f"{tuple(pattern_size)} has {n}: fix pattern_size (inner corners "
+            f"(columns, rows), not squares)"
+        )
     if not np.isfinite(arr).all():
         raise ValueError(f"image_points[{index}] has non-finite values")
     return arr
@@ -607,11 +661,28 @@ def _azimuth_gap_deg(centres):
     return float(gaps.max())
 
 
-def calibrate_pattern(images, pattern_size, square_size, mirror, K=None, D=None,
-                      image_size=None, image_points=None, refine_mirror_shape=False,
-                      dist_model="k1k2p1p2", *, boundary_points=None, camera_cls=None,
-                      fit_skew=False, drop_outlier_views=True, outlier_factor=3.0,
-                      outlier_min_px=1.0, f_scale=1.0, lens="auto", lens_z=None):
+def calibrate_pattern(
+    images,
+    pattern_size,
+    square_size,
+    mirror,
+    K=None,
+    D=None,
+    image_size=None,
+    image_points=None,
+    refine_mirror_shape=False,
+    dist_model="k1k2p1p2",
+    *,
+    boundary_points=None,
+    camera_cls=None,
+    fit_skew=False,
+    drop_outlier_views=True,
+    outlier_factor=3.0,
+    outlier_min_px=1.0,
+    f_scale=1.0,
+    lens="auto",
+    lens_z=None,
+):
     """Calibrate ``K``, ``D`` and the mirror posture from chessboards seen through the mirror.
 
     Parameters
@@ -684,8 +755,9 @@ def calibrate_pattern(images, pattern_size, square_size, mirror, K=None, D=None,
     from .rim import detect_rim, fit_rim
 
     if camera_cls is None:
-        raise ValueError("camera_cls is required (omnicam.calibrate_pattern passes the camera "
-                         "class)")
+        raise ValueError(
+            "camera_cls is required (omnicam.calibrate_pattern passes the camera class)"
+        )
     cols, rows = _pattern(pattern_size)
     n_corners = cols * rows
     try:
@@ -696,14 +768,18 @@ def calibrate_pattern(images, pattern_size, square_size, mirror, K=None, D=None,
         raise ValueError(f"square_size must be a positive number, got {square_size!r}")
     if not isinstance(mirror, HyperbolicMirror):
         raise ValueError(  # noqa: TRY004 (ValueError for bad arguments, as everywhere)
-            f"mirror must be a HyperbolicMirror, got {type(mirror).__name__}")
+            f"mirror must be a HyperbolicMirror, got {type(mirror).__name__}"
+        )
     if dist_model not in DIST_MODELS:
         raise ValueError(f"dist_model must be one of {sorted(DIST_MODELS)}, got {dist_model!r}")
     from .._validate import validate_D, validate_image_size, validate_K
+
     D = validate_D(D)
     if D is not None and D.size not in (4, 5):
-        raise ValueError(f"D must have 4 or 5 coefficients (k1, k2, p1, p2[, k3]) for pattern "
-                         f"calibration, got {D.size}")
+        raise ValueError(
+            f"D must have 4 or 5 coefficients (k1, k2, p1, p2[, k3]) for pattern "
+            f"calibration, got {D.size}"
+        )
     free_d = DIST_MODELS[dist_model]
     if not free_d and D is None:
         n_d = 0
@@ -713,29 +789,36 @@ def calibrate_pattern(images, pattern_size, square_size, mirror, K=None, D=None,
         D = np.concatenate([D, np.zeros(n_d - D.size)])
     if images is None:
         images = []
-    elif isinstance(images, (str, os.PathLike)) or (isinstance(images, np.ndarray)
-                                                     and images.ndim in (2, 3)
-                                                     and images.dtype != object
-                                                     and (images.ndim == 2
-                                                          or images.shape[2] in (1, 3, 4))):
+    elif isinstance(images, (str, os.PathLike)) or (
+        isinstance(images, np.ndarray)
+        and images.ndim in (2, 3)
+        and images.dtype != object
+        and (images.ndim == 2 or images.shape[2] in (1, 3, 4))
+    ):
         images = [images]
     images = [_load_image(im, i) for i, im in enumerate(images)]
     if image_points is not None:
         image_points = list(image_points)
         if images and len(images) != len(image_points):
-            raise ValueError(f"image_points has {len(image_points)} entries for {len(images)} "
-                             f"images: give one (or None) per image")
+            raise ValueError(
+                f"image_points has {len(image_points)} entries for {len(images)} "
+                f"images: give one (or None) per image"
+            )
     elif not images:
-        raise ValueError("give images (corners and rim are detected) or image_points with "
-                         "boundary_points and image_size")
+        raise ValueError(
+            "give images (corners and rim are detected) or image_points with "
+            "boundary_points and image_size"
+        )
     if image_size is None and images:
         image_size = (images[0].shape[1], images[0].shape[0])
     image_size = validate_image_size(image_size)
     for i, im in enumerate(images):
         if (im.shape[1], im.shape[0]) != image_size:
-            raise ValueError(f"images[{i}] is {im.shape[1]}x{im.shape[0]}, expected "
-                             f"{image_size[0]}x{image_size[1]}: all images must come from the "
-                             f"same camera mode")
+            raise ValueError(
+                f"images[{i}] is {im.shape[1]}x{im.shape[0]}, expected "
+                f"{image_size[0]}x{image_size[1]}: all images must come from the "
+                f"same camera mode"
+            )
     warns = []
 
     # 1. the rim
@@ -756,8 +839,11 @@ def calibrate_pattern(images, pattern_size, square_size, mirror, K=None, D=None,
             except ValueError as e:
                 errors.append(f"images[{i}]: {e}")
         if rim_fit is None:
-            raise ValueError("the mirror rim was not found in any image (" + "; ".join(errors[:2])
-                             + "); give boundary_points")
+            raise ValueError(
+                "the mirror rim was not found in any image ("
+                + "; ".join(errors[:2])
+                + "); give boundary_points"
+            )
         rim_seen = np.asarray(rim_fit.points, np.float64)
     if image_size is None:
         raise ValueError("image_size (width, height) is needed when no image is given")
@@ -765,23 +851,28 @@ def calibrate_pattern(images, pattern_size, square_size, mirror, K=None, D=None,
     lens_px, lens_note = None, "not used (lens=None)"
     if isinstance(lens, str):
         if lens != "auto":
-            raise ValueError(f"lens must be 'auto', None or an (M, 2) array of outline pixels, "
-                             f"got {lens!r}")
+            raise ValueError(
+                f"lens must be 'auto', None or an (M, 2) array of outline pixels, got {lens!r}"
+            )
         if not images:
             lens_note = "not used: no image (give lens=outline pixels to use it)"
         else:
             from .reflection import detect_reflection
+
             try:
-                lens_px = np.asarray(detect_reflection(images[rim_image], rim_fit).points,
-                                     np.float64)
+                lens_px = np.asarray(
+                    detect_reflection(images[rim_image], rim_fit).points, np.float64
+                )
                 lens_note = f"used: {len(lens_px)} outline points detected"
             except ValueError as e:
                 lens_note = f"not used: {e}"
     elif lens is not None and lens is not False:
         lens_px = np.asarray(lens, np.float64).reshape(-1, 2)
         if len(lens_px) < 8 or not np.isfinite(lens_px).all():
-            raise ValueError("lens must hold at least 8 finite pixels along the outline of the "
-                             "camera's reflection")
+            raise ValueError(
+                "lens must hold at least 8 finite pixels along the outline of the "
+                "camera's reflection"
+            )
         lens_note = f"used: {len(lens_px)} outline points given"
 
     # 2. the start: K from the rim, posture by Chen's method
@@ -793,8 +884,16 @@ def calibrate_pattern(images, pattern_size, square_size, mirror, K=None, D=None,
     else:
         K0 = validate_K(K)
     try:
-        cam0, _ = calibrate(K0, mirror, boundary_points=rim_seen, D=D, image_size=image_size,
-                            refine=True, camera_cls=camera_cls, lens=None)
+        cam0, _ = calibrate(
+            K0,
+            mirror,
+            boundary_points=rim_seen,
+            D=D,
+            image_size=image_size,
+            refine=True,
+            camera_cls=camera_cls,
+            lens=None,
+        )
     except ValueError as e:
         raise ValueError(f"the posture could not be started from the rim: {e}") from None
 
@@ -802,6 +901,7 @@ def calibrate_pattern(images, pattern_size, square_size, mirror, K=None, D=None,
     dropped = {}
     if image_points is None:
         from .pattern_detect import find_pattern
+
         image_points = [find_pattern(im, (cols, rows), cam0) for im in images]
     pts = []
     for i, p in enumerate(image_points):
@@ -815,9 +915,11 @@ def calibrate_pattern(images, pattern_size, square_size, mirror, K=None, D=None,
         for i in sorted(dropped):
             _warnings.warn(f"view {i} dropped: {dropped[i]}", RuntimeWarning, stacklevel=2)
     if not found:
-        raise ValueError(f"no {cols}x{rows} chessboard was found in any of the {len(pts)} "
-                         f"image(s): check pattern_size (inner corners (columns, rows), not "
-                         f"squares) and that the whole board is seen in the mirror")
+        raise ValueError(
+            f"no {cols}x{rows} chessboard was found in any of the {len(pts)} "
+            f"image(s): check pattern_size (inner corners (columns, rows), not "
+            f"squares) and that the whole board is seen in the mirror"
+        )
     obj = object_points((cols, rows), square)
     viewpoint, _ = cam0.best_fit_viewpoint()
     poses, edge_on = {}, []
@@ -837,13 +939,17 @@ def calibrate_pattern(images, pattern_size, square_size, mirror, K=None, D=None,
             continue
         poses[i] = (rvec_b, tvec_b)
     if edge_on and len(edge_on) == len(found):
-        raise ValueError("all boards are seen edge-on (their planes pass through the camera): "
-                         "turn the board towards the mirror")
+        raise ValueError(
+            "all boards are seen edge-on (their planes pass through the camera): "
+            "turn the board towards the mirror"
+        )
     used = sorted(poses)
     if len(used) < _MIN_VIEWS:
-        raise ValueError(f"only {len(used)} usable view(s) of the board (need at least "
-                         f"{_MIN_VIEWS}; dropped: {dropped}): take more views of the whole "
-                         f"board around the mirror")
+        raise ValueError(
+            f"only {len(used)} usable view(s) of the board (need at least "
+            f"{_MIN_VIEWS}; dropped: {dropped}): take more views of the whole "
+            f"board around the mirror"
+        )
 
     # 4. the bundle adjustment
     rim_px = rim_seen
@@ -851,10 +957,23 @@ def calibrate_pattern(images, pattern_size, square_size, mirror, K=None, D=None,
         rim_px = rim_px[np.linspace(0, len(rim_px) - 1, _N_RIM).round().astype(int)]
 
     def adjust(view_ids, x_boards, x_global=None):
-        adj = _Adjustment(cam0, mirror, obj, [pts[i] for i in view_ids], rim_px, free_d, n_d,
-                          fit_skew, refine_mirror_shape, camera_cls, lens_px, lens_z)
-        x0 = np.concatenate([adj.x0_global if x_global is None else x_global,
-                             np.concatenate(x_boards)])
+        adj = _Adjustment(
+            cam0,
+            mirror,
+            obj,
+            [pts[i] for i in view_ids],
+            rim_px,
+            free_d,
+            n_d,
+            fit_skew,
+            refine_mirror_shape,
+            camera_cls,
+            lens_px,
+            lens_z,
+        )
+        x0 = np.concatenate(
+            [adj.x0_global if x_global is None else x_global, np.concatenate(x_boards)]
+        )
         if x_global is None:
             # stage 1: principal point, skew and distortion held at the start, so the fit does
             # not first wander along the valley where a shift of the principal point (or
@@ -877,9 +996,11 @@ def calibrate_pattern(images, pattern_size, square_size, mirror, K=None, D=None,
     outliers = [i for i in used if vr[i] > limit]
     if outliers:
         what = "dropped" if drop_outlier_views else "kept"
-        msg = (f"view(s) {outliers} reproject with RMS "
-               f"{', '.join(f'{vr[i]:.2f}' for i in outliers)} px against a median of "
-               f"{med:.3f} px ({what}; check their corners)")
+        msg = (
+            f"view(s) {outliers} reproject with RMS "
+            f"{', '.join(f'{vr[i]:.2f}' for i in outliers)} px against a median of "
+            f"{med:.3f} px ({what}; check their corners)"
+        )
         warns.append(msg)
         _warnings.warn(msg, RuntimeWarning, stacklevel=2)
         if drop_outlier_views and len(used) - len(outliers) >= _MIN_VIEWS:
@@ -888,7 +1009,7 @@ def calibrate_pattern(images, pattern_size, square_size, mirror, K=None, D=None,
             for i in outliers:
                 dropped[i] = f"RMS {vr[i]:.2f} px stands out (median {med:.3f} px)"
             used = [used[k] for k in keep]
-            adj, sol = adjust(used, [B[k] for k in keep], sol.x[:adj.n_global])
+            adj, sol = adjust(used, [B[k] for k in keep], sol.x[: adj.n_global])
             vr = view_rms(sol, used)
         elif drop_outlier_views:
             warns.append("too few views would remain: the outliers were kept")
@@ -912,6 +1033,7 @@ def calibrate_pattern(images, pattern_size, square_size, mirror, K=None, D=None,
         std[name] = float(math.sqrt(max(var[k], 0.0)))
     ip = adj.names.index("w1")
     std["axis_deg"] = math.degrees(math.sqrt(max(var[ip] + var[ip + 1], 0.0)))
+
     # the camera centre C = -R^T tvec (eq. 17), linearised over the 5 posture parameters
     def centre(x):
         _, _, R, t, _ = adj.unpack(x)
@@ -924,39 +1046,55 @@ def calibrate_pattern(images, pattern_size, square_size, mirror, K=None, D=None,
         xp[ip + k] += hk
         xm[ip + k] -= hk
         G[:, k] = (centre(xp) - centre(xm)) / (2 * hk)
-    std["origin"] = float(math.sqrt(max(np.trace(G @ cov[ip:ip + 5, ip:ip + 5] @ G.T), 0.0)))
-    corner_r = r_all[:len(used) * nv_rows]
-    rim_r = r_all[len(used) * nv_rows:len(used) * nv_rows + len(rim_px)]
-    lens_r = r_all[len(used) * nv_rows + len(rim_px):]
+    std["origin"] = float(math.sqrt(max(np.trace(G @ cov[ip : ip + 5, ip : ip + 5] @ G.T), 0.0)))
+    corner_r = r_all[: len(used) * nv_rows]
+    rim_r = r_all[len(used) * nv_rows : len(used) * nv_rows + len(rim_px)]
+    lens_r = r_all[len(used) * nv_rows + len(rim_px) :]
     board_poses = {i: gauged[k] for k, i in enumerate(used)}
     reprojected = {i: camera.project(obj, *board_poses[i]).reshape(-1, 1, 2) for i in used}
     if len(used) < 6:
-        warns.append(f"only {len(used)} views: take 10 or more, spread around the mirror, for a "
-                     f"reliable K and posture")
-    centres = np.array([obj.mean(axis=0) @ _rodrigues(p[0]).T + p[1] for p in
-                        board_poses.values()])
+        warns.append(
+            f"only {len(used)} views: take 10 or more, spread around the mirror, for a "
+            f"reliable K and posture"
+        )
+    centres = np.array([obj.mean(axis=0) @ _rodrigues(p[0]).T + p[1] for p in board_poses.values()])
     if _azimuth_gap_deg(centres) > 180.0:
-        warns.append("all boards are on one side of the mirror (an azimuth gap over 180 deg): "
-                     "add views on the other side, or the principal point and the tilt are "
-                     "poorly separated")
+        warns.append(
+            "all boards are on one side of the mirror (an azimuth gap over 180 deg): "
+            "add views on the other side, or the principal point and the tilt are "
+            "poorly separated"
+        )
     if max(std["cx"], std["cy"]) > 1.0:
-        warns.append(f"the principal point is weakly determined (std {std['cx']:.2f}, "
-                     f"{std['cy']:.2f} px): add views at other azimuths and elevations")
+        warns.append(
+            f"the principal point is weakly determined (std {std['cx']:.2f}, "
+            f"{std['cy']:.2f} px): add views at other azimuths and elevations"
+        )
     if not sol.success:
         warns.append(f"the adjustment did not converge: {sol.message}")
     if refine_mirror_shape:
-        warns.append(f"the mirror's a, b were estimated (a = {camera.mirror.a:.3f} +- "
-                     f"{std['a']:.3f}, b = {camera.mirror.b:.3f} +- {std['b']:.3f}): "
-                     f"experimental, they trade against K and the posture; prefer the data "
-                     f"sheet's values")
-    image_points_out = [None if p is None else p.reshape(-1, 1, 2).astype(np.float32)
-                        for p in pts]
+        warns.append(
+            f"the mirror's a, b were estimated (a = {camera.mirror.a:.3f} +- "
+            f"{std['a']:.3f}, b = {camera.mirror.b:.3f} +- {std['b']:.3f}): "
+            f"experimental, they trade against K and the posture; prefer the data "
+            f"sheet's values"
+        )
+    image_points_out = [None if p is None else p.reshape(-1, 1, 2).astype(np.float32) for p in pts]
     report = PatternReport(
-        rms=float(np.sqrt(np.mean(corner_r ** 2) * 2)), view_rms=vr,
-        corners_used={i: n_corners for i in used}, board_poses=board_poses,
-        image_points=image_points_out, reprojected=reprojected, rim_points=rim_px,
-        rim_rms=float(np.sqrt(np.mean(rim_r ** 2))), std=std, warnings=tuple(warns),
-        lens_rms=float(np.sqrt(np.mean(lens_r ** 2))) if len(lens_r) else math.nan,
+        rms=float(np.sqrt(np.mean(corner_r**2) * 2)),
+        view_rms=vr,
+        corners_used={i: n_corners for i in used},
+        board_poses=board_poses,
+        image_points=image_points_out,
+        reprojected=reprojected,
+        rim_points=rim_px,
+        rim_rms=float(np.sqrt(np.mean(rim_r**2))),
+        std=std,
+        warnings=tuple(warns),
+        lens_rms=float(np.sqrt(np.mean(lens_r**2))) if len(lens_r) else math.nan,
         lens_note=lens_note,
-        dropped=dict(sorted(dropped.items())), nfev=int(sol.nfev), camera=camera, start=cam0)
+        dropped=dict(sorted(dropped.items())),
+        nfev=int(sol.nfev),
+        camera=camera,
+        start=cam0,
+    )
     return camera, report

@@ -8,8 +8,8 @@ straight again. In each view it runs ``cv2.findChessboardCorners`` (fast check f
 the corners with ``cv2.cornerSubPix``; a detection is accepted only if a homography fits
 the view's corners to the board's grid to :data:`HOMOGRAPHY_RMS_PX` RMS with no corner
 standing out (:data:`HOMOGRAPHY_MAX_PX`): a wrong or partial grid, or one corner pulled off
-by cornerSubPix, does not. The view's corners are mapped back to the source image exactly through the
-view's own remap table: a feature at view pixel ``u`` was sampled from source pixel
+by cornerSubPix, does not. The view's corners are mapped back to the source image exactly
+through the view's own remap table: a feature at view pixel ``u`` was sampled from source pixel
 ``map(u)``, bilinear in the float tables, whatever the calibration's errors. They are then
 refined once more by ``cv2.cornerSubPix`` in the source image, where the corners are not
 resampled (a window of a third of the local corner spacing, 2..5 px, where the bent lines are
@@ -25,6 +25,7 @@ largest 0.29 px, 0.27 s per image.
 Corner order: OpenCV's (row by row); the board's 180-degree ambiguity is resolved so that the
 first row runs left to right in the view whose image-up is the mirror axis.
 """
+
 from __future__ import annotations
 
 import math
@@ -43,18 +44,27 @@ _FIND_FLAGS = cv2.CALIB_CB_ADAPTIVE_THRESH | cv2.CALIB_CB_NORMALIZE_IMAGE | cv2.
 _CACHE = {}
 _CACHE_MAX = 8
 #: Passes of views: 80-degree views first; 120-degree ones for boards too large for those.
-_PASSES = ({}, {"fov_deg": 120.0, "yaw_step_deg": 40.0, "pitches_deg": (-15.0, -50.0),
-                "scale": 0.5})
+_PASSES = (
+    {},
+    {"fov_deg": 120.0, "yaw_step_deg": 40.0, "pitches_deg": (-15.0, -50.0), "scale": 0.5},
+)
 
 
 def _camera_key(camera):
     D = camera.D
-    return (camera.K.tobytes(), None if D is None else D.tobytes(), camera.rvec.tobytes(),
-            camera.tvec.tobytes(), repr(camera.mirror), camera.image_size)
+    return (
+        camera.K.tobytes(),
+        None if D is None else D.tobytes(),
+        camera.rvec.tobytes(),
+        camera.tvec.tobytes(),
+        repr(camera.mirror),
+        camera.image_size,
+    )
 
 
-def detection_views(camera, fov_deg=80.0, yaw_step_deg=30.0, pitches_deg=None, scale=0.7,
-                    node_step=8):
+def detection_views(
+    camera, fov_deg=80.0, yaw_step_deg=30.0, pitches_deg=None, scale=0.7, node_step=8
+):
     """The virtual views of :func:`find_pattern`: ``[(yaw, pitch, size, map_x, map_y)]``.
 
     Views of ``fov_deg`` (horizontal and vertical), one every ``yaw_step_deg`` of yaw, at the
@@ -70,8 +80,15 @@ def detection_views(camera, fov_deg=80.0, yaw_step_deg=30.0, pitches_deg=None, s
     :func:`_bilinear` maps corners back. Cached per camera.
     """
     from ..views import K_from_fov, rotation_from_ypr, visible_elevation_range
-    key = (_camera_key(camera), float(fov_deg), float(yaw_step_deg),
-           None if pitches_deg is None else tuple(pitches_deg), float(scale), int(node_step))
+
+    key = (
+        _camera_key(camera),
+        float(fov_deg),
+        float(yaw_step_deg),
+        None if pitches_deg is None else tuple(pitches_deg),
+        float(scale),
+        int(node_step),
+    )
     if key in _CACHE:
         return _CACHE[key]
     if pitches_deg is None:
@@ -120,18 +137,22 @@ def _bilinear(mx, my, pts):
     out = np.empty_like(pts)
     for k, m in enumerate((mx, my)):
         m = m.astype(np.float64)
-        out[:, k] = ((m[y0, x0] * (1 - fx) + m[y0, x0 + 1] * fx) * (1 - fy)
-                     + (m[y0 + 1, x0] * (1 - fx) + m[y0 + 1, x0 + 1] * fx) * fy)
+        out[:, k] = (m[y0, x0] * (1 - fx) + m[y0, x0 + 1] * fx) * (1 - fy) + (
+            m[y0 + 1, x0] * (1 - fx) + m[y0 + 1, x0 + 1] * fx
+        ) * fy
     return out
 
 
 def _spacing(grid):
-    return min(np.linalg.norm(np.diff(grid, axis=0), axis=2).min(),
-               np.linalg.norm(np.diff(grid, axis=1), axis=2).min())
+    return min(
+        np.linalg.norm(np.diff(grid, axis=0), axis=2).min(),
+        np.linalg.norm(np.diff(grid, axis=1), axis=2).min(),
+    )
 
 
 def _gray(image):
     from .intrinsics import _gray8
+
     return _gray8(image, 0)
 
 
@@ -156,11 +177,14 @@ def find_pattern(image, pattern_size, camera, refine_in_source=True):
         In OpenCV's order (row by row), source pixels.
     """
     from .intrinsics import _pattern
+
     cols, rows = _pattern(pattern_size)
     gray = _gray(image)
     if camera.image_size is not None and camera.image_size != (gray.shape[1], gray.shape[0]):
-        raise ValueError(f"image is {gray.shape[1]}x{gray.shape[0]} but camera.image_size is "
-                         f"{camera.image_size}: use camera.scaled(image_size)")
+        raise ValueError(
+            f"image is {gray.shape[1]}x{gray.shape[0]} but camera.image_size is "
+            f"{camera.image_size}: use camera.scaled(image_size)"
+        )
     best = None
     for spec in _PASSES:
         best = _detect(gray, cols, rows, detection_views(camera, **spec))
@@ -172,8 +196,13 @@ def find_pattern(image, pattern_size, camera, refine_in_source=True):
         grid = best.reshape(rows, cols, 2)
         half = int(np.clip(_spacing(grid) / 3.0, 2, 5))
         crit = (cv2.TERM_CRITERIA_EPS + cv2.TERM_CRITERIA_MAX_ITER, 100, 1e-4)
-        refined = cv2.cornerSubPix(gray, best.reshape(-1, 1, 2).astype(np.float32), (half, half),
-                                   (-1, -1), crit).reshape(-1, 2).astype(np.float64)
+        refined = (
+            cv2.cornerSubPix(
+                gray, best.reshape(-1, 1, 2).astype(np.float32), (half, half), (-1, -1), crit
+            )
+            .reshape(-1, 2)
+            .astype(np.float64)
+        )
         # keep the refinement only where it stays within a pixel of the mapped-back corner
         ok = np.linalg.norm(refined - best, axis=1) < 1.0
         best = np.where(ok[:, None], refined, best)
@@ -183,9 +212,10 @@ def find_pattern(image, pattern_size, camera, refine_in_source=True):
 def _detect(gray, cols, rows, views):
     """The mapped-back corners of the best detection in ``views`` (N, 2), or None."""
     best, best_margin = None, -np.inf
-    for yaw, pitch, (w, h), mx, my in views:
-        view = cv2.remap(gray, mx, my, cv2.INTER_LINEAR, borderMode=cv2.BORDER_CONSTANT,
-                         borderValue=0)
+    for _yaw, _pitch, (w, h), mx, my in views:
+        view = cv2.remap(
+            gray, mx, my, cv2.INTER_LINEAR, borderMode=cv2.BORDER_CONSTANT, borderValue=0
+        )
         # OpenCV's own quick test (what CALIB_CB_FAST_CHECK runs) first: 8 ms per view
         if not cv2.checkChessboard(view, (cols, rows)):
             continue
@@ -206,19 +236,26 @@ def _detect(gray, cols, rows, views):
         # smooth deviation, spread over the board, for near boards), so a corner far off the
         # board's homography, compared with the others, is a wrong corner
         res = np.linalg.norm(pr - c, axis=1)
-        if not (np.sqrt(np.mean(res ** 2)) < HOMOGRAPHY_RMS_PX
-                and res.max() < max(HOMOGRAPHY_MAX_PX, 6.0 * np.median(res))):
+        if not (
+            np.sqrt(np.mean(res**2)) < HOMOGRAPHY_RMS_PX
+            and res.max() < max(HOMOGRAPHY_MAX_PX, 6.0 * np.median(res))
+        ):
             continue
-        margin = float(min(c[:, 0].min(), c[:, 1].min(), w - 1 - c[:, 0].max(),
-                           h - 1 - c[:, 1].max()))
+        margin = float(
+            min(c[:, 0].min(), c[:, 1].min(), w - 1 - c[:, 0].max(), h - 1 - c[:, 1].max())
+        )
         if margin < half + 1:
             continue
         # OpenCV's 180-degree ambiguity: the first row runs left to right in the view
         if c[cols - 1, 0] - c[0, 0] < 0:
             c = c[::-1].copy()
         src = _bilinear(mx, my, c)
-        if not np.isfinite(src).all() or (src < 0).any() \
-                or (src[:, 0] > gray.shape[1] - 1).any() or (src[:, 1] > gray.shape[0] - 1).any():
+        if (
+            not np.isfinite(src).all()
+            or (src < 0).any()
+            or (src[:, 0] > gray.shape[1] - 1).any()
+            or (src[:, 1] > gray.shape[0] - 1).any()
+        ):
             continue
         if margin > best_margin:
             best, best_margin = src, margin

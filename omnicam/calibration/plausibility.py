@@ -20,6 +20,7 @@ is far from it:
 
 Each finding is a :class:`PlausibilityWarning` whose message says what to check.
 """
+
 from __future__ import annotations
 
 import dataclasses
@@ -28,10 +29,21 @@ import math
 import cv2
 import numpy as np
 
-__all__ = ["DEFAULT_MAX_ASPECT_DEVIATION", "DEFAULT_MAX_OFFSET_MM", "DEFAULT_MAX_RESIDUAL_PX",
-           "DEFAULT_MAX_TILT_DEG", "ExpectedRim", "PlausibilityWarning", "assess",
-           "check_plausibility", "cue_costs", "expected_rim", "focus_offset",
-           "swapped_mirror_warnings", "tilt_deg"]
+__all__ = [
+    "DEFAULT_MAX_ASPECT_DEVIATION",
+    "DEFAULT_MAX_OFFSET_MM",
+    "DEFAULT_MAX_RESIDUAL_PX",
+    "DEFAULT_MAX_TILT_DEG",
+    "ExpectedRim",
+    "PlausibilityWarning",
+    "assess",
+    "check_plausibility",
+    "cue_costs",
+    "expected_rim",
+    "focus_offset",
+    "swapped_mirror_warnings",
+    "tilt_deg",
+]
 
 DEFAULT_MAX_TILT_DEG = 10.0
 DEFAULT_MAX_OFFSET_MM = 10.0
@@ -126,15 +138,17 @@ def _rim_ellipse(K, D, rim, R, t):
         x = X[:, :2] / X[:, 2:]
         px = x @ K[:2, :2].T + K[:2, 2]
     else:
-        px, _ = cv2.projectPoints(X.reshape(-1, 1, 3), np.zeros(3), np.zeros(3), K,
-                                  np.asarray(D, np.float64))
+        px, _ = cv2.projectPoints(
+            X.reshape(-1, 1, 3), np.zeros(3), np.zeros(3), K, np.asarray(D, np.float64)
+        )
         px = px.reshape(-1, 2)
     (cx, cy), (d1, d2), _ = cv2.fitEllipse(px.astype(np.float32))
     return np.array([cx, cy]), 0.5 * min(d1, d2), 0.5 * max(d1, d2)
 
 
-def expected_rim(K, mirror, D=None, max_tilt_deg=DEFAULT_MAX_TILT_DEG,
-                 max_offset_mm=DEFAULT_MAX_OFFSET_MM):
+def expected_rim(
+    K, mirror, D=None, max_tilt_deg=DEFAULT_MAX_TILT_DEG, max_offset_mm=DEFAULT_MAX_OFFSET_MM
+):
     """The rim's expected place and size in the image from ``K`` and the mirror.
 
     The aligned rig (eqs. 2-5) sees the rim circle (radius ``rim_radius`` at height ``z_rim``)
@@ -169,9 +183,10 @@ def expected_rim(K, mirror, D=None, max_tilt_deg=DEFAULT_MAX_TILT_DEG,
         raise ValueError("K and the mirror put the rim behind the camera; check K")
     center = aligned[0]
     offsets = [np.zeros(3)] + [s * max_offset_mm * e for e in np.eye(3) for s in (1.0, -1.0)]
-    tilts = [np.zeros(3)] + [math.radians(max_tilt_deg) * np.array([-math.sin(p), math.cos(p),
-                                                                      0.0])
-                             for p in np.linspace(0.0, 2.0 * np.pi, 8, endpoint=False)]
+    tilts = [np.zeros(3)] + [
+        math.radians(max_tilt_deg) * np.array([-math.sin(p), math.cos(p), 0.0])
+        for p in np.linspace(0.0, 2.0 * np.pi, 8, endpoint=False)
+    ]
     lo, hi, off = math.inf, 0.0, 0.0
     for rvec in tilts:
         R = cv2.Rodrigues(rvec.reshape(3, 1))[0]
@@ -182,9 +197,14 @@ def expected_rim(K, mirror, D=None, max_tilt_deg=DEFAULT_MAX_TILT_DEG,
             lo, hi = min(lo, e[1]), max(hi, e[2])
             off = max(off, float(np.linalg.norm(e[0] - center)))
     radius = 0.5 * (aligned[1] + aligned[2])
-    return ExpectedRim(center=center, radius=float(radius), radius_range=(float(lo), float(hi)),
-                       max_center_offset=off, max_tilt_deg=max_tilt_deg,
-                       max_offset_mm=max_offset_mm)
+    return ExpectedRim(
+        center=center,
+        radius=float(radius),
+        radius_range=(float(lo), float(hi)),
+        max_center_offset=off,
+        max_tilt_deg=max_tilt_deg,
+        max_offset_mm=max_offset_mm,
+    )
 
 
 # -- the checks ----------------------------------------------------------------------------------
@@ -201,10 +221,17 @@ def _rim_geometry(rim):
     return center, np.asarray(axes_angle(S)[0], np.float64)
 
 
-def check_plausibility(camera, rim, image_size=None, *, max_tilt_deg=DEFAULT_MAX_TILT_DEG,
-                       max_offset_mm=DEFAULT_MAX_OFFSET_MM,
-                       max_residual_px=DEFAULT_MAX_RESIDUAL_PX,
-                       max_aspect_deviation=DEFAULT_MAX_ASPECT_DEVIATION, residuals=None):
+def check_plausibility(
+    camera,
+    rim,
+    image_size=None,
+    *,
+    max_tilt_deg=DEFAULT_MAX_TILT_DEG,
+    max_offset_mm=DEFAULT_MAX_OFFSET_MM,
+    max_residual_px=DEFAULT_MAX_RESIDUAL_PX,
+    max_aspect_deviation=DEFAULT_MAX_ASPECT_DEVIATION,
+    residuals=None,
+):
     """Warnings for a calibration no real rig would give; an empty list when it is plausible.
 
     Parameters
@@ -251,90 +278,137 @@ def check_plausibility(camera, rim, image_size=None, *, max_tilt_deg=DEFAULT_MAX
     lo, hi = exp.radius_range
     if axes[1] < (1 - _SIZE_SLACK) * lo or axes[0] > (1 + _SIZE_SLACK) * hi:
         ratio = math.sqrt(axes[0] * axes[1]) / exp.radius
-        why = (f" (about {ratio:.2f}x: a K calibrated at another resolution?)"
-               if ratio < 0.7 or ratio > 1.4 else "")
-        out.append(PlausibilityWarning(
-            "rim_size",
-            f"the rim found has semi-axes {axes[0]:.1f} and {axes[1]:.1f} px, but K (f = "
-            f"{0.5 * (fx + fy):.1f} px) and the mirror (a = {mirror.a:g}, b = {mirror.b:g}, "
-            f"rim radius {mirror.rim_radius:g}) predict {exp.radius:.1f} px for an aligned rig "
-            f"and {lo:.1f}-{hi:.1f} px within {limits}{why}: check K, the mirror parameters and "
-            f"that the ellipse found is the mirror's rim (see the overlay; --rim-hint)",
-            math.sqrt(axes[0] * axes[1]), exp.radius))
+        why = (
+            f" (about {ratio:.2f}x: a K calibrated at another resolution?)"
+            if ratio < 0.7 or ratio > 1.4
+            else ""
+        )
+        out.append(
+            PlausibilityWarning(
+                "rim_size",
+                f"the rim found has semi-axes {axes[0]:.1f} and {axes[1]:.1f} px, but K (f = "
+                f"{0.5 * (fx + fy):.1f} px) and the mirror (a = {mirror.a:g}, b = {mirror.b:g}, "
+                f"rim radius {mirror.rim_radius:g}) predict {exp.radius:.1f} px for an aligned "
+                f"rig and {lo:.1f}-{hi:.1f} px within {limits}{why}: check K, the mirror "
+                f"parameters and "
+                f"that the ellipse found is the mirror's rim (see the overlay; --rim-hint)",
+                math.sqrt(axes[0] * axes[1]),
+                exp.radius,
+            )
+        )
 
     # K against the image
     if image_size is not None:
         w, h = (int(v) for v in image_size)
         if not (-0.5 <= cx <= w - 0.5 and -0.5 <= cy <= h - 0.5):
-            out.append(PlausibilityWarning(
-                "intrinsics",
-                f"the principal point ({cx:.1f}, {cy:.1f}) of K is outside the {w}x{h} image: "
-                f"check K (is it for this image size? K for another resolution is rescaled "
-                f"only when the intrinsics file gives its image_size)", math.nan, math.nan))
+            out.append(
+                PlausibilityWarning(
+                    "intrinsics",
+                    f"the principal point ({cx:.1f}, {cy:.1f}) of K is outside the {w}x{h} image: "
+                    f"check K (is it for this image size? K for another resolution is rescaled "
+                    f"only when the intrinsics file gives its image_size)",
+                    math.nan,
+                    math.nan,
+                )
+            )
         diag = math.hypot(w, h)
         f = 0.5 * (fx + fy)
         if not 0.05 * diag <= f <= 50.0 * diag:
-            out.append(PlausibilityWarning(
-                "intrinsics",
-                f"the focal length of K ({f:.1f} px) is absurd for a {w}x{h} image (a lens "
-                f"gives {0.05 * diag:.0f}-{50 * diag:.0f} px): check K's units and image size",
-                f, math.nan))
+            out.append(
+                PlausibilityWarning(
+                    "intrinsics",
+                    f"the focal length of K ({f:.1f} px) is absurd for a {w}x{h} image (a lens "
+                    f"gives {0.05 * diag:.0f}-{50 * diag:.0f} px): check K's units and image size",
+                    f,
+                    math.nan,
+                )
+            )
         aspect = fx / fy
         if abs(aspect - 1.0) > max_aspect_deviation:
-            out.append(PlausibilityWarning(
-                "intrinsics",
-                f"K has fx / fy = {aspect:.3f} (real sensors have square pixels to about 1 %): "
-                f"was K rescaled to another aspect ratio? The image is {w}x{h} "
-                f"({w / h:.3f}:1); scale K to a crop or resize of the image it was "
-                f"calibrated on, not by (width, height) separately",
-                aspect, 1.0 + max_aspect_deviation))
+            out.append(
+                PlausibilityWarning(
+                    "intrinsics",
+                    f"K has fx / fy = {aspect:.3f} (real sensors have square pixels to about 1 %): "
+                    f"was K rescaled to another aspect ratio? The image is {w}x{h} "
+                    f"({w / h:.3f}:1); scale K to a crop or resize of the image it was "
+                    f"calibrated on, not by (width, height) separately",
+                    aspect,
+                    1.0 + max_aspect_deviation,
+                )
+            )
 
     # the rim centre against the principal point (aligned centre)
     d = float(np.linalg.norm(center - exp.center))
     allowed = 1.25 * exp.max_center_offset + 2.0
     if d > allowed:
-        out.append(PlausibilityWarning(
-            "principal_point",
-            f"the rim centre ({center[0]:.1f}, {center[1]:.1f}) is {d:.1f} px "
-            f"({d / math.sqrt(axes[0] * axes[1]):.2f} rim radii) from the principal point "
-            f"({exp.center[0]:.1f}, {exp.center[1]:.1f}) where an aligned rig puts it, more "
-            f"than {allowed:.1f} px ({limits}): check cx, cy of K (for this image, not a crop "
-            f"of it?) and that the ellipse found is the mirror's rim", d, allowed))
+        out.append(
+            PlausibilityWarning(
+                "principal_point",
+                f"the rim centre ({center[0]:.1f}, {center[1]:.1f}) is {d:.1f} px "
+                f"({d / math.sqrt(axes[0] * axes[1]):.2f} rim radii) from the principal point "
+                f"({exp.center[0]:.1f}, {exp.center[1]:.1f}) where an aligned rig puts it, more "
+                f"than {allowed:.1f} px ({limits}): check cx, cy of K (for this image, not a crop "
+                f"of it?) and that the ellipse found is the mirror's rim",
+                d,
+                allowed,
+            )
+        )
 
     # the posture
     tilt = tilt_deg(camera.R)
     if tilt > max_tilt_deg:
-        out.append(PlausibilityWarning(
-            "tilt",
-            f"the mirror axis is tilted {tilt:.1f} deg from the optical axis (limit "
-            f"{max_tilt_deg:g} deg; real rigs are within a few degrees): check K (resolution, "
-            f"aspect ratio), the mirror's a, b and rim radius, and that the ellipse found is "
-            f"the mirror's rim (see the overlay); raise the limit (--max-tilt) only for a rig "
-            f"built tilted", tilt, max_tilt_deg))
+        out.append(
+            PlausibilityWarning(
+                "tilt",
+                f"the mirror axis is tilted {tilt:.1f} deg from the optical axis (limit "
+                f"{max_tilt_deg:g} deg; real rigs are within a few degrees): check K (resolution, "
+                f"aspect ratio), the mirror's a, b and rim radius, and that the ellipse found is "
+                f"the mirror's rim (see the overlay); raise the limit (--max-tilt) only for a rig "
+                f"built tilted",
+                tilt,
+                max_tilt_deg,
+            )
+        )
     off = focus_offset(camera.camera_center, mirror)
     if off > max_offset_mm:
-        out.append(PlausibilityWarning(
-            "offset",
-            f"the camera centre is {off:.1f} from the mirror's lower focus (limit "
-            f"{max_offset_mm:g}, mirror units): check K (resolution, focal length), the "
-            f"mirror's a, b (swapped?) and rim radius, and that the ellipse found is the "
-            f"mirror's rim; raise the limit (--max-offset) only for a rig built that way",
-            off, max_offset_mm))
+        out.append(
+            PlausibilityWarning(
+                "offset",
+                f"the camera centre is {off:.1f} from the mirror's lower focus (limit "
+                f"{max_offset_mm:g}, mirror units): check K (resolution, focal length), the "
+                f"mirror's a, b (swapped?) and rim radius, and that the ellipse found is the "
+                f"mirror's rim; raise the limit (--max-offset) only for a rig built that way",
+                off,
+                max_offset_mm,
+            )
+        )
 
     # the cues after refinement
     for name, rms in (residuals or {}).items():
         if rms is not None and math.isfinite(rms) and rms > max_residual_px:
-            out.append(PlausibilityWarning(
-                "residual",
-                f"the {name} residual after refinement is {rms:.2f} px RMS (limit "
-                f"{max_residual_px:g} px): check those points (a line that is not "
-                f"straight or not far, an outline that is not the camera's), K and the mirror",
-                rms, max_residual_px))
+            out.append(
+                PlausibilityWarning(
+                    "residual",
+                    f"the {name} residual after refinement is {rms:.2f} px RMS (limit "
+                    f"{max_residual_px:g} px): check those points (a line that is not "
+                    f"straight or not far, an outline that is not the camera's), K and the mirror",
+                    rms,
+                    max_residual_px,
+                )
+            )
     return out
 
 
-def swapped_mirror_warnings(mirror, given, swapped, *, max_tilt_deg=DEFAULT_MAX_TILT_DEG,
-                            max_offset_mm=DEFAULT_MAX_OFFSET_MM, ratio=10.0, use_posture=True):
+def swapped_mirror_warnings(
+    mirror,
+    given,
+    swapped,
+    *,
+    max_tilt_deg=DEFAULT_MAX_TILT_DEG,
+    max_offset_mm=DEFAULT_MAX_OFFSET_MM,
+    ratio=10.0,
+    use_posture=True,
+):
     """Whether the mirror fits clearly better with ``a`` and ``b`` swapped.
 
     The rim alone fits any mirror exactly (Chen's method has as many unknowns as the ellipse),
@@ -366,36 +440,48 @@ def swapped_mirror_warnings(mirror, given, swapped, *, max_tilt_deg=DEFAULT_MAX_
     better = []
     for name, cost in given.get("costs", {}).items():
         other = swapped.get("costs", {}).get(name)
-        if (cost is None or other is None or not math.isfinite(cost)
-                or not math.isfinite(other)):
+        if cost is None or other is None or not math.isfinite(cost) or not math.isfinite(other):
             continue
         if cost > ratio * max(other, 1e-300):
             better.append(f"{name} {cost:.3g} vs {other:.3g} swapped")
 
     def plausible(cam):
-        return (tilt_deg(cam.R) <= max_tilt_deg
-                and focus_offset(cam.camera_center, cam.mirror) <= max_offset_mm)
+        return (
+            tilt_deg(cam.R) <= max_tilt_deg
+            and focus_offset(cam.camera_center, cam.mirror) <= max_offset_mm
+        )
 
     cam_g, cam_s = given["camera"], swapped["camera"]
     posture = None
     if use_posture and not plausible(cam_g) and plausible(cam_s):
-        posture = (f"tilt {tilt_deg(cam_g.R):.1f} deg and offset "
-                   f"{focus_offset(cam_g.camera_center, mirror):.1f} as given, "
-                   f"{tilt_deg(cam_s.R):.1f} deg and "
-                   f"{focus_offset(cam_s.camera_center, cam_s.mirror):.1f} swapped")
+        posture = (
+            f"tilt {tilt_deg(cam_g.R):.1f} deg and offset "
+            f"{focus_offset(cam_g.camera_center, mirror):.1f} as given, "
+            f"{tilt_deg(cam_s.R):.1f} deg and "
+            f"{focus_offset(cam_s.camera_center, cam_s.mirror):.1f} swapped"
+        )
     swap = f"a = {mirror.b:g}, b = {mirror.a:g}"
-    check = ("check the mirror parameters (a and b as in the paper's eq. 1, "
-             "(X^2+Y^2)/a^2 - Z^2/b^2 = -1: the apex is at Z = b)")
+    check = (
+        "check the mirror parameters (a and b as in the paper's eq. 1, "
+        "(X^2+Y^2)/a^2 - Z^2/b^2 = -1: the apex is at Z = b)"
+    )
     if better:
         detail = "; ".join(better + ([f"posture {posture}"] if posture else []))
-        return [PlausibilityWarning(
-            "swapped_ab", f"the mirror fits clearly better with a and b swapped ({swap}): "
-            f"{detail}; {check}")]
+        return [
+            PlausibilityWarning(
+                "swapped_ab",
+                f"the mirror fits clearly better with a and b swapped ({swap}): {detail}; {check}",
+            )
+        ]
     if posture:  # the rim alone cannot tell a swap from a wrong K or a wrong ellipse
-        return [PlausibilityWarning(
-            "swapped_ab", f"the posture would be plausible with a and b swapped ({swap}): "
-            f"{posture}; {check}, K and the rim (the rim alone cannot tell which is wrong; "
-            f"far lines can)")]
+        return [
+            PlausibilityWarning(
+                "swapped_ab",
+                f"the posture would be plausible with a and b swapped ({swap}): "
+                f"{posture}; {check}, K and the rim (the rim alone cannot tell which is wrong; "
+                f"far lines can)",
+            )
+        ]
     return []
 
 
@@ -404,13 +490,22 @@ def cue_costs(report):
     ``{"far-line score (eq. 31)": score of the chosen candidate, "outline RMS (px)": ...}``
     (NaN when the cue was not used)."""
     chosen = report.candidates[report.chosen]
-    return {"far-line score (eq. 31)": float(getattr(chosen, "score", math.nan)),
-            "outline RMS (px)": float(getattr(report, "lens_rms", math.nan))}
+    return {
+        "far-line score (eq. 31)": float(getattr(chosen, "score", math.nan)),
+        "outline RMS (px)": float(getattr(report, "lens_rms", math.nan)),
+    }
 
 
-def assess(report, image_size=None, recalibrate=None, *, max_tilt_deg=DEFAULT_MAX_TILT_DEG,
-           max_offset_mm=DEFAULT_MAX_OFFSET_MM, max_residual_px=DEFAULT_MAX_RESIDUAL_PX,
-           max_aspect_deviation=DEFAULT_MAX_ASPECT_DEVIATION):
+def assess(
+    report,
+    image_size=None,
+    recalibrate=None,
+    *,
+    max_tilt_deg=DEFAULT_MAX_TILT_DEG,
+    max_offset_mm=DEFAULT_MAX_OFFSET_MM,
+    max_residual_px=DEFAULT_MAX_RESIDUAL_PX,
+    max_aspect_deviation=DEFAULT_MAX_ASPECT_DEVIATION,
+):
     """Every plausibility warning for a finished calibration (what ``calibrate`` runs).
 
     :func:`check_plausibility` on the report's camera and rim, with the residuals of the far
@@ -429,12 +524,20 @@ def assess(report, image_size=None, recalibrate=None, *, max_tilt_deg=DEFAULT_MA
 
     camera = report.camera
     refinement = getattr(report, "refinement", None)
-    residuals = {"far lines": getattr(refinement, "line_rms", math.nan),
-                 "camera's reflection outline": getattr(report, "lens_rms", math.nan)}
+    residuals = {
+        "far lines": getattr(refinement, "line_rms", math.nan),
+        "camera's reflection outline": getattr(report, "lens_rms", math.nan),
+    }
     limits = {"max_tilt_deg": max_tilt_deg, "max_offset_mm": max_offset_mm}
-    out = check_plausibility(camera, report.conic, image_size, residuals=residuals,
-                             max_residual_px=max_residual_px,
-                             max_aspect_deviation=max_aspect_deviation, **limits)
+    out = check_plausibility(
+        camera,
+        report.conic,
+        image_size,
+        residuals=residuals,
+        max_residual_px=max_residual_px,
+        max_aspect_deviation=max_aspect_deviation,
+        **limits,
+    )
     mirror = camera.mirror
     implausible_posture = any(w.kind in ("tilt", "offset") for w in out)
     others = []  # other physical candidates of Chen's method within the limits
@@ -447,11 +550,14 @@ def assess(report, image_size=None, recalibrate=None, *, max_tilt_deg=DEFAULT_MA
         if tilt <= max_tilt_deg and off <= max_offset_mm:
             others.append(f"candidate {i}: tilt {tilt:.1f} deg, offset {off:.1f}")
     if implausible_posture and others:
-        out.append(PlausibilityWarning(
-            "choice",
-            f"another physical posture is within the limits ({'; '.join(others)}): the choice "
-            f"between the postures may be wrong; give far lines (--far-lines) or check the "
-            f"camera's reflection in the overlay"))
+        out.append(
+            PlausibilityWarning(
+                "choice",
+                f"another physical posture is within the limits ({'; '.join(others)}): the choice "
+                f"between the postures may be wrong; give far lines (--far-lines) or check the "
+                f"camera's reflection in the overlay",
+            )
+        )
     if recalibrate is None or mirror.a == mirror.b:
         return out
     costs = cue_costs(report)
@@ -459,9 +565,11 @@ def assess(report, image_size=None, recalibrate=None, *, max_tilt_deg=DEFAULT_MA
     # eq. 31's score is a mean squared sine between the rays and their plane: sqrt * f ~ px
     line_px = math.sqrt(max(costs["far-line score (eq. 31)"], 0.0)) * f
     # a wrong choice explains an implausible posture better than a swap
-    suspicious = ((implausible_posture and not others)
-                  or (math.isfinite(line_px) and line_px > 1.0)
-                  or costs["outline RMS (px)"] > 1.0)
+    suspicious = (
+        (implausible_posture and not others)
+        or (math.isfinite(line_px) and line_px > 1.0)
+        or costs["outline RMS (px)"] > 1.0
+    )
     if not suspicious:
         return out
     try:
@@ -469,5 +577,6 @@ def assess(report, image_size=None, recalibrate=None, *, max_tilt_deg=DEFAULT_MA
         swapped = {"camera": cam_s, "costs": cue_costs(rep_s)}
     except (ValueError, RuntimeError, np.linalg.LinAlgError):
         swapped = None  # no posture with the swapped mirror: no evidence for it
-    return out + swapped_mirror_warnings(mirror, {"camera": camera, "costs": costs}, swapped,
-                                         use_posture=not others, **limits)
+    return out + swapped_mirror_warnings(
+        mirror, {"camera": camera, "costs": costs}, swapped, use_posture=not others, **limits
+    )

@@ -42,6 +42,7 @@ line parameters fitted to it), so refinement never makes an exact analytic resul
 Whether a cue may join the rim at all is decided by :func:`.steps.refinement_step`;
 :func:`posture_uncertainty` gives the a posteriori covariance and its weakest direction.
 """
+
 from __future__ import annotations
 
 import dataclasses
@@ -53,8 +54,16 @@ import numpy as np
 from ..gauge import gauge_rotation  # re-exported: refine.gauge_rotation
 from .robust import mad_sigma
 
-__all__ = ["RefineResult", "Uncertainty", "RimTerm", "FarLineTerm", "ReflectionTerm",
-           "refine_posture", "posture_uncertainty", "gauge_rotation"]
+__all__ = [
+    "RefineResult",
+    "Uncertainty",
+    "RimTerm",
+    "FarLineTerm",
+    "ReflectionTerm",
+    "refine_posture",
+    "posture_uncertainty",
+    "gauge_rotation",
+]
 
 _N_POSTURE = 5
 _STEPS = np.array([1e-7, 1e-7, 1e-6, 1e-6, 1e-6])  # posture steps of the difference quotients
@@ -140,8 +149,9 @@ def _line_from_rays(P, V, N, rim_radius):
     e, m = e / ne, m / ne
     Q = np.cross(e, m)
     dist = float(np.linalg.norm(Q))
-    if not (abs(e @ N) < 0.1 and 10 * rim_radius < dist < 1e6 * rim_radius
-            and np.median(V @ Q) > 0):
+    if not (
+        abs(e @ N) < 0.1 and 10 * rim_radius < dist < 1e6 * rim_radius and np.median(V @ Q) > 0
+    ):
         return None
     return Q, e
 
@@ -213,8 +223,10 @@ class RimTerm:
         ]
 
         def img(q, off):
-            return (A[0, 0] * q[0] + A[0, 1] * q[1] + off[0],
-                    A[1, 0] * q[0] + A[1, 1] * q[1] + off[1])
+            return (
+                A[0, 0] * q[0] + A[0, 1] * q[1] + off[0],
+                A[1, 0] * q[0] + A[1, 1] * q[1] + off[1],
+            )
 
         return img(p, k), img(p1, (0.0, 0.0)), img(p2, (0.0, 0.0))
 
@@ -514,8 +526,18 @@ def _reflection_spec(reflection):
     return xn, float(r0), float(z0), bool(r_known), bool(z_known)
 
 
-def refine_posture(K, mirror, rvec, tvec, rim_points, far_lines_normalized=(), line_depth=None,
-                   max_nfev=15, robust=True, reflection=None):
+def refine_posture(
+    K,
+    mirror,
+    rvec,
+    tvec,
+    rim_points,
+    far_lines_normalized=(),
+    line_depth=None,
+    max_nfev=15,
+    robust=True,
+    reflection=None,
+):
     """Refine a mirror posture by non-linear least squares (rim, far lines, reflection).
 
     Parameters
@@ -554,8 +576,9 @@ def refine_posture(K, mirror, rvec, tvec, rim_points, far_lines_normalized=(), l
     lines_xn = [np.ascontiguousarray(np.asarray(x, np.float64)) for x in far_lines_normalized]
     depth = 1000.0 * mirror.rim_radius if line_depth is None else float(line_depth)
     # lines whose rays mostly miss the mirror under this posture are left out
-    lines_xn = [x for x in lines_xn
-                if np.isfinite(_rays(mirror, R0, t0, x)[1]).all(axis=1).sum() >= 3]
+    lines_xn = [
+        x for x in lines_xn if np.isfinite(_rays(mirror, R0, t0, x)[1]).all(axis=1).sum() >= 3
+    ]
     rim = RimTerm(K, mirror, R0, t0, rim_px)
     if robust:
         rim.set_robust_weights(R0, t0)
@@ -572,9 +595,13 @@ def refine_posture(K, mirror, rvec, tvec, rim_points, far_lines_normalized=(), l
     # stage 1: the line parameters alone at the analytic posture (its fair cost)
     if lines_xn:
         lt, sl = terms[1], prob.slices[1]
-        s1 = least_squares(lambda y: lt.residuals(R0, t0, y), x0[sl],
-                           jac=lambda y: lt.nuisance_jacobian(R0, t0, y, np.full(len(y), 1e-7)),
-                           max_nfev=max_nfev, **opts)
+        s1 = least_squares(
+            lambda y: lt.residuals(R0, t0, y),
+            x0[sl],
+            jac=lambda y: lt.nuisance_jacobian(R0, t0, y, np.full(len(y), 1e-7)),
+            max_nfev=max_nfev,
+            **opts,
+        )
         x0[sl] = s1.x
         nfev += s1.nfev
     r_init = prob.residuals(x0)
@@ -603,13 +630,23 @@ def refine_posture(K, mirror, rvec, tvec, rim_points, far_lines_normalized=(), l
         y = x[prob.slices[-1]]
         refl_rms = float(np.sqrt(np.mean(term.residuals(R, t, y, outline_only=True) ** 2)))
         r_c, z_c = term.circle(y)
-    return RefineResult(rvec=cv2.Rodrigues(R)[0].ravel(), tvec=np.asarray(t, np.float64),
-                        accepted=accepted, cost_initial=cost_init, cost_final=cost_fin,
-                        rim_rms=rim_rms, line_rms=line_rms, lines=lines, nfev=int(nfev),
-                        reflection_rms=refl_rms, r=r_c, z=z_c,
-                        rim_cost=0.5 * float(np.sum(rim.residuals(R, t) ** 2)),
-                        rim_cost_initial=0.5 * float(np.sum(rim.residuals(R0, t0) ** 2)),
-                        n_rim=len(rim_px))
+    return RefineResult(
+        rvec=cv2.Rodrigues(R)[0].ravel(),
+        tvec=np.asarray(t, np.float64),
+        accepted=accepted,
+        cost_initial=cost_init,
+        cost_final=cost_fin,
+        rim_rms=rim_rms,
+        line_rms=line_rms,
+        lines=lines,
+        nfev=int(nfev),
+        reflection_rms=refl_rms,
+        r=r_c,
+        z=z_c,
+        rim_cost=0.5 * float(np.sum(rim.residuals(R, t) ** 2)),
+        rim_cost_initial=0.5 * float(np.sum(rim.residuals(R0, t0) ** 2)),
+        n_rim=len(rim_px),
+    )
 
 
 @dataclasses.dataclass(frozen=True)
@@ -640,9 +677,11 @@ class Uncertainty:
         """The weakly determined direction in words."""
         if not np.isfinite(self.weak_tilt_deg):
             return "unknown"
-        return (f"a tilt of {self.weak_tilt_deg:.3g} deg with a compensating shift of "
-                f"{self.weak_shift:.3g} (one standard deviation; {100 * self.weak_share:.0f} % "
-                f"of the posture's variance)")
+        return (
+            f"a tilt of {self.weak_tilt_deg:.3g} deg with a compensating shift of "
+            f"{self.weak_shift:.3g} (one standard deviation; {100 * self.weak_share:.0f} % "
+            f"of the posture's variance)"
+        )
 
 
 def _correlation_factor(res):
@@ -657,8 +696,9 @@ def _correlation_factor(res):
     return math.sqrt((1.0 + rho1) / (1.0 - rho1))
 
 
-def posture_uncertainty(K, mirror, rvec, tvec, rim_points, rim_sigma, reflection=None,
-                        reflection_sigma=None, floor=0.02):
+def posture_uncertainty(
+    K, mirror, rvec, tvec, rim_points, rim_sigma, reflection=None, reflection_sigma=None, floor=0.02
+):
     """First-order a posteriori covariance of the posture from the rim (and the reflection).
 
     With ``J`` the Jacobian of the residuals (px) with respect to the posture (two axis angles,
@@ -713,5 +753,10 @@ def posture_uncertainty(K, mirror, rvec, tvec, rim_points, rim_sigma, reflection
     lam, E = np.linalg.eigh(S @ cov @ S)
     v = E[:, -1] * math.sqrt(max(lam[-1], 0.0))
     share = float(lam[-1] / max(lam.sum(), 1e-300))
-    return Uncertainty(axis_std, origin_std, math.degrees(float(np.hypot(v[0], v[1])) / L),
-                       float(np.linalg.norm(v[2:5])), share)
+    return Uncertainty(
+        axis_std,
+        origin_std,
+        math.degrees(float(np.hypot(v[0], v[1])) / L),
+        float(np.linalg.norm(v[2:5])),
+        share,
+    )

@@ -1,4 +1,5 @@
 """What a calibration did: the rim, the four candidates, the choice, warnings, and an overlay."""
+
 from __future__ import annotations
 
 import dataclasses
@@ -116,26 +117,46 @@ class CalibrationReport:
         circ = ref.circle
         note = cue.note
         if cue.used and circ is not None:
-            note += (f", circle r {circ.r:.3f} at z {circ.z:.3f}, RMS {circ.rms:.3f} px; "
-                     + ("joined the refinement" if "reflection" in ref.accepted_cues else
-                        "not in the refinement"))
-        return cls(conic=np.asarray(rim.fit.conic, np.float64), boundary_points=rim.seen,
-                   rim_rms=float(rim.fit.rms), candidates=list(sel.candidates),
-                   chosen=sel.chosen, confidence=float(sel.confidence), warnings=warnings,
-                   camera=camera, refinement=ref.result,
-                   axis_std_deg=ref.uncertainty.axis_std_deg,
-                   origin_std_mm=ref.uncertainty.origin_std, far_lines=far_lines,
-                   lens_points=cue.points, lens_fit=cue.fit,
-                   lens_scores=sel.scores_per_cue.get("reflection rms px"),
-                   lens_rms=circ.rms if circ is not None else math.nan,
-                   lens_r=circ.r if circ is not None else math.nan,
-                   lens_z=circ.z if circ is not None else math.nan, lens_note=note,
-                   ambiguous=sel.ambiguous, scores_per_cue=sel.scores_per_cue,
-                   sigma_per_cue=sel.sigma, accepted_cues=ref.accepted_cues,
-                   rejected_cues=ref.rejected_cues, skipped_cues=ref.skipped_cues,
-                   weak_direction=ref.uncertainty.describe(),
-                   steps={"rim": rim, "reflection": cue, "candidates": cands,
-                          "selection": sel, "refinement": ref})
+            note += f", circle r {circ.r:.3f} at z {circ.z:.3f}, RMS {circ.rms:.3f} px; " + (
+                "joined the refinement"
+                if "reflection" in ref.accepted_cues
+                else "not in the refinement"
+            )
+        return cls(
+            conic=np.asarray(rim.fit.conic, np.float64),
+            boundary_points=rim.seen,
+            rim_rms=float(rim.fit.rms),
+            candidates=list(sel.candidates),
+            chosen=sel.chosen,
+            confidence=float(sel.confidence),
+            warnings=warnings,
+            camera=camera,
+            refinement=ref.result,
+            axis_std_deg=ref.uncertainty.axis_std_deg,
+            origin_std_mm=ref.uncertainty.origin_std,
+            far_lines=far_lines,
+            lens_points=cue.points,
+            lens_fit=cue.fit,
+            lens_scores=sel.scores_per_cue.get("reflection rms px"),
+            lens_rms=circ.rms if circ is not None else math.nan,
+            lens_r=circ.r if circ is not None else math.nan,
+            lens_z=circ.z if circ is not None else math.nan,
+            lens_note=note,
+            ambiguous=sel.ambiguous,
+            scores_per_cue=sel.scores_per_cue,
+            sigma_per_cue=sel.sigma,
+            accepted_cues=ref.accepted_cues,
+            rejected_cues=ref.rejected_cues,
+            skipped_cues=ref.skipped_cues,
+            weak_direction=ref.uncertainty.describe(),
+            steps={
+                "rim": rim,
+                "reflection": cue,
+                "candidates": cands,
+                "selection": sel,
+                "refinement": ref,
+            },
+        )
 
     @property
     def lens_used(self):
@@ -175,7 +196,8 @@ class CalibrationReport:
             f"  camera reflection (lens): {self.lens_note}",
             f"  candidates (Chen's method, section 3.1; score of eq. 31 with "
             f"{len(self.far_lines)} far line(s)"
-            + (", lens outline RMS in px" if self.lens_scores else "") + "):",
+            + (", lens outline RMS in px" if self.lens_scores else "")
+            + "):",
         ]
         for i, c in enumerate(self.candidates):
             mark = "*" if i == self.chosen else " "
@@ -185,21 +207,31 @@ class CalibrationReport:
                 score += f" lens {self.lens_scores[i]:.3f}"
             if i in self.scores_per_cue.get("self-reflection px", {}):
                 score += f" self-px {self.scores_per_cue['self-reflection px'][i]:.1f}"
-            lines.append(f"   {mark}[{i}] l={c.l} m={c.m} score {score:>10}  "
-                         f"tvec [{', '.join(f'{v:.4f}' for v in c.tvec)}]  {state}")
+            lines.append(
+                f"   {mark}[{i}] l={c.l} m={c.m} score {score:>10}  "
+                f"tvec [{', '.join(f'{v:.4f}' for v in c.tvec)}]  {state}"
+            )
         sep = ", ".join(f"{k} {v:.1f} sigma" for k, v in self.sigma_per_cue.items())
-        lines.append(f"  chosen: {self.chosen}, confidence {self.confidence:.4f}"
-                     + (f" ({sep})" if sep else "") + (" AMBIGUOUS" if self.ambiguous else ""))
+        lines.append(
+            f"  chosen: {self.chosen}, confidence {self.confidence:.4f}"
+            + (f" ({sep})" if sep else "")
+            + (" AMBIGUOUS" if self.ambiguous else "")
+        )
         if self.refinement is not None:
             r = self.refinement
             kept = "accepted" if r.accepted else "kept the analytic posture"
-            lines.append(f"  refinement: {kept}"
-                         f" (cost {r.cost_initial:.4g} -> {r.cost_final:.4g} px^2, rim RMS "
-                         f"{r.rim_rms:.4f} px"
-                         + ("" if not np.isfinite(r.line_rms) else
-                            f", far-line RMS {r.line_rms:.4f} px")
-                         + ("" if not np.isfinite(r.reflection_rms) else
-                            f", lens RMS {r.reflection_rms:.4f} px") + ")")
+            lines.append(
+                f"  refinement: {kept}"
+                f" (cost {r.cost_initial:.4g} -> {r.cost_final:.4g} px^2, rim RMS "
+                f"{r.rim_rms:.4f} px"
+                + ("" if not np.isfinite(r.line_rms) else f", far-line RMS {r.line_rms:.4f} px")
+                + (
+                    ""
+                    if not np.isfinite(r.reflection_rms)
+                    else f", lens RMS {r.reflection_rms:.4f} px"
+                )
+                + ")"
+            )
             for name, why in self.rejected_cues:
                 lines.append(f"  refinement left out the {name}: {why}")
             for name, why in self.skipped_cues:
@@ -216,8 +248,10 @@ class CalibrationReport:
     __str__ = summary
 
     def __repr__(self):
-        return (f"CalibrationReport(chosen={self.chosen}, confidence={self.confidence:.4f}, "
-                f"rim_rms={self.rim_rms:.4f}, warnings={len(self.warnings)})")
+        return (
+            f"CalibrationReport(chosen={self.chosen}, confidence={self.confidence:.4f}, "
+            f"rim_rms={self.rim_rms:.4f}, warnings={len(self.warnings)})"
+        )
 
     # -- overlay --------------------------------------------------------------------------
     def draw(self, image=None):
@@ -254,38 +288,85 @@ class CalibrationReport:
             for run in runs:
                 if len(run) >= 2 and ok[run[0]]:
                     p = np.round(pts[run] * f).astype(np.int32).reshape(-1, 1, 2)
-                    cv2.polylines(canvas, [p], closed and len(run) == len(pts), colour, thick,
-                                  cv2.LINE_AA, shift)
+                    cv2.polylines(
+                        canvas,
+                        [p],
+                        closed and len(run) == len(pts),
+                        colour,
+                        thick,
+                        cv2.LINE_AA,
+                        shift,
+                    )
 
         for p in self.boundary_points[:: max(1, len(self.boundary_points) // 720)]:
             if np.isfinite(p).all():
-                cv2.circle(canvas, (int(round(p[0] * f)), int(round(p[1] * f))),
-                           int(1.5 * scale * f), _POINTS, -1, cv2.LINE_AA, shift)
+                cv2.circle(
+                    canvas,
+                    (int(round(p[0] * f)), int(round(p[1] * f))),
+                    int(1.5 * scale * f),
+                    _POINTS,
+                    -1,
+                    cv2.LINE_AA,
+                    shift,
+                )
         poly(self.camera.rim_image_points(720), _RIM, closed=True)
         if self.lens_points is not None:
             for p in self.lens_points:
-                cv2.circle(canvas, (int(round(p[0] * f)), int(round(p[1] * f))),
-                           int(scale * f), _POINTS, -1, cv2.LINE_AA, shift)
+                cv2.circle(
+                    canvas,
+                    (int(round(p[0] * f)), int(round(p[1] * f))),
+                    int(scale * f),
+                    _POINTS,
+                    -1,
+                    cv2.LINE_AA,
+                    shift,
+                )
         for line in self.far_lines:
             for p in line:
-                cv2.circle(canvas, (int(round(p[0] * f)), int(round(p[1] * f))),
-                           int(2 * scale * f), _LINES, thick, cv2.LINE_AA, shift)
+                cv2.circle(
+                    canvas,
+                    (int(round(p[0] * f)), int(round(p[1] * f))),
+                    int(2 * scale * f),
+                    _LINES,
+                    thick,
+                    cv2.LINE_AA,
+                    shift,
+                )
         for i in self.physical:
             cand = self.candidates[i]
-            cam = self.camera if i == self.chosen else self.camera.replace(
-                rvec=cand.rvec, tvec=cand.tvec)
+            cam = (
+                self.camera
+                if i == self.chosen
+                else self.camera.replace(rvec=cand.rvec, tvec=cand.tvec)
+            )
             colour = _CHOSEN if i == self.chosen else _OTHER
             for normal in _curve_normals(cam, self.far_lines):
                 poly(_great_circle_pixels(cam, normal), colour)
         text = f"chosen {self.chosen}  confidence {self.confidence:.3f}"
         if self.warnings:
             text += f"  ({len(self.warnings)} warning(s))"
-        cv2.putText(canvas, text, (int(8 * scale), int(20 * scale)), cv2.FONT_HERSHEY_SIMPLEX,
-                    0.5 * scale, (255, 255, 255), thick, cv2.LINE_AA)
-        _legend(canvas, scale, thick, [
-            (_RIM, "fitted rim"), (_POINTS, "rim and reflection points"),
-            (_LINES, "far-line pixels"), (_CHOSEN, "far lines under the chosen posture"),
-            (_OTHER, "... under the other posture")])
+        cv2.putText(
+            canvas,
+            text,
+            (int(8 * scale), int(20 * scale)),
+            cv2.FONT_HERSHEY_SIMPLEX,
+            0.5 * scale,
+            (255, 255, 255),
+            thick,
+            cv2.LINE_AA,
+        )
+        _legend(
+            canvas,
+            scale,
+            thick,
+            [
+                (_RIM, "fitted rim"),
+                (_POINTS, "rim and reflection points"),
+                (_LINES, "far-line pixels"),
+                (_CHOSEN, "far lines under the chosen posture"),
+                (_OTHER, "... under the other posture"),
+            ],
+        )
         return canvas
 
 
@@ -297,8 +378,16 @@ def _legend(canvas, scale, thick, entries):
         y = h - int(8 * scale) - k * step
         x = int(8 * scale)
         cv2.rectangle(canvas, (x, y - int(9 * scale)), (x + int(9 * scale), y), colour, -1)
-        cv2.putText(canvas, label, (x + int(14 * scale), y), cv2.FONT_HERSHEY_SIMPLEX,
-                    0.4 * scale, (255, 255, 255), max(1, thick - 1), cv2.LINE_AA)
+        cv2.putText(
+            canvas,
+            label,
+            (x + int(14 * scale), y),
+            cv2.FONT_HERSHEY_SIMPLEX,
+            0.4 * scale,
+            (255, 255, 255),
+            max(1, thick - 1),
+            cv2.LINE_AA,
+        )
 
 
 def _to_bgr8(image, image_size):

@@ -14,6 +14,7 @@ biased, so :func:`fit_rim` starts with a normalised direct ellipse fit and then 
 :func:`fit_rim` fits given boundary points (RANSAC against outliers, then geometric refinement);
 :func:`detect_rim` finds the boundary in an image automatically.
 """
+
 from __future__ import annotations
 
 import dataclasses
@@ -40,9 +41,15 @@ from .ellipse import (
 )
 from .robust import mad_sigma
 
-__all__ = ["RimFit", "check_hint", "conic_distance", "conic_from_ellipse", "detect_rim",
-           "ellipse_from_conic", "fit_rim"]
-
+__all__ = [
+    "RimFit",
+    "check_hint",
+    "conic_distance",
+    "conic_from_ellipse",
+    "detect_rim",
+    "ellipse_from_conic",
+    "fit_rim",
+]
 
 
 _COARSE_SIZE = 256  # longer side of the image used to find the rim roughly
@@ -105,10 +112,12 @@ class RimFit:
             object.__setattr__(self, name, arr)
 
     def __repr__(self):
-        return (f"RimFit(center=({self.center[0]:.3f}, {self.center[1]:.3f}), "
-                f"axes=({self.axes[0]:.3f}, {self.axes[1]:.3f}), "
-                f"angle={math.degrees(self.angle):.2f} deg, rms={self.rms:.4f} px, "
-                f"points={len(self.points)} of {len(self.inliers)})")
+        return (
+            f"RimFit(center=({self.center[0]:.3f}, {self.center[1]:.3f}), "
+            f"axes=({self.axes[0]:.3f}, {self.axes[1]:.3f}), "
+            f"angle={math.degrees(self.angle):.2f} deg, rms={self.rms:.4f} px, "
+            f"points={len(self.points)} of {len(self.inliers)})"
+        )
 
     @property
     def shape_matrix(self):
@@ -148,8 +157,10 @@ def _as_points(points, min_points):
     if not np.isfinite(pts).all():
         raise ValueError("points must be finite; drop NaN/inf rows before fitting the rim")
     if len(pts) < min_points:
-        raise ValueError(f"need at least {min_points} boundary points to fit the rim ellipse, "
-                         f"got {len(pts)}; give more points spread along the rim")
+        raise ValueError(
+            f"need at least {min_points} boundary points to fit the rim ellipse, "
+            f"got {len(pts)}; give more points spread along the rim"
+        )
     return pts
 
 
@@ -198,8 +209,10 @@ def fit_rim(points, robust=True, threshold=2.0, max_trials=2000, rng=0):
         rng = rng if isinstance(rng, np.random.Generator) else np.random.default_rng(rng)
         m = ransac_conic(pts_n, threshold * s, rng, int(max_trials))
         if m is None or m.sum() < 5:
-            raise ValueError("no ellipse found among the boundary points; give points along the "
-                             "rim (at least 5 on a common ellipse)")
+            raise ValueError(
+                "no ellipse found among the boundary points; give points along the "
+                "rim (at least 5 on a common ellipse)"
+            )
         mask = m
     return _fit_with_mask(pts, N, mask, robust, threshold)
 
@@ -209,8 +222,10 @@ def _fit_with_mask(pts, N, mask, robust, threshold):
     pts_n = pts * N[0, 0] + N[:2, 2]
     Qn = direct_ellipse(pts_n[mask])
     if Qn is None or not is_ellipse(Qn):
-        raise ValueError("the boundary points do not determine an ellipse (collinear, too few or "
-                         "a non-elliptic curve); give points spread along the rim")
+        raise ValueError(
+            "the boundary points do not determine an ellipse (collinear, too few or "
+            "a non-elliptic curve); give points spread along the rim"
+        )
     Q = N.T @ Qn @ N  # back to pixels
     center, S = ellipse_from_conic(Q)
     for _ in range(10):
@@ -222,8 +237,10 @@ def _fit_with_mask(pts, N, mask, robust, threshold):
         sigma = mad_sigma(ad[mask])
         new = ad <= max(threshold, 3.5 * sigma)
         if new.sum() < 5:
-            raise ValueError("no ellipse found among the boundary points; give points along the "
-                             "rim (at least 5 on a common ellipse)")
+            raise ValueError(
+                "no ellipse found among the boundary points; give points along the "
+                "rim (at least 5 on a common ellipse)"
+            )
         if np.array_equal(new, mask):
             break
         mask = new
@@ -233,13 +250,21 @@ def _fit_with_mask(pts, N, mask, robust, threshold):
     axes, angle = axes_angle(S)
     extent = float(np.ptp(used, axis=0).max())
     if not (axes[1] > 1e-3 * axes[0] and axes[0] < 20.0 * extent):
-        raise ValueError(f"the boundary points fit only a degenerate ellipse (semi-axes "
-                         f"{axes[0]:.3g} and {axes[1]:.3g} px for points spanning {extent:.3g} px: "
-                         f"collinear or nearly flat); give points spread along the rim")
+        raise ValueError(
+            f"the boundary points fit only a degenerate ellipse (semi-axes "
+            f"{axes[0]:.3g} and {axes[1]:.3g} px for points spanning {extent:.3g} px: "
+            f"collinear or nearly flat); give points spread along the rim"
+        )
     d, _, _ = orthogonal_residuals(used, center, S)
-    return RimFit(conic=conic_from_ellipse(center, S), points=used,
-                  rms=float(np.sqrt(np.mean(d * d))), center=center, axes=axes, angle=angle,
-                  inliers=mask)
+    return RimFit(
+        conic=conic_from_ellipse(center, S),
+        points=used,
+        rms=float(np.sqrt(np.mean(d * d))),
+        center=center,
+        axes=axes,
+        angle=angle,
+        inliers=mask,
+    )
 
 
 def _coarse_edges(gray):
@@ -248,8 +273,11 @@ def _coarse_edges(gray):
     axis."""
     h, w = gray.shape
     s = min(1.0, _COARSE_SIZE / max(h, w))
-    small = cv2.resize(gray, (max(8, round(w * s)), max(8, round(h * s))),
-                       interpolation=cv2.INTER_AREA) if s < 1.0 else gray
+    small = (
+        cv2.resize(gray, (max(8, round(w * s)), max(8, round(h * s))), interpolation=cv2.INTER_AREA)
+        if s < 1.0
+        else gray
+    )
     sy, sx = small.shape[0] / h, small.shape[1] / w
     small = cv2.GaussianBlur(small, (0, 0), 1.0)
     gx = cv2.Sobel(small, cv2.CV_32F, 1, 0, ksize=3)
@@ -262,8 +290,13 @@ def _coarse_edges(gray):
     if not hi > 0:
         raise ValueError("no ellipse found: the image has no edges")
     scale = 255.0 / float(mag.max())
-    edges = cv2.Canny((gx * scale).astype(np.int16), (gy * scale).astype(np.int16),
-                      0.5 * hi * scale, hi * scale, L2gradient=True)
+    edges = cv2.Canny(
+        (gx * scale).astype(np.int16),
+        (gy * scale).astype(np.int16),
+        0.5 * hi * scale,
+        hi * scale,
+        L2gradient=True,
+    )
     edges[:2, :] = edges[-2:, :] = 0  # the image border is not the rim
     edges[:, :2] = edges[:, -2:] = 0
     ys, xs = np.nonzero(edges)
@@ -324,9 +357,17 @@ def _coarse_ellipse(coarse_edges, hint=None, expected=None):
     guided = prior is not None
     found = []
     for polarity in (1.0, -1.0, 0.0) if guided else (1.0,):
-        for support, c, S in _coarse_candidates(p, (polarity or 1.0) * g, (H, W), rmin, rmax,
-                                                hint_c, hint_r, unsigned=polarity == 0.0,
-                                                n_refine=2 if guided else 3):
+        for support, c, S in _coarse_candidates(
+            p,
+            (polarity or 1.0) * g,
+            (H, W),
+            rmin,
+            rmax,
+            hint_c,
+            hint_r,
+            unsigned=polarity == 0.0,
+            n_refine=2 if guided else 3,
+        ):
             semi = np.linalg.eigvalsh(S)
             # an ellipse must be supported along >= ~8 % of its length to count, and keep to
             # the sizes asked for (a refinement may have slid to a neighbouring circle)
@@ -338,13 +379,16 @@ def _coarse_ellipse(coarse_edges, hint=None, expected=None):
             found.append((score, support, c, S, polarity))
     if not found:
         where = "" if hint is None else f" near the hint {tuple(float(v) for v in hint)}"
-        raise ValueError(f"no ellipse found{where}: no elliptic boundary between the mirror "
-                         f"and its housing; is the mirror rim in view?")
+        raise ValueError(
+            f"no ellipse found{where}: no elliptic boundary between the mirror "
+            f"and its housing; is the mirror rim in view?"
+        )
     found.sort(key=lambda f: -f[0])
     distinct = []
     for f in found:  # the same ellipse refined from neighbouring circles counts once
-        if all(np.abs(f[2] - d[2]).max() > 1.0 or np.abs(f[3] - d[3]).max() > 1.0
-               for d in distinct):
+        if all(
+            np.abs(f[2] - d[2]).max() > 1.0 or np.abs(f[3] - d[3]).max() > 1.0 for d in distinct
+        ):
             distinct.append(f)
     found = distinct
     out = []
@@ -353,13 +397,22 @@ def _coarse_ellipse(coarse_edges, hint=None, expected=None):
         # to full resolution: x = (x_small + 0.5) / s - 0.5 per axis
         AS = A @ S
         wv, V = np.linalg.eigh(AS @ AS.T)
-        out.append(_Coarse(A @ (c + 0.5) - 0.5, V @ np.diag(np.sqrt(wv)) @ V.T,
-                           1.0 / min(sx, sy), polarity, score, support))
+        out.append(
+            _Coarse(
+                A @ (c + 0.5) - 0.5,
+                V @ np.diag(np.sqrt(wv)) @ V.T,
+                1.0 / min(sx, sy),
+                polarity,
+                score,
+                support,
+            )
+        )
     return out
 
 
-def _coarse_candidates(p, g, shape, rmin, rmax, hint_c=None, hint_r=None, unsigned=False,
-                       n_refine=3):
+def _coarse_candidates(
+    p, g, shape, rmin, rmax, hint_c=None, hint_r=None, unsigned=False, n_refine=3
+):
     """Steps 1-3 of :func:`_coarse_ellipse` for one polarity: ``[(support, c, S), ...]``.
 
     ``p`` edge pixels, ``g`` unit gradients pointing into the rim (towards its centre); with
@@ -393,7 +446,7 @@ def _coarse_candidates(p, g, shape, rmin, rmax, hint_c=None, hint_r=None, unsign
             break
         y0, x0 = divmod(j, acc_w)
         peaks.append((np.array([x0 - m, y0 - m], np.float64), v))
-        acc[max(0, y0 - 6):y0 + 7, max(0, x0 - 6):x0 + 7] = 0
+        acc[max(0, y0 - 6) : y0 + 7, max(0, x0 - 6) : x0 + 7] = 0
 
     # 2. radii by supported arc length (1 px radius bins, +-1 bin; 1 px of arc per bin)
     candidates = []
@@ -413,8 +466,9 @@ def _coarse_candidates(p, g, shape, rmin, rmax, hint_c=None, hint_r=None, unsign
         arc = np.bincount(keys // 100000, minlength=int(rmax) + 3).astype(np.float64)
         arc3 = np.convolve(arc, np.ones(3), mode="same")
         for k in np.argsort(arc3)[::-1][:6]:
-            if arc3[k] >= 0.5 * k and all(abs(k - k2) > 4 or np.any(c != c2)
-                                           for _, c2, k2 in candidates):
+            if arc3[k] >= 0.5 * k and all(
+                abs(k - k2) > 4 or np.any(c != c2) for _, c2, k2 in candidates
+            ):
                 candidates.append((arc3[k], c, int(k)))
     candidates.sort(key=lambda item: -item[0])
 
@@ -530,19 +584,29 @@ def detect_rim(image, *, hint=None, expected=None, sigma=0.7, threshold=2.0, rng
     """
     # arguments first (ValueError naming them); sigma bounded so the blur cannot run for hours
     sigma = real_number(sigma, "sigma", 0.0, 25.0, expected="a number of pixels in [0, 25]")
-    threshold = real_number(threshold, "threshold", 0.0, 1e4, lo_open=True,
-                            expected="a positive number of pixels")
+    threshold = real_number(
+        threshold, "threshold", 0.0, 1e4, lo_open=True, expected="a positive number of pixels"
+    )
     rng = validate_rng(rng)
     gray = as_gray(image)
     if sigma > max(1.0, min(gray.shape) / 8):
-        raise ValueError(f"sigma must be at most 1/8 of the image's shorter side "
-                         f"({max(1.0, min(gray.shape) / 8):g} px), got {sigma!r}")
+        raise ValueError(
+            f"sigma must be at most 1/8 of the image's shorter side "
+            f"({max(1.0, min(gray.shape) / 8):g} px), got {sigma!r}"
+        )
     hint = check_hint(hint, (gray.shape[1], gray.shape[0]))
     expected = _check_expected(expected)
     edges = _coarse_edges(gray)
     if hint is not None:
-        return _detect(gray, _coarse_ellipse(edges, hint, None), hint, sigma, threshold, rng,
-                       _size_prior(hint, None))
+        return _detect(
+            gray,
+            _coarse_ellipse(edges, hint, None),
+            hint,
+            sigma,
+            threshold,
+            rng,
+            _size_prior(hint, None),
+        )
     if expected is None:
         return _detect(gray, _coarse_ellipse(edges), None, sigma, threshold, rng)
     # the rim of the expected size unless one of any size has a far longer arc (a wrong K)
@@ -553,11 +617,13 @@ def detect_rim(image, *, hint=None, expected=None, sigma=0.7, threshold=2.0, rng
         except ValueError as err:
             found[key], error = [], err
     sized, anysize = found["sized"], found["any"]
-    if sized and (not anysize or _fits(anysize[0], expected)
-                  or sized[0].support >= _EXPECTED_SCORE * anysize[0].support):
+    if sized and (
+        not anysize
+        or _fits(anysize[0], expected)
+        or sized[0].support >= _EXPECTED_SCORE * anysize[0].support
+    ):
         try:
-            return _detect(gray, sized, None, sigma, threshold, rng,
-                           _size_prior(None, expected))
+            return _detect(gray, sized, None, sigma, threshold, rng, _size_prior(None, expected))
         except ValueError as err:
             error = err
     if anysize:
@@ -578,19 +644,24 @@ def check_hint(hint, image_size):
     try:
         cx, cy, r = (float(v) for v in np.asarray(hint, dtype=np.float64).reshape(-1))
     except (TypeError, ValueError):
-        raise ValueError(f"hint must be (cx, cy, r): the rim's rough centre and radius in px, "
-                         f"got {hint!r}") from None
+        raise ValueError(
+            f"hint must be (cx, cy, r): the rim's rough centre and radius in px, got {hint!r}"
+        ) from None
     w, h = image_size
     if not (math.isfinite(cx) and math.isfinite(cy) and math.isfinite(r)):
         raise ValueError(f"hint must be finite (cx, cy, r) in px, got {hint!r}")
     if not r > 0:
         raise ValueError(f"hint radius must be positive, got r = {r!r}")
     if not (-0.5 <= cx <= w - 0.5 and -0.5 <= cy <= h - 0.5):
-        raise ValueError(f"hint centre ({cx:g}, {cy:g}) is outside the {w}x{h} image; give the "
-                         f"rim's centre in image pixels")
+        raise ValueError(
+            f"hint centre ({cx:g}, {cy:g}) is outside the {w}x{h} image; give the "
+            f"rim's centre in image pixels"
+        )
     if r > math.hypot(w, h):
-        raise ValueError(f"hint radius {r:g} px is larger than the image diagonal "
-                         f"({math.hypot(w, h):.0f} px); give the rim's radius in image pixels")
+        raise ValueError(
+            f"hint radius {r:g} px is larger than the image diagonal "
+            f"({math.hypot(w, h):.0f} px); give the rim's radius in image pixels"
+        )
     return cx, cy, r
 
 
@@ -604,8 +675,10 @@ def _check_expected(expected):
     if len(v) == 1:
         v = v[0] * np.array([1.0 - _HINT_RADIUS, 1.0 + _HINT_RADIUS])
     if not (len(v) == 2 and np.isfinite(v).all() and 0 < v[0] <= v[1]):
-        raise ValueError(f"expected must be the rim's radius in px or a range (r_min, r_max) "
-                         f"with 0 < r_min <= r_max, got {expected!r}")
+        raise ValueError(
+            f"expected must be the rim's radius in px or a range (r_min, r_max) "
+            f"with 0 < r_min <= r_max, got {expected!r}"
+        )
     return float(v[0]), float(v[1])
 
 
@@ -640,8 +713,9 @@ def _detect(gray, coarses, hint, sigma, threshold, rng, prior=None):
     or to a poorly supported compromise)."""
     error, best = None, None
     for coarse in coarses:
-        for absolute in (True,) if coarse.polarity == 0 else (
-                (False, True) if prior is not None else (False,)):
+        for absolute in (
+            (True,) if coarse.polarity == 0 else ((False, True) if prior is not None else (False,))
+        ):
             try:
                 fit, support = _detect_one(gray, coarse, hint, sigma, threshold, rng, absolute)
             except ValueError as err:
@@ -671,12 +745,14 @@ def _detect_one(gray, coarse, hint, sigma, threshold, rng, absolute=False):
     for i in range(3):
         # search window: the coarse ellipse's uncertainty, then the spread of the last fit
         hw = max(6.0, 3.0 * coarse_px) if i == 0 else cw + max(1.5, 3.0 * fit.rms)
-        pts, n_tried = edge_points_along_normals(G, center, S, hw, outermost=(i == 0),
-                                                  centroid=0.0 if i == 0 else cw,
-                                                  absolute=absolute)
+        pts, n_tried = edge_points_along_normals(
+            G, center, S, hw, outermost=(i == 0), centroid=0.0 if i == 0 else cw, absolute=absolute
+        )
         if len(pts) < 6:
-            raise ValueError("no ellipse found: the rim is not visible along enough of its length "
-                             "(too much of it outside the image?)")
+            raise ValueError(
+                "no ellipse found: the rim is not visible along enough of its length "
+                "(too much of it outside the image?)"
+            )
         try:
             if fit is None:
                 fit = fit_rim(pts, threshold=threshold, rng=rng)
@@ -695,20 +771,30 @@ def _detect_one(gray, coarse, hint, sigma, threshold, rng, absolute=False):
     # a rim is a long, clean ellipse: most normals in the frame find it, and it fits tightly
     support = fit.inliers.sum() / max(n_tried, 1)
     if support < 0.3 or fit.rms > max(1.5, 0.005 * fit.axes[0]):
-        raise ValueError(f"no ellipse found: the best elliptic boundary is supported along "
-                         f"{100 * support:.0f} % of its visible length with {fit.rms:.2f} px RMS "
-                         f"(a rim needs >= 30 % and <= {max(1.5, 0.005 * fit.axes[0]):.2f} px); is "
-                         f"the whole mirror in view, differing from its holder and in focus?")
+        raise ValueError(
+            f"no ellipse found: the best elliptic boundary is supported along "
+            f"{100 * support:.0f} % of its visible length with {fit.rms:.2f} px RMS "
+            f"(a rim needs >= 30 % and <= {max(1.5, 0.005 * fit.axes[0]):.2f} px); is "
+            f"the whole mirror in view, differing from its holder and in focus?"
+        )
     if hint is not None:
         off = float(np.linalg.norm(fit.center - hint[:2]))
-        if (off > (_HINT_CENTER + 0.02) * hint[2]
-                or not (1.0 - _HINT_RADIUS - 0.02) * hint[2] <= fit.axes[1]
-                or not fit.axes[0] <= (1.0 + _HINT_RADIUS + 0.02) * hint[2]):
-            raise ValueError(f"no ellipse found near the hint {hint}: the nearest rim found has "
-                             f"centre ({fit.center[0]:.1f}, {fit.center[1]:.1f}) and semi-axes "
-                             f"{fit.axes[0]:.1f}, {fit.axes[1]:.1f} px; check the hint")
+        if (
+            off > (_HINT_CENTER + 0.02) * hint[2]
+            or not (1.0 - _HINT_RADIUS - 0.02) * hint[2] <= fit.axes[1]
+            or not fit.axes[0] <= (1.0 + _HINT_RADIUS + 0.02) * hint[2]
+        ):
+            raise ValueError(
+                f"no ellipse found near the hint {hint}: the nearest rim found has "
+                f"centre ({fit.center[0]:.1f}, {fit.center[1]:.1f}) and semi-axes "
+                f"{fit.axes[0]:.1f}, {fit.axes[1]:.1f} px; check the hint"
+            )
     return fit, support
 
 
 # private aliases kept for modules written before the split (calibration.lens)
-_as_gray, _edge_points_along_normals, _hartley = as_gray, edge_points_along_normals, hartley_normalization
+_as_gray, _edge_points_along_normals, _hartley = (
+    as_gray,
+    edge_points_along_normals,
+    hartley_normalization,
+)

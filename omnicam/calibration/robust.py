@@ -4,6 +4,7 @@ For Gaussian residuals the median of their absolute deviation times 1.4826 estim
 standard deviation, and outliers barely move it. The rim fit, the reflection detection and the
 refinement's reweighting all use :func:`mad_sigma` for their thresholds.
 """
+
 from __future__ import annotations
 
 import numpy as np

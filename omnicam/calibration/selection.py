@@ -28,6 +28,7 @@ Every cue gives a cost per candidate in chi-square units above its best candidat
 up, the least total is chosen, and ``confidence = tanh(gap / 4)`` (for far lines alone exactly the
 paper-style ``1 - best / second best``). :class:`Selection` lists every cue's scores.
 """
+
 from __future__ import annotations
 
 import dataclasses
@@ -38,8 +39,15 @@ import numpy as np
 from ..raytrace import as_points
 from .errors import EstimationError
 
-__all__ = ["Selection", "validate_far_lines", "check_lines_inside_rim", "line_score",
-           "line_costs", "reflection_costs", "select_candidate"]
+__all__ = [
+    "Selection",
+    "validate_far_lines",
+    "check_lines_inside_rim",
+    "line_score",
+    "line_costs",
+    "reflection_costs",
+    "select_candidate",
+]
 
 AMBIGUOUS_CONFIDENCE = 0.8  # below this a choice by far lines comes with a warning
 # (exact far lines give > 0.99; with rim noise the wrong choices seen had 0.07-0.74)
@@ -57,20 +65,26 @@ def validate_far_lines(far_lines):
     """
     if far_lines is None:
         return []
-    if isinstance(far_lines, np.ndarray) and far_lines.dtype != object and (
-            far_lines.ndim == 2 or (far_lines.ndim == 3 and far_lines.shape[1] == 1)):
+    if (
+        isinstance(far_lines, np.ndarray)
+        and far_lines.dtype != object
+        and (far_lines.ndim == 2 or (far_lines.ndim == 3 and far_lines.shape[1] == 1))
+    ):
         far_lines = [far_lines]  # one line given as a bare (N, 2) or (N, 1, 2) array
     if isinstance(far_lines, (str, bytes, dict)) or not hasattr(far_lines, "__iter__"):
-        raise ValueError(f"far_lines must be a sequence of (N_i, 2) pixel arrays, "
-                         f"got {type(far_lines).__name__}")
+        raise ValueError(
+            f"far_lines must be a sequence of (N_i, 2) pixel arrays, got {type(far_lines).__name__}"
+        )
     out = []
     for i, line in enumerate(far_lines):
         arr, _ = as_points(line, f"far_lines[{i}]", 2)
         if not np.isfinite(arr).all():
             raise ValueError(f"far_lines[{i}] has non-finite pixels; drop them")
         if len(arr) < 3:
-            raise ValueError(f"far_lines[{i}] has {len(arr)} point(s); sample at least 3 pixels "
-                             f"along the image of each far straight line (more is better)")
+            raise ValueError(
+                f"far_lines[{i}] has {len(arr)} point(s); sample at least 3 pixels "
+                f"along the image of each far straight line (more is better)"
+            )
         out.append(np.ascontiguousarray(arr))
     return out
 
@@ -91,9 +105,11 @@ def check_lines_inside_rim(distances, tolerance):
         bad = ~(np.asarray(d) <= tolerance)
         if bad.any():
             k = int(np.flatnonzero(bad)[0])
-            raise ValueError(f"far_lines[{i}] has {int(bad.sum())} pixel(s) outside the mirror "
-                             f"rim (e.g. index {k}, {float(d[k]):.1f} px outside); give only "
-                             f"pixels that see the mirror, inside the rim ellipse")
+            raise ValueError(
+                f"far_lines[{i}] has {int(bad.sum())} pixel(s) outside the mirror "
+                f"rim (e.g. index {k}, {float(d[k]):.1f} px outside); give only "
+                f"pixels that see the mirror, inside the rim ellipse"
+            )
 
 
 def line_score(camera, line_pixels):
@@ -109,7 +125,6 @@ def line_score(camera, line_pixels):
     # N minimises sum (V_i, N)^2: the eigenvector of the least eigenvalue  (eq. 31)
     lam = np.linalg.eigvalsh(V.T @ V)
     return float(max(lam[0], 0.0)) / len(V), len(V)
-
 
 
 @dataclasses.dataclass(frozen=True, eq=False)
@@ -184,8 +199,10 @@ def reflection_costs(rms, n_points, sigma_measured):
     best = min(finite)
     s = max(float(sigma_measured) if np.isfinite(sigma_measured) else 0.0, best, 0.05)
     n_eff = 0.5 * n_points
-    return {i: (n_eff * max(v * v - best * best, 0.0) / (s * s) if np.isfinite(v) else math.inf)
-            for i, v in rms.items()}
+    return {
+        i: (n_eff * max(v * v - best * best, 0.0) / (s * s) if np.isfinite(v) else math.inf)
+        for i, v in rms.items()
+    }
 
 
 def select_candidate(candidates, make_camera, far_lines, lower_focus, reflection=None):
@@ -217,9 +234,11 @@ def select_candidate(candidates, make_camera, far_lines, lower_focus, reflection
     warnings = []
     phys = [i for i, c in enumerate(candidates) if c.physical]
     if not phys:
-        raise EstimationError("none of the four postures of the rim ellipse is physically possible "
-                              "(rim behind the camera or mirror seen from behind); check K, D, the "
-                              "mirror's rim_radius and that the boundary points are on the rim")
+        raise EstimationError(
+            "none of the four postures of the rim ellipse is physically possible "
+            "(rim behind the camera or mirror seen from behind); check K, D, the "
+            "mirror's rim_radius and that the boundary points are on the rim"
+        )
     scored = list(candidates)
     scores, costs, sigma = {}, {}, {}
     if far_lines and len(phys) > 1:
@@ -230,8 +249,10 @@ def select_candidate(candidates, make_camera, far_lines, lower_focus, reflection
             for j, line in enumerate(far_lines):
                 s, n_used = line_score(cam, line)
                 if n_used < len(line):
-                    warnings.append(f"candidate {i}: {len(line) - n_used} pixel(s) of "
-                                    f"far_lines[{j}] miss the mirror and were left out")
+                    warnings.append(
+                        f"candidate {i}: {len(line) - n_used} pixel(s) of "
+                        f"far_lines[{j}] miss the mirror and were left out"
+                    )
                 total += s
             scored[i] = candidates[i].with_score(total)
             line_s[i] = total
@@ -248,26 +269,38 @@ def select_candidate(candidates, make_camera, far_lines, lower_focus, reflection
                 costs["reflection"] = reflection_costs(rms, reflection["n"], reflection["sigma"])
             else:  # no posture explains it: it cannot tell them apart either
                 where = reflection.get("self_px") or {}
-                off = (f"; the camera sees itself {min(where.values()):.0f} px or more from "
-                       f"where the postures predict" if where else "")
-                warnings.append(f"the camera's reflection fits none of the rim's postures "
-                                f"(best RMS {min(rms.values()):.2f} px, allowed {limit:.2f}{off}) "
-                                f"and was not used to choose: check K (the principal point), D "
-                                f"and the mirror's a, b and rim_radius")
+                off = (
+                    f"; the camera sees itself {min(where.values()):.0f} px or more from "
+                    f"where the postures predict"
+                    if where
+                    else ""
+                )
+                warnings.append(
+                    f"the camera's reflection fits none of the rim's postures "
+                    f"(best RMS {min(rms.values()):.2f} px, allowed {limit:.2f}{off}) "
+                    f"and was not used to choose: check K (the principal point), D "
+                    f"and the mirror's a, b and rim_radius"
+                )
     if len(phys) == 1:
-        return Selection(tuple(scored), phys[0], 1.0, False, scores, costs, sigma,
-                         tuple(warnings))
+        return Selection(tuple(scored), phys[0], 1.0, False, scores, costs, sigma, tuple(warnings))
     if not costs:
-        dist = [float(np.linalg.norm(-candidates[i].R.T @ candidates[i].tvec
-                                     - np.asarray(lower_focus, np.float64))) for i in phys]
+        dist = [
+            float(
+                np.linalg.norm(
+                    -candidates[i].R.T @ candidates[i].tvec - np.asarray(lower_focus, np.float64)
+                )
+            )
+            for i in phys
+        ]
         chosen = phys[int(np.argmin(dist))]
-        warnings.append("no far_lines given and no camera reflection used: the choice between "
-                        "the physical postures is ambiguous (fallback: the camera nearest the "
-                        "lower focus, right about half of the time); give far_lines (pixels "
-                        "along the image of a far straight line) or an image showing the "
-                        "camera's reflection")
-        return Selection(tuple(scored), chosen, 0.0, True, scores, costs, sigma,
-                         tuple(warnings))
+        warnings.append(
+            "no far_lines given and no camera reflection used: the choice between "
+            "the physical postures is ambiguous (fallback: the camera nearest the "
+            "lower focus, right about half of the time); give far_lines (pixels "
+            "along the image of a far straight line) or an image showing the "
+            "camera's reflection"
+        )
+        return Selection(tuple(scored), chosen, 0.0, True, scores, costs, sigma, tuple(warnings))
     total = {i: sum(c[i] for c in costs.values()) for i in phys}
     order = sorted(phys, key=lambda i: (total[i], i))
     chosen = order[0]
@@ -282,13 +315,21 @@ def select_candidate(candidates, make_camera, far_lines, lower_focus, reflection
     ambiguous = confidence < needed
     if ambiguous:
         cues = " and ".join(costs)
-        warnings.append(f"the {cues} barely separate the physical postures (confidence "
-                        f"{confidence:.3f}): the choice may be wrong; give more or longer far "
-                        f"lines, far from the image centre")
-    disagree = [cue for cue, c in costs.items() if min(phys, key=lambda i: (c[i], i)) != chosen
-                and c[chosen] > 4.0]
+        warnings.append(
+            f"the {cues} barely separate the physical postures (confidence "
+            f"{confidence:.3f}): the choice may be wrong; give more or longer far "
+            f"lines, far from the image centre"
+        )
+    disagree = [
+        cue
+        for cue, c in costs.items()
+        if min(phys, key=lambda i: (c[i], i)) != chosen and c[chosen] > 4.0
+    ]
     for cue in disagree:
-        warnings.append(f"the {cue} prefer another posture than the combined choice (by "
-                        f"{math.sqrt(costs[cue][chosen]):.1f} sigma): check that cue")
-    return Selection(tuple(scored), chosen, confidence, ambiguous, scores, costs, sigma,
-                     tuple(warnings))
+        warnings.append(
+            f"the {cue} prefer another posture than the combined choice (by "
+            f"{math.sqrt(costs[cue][chosen]):.1f} sigma): check that cue"
+        )
+    return Selection(
+        tuple(scored), chosen, confidence, ambiguous, scores, costs, sigma, tuple(warnings)
+    )

@@ -95,8 +95,16 @@ class RimStep:
         return np.asarray(self.fit.points, np.float64)
 
 
-def rim_step(K, D, image=None, boundary_points=None, hint=None, mirror=None,
-             max_tilt_deg=10.0, max_offset_mm=10.0):
+def rim_step(
+    K,
+    D,
+    image=None,
+    boundary_points=None,
+    hint=None,
+    mirror=None,
+    max_tilt_deg=10.0,
+    max_offset_mm=10.0,
+):
     """Fit (or detect) the rim ellipse; see :class:`RimStep`.
 
     In an image the search is guided by ``hint`` (a rough circle ``(cx, cy, r)``) and by the

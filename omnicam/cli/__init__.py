@@ -56,14 +56,11 @@ def build_parser():
     """The ``argparse`` parser of the ``omnicam`` command (one sub-parser per command)."""
     parser = _Parser(
         prog=PROG,
-        description="Calibrate and unwarp misaligned hyperbolic-mirror "
-        "catadioptric cameras.",
+        description="Calibrate and unwarp misaligned hyperbolic-mirror catadioptric cameras.",
     )
     from .. import __version__
 
-    parser.add_argument(
-        "--version", action="version", version=f"%(prog)s {__version__}"
-    )
+    parser.add_argument("--version", action="version", version=f"%(prog)s {__version__}")
     sub = parser.add_subparsers(dest="command", metavar="COMMAND", required=True)
 
     for module in (calibrate, unwarp, maps, export, info, demo):
@@ -76,7 +73,8 @@ def main(argv=None) -> int:
     import signal
 
     console = getattr(signal.getsignal(signal.SIGINT), "__name__", "") == (
-        "_interrupted_while_loading")  # set by omnicam/__init__.py for the console script
+        "_interrupted_while_loading"
+    )  # set by omnicam/__init__.py for the console script
     if console:
         signal.signal(signal.SIGINT, signal.default_int_handler)  # loaded: Ctrl-C as usual
     try:

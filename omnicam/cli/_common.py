@@ -44,14 +44,10 @@ def _size(text):
     """``WxH`` -> ``(W, H)`` positive ints."""
     m = re.fullmatch(r"\s*(\d+)\s*[xX]\s*(\d+)\s*", text)
     if not m:
-        raise argparse.ArgumentTypeError(
-            f"expected WIDTHxHEIGHT such as 1024x256, got {text!r}"
-        )
+        raise argparse.ArgumentTypeError(f"expected WIDTHxHEIGHT such as 1024x256, got {text!r}")
     w, h = int(m.group(1)), int(m.group(2))
     if not (0 < w <= 32767 and 0 < h <= 32767):
-        raise argparse.ArgumentTypeError(
-            f"width and height must be 1..32767, got {text!r}"
-        )
+        raise argparse.ArgumentTypeError(f"width and height must be 1..32767, got {text!r}")
     return w, h
 
 
@@ -76,9 +72,7 @@ def _count(text):
     try:
         value = int(text)
     except ValueError:
-        raise argparse.ArgumentTypeError(
-            f"expected a positive integer, got {text!r}"
-        ) from None
+        raise argparse.ArgumentTypeError(f"expected a positive integer, got {text!r}") from None
     if value <= 0:
         raise argparse.ArgumentTypeError(f"expected a positive integer, got {text!r}")
     return value
@@ -120,8 +114,13 @@ def _opencv_quiet():
         try:
             if fd == 2:  # our own messages keep the real stderr
                 swapped = sys.stderr
-                sys.stderr = open(os.dup(saved), "w", buffering=1,  # noqa: SIM115
-                                  encoding=swapped.encoding, errors="backslashreplace")
+                sys.stderr = open(
+                    os.dup(saved),
+                    "w",
+                    buffering=1,  # noqa: SIM115
+                    encoding=swapped.encoding,
+                    errors="backslashreplace",
+                )
             os.dup2(devnull, 2)
         finally:
             os.close(devnull)
@@ -229,8 +228,10 @@ def _write_image(path, image, overwrite=True):
         return back is not None and back.shape[:2] == image.shape[:2]
 
     try:
-        with opencv_silenced(), atomic_output(path, what="image", overwrite=overwrite,
-                                              verify=verify) as tmp:
+        with (
+            opencv_silenced(),
+            atomic_output(path, what="image", overwrite=overwrite, verify=verify) as tmp,
+        ):
             try:
                 ok, detail = cv2.imwrite(tmp, image), "cv2.imwrite failed"
             except cv2.error as e:
@@ -248,9 +249,29 @@ def _cv_message(e):
     return re.sub(r"^.*?error: \(-?\d+:[^)]*\)\s*", "", text).strip() or text
 
 
-IMAGE_EXTENSIONS = (".png", ".jpg", ".jpeg", ".jpe", ".bmp", ".dib", ".tif", ".tiff", ".webp",
-                    ".pbm", ".pgm", ".ppm", ".pxm", ".pnm", ".sr", ".ras", ".exr", ".hdr", ".pic",
-                    ".jp2", ".avif")
+IMAGE_EXTENSIONS = (
+    ".png",
+    ".jpg",
+    ".jpeg",
+    ".jpe",
+    ".bmp",
+    ".dib",
+    ".tif",
+    ".tiff",
+    ".webp",
+    ".pbm",
+    ".pgm",
+    ".ppm",
+    ".pxm",
+    ".pnm",
+    ".sr",
+    ".ras",
+    ".exr",
+    ".hdr",
+    ".pic",
+    ".jp2",
+    ".avif",
+)
 
 
 def _is_image_input(path):
@@ -295,8 +316,9 @@ def _read_image(path, flags=cv2.IMREAD_UNCHANGED):
     except cv2.error as e:
         raise CliError(f"cannot read image {shown(path)}: {_cv_message(e)}") from None
     if image is None or image.size == 0:
-        raise CliError(f"cannot read image {shown(path)}: not an image format OpenCV reads "
-                       f"(or a corrupt file)")
+        raise CliError(
+            f"cannot read image {shown(path)}: not an image format OpenCV reads (or a corrupt file)"
+        )
     return image
 
 
@@ -322,16 +344,12 @@ def read_far_lines(path):
 
 def _report_text(report):
     summary = getattr(report, "summary", None)
-    return str(
-        summary() if callable(summary) else summary if summary is not None else report
-    )
+    return str(summary() if callable(summary) else summary if summary is not None else report)
 
 
 def _save_camera(camera, path, overwrite):
     if not overwrite and os.path.lexists(path):
-        raise CliError(
-            f"calibration file {path} exists; pass --overwrite to replace it"
-        )
+        raise CliError(f"calibration file {path} exists; pass --overwrite to replace it")
     try:
         camera.save(path)
     except (ValueError, OSError) as e:

@@ -42,22 +42,21 @@ def cmd_calibrate(args):
     if args.intrinsics is not None and (given or args.dist is not None):
         raise CliError("calibrate: give --intrinsics or --fx --fy --cx --cy [--dist], not both", 2)
     if args.intrinsics is None and len(given) != 4:
-        raise CliError("calibrate: give the camera's intrinsics: --intrinsics K.yaml, or all of "
-                       "--fx --fy --cx --cy [--dist ...] (or use --chessboard)", 2)
+        raise CliError(
+            "calibrate: give the camera's intrinsics: --intrinsics K.yaml, or all of "
+            "--fx --fy --cx --cy [--dist ...] (or use --chessboard)",
+            2,
+        )
     args.image = args.image[0]
 
     calib = args.output
     if os.path.splitext(calib)[1].lower() not in SUFFIXES:
-        raise CliError(
-            f"calibration file {calib}: extension must be one of {', '.join(SUFFIXES)}"
-        )
+        raise CliError(f"calibration file {calib}: extension must be one of {', '.join(SUFFIXES)}")
     overlay = args.overlay or _overlay_path(calib)
     _check_output(calib, args.overwrite, "calibration file")
     _check_output(overlay, args.overwrite, "overlay")
     if not cv2.haveImageWriter(overlay):
-        raise CliError(
-            f"overlay {overlay}: no image writer for its extension; use .png or .jpg"
-        )
+        raise CliError(f"overlay {overlay}: no image writer for its extension; use .png or .jpg")
     if (
         os.path.exists(overlay)
         and os.path.exists(args.image)
@@ -73,9 +72,7 @@ def cmd_calibrate(args):
     else:
         K, D, size = _intrinsics_from_numbers(args)
     far_lines = read_far_lines(args.far_lines) if args.far_lines else None
-    boundary = (
-        read_boundary_points(args.boundary_points) if args.boundary_points else None
-    )
+    boundary = read_boundary_points(args.boundary_points) if args.boundary_points else None
     image = _read_image(args.image, cv2.IMREAD_COLOR | cv2.IMREAD_IGNORE_ORIENTATION)
     image_size = (image.shape[1], image.shape[0])
     if args.rim_hint is not None:
@@ -86,9 +83,7 @@ def cmd_calibrate(args):
         except ValueError as e:
             raise CliError(f"--rim-hint: {_one_line(e)}") from None
         if boundary is not None:
-            _warn(
-                "--rim-hint is not used with --boundary-points (the rim is fitted to them)"
-            )
+            _warn("--rim-hint is not used with --boundary-points (the rim is fitted to them)")
     if size is not None and size != image_size:
         _warn(
             f"intrinsics are for {size[0]}x{size[1]}, image is {image_size[0]}x{image_size[1]}: "
@@ -205,9 +200,7 @@ def _rim_hint(text):
             f"got {text!r}"
         ) from None
     if not all(math.isfinite(v) for v in (cx, cy, r)) or r <= 0:
-        raise argparse.ArgumentTypeError(
-            f"expected finite CX,CY and a positive R, got {text!r}"
-        )
+        raise argparse.ArgumentTypeError(f"expected finite CX,CY and a positive R, got {text!r}")
     return cx, cy, r
 
 
@@ -263,14 +256,23 @@ def add_parser(sub):
         "'image_width' and 'image_height'); K is rescaled if image_size differs "
         "from IMAGE's size. An omnicam calibration file also works.",
     )
-    p.add_argument("--fx", type=_positive, metavar="PX", help="focal length in x, px "
-                   "(with --fy --cx --cy instead of --intrinsics)")
+    p.add_argument(
+        "--fx",
+        type=_positive,
+        metavar="PX",
+        help="focal length in x, px (with --fy --cx --cy instead of --intrinsics)",
+    )
     p.add_argument("--fy", type=_positive, metavar="PX", help="focal length in y, px")
     p.add_argument("--cx", type=_finite, metavar="PX", help="principal point x, px")
     p.add_argument("--cy", type=_finite, metavar="PX", help="principal point y, px")
-    p.add_argument("--dist", type=_finite, nargs="+", metavar="D",
-                   help="OpenCV distortion coefficients k1 k2 p1 p2 [k3 ...] (4, 5, 8, 12 or "
-                   "14 values) with --fx --fy --cx --cy")
+    p.add_argument(
+        "--dist",
+        type=_finite,
+        nargs="+",
+        metavar="D",
+        help="OpenCV distortion coefficients k1 k2 p1 p2 [k3 ...] (4, 5, 8, 12 or "
+        "14 values) with --fx --fy --cx --cy",
+    )
     p.add_argument(
         "--far-lines",
         metavar="LINES.json",
@@ -328,12 +330,9 @@ def add_parser(sub):
     p.add_argument(
         "--overlay",
         metavar="PATH",
-        help="overlay image to write (default: CALIB's stem + '_overlay.png', "
-        "next to CALIB)",
+        help="overlay image to write (default: CALIB's stem + '_overlay.png', next to CALIB)",
     )
-    p.add_argument(
-        "--overwrite", action="store_true", help="replace existing output files"
-    )
+    p.add_argument("--overwrite", action="store_true", help="replace existing output files")
     pattern.add_arguments(p)
     p.set_defaults(func=cmd_calibrate)
     return p

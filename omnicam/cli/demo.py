@@ -45,9 +45,7 @@ def cmd_demo(args):
     try:
         os.makedirs(out, exist_ok=True)
     except OSError as e:
-        raise CliError(
-            f"cannot create output folder {out}: {e.strerror or e}"
-        ) from None
+        raise CliError(f"cannot create output folder {out}: {e.strerror or e}") from None
     if not os.access(out, os.W_OK | os.X_OK):
         raise CliError(f"output folder {out} is not writable")
 
@@ -76,9 +74,7 @@ def cmd_demo(args):
         f"{len(lines)} orange far straight lines ({path('far_lines.json')})"
     )
 
-    print(
-        "3. calibration from that image (rim ellipse, Chen's method, far-line selection):"
-    )
+    print("3. calibration from that image (rim ellipse, Chen's method, far-line selection):")
     try:
         camera, report = MisalignedHyperbolicCamera.calibrate(
             truth.K, m, image=image, far_lines=lines, image_size=truth.image_size
@@ -90,9 +86,7 @@ def cmd_demo(args):
     _save_camera(camera, path("calibration.yaml"), overwrite=True)
 
     e_tilt, e_az, e_offset = posture(camera)
-    axis_error = math.degrees(
-        math.acos(float(np.clip(camera.R[:, 2] @ truth.R[:, 2], -1, 1)))
-    )
+    axis_error = math.degrees(math.acos(float(np.clip(camera.R[:, 2] @ truth.R[:, 2], -1, 1))))
     baseline = MisalignedHyperbolicCamera.aligned(
         m, truth.K[0, 0], truth.K[0, 2], truth.K[1, 2], truth.image_size
     )

@@ -26,8 +26,10 @@ def cmd_export(args):
         raise CliError(f"{args.to} files need the image size; {args.calibration} has none")
     ext = os.path.splitext(args.output)[1].lower()
     if args.to == "omnidir" and ext not in (".yaml", ".yml", ".xml", ".json"):
-        raise CliError(f"output {args.output}: an omnidir file is a cv2.FileStorage file "
-                       f"(.yaml, .yml, .xml or .json)")
+        raise CliError(
+            f"output {args.output}: an omnidir file is a cv2.FileStorage file "
+            f"(.yaml, .yml, .xml or .json)"
+        )
     try:
         fit = export(camera, args.to, args.output, depth=args.depth, overwrite=args.overwrite)
     except OutputError as e:
@@ -35,13 +37,17 @@ def cmd_export(args):
     except ValueError as e:
         raise CliError(f"cannot export {args.calibration}: {e}") from None
     if hasattr(fit, "world2cam_rms_px"):
-        print(f"wrote {args.output} (OCamCalib): world2cam RMS {fit.world2cam_rms_px:.3g} px, "
-              f"max {fit.world2cam_max_px:.3g} px; cam2world RMS {fit.cam2world_rms_px:.3g} px, "
-              f"max {fit.cam2world_max_px:.3g} px over {fit.n_points} pixels")
+        print(
+            f"wrote {args.output} (OCamCalib): world2cam RMS {fit.world2cam_rms_px:.3g} px, "
+            f"max {fit.world2cam_max_px:.3g} px; cam2world RMS {fit.cam2world_rms_px:.3g} px, "
+            f"max {fit.cam2world_max_px:.3g} px over {fit.n_points} pixels"
+        )
     else:
         where = "at infinity" if fit.depth is None else f"at {fit.depth:g} mm"
-        print(f"wrote {args.output} ({args.to}, unified model, scene {where}): xi = {fit.xi:.6f}, "
-              f"RMS {fit.rms_px:.3g} px, max {fit.max_px:.3g} px over {fit.n_points} pixels")
+        print(
+            f"wrote {args.output} ({args.to}, unified model, scene {where}): xi = {fit.xi:.6f}, "
+            f"RMS {fit.rms_px:.3g} px, max {fit.max_px:.3g} px over {fit.n_points} pixels"
+        )
     return EXIT_OK
 
 
@@ -54,13 +60,21 @@ def add_parser(sub):
         "for another tool, with its RMS and maximum error in pixels.",
     )
     p.add_argument("calibration", metavar="CALIB", help="calibration file")
-    p.add_argument("--to", required=True, choices=("omnidir", "kalibr", "camodocal", "ocamcalib"),
-                   help="target: omnidir (cv2.omnidir FileStorage), kalibr (camchain yaml), "
-                   "camodocal (MEI yaml), ocamcalib (calib_results.txt)")
+    p.add_argument(
+        "--to",
+        required=True,
+        choices=("omnidir", "kalibr", "camodocal", "ocamcalib"),
+        help="target: omnidir (cv2.omnidir FileStorage), kalibr (camchain yaml), "
+        "camodocal (MEI yaml), ocamcalib (calib_results.txt)",
+    )
     p.add_argument("-o", "--output", required=True, metavar="FILE", help="file to write")
-    p.add_argument("--depth", type=_positive, metavar="MM",
-                   help="fit for a scene at this distance from the best-fit viewpoint "
-                   "(default: at infinity; not for ocamcalib)")
+    p.add_argument(
+        "--depth",
+        type=_positive,
+        metavar="MM",
+        help="fit for a scene at this distance from the best-fit viewpoint "
+        "(default: at infinity; not for ocamcalib)",
+    )
     p.add_argument("--overwrite", action="store_true", help="replace FILE if it exists")
     p.set_defaults(func=cmd_export)
     return p

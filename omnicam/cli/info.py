@@ -85,9 +85,11 @@ def cmd_info(args):
 
     try:  # the central model that tools without a non-central one can take (omnicam export)
         fit = fit_omnidir(camera)
-        print(f"{'omnidir':<13}  nearest unified (Mei) model, xi = {fit.xi:.6f}: "
-              f"{fit.rms_px:.4f} px RMS, {fit.max_px:.4f} px max from this rig over the "
-              f"annulus (omnicam export --to omnidir|kalibr|camodocal)")
+        print(
+            f"{'omnidir':<13}  nearest unified (Mei) model, xi = {fit.xi:.6f}: "
+            f"{fit.rms_px:.4f} px RMS, {fit.max_px:.4f} px max from this rig over the "
+            f"annulus (omnicam export --to omnidir|kalibr|camodocal)"
+        )
     except (ValueError, np.linalg.LinAlgError) as e:
         print(f"{'omnidir':<13}  no central approximation: {e}")
     return EXIT_OK

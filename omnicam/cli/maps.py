@@ -41,16 +41,24 @@ def _scaled_view(spec, camera, k):
     if spec.kind == "equirect":
         return equirect_view(size, depth=view.depth)
     if spec.kind == "perspective":
-        return type(view)(size, K_new=scale_K(view.K_new, view.size, size), R=view.R,
-                          depth=view.depth, viewpoint=view.viewpoint)
+        return type(view)(
+            size,
+            K_new=scale_K(view.K_new, view.size, size),
+            R=view.R,
+            depth=view.depth,
+            viewpoint=view.viewpoint,
+        )
     if view.elevation_range is None:
         lo, hi = visible_elevation_range(camera)
         if view.projection == "cylindrical":
             lo, hi = max(lo, CYLINDRICAL_MIN_ELEVATION), min(hi, 89.0)
     else:
         lo, hi = view.elevation_range
-    to_p, from_p = ((lambda d: math.tan(math.radians(d)), lambda p: math.degrees(math.atan(p)))
-                    if view.projection == "cylindrical" else (math.radians, math.degrees))
+    to_p, from_p = (
+        (lambda d: math.tan(math.radians(d)), lambda p: math.degrees(math.atan(p)))
+        if view.projection == "cylindrical"
+        else (math.radians, math.degrees)
+    )
     step = (to_p(lo) - to_p(hi)) / (h - 1)
     shift = 0.5 - 0.5 / k
     limit = 89.999 if view.projection == "cylindrical" else 90.0
@@ -61,8 +69,14 @@ def _scaled_view(spec, camera, k):
     c, s_ = math.cos(delta), math.sin(delta)
     Rz = np.array([[c, -s_, 0.0], [s_, c, 0.0], [0.0, 0.0, 1.0]])
     R_old = np.eye(3) if view.R is None else view.R
-    return PanoramaView(size, elevation_range=(lo2, hi2), projection=view.projection,
-                        R=Rz.T @ R_old, depth=view.depth, viewpoint=view.viewpoint)
+    return PanoramaView(
+        size,
+        elevation_range=(lo2, hi2),
+        projection=view.projection,
+        R=Rz.T @ R_old,
+        depth=view.depth,
+        viewpoint=view.viewpoint,
+    )
 
 
 def cmd_maps(args):
@@ -75,8 +89,7 @@ def cmd_maps(args):
     )
 
     if not (args.ffmpeg or args.npy or args.filestorage):
-        raise CliError("choose what to write: --ffmpeg, --npy and/or --filestorage EXT",
-                       EXIT_USAGE)
+        raise CliError("choose what to write: --ffmpeg, --npy and/or --filestorage EXT", EXIT_USAGE)
     specs = view_specs(args)
     camera = _load_camera(args.calibration)
     if args.frame_size is not None:
@@ -104,8 +117,10 @@ def cmd_maps(args):
             if args.ffmpeg:
                 px, py = write_ffmpeg_maps(prefix, mx, my, source, overwrite=args.overwrite)
                 if not args.quiet:
-                    print(f"wrote {px} and {py} ({mx.shape[1]}x{mx.shape[0]}, for "
-                          f"{source[0]}x{source[1]} frames)")
+                    print(
+                        f"wrote {px} and {py} ({mx.shape[1]}x{mx.shape[0]}, for "
+                        f"{source[0]}x{source[1]} frames)"
+                    )
                 print(ffmpeg_command(px, py, spec.size, k))
                 if k > 1 and (args.npy or args.filestorage):
                     mx, my = float_maps(*spec.view.maps(camera, cv2.CV_32FC1))
@@ -114,8 +129,9 @@ def cmd_maps(args):
                 if not args.quiet:
                     print(f"wrote {px} and {py}")
             if args.filestorage:
-                path = write_filestorage_maps(f"{prefix}.{args.filestorage}", mx, my,
-                                              overwrite=args.overwrite)
+                path = write_filestorage_maps(
+                    f"{prefix}.{args.filestorage}", mx, my, overwrite=args.overwrite
+                )
                 if not args.quiet:
                     print(f"wrote {path}")
         except OutputError as e:
@@ -135,15 +151,28 @@ def add_parser(sub):
     )
     p.add_argument("calibration", metavar="CALIB", help="calibration file")
     add_view_arguments(p, output_help="prefix of the files written for the view")
-    p.add_argument("--ffmpeg", action="store_true",
-                   help="16-bit PGM maps for ffmpeg's remap filter")
+    p.add_argument(
+        "--ffmpeg", action="store_true", help="16-bit PGM maps for ffmpeg's remap filter"
+    )
     p.add_argument("--npy", action="store_true", help="float32 maps as PREFIX_x/_y.npy")
-    p.add_argument("--filestorage", choices=("yaml", "yml", "xml", "json"), metavar="EXT",
-                   help="float32 maps map_x, map_y in PREFIX.EXT (yaml, yml, xml, json)")
-    p.add_argument("--supersample", type=_count, metavar="K",
-                   help="--ffmpeg: maps at K times the size; ffmpeg scales the result down")
-    p.add_argument("--frame-size", type=_size, metavar="WxH",
-                   help="size of the frames to unwarp (default: the calibration's)")
+    p.add_argument(
+        "--filestorage",
+        choices=("yaml", "yml", "xml", "json"),
+        metavar="EXT",
+        help="float32 maps map_x, map_y in PREFIX.EXT (yaml, yml, xml, json)",
+    )
+    p.add_argument(
+        "--supersample",
+        type=_count,
+        metavar="K",
+        help="--ffmpeg: maps at K times the size; ffmpeg scales the result down",
+    )
+    p.add_argument(
+        "--frame-size",
+        type=_size,
+        metavar="WxH",
+        help="size of the frames to unwarp (default: the calibration's)",
+    )
     p.add_argument("--overwrite", action="store_true", help="replace files that exist")
     p.add_argument("-q", "--quiet", action="store_true", help="print only the ffmpeg command")
     p.set_defaults(func=cmd_maps, ordered=None)

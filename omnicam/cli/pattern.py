@@ -86,9 +86,7 @@ def cmd_calibrate_pattern(args):
         raise CliError("calibrate: --far-lines is not used with --chessboard", 2)
     calib = args.output
     if os.path.splitext(calib)[1].lower() not in SUFFIXES:
-        raise CliError(
-            f"calibration file {calib}: extension must be one of {', '.join(SUFFIXES)}"
-        )
+        raise CliError(f"calibration file {calib}: extension must be one of {', '.join(SUFFIXES)}")
     _check_output(calib, args.overwrite, "calibration file")
     stem = os.path.splitext(os.path.basename(calib))[0]
     folder = args.overlay or os.path.join(os.path.dirname(calib), f"{stem}_views")

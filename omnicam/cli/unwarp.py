@@ -42,11 +42,11 @@ from ._common import (
     _count,
     _finite,
     _fourcc,
+    _is_image_input,
     _load_camera,
     _one_line,
     _positive,
     _publish,
-    _is_image_input,
     _read_image,
     _remove_quietly,
     _size,
@@ -107,16 +107,18 @@ def view_specs(args):
         else:
             before.append((dest, value, flag))
     if not specs:
-        raise CliError("give a view: --panorama WxH, --perspective WxH --fov DEG or "
-                       "--equirect WxH", EXIT_USAGE)
+        raise CliError(
+            "give a view: --panorama WxH, --perspective WxH --fov DEG or --equirect WxH", EXIT_USAGE
+        )
     for dest, value, flag in before:
         _attach(specs[0], dest, value, flag)
     for i, spec in enumerate(specs):
         spec.output = spec.options.pop("output", None)
         if spec.output is None:
             which = f"view {i + 1} ({spec.label()})" if len(specs) > 1 else spec.label()
-            raise CliError(f"{which} has no -o OUTPUT; each view takes its own -o after it",
-                           EXIT_USAGE)
+            raise CliError(
+                f"{which} has no -o OUTPUT; each view takes its own -o after it", EXIT_USAGE
+            )
         spec.view = view_from_spec(spec)
     outputs = [os.path.abspath(s.output) for s in specs]
     if len(set(outputs)) != len(outputs):
@@ -140,29 +142,44 @@ def view_from_spec(spec):
     from ..views import PanoramaView, PerspectiveView
 
     o = spec.options
-    allowed = {"panorama": ("elevation", "projection", "depth"),
-               "perspective": ("fov", "yaw", "pitch", "roll", "depth"),
-               "equirect": ("depth",)}[spec.kind]
+    allowed = {
+        "panorama": ("elevation", "projection", "depth"),
+        "perspective": ("fov", "yaw", "pitch", "roll", "depth"),
+        "equirect": ("depth",),
+    }[spec.kind]
     refused = [f"--{k}" for k in o if k not in allowed]
     if refused:
-        kinds = {"elevation": "--panorama", "projection": "--panorama", "fov": "--perspective",
-                 "yaw": "--perspective", "pitch": "--perspective", "roll": "--perspective"}
+        kinds = {
+            "elevation": "--panorama",
+            "projection": "--panorama",
+            "fov": "--perspective",
+            "yaw": "--perspective",
+            "pitch": "--perspective",
+            "roll": "--perspective",
+        }
         owner = kinds.get(refused[0][2:], "--panorama")
         verb = "only apply" if len(refused) > 1 else "only applies"
         raise CliError(f"{', '.join(refused)} {verb} to {owner}, not to {spec.flag}", EXIT_USAGE)
     try:
         if spec.kind == "panorama":
-            return PanoramaView(spec.size, elevation_range=o.get("elevation"),
-                                projection=o.get("projection") or "cylindrical",
-                                depth=o.get("depth"))
+            return PanoramaView(
+                spec.size,
+                elevation_range=o.get("elevation"),
+                projection=o.get("projection") or "cylindrical",
+                depth=o.get("depth"),
+            )
         if spec.kind == "equirect":
             return equirect_view(spec.size, depth=o.get("depth"))
         if o.get("fov") is None:
-            raise CliError("--perspective needs --fov DEG (horizontal field of view)",
-                           EXIT_USAGE)
-        return PerspectiveView(spec.size, fov=o["fov"], yaw=o.get("yaw") or 0.0,
-                               pitch=o.get("pitch") or 0.0, roll=o.get("roll") or 0.0,
-                               depth=o.get("depth"))
+            raise CliError("--perspective needs --fov DEG (horizontal field of view)", EXIT_USAGE)
+        return PerspectiveView(
+            spec.size,
+            fov=o["fov"],
+            yaw=o.get("yaw") or 0.0,
+            pitch=o.get("pitch") or 0.0,
+            roll=o.get("roll") or 0.0,
+            depth=o.get("depth"),
+        )
     except ValueError as e:
         raise CliError(f"{spec.flag}: {_one_line(e)}", EXIT_USAGE) from None
 
@@ -179,11 +196,16 @@ def _unwarper(camera, specs, frame_size):
     from ..stream import Unwarper
 
     size = camera.image_size
-    if size is not None and size != tuple(frame_size) and abs(
-            frame_size[0] * size[1] - frame_size[1] * size[0]) > 0.01 * size[0] * size[1]:
-        _warn(f"frames are {frame_size[0]}x{frame_size[1]} but the calibration is for "
-              f"{size[0]}x{size[1]}, another aspect ratio: assuming the same sensor "
-              f"rescaled (not a crop)")
+    if (
+        size is not None
+        and size != tuple(frame_size)
+        and abs(frame_size[0] * size[1] - frame_size[1] * size[0]) > 0.01 * size[0] * size[1]
+    ):
+        _warn(
+            f"frames are {frame_size[0]}x{frame_size[1]} but the calibration is for "
+            f"{size[0]}x{size[1]}, another aspect ratio: assuming the same sensor "
+            f"rescaled (not a crop)"
+        )
     views = {str(i): s.view for i, s in enumerate(specs)}
     try:
         with warnings.catch_warnings(record=True) as caught:
@@ -210,14 +232,17 @@ def _output_kind(path, video_input):
     ext = os.path.splitext(path)[1].lower()
     if _is_sequence(path):
         if not cv2.haveImageWriter("x" + ext):
-            raise CliError(f"output {path}: an image sequence needs an image extension "
-                           f"(.png, .jpg, .tif, ...)")
+            raise CliError(
+                f"output {path}: an image sequence needs an image extension (.png, .jpg, .tif, ...)"
+            )
         return "sequence"
     if video_input:
         if ext in VIDEO_FOURCC:
             return "video"
-        raise CliError(f"output {path}: the input is a video; use a video extension "
-                       f"({', '.join(VIDEO_FOURCC)}) or an image sequence (out_%04d.png)")
+        raise CliError(
+            f"output {path}: the input is a video; use a video extension "
+            f"({', '.join(VIDEO_FOURCC)}) or an image sequence (out_%04d.png)"
+        )
     if not cv2.haveImageWriter(path):
         hint = " (the input is an image)" if ext in VIDEO_FOURCC else ""
         raise CliError(f"output {path}: no image writer for extension {ext or '(none)'!r}{hint}")
@@ -290,8 +315,7 @@ def _unwarp_image(args, specs, camera):
         out = views[str(i)]
         path = _sequence_name(spec.output, 0) if spec.kind_out == "sequence" else spec.output
         _write_view_image(spec, path, out, args.overwrite)
-        if spec.kind == "equirect" and os.path.splitext(path)[1].lower() not in (".jpg",
-                                                                                ".jpeg"):
+        if spec.kind == "equirect" and os.path.splitext(path)[1].lower() not in (".jpg", ".jpeg"):
             _warn(f"{path}: Photo Sphere metadata is written into .jpg outputs only")
         if not args.quiet:
             print(f"wrote {path} ({out.shape[1]}x{out.shape[0]})")
@@ -403,9 +427,11 @@ class _VideoOut:
         self.spec, self.size = spec, size
         output = spec.output
         if size[0] % 2 or size[1] % 2:
-            raise CliError(f"video {output}: the view is {size[0]}x{size[1]}; video needs an "
-                           f"even width and height (cv2.VideoWriter drops an odd last row or "
-                           f"column)")
+            raise CliError(
+                f"video {output}: the view is {size[0]}x{size[1]}; video needs an "
+                f"even width and height (cv2.VideoWriter drops an odd last row or "
+                f"column)"
+            )
         self.tmp = _temp_beside(output)
         try:
             self.writer = cv2.VideoWriter(self.tmp, cv2.VideoWriter_fourcc(*fourcc), fps, size)
@@ -414,8 +440,10 @@ class _VideoOut:
             ok = False
         if not ok:
             _remove_quietly(self.tmp)
-            raise CliError(f"cannot write video {output} with codec {fourcc}; try --fourcc or "
-                           f"another extension")
+            raise CliError(
+                f"cannot write video {output} with codec {fourcc}; try --fourcc or "
+                f"another extension"
+            )
         self.written = 0
 
     def write(self, image):
@@ -516,8 +544,9 @@ def _stream(unwarper, cap, specs, outs, declared, args, flag):
                 if spec.kind_out == "video":
                     video[spec.output].write(image)
                 else:
-                    _write_view_image(spec, _sequence_name(spec.output, written), image,
-                                      args.overwrite)
+                    _write_view_image(
+                        spec, _sequence_name(spec.output, written), image, args.overwrite
+                    )
                 if args.preview and written % args.preview == 0:
                     _write_image(_preview_name(spec.output, written), image, True)
             written += 1
@@ -525,9 +554,11 @@ def _stream(unwarper, cap, specs, outs, declared, args, flag):
             if outs and written % 16 == 0:
                 for o in outs:
                     if _free_bytes(o.tmp) < MIN_FREE_BYTES:
-                        raise CliError(f"cannot write video {o.spec.output}: no space left on "
-                                       f"the device after {written} frames; the previous file "
-                                       f"is unchanged")
+                        raise CliError(
+                            f"cannot write video {o.spec.output}: no space left on "
+                            f"the device after {written} frames; the previous file "
+                            f"is unchanged"
+                        )
         if flag["stop"]:
             how = "interrupted"
     except KeyboardInterrupt:
@@ -538,15 +569,17 @@ def _stream(unwarper, cap, specs, outs, declared, args, flag):
         progress.close()
     if written == 0 and how != "interrupted":
         raise CliError(f"cannot read a frame from {args.input}")
-    if how == "end" and written < declared and not (args.max_frames
-                                                    and written >= args.max_frames):
+    if how == "end" and written < declared and not (args.max_frames and written >= args.max_frames):
         how = "truncated"
     return written, how
 
 
 def _preview_name(output, index):
-    stem = re.split(r"%0?\d*d", output, maxsplit=1)[0] if _is_sequence(output) else \
-        os.path.splitext(output)[0]
+    stem = (
+        re.split(r"%0?\d*d", output, maxsplit=1)[0]
+        if _is_sequence(output)
+        else os.path.splitext(output)[0]
+    )
     return f"{stem.rstrip('_.-') or 'view'}.preview_{index:06d}.png"
 
 
@@ -557,9 +590,11 @@ def _finish(args, specs, outs, written, how, declared):
         for o in outs:
             got = count_frames(o.tmp, o.written + 1)
             if how != "interrupted" and got != o.written:
-                raise CliError(f"cannot write video {o.spec.output}: only {got} of {o.written} "
-                               f"frames can be read back (is the disk full?); the previous "
-                               f"file is unchanged")
+                raise CliError(
+                    f"cannot write video {o.spec.output}: only {got} of {o.written} "
+                    f"frames can be read back (is the disk full?); the previous "
+                    f"file is unchanged"
+                )
             o.readable = got
             if o.spec.kind == "equirect" and got:
                 _add_spherical_metadata(o)
@@ -577,17 +612,23 @@ def _finish(args, specs, outs, written, how, declared):
             if os.path.lexists(output):
                 partial = _partial_name(output)
                 _publish(o.tmp, partial, False)
-                _warn(f"interrupted: kept the {o.readable} frames written so far in {partial}; "
-                      f"the earlier {output} is unchanged")
+                _warn(
+                    f"interrupted: kept the {o.readable} frames written so far in {partial}; "
+                    f"the earlier {output} is unchanged"
+                )
             else:
                 _publish(o.tmp, output, False)
-                _warn(f"interrupted: kept the {o.readable} frames written so far in {output} "
-                      f"(there was no earlier output)")
+                _warn(
+                    f"interrupted: kept the {o.readable} frames written so far in {output} "
+                    f"(there was no earlier output)"
+                )
             continue
         _publish(o.tmp, output, args.overwrite)
         if how == "truncated":
-            _warn(f"input ended after {written} of its {declared} frames (truncated, or a "
-                  f"frame it cannot decode); kept them in {output}")
+            _warn(
+                f"input ended after {written} of its {declared} frames (truncated, or a "
+                f"frame it cannot decode); kept them in {output}"
+            )
         elif not args.quiet:
             print(f"wrote {output} ({written} frames, {o.size[0]}x{o.size[1]})")
     for spec in specs:
@@ -619,11 +660,14 @@ def _add_spherical_metadata(o):
             f.flush()
             os.fsync(f.fileno())
     except OSError as e:
-        raise CliError(f"cannot write video {o.spec.output}: {e.strerror or e}; the previous "
-                       f"file is unchanged") from None
+        raise CliError(
+            f"cannot write video {o.spec.output}: {e.strerror or e}; the previous file is unchanged"
+        ) from None
     if count_frames(o.tmp, o.readable + 1) != o.readable:
-        raise CliError(f"cannot write video {o.spec.output}: the file with 360 metadata does "
-                       f"not read back; the previous file is unchanged")
+        raise CliError(
+            f"cannot write video {o.spec.output}: the file with 360 metadata does "
+            f"not read back; the previous file is unchanged"
+        )
 
 
 def add_parser(sub):
@@ -642,17 +686,33 @@ def add_parser(sub):
         help="image or video file, image sequence (img_%%04d.png), camera index "
         "(0, 1, ...) or stream URL",
     )
-    p.add_argument("-c", "--calibration", required=True, metavar="CALIB",
-                   help="calibration file written by 'omnicam calibrate'")
+    p.add_argument(
+        "-c",
+        "--calibration",
+        required=True,
+        metavar="CALIB",
+        help="calibration file written by 'omnicam calibrate'",
+    )
     add_view_arguments(p)
     p.add_argument("--overwrite", action="store_true", help="replace outputs that exist")
-    p.add_argument("--max-frames", type=_count, metavar="N",
-                   help="video: stop after N frames (useful with a camera)")
-    p.add_argument("--fourcc", type=_fourcc, metavar="CODE",
-                   help="video codec FourCC (default MJPG for .avi/.mkv, mp4v for .mp4/.mov)")
-    p.add_argument("--preview", type=_count, metavar="N",
-                   help="video: also write every N-th frame of each view as "
-                   "OUTPUT.preview_FRAME.png")
+    p.add_argument(
+        "--max-frames",
+        type=_count,
+        metavar="N",
+        help="video: stop after N frames (useful with a camera)",
+    )
+    p.add_argument(
+        "--fourcc",
+        type=_fourcc,
+        metavar="CODE",
+        help="video codec FourCC (default MJPG for .avi/.mkv, mp4v for .mp4/.mov)",
+    )
+    p.add_argument(
+        "--preview",
+        type=_count,
+        metavar="N",
+        help="video: also write every N-th frame of each view as OUTPUT.preview_FRAME.png",
+    )
     p.add_argument("-q", "--quiet", action="store_true", help="no progress bar")
     p.set_defaults(func=cmd_unwarp, ordered=None)
     return p
@@ -661,36 +721,99 @@ def add_parser(sub):
 def add_view_arguments(p, output_help=None):
     """The view options (``--panorama``, ``--perspective``, ``--equirect`` and those that
     belong to a view, ``-o`` included), recorded in order (:func:`view_specs`)."""
-    p.add_argument("--panorama", type=_size, metavar="WxH", action=_InOrder,
-                   help="a panorama of this size (starts a view)")
-    p.add_argument("--perspective", type=_size, metavar="WxH", action=_InOrder,
-                   help="a virtual perspective view of this size, needs --fov (starts a view)")
-    p.add_argument("--equirect", type=_size, metavar="WxH", action=_InOrder,
-                   help="a 2:1 equirectangular 360 image of the full sphere, forward at the "
-                   "centre; .jpg outputs get Photo Sphere XMP, .mp4/.mov the spherical video "
-                   "metadata (starts a view)")
-    p.add_argument("--elevation", nargs=2, type=_finite, metavar=("LO", "HI"), action=_InOrder,
-                   help="panorama elevation range in degrees (default: what the mirror sees, "
-                   "from -60 deg, which leaves out the camera's own reflection)")
-    p.add_argument("--projection", choices=("cylindrical", "equirectangular"), action=_InOrder,
-                   help="panorama rows linear in tan(elevation) or in elevation "
-                   "(default cylindrical)")
-    p.add_argument("--fov", type=_finite, metavar="DEG", action=_InOrder,
-                   help="horizontal field of view of the perspective view, degrees")
-    p.add_argument("--yaw", type=_finite, metavar="Y", action=_InOrder,
-                   help="perspective view: turn right by Y degrees (default 0)")
-    p.add_argument("--pitch", type=_finite, metavar="P", action=_InOrder,
-                   help="perspective view: look up by P degrees (default 0)")
-    p.add_argument("--roll", type=_finite, metavar="R", action=_InOrder,
-                   help="perspective view: turn the image clockwise by R degrees (default 0)")
-    p.add_argument("--depth", type=_positive, metavar="MM", action=_InOrder,
-                   help="map the scene at this distance from the best-fit viewpoint "
-                   "(default: at infinity)")
-    p.add_argument("-o", "--output", metavar="OUTPUT", action=_InOrder,
-                   help=output_help or "the view's output: an image, a video (.avi, .mp4, "
-                   ".m4v, .mov, .mkv) for a video input, or an image sequence (out_%%04d.png)")
+    p.add_argument(
+        "--panorama",
+        type=_size,
+        metavar="WxH",
+        action=_InOrder,
+        help="a panorama of this size (starts a view)",
+    )
+    p.add_argument(
+        "--perspective",
+        type=_size,
+        metavar="WxH",
+        action=_InOrder,
+        help="a virtual perspective view of this size, needs --fov (starts a view)",
+    )
+    p.add_argument(
+        "--equirect",
+        type=_size,
+        metavar="WxH",
+        action=_InOrder,
+        help="a 2:1 equirectangular 360 image of the full sphere, forward at the "
+        "centre; .jpg outputs get Photo Sphere XMP, .mp4/.mov the spherical video "
+        "metadata (starts a view)",
+    )
+    p.add_argument(
+        "--elevation",
+        nargs=2,
+        type=_finite,
+        metavar=("LO", "HI"),
+        action=_InOrder,
+        help="panorama elevation range in degrees (default: what the mirror sees, "
+        "from -60 deg, which leaves out the camera's own reflection)",
+    )
+    p.add_argument(
+        "--projection",
+        choices=("cylindrical", "equirectangular"),
+        action=_InOrder,
+        help="panorama rows linear in tan(elevation) or in elevation (default cylindrical)",
+    )
+    p.add_argument(
+        "--fov",
+        type=_finite,
+        metavar="DEG",
+        action=_InOrder,
+        help="horizontal field of view of the perspective view, degrees",
+    )
+    p.add_argument(
+        "--yaw",
+        type=_finite,
+        metavar="Y",
+        action=_InOrder,
+        help="perspective view: turn right by Y degrees (default 0)",
+    )
+    p.add_argument(
+        "--pitch",
+        type=_finite,
+        metavar="P",
+        action=_InOrder,
+        help="perspective view: look up by P degrees (default 0)",
+    )
+    p.add_argument(
+        "--roll",
+        type=_finite,
+        metavar="R",
+        action=_InOrder,
+        help="perspective view: turn the image clockwise by R degrees (default 0)",
+    )
+    p.add_argument(
+        "--depth",
+        type=_positive,
+        metavar="MM",
+        action=_InOrder,
+        help="map the scene at this distance from the best-fit viewpoint (default: at infinity)",
+    )
+    p.add_argument(
+        "-o",
+        "--output",
+        metavar="OUTPUT",
+        action=_InOrder,
+        help=output_help
+        or "the view's output: an image, a video (.avi, .mp4, "
+        ".m4v, .mov, .mkv) for a video input, or an image sequence (out_%%04d.png)",
+    )
 
 
 # re-exported for callers of the earlier one-view module
-__all__ = ["EXIT_FAILURE", "VIDEO_FOURCC", "Progress", "add_parser", "add_view_arguments",
-           "cmd_unwarp", "count_frames", "view_from_args", "view_specs"]
+__all__ = [
+    "EXIT_FAILURE",
+    "VIDEO_FOURCC",
+    "Progress",
+    "add_parser",
+    "add_view_arguments",
+    "cmd_unwarp",
+    "count_frames",
+    "view_from_args",
+    "view_specs",
+]

@@ -27,6 +27,7 @@ samples sit at offsets ``(k + 1/2) / s - 1/2``, their colours are averaged in fl
 values taken as linear, no gamma) and rounded once, so an edge's pixel value is its area
 coverage and edges are subpixel-true.
 """
+
 from __future__ import annotations
 
 import dataclasses
@@ -38,16 +39,28 @@ import numpy as np
 from ..camera import MisalignedHyperbolicCamera
 from ..mirror import HyperbolicMirror
 
-__all__ = ["default_mirror", "aligned_rig", "misaligned_rig", "random_misaligned_rig",
-           "equirect_directions", "equirect_coords", "make_environment", "render_environment",
-           "Room", "render_room", "HOUSING_COLOR", "line_pixels", "far_line_pixels"]
+__all__ = [
+    "default_mirror",
+    "aligned_rig",
+    "misaligned_rig",
+    "random_misaligned_rig",
+    "equirect_directions",
+    "equirect_coords",
+    "make_environment",
+    "render_environment",
+    "Room",
+    "render_room",
+    "HOUSING_COLOR",
+    "line_pixels",
+    "far_line_pixels",
+]
 
 #: BGR colour of the housing (mirror holder) outside the rim.
 HOUSING_COLOR = (18, 18, 18)
-_BODY_COLOR = (58, 56, 54)   # camera body seen in the mirror
-_LENS_COLOR = (14, 6, 4)     # its lens (dark bluish glass), facing the mirror
-_LENS_COS = 0.6              # lens = the part of the ball within ~53 deg of the optical axis
-_CHUNK_RAYS = 1 << 18        # rays traced per chunk (memory stays at a few tens of MB)
+_BODY_COLOR = (58, 56, 54)  # camera body seen in the mirror
+_LENS_COLOR = (14, 6, 4)  # its lens (dark bluish glass), facing the mirror
+_LENS_COS = 0.6  # lens = the part of the ball within ~53 deg of the optical axis
+_CHUNK_RAYS = 1 << 18  # rays traced per chunk (memory stays at a few tens of MB)
 
 
 def default_mirror():
@@ -73,8 +86,15 @@ def aligned_rig(image_size=(500, 500), mirror=None, fill=0.85):
     return MisalignedHyperbolicCamera.aligned(mirror, K[0, 0], K[0, 2], K[1, 2], image_size)
 
 
-def misaligned_rig(tilt_deg=3.0, tilt_azimuth_deg=30.0, offset_mm=(1.5, -1.0, 1.0),
-                   image_size=(500, 500), mirror=None, fill=0.85, D=None):
+def misaligned_rig(
+    tilt_deg=3.0,
+    tilt_azimuth_deg=30.0,
+    offset_mm=(1.5, -1.0, 1.0),
+    image_size=(500, 500),
+    mirror=None,
+    fill=0.85,
+    D=None,
+):
     """A misaligned rig: the mirror axis tilted by ``tilt_deg`` towards ``tilt_azimuth_deg``
     (in the camera's x-y plane) and its origin moved by ``offset_mm`` (camera frame) from the
     aligned position ``(0, 0, c)``.
@@ -87,8 +107,9 @@ def misaligned_rig(tilt_deg=3.0, tilt_azimuth_deg=30.0, offset_mm=(1.5, -1.0, 1.
     return MisalignedHyperbolicCamera(K, mirror, rvec, tvec, D=D, image_size=image_size)
 
 
-def random_misaligned_rig(rng, max_tilt_deg=5.0, max_offset_mm=5.0, image_size=(500, 500),
-                          mirror=None, fill=0.85):
+def random_misaligned_rig(
+    rng, max_tilt_deg=5.0, max_offset_mm=5.0, image_size=(500, 500), mirror=None, fill=0.85
+):
     """A random rig with tilt up to ``max_tilt_deg`` and offset norm up to ``max_offset_mm``."""
     tilt = rng.uniform(0.0, max_tilt_deg)
     az = rng.uniform(0.0, 360.0)
@@ -126,8 +147,14 @@ def equirect_directions(size):
     az = -2.0 * np.pi * np.arange(w) / w
     el = 0.5 * np.pi - np.pi * np.arange(h) / (h - 1)
     ce = np.cos(el)[:, None]
-    return np.stack([ce * np.cos(az)[None, :], ce * np.sin(az)[None, :],
-                     np.broadcast_to(np.sin(el)[:, None], (h, w))], axis=-1)
+    return np.stack(
+        [
+            ce * np.cos(az)[None, :],
+            ce * np.sin(az)[None, :],
+            np.broadcast_to(np.sin(el)[:, None], (h, w)),
+        ],
+        axis=-1,
+    )
 
 
 def equirect_coords(directions, size):
@@ -157,7 +184,7 @@ def equirect_coords(directions, size):
     az = np.arctan2(d[..., 1], d[..., 0])
     el = np.arctan2(d[..., 2], horiz)
     x = np.mod(-az * (w / (2.0 * np.pi)), w)
-    x = np.where(x >= w, 0.0, x)          # mod can round up to w
+    x = np.where(x >= w, 0.0, x)  # mod can round up to w
     y = (0.5 * np.pi - el) * ((h - 1) / np.pi)
     return np.where(bad, np.nan, x), np.where(bad, np.nan, y)
 
@@ -169,7 +196,7 @@ def _sample_equirect(env, d):
     x0 = np.floor(x)
     fx = (x - x0).astype(np.float32)[:, None]
     x0 = x0.astype(np.intp) % w
-    x1 = (x0 + 1) % w                       # azimuth wraps around
+    x1 = (x0 + 1) % w  # azimuth wraps around
     y0 = np.minimum(np.floor(y), h - 2)
     fy = (y - y0).astype(np.float32)[:, None]
     y0 = y0.astype(np.intp)
@@ -182,9 +209,13 @@ def _sample_equirect(env, d):
 
 
 # -- the procedural environment ---------------------------------------------------------------
-def make_environment(size=(2048, 1024), pole_spacing_deg=30.0,
-                     line_elevations_deg=(10.0, 0.0, -15.0, -30.0, -50.0, -70.0),
-                     checker_deg=(15.0, 10.0), line_width_deg=0.6):
+def make_environment(
+    size=(2048, 1024),
+    pole_spacing_deg=30.0,
+    line_elevations_deg=(10.0, 0.0, -15.0, -30.0, -50.0, -70.0),
+    checker_deg=(15.0, 10.0),
+    line_width_deg=0.6,
+):
     """A procedural scene at infinity whose distortion is easy to see in a panorama.
 
     Sky gradient above the horizon; below it a checker of ``checker_deg = (azimuth, elevation)``
@@ -216,18 +247,20 @@ def make_environment(size=(2048, 1024), pole_spacing_deg=30.0,
     w, h = _check_size(size)
     if not (pole_spacing_deg > 0 and line_width_deg > 0 and min(checker_deg) > 0):
         raise ValueError("pole_spacing_deg, line_width_deg and checker_deg must be positive")
-    az = np.mod(-360.0 * np.arange(w) / w, 360.0)                 # azimuth of each column
-    el = 90.0 - 180.0 * np.arange(h) / (h - 1)                      # elevation of each row
+    az = np.mod(-360.0 * np.arange(w) / w, 360.0)  # azimuth of each column
+    el = 90.0 - 180.0 * np.arange(h) / (h - 1)  # elevation of each row
     img = np.empty((h, w, 3), np.float32)
     # sky: pale near the horizon, deeper blue at the zenith (BGR)
     t = np.clip(el / 90.0, 0.0, 1.0)[:, None, None]
     img[:] = (1 - t) * np.float32([250, 225, 200]) + t * np.float32([200, 120, 60])
     # ground: checker in azimuth x elevation cells, two earthy tones
     below = el < 0.0
-    parity = (np.floor(az[None, :] / checker_deg[0])
-              + np.floor(-el[below, None] / checker_deg[1])).astype(np.int64) & 1
-    img[below] = np.where(parity[..., None] == 1, np.float32([90, 140, 160]),
-                          np.float32([60, 95, 120]))
+    parity = (
+        np.floor(az[None, :] / checker_deg[0]) + np.floor(-el[below, None] / checker_deg[1])
+    ).astype(np.int64) & 1
+    img[below] = np.where(
+        parity[..., None] == 1, np.float32([90, 140, 160]), np.float32([60, 95, 120])
+    )
     half = 0.5 * line_width_deg
     # horizontal lines: straight rows of a panorama
     for e in line_elevations_deg:
@@ -293,24 +326,36 @@ class Room:
     cube_center: tuple = (1250.0, 250.0, -700.0)
     cube_size: float = 300.0
     cube_rvec: tuple = (0.0, 0.0, math.radians(45.0) + math.atan2(250.0, 1250.0))
-    wall_colors: tuple = (((150, 160, 120), (120, 130, 95)),    # -X: teal-grey
-                          ((120, 150, 170), (95, 120, 140)),    # +X: beige
-                          ((160, 140, 140), (130, 112, 112)),   # -Y: lilac-grey
-                          ((130, 165, 140), (105, 135, 112)),   # +Y: sage
-                          ((185, 195, 200), (160, 172, 178)),   # floor: light
-                          ((215, 215, 215), (195, 195, 195)))   # ceiling
-    cube_colors: tuple = ((60, 60, 200), (30, 20, 10), (40, 170, 60), (110, 40, 200),
-                          (140, 245, 255), (90, 90, 90))
+    wall_colors: tuple = (
+        ((150, 160, 120), (120, 130, 95)),  # -X: teal-grey
+        ((120, 150, 170), (95, 120, 140)),  # +X: beige
+        ((160, 140, 140), (130, 112, 112)),  # -Y: lilac-grey
+        ((130, 165, 140), (105, 135, 112)),  # +Y: sage
+        ((185, 195, 200), (160, 172, 178)),  # floor: light
+        ((215, 215, 215), (195, 195, 195)),
+    )  # ceiling
+    cube_colors: tuple = (
+        (60, 60, 200),
+        (30, 20, 10),
+        (40, 170, 60),
+        (110, 40, 200),
+        (140, 245, 255),
+        (90, 90, 90),
+    )
 
     def __post_init__(self):
         lo = np.asarray(self.box_min, np.float64)
         hi = np.asarray(self.box_max, np.float64)
-        if lo.shape != (3,) or hi.shape != (3,) or not (np.isfinite(lo).all()
-                                                        and np.isfinite(hi).all()):
+        if (
+            lo.shape != (3,)
+            or hi.shape != (3,)
+            or not (np.isfinite(lo).all() and np.isfinite(hi).all())
+        ):
             raise ValueError("box_min and box_max must be 3 finite numbers each")
         if not (lo < hi).all():
-            raise ValueError(f"box_min must be below box_max on every axis, got {self.box_min}, "
-                             f"{self.box_max}")
+            raise ValueError(
+                f"box_min must be below box_max on every axis, got {self.box_min}, {self.box_max}"
+            )
         if not (self.checker_size > 0 and self.cube_size > 0):
             raise ValueError("checker_size and cube_size must be positive")
         c = np.asarray(self.cube_center, np.float64)
@@ -318,11 +363,13 @@ class Room:
         if c.shape != (3,) or r.shape != (3,) or not np.isfinite(np.r_[c, r]).all():
             raise ValueError("cube_center and cube_rvec must be 3 finite numbers each")
         if _bgr(self.wall_colors, "wall_colors").shape != (6, 2, 3):
-            raise ValueError("wall_colors must be (6, 2, 3): two BGR colours for -X, +X, -Y, +Y, "
-                             "floor, ceiling")
+            raise ValueError(
+                "wall_colors must be (6, 2, 3): two BGR colours for -X, +X, -Y, +Y, floor, ceiling"
+            )
         if _bgr(self.cube_colors, "cube_colors").shape != (6, 3):
-            raise ValueError("cube_colors must be (6, 3): BGR colours of faces +X, -X, +Y, -Y, "
-                             "+Z, -Z")
+            raise ValueError(
+                "cube_colors must be (6, 3): BGR colours of faces +X, -X, +Y, -Y, +Z, -Z"
+            )
         corners = self.cube_corners()
         tol = 1e-6 * float(np.abs(hi - lo).max())
         if (corners < lo - tol).any() or (corners > hi + tol).any():
@@ -340,9 +387,18 @@ class Room:
         0 (x), 1 (y) and 2 (z) of ``i`` (bit set = ``+``).
         """
         i = np.arange(8)
-        local = 0.5 * self.cube_size * np.stack(
-            [np.where(i & 1, 1.0, -1.0), np.where(i & 2, 1.0, -1.0), np.where(i & 4, 1.0, -1.0)],
-            axis=1)
+        local = (
+            0.5
+            * self.cube_size
+            * np.stack(
+                [
+                    np.where(i & 1, 1.0, -1.0),
+                    np.where(i & 2, 1.0, -1.0),
+                    np.where(i & 4, 1.0, -1.0),
+                ],
+                axis=1,
+            )
+        )
         return local @ self.cube_R.T + np.asarray(self.cube_center, np.float64)
 
     def cube_faces(self):
@@ -351,8 +407,9 @@ class Room:
         Each face's corners go counter-clockwise seen from outside the cube (so its outward
         normal is ``(p1 - p0) x (p2 - p1)``); :meth:`face_normals` gives the unit normals.
         """
-        idx = np.array([[1, 3, 7, 5], [0, 4, 6, 2], [2, 6, 7, 3],
-                        [0, 1, 5, 4], [4, 5, 7, 6], [0, 2, 3, 1]])
+        idx = np.array(
+            [[1, 3, 7, 5], [0, 4, 6, 2], [2, 6, 7, 3], [0, 1, 5, 4], [4, 5, 7, 6], [0, 2, 3, 1]]
+        )
         return self.cube_corners()[idx]
 
     def face_normals(self):
@@ -381,7 +438,7 @@ def _shade_room(room, P, d):
     axis = np.argmin(t_axis, axis=1)
     t_exit = t_axis[rows, axis]
     X = P + t_exit[:, None] * d
-    surface = 2 * axis + (d[rows, axis] > 0)                # -X, +X, -Y, +Y, floor, ceiling
+    surface = 2 * axis + (d[rows, axis] > 0)  # -X, +X, -Y, +Y, floor, ceiling
     # in-plane coordinates: walls x (y, z), walls y (x, z), floor/ceiling (x, y)
     u = np.where(axis == 0, X[:, 1], X[:, 0])
     v = np.where(axis == 2, X[:, 1], X[:, 2])
@@ -394,8 +451,9 @@ def _shade_room(room, P, d):
     h = 0.5 * room.cube_size
     w = c - P
     tc = np.einsum("ij,ij->i", w, d)
-    near = np.flatnonzero((np.einsum("ij,ij->i", w, w) - tc * tc <= 3.0 * h * h)
-                          & (tc > -math.sqrt(3.0) * h))
+    near = np.flatnonzero(
+        (np.einsum("ij,ij->i", w, w) - tc * tc <= 3.0 * h * h) & (tc > -math.sqrt(3.0) * h)
+    )
     if len(near):
         R = room.cube_R
         Pl = (P[near] - c) @ R
@@ -423,16 +481,20 @@ def _shade_room(room, P, d):
 # -- rendering --------------------------------------------------------------------------------
 def _check_camera(camera):
     if not isinstance(camera, MisalignedHyperbolicCamera):
-        raise ValueError("camera must be a MisalignedHyperbolicCamera, "
-                         f"got {type(camera).__name__}")
+        raise ValueError(
+            f"camera must be a MisalignedHyperbolicCamera, got {type(camera).__name__}"
+        )
     if camera.image_size is None:
         raise ValueError("camera has no image_size; construct it with image_size=(width, height)")
     return camera.image_size
 
 
 def _check_supersample(supersample):
-    if isinstance(supersample, bool) or not isinstance(supersample, (int, np.integer)) \
-            or not 1 <= supersample <= 16:
+    if (
+        isinstance(supersample, bool)
+        or not isinstance(supersample, (int, np.integer))
+        or not 1 <= supersample <= 16
+    ):
         raise ValueError(f"supersample must be an integer from 1 to 16, got {supersample!r}")
     return int(supersample)
 
@@ -446,7 +508,7 @@ def _body_hits(camera, P, d, radius):
     with np.errstate(invalid="ignore"):
         t = -b - np.sqrt(disc)
     hit = (disc >= 0) & (t > 0)
-    axis = camera.R[2]          # camera +z (optical axis) in the mirror frame
+    axis = camera.R[2]  # camera +z (optical axis) in the mirror frame
     cosang = ((w[hit] + t[hit, None] * d[hit]) @ axis) / radius
     col = np.where((cosang > _LENS_COS)[:, None], np.float32(_LENS_COLOR), np.float32(_BODY_COLOR))
     return hit, col.astype(np.float32)
@@ -473,8 +535,10 @@ def _render(camera, shade, supersample, noise, seed, housing_color, body_radius,
     else:
         img = np.array(background, dtype=np.float32)
         if img.shape != (h, w, 3) or not np.isfinite(img).all():
-            raise ValueError(f"background must be a finite ({h}, {w}, 3) image (the camera's "
-                             f"image_size), got shape {img.shape}")
+            raise ValueError(
+                f"background must be a finite ({h}, {w}, 3) image (the camera's "
+                f"image_size), got shape {img.shape}"
+            )
     # only the rim's bounding box can see the mirror
     rim = camera.rim_image_points(1440)
     x_lo = max(0, int(np.floor(np.nanmin(rim[:, 0]))) - 2)
@@ -482,7 +546,7 @@ def _render(camera, shade, supersample, noise, seed, housing_color, body_radius,
     y_lo = max(0, int(np.floor(np.nanmin(rim[:, 1]))) - 2)
     y_hi = min(h - 1, int(np.ceil(np.nanmax(rim[:, 1]))) + 2)
     if x_lo <= x_hi and y_lo <= y_hi:
-        off = (np.arange(s) + 0.5) / s - 0.5          # subpixel offsets about the centre
+        off = (np.arange(s) + 0.5) / s - 0.5  # subpixel offsets about the centre
         xs = (np.arange(x_lo, x_hi + 1)[:, None] + off[None, :]).ravel()
         nx = x_hi - x_lo + 1
         rows_per_chunk = max(1, _CHUNK_RAYS // (nx * s * s))
@@ -508,7 +572,7 @@ def _render(camera, shade, supersample, noise, seed, housing_color, body_radius,
                 col[ok] = shade(Pk, dk)
             mirror = col.reshape(ny, s, nx, s, 3).sum(axis=(1, 3)) / (s * s)
             coverage = seen.reshape(ny, s, nx, s).sum(axis=(1, 3)) / (s * s)
-            block = img[y0:y1, x_lo:x_hi + 1]
+            block = img[y0:y1, x_lo : x_hi + 1]
             block *= (1.0 - coverage)[..., None].astype(np.float32)
             block += mirror
     if noise > 0:
@@ -516,8 +580,16 @@ def _render(camera, shade, supersample, noise, seed, housing_color, body_radius,
     return np.clip(np.round(img), 0, 255).astype(np.uint8)
 
 
-def render_environment(camera, environment=None, supersample=4, noise=0.0, seed=None,
-                       housing_color=HOUSING_COLOR, body_radius=10.0, background=None):
+def render_environment(
+    camera,
+    environment=None,
+    supersample=4,
+    noise=0.0,
+    seed=None,
+    housing_color=HOUSING_COLOR,
+    body_radius=10.0,
+    background=None,
+):
     """What the rig sees of a scene at infinity (paper Fig. 6).
 
     Every subpixel is traced to its reflected ray (:meth:`MisalignedHyperbolicCamera.unproject`)
@@ -564,12 +636,28 @@ def render_environment(camera, environment=None, supersample=4, noise=0.0, seed=
     env = np.ascontiguousarray(env, dtype=np.float32)
     if not np.isfinite(env).all():
         raise ValueError("environment must be finite")
-    return _render(camera, lambda P, d: _sample_equirect(env, d), supersample, noise, seed,
-                   housing_color, body_radius, background)
+    return _render(
+        camera,
+        lambda P, d: _sample_equirect(env, d),
+        supersample,
+        noise,
+        seed,
+        housing_color,
+        body_radius,
+        background,
+    )
 
 
-def render_room(camera, room=None, supersample=4, noise=0.0, seed=None,
-                housing_color=HOUSING_COLOR, body_radius=10.0, background=None):
+def render_room(
+    camera,
+    room=None,
+    supersample=4,
+    noise=0.0,
+    seed=None,
+    housing_color=HOUSING_COLOR,
+    body_radius=10.0,
+    background=None,
+):
     """What the rig sees of a room at finite distance: checker box and a cube (:class:`Room`).
 
     Every subpixel is traced to its reflected ray ``P + t d`` (mirror point ``P``, unit
@@ -599,10 +687,20 @@ def render_room(camera, room=None, supersample=4, noise=0.0, seed=None,
     # the camera and the whole mirror cap (rim circle and apex) must be inside the box
     rig = np.vstack([camera.camera_center, m.rim_points(16), [0.0, 0.0, m.b]])
     if not ((rig > np.asarray(room.box_min)) & (rig < np.asarray(room.box_max))).all():
-        raise ValueError("the camera and the mirror must be inside the room box "
-                         f"(box_min={room.box_min}, box_max={room.box_max})")
-    return _render(camera, lambda P, d: _shade_room(room, P, d), supersample, noise, seed,
-                   housing_color, body_radius, background)
+        raise ValueError(
+            "the camera and the mirror must be inside the room box "
+            f"(box_min={room.box_min}, box_max={room.box_max})"
+        )
+    return _render(
+        camera,
+        lambda P, d: _shade_room(room, P, d),
+        supersample,
+        noise,
+        seed,
+        housing_color,
+        body_radius,
+        background,
+    )
 
 
 def line_pixels(camera, start, end, n=30):
@@ -622,8 +720,9 @@ def line_pixels(camera, start, end, n=30):
     return px[np.isfinite(px).all(axis=1)]
 
 
-def far_line_pixels(camera, n_lines=3, n_points=30, distance=(10e3, 50e3),
-                    elevation_deg=(-60.0, 5.0), rng=0):
+def far_line_pixels(
+    camera, n_lines=3, n_points=30, distance=(10e3, 50e3), elevation_deg=(-60.0, 5.0), rng=0
+):
     """Pixels of far straight lines, as a user would click them for section 3.2's selection.
 
     Each line passes at a random distance in ``distance`` (mm) from the mirror origin, at a

@@ -18,6 +18,7 @@ row by row, ``(i * s, j * s, 0)`` for column ``i`` and row ``j``) and a pose
 The renderer shares nothing with the estimator but ``unproject``; the ground truth shares nothing
 with the renderer but ``project`` (their agreement is tested in ``tests/test_camera.py``).
 """
+
 from __future__ import annotations
 
 import math
@@ -85,8 +86,11 @@ def _visible(camera, pattern_size, square_size, rvec, tvec, margin, min_spacing,
     pts = np.concatenate([corners, edge])
     if not np.isfinite(pts).all():
         return False
-    if (pts < margin).any() or (pts[:, 0] > w - 1 - margin).any() \
-            or (pts[:, 1] > h - 1 - margin).any():
+    if (
+        (pts < margin).any()
+        or (pts[:, 0] > w - 1 - margin).any()
+        or (pts[:, 1] > h - 1 - margin).any()
+    ):
         return False
     # the board must stay clear of the camera's own reflection (the ball of render_board):
     # no ray of a corner or of the board's edge may hit it
@@ -101,14 +105,28 @@ def _visible(camera, pattern_size, square_size, rvec, tvec, margin, min_spacing,
             return False
     cols, rows = _pattern(pattern_size)
     g = corners.reshape(rows, cols, 2)
-    spacing = min(np.linalg.norm(np.diff(g, axis=0), axis=2).min(),
-                  np.linalg.norm(np.diff(g, axis=1), axis=2).min())
+    spacing = min(
+        np.linalg.norm(np.diff(g, axis=0), axis=2).min(),
+        np.linalg.norm(np.diff(g, axis=1), axis=2).min(),
+    )
     return spacing >= min_spacing
 
 
-def random_board_poses(camera, n, pattern_size, square_size, distance=(300.0, 1500.0),
-                       elevation=(-65.0, 5.0), max_tilt_deg=40.0, min_spacing=6.0, margin=3.0,
-                       rng=0, max_tries=20000, body_radius=10.0, azimuth=(0.0, 360.0)):
+def random_board_poses(
+    camera,
+    n,
+    pattern_size,
+    square_size,
+    distance=(300.0, 1500.0),
+    elevation=(-65.0, 5.0),
+    max_tilt_deg=40.0,
+    min_spacing=6.0,
+    margin=3.0,
+    rng=0,
+    max_tries=20000,
+    body_radius=10.0,
+    azimuth=(0.0, 360.0),
+):
     """``n`` board poses ``(rvec_b, tvec_b)`` (mirror frame), each wholly visible in ``camera``.
 
     Each board's centre is at a distance in ``distance`` (mm) from the mirror origin, at an
@@ -152,13 +170,26 @@ def random_board_poses(camera, n, pattern_size, square_size, distance=(300.0, 15
         if _visible(camera, (cols, rows), s, rvec, tvec, margin, min_spacing, body_radius):
             poses.append((rvec, tvec))
     if len(poses) < n:
-        raise ValueError(f"only {len(poses)} of {n} visible board poses found: widen distance or "
-                         f"elevation, or use a smaller board")
+        raise ValueError(
+            f"only {len(poses)} of {n} visible board poses found: widen distance or "
+            f"elevation, or use a smaller board"
+        )
     return poses
 
 
-def render_board(camera, pattern_size, square_size, rvec, tvec, supersample=4, noise=0.0,
-                 seed=None, environment=None, body_radius=10.0, housing_color=HOUSING_COLOR):
+def render_board(
+    camera,
+    pattern_size,
+    square_size,
+    rvec,
+    tvec,
+    supersample=4,
+    noise=0.0,
+    seed=None,
+    environment=None,
+    body_radius=10.0,
+    housing_color=HOUSING_COLOR,
+):
     """What the rig sees of a chessboard (or of the scene alone, ``rvec=tvec=None``).
 
     Every subpixel's reflected ray ``P + t d`` (:meth:`unproject`) is intersected with the
@@ -174,11 +205,14 @@ def render_board(camera, pattern_size, square_size, rvec, tvec, supersample=4, n
     _check_camera(camera)
     cols, rows = _pattern(pattern_size)
     s = float(square_size)
-    env = np.ascontiguousarray(make_environment() if environment is None else environment,
-                               dtype=np.float32)
+    env = np.ascontiguousarray(
+        make_environment() if environment is None else environment, dtype=np.float32
+    )
     if rvec is None:
+
         def shade(P, d):
             return _sample_equirect(env, d)
+
         return _render(camera, shade, supersample, noise, seed, housing_color, body_radius, None)
     Rb = cv2.Rodrigues(np.asarray(rvec, np.float64).reshape(3, 1))[0]
     tb = np.asarray(tvec, np.float64)
@@ -191,12 +225,11 @@ def render_board(camera, pattern_size, square_size, rvec, tvec, supersample=4, n
             t = ((tb - P) @ n) / den
         hit = np.isfinite(t) & (t > 0)
         X = P[hit] + t[hit, None] * d[hit]
-        xb = (X - tb) @ Rb                       # board frame: R^T (X - t)
+        xb = (X - tb) @ Rb  # board frame: R^T (X - t)
         fx, fy = xb[:, 0] / s, xb[:, 1] / s
         inside = (fx >= -2) & (fx <= cols + 1) & (fy >= -2) & (fy <= rows + 1)
         squares = (fx >= -1) & (fx <= cols) & (fy >= -1) & (fy <= rows)
-        black = squares & ((np.floor(fx).astype(np.int64) + np.floor(fy).astype(np.int64)) % 2
-                           == 0)
+        black = squares & ((np.floor(fx).astype(np.int64) + np.floor(fy).astype(np.int64)) % 2 == 0)
         val = np.where(black, _BLACK, _WHITE).astype(np.float32)
         idx = np.flatnonzero(hit)[inside]
         col[idx] = val[inside, None]

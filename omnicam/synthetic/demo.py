@@ -1,4 +1,4 @@
-"""The demo's scene: far straight lines drawn into the environment, and the pixels a user would click."""
+"""The demo's scene: far straight lines drawn into the environment, and the pixels clicked."""
 
 from __future__ import annotations
 
@@ -22,9 +22,7 @@ DEMO_LINE_COLOR = (0, 160, 255)  # BGR orange
 def great_circle(tilt_deg, azimuth_deg, n=720):
     """``(n, 3)`` unit directions of the line at infinity whose plane has the given normal."""
     t, a = math.radians(tilt_deg), math.radians(azimuth_deg)
-    normal = np.array(
-        [math.sin(t) * math.cos(a), math.sin(t) * math.sin(a), math.cos(t)]
-    )
+    normal = np.array([math.sin(t) * math.cos(a), math.sin(t) * math.sin(a), math.cos(t)])
     u = np.cross(normal, (0.0, 0.0, 1.0)) if t > 1e-9 else np.array([1.0, 0.0, 0.0])
     u /= np.linalg.norm(u)
     v = np.cross(normal, u)
@@ -38,9 +36,7 @@ def demo_environment(lines=DEMO_FAR_LINES):
 
     env = make_environment()
     h, w = env.shape[:2]
-    radius = max(
-        1, int(round(0.3 * w / 360.0))
-    )  # lines 0.6 deg wide, as the environment's
+    radius = max(1, int(round(0.3 * w / 360.0)))  # lines 0.6 deg wide, as the environment's
     for tilt, az in lines:
         x, y = equirect_coords(great_circle(tilt, az, 8 * w), (w, h))
         for xi, yi in zip(np.round(x).astype(int), np.round(y).astype(int)):

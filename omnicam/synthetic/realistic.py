@@ -20,9 +20,9 @@ mirror's ``a, b, rim_radius``) and traces every subpixel itself:
 Hostile elements (:data:`VARIANTS`), each switchable: the camera body, a holder ring around the
 rim, struts across the mirror, a dark floor, a clipped rim, Gaussian blur, vignetting, sensor
 noise, JPEG compression and mild lens distortion. The ground truth comes back with the image:
-the truth camera, the coaxial circles ``(r, z)`` (camera frame, docs/conventions.md "The camera's own
-reflection") whose reflections make the outermost round dark silhouette, far-line pixels of
-the room's straight edges (:func:`far_line_pixels`, own bisection) and a label per pixel.
+the truth camera, the coaxial circles ``(r, z)`` (camera frame, docs/conventions.md "The
+camera's own reflection") whose reflections make the outermost round dark silhouette, far-line
+pixels of the room's straight edges (:func:`far_line_pixels`, own bisection) and a label per pixel.
 
 Typical use (the stress benchmark ``benchmarks/bench_stress.py``)::
 
@@ -898,7 +898,8 @@ def far_line_pixels(camera, p1, p2, n_points=40, valid=None, margin=2, _grid=Non
     The line's directions form the great-circle arc ``alpha p1 + beta p2`` (alpha, beta >= 0)
     of the plane with normal ``n = p1 x p2``. Every integer pixel of the mirror is traced;
     where ``n . d`` changes sign between horizontal or vertical neighbours, the crossing is
-    found by bisection on that segment (to 1e-9 px, 30 halvings) and kept if its direction lies on the arc.
+    found by bisection on that segment (to 1e-9 px, 30 halvings) and kept if its direction
+    lies on the arc.
 
     Parameters
     ----------

@@ -21,6 +21,7 @@ Full-disk and read-only cases mount a small tmpfs (``mount -t tmpfs -o size=64k`
 root; without it they are skipped with a message. Permission cases run in a second worker as
 user ``nobody`` (root only). The exit status is 1 if any case was bad.
 """
+
 from __future__ import annotations
 
 import argparse
@@ -58,8 +59,14 @@ def base_fields(cam):
     fields = {
         "format_version": ("raw", "1"),
         "model": ("str", "misaligned_hyperbolic"),
-        "mirror": ("map", {"a": _num(cam.mirror.a), "b": _num(cam.mirror.b),
-                           "rim_radius": _num(cam.mirror.rim_radius)}),
+        "mirror": (
+            "map",
+            {
+                "a": _num(cam.mirror.a),
+                "b": _num(cam.mirror.b),
+                "rim_radius": _num(cam.mirror.rim_radius),
+            },
+        ),
         "K": ("mat", 3, 3, "d", [_num(v) for v in cam.K.ravel()]),
         "rvec": ("mat", 3, 1, "d", [_num(v) for v in cam.rvec]),
         "tvec": ("mat", 3, 1, "d", [_num(v) for v in cam.tvec]),
@@ -85,8 +92,10 @@ def render(fields, fmt):
                 out.append(f"{name}: [ {', '.join(v[1])} ]\n")
             else:
                 _, r, c, dt, data = v
-                out.append(f"{name}: !!opencv-matrix\n   rows: {r}\n   cols: {c}\n   dt: {dt}\n"
-                           f"   data: [ {', '.join(data)} ]\n")
+                out.append(
+                    f"{name}: !!opencv-matrix\n   rows: {r}\n   cols: {c}\n   dt: {dt}\n"
+                    f"   data: [ {', '.join(data)} ]\n"
+                )
     elif fmt == "xml":
         out.append('<?xml version="1.0"?>\n<opencv_storage>\n')
         for name, v in fields.items():
@@ -94,15 +103,20 @@ def render(fields, fmt):
             if kind in ("raw", "str"):
                 out.append(f"<{name}>{v[1] if kind == 'raw' else v[1]}</{name}>\n")
             elif kind == "map":
-                out.append(f"<{name}>\n" + "".join(f"  <{k}>{x}</{k}>\n" for k, x in v[1].items())
-                           + f"</{name}>\n")
+                out.append(
+                    f"<{name}>\n"
+                    + "".join(f"  <{k}>{x}</{k}>\n" for k, x in v[1].items())
+                    + f"</{name}>\n"
+                )
             elif kind == "seq":
                 out.append(f"<{name}>\n  {' '.join(v[1])}</{name}>\n")
             else:
                 _, r, c, dt, data = v
-                out.append(f'<{name} type_id="opencv-matrix">\n  <rows>{r}</rows>\n  <cols>{c}'
-                           f'</cols>\n  <dt>{dt}</dt>\n  <data>\n    {" ".join(data)}</data></'
-                           f'{name}>\n')
+                out.append(
+                    f'<{name} type_id="opencv-matrix">\n  <rows>{r}</rows>\n  <cols>{c}'
+                    f"</cols>\n  <dt>{dt}</dt>\n  <data>\n    {' '.join(data)}</data></"
+                    f"{name}>\n"
+                )
         out.append("</opencv_storage>\n")
     else:
         items = []
@@ -114,29 +128,59 @@ def render(fields, fmt):
                 items.append(f'    "{name}": {json.dumps(v[1])}')
             elif kind == "map":
                 pairs = ", ".join(f'"{k}": {x}' for k, x in v[1].items())
-                items.append(f'    "{name}": {{ ' + pairs
-                             + " }")
+                items.append(f'    "{name}": {{ ' + pairs + " }")
             elif kind == "seq":
                 items.append(f'    "{name}": [ {", ".join(v[1])} ]')
             else:
                 _, r, c, dt, data = v
-                items.append(f'    "{name}": {{ "type_id": "opencv-matrix", "rows": {r}, "cols": '
-                             f'{c}, "dt": "{dt}", "data": [ {", ".join(data)} ] }}')
+                items.append(
+                    f'    "{name}": {{ "type_id": "opencv-matrix", "rows": {r}, "cols": '
+                    f'{c}, "dt": "{dt}", "data": [ {", ".join(data)} ] }}'
+                )
         out.append("{\n" + ",\n".join(items) + "\n}\n")
     return "".join(out)
 
 
-NAN_TOKENS = {"yaml": [".nan", ".inf", "-.inf", ".NaN"], "xml": [".nan", ".inf", "-.inf"],
-              "json": ["NaN", "Infinity", "-Infinity"]}
-EXTREME = ["1e300", "-1e300", "1e-300", "0", "-0.0", "1e12", "-1", "583", "2147483648", "1e400",
-           "-1e400", "4294967297", "1e7", "1e-2", "99999999999999999999999"]
+NAN_TOKENS = {
+    "yaml": [".nan", ".inf", "-.inf", ".NaN"],
+    "xml": [".nan", ".inf", "-.inf"],
+    "json": ["NaN", "Infinity", "-Infinity"],
+}
+EXTREME = [
+    "1e300",
+    "-1e300",
+    "1e-300",
+    "0",
+    "-0.0",
+    "1e12",
+    "-1",
+    "583",
+    "2147483648",
+    "1e400",
+    "-1e400",
+    "4294967297",
+    "1e7",
+    "1e-2",
+    "99999999999999999999999",
+]
 WRONG = ['"abc"', "abc", "[ 1, 2 ]", "{ }", "true", "null", "", '""', "[ ]", "- 1"]
 
 
 def semantic_mutant(rnd, fields, fmt):
     """A field-level mutation: (fields, description, must_refuse)."""
-    f = {k: (tuple(v[:-1]) + (list(v[-1]) if isinstance(v[-1], list) else dict(v[-1])
-                                if isinstance(v[-1], dict) else v[-1],)) for k, v in fields.items()}
+    f = {
+        k: (
+            tuple(v[:-1])
+            + (
+                list(v[-1])
+                if isinstance(v[-1], list)
+                else dict(v[-1])
+                if isinstance(v[-1], dict)
+                else v[-1],
+            )
+        )
+        for k, v in fields.items()
+    }
     name = rnd.choice(list(f))
     ops = ["delete", "wrong", "nan", "extreme", "dt", "shape", "swap", "scale"]
     if "mirror" in f:  # a calibration file
@@ -186,13 +230,26 @@ def semantic_mutant(rnd, fields, fmt):
                 data = [str(int(float(x))) if abs(float(x)) < 1e9 else x for x in data]
                 data[i] = rnd.choice(["583", "-1", "70000", "255", "128", "3.5e38", "4e9"])
         elif op == "shape":
-            r, c = rnd.choice([(1, 9), (9, 1), (2, 2), (0, 3), (3, 0), (-1, 3), (100000, 1),
-                               (3, 4), (1, len(data)), (2147483647, 2)])
+            r, c = rnd.choice(
+                [
+                    (1, 9),
+                    (9, 1),
+                    (2, 2),
+                    (0, 3),
+                    (3, 0),
+                    (-1, 3),
+                    (100000, 1),
+                    (3, 4),
+                    (1, len(data)),
+                    (2147483647, 2),
+                ]
+            )
         elif op == "swap":
             data = data[::-1]
         else:
-            data = [_num(float(x) * rnd.choice([1e-9, 1e9, 1e6, -1])) if _isnum(x) else x
-                    for x in data]
+            data = [
+                _num(float(x) * rnd.choice([1e-9, 1e9, 1e6, -1])) if _isnum(x) else x for x in data
+            ]
         f[name] = ("mat", r, c, dt, data)
     elif spec[0] == "map":
         m = dict(spec[1])
@@ -208,16 +265,36 @@ def semantic_mutant(rnd, fields, fmt):
             refuse = True
         else:
             m[k] = rnd.choice(EXTREME + ["1e-4", "2e6"])
-            refuse = m[k] in ("1e300", "-1e300", "1e-300", "0", "-0.0", "1e12", "-1", "1e400",
-                              "-1e400", "99999999999999999999999", "1e-4", "2e6", "4294967297",
-                              "1e7", "2147483648")
+            refuse = m[k] in (
+                "1e300",
+                "-1e300",
+                "1e-300",
+                "0",
+                "-0.0",
+                "1e12",
+                "-1",
+                "1e400",
+                "-1e400",
+                "99999999999999999999999",
+                "1e-4",
+                "2e6",
+                "4294967297",
+                "1e7",
+                "2147483648",
+            )
         f[name] = ("map", m)
     elif spec[0] == "seq":
         vals = list(spec[1])
         choice = rnd.choice(["inf", "float", "huge", "neg", "short", "long", "str"])
-        vals = {"inf": [NAN_TOKENS[fmt][1], vals[1]], "float": ["640.5", vals[1]],
-                "huge": ["1000000", "1000000"], "neg": ["-640", vals[1]], "short": vals[:1],
-                "long": vals + ["3"], "str": ['"640"', vals[1]]}[choice]
+        vals = {
+            "inf": [NAN_TOKENS[fmt][1], vals[1]],
+            "float": ["640.5", vals[1]],
+            "huge": ["1000000", "1000000"],
+            "neg": ["-640", vals[1]],
+            "short": vals[:1],
+            "long": vals + ["3"],
+            "str": ['"640"', vals[1]],
+        }[choice]
         refuse = True
         f[name] = ("seq", vals)
     else:
@@ -236,11 +313,22 @@ def _isnum(x):
 
 def byte_mutant(rnd, data):
     """A byte-level mutation of ``data``: (bytes, description)."""
-    op = rnd.choice(["truncate", "flip", "nonutf8", "insert", "delete_line", "dup_line",
-                     "zero", "shuffle_lines", "multi"])
+    op = rnd.choice(
+        [
+            "truncate",
+            "flip",
+            "nonutf8",
+            "insert",
+            "delete_line",
+            "dup_line",
+            "zero",
+            "shuffle_lines",
+            "multi",
+        ]
+    )
     b = bytearray(data)
     if op == "truncate":
-        b = b[:rnd.randrange(len(b))]
+        b = b[: rnd.randrange(len(b))]
     elif op == "flip":
         for _ in range(rnd.randint(1, 8)):
             i = rnd.randrange(len(b))
@@ -254,8 +342,26 @@ def byte_mutant(rnd, data):
         b[i:i] = seq
     elif op == "insert":
         i = rnd.randrange(len(b) + 1)
-        b[i:i] = rnd.choice([b"{", b"[", b"<a>", b"- ", b":", b'"', b"\\", b"&x ", b"*x",
-                             b"!!binary", b"%YAML:1.0", b"\t", b"#", b"'", b"\r\n", b"\x0b"])
+        b[i:i] = rnd.choice(
+            [
+                b"{",
+                b"[",
+                b"<a>",
+                b"- ",
+                b":",
+                b'"',
+                b"\\",
+                b"&x ",
+                b"*x",
+                b"!!binary",
+                b"%YAML:1.0",
+                b"\t",
+                b"#",
+                b"'",
+                b"\r\n",
+                b"\x0b",
+            ]
+        )
     elif op == "zero":
         i = rnd.randrange(len(b))
         b[i] = 0
@@ -280,8 +386,13 @@ def deep_text(fmt, depth):
     if fmt == "json":
         return "[" * depth + "]" * depth
     if fmt == "xml":
-        return ('<?xml version="1.0"?>\n<opencv_storage>\n' + "<a>" * depth + "1" + "</a>" * depth
-                + "\n</opencv_storage>\n")
+        return (
+            '<?xml version="1.0"?>\n<opencv_storage>\n'
+            + "<a>" * depth
+            + "1"
+            + "</a>" * depth
+            + "\n</opencv_storage>\n"
+        )
     if fmt == "yaml_flow":
         return "%YAML:1.0\n---\nK: " + "[" * depth + "1" + "]" * depth + "\n"
     if fmt == "yaml_seq":
@@ -371,8 +482,9 @@ def _check_loaded(ctx, cam, expect):
         K = np.array(expect["K"], dtype=float).reshape(3, 3) if expect.get("K") else None
         if K is not None and not np.allclose(cam.K, K, rtol=1e-9, atol=0):
             return "bad", f"loaded K {cam.K.ravel().tolist()} differs from the file's {expect['K']}"
-        if expect.get("tvec") and not np.allclose(cam.tvec, np.array(expect["tvec"], float),
-                                                  rtol=1e-9, atol=1e-12):
+        if expect.get("tvec") and not np.allclose(
+            cam.tvec, np.array(expect["tvec"], float), rtol=1e-9, atol=1e-12
+        ):
             return "bad", f"loaded tvec differs from the file's {expect['tvec']}"
     from omnicam.cli.info import describe_camera
 
@@ -419,8 +531,11 @@ def case_cli(ctx, spec, cap):
 def _without_notices(err):
     """stderr without omnicam's own one-time notices (the first compilation of its kernels, a
     cache folder that cannot be written): they are meant for the user, once per process."""
-    return "\n".join(ln for ln in err.replace("\r", "\n").splitlines()
-                     if not ln.startswith(("omnicam: compiling kernels", "omnicam: numba cannot write")))
+    return "\n".join(
+        ln
+        for ln in err.replace("\r", "\n").splitlines()
+        if not ln.startswith(("omnicam: compiling kernels", "omnicam: numba cannot write"))
+    )
 
 
 def _cli_outcome(rc, err, spec):
@@ -449,8 +564,12 @@ def case_api(ctx, spec, cap):
         result = fn(ctx)
     except Exception as e:  # noqa: BLE001
         return _exc_outcome(e, names)
-    if isinstance(result, tuple) and len(result) == 2 and isinstance(result[0], str) \
-            and result[0] == "__must_raise__":
+    if (
+        isinstance(result, tuple)
+        and len(result) == 2
+        and isinstance(result[0], str)
+        and result[0] == "__must_raise__"
+    ):
         return "bad", f"accepted: {result[1]}"
     return "ok", "returned"
 
@@ -494,8 +613,10 @@ def case_save(ctx, spec, cap):
         if _snapshot(path) != before:
             return "bad", f"a failed save changed the old file ({type(failed).__name__})"
         base = os.path.basename(path)
-        out = _exc_outcome(failed, [base, base.encode("utf-8", "surrogateescape").decode(
-            "utf-8", "backslashreplace")])
+        out = _exc_outcome(
+            failed,
+            [base, base.encode("utf-8", "surrogateescape").decode("utf-8", "backslashreplace")],
+        )
         if out[0] == "ok" and spec.get("must_succeed"):
             return "bad", f"save failed: {failed}"
         return out
@@ -521,16 +642,23 @@ def case_cli_write(ctx, spec, cap):
         if rc == 0 and spec.get("must_fail"):
             now = _snapshot(p) or b""
             fate = "unchanged" if now == b else f"replaced by {len(now)} bytes"
-            return "bad", (f"exit 0 and 'wrote' on a full/read-only disk: {os.path.basename(p)} "
-                           f"{fate}; stdout {cap.text(0).strip()[-80:]!r}")
+            return "bad", (
+                f"exit 0 and 'wrote' on a full/read-only disk: {os.path.basename(p)} "
+                f"{fate}; stdout {cap.text(0).strip()[-80:]!r}"
+            )
     left = _temps(os.path.dirname(spec["keep"][0]))
     if left:
         return "bad", f"temporary files left: {left}"
     return out
 
 
-KINDS = {"load": case_load, "cli": case_cli, "api": case_api, "save": case_save,
-         "cli_write": case_cli_write}
+KINDS = {
+    "load": case_load,
+    "cli": case_cli,
+    "api": case_api,
+    "save": case_save,
+    "cli_write": case_cli_write,
+}
 
 
 def worker_main(workdir, as_user=None):
@@ -556,38 +684,106 @@ def worker_main(workdir, as_user=None):
             except Exception as e:  # noqa: BLE001 - a harness path the case did not expect
                 status = "bad"
                 detail = f"uncaught {type(e).__name__}: {str(e)[:300]} | " + " / ".join(
-                    traceback.format_exc().splitlines()[-4:-1])
+                    traceback.format_exc().splitlines()[-4:-1]
+                )
             err = _without_notices(cap.text(1))
         if status == "ok" and spec["kind"] not in ("cli", "cli_write") and err.strip():
             status, detail = "bad", f"stderr output during the call: {err.strip()[:300]!r}"
-        out.write(json.dumps({"status": status, "detail": detail,
-                              "seconds": round(time.perf_counter() - t0, 3)}) + "\n")
+        out.write(
+            json.dumps(
+                {"status": status, "detail": detail, "seconds": round(time.perf_counter() - t0, 3)}
+            )
+            + "\n"
+        )
 
 
 # ==============================================================================================
 # API cases: built in the worker from an index (the same list in runner and worker)
 # ==============================================================================================
-BAD_NUMBERS = ["a", None, [1.0], 1j, float("nan"), float("inf"), -float("inf"), 0, -1, 1e-300,
-               1e300, True, "1e3", (), {}, 10**400]
-BAD_ARRAYS = ["abc", None, 1j, [1, 2], [[1, 2], [3]], [1j, 0, 0], "nan", [float("nan")] * 3,
-              [1e300, 0, 0], [True, False, True], [None, 1, 2], [[1.0] * 3] * 4, {}, 5,
-              [10**400, 0, 0]]
-BAD_SIZES = [(float("inf"), 500), ("ab", 5), "ab", (0, 5), (1e6, 1e6), (1.5, 2), True, (640,),
-             (-1, 5), (640, 480, 3), 1j, (1j, 2), (2**40, 1), None, (640.0, float("nan")),
-             ([1], [2])]
-BAD_IMAGES = [None, "img", [[1, 2], [3, 4]], "bool", "empty", "1x1", "nan", "4ch", "complex",
-              "3d5", 7, "obj"]
+BAD_NUMBERS = [
+    "a",
+    None,
+    [1.0],
+    1j,
+    float("nan"),
+    float("inf"),
+    -float("inf"),
+    0,
+    -1,
+    1e-300,
+    1e300,
+    True,
+    "1e3",
+    (),
+    {},
+    10**400,
+]
+BAD_ARRAYS = [
+    "abc",
+    None,
+    1j,
+    [1, 2],
+    [[1, 2], [3]],
+    [1j, 0, 0],
+    "nan",
+    [float("nan")] * 3,
+    [1e300, 0, 0],
+    [True, False, True],
+    [None, 1, 2],
+    [[1.0] * 3] * 4,
+    {},
+    5,
+    [10**400, 0, 0],
+]
+BAD_SIZES = [
+    (float("inf"), 500),
+    ("ab", 5),
+    "ab",
+    (0, 5),
+    (1e6, 1e6),
+    (1.5, 2),
+    True,
+    (640,),
+    (-1, 5),
+    (640, 480, 3),
+    1j,
+    (1j, 2),
+    (2**40, 1),
+    None,
+    (640.0, float("nan")),
+    ([1], [2]),
+]
+BAD_IMAGES = [
+    None,
+    "img",
+    [[1, 2], [3, 4]],
+    "bool",
+    "empty",
+    "1x1",
+    "nan",
+    "4ch",
+    "complex",
+    "3d5",
+    7,
+    "obj",
+]
 
 
 def _image(ctx, tag):
     np = ctx.np
     if not isinstance(tag, str):
         return tag
-    return {"bool": np.ones((64, 64), bool), "empty": np.zeros((0, 0), np.uint8),
-            "1x1": np.zeros((1, 1), np.uint8), "nan": np.full((64, 64), np.nan),
-            "4ch": np.zeros((64, 64, 4), np.uint8), "complex": np.zeros((64, 64), complex),
-            "3d5": np.zeros((64, 64, 5), np.uint8), "obj": np.zeros((64, 64), object),
-            "img": "img"}.get(tag, tag)
+    return {
+        "bool": np.ones((64, 64), bool),
+        "empty": np.zeros((0, 0), np.uint8),
+        "1x1": np.zeros((1, 1), np.uint8),
+        "nan": np.full((64, 64), np.nan),
+        "4ch": np.zeros((64, 64, 4), np.uint8),
+        "complex": np.zeros((64, 64), complex),
+        "3d5": np.zeros((64, 64, 5), np.uint8),
+        "obj": np.zeros((64, 64), object),
+        "img": "img",
+    }.get(tag, tag)
 
 
 def _api_cases():
@@ -602,28 +798,37 @@ def _api_cases():
     from_mirror = ("a", "b", "rim_radius")
     for i, pname in enumerate(from_mirror):
         for v in BAD_NUMBERS + [2e6, 1e-4]:
+
             def fn(ctx, i=i, v=v, pname=pname):
                 args = [28.0, 23.0, 30.0]
                 args[i] = v
                 ctx.omnicam.HyperbolicMirror(*args)
                 return must_raise(f"{pname}={v!r}")
+
             add(f"HyperbolicMirror({pname}={v!r})", [pname], fn)
 
     def cam_with(ctx, **kw):
         c = ctx.cam
-        args = dict(K=c.K, mirror=c.mirror, rvec=c.rvec, tvec=c.tvec, D=None,
-                    image_size=c.image_size)
+        args = dict(
+            K=c.K, mirror=c.mirror, rvec=c.rvec, tvec=c.tvec, D=None, image_size=c.image_size
+        )
         args.update(kw)
         return ctx.omnicam.MisalignedHyperbolicCamera(**args)
 
-    for pname, pool in (("K", BAD_ARRAYS + ["fx1e12", "fx0", "fxneg", "fy1e-9", "Kc", "Kbool"]),
-                        ("rvec", BAD_ARRAYS + ["pi", "big"]),
-                        ("tvec", BAD_ARRAYS + ["behind", "upper", "far"]),
-                        ("D", [v for v in BAD_ARRAYS if v is not None and not (
-                            isinstance(v, list) and len(v) == 4)] + ["D3", "Dhuge"]),
-                        ("image_size", [v for v in BAD_SIZES if v is not None]),
-                        ("mirror", [None, "m", 5, (28, 23, 30)])):
+    for pname, pool in (
+        ("K", BAD_ARRAYS + ["fx1e12", "fx0", "fxneg", "fy1e-9", "Kc", "Kbool"]),
+        ("rvec", BAD_ARRAYS + ["pi", "big"]),
+        ("tvec", BAD_ARRAYS + ["behind", "upper", "far"]),
+        (
+            "D",
+            [v for v in BAD_ARRAYS if v is not None and not (isinstance(v, list) and len(v) == 4)]
+            + ["D3", "Dhuge"],
+        ),
+        ("image_size", [v for v in BAD_SIZES if v is not None]),
+        ("mirror", [None, "m", 5, (28, 23, 30)]),
+    ):
         for v in pool:
+
             def fn(ctx, pname=pname, v=v):
                 np = ctx.np
                 K = ctx.cam.K
@@ -632,38 +837,80 @@ def _api_cases():
                     "fx0": np.array([[0.0, 0, 250], [0, 300, 250], [0, 0, 1]]),
                     "fxneg": K * np.array([[-1, 1, 1], [1, 1, 1], [1, 1, 1]]),
                     "fy1e-9": np.array([[300, 0, 250], [0, 1e-9, 250], [0, 0, 1.0]]),
-                    "Kc": K.astype(complex) + 1j, "Kbool": np.eye(3, dtype=bool),
-                    "pi": [math.pi, 0, 0], "big": [1e300, 0, 0], "behind": [0, 0, -100.0],
-                    "upper": [0, 0, -ctx.cam.mirror.c], "far": [0, 0, 1e12],
-                    "D3": [0.1, 0.2, 0.3], "Dhuge": [1e300, 0, 0, 0, 0],
+                    "Kc": K.astype(complex) + 1j,
+                    "Kbool": np.eye(3, dtype=bool),
+                    "pi": [math.pi, 0, 0],
+                    "big": [1e300, 0, 0],
+                    "behind": [0, 0, -100.0],
+                    "upper": [0, 0, -ctx.cam.mirror.c],
+                    "far": [0, 0, 1e12],
+                    "D3": [0.1, 0.2, 0.3],
+                    "Dhuge": [1e300, 0, 0, 0, 0],
                 }
                 value = special.get(v, v) if isinstance(v, str) else v
                 cam_with(ctx, **{pname: value})
                 return must_raise(f"{pname}={v!r}")
-            add(f"Camera({pname}={v!r})", [pname] + (["fx", "fy", "K"] if pname == "K" else [])
-                + (["rvec", "tvec"] if pname in ("rvec", "tvec") else []), fn)
 
-    pts_pool = [None, "abc", 1j, [1, 2, 3], [[1, 2, 3, 4]], "cplx", "obj", "empty", "huge",
-                "nanrows", [[1e300, 1e300]], "f32", "n11", [[True, False]]]
+            add(
+                f"Camera({pname}={v!r})",
+                [pname]
+                + (["fx", "fy", "K"] if pname == "K" else [])
+                + (["rvec", "tvec"] if pname in ("rvec", "tvec") else []),
+                fn,
+            )
+
+    pts_pool = [
+        None,
+        "abc",
+        1j,
+        [1, 2, 3],
+        [[1, 2, 3, 4]],
+        "cplx",
+        "obj",
+        "empty",
+        "huge",
+        "nanrows",
+        [[1e300, 1e300]],
+        "f32",
+        "n11",
+        [[True, False]],
+    ]
     for meth, dim in (("unproject", 2), ("project", 3), ("project_directions", 3)):
         for v in pts_pool:
+
             def fn(ctx, meth=meth, dim=dim, v=v):
                 np = ctx.np
-                special = {"cplx": np.ones((4, dim), complex), "obj": np.ones((4, dim), object),
-                           "empty": np.zeros((0, dim)), "huge": np.full((4, dim), 1e300),
-                           "nanrows": np.full((4, dim), np.nan),
-                           "f32": np.ones((4, dim), np.float32) * 100,
-                           "n11": np.ones((4, 1, dim)) * 100}
+                special = {
+                    "cplx": np.ones((4, dim), complex),
+                    "obj": np.ones((4, dim), object),
+                    "empty": np.zeros((0, dim)),
+                    "huge": np.full((4, dim), 1e300),
+                    "nanrows": np.full((4, dim), np.nan),
+                    "f32": np.ones((4, dim), np.float32) * 100,
+                    "n11": np.ones((4, 1, dim)) * 100,
+                }
                 value = special.get(v, v) if isinstance(v, str) else v
-                if isinstance(value, list) and value and isinstance(value[0], list) \
-                        and len(value[0]) != dim:
+                if (
+                    isinstance(value, list)
+                    and value
+                    and isinstance(value[0], list)
+                    and len(value[0]) != dim
+                ):
                     value = [row[:dim] + [0.0] * (dim - len(row)) for row in value]
                 return getattr(ctx.cam, meth)(value)
+
             add(f"{meth}({v!r})", ["image_points", "object_points", "directions", "points"], fn)
-    for kw in ({"rvec": [1j, 0, 0], "tvec": [0, 0, 0]}, {"rvec": [0, 0, 0]},
-               {"rvec": "a", "tvec": [0, 0, 0]}, {"rvec": [0, 0, 0], "tvec": [float("inf")] * 3}):
-        add(f"project(rvec/tvec {kw})", ["rvec", "tvec"],
-            lambda ctx, kw=kw: ctx.cam.project(ctx.np.ones((2, 3)) * 1000, **kw))
+    for kw in (
+        {"rvec": [1j, 0, 0], "tvec": [0, 0, 0]},
+        {"rvec": [0, 0, 0]},
+        {"rvec": "a", "tvec": [0, 0, 0]},
+        {"rvec": [0, 0, 0], "tvec": [float("inf")] * 3},
+    ):
+        add(
+            f"project(rvec/tvec {kw})",
+            ["rvec", "tvec"],
+            lambda ctx, kw=kw: ctx.cam.project(ctx.np.ones((2, 3)) * 1000, **kw),
+        )
 
     for v in BAD_SIZES:
         add(f"scaled({v!r})", ["image_size"], lambda ctx, v=v: ctx.cam.scaled(v))
@@ -685,118 +932,210 @@ def _api_cases():
             if fname == "init_perspective_maps" and pname in ("elevation_range", "projection"):
                 continue
             for v in pool:
+
                 def fn(ctx, fname=fname, pname=pname, v=v):
                     np = ctx.np
                     kw = {"size": (64, 32)}
                     if fname == "init_perspective_maps":
                         kw["K_new"] = np.array([[30.0, 0, 31.5], [0, 30, 15.5], [0, 0, 1]])
-                    value = {"notrot": np.diag([1.0, 1.0, -1.0])}.get(v, v) \
-                        if isinstance(v, str) else v
+                    value = (
+                        {"notrot": np.diag([1.0, 1.0, -1.0])}.get(v, v) if isinstance(v, str) else v
+                    )
                     kw[pname] = value
                     if pname == "viewpoint":
                         kw["depth"] = 1000.0
                     return getattr(ctx.cam, fname)(**kw)
+
                 add(f"{fname}({pname}={v!r})", [pname], fn)
         if fname == "init_perspective_maps":
             for v in BAD_ARRAYS + ["fx1e12"]:
+
                 def fn(ctx, v=v):
                     value = ctx.np.diag([1e12, 1e12, 1.0]) if v == "fx1e12" else v
                     return ctx.cam.init_perspective_maps(value, (64, 32))
+
                 add(f"init_perspective_maps(K_new={v!r})", ["K_new", "K"], fn)
     for v in BAD_NUMBERS:
-        add(f"rotation_from_ypr(yaw={v!r})", ["yaw"],
-            lambda ctx, v=v: __import__("omnicam.views").views.rotation_from_ypr(yaw=v))
-        add(f"K_from_fov({v!r})", ["fov_deg"],
-            lambda ctx, v=v: __import__("omnicam.views").views.K_from_fov(v, (64, 32)))
+        add(
+            f"rotation_from_ypr(yaw={v!r})",
+            ["yaw"],
+            lambda ctx, v=v: __import__("omnicam.views").views.rotation_from_ypr(yaw=v),
+        )
+        add(
+            f"K_from_fov({v!r})",
+            ["fov_deg"],
+            lambda ctx, v=v: __import__("omnicam.views").views.K_from_fov(v, (64, 32)),
+        )
     for v in BAD_SIZES[:8]:
         add(f"PanoramaView({v!r})", ["size"], lambda ctx, v=v: ctx.omnicam.PanoramaView(v))
         add(f"PerspectiveView({v!r})", ["size"], lambda ctx, v=v: ctx.omnicam.PerspectiveView(v))
     for v in [None, "cam", 5]:
-        add(f"visible_elevation_range({v!r})", ["camera"],
-            lambda ctx, v=v: ctx.omnicam.visible_elevation_range(v))
+        add(
+            f"visible_elevation_range({v!r})",
+            ["camera"],
+            lambda ctx, v=v: ctx.omnicam.visible_elevation_range(v),
+        )
 
     for v in BAD_IMAGES:
-        add(f"detect_rim(image={v!r})", ["image"],
-            lambda ctx, v=v: ctx.omnicam.detect_rim(_image(ctx, v)))
-    for pname, pool in (("sigma", ["a", 1e6, 1e5, -1, float("nan"), 1j, None, True, [1]]),
-                        ("threshold", ["a", 0, -1, float("inf"), 1j, None]),
-                        ("rng", ["abc", -1, 1.5, [1, 2], object()])):
+        add(
+            f"detect_rim(image={v!r})",
+            ["image"],
+            lambda ctx, v=v: ctx.omnicam.detect_rim(_image(ctx, v)),
+        )
+    for pname, pool in (
+        ("sigma", ["a", 1e6, 1e5, -1, float("nan"), 1j, None, True, [1]]),
+        ("threshold", ["a", 0, -1, float("inf"), 1j, None]),
+        ("rng", ["abc", -1, 1.5, [1, 2], object()]),
+    ):
         for v in pool:
+
             def fn(ctx, pname=pname, v=v):
                 img = ctx.np.zeros((96, 96), ctx.np.uint8)
                 import cv2
+
                 cv2.circle(img, (48, 48), 35, 200, -1)
                 return ctx.omnicam.detect_rim(img, **{pname: v})
+
             add(f"detect_rim({pname}={v!r})", [pname], fn)
 
     def calib_kw(ctx):
         c = ctx.cam
-        return dict(K=c.K, mirror=c.mirror, boundary_points=c.rim_image_points(200),
-                    image_size=c.image_size, refine=False)
+        return dict(
+            K=c.K,
+            mirror=c.mirror,
+            boundary_points=c.rim_image_points(200),
+            image_size=c.image_size,
+            refine=False,
+        )
 
-    for pname, pool in (("far_lines", [5, "abc", [[1, 2]], [[[1j, 0]] * 3],
-                                       [[[float("nan"), 0]] * 3],
-                                       [None], [[[1, 2]] * 2]]),
-                        ("boundary_points", ["abc", 1j, [[1j, 2]] * 10, [[1, 2]], None]),
-                        ("K", ["abc", 1j, None]), ("mirror", [None, "m"]),
-                        ("image_size", BAD_SIZES[:6]), ("D", ["abc", [1j] * 5]),
-                        ("lens", ["bogus", 5])):
+    for pname, pool in (
+        (
+            "far_lines",
+            [
+                5,
+                "abc",
+                [[1, 2]],
+                [[[1j, 0]] * 3],
+                [[[float("nan"), 0]] * 3],
+                [None],
+                [[[1, 2]] * 2],
+            ],
+        ),
+        ("boundary_points", ["abc", 1j, [[1j, 2]] * 10, [[1, 2]], None]),
+        ("K", ["abc", 1j, None]),
+        ("mirror", [None, "m"]),
+        ("image_size", BAD_SIZES[:6]),
+        ("D", ["abc", [1j] * 5]),
+        ("lens", ["bogus", 5]),
+    ):
         for v in pool:
+
             def fn(ctx, pname=pname, v=v):
                 from omnicam import MisalignedHyperbolicCamera
+
                 calibrate = MisalignedHyperbolicCamera.calibrate
                 kw = calib_kw(ctx)
                 kw[pname] = v
                 return calibrate(**kw)
+
             add(f"calibrate({pname}={v!r})", [pname], fn)
 
     def unwarper(ctx, **kw):
         from omnicam import PanoramaView, Unwarper
+
         return Unwarper.from_camera(ctx.cam, {"p": PanoramaView((64, 32))}, **kw)
 
     for v in BAD_IMAGES + ["wrongsize"]:
+
         def fn(ctx, v=v):
             u = unwarper(ctx)
             img = ctx.np.zeros((10, 10, 3), ctx.np.uint8) if v == "wrongsize" else _image(ctx, v)
             return u.unwarp(img)
+
         add(f"Unwarper.unwarp({v!r})", ["frame", "image"], fn)
-    for pname, pool in (("frame_size", ["ab", (float("inf"), 5), (0, 5), 1j]),
-                        ("border_value", ["red", None, [1j], "0"]),
-                        ("interpolation", ["a", 99]), ("m1type", ["a", 7])):
+    for pname, pool in (
+        ("frame_size", ["ab", (float("inf"), 5), (0, 5), 1j]),
+        ("border_value", ["red", None, [1j], "0"]),
+        ("interpolation", ["a", 99]),
+        ("m1type", ["a", 7]),
+    ):
         for v in pool:
-            add(f"Unwarper.from_camera({pname}={v!r})", [pname],
-                lambda ctx, pname=pname, v=v: unwarper(ctx, **{pname: v}))
+            add(
+                f"Unwarper.from_camera({pname}={v!r})",
+                [pname],
+                lambda ctx, pname=pname, v=v: unwarper(ctx, **{pname: v}),
+            )
 
     for fname, pnames in (("save", ["path"]), ("load", ["path"])):
-        for v in [None, 5, 3.5, b"\xff.yaml", "", "x.txt", "/", "/nonexistent/dir/c.yaml",
-                  "/dev/null", "\udcff.yaml", "a\x00b.yaml", ["c.yaml"]]:
+        for v in [
+            None,
+            5,
+            3.5,
+            b"\xff.yaml",
+            "",
+            "x.txt",
+            "/",
+            "/nonexistent/dir/c.yaml",
+            "/dev/null",
+            "\udcff.yaml",
+            "a\x00b.yaml",
+            ["c.yaml"],
+        ]:
+
             def fn(ctx, fname=fname, v=v):
-                if isinstance(v, (str, bytes)) and v not in ("", "/", "/dev/null") \
-                        and not str(v).startswith("/"):
-                    v = os.path.join(ctx.workdir, "api",
-                                     v.decode("latin-1") if isinstance(v, bytes) else v)
+                if (
+                    isinstance(v, (str, bytes))
+                    and v not in ("", "/", "/dev/null")
+                    and not str(v).startswith("/")
+                ):
+                    v = os.path.join(
+                        ctx.workdir, "api", v.decode("latin-1") if isinstance(v, bytes) else v
+                    )
                 if fname == "save":
                     return ctx.cam.save(v)
                 return ctx.omnicam.MisalignedHyperbolicCamera.load(v)
+
             add(f"{fname}({v!r})", pnames + [str(v), "file", "calibration"], fn)
-    for pname, pool in (("K", BAD_ARRAYS[:8]), ("D", ["abc", [1j] * 5, [1, 2]]),
-                        ("image_size", BAD_SIZES[:8])):
+    for pname, pool in (
+        ("K", BAD_ARRAYS[:8]),
+        ("D", ["abc", [1j] * 5, [1, 2]]),
+        ("image_size", BAD_SIZES[:8]),
+    ):
         for v in pool:
+
             def fn(ctx, pname=pname, v=v):
                 kw = dict(K=ctx.cam.K, D=None, image_size=None)
                 kw[pname] = v
-                return ctx.omnicam.write_intrinsics(os.path.join(ctx.workdir, "api", "k.yaml"),
-                                                    **kw)
+                return ctx.omnicam.write_intrinsics(
+                    os.path.join(ctx.workdir, "api", "k.yaml"), **kw
+                )
+
             add(f"write_intrinsics({pname}={v!r})", [pname], fn)
-    for v in [5, "abc", [[1, 2]], [[[1j, 0]] * 3], [[[float("nan"), 0]] * 3], None, [],
-              [[[1, 2, 3]] * 3], [[[10**400, 0]] * 3]]:
-        add(f"write_far_lines({v!r})", ["far_lines"],
+    for v in [
+        5,
+        "abc",
+        [[1, 2]],
+        [[[1j, 0]] * 3],
+        [[[float("nan"), 0]] * 3],
+        None,
+        [],
+        [[[1, 2, 3]] * 3],
+        [[[10**400, 0]] * 3],
+    ]:
+        add(
+            f"write_far_lines({v!r})",
+            ["far_lines"],
             lambda ctx, v=v: ctx.omnicam.write_far_lines(
-                os.path.join(ctx.workdir, "api", "f.json"), v))
+                os.path.join(ctx.workdir, "api", "f.json"), v
+            ),
+        )
     for fname in ("read_intrinsics", "read_far_lines"):
         for v in [None, 5, "/nonexistent.yaml", "/dev/null", "/", "\udcff.json"]:
-            add(f"{fname}({v!r})", ["path", str(v), "file"],
-                lambda ctx, fname=fname, v=v: getattr(ctx.omnicam, fname)(v))
+            add(
+                f"{fname}({v!r})",
+                ["path", str(v), "file"],
+                lambda ctx, fname=fname, v=v: getattr(ctx.omnicam, fname)(v),
+            )
     return cases
 
 
@@ -818,8 +1157,12 @@ class Worker:
         self.log = open(os.path.join(self.workdir, f"worker-{self.user}.log"), "ab")
         self.proc = subprocess.Popen(
             [sys.executable, os.path.abspath(__file__), "--worker", self.workdir, *extra],
-            stdin=subprocess.PIPE, stdout=subprocess.PIPE, stderr=self.log, env=env,
-            cwd=self.workdir)
+            stdin=subprocess.PIPE,
+            stdout=subprocess.PIPE,
+            stderr=self.log,
+            env=env,
+            cwd=self.workdir,
+        )
         line = self._readline(300)
         if not line:
             raise RuntimeError(f"the fuzz worker did not start: {self._log_tail()}")
@@ -924,8 +1267,10 @@ class Runner:
                     f.write(text)
                 self.good[(fmt, tag)] = p
         write_intrinsics(self.path("good", "k.yaml"), cam.K, None, cam.image_size)
-        write_far_lines(self.path("good", "lines.json"),
-                        [np.array([[10.0 * i + j, 5.0 * j] for j in range(5)]) for i in range(3)])
+        write_far_lines(
+            self.path("good", "lines.json"),
+            [np.array([[10.0 * i + j, 5.0 * j] for j in range(5)]) for i in range(3)],
+        )
         image = synthetic.render_environment(cam, supersample=1, seed=1)
         self.image = self.path("good", "mirror.png")
         cv2.imwrite(self.image, image)
@@ -963,8 +1308,13 @@ class Runner:
             if i < n_sem:
                 fields, desc, refuse = semantic_mutant(rnd, fields, fmt)
                 data = render(fields, fmt).encode()
-                if "K" in fields and fields["K"][0] == "mat" and fields["K"][3] in "uwcs" \
-                        and len(fields["K"][4]) == 9 and all(_isnum(x) for x in fields["K"][4]):
+                if (
+                    "K" in fields
+                    and fields["K"][0] == "mat"
+                    and fields["K"][3] in "uwcs"
+                    and len(fields["K"][4]) == 9
+                    and all(_isnum(x) for x in fields["K"][4])
+                ):
                     expect = {"K": [float(x) for x in fields["K"][4]]}
                 cat = f"calibration file ({fmt}, field mutants)"
             else:
@@ -975,11 +1325,24 @@ class Runner:
             with open(p, "wb") as f:
                 f.write(data)
             label = f"{desc} -> {os.path.basename(p)}"
-            self.run(cat, label, {"kind": "load", "what": "calibration", "path": p,
-                                  "refuse": refuse, "desc": desc, "expect": expect})
+            self.run(
+                cat,
+                label,
+                {
+                    "kind": "load",
+                    "what": "calibration",
+                    "path": p,
+                    "refuse": refuse,
+                    "desc": desc,
+                    "expect": expect,
+                },
+            )
             if info_every and count % info_every == 0:
-                self.run("omnicam info on mutants", label,
-                         {"kind": "cli", "argv": ["info", p], "must_name": [os.path.basename(p)]})
+                self.run(
+                    "omnicam info on mutants",
+                    label,
+                    {"kind": "cli", "argv": ["info", p], "must_name": [os.path.basename(p)]},
+                )
             count += 1
         del np
 
@@ -992,38 +1355,60 @@ class Runner:
             K = self.cam.K
             style = rnd.choice(["omnicam", "sample"])
             if style == "omnicam":
-                fields = {"K": ("mat", 3, 3, "d", [_num(v) for v in K.ravel()]),
-                          "D": ("mat", 1, 5, "d", ["-0.1", "0.02", "0.", "0.", "0."]),
-                          "image_size": ("seq", ["500", "500"])}
+                fields = {
+                    "K": ("mat", 3, 3, "d", [_num(v) for v in K.ravel()]),
+                    "D": ("mat", 1, 5, "d", ["-0.1", "0.02", "0.", "0.", "0."]),
+                    "image_size": ("seq", ["500", "500"]),
+                }
             else:
-                fields = {"image_width": ("raw", "500"), "image_height": ("raw", "500"),
-                          "camera_matrix": ("mat", 3, 3, "d", [_num(v) for v in K.ravel()]),
-                          "distortion_coefficients": ("mat", 5, 1, "d", ["0.1"] + ["0."] * 4)}
+                fields = {
+                    "image_width": ("raw", "500"),
+                    "image_height": ("raw", "500"),
+                    "camera_matrix": ("mat", 3, 3, "d", [_num(v) for v in K.ravel()]),
+                    "distortion_coefficients": ("mat", 5, 1, "d", ["0.1"] + ["0."] * 4),
+                }
             if rnd.random() < 0.5:
                 fields, desc, refuse = semantic_mutant(rnd, fields, fmt)
                 data = render(fields, fmt).encode()
-                refuse = refuse and desc.split(":")[0] not in ("model", "posture") \
+                refuse = (
+                    refuse
+                    and desc.split(":")[0] not in ("model", "posture")
                     and desc.split(":")[1] in ("K", "camera_matrix")
+                )
             else:
                 data, desc = byte_mutant(rnd, render(fields, fmt).encode())
                 refuse = False
             p = self.path("intr", f"k{i}.{fmt}")
             with open(p, "wb") as f:
                 f.write(data)
-            self.run(f"intrinsics file ({fmt})", f"{desc} -> {os.path.basename(p)}",
-                     {"kind": "load", "what": "intrinsics", "path": p, "refuse": refuse,
-                      "desc": desc})
+            self.run(
+                f"intrinsics file ({fmt})",
+                f"{desc} -> {os.path.basename(p)}",
+                {"kind": "load", "what": "intrinsics", "path": p, "refuse": refuse, "desc": desc},
+            )
         del np
 
     def far_line_mutants(self, n):
         rnd = self.rnd
         with open(self.path("good", "lines.json"), "rb") as f:
             good = f.read()
-        variants = ["[]", "{}", "5", '"abc"', "[[[1,2],[3,4]]]", "[[[1,2],[3,4],[5]]]",
-                    "[[[1,2],[3,4],[5,NaN]]]", "[[[1,2],[3,4],[5,Infinity]]]",
-                    "[[[1,2],[3,4],[5,1e400]]]", "[[[1,2],[3,4],[5,true]]]",
-                    "[[[1,2],[3,4],[5,\"6\"]]]", "[[[1,2],[3,4],[5,null]]]",
-                    "[[[1,2],[3,4],[5," + "9" * 400 + "]]]", "[[{\"x\":1}]*3]", "null"]
+        variants = [
+            "[]",
+            "{}",
+            "5",
+            '"abc"',
+            "[[[1,2],[3,4]]]",
+            "[[[1,2],[3,4],[5]]]",
+            "[[[1,2],[3,4],[5,NaN]]]",
+            "[[[1,2],[3,4],[5,Infinity]]]",
+            "[[[1,2],[3,4],[5,1e400]]]",
+            "[[[1,2],[3,4],[5,true]]]",
+            '[[[1,2],[3,4],[5,"6"]]]',
+            "[[[1,2],[3,4],[5,null]]]",
+            "[[[1,2],[3,4],[5," + "9" * 400 + "]]]",
+            '[[{"x":1}]*3]',
+            "null",
+        ]
         for i in range(n):
             if i < len(variants):
                 data, desc = variants[i].encode(), f"shape:{variants[i][:30]}"
@@ -1032,8 +1417,11 @@ class Runner:
             p = self.path("lines", f"l{i}.json")
             with open(p, "wb") as f:
                 f.write(data)
-            self.run("far-lines file", f"{desc} -> {os.path.basename(p)}",
-                     {"kind": "load", "what": "far_lines", "path": p})
+            self.run(
+                "far-lines file",
+                f"{desc} -> {os.path.basename(p)}",
+                {"kind": "load", "what": "far_lines", "path": p},
+            )
 
     def special_files(self):
         """Directories, FIFOs, devices, non-UTF-8 names, empty, binary, huge, deep nesting."""
@@ -1057,45 +1445,55 @@ class Runner:
         cases.append(("dangling.yaml", "a dangling link", {"missing": True}))
         cases.append(("missing.yaml", "a missing file", {"missing": True}))
         files = {
-            "empty.yaml": b"", "empty.json": b"", "empty.xml": b"", "spaces.yaml": b"   \n\n",
-            "binary.yaml": bytes(range(256)) * 8, "binary.json": os.urandom(2048),
-            "png.xml": b"\x89PNG\r\n\x1a\n" + os.urandom(200), "nul.yaml": b"%YAML:1.0\n\0\0",
-            "bom.json": b"\xef\xbb\xbf{}", "huge.yaml": b"%YAML:1.0\n#" + b"x" * (2 << 20),
+            "empty.yaml": b"",
+            "empty.json": b"",
+            "empty.xml": b"",
+            "spaces.yaml": b"   \n\n",
+            "binary.yaml": bytes(range(256)) * 8,
+            "binary.json": os.urandom(2048),
+            "png.xml": b"\x89PNG\r\n\x1a\n" + os.urandom(200),
+            "nul.yaml": b"%YAML:1.0\n\0\0",
+            "bom.json": b"\xef\xbb\xbf{}",
+            "huge.yaml": b"%YAML:1.0\n#" + b"x" * (2 << 20),
             "deep.json": deep_text("json", 100000).encode(),
             "deep.xml": deep_text("xml", 30000).encode(),
             "deepflow.yaml": deep_text("yaml_flow", 100000).encode(),
             "deepseq.yaml": deep_text("yaml_seq", 20000).encode(),
             "deepmap.yaml": deep_text("yaml_map", 3000).encode(),
             "deep40.json": deep_text("json", 40).encode(),
-            "base64.yaml": b"%YAML:1.0\n---\nK: [ \"$base64$AAAAAAAA\" ]\n",
-            "model_ff.json": render(base_fields(self.cam), "json").replace(
-                "misaligned_hyperbolic", "misaligned_\udcffhyperbolic").encode(
-                "utf-8", "surrogateescape"),
-            "latin1.yaml": "%YAML:1.0\nmodel: \"caf\xe9\"\n".encode("latin-1"),
+            "base64.yaml": b'%YAML:1.0\n---\nK: [ "$base64$AAAAAAAA" ]\n',
+            "model_ff.json": render(base_fields(self.cam), "json")
+            .replace("misaligned_hyperbolic", "misaligned_\udcffhyperbolic")
+            .encode("utf-8", "surrogateescape"),
+            "latin1.yaml": '%YAML:1.0\nmodel: "caf\xe9"\n'.encode("latin-1"),
             "alias.yaml": b"%YAML:1.0\n---\na: &x 1\nb: *x\n",
             "tags.yaml": b"%YAML:1.0\n---\nK: !!opencv-matrix\n   rows: 3\n   cols: 3\n"
-                         b"   dt: u\n   data: [ 583, 0, 0, 0, 583, 0, 0, 0, 1 ]\n",
+            b"   dt: u\n   data: [ 583, 0, 0, 0, 583, 0, 0, 0, 1 ]\n",
             "longline.json": ("[" + "1," * 200000 + "1]").encode(),
             "crlf.yaml": render(base_fields(self.cam), "yaml").replace("\n", "\r\n").encode(),
             "xmlent.xml": b'<?xml version="1.0"?>\n<!DOCTYPE a [<!ENTITY x "xxxxxxxxxx">]>\n'
-                          b"<opencv_storage><a>&x;&x;&x;</a></opencv_storage>\n",
+            b"<opencv_storage><a>&x;&x;&x;</a></opencv_storage>\n",
             "longkey.yaml": b"%YAML:1.0\n---\n" + b"k" * 100000 + b": 1\n",
-            "longstr.yaml": b"%YAML:1.0\n---\nmodel: \"" + b"m" * 100000 + b"\"\n",
-            "longstr.xml": b'<?xml version="1.0"?>\n<opencv_storage><model>' + b"m" * 100000
-                           + b"</model></opencv_storage>\n",
-            "longtag.xml": b'<?xml version="1.0"?>\n<opencv_storage><' + b"t" * 100000
-                           + b">1</" + b"t" * 100000 + b"></opencv_storage>\n",
-            "manykeys.yaml": b"%YAML:1.0\n---\n" + b"".join(b"k%d: %d\n" % (i, i)
-                                                          for i in range(60000)),
+            "longstr.yaml": b'%YAML:1.0\n---\nmodel: "' + b"m" * 100000 + b'"\n',
+            "longstr.xml": b'<?xml version="1.0"?>\n<opencv_storage><model>'
+            + b"m" * 100000
+            + b"</model></opencv_storage>\n",
+            "longtag.xml": b'<?xml version="1.0"?>\n<opencv_storage><'
+            + b"t" * 100000
+            + b">1</"
+            + b"t" * 100000
+            + b"></opencv_storage>\n",
+            "manykeys.yaml": b"%YAML:1.0\n---\n"
+            + b"".join(b"k%d: %d\n" % (i, i) for i in range(60000)),
             "attrs.xml": b'<?xml version="1.0"?>\n<opencv_storage><K type_id="opencv-matrix" '
-                         + b" ".join(b'a%d="1"' % i for i in range(20000))
-                         + b"><rows>1</rows></K></opencv_storage>\n",
+            + b" ".join(b'a%d="1"' % i for i in range(20000))
+            + b"><rows>1</rows></K></opencv_storage>\n",
             "unclosed.xml": b'<?xml version="1.0"?>\n<opencv_storage><K type_id="opencv-matrix">'
-                            b"<rows>3</rows><cols>3<dt>d</dt><data>1 2 3",
+            b"<rows>3</rows><cols>3<dt>d</dt><data>1 2 3",
             "badmat.yaml": b"%YAML:1.0\n---\nK: !!opencv-matrix\n   rows: 3\n   cols: 3\n"
-                           b"   dt: \"3d\"\n   data: [ 1, 2, 3 ]\n",
+            b'   dt: "3d"\n   data: [ 1, 2, 3 ]\n',
             "rowsbig.yaml": b"%YAML:1.0\n---\nK: !!opencv-matrix\n   rows: 2147483647\n"
-                            b"   cols: 2147483647\n   dt: d\n   data: [ 1, 2, 3 ]\n",
+            b"   cols: 2147483647\n   dt: d\n   data: [ 1, 2, 3 ]\n",
         }
         for name, data in files.items():
             with open(os.path.join(d, name), "wb") as f:
@@ -1111,95 +1509,287 @@ class Runner:
             base = {"path": p, "shown": shown, **extra}
             if name.endswith((".yaml", ".yml", ".xml", ".json")):
                 what = "calibration"
-                self.run("special files", f"load: {desc}",
-                         {"kind": "load", "what": what, "desc": desc, **base})
-                self.run("special files", f"read_intrinsics: {desc}",
-                         {"kind": "load", "what": "intrinsics", "desc": desc, **base})
-                self.run("special files", f"omnicam info: {desc}",
-                         {"kind": "cli", "argv": ["info", p]})
+                self.run(
+                    "special files",
+                    f"load: {desc}",
+                    {"kind": "load", "what": what, "desc": desc, **base},
+                )
+                self.run(
+                    "special files",
+                    f"read_intrinsics: {desc}",
+                    {"kind": "load", "what": "intrinsics", "desc": desc, **base},
+                )
+                self.run(
+                    "special files", f"omnicam info: {desc}", {"kind": "cli", "argv": ["info", p]}
+                )
             if name.endswith(".json") or desc in ("a folder", "a FIFO", "a missing file"):
-                self.run("special files", f"read_far_lines: {desc}",
-                         {"kind": "load", "what": "far_lines", "desc": desc, **base})
+                self.run(
+                    "special files",
+                    f"read_far_lines: {desc}",
+                    {"kind": "load", "what": "far_lines", "desc": desc, **base},
+                )
         # the worker must survive a few dozen corrupt json files in one process
         for i in range(30):
-            src = (files["model_ff.json"] if i % 2
-                   else render(base_fields(self.cam), "json").encode())
+            src = (
+                files["model_ff.json"] if i % 2 else render(base_fields(self.cam), "json").encode()
+            )
             data, desc = byte_mutant(self.rnd, src)
             p = os.path.join(d, f"heap{i}.json")
             with open(p, "wb") as f:
                 f.write(data)
-            self.run("special files", f"corrupt json in one process #{i} ({desc})",
-                     {"kind": "load", "what": "calibration", "path": p})
+            self.run(
+                "special files",
+                f"corrupt json in one process #{i} ({desc})",
+                {"kind": "load", "what": "calibration", "path": p},
+            )
 
     def api(self, limit=None):
         idx = list(range(len(API_CASES)))
         if limit is not None and limit < len(idx):
             idx = sorted(self.rnd.sample(idx, limit))
         for i in idx:
-            self.run("API arguments", f"api #{i} {API_CASES[i][0]}", {"kind": "api", "index": i},
-                     timeout=60)
+            self.run(
+                "API arguments",
+                f"api #{i} {API_CASES[i][0]}",
+                {"kind": "api", "index": i},
+                timeout=60,
+            )
 
     def cli_args(self, n):
         rnd = self.rnd
         img, calib, k = self.image, self.calib, self.path("good", "k.yaml")
         out_png = self.path("cliout", "o.png")
-        toks = ["nan", "inf", "-1", "0", "abc", "1e400", "", "1x1", "0x0", "99999x99999", "ab",
-                "10x", "-5x3", "1e3", "32768x2", "\udcff", "--", "-", "3.5"]
+        toks = [
+            "nan",
+            "inf",
+            "-1",
+            "0",
+            "abc",
+            "1e400",
+            "",
+            "1x1",
+            "0x0",
+            "99999x99999",
+            "ab",
+            "10x",
+            "-5x3",
+            "1e3",
+            "32768x2",
+            "\udcff",
+            "--",
+            "-",
+            "3.5",
+        ]
         templates = [
             ["unwarp", img, "-c", calib, "--panorama", "{t}", "-o", out_png, "--overwrite"],
-            ["unwarp", img, "-c", calib, "--panorama", "128x32", "--elevation", "{t}", "{t}",
-             "-o", out_png, "--overwrite"],
-            ["unwarp", img, "-c", calib, "--perspective", "64x48", "--fov", "{t}", "-o", out_png,
-             "--overwrite"],
-            ["unwarp", img, "-c", calib, "--perspective", "64x48", "--fov", "60", "--yaw", "{t}",
-             "--pitch", "{t}", "-o", out_png, "--overwrite"],
-            ["unwarp", img, "-c", calib, "--panorama", "128x32", "--depth", "{t}", "-o", out_png,
-             "--overwrite"],
-            ["unwarp", img, "-c", calib, "--panorama", "128x32", "--projection", "{t}", "-o",
-             out_png, "--overwrite"],
+            [
+                "unwarp",
+                img,
+                "-c",
+                calib,
+                "--panorama",
+                "128x32",
+                "--elevation",
+                "{t}",
+                "{t}",
+                "-o",
+                out_png,
+                "--overwrite",
+            ],
+            [
+                "unwarp",
+                img,
+                "-c",
+                calib,
+                "--perspective",
+                "64x48",
+                "--fov",
+                "{t}",
+                "-o",
+                out_png,
+                "--overwrite",
+            ],
+            [
+                "unwarp",
+                img,
+                "-c",
+                calib,
+                "--perspective",
+                "64x48",
+                "--fov",
+                "60",
+                "--yaw",
+                "{t}",
+                "--pitch",
+                "{t}",
+                "-o",
+                out_png,
+                "--overwrite",
+            ],
+            [
+                "unwarp",
+                img,
+                "-c",
+                calib,
+                "--panorama",
+                "128x32",
+                "--depth",
+                "{t}",
+                "-o",
+                out_png,
+                "--overwrite",
+            ],
+            [
+                "unwarp",
+                img,
+                "-c",
+                calib,
+                "--panorama",
+                "128x32",
+                "--projection",
+                "{t}",
+                "-o",
+                out_png,
+                "--overwrite",
+            ],
             ["unwarp", "{t}", "-c", calib, "--panorama", "128x32", "-o", out_png, "--overwrite"],
             ["unwarp", img, "-c", "{t}", "--panorama", "128x32", "-o", out_png, "--overwrite"],
             ["unwarp", img, "-c", calib, "--panorama", "128x32", "-o", "{t}", "--overwrite"],
-            ["unwarp", self.video, "-c", calib, "--panorama", "128x32", "-o",
-             self.path("cliout", "o.avi"), "--overwrite", "--quiet", "--max-frames", "{t}"],
-            ["unwarp", self.video, "-c", calib, "--panorama", "128x32", "-o",
-             self.path("cliout", "o.avi"), "--overwrite", "--quiet", "--fourcc", "{t}"],
-            ["calibrate", img, "--mirror", "{t}", "23", "30", "--intrinsics", k, "-o",
-             self.path("cliout", "c.yaml"), "--overwrite"],
-            ["calibrate", img, "--mirror", "28", "23", "30", "--intrinsics", "{t}", "-o",
-             self.path("cliout", "c.yaml"), "--overwrite"],
-            ["calibrate", img, "--mirror", "28", "23", "30", "--intrinsics", k, "--far-lines",
-             "{t}", "-o", self.path("cliout", "c.yaml"), "--overwrite"],
+            [
+                "unwarp",
+                self.video,
+                "-c",
+                calib,
+                "--panorama",
+                "128x32",
+                "-o",
+                self.path("cliout", "o.avi"),
+                "--overwrite",
+                "--quiet",
+                "--max-frames",
+                "{t}",
+            ],
+            [
+                "unwarp",
+                self.video,
+                "-c",
+                calib,
+                "--panorama",
+                "128x32",
+                "-o",
+                self.path("cliout", "o.avi"),
+                "--overwrite",
+                "--quiet",
+                "--fourcc",
+                "{t}",
+            ],
+            [
+                "calibrate",
+                img,
+                "--mirror",
+                "{t}",
+                "23",
+                "30",
+                "--intrinsics",
+                k,
+                "-o",
+                self.path("cliout", "c.yaml"),
+                "--overwrite",
+            ],
+            [
+                "calibrate",
+                img,
+                "--mirror",
+                "28",
+                "23",
+                "30",
+                "--intrinsics",
+                "{t}",
+                "-o",
+                self.path("cliout", "c.yaml"),
+                "--overwrite",
+            ],
+            [
+                "calibrate",
+                img,
+                "--mirror",
+                "28",
+                "23",
+                "30",
+                "--intrinsics",
+                k,
+                "--far-lines",
+                "{t}",
+                "-o",
+                self.path("cliout", "c.yaml"),
+                "--overwrite",
+            ],
             ["calibrate", img, "--mirror", "28", "23", "30", "--intrinsics", k, "-o", "{t}"],
-            ["unwarp", self.video, "-c", calib, "--panorama", "128x32", "-o",
-             self.path("cliout", "o.mp4"), "--overwrite", "--quiet", "--fourcc", "{f}"],
-            ["info", "{t}"], ["{t}"], ["info"], ["calibrate"], ["unwarp"], [],
+            [
+                "unwarp",
+                self.video,
+                "-c",
+                calib,
+                "--panorama",
+                "128x32",
+                "-o",
+                self.path("cliout", "o.mp4"),
+                "--overwrite",
+                "--quiet",
+                "--fourcc",
+                "{f}",
+            ],
+            ["info", "{t}"],
+            ["{t}"],
+            ["info"],
+            ["calibrate"],
+            ["unwarp"],
+            [],
             ["unwarp", img, "-c", calib, "-o", out_png],
-            ["unwarp", img, "-c", calib, "--panorama", "128x32", "--perspective", "64x48",
-             "-o", out_png],
+            [
+                "unwarp",
+                img,
+                "-c",
+                calib,
+                "--panorama",
+                "128x32",
+                "--perspective",
+                "64x48",
+                "-o",
+                out_png,
+            ],
         ]
         for i in range(n):
             tpl = templates[i % len(templates)]
             fourccs = ["H264", "avc1", "XVID", "MJPG", "zzzz", "mp4v", "hev1", "\0\0\0\0"]
-            argv = [rnd.choice(toks) if t == "{t}" else rnd.choice(fourccs) if t == "{f}" else t
-                    for t in tpl]
-            expensive = bool(argv) and argv[0] == "calibrate" and all(
-                t not in toks for t in argv[1:])
-            self.run("CLI arguments", " ".join(map(repr, argv)),
-                     {"kind": "cli", "argv": argv}, timeout=180 if expensive else None)
+            argv = [
+                rnd.choice(toks) if t == "{t}" else rnd.choice(fourccs) if t == "{f}" else t
+                for t in tpl
+            ]
+            expensive = (
+                bool(argv) and argv[0] == "calibrate" and all(t not in toks for t in argv[1:])
+            )
+            self.run(
+                "CLI arguments",
+                " ".join(map(repr, argv)),
+                {"kind": "cli", "argv": argv},
+                timeout=180 if expensive else None,
+            )
 
     def media(self, n_images, n_videos):
         """Corrupt and truncated images and videos through `omnicam unwarp` / `calibrate`."""
         rnd = self.rnd
-        srcs = {ext: open(self.path("good", f"mirror{ext}"), "rb").read()
-                for ext in (".png", ".jpg", ".tif")}
+        srcs = {
+            ext: open(self.path("good", f"mirror{ext}"), "rb").read()
+            for ext in (".png", ".jpg", ".tif")
+        }
         out_png = self.path("mediaout", "o.png")
         for i in range(n_images):
             ext = rnd.choice(list(srcs))
             data = srcs[ext]
             op = rnd.choice(["truncate", "flip", "empty", "garbage", "header", "zero_tail"])
             if op == "truncate":
-                data = data[:rnd.randrange(1, len(data))]
+                data = data[: rnd.randrange(1, len(data))]
             elif op == "flip":
                 b = bytearray(data)
                 for _ in range(rnd.randint(1, 20)):
@@ -1218,31 +1808,69 @@ class Runner:
             with open(p, "wb") as f:
                 f.write(data)
             if i % 8 == 7:
-                argv = ["calibrate", p, "--mirror", "28", "23", "30", "--intrinsics",
-                        self.path("good", "k.yaml"), "-o", self.path("mediaout", "c.yaml"),
-                        "--overwrite", "--no-refine"]
+                argv = [
+                    "calibrate",
+                    p,
+                    "--mirror",
+                    "28",
+                    "23",
+                    "30",
+                    "--intrinsics",
+                    self.path("good", "k.yaml"),
+                    "-o",
+                    self.path("mediaout", "c.yaml"),
+                    "--overwrite",
+                    "--no-refine",
+                ]
             else:
-                argv = ["unwarp", p, "-c", self.calib, "--panorama", "128x32", "-o", out_png,
-                        "--overwrite"]
-            self.run("corrupt images", f"{op} {ext} via {argv[0]}",
-                     {"kind": "cli", "argv": argv, "must_name": [os.path.basename(p)]},
-                     timeout=180)
+                argv = [
+                    "unwarp",
+                    p,
+                    "-c",
+                    self.calib,
+                    "--panorama",
+                    "128x32",
+                    "-o",
+                    out_png,
+                    "--overwrite",
+                ]
+            self.run(
+                "corrupt images",
+                f"{op} {ext} via {argv[0]}",
+                {"kind": "cli", "argv": argv, "must_name": [os.path.basename(p)]},
+                timeout=180,
+            )
         for ext in (".png", ".avi"):
             src = self.image if ext == ".png" else self.video
             bad = os.path.join(os.fsencode(self.path("media", "x")[:-1]), b"in\xff" + ext.encode())
             shutil.copy(src, bad)
             out = self.path("mediaout", "o" + (".png" if ext == ".png" else ".avi"))
-            self.run("corrupt images" if ext == ".png" else "corrupt videos",
-                     f"a non-UTF-8 input name {ext}",
-                     {"kind": "cli", "argv": ["unwarp", os.fsdecode(bad), "-c", self.calib,
-                                              "--panorama", "128x32", "-o", out, "--overwrite",
-                                              "--quiet"]}, timeout=120)
+            self.run(
+                "corrupt images" if ext == ".png" else "corrupt videos",
+                f"a non-UTF-8 input name {ext}",
+                {
+                    "kind": "cli",
+                    "argv": [
+                        "unwarp",
+                        os.fsdecode(bad),
+                        "-c",
+                        self.calib,
+                        "--panorama",
+                        "128x32",
+                        "-o",
+                        out,
+                        "--overwrite",
+                        "--quiet",
+                    ],
+                },
+                timeout=120,
+            )
         vsrc = open(self.video, "rb").read()
         for i in range(n_videos):
             op = rnd.choice(["truncate", "flip", "empty", "garbage", "zero_tail"])
             data = vsrc
             if op == "truncate":
-                data = data[:rnd.randrange(1, len(data))]
+                data = data[: rnd.randrange(1, len(data))]
             elif op == "flip":
                 b = bytearray(data)
                 for _ in range(rnd.randint(1, 40)):
@@ -1259,45 +1887,99 @@ class Runner:
             p = self.path("media", f"vid{i}{ext}")
             with open(p, "wb") as f:
                 f.write(data)
-            self.run("corrupt videos", f"{op} {ext}",
-                     {"kind": "cli", "argv": ["unwarp", p, "-c", self.calib, "--panorama",
-                                              "128x32", "-o", self.path("mediaout", "o.avi"),
-                                              "--overwrite", "--quiet"]}, timeout=120)
+            self.run(
+                "corrupt videos",
+                f"{op} {ext}",
+                {
+                    "kind": "cli",
+                    "argv": [
+                        "unwarp",
+                        p,
+                        "-c",
+                        self.calib,
+                        "--panorama",
+                        "128x32",
+                        "-o",
+                        self.path("mediaout", "o.avi"),
+                        "--overwrite",
+                        "--quiet",
+                    ],
+                },
+                timeout=120,
+            )
 
     def saves(self):
         """Saves onto existing files and into odd places (the old file must survive)."""
         d = os.path.dirname(self.path("saves", "x"))
-        for writer, ext in (("camera", ".yaml"), ("camera", ".xml"), ("camera", ".json"),
-                            ("camera", ".yml"), ("intrinsics", ".yaml"), ("far_lines", ".json")):
+        for writer, ext in (
+            ("camera", ".yaml"),
+            ("camera", ".xml"),
+            ("camera", ".json"),
+            ("camera", ".yml"),
+            ("intrinsics", ".yaml"),
+            ("far_lines", ".json"),
+        ):
             p = os.path.join(d, f"old_{writer}{ext}")
             with open(p, "wb") as f:
                 f.write(b"old content that must survive a failed save\n")
-            self.run("saves", f"{writer}{ext} over an old file",
-                     {"kind": "save", "writer": writer, "path": p, "must_succeed": True})
+            self.run(
+                "saves",
+                f"{writer}{ext} over an old file",
+                {"kind": "save", "writer": writer, "path": p, "must_succeed": True},
+            )
             # a stale temporary of a killed writer is removed by the next save
             stale = os.path.join(d, f".old_{writer}{TEMP_MARK}999999-deadbeef{ext}")
             with open(stale, "wb") as f:
                 f.write(b"half")
-            self.run("saves", f"{writer}{ext} with a stale temporary",
-                     {"kind": "save", "writer": writer, "path": p, "must_succeed": True})
+            self.run(
+                "saves",
+                f"{writer}{ext} with a stale temporary",
+                {"kind": "save", "writer": writer, "path": p, "must_succeed": True},
+            )
             os.makedirs(os.path.join(d, f"dir_{writer}{ext}"), exist_ok=True)
-            self.run("saves", f"{writer}{ext} onto a folder",
-                     {"kind": "save", "writer": writer, "path": os.path.join(
-                         d, f"dir_{writer}{ext}"), "must_fail": True, "desc": "a folder"})
-            self.run("saves", f"{writer}{ext} into a missing folder",
-                     {"kind": "save", "writer": writer, "path": os.path.join(
-                         d, "missing", f"c{ext}"), "must_fail": True, "desc": "missing folder"})
-            self.run("saves", f"{writer}{ext} with a non-UTF-8 name",
-                     {"kind": "save", "writer": writer, "path": os.path.join(
-                         d, f"bad\udcff{ext}"), "desc": "non-UTF-8"})
+            self.run(
+                "saves",
+                f"{writer}{ext} onto a folder",
+                {
+                    "kind": "save",
+                    "writer": writer,
+                    "path": os.path.join(d, f"dir_{writer}{ext}"),
+                    "must_fail": True,
+                    "desc": "a folder",
+                },
+            )
+            self.run(
+                "saves",
+                f"{writer}{ext} into a missing folder",
+                {
+                    "kind": "save",
+                    "writer": writer,
+                    "path": os.path.join(d, "missing", f"c{ext}"),
+                    "must_fail": True,
+                    "desc": "missing folder",
+                },
+            )
+            self.run(
+                "saves",
+                f"{writer}{ext} with a non-UTF-8 name",
+                {
+                    "kind": "save",
+                    "writer": writer,
+                    "path": os.path.join(d, f"bad\udcff{ext}"),
+                    "desc": "non-UTF-8",
+                },
+            )
 
     # -- full disk and read-only folder (root: a small tmpfs) -------------------------------
     def _mount(self, name, size="64k"):
         mnt = self.path("mnt", name, "x")
         mnt = os.path.dirname(mnt)
         try:
-            r = subprocess.run(["mount", "-t", "tmpfs", "-o", f"size={size}", "tmpfs", mnt],
-                               capture_output=True, text=True)
+            r = subprocess.run(
+                ["mount", "-t", "tmpfs", "-o", f"size={size}", "tmpfs", mnt],
+                capture_output=True,
+                text=True,
+            )
         except OSError:  # no mount command
             return None
         if r.returncode != 0:
@@ -1323,10 +2005,13 @@ class Runner:
         import shutil as sh
 
         olds = {}
-        for name, src in (("c.yaml", self.good[("yaml", "")]), ("c.xml", self.good[("xml", "")]),
-                          ("c.json", self.good[("json", "")]),
-                          ("k.yaml", self.path("good", "k.yaml")),
-                          ("lines.json", self.path("good", "lines.json"))):
+        for name, src in (
+            ("c.yaml", self.good[("yaml", "")]),
+            ("c.xml", self.good[("xml", "")]),
+            ("c.json", self.good[("json", "")]),
+            ("k.yaml", self.path("good", "k.yaml")),
+            ("lines.json", self.path("good", "lines.json")),
+        ):
             sh.copy(src, os.path.join(mnt, name))
             olds[name] = os.path.join(mnt, name)
         return olds
@@ -1345,29 +2030,88 @@ class Runner:
                 f.write(b"\x89PNG-old-output")
             self._fill(mnt, leave)
             cat = f"full disk ({leave} B free)"
-            for name, writer in (("c.yaml", "camera"), ("c.xml", "camera"), ("c.json", "camera"),
-                                 ("k.yaml", "intrinsics"), ("lines.json", "far_lines")):
-                self.run(cat, f"save {name}", {"kind": "save", "writer": writer,
-                                               "path": olds[name]})
-            self.run(cat, "omnicam calibrate -o on a full disk", {
-                "kind": "cli_write", "keep": [olds["c.yaml"]],
-                "argv": ["calibrate", self.image, "--mirror", "28", "23", "30", "--intrinsics",
-                         self.path("good", "k.yaml"), "-o", olds["c.yaml"], "--overlay",
-                         self.path("cliout", "ov.png"), "--overwrite", "--no-refine"]},
-                timeout=240)
-            self.run(cat, "omnicam unwarp image on a full disk", {
-                "kind": "cli_write", "keep": [os.path.join(mnt, "old.png")], "must_fail": True,
-                "argv": ["unwarp", self.image, "-c", self.calib, "--panorama", "512x128", "-o",
-                         os.path.join(mnt, "old.png"), "--overwrite"]})
+            for name, writer in (
+                ("c.yaml", "camera"),
+                ("c.xml", "camera"),
+                ("c.json", "camera"),
+                ("k.yaml", "intrinsics"),
+                ("lines.json", "far_lines"),
+            ):
+                self.run(
+                    cat, f"save {name}", {"kind": "save", "writer": writer, "path": olds[name]}
+                )
+            self.run(
+                cat,
+                "omnicam calibrate -o on a full disk",
+                {
+                    "kind": "cli_write",
+                    "keep": [olds["c.yaml"]],
+                    "argv": [
+                        "calibrate",
+                        self.image,
+                        "--mirror",
+                        "28",
+                        "23",
+                        "30",
+                        "--intrinsics",
+                        self.path("good", "k.yaml"),
+                        "-o",
+                        olds["c.yaml"],
+                        "--overlay",
+                        self.path("cliout", "ov.png"),
+                        "--overwrite",
+                        "--no-refine",
+                    ],
+                },
+                timeout=240,
+            )
+            self.run(
+                cat,
+                "omnicam unwarp image on a full disk",
+                {
+                    "kind": "cli_write",
+                    "keep": [os.path.join(mnt, "old.png")],
+                    "must_fail": True,
+                    "argv": [
+                        "unwarp",
+                        self.image,
+                        "-c",
+                        self.calib,
+                        "--panorama",
+                        "512x128",
+                        "-o",
+                        os.path.join(mnt, "old.png"),
+                        "--overwrite",
+                    ],
+                },
+            )
             old_video = os.path.join(mnt, "old.avi")
             with contextlib.suppress(OSError):
                 with open(old_video, "wb") as f:
                     f.write(b"RIFF-old-video")
             if os.path.exists(old_video):
-                self.run(cat, "omnicam unwarp video on a full disk", {
-                    "kind": "cli_write", "keep": [old_video], "must_fail": True,
-                    "argv": ["unwarp", self.video, "-c", self.calib, "--panorama", "256x64",
-                             "-o", old_video, "--overwrite", "--quiet"]}, timeout=120)
+                self.run(
+                    cat,
+                    "omnicam unwarp video on a full disk",
+                    {
+                        "kind": "cli_write",
+                        "keep": [old_video],
+                        "must_fail": True,
+                        "argv": [
+                            "unwarp",
+                            self.video,
+                            "-c",
+                            self.calib,
+                            "--panorama",
+                            "256x64",
+                            "-o",
+                            old_video,
+                            "--overwrite",
+                            "--quiet",
+                        ],
+                    },
+                    timeout=120,
+                )
         # read-only: a tmpfs remounted read-only
         mnt = self._mount("ro", "1m")
         if mnt is None:
@@ -1380,24 +2124,88 @@ class Runner:
             self.skipped.append("read-only folder: remount,ro failed")
             return
         cat = "read-only folder"
-        for name, writer in (("c.yaml", "camera"), ("c.xml", "camera"), ("c.json", "camera"),
-                             ("k.yaml", "intrinsics"), ("lines.json", "far_lines")):
-            self.run(cat, f"save {name}", {"kind": "save", "writer": writer, "path": olds[name],
-                                           "must_fail": True, "desc": "read-only"})
-            self.run(cat, f"load {name}", {"kind": "load", "what": {
-                "camera": "calibration", "intrinsics": "intrinsics",
-                "far_lines": "far_lines"}[writer], "path": olds[name]})
-        self.run(cat, "omnicam calibrate -o into a read-only folder", {
-            "kind": "cli_write", "keep": [olds["c.yaml"]], "must_fail": True,
-            "argv": ["calibrate", self.image, "--mirror", "28", "23", "30", "--intrinsics",
-                     self.path("good", "k.yaml"), "-o", olds["c.yaml"], "--overlay",
-                     self.path("cliout", "ov2.png"), "--overwrite", "--no-refine"]}, timeout=240)
-        self.run(cat, "omnicam unwarp image into a read-only folder", {
-            "kind": "cli_write", "keep": [os.path.join(mnt, "old.png")], "must_fail": True,
-            "argv": ["unwarp", self.image, "-c", self.calib, "--panorama", "128x32", "-o",
-                     os.path.join(mnt, "old.png"), "--overwrite"]})
-        self.run(cat, "omnicam info from a read-only folder",
-                 {"kind": "cli", "argv": ["info", olds["c.yaml"]], "rc": (0,)})
+        for name, writer in (
+            ("c.yaml", "camera"),
+            ("c.xml", "camera"),
+            ("c.json", "camera"),
+            ("k.yaml", "intrinsics"),
+            ("lines.json", "far_lines"),
+        ):
+            self.run(
+                cat,
+                f"save {name}",
+                {
+                    "kind": "save",
+                    "writer": writer,
+                    "path": olds[name],
+                    "must_fail": True,
+                    "desc": "read-only",
+                },
+            )
+            self.run(
+                cat,
+                f"load {name}",
+                {
+                    "kind": "load",
+                    "what": {
+                        "camera": "calibration",
+                        "intrinsics": "intrinsics",
+                        "far_lines": "far_lines",
+                    }[writer],
+                    "path": olds[name],
+                },
+            )
+        self.run(
+            cat,
+            "omnicam calibrate -o into a read-only folder",
+            {
+                "kind": "cli_write",
+                "keep": [olds["c.yaml"]],
+                "must_fail": True,
+                "argv": [
+                    "calibrate",
+                    self.image,
+                    "--mirror",
+                    "28",
+                    "23",
+                    "30",
+                    "--intrinsics",
+                    self.path("good", "k.yaml"),
+                    "-o",
+                    olds["c.yaml"],
+                    "--overlay",
+                    self.path("cliout", "ov2.png"),
+                    "--overwrite",
+                    "--no-refine",
+                ],
+            },
+            timeout=240,
+        )
+        self.run(
+            cat,
+            "omnicam unwarp image into a read-only folder",
+            {
+                "kind": "cli_write",
+                "keep": [os.path.join(mnt, "old.png")],
+                "must_fail": True,
+                "argv": [
+                    "unwarp",
+                    self.image,
+                    "-c",
+                    self.calib,
+                    "--panorama",
+                    "128x32",
+                    "-o",
+                    os.path.join(mnt, "old.png"),
+                    "--overwrite",
+                ],
+            },
+        )
+        self.run(
+            cat,
+            "omnicam info from a read-only folder",
+            {"kind": "cli", "argv": ["info", olds["c.yaml"]], "rc": (0,)},
+        )
 
     def permissions(self):
         if os.geteuid() != 0:
@@ -1420,19 +2228,39 @@ class Runner:
                 p = os.path.join(d, f"secret{ext}")
                 shutil.copy(self.good[(ext[1:], "")], p)
                 os.chmod(p, 0o000)
-                self.run("permissions (user nobody)", f"load unreadable {ext}",
-                         {"kind": "load", "what": "calibration", "path": p}, worker=worker)
-                self.run("permissions (user nobody)", f"read_intrinsics unreadable {ext}",
-                         {"kind": "load", "what": "intrinsics", "path": p}, worker=worker)
+                self.run(
+                    "permissions (user nobody)",
+                    f"load unreadable {ext}",
+                    {"kind": "load", "what": "calibration", "path": p},
+                    worker=worker,
+                )
+                self.run(
+                    "permissions (user nobody)",
+                    f"read_intrinsics unreadable {ext}",
+                    {"kind": "load", "what": "intrinsics", "path": p},
+                    worker=worker,
+                )
                 p2 = os.path.join(d, f"old{ext}")
                 shutil.copy(self.good[(ext[1:], "")], p2)
                 os.chmod(p2, 0o644)
-                self.run("permissions (user nobody)", f"save into a folder not writable {ext}",
-                         {"kind": "save", "writer": "camera", "path": p2, "must_fail": True,
-                          "desc": "no write permission"}, worker=worker)
-            self.run("permissions (user nobody)", "omnicam info unreadable",
-                     {"kind": "cli", "argv": ["info", os.path.join(d, "secret.yaml")]},
-                     worker=worker)
+                self.run(
+                    "permissions (user nobody)",
+                    f"save into a folder not writable {ext}",
+                    {
+                        "kind": "save",
+                        "writer": "camera",
+                        "path": p2,
+                        "must_fail": True,
+                        "desc": "no write permission",
+                    },
+                    worker=worker,
+                )
+            self.run(
+                "permissions (user nobody)",
+                "omnicam info unreadable",
+                {"kind": "cli", "argv": ["info", os.path.join(d, "secret.yaml")]},
+                worker=worker,
+            )
         finally:
             worker.close()
 
@@ -1454,65 +2282,134 @@ class Runner:
             shutil.copy(self.video, out)  # an earlier complete output
             before = _snapshot(out)
             delay = rnd.uniform(0.0, 6.0)
-            argv = ["unwarp", self.long_video, "-c", self.calib, "--panorama", "512x128", "-o",
-                    out, "--overwrite", "--quiet"]
-            self._interrupt(f"SIGINT during unwarp (video, --overwrite) at {delay:.2f} s",
-                            [*command, *argv], env, delay, d,
-                            keep={out: before})
+            argv = [
+                "unwarp",
+                self.long_video,
+                "-c",
+                self.calib,
+                "--panorama",
+                "512x128",
+                "-o",
+                out,
+                "--overwrite",
+                "--quiet",
+            ]
+            self._interrupt(
+                f"SIGINT during unwarp (video, --overwrite) at {delay:.2f} s",
+                [*command, *argv],
+                env,
+                delay,
+                d,
+                keep={out: before},
+            )
         for i in range(n_calib):
             out = os.path.join(d, f"c{i}.yaml")
             shutil.copy(self.calib, out)
             before = _snapshot(out)
             delay = rnd.uniform(0.0, 8.0)
-            argv = ["calibrate", self.image, "--mirror", "28", "23", "30", "--intrinsics",
-                    self.path("good", "k.yaml"), "-o", out, "--overlay",
-                    os.path.join(d, f"ov{i}.png"), "--overwrite"]
-            self._interrupt(f"SIGINT during calibrate at {delay:.2f} s",
-                            [*command, *argv], env, delay, d,
-                            keep={out: before}, new_ok=True, loads=out)
-        script = ("import sys, numpy as np\nfrom omnicam import synthetic\n"
-                  "cam = synthetic.misaligned_rig()\nother = cam.replace(D=[0.1, 0, 0, 0, 0])\n"
-                  "cam.save(sys.argv[1])\nprint('ready', flush=True)\n"
-                  "i = 0\ntry:\n    while True:\n"
-                  "        (cam if i % 2 else other).save(sys.argv[1])\n"
-                  "        i += 1\nexcept KeyboardInterrupt:\n    print('interrupted', i)\n")
+            argv = [
+                "calibrate",
+                self.image,
+                "--mirror",
+                "28",
+                "23",
+                "30",
+                "--intrinsics",
+                self.path("good", "k.yaml"),
+                "-o",
+                out,
+                "--overlay",
+                os.path.join(d, f"ov{i}.png"),
+                "--overwrite",
+            ]
+            self._interrupt(
+                f"SIGINT during calibrate at {delay:.2f} s",
+                [*command, *argv],
+                env,
+                delay,
+                d,
+                keep={out: before},
+                new_ok=True,
+                loads=out,
+            )
+        script = (
+            "import sys, numpy as np\nfrom omnicam import synthetic\n"
+            "cam = synthetic.misaligned_rig()\nother = cam.replace(D=[0.1, 0, 0, 0, 0])\n"
+            "cam.save(sys.argv[1])\nprint('ready', flush=True)\n"
+            "i = 0\ntry:\n    while True:\n"
+            "        (cam if i % 2 else other).save(sys.argv[1])\n"
+            "        i += 1\nexcept KeyboardInterrupt:\n    print('interrupted', i)\n"
+        )
         for i in range(n_save):
             ext = rnd.choice([".yaml", ".xml", ".json"])
             out = os.path.join(d, f"s{i}{ext}")
             shutil.copy(self.good[(ext[1:], "")], out)
             delay = rnd.uniform(0.5, 4.0)
-            self._interrupt(f"SIGINT during a loop of saves ({ext}) at {delay:.2f} s",
-                            [sys.executable, "-c", script, out], env, delay, d,
-                            keep={out: None}, rc=(0,), loads=out, wait_ready=True)
+            self._interrupt(
+                f"SIGINT during a loop of saves ({ext}) at {delay:.2f} s",
+                [sys.executable, "-c", script, out],
+                env,
+                delay,
+                d,
+                keep={out: None},
+                rc=(0,),
+                loads=out,
+                wait_ready=True,
+            )
 
     def sigkill_saves(self, n):
         """SIGKILL mid-save: the file stays loadable; the next save removes the temporary."""
         rnd = self.rnd
         env = dict(os.environ, PYTHONPATH=REPO)
-        script = ("import sys\nfrom omnicam import synthetic\n"
-                  "cam = synthetic.misaligned_rig()\nother = cam.replace(D=[0.1, 0, 0, 0, 0])\n"
-                  "cam.save(sys.argv[1])\nprint('ready', flush=True)\ni = 0\nwhile True:\n"
-                  "    (cam if i % 2 else other).save(sys.argv[1])\n    i += 1\n")
+        script = (
+            "import sys\nfrom omnicam import synthetic\n"
+            "cam = synthetic.misaligned_rig()\nother = cam.replace(D=[0.1, 0, 0, 0, 0])\n"
+            "cam.save(sys.argv[1])\nprint('ready', flush=True)\ni = 0\nwhile True:\n"
+            "    (cam if i % 2 else other).save(sys.argv[1])\n    i += 1\n"
+        )
         for i in range(n):
             ext = rnd.choice([".yaml", ".xml", ".json"])
             d = os.path.dirname(self.path("sigkill", f"k{i}", "x"))
             out = os.path.join(d, f"c{ext}")
-            p = subprocess.Popen([sys.executable, "-c", script, out], stdout=subprocess.PIPE,
-                                 stderr=subprocess.PIPE, env=env)
+            p = subprocess.Popen(
+                [sys.executable, "-c", script, out],
+                stdout=subprocess.PIPE,
+                stderr=subprocess.PIPE,
+                env=env,
+            )
             p.stdout.readline()
             time.sleep(rnd.uniform(0.0, 1.0))
             p.kill()
             p.communicate()
-            result = self.worker.run({"kind": "save", "writer": "camera", "path": out,
-                                      "must_succeed": True, "loads_first": True},
-                                     self.args.timeout)
+            result = self.worker.run(
+                {
+                    "kind": "save",
+                    "writer": "camera",
+                    "path": out,
+                    "must_succeed": True,
+                    "loads_first": True,
+                },
+                self.args.timeout,
+            )
             self.record("SIGKILL during save", f"{ext} #{i}", result)
 
-    def _interrupt(self, label, cmd, env, delay, folder, keep, new_ok=False, rc=(0, 130),
-                   loads=None, wait_ready=False):
+    def _interrupt(
+        self,
+        label,
+        cmd,
+        env,
+        delay,
+        folder,
+        keep,
+        new_ok=False,
+        rc=(0, 130),
+        loads=None,
+        wait_ready=False,
+    ):
         t0 = time.perf_counter()
-        p = subprocess.Popen(cmd, stdout=subprocess.PIPE, stderr=subprocess.PIPE, env=env,
-                             cwd=folder)
+        p = subprocess.Popen(
+            cmd, stdout=subprocess.PIPE, stderr=subprocess.PIPE, env=env, cwd=folder
+        )
         if wait_ready:
             p.stdout.readline()
         time.sleep(delay)
@@ -1529,8 +2426,9 @@ class Runner:
         lines = [ln for ln in err.splitlines() if ln.strip()]
         # a SIGINT after the work is done (the outputs written and announced) arrives during
         # the interpreter's shutdown, where Python dies by the signal itself: not a fault
-        done_then_killed = (p.returncode == -signal.SIGINT and not lines
-                            and b"wrote " in out and new_ok)
+        done_then_killed = (
+            p.returncode == -signal.SIGINT and not lines and b"wrote " in out and new_ok
+        )
         if done_then_killed:
             detail = "interrupted after it wrote its outputs (during interpreter shutdown)"
         elif p.returncode not in rc:
@@ -1543,9 +2441,12 @@ class Runner:
         for path, before in keep.items():
             now = _snapshot(path)
             if before is not None and now != before and not (p.returncode == 0 or new_ok):
-                status, detail = "bad", f"rc {p.returncode}: the earlier output " \
-                    f"{os.path.basename(path)} was replaced ({len(before)} -> " \
-                    f"{len(now or b'')} bytes)"
+                status, detail = (
+                    "bad",
+                    f"rc {p.returncode}: the earlier output "
+                    f"{os.path.basename(path)} was replaced ({len(before)} -> "
+                    f"{len(now or b'')} bytes)",
+                )
         if loads:
             import omnicam
 
@@ -1569,8 +2470,10 @@ class Runner:
             self.setup()
             self.worker.start()
             steps = [
-                ("file mutants", lambda: self.file_mutants(60 if q else 400, 40 if q else 600,
-                                                           10 if q else 5)),
+                (
+                    "file mutants",
+                    lambda: self.file_mutants(60 if q else 400, 40 if q else 600, 10 if q else 5),
+                ),
                 ("intrinsics", lambda: self.intrinsics_mutants(20 if q else 120)),
                 ("far lines", lambda: self.far_line_mutants(20 if q else 80)),
                 ("special files", self.special_files),
@@ -1590,10 +2493,12 @@ class Runner:
                 try:
                     step()
                 except Exception:  # noqa: BLE001 - a harness fault: bad, and go on
-                    self.record("harness", name, {"status": "bad",
-                                                  "detail": traceback.format_exc()[-600:]})
-                print(f"[{name}: {self.n - n0} cases in {time.perf_counter() - s0:.0f} s]",
-                      flush=True)
+                    self.record(
+                        "harness", name, {"status": "bad", "detail": traceback.format_exc()[-600:]}
+                    )
+                print(
+                    f"[{name}: {self.n - n0} cases in {time.perf_counter() - s0:.0f} s]", flush=True
+                )
         finally:
             self.worker.close()
             for mnt in reversed(self.mounts):

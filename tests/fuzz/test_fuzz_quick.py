@@ -2,17 +2,18 @@
 
 The full run is ``python tests/fuzz/run.py`` (>= 1500 cases); see its docstring.
 """
+
 import os
 import subprocess
 import sys
-
 
 RUN = os.path.join(os.path.dirname(os.path.abspath(__file__)), "run.py")
 
 
 def test_quick_fuzz_run_has_no_bad_outcome():
-    r = subprocess.run([sys.executable, RUN, "--quick"], capture_output=True, text=True,
-                       timeout=900)
+    r = subprocess.run(
+        [sys.executable, RUN, "--quick"], capture_output=True, text=True, timeout=900
+    )
     assert "omnicam fuzz:" in r.stdout, r.stdout + r.stderr
     total = [ln for ln in r.stdout.splitlines() if ln.strip().startswith("total")]
     assert total and int(total[0].split()[2]) >= 300, r.stdout  # a few hundred cases ran
