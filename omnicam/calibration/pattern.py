@@ -750,16 +750,73 @@ def calibrate_pattern(
         edge-on (coplanar with the camera), corner arrays that do not match ``pattern_size``;
         the message says what to change.
     """
+    cols, rows, square, D, free_d, n_d, images, image_points, image_size = _check_arguments(
+        images,
+        pattern_size,
+        square_size,
+        mirror,
+        D,
+        dist_model,
+        image_points,
+        image_size,
+        camera_cls,
+    )
+    rim_fit, rim_seen, rim_image = _rim_step(images, boundary_points, image_size)
+    lens_px, lens_note = _reflection_step(lens, images, rim_image, rim_fit)
+    cam0 = _start_step(K, mirror, rim_fit, rim_seen, D, image_size, camera_cls)
+    pts, poses, dropped, obj = _corner_step(images, image_points, (cols, rows), square, cam0)
+    adj, sol, used, vr, rim_px, warns = _adjustment_step(
+        cam0,
+        mirror,
+        obj,
+        pts,
+        poses,
+        dropped,
+        rim_seen,
+        free_d,
+        n_d,
+        fit_skew,
+        refine_mirror_shape,
+        camera_cls,
+        lens_px,
+        lens_z,
+        f_scale,
+        drop_outlier_views,
+        outlier_factor,
+        outlier_min_px,
+    )
+    return _report_step(
+        adj,
+        sol,
+        used,
+        vr,
+        rim_px,
+        warns,
+        mirror,
+        obj,
+        pts,
+        dropped,
+        cam0,
+        image_size,
+        cols * rows,
+        refine_mirror_shape,
+        lens_note,
+    )
+
+
+# -- the steps of calibrate_pattern ----------------------------------------------------------
+def _check_arguments(
+    images, pattern_size, square_size, mirror, D, dist_model, image_points, image_size, camera_cls
+):
+    """Validated arguments: ``(cols, rows, square, D, free_d, n_d, images, image_points,
+    image_size)``; ``ValueError`` naming what to change."""
     from ..mirror import HyperbolicMirror
-    from . import calibrate
-    from .rim import detect_rim, fit_rim
 
     if camera_cls is None:
         raise ValueError(
             "camera_cls is required (omnicam.calibrate_pattern passes the camera class)"
         )
     cols, rows = _pattern(pattern_size)
-    n_corners = cols * rows
     try:
         square = float(square_size)
     except (TypeError, ValueError):
@@ -772,7 +829,7 @@ def calibrate_pattern(
         )
     if dist_model not in DIST_MODELS:
         raise ValueError(f"dist_model must be one of {sorted(DIST_MODELS)}, got {dist_model!r}")
-    from .._validate import validate_D, validate_image_size, validate_K
+    from .._validate import validate_D
 
     D = validate_D(D)
     if D is not None and D.size not in (4, 5):
@@ -787,6 +844,15 @@ def calibrate_pattern(
         n_d = 5 if (4 in free_d or (D is not None and D.size == 5)) else 4
     if D is not None and D.size < n_d:
         D = np.concatenate([D, np.zeros(n_d - D.size)])
+    images, image_points, image_size = _images_and_size(images, image_points, image_size)
+    return cols, rows, square, D, free_d, n_d, images, image_points, image_size
+
+
+def _images_and_size(images, image_points, image_size):
+    """The images as arrays (paths read), ``image_points`` as a list matching them, and the
+    one ``image_size`` they share."""
+    from .._validate import validate_image_size
+
     if images is None:
         images = []
     elif isinstance(images, (str, os.PathLike)) or (
@@ -819,7 +885,13 @@ def calibrate_pattern(
                 f"{image_size[0]}x{image_size[1]}: all images must come from the "
                 f"same camera mode"
             )
-    warns = []
+    return images, image_points, image_size
+
+
+def _rim_step(images, boundary_points, image_size):
+    """1. The rim: ``(rim_fit, rim_seen, rim_image)`` from the points or the first image that
+    shows it."""
+    from .rim import detect_rim, fit_rim
 
     # 1. the rim
     rim_image = 0
@@ -847,6 +919,11 @@ def calibrate_pattern(
         rim_seen = np.asarray(rim_fit.points, np.float64)
     if image_size is None:
         raise ValueError("image_size (width, height) is needed when no image is given")
+    return rim_fit, rim_seen, rim_image
+
+
+def _reflection_step(lens, images, rim_image, rim_fit):
+    """The camera's own reflection: ``(outline pixels or None, note)``."""
     # the camera's own reflection (its outline pins the tilt against the principal point)
     lens_px, lens_note = None, "not used (lens=None)"
     if isinstance(lens, str):
@@ -875,6 +952,14 @@ def calibrate_pattern(
             )
         lens_note = f"used: {len(lens_px)} outline points given"
 
+    return lens_px, lens_note
+
+
+def _start_step(K, mirror, rim_fit, rim_seen, D, image_size, camera_cls):
+    """2. The start: ``K`` from the rim's size unless given, the posture by Chen's method."""
+    from .._validate import validate_K
+    from . import calibrate
+
     # 2. the start: K from the rim, posture by Chen's method
     if K is None:
         r_px = math.sqrt(float(rim_fit.axes[0] * rim_fit.axes[1]))
@@ -897,6 +982,14 @@ def calibrate_pattern(
     except ValueError as e:
         raise ValueError(f"the posture could not be started from the rim: {e}") from None
 
+    return cam0
+
+
+def _corner_step(images, image_points, pattern_size, square, cam0):
+    """3. The corners of every view, checked, and each board's start pose from its rays:
+    ``(pts, poses, dropped, obj)``."""
+    cols, rows = pattern_size
+    n_corners = cols * rows
     # 3. the corners
     dropped = {}
     if image_points is None:
@@ -951,6 +1044,33 @@ def calibrate_pattern(
             f"board around the mirror"
         )
 
+    return pts, poses, dropped, obj
+
+
+def _adjustment_step(
+    cam0,
+    mirror,
+    obj,
+    pts,
+    poses,
+    dropped,
+    rim_seen,
+    free_d,
+    n_d,
+    fit_skew,
+    refine_mirror_shape,
+    camera_cls,
+    lens_px,
+    lens_z,
+    f_scale,
+    drop_outlier_views,
+    outlier_factor,
+    outlier_min_px,
+):
+    """4. The bundle adjustment in two stages, views that stand out reported (and dropped):
+    ``(adj, sol, used, view_rms, rim_px, warnings)``."""
+    warns = []
+    used = sorted(poses)
     # 4. the bundle adjustment
     rim_px = rim_seen
     if len(rim_px) > _N_RIM:
@@ -984,7 +1104,6 @@ def calibrate_pattern(
         return adj, adj.solve(x0, f_scale=f_scale)
 
     adj, sol = adjust(used, [np.concatenate(poses[i]) for i in used])
-    nv_rows = adj.n_rows_view
 
     def view_rms(sol, ids):
         r = adj.corner_residuals(sol.x).reshape(len(ids), -1)
@@ -1014,6 +1133,29 @@ def calibrate_pattern(
         elif drop_outlier_views:
             warns.append("too few views would remain: the outliers were kept")
 
+    return adj, sol, used, vr, rim_px, warns
+
+
+def _report_step(
+    adj,
+    sol,
+    used,
+    vr,
+    rim_px,
+    warns,
+    mirror,
+    obj,
+    pts,
+    dropped,
+    cam0,
+    image_size,
+    n_corners,
+    refine_mirror_shape,
+    lens_note,
+):
+    """5. The camera in the gauge and the :class:`PatternReport` with the a posteriori
+    standard deviations and the warnings."""
+    nv_rows = adj.n_rows_view
     # 5. the report
     camera, gauged = adj.to_gauge(sol.x, image_size)
     r_all = adj.residuals(sol.x)
