@@ -685,7 +685,8 @@ def init_panorama_maps(
         ``(lo, hi)`` in degrees, ``lo < hi``, inside (-90, 90) for ``"cylindrical"`` and
         [-90, 90] for ``"equirectangular"``. ``None``: the band the mirror sees
         (:func:`visible_elevation_range`), its lower end raised to
-        ``CYLINDRICAL_MIN_ELEVATION`` (-60 deg) for ``"cylindrical"``.
+        ``CYLINDRICAL_MIN_ELEVATION`` (-60 deg), which leaves out the camera's own reflection
+        around the nadir (a lens barrel of 30 mm on the default rigs stays below it).
     projection : {"cylindrical", "equirectangular"}
     R : (3, 3) array_like or None
         Rotation of the panorama frame (as for perspective views); ``None`` is the identity,
@@ -728,8 +729,8 @@ def init_panorama_maps(
     depth = _check_depth(depth)
     if elevation_range is None:
         lo, hi = visible_elevation_range(camera)
+        lo = max(lo, CYLINDRICAL_MIN_ELEVATION)  # below it: the camera's own reflection
         if projection == "cylindrical":
-            lo = max(lo, CYLINDRICAL_MIN_ELEVATION)
             hi = min(hi, 89.0)
         if not (math.isfinite(lo) and math.isfinite(hi) and lo < hi):
             raise ValueError(

@@ -106,8 +106,7 @@ def test_panorama_table_within_tolerance_of_exact_projection(rig, projection, de
         size, projection=projection, m1type=cv2.CV_32FC1, depth=depth
     )
     lo, hi = views.visible_elevation_range(rig)
-    if projection == "cylindrical":
-        lo = max(lo, views.CYLINDRICAL_MIN_ELEVATION)
+    lo = max(lo, views.CYLINDRICAL_MIN_ELEVATION)  # the default leaves out the camera itself
     ref = exact(rig, panorama_dirs(size, lo, hi, projection), depth)
     assert_matches_exact(rig, mapx, mapy, ref)
 
@@ -467,10 +466,10 @@ def test_random_rigs_keep_the_bound(seed):
     cam = synthetic.random_misaligned_rig(rng, max_tilt_deg=5.0, max_offset_mm=5.0)
     depth = None if seed % 2 else float(rng.uniform(200.0, 3000.0))
     size = (768, 192)
+    lo, hi = views.visible_elevation_range(cam)  # the whole band, the nadir included
     mapx, mapy = cam.init_panorama_maps(
-        size, projection="equirectangular", m1type=cv2.CV_32FC1, depth=depth
+        size, (lo, hi), projection="equirectangular", m1type=cv2.CV_32FC1, depth=depth
     )
-    lo, hi = views.visible_elevation_range(cam)
     assert_matches_exact(
         cam, mapx, mapy, exact(cam, panorama_dirs(size, lo, hi, "equirectangular"), depth)
     )
