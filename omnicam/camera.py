@@ -23,6 +23,7 @@ import cv2
 import numpy as np
 
 from . import raytrace
+from ._typing import ArrayLike, FloatArray, Maps, PathLike, Size
 from ._validate import finite_array, validate_D, validate_image_size, validate_K, validate_posture
 from .gauge import canonical_rvec
 from .io import MODEL_NAME
@@ -39,7 +40,7 @@ __all__ = [
 ]  # the last five re-exported for callers
 
 
-def scale_K(K, from_size, to_size):
+def scale_K(K: ArrayLike, from_size: Size, to_size: Size) -> FloatArray:
     """``K`` of the same sensor imaged at another resolution.
 
     Pixel centres sit at integer coordinates, so ``x' = sx (x + 0.5) - 0.5`` with
@@ -91,7 +92,15 @@ class MisalignedHyperbolicCamera:
 
     __slots__ = ("_K", "_D", "_mirror", "_rvec", "_tvec", "_R", "_C", "_image_size", "_viewpoint")
 
-    def __init__(self, K, mirror, rvec, tvec, D=None, image_size=None):
+    def __init__(
+        self,
+        K: ArrayLike,
+        mirror: HyperbolicMirror,
+        rvec: ArrayLike,
+        tvec: ArrayLike,
+        D: ArrayLike | None = None,
+        image_size: Size | None = None,
+    ) -> None:
         if not isinstance(mirror, HyperbolicMirror):
             raise ValueError(f"mirror must be a HyperbolicMirror, got {type(mirror).__name__}")
         self._K = _readonly(validate_K(K))
@@ -116,7 +125,14 @@ class MisalignedHyperbolicCamera:
 
     # -- constructors -------------------------------------------------------------------
     @classmethod
-    def aligned(cls, mirror, f_C, x_c, y_c, image_size=None):
+    def aligned(
+        cls,
+        mirror: HyperbolicMirror,
+        f_C: float,
+        x_c: float,
+        y_c: float,
+        image_size: Size | None = None,
+    ) -> MisalignedHyperbolicCamera:
         """The paper's aligned HyperOmni rig (eqs. 2-5), the "uncalibrated" baseline.
 
         Camera at the lower focus with axes parallel to the mirror's: ``rvec = 0``,
@@ -125,7 +141,7 @@ class MisalignedHyperbolicCamera:
         K = np.array([[f_C, 0.0, x_c], [0.0, f_C, y_c], [0.0, 0.0, 1.0]], dtype=np.float64)
         return cls(K, mirror, np.zeros(3), np.array([0.0, 0.0, mirror.c]), image_size=image_size)
 
-    def scaled(self, image_size):
+    def scaled(self, image_size: Size) -> MisalignedHyperbolicCamera:
         """The same rig imaged at another resolution of the same sensor.
 
         ``K`` is scaled by ``sx = w'/w``, ``sy = h'/h`` about pixel centres at integer
@@ -145,7 +161,7 @@ class MisalignedHyperbolicCamera:
             new,
         )
 
-    def replace(self, **changes):
+    def replace(self, **changes) -> MisalignedHyperbolicCamera:
         """A copy with some of ``K, mirror, rvec, tvec, D, image_size`` changed."""
         args = dict(
             K=self._K,
@@ -173,7 +189,7 @@ class MisalignedHyperbolicCamera:
     image_size = property(lambda self: self._image_size, doc="(width, height) or None.")
 
     @property
-    def camera_center(self):
+    def camera_center(self) -> FloatArray:
         """(3,) camera centre in the mirror frame, ``-R^T tvec`` (``F_M`` of eq. 17)."""
         return self._C
 
@@ -203,7 +219,7 @@ class MisalignedHyperbolicCamera:
     __hash__ = None
 
     # -- the model ----------------------------------------------------------------------
-    def unproject(self, image_points):
+    def unproject(self, image_points: ArrayLike) -> tuple[FloatArray, FloatArray]:
         """Reflected rays of pixels by ray tracing (eqs. 6-19).
 
         Parameters
@@ -223,7 +239,9 @@ class MisalignedHyperbolicCamera:
         origins, directions = raytrace.trace(pts, self._K, self._D, self._R, self._C, self._mirror)
         return restore(origins), restore(directions)
 
-    def project(self, object_points, rvec=None, tvec=None):
+    def project(
+        self, object_points: ArrayLike, rvec: ArrayLike | None = None, tvec: ArrayLike | None = None
+    ) -> FloatArray:
         """Exact non-central projection of 3-D points to pixels.
 
         For each point the pixel whose traced ray (:meth:`unproject`) passes through it, to
@@ -256,7 +274,7 @@ class MisalignedHyperbolicCamera:
             )
         )
 
-    def project_directions(self, directions):
+    def project_directions(self, directions: ArrayLike) -> FloatArray:
         """Project points at infinity: the pixel whose reflected ray has the given direction.
 
         Parameters
@@ -277,7 +295,7 @@ class MisalignedHyperbolicCamera:
         )
 
     # -- the rim and the viewpoint ------------------------------------------------------
-    def rim_image_points(self, n=360):
+    def rim_image_points(self, n: int = 360) -> FloatArray:
         """Pixels of ``n`` points of the rim circle, ``(n, 2)``: the ellipse of section 3.1."""
         rim = self._mirror.rim_points(n)
         xc = rim @ self._R.T + self._tvec
@@ -306,7 +324,7 @@ class MisalignedHyperbolicCamera:
             out.append(pix[np.isfinite(d[:, 0])])
         return np.concatenate(out)
 
-    def best_fit_viewpoint(self):
+    def best_fit_viewpoint(self) -> tuple[FloatArray, float]:
         """The point closest, in mean squared distance, to the rays of all mirror pixels.
 
         Closed-form least squares (section 4.1): with ``M_i = I - d_i d_i^T``,
@@ -339,17 +357,17 @@ class MisalignedHyperbolicCamera:
     @classmethod
     def calibrate(
         cls,
-        K,
-        mirror,
-        image=None,
-        boundary_points=None,
-        far_lines=None,
-        D=None,
-        image_size=None,
-        refine=True,
-        lens="auto",
+        K: ArrayLike,
+        mirror: HyperbolicMirror,
+        image: np.ndarray | None = None,
+        boundary_points: ArrayLike | None = None,
+        far_lines: list | None = None,
+        D: ArrayLike | None = None,
+        image_size: Size | None = None,
+        refine: bool = True,
+        lens: str | bool | ArrayLike | None = "auto",
         **options,
-    ):
+    ) -> tuple:
         """Mirror posture from one image: rim, Chen's method, selection, refinement, checks.
 
         See :func:`omnicam.calibration.calibrate` for ``options`` (``lens_r``, ``lens_z``,
@@ -412,14 +430,14 @@ class MisalignedHyperbolicCamera:
 
     def init_panorama_maps(
         self,
-        size,
-        elevation_range=None,
-        projection="cylindrical",
-        R=None,
-        m1type=cv2.CV_16SC2,
-        depth=None,
-        viewpoint=None,
-    ):
+        size: Size,
+        elevation_range: tuple[float, float] | None = None,
+        projection: str = "cylindrical",
+        R: ArrayLike | None = None,
+        m1type: int = cv2.CV_16SC2,
+        depth: float | None = None,
+        viewpoint: ArrayLike | None = None,
+    ) -> Maps:
         """``cv2.remap`` tables of a panorama; see :func:`omnicam.views.init_panorama_maps`."""
         from .views import init_panorama_maps
 
@@ -435,8 +453,14 @@ class MisalignedHyperbolicCamera:
         )
 
     def init_perspective_maps(
-        self, K_new, size, R=None, m1type=cv2.CV_16SC2, depth=None, viewpoint=None
-    ):
+        self,
+        K_new: ArrayLike,
+        size: Size,
+        R: ArrayLike | None = None,
+        m1type: int = cv2.CV_16SC2,
+        depth: float | None = None,
+        viewpoint: ArrayLike | None = None,
+    ) -> Maps:
         """``cv2.remap`` tables of a virtual perspective view; see
         :func:`omnicam.views.init_perspective_maps`."""
         from .views import init_perspective_maps
@@ -445,7 +469,7 @@ class MisalignedHyperbolicCamera:
             self, K_new, size, R=R, m1type=m1type, depth=depth, viewpoint=viewpoint
         )
 
-    def to_omnidir(self, depth=None):
+    def to_omnidir(self, depth: float | None = None) -> tuple:
         """The unified (Mei) model of ``cv2.omnidir`` closest to this rig, and its RMS error.
 
         Returns ``(K, xi, D, M, origin, rms_px)`` with ``X_omni = M (X_mirror - origin)``
@@ -457,7 +481,7 @@ class MisalignedHyperbolicCamera:
         return fit_omnidir(self, depth=depth).as_tuple()
 
     # -- files ----------------------------------------------------------------------------
-    def save(self, path):
+    def save(self, path: PathLike) -> None:
         """Write the calibration with ``cv2.FileStorage`` (yaml, yml, xml or json), atomically.
 
         The file is written beside ``path``, read back and compared, then renamed into place
@@ -474,7 +498,7 @@ class MisalignedHyperbolicCamera:
         save_camera(self, path)
 
     @classmethod
-    def load(cls, path):
+    def load(cls, path: PathLike) -> MisalignedHyperbolicCamera:
         """Read a calibration file written by :meth:`save`, validating every field.
 
         Raises

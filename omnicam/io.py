@@ -58,6 +58,7 @@ import cv2
 import numpy as np
 
 from ._atomic import OutputError, atomic_output, write_bytes
+from ._typing import ArrayLike, FloatArray, PathLike, Size
 from ._validate import validate_D, validate_image_size, validate_K
 from .mirror import HyperbolicMirror
 
@@ -540,7 +541,7 @@ def _reading(path, what):
     return _Reader(_parse(_prescan(path, what), path, what, ext), path, what)
 
 
-def load_camera(path, cls):
+def load_camera(path: PathLike, cls: type):
     """Read and validate a calibration file; return ``cls(K, mirror, rvec, tvec, D, image_size)``.
 
     ``cls`` is the camera class (:meth:`MisalignedHyperbolicCamera.load` passes itself), so this
@@ -578,7 +579,7 @@ def load_camera(path, cls):
         raise r.fail(str(e).split(" ", 1)[0].rstrip(":,"), str(e)) from None
 
 
-def read_intrinsics(path):
+def read_intrinsics(path: PathLike) -> tuple[FloatArray, FloatArray | None, Size | None]:
     """Read a pinhole's ``K``, ``D`` and ``image_size`` from a ``cv2.FileStorage`` file.
 
     Fields (first match wins): the camera matrix ``K`` (or ``camera_matrix``, ``cameraMatrix``),
@@ -622,7 +623,7 @@ def read_intrinsics(path):
     return K, D, size
 
 
-def read_far_lines(path):
+def read_far_lines(path: PathLike) -> list[FloatArray]:
     """Far-line pixels from JSON: a list of lines, each a list of ``[x, y]`` pixels.
 
     The ``far_lines`` of section 3.2, as a user clicked them along the images of far straight
@@ -718,7 +719,7 @@ def _write_seq(fs, name, values):
     fs.endWriteStruct()
 
 
-def save_camera(camera, path):
+def save_camera(camera, path: PathLike) -> None:
     """Write ``camera`` to ``path`` atomically and verified.
 
     A temporary file in the same folder is written, flushed, read back and compared with
@@ -770,7 +771,9 @@ def _same_camera(a, b):
     )
 
 
-def write_intrinsics(path, K, D=None, image_size=None):
+def write_intrinsics(
+    path: PathLike, K: ArrayLike, D: ArrayLike | None = None, image_size: Size | None = None
+) -> None:
     """Write a pinhole's ``K``, ``D`` and ``image_size`` (what :func:`read_intrinsics` reads).
 
     Atomic and verified as :func:`save_camera`.
@@ -801,7 +804,7 @@ def write_intrinsics(path, K, D=None, image_size=None):
     _atomic_filestorage(path, "intrinsics file", write, read_back)
 
 
-def write_far_lines(path, far_lines):
+def write_far_lines(path: PathLike, far_lines: list) -> None:
     """Write far-line pixels as JSON (what :func:`read_far_lines` reads), atomically.
 
     Raises

@@ -259,7 +259,7 @@ class Unwarper:
         }
         self._out_key = key
 
-    def unwarp(self, frame, copy=False):
+    def unwarp(self, frame: np.ndarray, copy: bool = False) -> dict:
         """All views of one frame.
 
         The output arrays are allocated once and **reused**: each call overwrites the arrays
@@ -392,6 +392,6 @@ class Unwarper:
             for w in writers.values():
                 w.release()
 
-    def run(self, source, outputs, **kwargs):
+    def run(self, source, outputs, **kwargs) -> int:
         """Unwarp a whole source into ``outputs`` (see :meth:`stream`); returns the frame count."""
         return sum(1 for _ in self.stream(source, outputs, **kwargs))

@@ -38,6 +38,7 @@ import cv2
 import numpy as np
 
 from ._jit import notice_if_cold, run_chunks
+from ._typing import ArrayLike, FloatArray, Maps, Size
 from ._validate import finite_array, float_array, real_number, validate_K
 
 __all__ = [
@@ -73,7 +74,7 @@ CYLINDRICAL_MIN_ELEVATION = -60.0
 
 
 # -- helpers for view specs ----------------------------------------------------------------------
-def rotation_from_ypr(yaw=0.0, pitch=0.0, roll=0.0):
+def rotation_from_ypr(yaw: float = 0.0, pitch: float = 0.0, roll: float = 0.0) -> FloatArray:
     """``R`` of a virtual view from yaw, pitch and roll in degrees (docs/conventions.md, "Views").
 
     The optical axis looks at azimuth ``-yaw`` (positive yaw turns right, as a panorama does
@@ -114,7 +115,7 @@ def rotation_from_ypr(yaw=0.0, pitch=0.0, roll=0.0):
     return np.stack([right_r, down_r, forward])
 
 
-def K_from_fov(fov_deg, size):
+def K_from_fov(fov_deg: float, size: Size) -> FloatArray:
     """Camera matrix of a virtual perspective view with horizontal field of view ``fov_deg``.
 
     Square pixels, no skew, principal point at the image centre with pixel centres at integers:
@@ -280,7 +281,7 @@ def _nadir_seen(camera, rim_dirs):
     return abs(winding) == 1 and _elevation_deg(apex_ray) < float(np.min(_elevation_deg(rim_dirs)))
 
 
-def visible_elevation_range(camera):
+def visible_elevation_range(camera) -> tuple[float, float]:
     """The band of elevations the mirror sees, ``(lo, hi)`` in degrees, mirror frame.
 
     ``hi`` is the highest elevation of the rays of the rim (the reflected directions of the rim
@@ -657,14 +658,14 @@ def _panorama_params(size, lo, hi, projection):
 # -- public API ---------------------------------------------------------------------------------
 def init_panorama_maps(
     camera,
-    size,
-    elevation_range=None,
-    projection="cylindrical",
-    R=None,
-    m1type=cv2.CV_16SC2,
-    depth=None,
-    viewpoint=None,
-):
+    size: Size,
+    elevation_range: tuple[float, float] | None = None,
+    projection: str = "cylindrical",
+    R: ArrayLike | None = None,
+    m1type: int = cv2.CV_16SC2,
+    depth: float | None = None,
+    viewpoint: ArrayLike | None = None,
+) -> Maps:
     """``cv2.remap`` tables of a 360-degree panorama (paper section 4.1, Fig. 7).
 
     Column ``j`` looks at azimuth ``-360 j / W`` degrees (measured in the panorama frame from +X
@@ -747,8 +748,14 @@ def init_panorama_maps(
 
 
 def init_perspective_maps(
-    camera, K_new, size, R=None, m1type=cv2.CV_16SC2, depth=None, viewpoint=None
-):
+    camera,
+    K_new: ArrayLike,
+    size: Size,
+    R: ArrayLike | None = None,
+    m1type: int = cv2.CV_16SC2,
+    depth: float | None = None,
+    viewpoint: ArrayLike | None = None,
+) -> Maps:
     """``cv2.remap`` tables of a virtual perspective view (paper section 4.1, Fig. 8).
 
     Output pixel ``u`` looks along ``d = R^T K_new^-1 (u, v, 1)`` in the mirror frame; each
@@ -876,7 +883,7 @@ class PanoramaView:
             else _check_viewpoint(None, viewpoint, 1.0 if depth is None else depth)
         )
 
-    def maps(self, camera, m1type=cv2.CV_16SC2):
+    def maps(self, camera, m1type: int = cv2.CV_16SC2) -> Maps:
         """``(map1, map2)`` of this view for ``camera``."""
         return init_panorama_maps(
             camera,
@@ -948,7 +955,7 @@ class PerspectiveView:
             else _check_viewpoint(None, viewpoint, 1.0 if depth is None else depth)
         )
 
-    def maps(self, camera, m1type=cv2.CV_16SC2):
+    def maps(self, camera, m1type: int = cv2.CV_16SC2) -> Maps:
         """``(map1, map2)`` of this view for ``camera``."""
         return init_perspective_maps(
             camera, self.K_new, self.size, self.R, m1type, self.depth, self.viewpoint

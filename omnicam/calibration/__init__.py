@@ -30,6 +30,7 @@ import dataclasses
 
 import numpy as np
 
+from .._typing import ArrayLike
 from .errors import EstimationError
 
 __all__ = ["calibrate", "CalibrationReport", "EstimationError"]
@@ -44,23 +45,23 @@ def __getattr__(name):
 
 
 def calibrate(
-    K,
+    K: ArrayLike,
     mirror,
-    image=None,
-    boundary_points=None,
-    far_lines=None,
-    D=None,
-    image_size=None,
-    refine=True,
-    camera_cls=None,
-    lens="auto",
-    lens_r=None,
-    lens_z=None,
-    rim_hint=None,
-    max_tilt_deg=10.0,
-    max_offset_mm=10.0,
-    check_plausibility=True,
-):
+    image: np.ndarray | None = None,
+    boundary_points: ArrayLike | None = None,
+    far_lines: list | None = None,
+    D: ArrayLike | None = None,
+    image_size: tuple[int, int] | None = None,
+    refine: bool = True,
+    camera_cls: type | None = None,
+    lens: str | bool | ArrayLike | None = "auto",
+    lens_r: float | None = None,
+    lens_z: float | None = None,
+    rim_hint: tuple[float, float, float] | None = None,
+    max_tilt_deg: float = 10.0,
+    max_offset_mm: float = 10.0,
+    check_plausibility: bool = True,
+) -> tuple:
     """Mirror posture from one image: rim ellipse, Chen's method, far-line selection, refinement.
 
     Parameters

@@ -24,6 +24,7 @@ import typing
 import cv2
 import numpy as np
 
+from .._typing import ArrayLike
 from .._validate import real_number, validate_rng
 from ..raytrace import as_points
 from .edges import as_gray, edge_points_along_normals
@@ -164,7 +165,9 @@ def _as_points(points, min_points):
     return pts
 
 
-def fit_rim(points, robust=True, threshold=2.0, max_trials=2000, rng=0):
+def fit_rim(
+    points: ArrayLike, robust: bool = True, threshold: float = 2.0, max_trials: int = 2000, rng=0
+) -> RimFit:
     """Fit the rim ellipse ``Q_I`` (eqs. 20-22) to boundary points, robustly and geometrically.
 
     1. Hartley normalisation (centroid to 0, mean distance sqrt(2)).
@@ -519,7 +522,15 @@ def _refine_coarse(p, g, c, r, unsigned=False):
     return int(sel.sum()), center, S
 
 
-def detect_rim(image, *, hint=None, expected=None, sigma=0.7, threshold=2.0, rng=0):
+def detect_rim(
+    image: np.ndarray,
+    *,
+    hint: tuple[float, float, float] | None = None,
+    expected: float | tuple[float, float] | None = None,
+    sigma: float = 0.7,
+    threshold: float = 2.0,
+    rng=0,
+) -> RimFit:
     """Find the mirror rim (where the mirror's reflection meets its holder) in an image.
 
     1. Coarse, on a copy 256 px wide (:func:`_coarse_ellipse`): Canny edge pixels vote along
