@@ -1,10 +1,14 @@
-"""Shared fixtures: the canonical rigs every generic model test runs over."""
+"""Shared fixtures and helpers: the canonical rigs every generic model test runs over, random
+misaligned rigs for the calibration tests, and a rig in a white holder for the rim tests."""
+
+import math
 
 import cv2
 import numpy as np
 import pytest
 
 from omnicam import MisalignedHyperbolicCamera, synthetic
+from omnicam.calibration import chen
 
 
 def _rigs():
@@ -60,3 +64,59 @@ def video_frames(path):
         n, size = n + 1, (frame.shape[1], frame.shape[0])
     cap.release()
     return n, size
+
+
+# -- random misaligned rigs and helpers shared by the calibration tests --------------------
+def axis_angle_deg(a, b):
+    """Angle between two directions, accurate near 0 (atan2, not arccos)."""
+    return math.degrees(math.atan2(np.linalg.norm(np.cross(a, b)), float(np.dot(a, b))))
+
+
+def random_rigs(n, seed=20261122, min_lateral=0.1):
+    """Random misalignments (tilt <= 5 deg, offset <= 5 mm), camera >= 0.1 mm off the axis."""
+    rng = np.random.default_rng(seed)
+    rigs = []
+    while len(rigs) < n:
+        cam = synthetic.random_misaligned_rig(rng, 5.0, 5.0)
+        C = cam.camera_center
+        if math.hypot(C[0], C[1]) >= min_lateral:  # reject-sample (closer: candidates merge)
+            rigs.append(cam)
+    return rigs
+
+
+RANDOM_RIGS = random_rigs(100)  # Chen, selection and calibration tests share them
+
+
+def candidates_of(cam):
+    Q_I = chen.rim_conic(cam.K, cam.R, cam.tvec, cam.mirror)
+    return chen.chen_candidates(chen.normalized_conic(Q_I, cam.K), cam.mirror)
+
+
+def white_holder_render(
+    size=400, rim_px=130, holder_px=167, struts=(20, 140, 260), noise=0.0, seed=0, holder=235.0
+):
+    """A rig in a white holder ring (``holder_px`` outer radius) on a darker textured room, three
+    dark struts crossing holder and mirror (radial bars), rendered by ``omnicam.synthetic``
+    (environment at infinity, camera's reflection): ``(image, camera)``. The mirror's content
+    near the rim (bright sky) is only ~25 grey levels darker than the holder, while the holder's
+    outer edge is a 165-level step: the edge a bright-mirror detector takes for the rim."""
+    cam = synthetic.misaligned_rig(
+        2.0, 40.0, (1.0, -0.5, 0.5), image_size=(size, size), fill=2 * rim_px / size
+    )
+    c = cam.rim_image_points(720).mean(axis=0)
+    yy, xx = np.mgrid[0:size, 0:size].astype(np.float32)
+    rng = np.random.default_rng(seed)
+    room = 70 + 25 * np.sin(xx / 23.0) * np.cos(yy / 31.0) + rng.normal(0, 3, (size, size))
+    bg = np.repeat(room[..., None], 3, axis=2)
+    ring = np.hypot(xx - c[0], yy - c[1]) < holder_px
+    bg[ring] = (
+        (holder(xx, yy) if callable(holder) else holder)[..., None][ring]
+        if callable(holder)
+        else holder
+    )
+    img = synthetic.render_environment(cam, background=bg, noise=noise, seed=seed)
+    q = np.stack([xx - c[0], yy - c[1]], -1)
+    for ang in struts:
+        u = np.array([np.cos(np.deg2rad(ang)), np.sin(np.deg2rad(ang))])
+        img[(np.abs(q @ np.array([-u[1], u[0]])) < 0.02 * size) & (q @ u > 0.35 * rim_px)] = 45
+    return img, cam

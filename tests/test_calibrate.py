@@ -3,7 +3,8 @@
 import conftest
 import numpy as np
 import pytest
-from test_chen import RIGS, axis_angle_deg
+from conftest import RANDOM_RIGS as RIGS
+from conftest import axis_angle_deg
 
 import omnicam
 from omnicam import MisalignedHyperbolicCamera, synthetic

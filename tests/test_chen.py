@@ -1,38 +1,13 @@
 """Chen's conic method (paper section 3.1 and appendix): four candidates, one of them exact."""
 
-import math
-
 import conftest
 import numpy as np
 import pytest
+from conftest import RANDOM_RIGS as RIGS
+from conftest import axis_angle_deg, candidates_of
 
 from omnicam import HyperbolicMirror, synthetic
 from omnicam.calibration import chen
-
-
-def axis_angle_deg(a, b):
-    """Angle between two directions, accurate near 0 (atan2, not arccos)."""
-    return math.degrees(math.atan2(np.linalg.norm(np.cross(a, b)), float(np.dot(a, b))))
-
-
-def random_rigs(n, seed=20261122, min_lateral=0.1):
-    """Random misalignments (tilt <= 5 deg, offset <= 5 mm), camera >= 0.1 mm off the axis."""
-    rng = np.random.default_rng(seed)
-    rigs = []
-    while len(rigs) < n:
-        cam = synthetic.random_misaligned_rig(rng, 5.0, 5.0)
-        C = cam.camera_center
-        if math.hypot(C[0], C[1]) >= min_lateral:  # reject-sample (closer: candidates merge)
-            rigs.append(cam)
-    return rigs
-
-
-RIGS = random_rigs(100)
-
-
-def candidates_of(cam):
-    Q_I = chen.rim_conic(cam.K, cam.R, cam.tvec, cam.mirror)
-    return chen.chen_candidates(chen.normalized_conic(Q_I, cam.K), cam.mirror)
 
 
 def test_rim_conic_passes_through_the_rim_image():

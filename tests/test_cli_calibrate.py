@@ -8,7 +8,7 @@ import re
 import cv2
 import numpy as np
 import pytest
-from test_rim import white_holder_render
+from conftest import white_holder_render
 
 from omnicam import MisalignedHyperbolicCamera, synthetic
 from omnicam.calibration.rim import fit_rim

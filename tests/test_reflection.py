@@ -7,7 +7,7 @@ import cv2
 import numpy as np
 import pytest
 from barrel import render
-from test_chen import RIGS
+from conftest import RANDOM_RIGS as RIGS
 
 from omnicam import MisalignedHyperbolicCamera, synthetic
 from omnicam.calibration import EstimationError, reflection

@@ -5,6 +5,7 @@ import pathlib
 import cv2
 import numpy as np
 import pytest
+from conftest import white_holder_render
 
 from omnicam import synthetic
 from omnicam.calibration.rim import (
@@ -406,36 +407,6 @@ def test_detect_rim_no_circle_in_image_raises():
 
 
 # -- a white holder ring with struts; hints and the expected size --------------------------------
-def white_holder_render(
-    size=400, rim_px=130, holder_px=167, struts=(20, 140, 260), noise=0.0, seed=0, holder=235.0
-):
-    """A rig in a white holder ring (``holder_px`` outer radius) on a darker textured room, three
-    dark struts crossing holder and mirror (radial bars), rendered by ``omnicam.synthetic``
-    (environment at infinity, camera's reflection): ``(image, camera)``. The mirror's content
-    near the rim (bright sky) is only ~25 grey levels darker than the holder, while the holder's
-    outer edge is a 165-level step: the edge a bright-mirror detector takes for the rim."""
-    cam = synthetic.misaligned_rig(
-        2.0, 40.0, (1.0, -0.5, 0.5), image_size=(size, size), fill=2 * rim_px / size
-    )
-    c = cam.rim_image_points(720).mean(axis=0)
-    yy, xx = np.mgrid[0:size, 0:size].astype(np.float32)
-    rng = np.random.default_rng(seed)
-    room = 70 + 25 * np.sin(xx / 23.0) * np.cos(yy / 31.0) + rng.normal(0, 3, (size, size))
-    bg = np.repeat(room[..., None], 3, axis=2)
-    ring = np.hypot(xx - c[0], yy - c[1]) < holder_px
-    bg[ring] = (
-        (holder(xx, yy) if callable(holder) else holder)[..., None][ring]
-        if callable(holder)
-        else holder
-    )
-    img = synthetic.render_environment(cam, background=bg, noise=noise, seed=seed)
-    q = np.stack([xx - c[0], yy - c[1]], -1)
-    for ang in struts:
-        u = np.array([np.cos(np.deg2rad(ang)), np.sin(np.deg2rad(ang))])
-        img[(np.abs(q @ np.array([-u[1], u[0]])) < 0.02 * size) & (q @ u > 0.35 * rim_px)] = 45
-    return img, cam
-
-
 @pytest.fixture(scope="module")
 def holder():
     return white_holder_render()

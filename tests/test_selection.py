@@ -4,7 +4,8 @@ import math
 
 import numpy as np
 import pytest
-from test_chen import RIGS, candidates_of
+from conftest import RANDOM_RIGS as RIGS
+from conftest import candidates_of
 
 from omnicam import synthetic
 from omnicam.calibration import EstimationError, selection
