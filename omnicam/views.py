@@ -809,6 +809,13 @@ def init_perspective_maps(
     return maps
 
 
+def _is_matrix3(value):
+    try:
+        return np.shape(value) == (3, 3)
+    except ValueError:  # ragged nesting
+        return False
+
+
 def _refuse_swapped(matrix_arg, size_arg, signature):
     """A clear ValueError when a camera matrix stands where the size goes (or vice versa)."""
     try:
@@ -906,10 +913,15 @@ class PanoramaView:
 class PerspectiveView:
     """A virtual perspective view spec, validated once (see :func:`init_perspective_maps`).
 
+    Two forms: ``PerspectiveView(K_new, size, R=None, depth=None, viewpoint=None)``, the
+    arguments in the order of :func:`init_perspective_maps` (a camera matrix first), or
+    ``PerspectiveView(size, fov=90.0, yaw=0.0, pitch=0.0, roll=0.0, ...)`` for a view given by
+    its field of view and direction.
+
     Parameters
     ----------
     size : (int, int)
-        ``(width, height)``.
+        ``(width, height)`` (the second argument in the first form).
     fov : float
         Horizontal field of view in degrees (:func:`K_from_fov`); ignored if ``K_new`` is given.
     yaw, pitch, roll : float
@@ -934,6 +946,12 @@ class PerspectiveView:
         depth=None,
         viewpoint=None,
     ):
+        if _is_matrix3(size):  # PerspectiveView(K_new, size, R, ...): init_perspective_maps' order
+            if K_new is not None:
+                raise ValueError("K_new given twice: as the first argument and as K_new=")
+            if R is None and _is_matrix3(yaw):
+                R, yaw = yaw, 0.0
+            K_new, size, fov = size, fov, 90.0
         _refuse_swapped(
             fov,
             size,

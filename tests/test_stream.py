@@ -189,14 +189,24 @@ def test_stream_refuses_odd_sized_video_outputs(tmp_path):
         next(unwarper.stream(0, outputs={"pano": tmp_path / "p.avi"}))
 
 
+def test_perspective_view_and_maps_take_k_new_size_r_in_one_order(cam):
+    from omnicam.views import K_from_fov, rotation_from_ypr
+
+    K = K_from_fov(90.0, (40, 30))
+    R = rotation_from_ypr(30.0, -10.0)
+    a = PerspectiveView(K, (40, 30), R).maps(cam)  # init_perspective_maps' order
+    b = cam.init_perspective_maps(K, (40, 30), R)
+    np.testing.assert_array_equal(a[0], b[0])
+    with pytest.raises(ValueError, match="K_new given twice"):
+        PerspectiveView(K, (40, 30), K_new=K)
+
+
 def test_perspective_arguments_in_the_wrong_order_say_the_order(cam):
     from omnicam.views import K_from_fov
 
     K = K_from_fov(90.0, (40, 30))
     with pytest.raises(ValueError, match=r"init_perspective_maps\(camera, K_new, size"):
         cam.init_perspective_maps((40, 30), K)
-    with pytest.raises(ValueError, match=r"PerspectiveView\(size, fov"):
-        PerspectiveView(K, (40, 30))
     with pytest.raises(ValueError, match="K_new="):
         PerspectiveView((40, 30), K)
     a = PerspectiveView(K_new=K, size=(40, 30)).maps(cam)  # keywords: one spelling for both
