@@ -1,4 +1,7 @@
-"""omnicam fit_rim against scikit-image EllipseModel on clipped noisy rims (figure quoted in calibration/ellipse.py)."""
+"""fit_rim against scikit-image's EllipseModel on clipped noisy rims.
+
+The figure is quoted in omnicam/calibration/ellipse.py.
+"""
 
 import time
 
@@ -11,7 +14,7 @@ from omnicam.calibration.rim import fit_rim
 
 rng = np.random.default_rng(0)
 errs_o, errs_s, t_o, t_s = [], [], [], []
-for k in range(50):
+for _ in range(50):
     cam = synthetic.random_misaligned_rig(rng, 5.0, 5.0)
     true = cam.rim_image_points(2000)
     pts = cam.rim_image_points(400)
@@ -33,5 +36,6 @@ for k in range(50):
 print(
     f"true rim to fitted ellipse, RMS over 50 clipped rims with 0.3 px noise: omnicam fit_rim "
     f"median {np.median(errs_o):.4f} px (max {np.max(errs_o):.4f}), skimage EllipseModel "
-    f"median {np.median(errs_s):.4f} px (max {np.max(errs_s):.4f}); time {np.median(t_o) * 1e3:.1f} vs {np.median(t_s) * 1e3:.1f} ms"
+    f"median {np.median(errs_s):.4f} px (max {np.max(errs_s):.4f}); "
+    f"time {np.median(t_o) * 1e3:.1f} vs {np.median(t_s) * 1e3:.1f} ms"
 )

@@ -107,7 +107,12 @@ def accuracy_trial(truth, n_views, noise, seed, dist_model, use_lens=True):
     )
     rim_fit = detect_rim(scene)
     rim = rim_fit.points
-    lens = detect_reflection(scene, rim_fit).points if use_lens else None
+    lens = None
+    if use_lens:
+        try:
+            lens = detect_reflection(scene, rim_fit).points
+        except ValueError as e:  # declined (EstimationError): calibrate without it
+            print(f"  (no camera reflection: {e})")
     pix, d_true = annulus_pixels(truth)
     obj = boards.board_object_points(PATTERN, SQUARE)
     row = {}

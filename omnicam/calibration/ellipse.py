@@ -5,10 +5,11 @@ same ellipse as a centre and shape matrix ``S`` (``|S^-1 (p - center)| = 1``). F
 normalised direct fit, RANSAC over five-point conics with Sampson distances, and the
 orthogonal (geometric) refinement used by :func:`omnicam.calibration.rim.fit_rim`.
 
-scikit-image's ``measure.EllipseModel`` was measured against :func:`omnicam.calibration.rim.fit_rim`
-(``python benchmarks/bench_ellipse_skimage.py``: 50 random rigs, rims clipped to 420 of 500 rows, 0.3 px
-noise; RMS of the true rim's distance to the fitted ellipse): the same accuracy (median 0.0341 px
-for both, max 0.0696 px here and 0.0700 px there), 0.3 ms against 1.7 ms. The hand-written fit stays
+scikit-image's ``measure.EllipseModel`` was measured against
+:func:`omnicam.calibration.rim.fit_rim` (``python benchmarks/bench_ellipse_skimage.py``: 50
+random rigs, rims clipped to 420 of 500 rows, 0.3 px noise; RMS of the true rim's distance to
+the fitted ellipse): the same accuracy (median 0.0341 px for both, max 0.0696 px here and 0.0700
+px there), 0.3 ms against 1.7 ms. The hand-written fit stays
 because the pipeline needs what it returns besides the ellipse (the orthogonal residuals and
 their RMS, the RANSAC inlier mask with Sampson distances, the conic with the sign convention of
 eq. 24), and because ``EllipseModel``'s interface changed in scikit-image 0.26
