@@ -13,7 +13,7 @@ import math
 import cv2
 import numpy as np
 
-__all__ = ["canonical_rvec", "gauge_rotation", "posture_error"]
+__all__ = ["canonical_rvec", "gauge_rotation", "posture_error", "rotate_vector"]
 
 
 def canonical_rvec(rvec):
@@ -83,3 +83,21 @@ def posture_error(camera, truth):
         )
     )
     return axis, origin
+
+
+def rotate_vector(v, w):
+    """``v`` rotated by the rotation vector ``w`` (Rodrigues' formula), without a matrix.
+
+    Parameters
+    ----------
+    v, w : (3,) ndarray
+
+    Returns
+    -------
+    (3,) ndarray
+    """
+    th = float(np.linalg.norm(w))
+    if th == 0.0:
+        return v.copy()
+    k = w / th
+    return v * math.cos(th) + np.cross(k, v) * math.sin(th) + k * (k @ v) * (1 - math.cos(th))

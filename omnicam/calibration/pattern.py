@@ -191,15 +191,6 @@ def object_points(pattern_size, square_size):
     return obj
 
 
-def _rotate(v, w):
-    """Rotate ``v`` by the rotation vector ``w`` (Rodrigues)."""
-    th = float(np.linalg.norm(w))
-    if th == 0.0:
-        return v.copy()
-    k = w / th
-    return v * math.cos(th) + np.cross(k, v) * math.sin(th) + k * (k @ v) * (1 - math.cos(th))
-
-
 def _perp_basis(v):
     v = v / np.linalg.norm(v)
     h = np.array([1.0, 0.0, 0.0]) if abs(v[0]) < 0.9 else np.array([0.0, 1.0, 0.0])

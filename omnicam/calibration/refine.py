@@ -52,6 +52,7 @@ import cv2
 import numpy as np
 
 from ..gauge import gauge_rotation  # re-exported: refine.gauge_rotation
+from ..gauge import rotate_vector as _rotate
 from .robust import mad_sigma
 
 __all__ = [
@@ -154,15 +155,6 @@ def _line_from_rays(P, V, N, rim_radius):
     ):
         return None
     return Q, e
-
-
-def _rotate(v, w):
-    """Rotate ``v`` by the rotation vector ``w`` (Rodrigues)."""
-    th = float(np.linalg.norm(w))
-    if th == 0.0:
-        return v.copy()
-    k = w / th
-    return v * math.cos(th) + np.cross(k, v) * math.sin(th) + k * (k @ v) * (1 - math.cos(th))
 
 
 class _Posture:
