@@ -20,6 +20,7 @@ killed process are removed by the next write into the same folder (:func:`remove
 
 from __future__ import annotations
 
+import atexit
 import contextlib
 import errno
 import os
@@ -36,6 +37,10 @@ __all__ = [
 ]
 
 TEMP_MARK = ".omnicam-tmp-"
+# temporary files of this process not yet renamed or removed: a Ctrl-C can land between creating
+# one and the ``with`` block that owns it (in contextlib's __enter__), where no ``finally`` runs;
+# they are removed at exit
+_LIVE = set()
 STALE_AFTER_S = 60.0  # a temporary file of a process that is gone, or this old, is litter
 
 
@@ -116,15 +121,40 @@ def temp_beside(path):
     remove_stale(folder)
     for _ in range(100):
         tmp = os.path.join(folder, f".{base}{TEMP_MARK}{os.getpid()}-{secrets.token_hex(4)}{ext}")
+        _LIVE.add(tmp)  # before it exists: a Ctrl-C from here on cannot leave it behind
         try:
             fd = os.open(tmp, os.O_WRONLY | os.O_CREAT | os.O_EXCL, 0o666)
         except FileExistsError:
+            _LIVE.discard(tmp)
             continue
         except OSError as e:
+            _LIVE.discard(tmp)
             raise OutputError(f"cannot write {path}: {_describe(e)} (in {folder})") from None
+        except BaseException:  # Ctrl-C as os.open returns: the name is ours, the file may be
+            _remove_quietly(tmp)
+            _LIVE.discard(tmp)
+            raise
         os.close(fd)
         return tmp
     raise OutputError(f"cannot write {path}: no free temporary name in {folder}")
+
+
+@contextlib.contextmanager
+def _sigint_deferred():
+    """Hold SIGINT back (POSIX, main thread) for the body; a Ctrl-C then arrives right after."""
+    import signal
+    import threading
+
+    block = (
+        hasattr(signal, "pthread_sigmask") and threading.current_thread() is threading.main_thread()
+    )
+    if block:
+        old = signal.pthread_sigmask(signal.SIG_BLOCK, {signal.SIGINT})
+    try:
+        yield
+    finally:
+        if block:
+            signal.pthread_sigmask(signal.SIG_SETMASK, old)
 
 
 def _fsync(path, directory=False):
@@ -192,8 +222,10 @@ def atomic_output(path, *, what="file", overwrite=True, verify=None, allow_empty
         raise OutputError(f"cannot write {what} {path}: it is a folder")
     if not overwrite and os.path.lexists(path):
         raise OutputError(f"cannot write {what} {path}: it exists")
-    tmp = temp_beside(path)
+    tmp = None
     try:
+        with _sigint_deferred():  # no Ctrl-C between creating the file and owning it
+            tmp = temp_beside(path)
         try:
             yield tmp
         except OSError as e:  # the writer's own failure, e.g. ENOSPC from f.write
@@ -232,6 +264,14 @@ def atomic_output(path, *, what="file", overwrite=True, verify=None, allow_empty
         with contextlib.suppress(OSError):
             _fsync(os.path.dirname(os.path.abspath(path)), directory=True)
     finally:
+        if tmp is not None:
+            _remove_quietly(tmp)
+            _LIVE.discard(tmp)
+
+
+@atexit.register
+def _remove_live():
+    for tmp in list(_LIVE):
         _remove_quietly(tmp)
 
 

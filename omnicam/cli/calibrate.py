@@ -117,7 +117,7 @@ def cmd_calibrate(args):
         _warn(f"implausible: {w}")
     if implausible and not args.force:
         raise CliError(
-            f"the calibration is implausible ({len(implausible)} warning"
+            f"the calibration of {args.image} is implausible ({len(implausible)} warning"
             f"{'s' if len(implausible) > 1 else ''} above); {calib} not written, see "
             f"{overlay}; fix the inputs, or pass --force to write it anyway"
         )
