@@ -378,7 +378,9 @@ def detect_reflection(
        finds the round silhouettes; the **outermost** one supported by at least 40 % of the
        rays is kept (the lens barrel or body, not the glass's inner rings).
     4. Per ray the rise nearest to that circle, then a robust ellipse (RANSAC,
-       :func:`.rim.fit_rim`) rejects struts and highlights; two more rounds along rays from the
+       :func:`.rim.fit_rim`) rejects struts and highlights (first on the rises at least
+       ``min_radius`` from ``center``, then, if that declines, on those from 3 px: a small
+       lens off ``center`` has its near side there); two more rounds along rays from the
        ellipse's centre in a narrow window, unsmoothed but for 0.7 px, each edge at the
        centroid of the radial derivative within 1.5 px of its steepest sample.
     5. Declines (:class:`~.errors.EstimationError`) when the centre is not darker than the
@@ -468,7 +470,9 @@ def _detect(image, rim, center, center_search, max_radius, min_radius, rng, scen
             f"than the mirror's scene (grey {scene:.0f})"
         )
     ri, rj = _rises(prof, dr, 0.2 * contrast, dark + 0.6 * contrast)
-    keep = radii[rj] >= R_min
+    # rises from 3 px of c0 on: a small lens off c0 has its near side nearer than R_min; they
+    # vote, and step 4 tries the rises beyond R_min first (highlights lie near c0), then all
+    keep = radii[rj] >= (3.0 if scene_level is None else R_min)  # (not inside a surround)
     ri, rj = ri[keep], rj[keep]
     if len(ri) < 0.3 * n_rays:
         raise EstimationError(
@@ -476,6 +480,7 @@ def _detect(image, rim, center, center_search, max_radius, min_radius, rng, scen
             f"{c0[1]:.0f})"
         )
     pts = c0 + radii[rj, None] * np.stack([np.cos(ang[ri]), np.sin(ang[ri])], axis=1)
+    far_pts = pts[radii[rj] >= R_min]
     dark_max = dark + 0.6 * contrast
 
     def dark_inside(rho, c):
@@ -520,12 +525,14 @@ def _detect(image, rim, center, center_search, max_radius, min_radius, rng, scen
         )
     first_why, surround = None, None
     for j, _ in circles[:4]:
-        try:
-            return _refine_silhouette(gray, G, pts, found[j][1], j * bw, bw, sig, contrast, rng)
-        except _BrightInside as err:  # a dark surround (e.g. a dark floor) holding the body
-            first_why, surround = first_why or err, surround or err
-        except EstimationError as err:  # e.g. a square box behind the barrel: try inside it
-            first_why = first_why or err
+        for p in (far_pts, pts) if len(pts) > len(far_pts) else (pts,):
+            try:
+                return _refine_silhouette(gray, G, p, found[j][1], j * bw, bw, sig, contrast, rng)
+            except _BrightInside as err:  # a dark surround (e.g. a dark floor) holding the body
+                first_why, surround = first_why or err, surround or err
+                break
+            except EstimationError as err:  # e.g. a square box behind the barrel: try inside it
+                first_why = first_why or err
     inner = None if surround is None else 0.85 * surround.radius / r_rim
     if scene_level is None and inner is not None and inner > 2.0 * min_radius:
         # 6. the body inside a dark surround: its edges rise against the surround's interior,
