@@ -63,6 +63,20 @@ def test_exact_outline_fits_the_true_circle_with_zero_residual():
         assert free.rms < 1e-3 and abs(free.z - Z_C) < 0.05, free
 
 
+def test_a_barrel_front_far_towards_the_mirror_is_fitted_at_its_z():
+    """A front edge at 0.6 of the camera's distance to the mirror vertex (a long barrel; the
+    stress renders' fronts reach 40 mm of 65): the z search reaches it and does not stop in a
+    local minimum of the RMS over z (before: z at half the vertex distance, RMS 0.1-1 px)."""
+    for cam in RIGS[:4]:
+        vertex = float(np.linalg.norm(cam.R @ np.array([0.0, 0.0, cam.mirror.b]) + cam.tvec))
+        z_true = 0.6 * vertex
+        out, _ = reflection.outline_pixels(cam, R_C, z_true, 64)
+        xn, Ki2 = normalized(cam, out)
+        fit = reflection.fit_circle(cam.mirror, cam.R, cam.tvec, xn, Ki2)
+        assert fit.rms < 1e-3, fit
+        assert abs(fit.z - z_true) < 1e-2 * vertex and abs(fit.r - R_C) < 1e-2 * R_C, fit
+
+
 def test_exact_circle_outline_gives_the_exact_posture_and_the_true_candidate():
     for truth in RIGS[:15]:
         out, _ = reflection.outline_pixels(truth, R_C, Z_C, 64)
@@ -229,6 +243,95 @@ def test_a_dark_floor_around_the_body_is_not_taken_for_it():
         xn, Ki2 = normalized(truth, fit.points)
         rho, g = reflection.plane_radius(truth.mirror, truth.R, truth.tvec, xn, Z_C, Ki2)
         assert math.sqrt(np.mean(((rho - R_C) / g) ** 2)) < 0.25, fit
+
+
+def test_a_body_inside_a_dark_floor_is_found_against_the_floors_interior():
+    """A dark floor around a grey box (grey 60) holding the lens (glass 12, barrel front 33,
+    blur 1 px): the floor's disk is the outermost silhouette and brighter inside; the lens's
+    edges rise against the box, a fraction of the floor-to-scene contrast. The detection looks
+    again inside the floor's disk with its interior as the scene (before: declined, "no darker
+    core"); the outline is the barrel front's to within a px."""
+    from omnicam.synthetic import default_mirror, realistic
+
+    mirror, size = default_mirror(), (480, 480)
+    f = 0.4 * min(size) * (mirror.z_rim + mirror.c) / mirror.rim_radius
+    body = realistic.BodyGeometry(
+        r_barrel=12.0,
+        z_barrel=12.0,
+        r_glass=9.5,
+        rings=(5.0,),
+        z_box=0.0,
+        w_box=22.0,
+        h_box=18.0,
+        box_color=(60.0, 60.0, 60.0),
+        ring_color=(33.0, 33.0, 33.0),
+    )
+    case = realistic.StressCase(
+        index=0,
+        seed=1,
+        flags=frozenset({"body", "dark_floor"}),
+        image_size=size,
+        K=((f, 0.0, 239.5), (0.0, f, 239.5), (0.0, 0.0, 1.0)),
+        D=None,
+        tilt_deg=4.0,
+        tilt_azimuth_deg=200.0,
+        offset_mm=(-2.0, 1.0, 0.5),
+        body=body,
+        photometric=realistic.Photometric(blur_sigma=1.0),
+    )
+    render_ = realistic.render_case(case)
+    truth = render_.camera
+    fit = reflection.detect_reflection(render_.image, detect_rim(render_.image))
+    xn, Ki2 = normalized(truth, fit.points)
+    rho, g = reflection.plane_radius(truth.mirror, truth.R, truth.tvec, xn, 12.0, Ki2)
+    assert math.sqrt(np.mean(((rho - 12.0) / g) ** 2)) < 1.0, fit
+    assert fit.quality > 0.9, fit
+
+
+def test_a_small_lens_in_a_box_is_found_from_half_its_radius_away():
+    """A 10 px lens in a dark box of about its size, sought from half its radius off its
+    centre (where the candidates' self-reflection pixels put the search): its near side lies
+    nearer to the search centre than the smallest radius sought; those rises vote and, if the
+    others alone give no round silhouette, refine (before: "not round", box and lens mixed).
+    The outline is a coaxial circle under the true posture (RMS < 0.3 px)."""
+    from omnicam.synthetic import default_mirror, realistic
+
+    mirror, size = default_mirror(), (640, 640)
+    f = 0.4 * min(size) * (mirror.z_rim + mirror.c) / mirror.rim_radius
+    body = realistic.BodyGeometry(
+        r_barrel=7.0,
+        z_barrel=9.0,
+        r_glass=5.9,
+        rings=(4.2,),
+        z_box=-2.7,
+        w_box=15.5,
+        h_box=14.4,
+        box_color=(66.0, 66.0, 70.0),
+        ring_color=(57.0, 57.0, 57.0),
+    )
+    case = realistic.StressCase(
+        index=0,
+        seed=3,
+        flags=frozenset({"body"}),
+        image_size=size,
+        K=((f, 0.0, 319.5), (0.0, f, 319.5), (0.0, 0.0, 1.0)),
+        D=None,
+        tilt_deg=3.0,
+        tilt_azimuth_deg=60.0,
+        offset_mm=(1.0, 1.0, 0.0),
+        body=body,
+        photometric=realistic.Photometric(blur_sigma=0.8),
+    )
+    render_ = realistic.render_case(case)
+    truth = render_.camera
+    rim = detect_rim(render_.image)
+    u0 = reflection.self_reflection_pixel(truth.mirror, truth.R, truth.tvec, truth.K)
+    for angle in (0.0, 3.0):
+        c = u0 + 5.0 * np.array([math.cos(angle), math.sin(angle)])
+        fit = reflection.detect_reflection(render_.image, rim, center=c, center_search=0.1)
+        xn, Ki2 = normalized(truth, fit.points)
+        circle = reflection.fit_circle(truth.mirror, truth.R, truth.tvec, xn, Ki2)
+        assert circle.rms < 0.3 and fit.quality > 0.8, (angle, fit, circle)
 
 
 def test_an_outline_no_posture_explains_does_not_choose_and_warns():

@@ -51,6 +51,13 @@ __all__ = [
 
 
 # -- geometry ----------------------------------------------------------------------------------
+#: :func:`fit_circle` seeks ``z`` up to this fraction of the camera's distance to the mirror
+#: vertex (a lens barrel may reach far towards the mirror: the stress renders' fronts lie at
+#: 5-40 mm with the vertex at 65 mm), on a grid of ``Z_GRID`` values refined by Brent.
+Z_MAX_FRACTION = 0.9
+Z_GRID = 25
+
+
 @dataclasses.dataclass(frozen=True)
 class ReflectionCircle:
     """A circle coaxial with the optical axis: radius ``r`` at axial distance ``z`` (camera frame,
@@ -178,9 +185,10 @@ def fit_circle(mirror, R, t, xn, Kinv2, r=None, z=None, min_fraction=0.8, h=1e-2
     """The coaxial circle that best explains an outline under one posture.
 
     ``r`` minimises ``sum(((rho - r) / g)^2)`` in closed form (``g = |grad_u rho|``, central
-    differences of ``h`` px, at each ``z``); ``z`` (unless given) is found by a bounded 1-D search
-    (Brent) between ``-c / 2`` and half the camera's distance to the mirror vertex (the circle
-    is part of the camera: nearer to it than to the mirror).
+    differences of ``h`` px, at each ``z``); ``z`` (unless given) is found on a grid of
+    ``Z_GRID`` values between ``-c / 2`` and ``Z_MAX_FRACTION`` of the camera's distance to the
+    mirror vertex (the circle is part of the camera, below the mirror), refined by a bounded
+    1-D search (Brent) in the best grid cell.
 
     Returns
     -------
@@ -196,7 +204,7 @@ def fit_circle(mirror, R, t, xn, Kinv2, r=None, z=None, min_fraction=0.8, h=1e-2
         d = h * Kinv2[:, k]
         rays += [_rays_camera(mirror, R, t, xn + d), _rays_camera(mirror, R, t, xn - d)]
     vertex = float(np.linalg.norm(R @ np.array([0.0, 0.0, mirror.b]) + t))
-    z_lo, z_hi = -0.5 * mirror.c, 0.5 * vertex
+    z_lo, z_hi = -0.5 * mirror.c, Z_MAX_FRACTION * vertex
 
     def rms_at(zz):
         rho, xp, xm, yp, ym = (_radius_in_plane(P, V, zz) for P, V in rays)
@@ -210,13 +218,17 @@ def fit_circle(mirror, R, t, xn, Kinv2, r=None, z=None, min_fraction=0.8, h=1e-2
 
     z0 = 0.0 if z is None else float(z)
     if z is None:
+        # the RMS over z has local minima (an outline of a few px fits several circles to a
+        # px): a grid first, then Brent in the best grid cell
+        grid = np.linspace(z_lo, z_hi, Z_GRID)
+        k = int(np.argmin([min(rms_at(zz)[1], 1e30) for zz in grid]))
         best = minimize_scalar(
             lambda zz: min(rms_at(zz)[1], 1e30),
-            bounds=(z_lo, z_hi),
+            bounds=(grid[max(k - 1, 0)], grid[min(k + 1, Z_GRID - 1)]),
             method="bounded",
             options={"xatol": 1e-3 * mirror.rim_radius},
         )
-        z0 = float(best.x)
+        z0 = float(best.x) if rms_at(best.x)[1] <= rms_at(grid[k])[1] else float(grid[k])
     rr, e = rms_at(z0)
     return ReflectionCircle(r=float(rr), z=z0, rms=float(e))
 
@@ -366,12 +378,19 @@ def detect_reflection(
        finds the round silhouettes; the **outermost** one supported by at least 40 % of the
        rays is kept (the lens barrel or body, not the glass's inner rings).
     4. Per ray the rise nearest to that circle, then a robust ellipse (RANSAC,
-       :func:`.rim.fit_rim`) rejects struts and highlights; two more rounds along rays from the
+       :func:`.rim.fit_rim`) rejects struts and highlights (first on the rises at least
+       ``min_radius`` from ``center``, then, if that declines, on those from 3 px: a small
+       lens off ``center`` has its near side there); two more rounds along rays from the
        ellipse's centre in a narrow window, unsmoothed but for 0.7 px, each edge at the
        centroid of the radial derivative within 1.5 px of its steepest sample.
     5. Declines (:class:`~.errors.EstimationError`) when the centre is not darker than the
        scene, no round silhouette has enough support, or the silhouette has no darker core (the
        lens glass; a uniformly dark floor or clutter has none).
+    6. A silhouette brighter inside than near its edge (90th percentile of its inner 60 %) is
+       a dark surround, e.g. a dark floor, holding the body: when no silhouette is accepted,
+       steps 1-5 run once more inside it (to 85 % of its radius), with its interior's level
+       as the scene's (the body's edges rise against the body, not against the mirror's
+       scene).
 
     Parameters
     ----------
@@ -401,6 +420,12 @@ def detect_reflection(
     ValueError
         Bad arguments.
     """
+    return _detect(image, rim, center, center_search, max_radius, min_radius, rng, None)
+
+
+def _detect(image, rim, center, center_search, max_radius, min_radius, rng, scene_level):
+    """:func:`detect_reflection`; ``scene_level`` (grey) replaces the mirror scene's level when
+    looking inside a dark surround."""
     from .rim import RimFit
 
     if not isinstance(rim, RimFit):
@@ -435,6 +460,8 @@ def detect_reflection(
             f"not in the image"
         )
     dark, scene = float(np.nanmedian(centre)), float(np.nanmedian(ring))
+    if scene_level is not None:  # inside a dark surround: its interior is the scene
+        scene = float(scene_level)
     contrast = scene - dark
     noise = mad_sigma(near)
     if not (np.isfinite(contrast) and contrast > max(10.0, 4.0 * noise)):
@@ -443,7 +470,9 @@ def detect_reflection(
             f"than the mirror's scene (grey {scene:.0f})"
         )
     ri, rj = _rises(prof, dr, 0.2 * contrast, dark + 0.6 * contrast)
-    keep = radii[rj] >= R_min
+    # rises from 3 px of c0 on: a small lens off c0 has its near side nearer than R_min; they
+    # vote, and step 4 tries the rises beyond R_min first (highlights lie near c0), then all
+    keep = radii[rj] >= (3.0 if scene_level is None else R_min)  # (not inside a surround)
     ri, rj = ri[keep], rj[keep]
     if len(ri) < 0.3 * n_rays:
         raise EstimationError(
@@ -451,6 +480,7 @@ def detect_reflection(
             f"{c0[1]:.0f})"
         )
     pts = c0 + radii[rj, None] * np.stack([np.cos(ang[ri]), np.sin(ang[ri])], axis=1)
+    far_pts = pts[radii[rj] >= R_min]
     dark_max = dark + 0.6 * contrast
 
     def dark_inside(rho, c):
@@ -493,13 +523,34 @@ def detect_reflection(
             "no camera reflection found: no round dark silhouette around the image centre "
             "(edges on fewer than 40 % of the rays share a circle that is dark inside)"
         )
-    first_why = None
+    first_why, surround = None, None
     for j, _ in circles[:4]:
+        for p in (far_pts, pts) if len(pts) > len(far_pts) else (pts,):
+            try:
+                return _refine_silhouette(gray, G, p, found[j][1], j * bw, bw, sig, contrast, rng)
+            except _BrightInside as err:  # a dark surround (e.g. a dark floor) holding the body
+                first_why, surround = first_why or err, surround or err
+                break
+            except EstimationError as err:  # e.g. a square box behind the barrel: try inside it
+                first_why = first_why or err
+    inner = None if surround is None else 0.85 * surround.radius / r_rim
+    if scene_level is None and inner is not None and inner > 2.0 * min_radius:
+        # 6. the body inside a dark surround: its edges rise against the surround's interior,
+        # not against the mirror's scene; look again inside, once
         try:
-            return _refine_silhouette(gray, G, pts, found[j][1], j * bw, bw, sig, contrast, rng)
-        except EstimationError as err:  # e.g. a square box behind the barrel: try inside it
-            first_why = first_why or err
+            return _detect(image, rim, c0, center_search, inner, min_radius, rng, surround.interior)
+        except EstimationError:
+            pass
     raise first_why
+
+
+class _BrightInside(EstimationError):
+    """A round dark silhouette whose interior is brighter than its edge band: a dark surround
+    (a dark floor, a dark holder) with something brighter, the camera's body, inside."""
+
+    def __init__(self, message, radius, interior):
+        super().__init__(message)
+        self.radius, self.interior = float(radius), float(interior)
 
 
 def _refine_silhouette(gray, G, pts, c_est, r_est, bw, sig, contrast, rng):
@@ -564,12 +615,17 @@ def _refine_silhouette(gray, G, pts, c_est, r_est, bw, sig, contrast, rng):
         why = f"the silhouette is not round (axes {fit.axes[0]:.1f} and {fit.axes[1]:.1f} px)"
     elif fit.rms > max(0.75, 0.02 * radius):
         why = f"the silhouette's edge is ragged (RMS {fit.rms:.2f} px to an ellipse)"
-    elif not core_level < shell_level - max(3.0, 0.05 * contrast):
+    if why is not None:
+        raise EstimationError(f"no camera reflection found: {why}")
+    if not core_level < shell_level - max(3.0, 0.05 * contrast):
         why = (
             f"the silhouette has no darker core (grey {core_level:.0f} inside, "
             f"{shell_level:.0f} near its edge): no lens glass, e.g. a dark floor"
         )
-    if why is not None:
+        inside = _polar(G, fit.center, np.linspace(0.0, 0.6, 16) * radius, ang[::2])
+        interior = float(np.nanpercentile(inside, 90))
+        if interior > shell_level + max(3.0, 0.05 * contrast):  # brighter things inside
+            raise _BrightInside(f"no camera reflection found: {why}", radius, interior)
         raise EstimationError(f"no camera reflection found: {why}")
     n = len(fit.points)
     return ReflectionFit(
