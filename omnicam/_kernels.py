@@ -940,6 +940,52 @@ def _pixel_direction(view, i, j, row_z, row_cos, column_cos, column_sin):
     return x0 / nrm, y0 / nrm, z0 / nrm
 
 
+@kernel(inline="always")
+def _row_columns(S, r, k, v0, v1, v2, v3):
+    """Node values S (NY, NX, 2) of columns ``k:k + 4`` interpolated to a row of cell (r, k)
+    with the row weights ``v*``: ``(x0..x3, y0..y3)``. Their column-weighted sum is
+    :func:`_interp_weighted`'s tensor cubic summed in the other order."""
+    a0 = v0 * S[r, k, 0] + v1 * S[r + 1, k, 0] + v2 * S[r + 2, k, 0] + v3 * S[r + 3, k, 0]
+    a1 = (
+        v0 * S[r, k + 1, 0]
+        + v1 * S[r + 1, k + 1, 0]
+        + v2 * S[r + 2, k + 1, 0]
+        + v3 * S[r + 3, k + 1, 0]
+    )
+    a2 = (
+        v0 * S[r, k + 2, 0]
+        + v1 * S[r + 1, k + 2, 0]
+        + v2 * S[r + 2, k + 2, 0]
+        + v3 * S[r + 3, k + 2, 0]
+    )
+    a3 = (
+        v0 * S[r, k + 3, 0]
+        + v1 * S[r + 1, k + 3, 0]
+        + v2 * S[r + 2, k + 3, 0]
+        + v3 * S[r + 3, k + 3, 0]
+    )
+    b0 = v0 * S[r, k, 1] + v1 * S[r + 1, k, 1] + v2 * S[r + 2, k, 1] + v3 * S[r + 3, k, 1]
+    b1 = (
+        v0 * S[r, k + 1, 1]
+        + v1 * S[r + 1, k + 1, 1]
+        + v2 * S[r + 2, k + 1, 1]
+        + v3 * S[r + 3, k + 1, 1]
+    )
+    b2 = (
+        v0 * S[r, k + 2, 1]
+        + v1 * S[r + 1, k + 2, 1]
+        + v2 * S[r + 2, k + 2, 1]
+        + v3 * S[r + 3, k + 2, 1]
+    )
+    b3 = (
+        v0 * S[r, k + 3, 1]
+        + v1 * S[r + 1, k + 3, 1]
+        + v2 * S[r + 2, k + 3, 1]
+        + v3 * S[r + 3, k + 3, 1]
+    )
+    return a0, a1, a2, a3, b0, b1, b2, b3
+
+
 @kernel
 def _fill_refined_cell(
     view,
@@ -979,32 +1025,107 @@ def _fill_refined_cell(
         k0 = j0 + fb * g
         k1 = min(j1, k0 + g)
         fine_class = fine_cls[fine_row, fb]
+        if fine_class == CELL_UNSEEN:
+            for j in range(k0, k1):
+                _view_store(i, j, _NAN, _NAN, mode, outx, outy, out16, outf16)
+            continue
+        # the sub-cell's four node columns interpolated to this row: pixels of SEEN sub-cells,
+        # mirror points of the others; per pixel only the column weights remain
+        src = fine_P if fine_class == CELL_SEEN else fine_S
+        a0, a1, a2, a3, b0, b1, b2, b3 = _row_columns(src, fine_row, fb, v0, v1, v2, v3)
         for j in range(k0, k1):
             tu = j - k0
             u0 = fine_weights[0, tu]
             u1 = fine_weights[1, tu]
             u2 = fine_weights[2, tu]
             u3 = fine_weights[3, tu]
+            c1 = u0 * a0 + u1 * a1 + u2 * a2 + u3 * a3
+            c2 = u0 * b0 + u1 * b1 + u2 * b2 + u3 * b3
             if fine_class == CELL_SEEN:
-                x, y = _interp_weighted(fine_P, fine_row, fb, v0, v1, v2, v3, u0, u1, u2, u3)
-                _view_store(i, j, x, y, mode, outx, outy, out16, outf16)
-                continue
-            if fine_class == CELL_UNSEEN:
-                _view_store(i, j, _NAN, _NAN, mode, outx, outy, out16, outf16)
+                _view_store(i, j, c1, c2, mode, outx, outy, out16, outf16)
                 continue
             dx, dy, dz = _pixel_direction(view, i, j, row_z, row_cos, column_cos, column_sin)
             x = _NAN
             y = _NAN
             decided = not dz <= view.sin_reject  # above every elevation the rig sees
             if not decided and fine_class == CELL_EDGE:
-                s1, s2 = _interp_weighted(fine_S, fine_row, fb, v0, v1, v2, v3, u0, u1, u2, u3)
-                x, y, decided = _edge_pixel(view, rig, s1, s2, dx, dy, dz)
+                x, y, decided = _edge_pixel(view, rig, c1, c2, dx, dy, dz)
             if decided:
                 _view_store(i, j, x, y, mode, outx, outy, out16, outf16)
             else:
                 pending[i, j] = 1
                 n_pending += 1
     return n_pending
+
+
+#: 1.5 * 2^52: ``(x + ROUND_MAGIC) - ROUND_MAGIC`` rounds |x| <= 2^51 to the nearest integer,
+#: ties to even (IEEE default rounding), as np.rint does, in a loop the compiler vectorises
+ROUND_MAGIC = 6755399441055744.0
+FIXED_LIMIT = 2.0**40  # |x * 32| clamped here first: a multiple of 32, so ix >> 5 saturates alike
+
+
+@kernel(inline="always")
+def _round_fixed(f):
+    """``int(np.rint(np.float64(f) * 32.0))`` of a finite float32 ``f`` (cv2.convertMaps'
+    cvRound(f * 32)), with no call to rint. Beyond ``FIXED_LIMIT`` (|f| > 2^35 px) the result
+    is the limit, whose low 5 bits are 0 like those of any float32 times 32 that large, and
+    whose ``>> 5`` saturates the int16 as well."""
+    x = min(max(np.float64(f) * 32.0, -FIXED_LIMIT), FIXED_LIMIT)
+    return int((x + ROUND_MAGIC) - ROUND_MAGIC)
+
+
+@kernel(inline="always")
+def _fill_seen(row_P, k, weights, n, mode, ox, oy, o16, of16):
+    """Entries ``0:n`` of a SEEN cell's row segment (row slices ``ox, oy``, or ``o16`` (x, y
+    interleaved) and ``of16``):
+    the cubic in the column of the row-interpolated node pixels ``row_P[k:k + 4]``.
+
+    The outputs are 1-D slices indexed from 0, so the stores are contiguous (an index numba
+    cannot prove non-negative gets a wraparound select, and the vectorised loop then scatters).
+    """
+    a0 = row_P[k, 0]
+    a1 = row_P[k + 1, 0]
+    a2 = row_P[k + 2, 0]
+    a3 = row_P[k + 3, 0]
+    b0 = row_P[k, 1]
+    b1 = row_P[k + 1, 1]
+    b2 = row_P[k + 2, 1]
+    b3 = row_P[k + 3, 1]
+    w0 = weights[0]
+    w1 = weights[1]
+    w2 = weights[2]
+    w3 = weights[3]
+    if mode == 0:  # the bulk of a table: a tight loop the compiler vectorises
+        for t in range(n):
+            ox[t] = np.float32(w0[t] * a0 + w1[t] * a1 + w2[t] * a2 + w3[t] * a3)
+            oy[t] = np.float32(w0[t] * b0 + w1[t] * b1 + w2[t] * b2 + w3[t] * b3)
+    else:  # _view_store's fixed point; finite here (all 16 nodes solved)
+        for t in range(n):
+            fx = np.float32(w0[t] * a0 + w1[t] * a1 + w2[t] * a2 + w3[t] * a3)
+            fy = np.float32(w0[t] * b0 + w1[t] * b1 + w2[t] * b2 + w3[t] * b3)
+            ix = _round_fixed(fx)
+            iy = _round_fixed(fy)
+            o16[2 * t] = max(-32768, min(32767, ix >> 5))
+            o16[2 * t + 1] = max(-32768, min(32767, iy >> 5))
+            of16[t] = (iy & 31) * 32 + (ix & 31)
+
+
+@kernel(inline="always")
+def _fill_unseen(n, mode, ox, oy, o16, of16):
+    """Entries ``0:n`` of an UNSEEN cell's row segment: ``UNSEEN`` as :func:`_view_store`
+    writes it."""
+    if mode == 0:
+        for t in range(n):
+            ox[t] = np.float32(UNSEEN)
+            oy[t] = np.float32(UNSEEN)
+    else:
+        iu = int(np.rint(np.float64(np.float32(UNSEEN)) * 32.0))
+        hi = max(-32768, min(32767, iu >> 5))
+        lo = (iu & 31) * 32 + (iu & 31)
+        for t in range(n):
+            o16[2 * t] = hi
+            o16[2 * t + 1] = hi
+            of16[t] = lo
 
 
 @kernel
@@ -1046,6 +1167,8 @@ def fill_rows(
     nx = cls.shape[1]
     NX = nx + 3
     row_P = np.empty((NX, 2))
+    # (H, 2 W): the (x, y) pairs of a row one after the other, for contiguous 1-D row slices
+    out16_rows = out16.reshape((out16.shape[0], 2 * out16.shape[1]))
     for i in range(lo, hi):
         pending_rows[i] = 0
         r = i // h
@@ -1069,57 +1192,31 @@ def fill_rows(
             row_cos = math.cos(el)
         fine_row = (i - r * h) // g  # row of the sub-cells of refined cells
         fine_tv = (i - r * h - fine_row * g) / g
+        # this row of the maps being written (row 0 of the unused 1 x 1 ones)
+        rowx = outx[i if mode == 0 else 0]
+        rowy = outy[i if mode == 0 else 0]
+        row16 = out16_rows[i if mode == 1 else 0]
+        rowf16 = outf16[i if mode == 1 else 0]
         for k in range(nx):
             j0 = k * h
             j1 = min(W, j0 + h)
             cell_class = cls[r, k]
             if cell_class == CELL_SEEN:
-                a0 = row_P[k, 0]
-                a1 = row_P[k + 1, 0]
-                a2 = row_P[k + 2, 0]
-                a3 = row_P[k + 3, 0]
-                b0 = row_P[k, 1]
-                b1 = row_P[k + 1, 1]
-                b2 = row_P[k + 2, 1]
-                b3 = row_P[k + 3, 1]
-                if mode == 0:  # the bulk of a table: a tight loop the compiler can vectorise
-                    for j in range(j0, j1):
-                        tu = j - j0
-                        outx[i, j] = np.float32(
-                            weights[0, tu] * a0
-                            + weights[1, tu] * a1
-                            + weights[2, tu] * a2
-                            + weights[3, tu] * a3
-                        )
-                        outy[i, j] = np.float32(
-                            weights[0, tu] * b0
-                            + weights[1, tu] * b1
-                            + weights[2, tu] * b2
-                            + weights[3, tu] * b3
-                        )
-                else:  # _view_store's fixed point; finite here (all 16 nodes solved)
-                    for j in range(j0, j1):
-                        tu = j - j0
-                        fx = np.float32(
-                            weights[0, tu] * a0
-                            + weights[1, tu] * a1
-                            + weights[2, tu] * a2
-                            + weights[3, tu] * a3
-                        )
-                        fy = np.float32(
-                            weights[0, tu] * b0
-                            + weights[1, tu] * b1
-                            + weights[2, tu] * b2
-                            + weights[3, tu] * b3
-                        )
-                        ix = int(np.rint(np.float64(fx) * 32.0))
-                        iy = int(np.rint(np.float64(fy) * 32.0))
-                        out16[i, j, 0] = max(-32768, min(32767, ix >> 5))
-                        out16[i, j, 1] = max(-32768, min(32767, iy >> 5))
-                        outf16[i, j] = (iy & 31) * 32 + (ix & 31)
+                _fill_seen(
+                    row_P,
+                    k,
+                    weights,
+                    j1 - j0,
+                    mode,
+                    rowx[j0:j1],
+                    rowy[j0:j1],
+                    row16[2 * j0 : 2 * j1],
+                    rowf16[j0:j1],
+                )
             elif cell_class == CELL_UNSEEN:
-                for j in range(j0, j1):
-                    _view_store(i, j, _NAN, _NAN, mode, outx, outy, out16, outf16)
+                _fill_unseen(
+                    j1 - j0, mode, rowx[j0:j1], rowy[j0:j1], row16[2 * j0 : 2 * j1], rowf16[j0:j1]
+                )
             else:  # refined (coarse cells are never EDGE: classify_cells without allow_edge)
                 c = refined_index[r, k]
                 pending_rows[i] += _fill_refined_cell(
