@@ -887,17 +887,70 @@ def mark_cells_above_band(view, origins, spacing, W, H, cls):
 
 
 @kernel(inline="always")
+def _clear_sign(dot, D, margin):
+    """Which side of ``+-margin`` the cosine ``dot / sqrt(D)`` (D > 0) is clearly on: 1 above
+    ``margin``, -1 below ``-margin``, 0 between (or NaN); squares, no root or division."""
+    if dot * dot > margin * margin * D:
+        return 1 if dot > 0.0 else -1
+    return 0
+
+
+@kernel(inline="always")
 def _edge_pixel(view, rig, s1, s2, dx, dy, dz):
-    """Entry from an interpolated mirror point: ``(x, y, decided)``; undecided near the edge."""
+    """Entry from an interpolated mirror point: ``(x, y, decided)``; undecided near the edge.
+
+    Clearly unseen (NaN, decided) when the rim margin is below ``-VIEW_RIM_MARGIN`` or one of
+    :func:`_view_pixel`'s cosines below ``-VIEW_COS_MARGIN``; seen (its pixel, computed as
+    :func:`_view_pixel` does) when the rim margin and every cosine are above the margins;
+    else undecided. The cosines are compared through their squares (:func:`_clear_sign`).
+    """
     Xx, Xy, Xz = _view_target(view, dx, dy, dz)
+    a2 = rig.a * rig.a
+    b2 = rig.b * rig.b
     if (not view.at_infinity) and _inside_mirror_body(Xx, Xy, Xz, rig.a, rig.b):
         return _NAN, _NAN, True  # inside the mirror body, as project_points
     rim2 = rig.rim_radius * rig.rim_radius
     rim_m = (rim2 - (s1 * s1 + s2 * s2)) / rim2
-    xi, yi, m = _view_pixel(rig, s1, s2, Xx, Xy, Xz, view.at_infinity)
-    if rim_m < -VIEW_RIM_MARGIN or m < -VIEW_COS_MARGIN:
+    if rim_m < -VIEW_RIM_MARGIN:
+        return _NAN, _NAN, True  # clearly outside the rim
+    C = rig.C
+    Rc = rig.R
+    tc = rig.t
+    z = rig.b * math.sqrt(1.0 + (s1 * s1 + s2 * s2) / a2)
+    Nx = b2 * s1 / (a2 * z)
+    Ny = b2 * s2 / (a2 * z)
+    nn2 = Nx * Nx + Ny * Ny + 1.0
+    wx = C[0] - s1
+    wy = C[1] - s2
+    wz = C[2] - z
+    camera = _clear_sign(
+        Nx * wx + Ny * wy - wz, nn2 * (wx * wx + wy * wy + wz * wz), VIEW_COS_MARGIN
+    )
+    if view.at_infinity:
+        ex, ey, ez = Xx, Xy, Xz
+    else:
+        ex = Xx - s1
+        ey = Xy - s2
+        ez = Xz - z
+    target = _clear_sign(
+        Nx * ex + Ny * ey - ez, nn2 * (ex * ex + ey * ey + ez * ez), VIEW_COS_MARGIN
+    )
+    xc = Rc[0, 0] * s1 + Rc[0, 1] * s2 + Rc[0, 2] * z + tc[0]
+    yc = Rc[1, 0] * s1 + Rc[1, 1] * s2 + Rc[1, 2] * z + tc[1]
+    zc = Rc[2, 0] * s1 + Rc[2, 1] * s2 + Rc[2, 2] * z + tc[2]
+    front = _clear_sign(zc, xc * xc + yc * yc + zc * zc, VIEW_COS_MARGIN)
+    if camera < 0 or target < 0 or front < 0:
         return _NAN, _NAN, True  # clearly unseen
-    if rim_m > VIEW_RIM_MARGIN and m > VIEW_COS_MARGIN and xi == xi and yi == yi:
+    if not (rim_m > VIEW_RIM_MARGIN and camera > 0 and target > 0 and front > 0):
+        return _NAN, _NAN, False
+    xn = xc / zc
+    yn = yc / zc
+    if rig.has_dist:
+        xn, yn = _distort(rig, xn, yn)
+    K = rig.K
+    xi = K[0, 0] * xn + K[0, 1] * yn + K[0, 2]
+    yi = K[1, 0] * xn + K[1, 1] * yn + K[1, 2]
+    if xi == xi and yi == yi:
         return xi, yi, True
     return _NAN, _NAN, False
 
