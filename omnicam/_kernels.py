@@ -22,6 +22,7 @@ NEWTON_TOL_REL = 1e-10  # converged when a step is shorter than this times (a + 
 NEWTON_MAX_ITER = 50  # iterations from the aligned start
 NEWTON_WARM_MAX_ITER = 8  # iterations from a start interpolated from solved neighbours
 NEWTON_BASIN_REL = 1e-4  # steps shorter than this times (a + b) are taken whole (in the basin)
+NEWTON_WARM_DONE_REL = 1e-6  # a warm start's full step this short leaves ~1e-12 (a + b)
 LINE_SEARCH_HALVINGS = 30  # backtracking halvings before giving up on a descent step
 LINE_SEARCH_SLACK = 1e-15  # relative increase of the path length still taken as no increase
 GRADIENT_ZERO = 1e-9  # |grad L| under which a stalled line search counts as converged
@@ -495,9 +496,12 @@ def _newton_warm(rig, s1, s2, Xx, Xy, Xz, at_infinity, tol):
     """Newton's full steps of ``_reflection_point`` from a start already in its basin.
 
     The start comes from the interpolated neighbours, so the step is small from the first
-    iteration; the same gradient and Hessian of the path length and the same stopping rule as
-    ``_reflection_point``. Returns ``(s1, s2, ok)``; not ok (the caller then solves from the
-    aligned start) if a step is not a full Newton step of that basin or
+    iteration; the same gradient and Hessian of the path length as ``_reflection_point``.
+    Stops at its step tolerance ``tol`` or after a full step shorter than
+    ``NEWTON_WARM_DONE_REL (a + b)``: Newton converges quadratically in the basin, so the error
+    left is of the order of that step squared over the mirror's scale, ~1e-12 (a + b), below
+    the tolerance of 1e-10 (a + b). Returns ``(s1, s2, ok)``; not ok (the caller then solves
+    from the aligned start) if a step is not a full Newton step of that basin or
     ``NEWTON_WARM_MAX_ITER`` pass.
     """
     C = rig.C
@@ -514,7 +518,8 @@ def _newton_warm(rig, s1, s2, Xx, Xy, Xz, at_infinity, tol):
             return s1, s2, False
         s1 += d1
         s2 += d2
-        if dn < tol:
+        # quadratic convergence: the error left after a full step of dn is ~ dn^2 / (a + b)
+        if dn < tol or dn < NEWTON_WARM_DONE_REL * (a + b):
             return s1, s2, True
     return s1, s2, False
 
