@@ -486,8 +486,8 @@ class _GridStack:
         positions = np.empty(checks + (2,))
         starts = np.empty(checks + (2,))
         interpolated = np.empty(checks + (2,))
-        run_chunks(
-            k.grid_check_points,
+        k.grid_check_points(
+            0,
             positions[..., 0].size,
             origins,
             spacing,
@@ -496,7 +496,6 @@ class _GridStack:
             positions,
             starts,
             interpolated,
-            min_chunk=512,
         )
         _S, P, margins, ok, start_pixels = _solve(view, rig, positions, starts)
         estimates = np.concatenate([interpolated, start_pixels], axis=-1)
