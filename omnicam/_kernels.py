@@ -22,6 +22,7 @@ NEWTON_TOL_REL = 1e-10  # converged when a step is shorter than this times (a + 
 NEWTON_MAX_ITER = 50  # iterations from the aligned start
 NEWTON_WARM_MAX_ITER = 8  # iterations from a start interpolated from solved neighbours
 NEWTON_BASIN_REL = 1e-4  # steps shorter than this times (a + b) are taken whole (in the basin)
+NEWTON_WARM_DONE_REL = 1e-6  # a warm start's full step this short leaves ~1e-12 (a + b)
 LINE_SEARCH_HALVINGS = 30  # backtracking halvings before giving up on a descent step
 LINE_SEARCH_SLACK = 1e-15  # relative increase of the path length still taken as no increase
 GRADIENT_ZERO = 1e-9  # |grad L| under which a stalled line search counts as converged
@@ -495,9 +496,12 @@ def _newton_warm(rig, s1, s2, Xx, Xy, Xz, at_infinity, tol):
     """Newton's full steps of ``_reflection_point`` from a start already in its basin.
 
     The start comes from the interpolated neighbours, so the step is small from the first
-    iteration; the same gradient and Hessian of the path length and the same stopping rule as
-    ``_reflection_point``. Returns ``(s1, s2, ok)``; not ok (the caller then solves from the
-    aligned start) if a step is not a full Newton step of that basin or
+    iteration; the same gradient and Hessian of the path length as ``_reflection_point``.
+    Stops at its step tolerance ``tol`` or after a full step shorter than
+    ``NEWTON_WARM_DONE_REL (a + b)``: Newton converges quadratically in the basin, so the error
+    left is of the order of that step squared over the mirror's scale, ~1e-12 (a + b), below
+    the tolerance of 1e-10 (a + b). Returns ``(s1, s2, ok)``; not ok (the caller then solves
+    from the aligned start) if a step is not a full Newton step of that basin or
     ``NEWTON_WARM_MAX_ITER`` pass.
     """
     C = rig.C
@@ -514,7 +518,8 @@ def _newton_warm(rig, s1, s2, Xx, Xy, Xz, at_infinity, tol):
             return s1, s2, False
         s1 += d1
         s2 += d2
-        if dn < tol:
+        # quadratic convergence: the error left after a full step of dn is ~ dn^2 / (a + b)
+        if dn < tol or dn < NEWTON_WARM_DONE_REL * (a + b):
             return s1, s2, True
     return s1, s2, False
 
@@ -887,17 +892,70 @@ def mark_cells_above_band(view, origins, spacing, W, H, cls):
 
 
 @kernel(inline="always")
+def _clear_sign(dot, D, margin):
+    """Which side of ``+-margin`` the cosine ``dot / sqrt(D)`` (D > 0) is clearly on: 1 above
+    ``margin``, -1 below ``-margin``, 0 between (or NaN); squares, no root or division."""
+    if dot * dot > margin * margin * D:
+        return 1 if dot > 0.0 else -1
+    return 0
+
+
+@kernel(inline="always")
 def _edge_pixel(view, rig, s1, s2, dx, dy, dz):
-    """Entry from an interpolated mirror point: ``(x, y, decided)``; undecided near the edge."""
+    """Entry from an interpolated mirror point: ``(x, y, decided)``; undecided near the edge.
+
+    Clearly unseen (NaN, decided) when the rim margin is below ``-VIEW_RIM_MARGIN`` or one of
+    :func:`_view_pixel`'s cosines below ``-VIEW_COS_MARGIN``; seen (its pixel, computed as
+    :func:`_view_pixel` does) when the rim margin and every cosine are above the margins;
+    else undecided. The cosines are compared through their squares (:func:`_clear_sign`).
+    """
     Xx, Xy, Xz = _view_target(view, dx, dy, dz)
+    a2 = rig.a * rig.a
+    b2 = rig.b * rig.b
     if (not view.at_infinity) and _inside_mirror_body(Xx, Xy, Xz, rig.a, rig.b):
         return _NAN, _NAN, True  # inside the mirror body, as project_points
     rim2 = rig.rim_radius * rig.rim_radius
     rim_m = (rim2 - (s1 * s1 + s2 * s2)) / rim2
-    xi, yi, m = _view_pixel(rig, s1, s2, Xx, Xy, Xz, view.at_infinity)
-    if rim_m < -VIEW_RIM_MARGIN or m < -VIEW_COS_MARGIN:
+    if rim_m < -VIEW_RIM_MARGIN:
+        return _NAN, _NAN, True  # clearly outside the rim
+    C = rig.C
+    Rc = rig.R
+    tc = rig.t
+    z = rig.b * math.sqrt(1.0 + (s1 * s1 + s2 * s2) / a2)
+    Nx = b2 * s1 / (a2 * z)
+    Ny = b2 * s2 / (a2 * z)
+    nn2 = Nx * Nx + Ny * Ny + 1.0
+    wx = C[0] - s1
+    wy = C[1] - s2
+    wz = C[2] - z
+    camera = _clear_sign(
+        Nx * wx + Ny * wy - wz, nn2 * (wx * wx + wy * wy + wz * wz), VIEW_COS_MARGIN
+    )
+    if view.at_infinity:
+        ex, ey, ez = Xx, Xy, Xz
+    else:
+        ex = Xx - s1
+        ey = Xy - s2
+        ez = Xz - z
+    target = _clear_sign(
+        Nx * ex + Ny * ey - ez, nn2 * (ex * ex + ey * ey + ez * ez), VIEW_COS_MARGIN
+    )
+    xc = Rc[0, 0] * s1 + Rc[0, 1] * s2 + Rc[0, 2] * z + tc[0]
+    yc = Rc[1, 0] * s1 + Rc[1, 1] * s2 + Rc[1, 2] * z + tc[1]
+    zc = Rc[2, 0] * s1 + Rc[2, 1] * s2 + Rc[2, 2] * z + tc[2]
+    front = _clear_sign(zc, xc * xc + yc * yc + zc * zc, VIEW_COS_MARGIN)
+    if camera < 0 or target < 0 or front < 0:
         return _NAN, _NAN, True  # clearly unseen
-    if rim_m > VIEW_RIM_MARGIN and m > VIEW_COS_MARGIN and xi == xi and yi == yi:
+    if not (rim_m > VIEW_RIM_MARGIN and camera > 0 and target > 0 and front > 0):
+        return _NAN, _NAN, False
+    xn = xc / zc
+    yn = yc / zc
+    if rig.has_dist:
+        xn, yn = _distort(rig, xn, yn)
+    K = rig.K
+    xi = K[0, 0] * xn + K[0, 1] * yn + K[0, 2]
+    yi = K[1, 0] * xn + K[1, 1] * yn + K[1, 2]
+    if xi == xi and yi == yi:
         return xi, yi, True
     return _NAN, _NAN, False
 
@@ -940,6 +998,52 @@ def _pixel_direction(view, i, j, row_z, row_cos, column_cos, column_sin):
     return x0 / nrm, y0 / nrm, z0 / nrm
 
 
+@kernel(inline="always")
+def _row_columns(S, r, k, v0, v1, v2, v3):
+    """Node values S (NY, NX, 2) of columns ``k:k + 4`` interpolated to a row of cell (r, k)
+    with the row weights ``v*``: ``(x0..x3, y0..y3)``. Their column-weighted sum is
+    :func:`_interp_weighted`'s tensor cubic summed in the other order."""
+    a0 = v0 * S[r, k, 0] + v1 * S[r + 1, k, 0] + v2 * S[r + 2, k, 0] + v3 * S[r + 3, k, 0]
+    a1 = (
+        v0 * S[r, k + 1, 0]
+        + v1 * S[r + 1, k + 1, 0]
+        + v2 * S[r + 2, k + 1, 0]
+        + v3 * S[r + 3, k + 1, 0]
+    )
+    a2 = (
+        v0 * S[r, k + 2, 0]
+        + v1 * S[r + 1, k + 2, 0]
+        + v2 * S[r + 2, k + 2, 0]
+        + v3 * S[r + 3, k + 2, 0]
+    )
+    a3 = (
+        v0 * S[r, k + 3, 0]
+        + v1 * S[r + 1, k + 3, 0]
+        + v2 * S[r + 2, k + 3, 0]
+        + v3 * S[r + 3, k + 3, 0]
+    )
+    b0 = v0 * S[r, k, 1] + v1 * S[r + 1, k, 1] + v2 * S[r + 2, k, 1] + v3 * S[r + 3, k, 1]
+    b1 = (
+        v0 * S[r, k + 1, 1]
+        + v1 * S[r + 1, k + 1, 1]
+        + v2 * S[r + 2, k + 1, 1]
+        + v3 * S[r + 3, k + 1, 1]
+    )
+    b2 = (
+        v0 * S[r, k + 2, 1]
+        + v1 * S[r + 1, k + 2, 1]
+        + v2 * S[r + 2, k + 2, 1]
+        + v3 * S[r + 3, k + 2, 1]
+    )
+    b3 = (
+        v0 * S[r, k + 3, 1]
+        + v1 * S[r + 1, k + 3, 1]
+        + v2 * S[r + 2, k + 3, 1]
+        + v3 * S[r + 3, k + 3, 1]
+    )
+    return a0, a1, a2, a3, b0, b1, b2, b3
+
+
 @kernel
 def _fill_refined_cell(
     view,
@@ -979,32 +1083,107 @@ def _fill_refined_cell(
         k0 = j0 + fb * g
         k1 = min(j1, k0 + g)
         fine_class = fine_cls[fine_row, fb]
+        if fine_class == CELL_UNSEEN:
+            for j in range(k0, k1):
+                _view_store(i, j, _NAN, _NAN, mode, outx, outy, out16, outf16)
+            continue
+        # the sub-cell's four node columns interpolated to this row: pixels of SEEN sub-cells,
+        # mirror points of the others; per pixel only the column weights remain
+        src = fine_P if fine_class == CELL_SEEN else fine_S
+        a0, a1, a2, a3, b0, b1, b2, b3 = _row_columns(src, fine_row, fb, v0, v1, v2, v3)
         for j in range(k0, k1):
             tu = j - k0
             u0 = fine_weights[0, tu]
             u1 = fine_weights[1, tu]
             u2 = fine_weights[2, tu]
             u3 = fine_weights[3, tu]
+            c1 = u0 * a0 + u1 * a1 + u2 * a2 + u3 * a3
+            c2 = u0 * b0 + u1 * b1 + u2 * b2 + u3 * b3
             if fine_class == CELL_SEEN:
-                x, y = _interp_weighted(fine_P, fine_row, fb, v0, v1, v2, v3, u0, u1, u2, u3)
-                _view_store(i, j, x, y, mode, outx, outy, out16, outf16)
-                continue
-            if fine_class == CELL_UNSEEN:
-                _view_store(i, j, _NAN, _NAN, mode, outx, outy, out16, outf16)
+                _view_store(i, j, c1, c2, mode, outx, outy, out16, outf16)
                 continue
             dx, dy, dz = _pixel_direction(view, i, j, row_z, row_cos, column_cos, column_sin)
             x = _NAN
             y = _NAN
             decided = not dz <= view.sin_reject  # above every elevation the rig sees
             if not decided and fine_class == CELL_EDGE:
-                s1, s2 = _interp_weighted(fine_S, fine_row, fb, v0, v1, v2, v3, u0, u1, u2, u3)
-                x, y, decided = _edge_pixel(view, rig, s1, s2, dx, dy, dz)
+                x, y, decided = _edge_pixel(view, rig, c1, c2, dx, dy, dz)
             if decided:
                 _view_store(i, j, x, y, mode, outx, outy, out16, outf16)
             else:
                 pending[i, j] = 1
                 n_pending += 1
     return n_pending
+
+
+#: 1.5 * 2^52: ``(x + ROUND_MAGIC) - ROUND_MAGIC`` rounds |x| <= 2^51 to the nearest integer,
+#: ties to even (IEEE default rounding), as np.rint does, in a loop the compiler vectorises
+ROUND_MAGIC = 6755399441055744.0
+FIXED_LIMIT = 2.0**40  # |x * 32| clamped here first: a multiple of 32, so ix >> 5 saturates alike
+
+
+@kernel(inline="always")
+def _round_fixed(f):
+    """``int(np.rint(np.float64(f) * 32.0))`` of a finite float32 ``f`` (cv2.convertMaps'
+    cvRound(f * 32)), with no call to rint. Beyond ``FIXED_LIMIT`` (|f| > 2^35 px) the result
+    is the limit, whose low 5 bits are 0 like those of any float32 times 32 that large, and
+    whose ``>> 5`` saturates the int16 as well."""
+    x = min(max(np.float64(f) * 32.0, -FIXED_LIMIT), FIXED_LIMIT)
+    return int((x + ROUND_MAGIC) - ROUND_MAGIC)
+
+
+@kernel(inline="always")
+def _fill_seen(row_P, k, weights, n, mode, ox, oy, o16, of16):
+    """Entries ``0:n`` of a SEEN cell's row segment (row slices ``ox, oy``, or ``o16`` (x, y
+    interleaved) and ``of16``):
+    the cubic in the column of the row-interpolated node pixels ``row_P[k:k + 4]``.
+
+    The outputs are 1-D slices indexed from 0, so the stores are contiguous (an index numba
+    cannot prove non-negative gets a wraparound select, and the vectorised loop then scatters).
+    """
+    a0 = row_P[k, 0]
+    a1 = row_P[k + 1, 0]
+    a2 = row_P[k + 2, 0]
+    a3 = row_P[k + 3, 0]
+    b0 = row_P[k, 1]
+    b1 = row_P[k + 1, 1]
+    b2 = row_P[k + 2, 1]
+    b3 = row_P[k + 3, 1]
+    w0 = weights[0]
+    w1 = weights[1]
+    w2 = weights[2]
+    w3 = weights[3]
+    if mode == 0:  # the bulk of a table: a tight loop the compiler vectorises
+        for t in range(n):
+            ox[t] = np.float32(w0[t] * a0 + w1[t] * a1 + w2[t] * a2 + w3[t] * a3)
+            oy[t] = np.float32(w0[t] * b0 + w1[t] * b1 + w2[t] * b2 + w3[t] * b3)
+    else:  # _view_store's fixed point; finite here (all 16 nodes solved)
+        for t in range(n):
+            fx = np.float32(w0[t] * a0 + w1[t] * a1 + w2[t] * a2 + w3[t] * a3)
+            fy = np.float32(w0[t] * b0 + w1[t] * b1 + w2[t] * b2 + w3[t] * b3)
+            ix = _round_fixed(fx)
+            iy = _round_fixed(fy)
+            o16[2 * t] = max(-32768, min(32767, ix >> 5))
+            o16[2 * t + 1] = max(-32768, min(32767, iy >> 5))
+            of16[t] = (iy & 31) * 32 + (ix & 31)
+
+
+@kernel(inline="always")
+def _fill_unseen(n, mode, ox, oy, o16, of16):
+    """Entries ``0:n`` of an UNSEEN cell's row segment: ``UNSEEN`` as :func:`_view_store`
+    writes it."""
+    if mode == 0:
+        for t in range(n):
+            ox[t] = np.float32(UNSEEN)
+            oy[t] = np.float32(UNSEEN)
+    else:
+        iu = int(np.rint(np.float64(np.float32(UNSEEN)) * 32.0))
+        hi = max(-32768, min(32767, iu >> 5))
+        lo = (iu & 31) * 32 + (iu & 31)
+        for t in range(n):
+            o16[2 * t] = hi
+            o16[2 * t + 1] = hi
+            of16[t] = lo
 
 
 @kernel
@@ -1046,6 +1225,8 @@ def fill_rows(
     nx = cls.shape[1]
     NX = nx + 3
     row_P = np.empty((NX, 2))
+    # (H, 2 W): the (x, y) pairs of a row one after the other, for contiguous 1-D row slices
+    out16_rows = out16.reshape((out16.shape[0], 2 * out16.shape[1]))
     for i in range(lo, hi):
         pending_rows[i] = 0
         r = i // h
@@ -1069,57 +1250,31 @@ def fill_rows(
             row_cos = math.cos(el)
         fine_row = (i - r * h) // g  # row of the sub-cells of refined cells
         fine_tv = (i - r * h - fine_row * g) / g
+        # this row of the maps being written (row 0 of the unused 1 x 1 ones)
+        rowx = outx[i if mode == 0 else 0]
+        rowy = outy[i if mode == 0 else 0]
+        row16 = out16_rows[i if mode == 1 else 0]
+        rowf16 = outf16[i if mode == 1 else 0]
         for k in range(nx):
             j0 = k * h
             j1 = min(W, j0 + h)
             cell_class = cls[r, k]
             if cell_class == CELL_SEEN:
-                a0 = row_P[k, 0]
-                a1 = row_P[k + 1, 0]
-                a2 = row_P[k + 2, 0]
-                a3 = row_P[k + 3, 0]
-                b0 = row_P[k, 1]
-                b1 = row_P[k + 1, 1]
-                b2 = row_P[k + 2, 1]
-                b3 = row_P[k + 3, 1]
-                if mode == 0:  # the bulk of a table: a tight loop the compiler can vectorise
-                    for j in range(j0, j1):
-                        tu = j - j0
-                        outx[i, j] = np.float32(
-                            weights[0, tu] * a0
-                            + weights[1, tu] * a1
-                            + weights[2, tu] * a2
-                            + weights[3, tu] * a3
-                        )
-                        outy[i, j] = np.float32(
-                            weights[0, tu] * b0
-                            + weights[1, tu] * b1
-                            + weights[2, tu] * b2
-                            + weights[3, tu] * b3
-                        )
-                else:  # _view_store's fixed point; finite here (all 16 nodes solved)
-                    for j in range(j0, j1):
-                        tu = j - j0
-                        fx = np.float32(
-                            weights[0, tu] * a0
-                            + weights[1, tu] * a1
-                            + weights[2, tu] * a2
-                            + weights[3, tu] * a3
-                        )
-                        fy = np.float32(
-                            weights[0, tu] * b0
-                            + weights[1, tu] * b1
-                            + weights[2, tu] * b2
-                            + weights[3, tu] * b3
-                        )
-                        ix = int(np.rint(np.float64(fx) * 32.0))
-                        iy = int(np.rint(np.float64(fy) * 32.0))
-                        out16[i, j, 0] = max(-32768, min(32767, ix >> 5))
-                        out16[i, j, 1] = max(-32768, min(32767, iy >> 5))
-                        outf16[i, j] = (iy & 31) * 32 + (ix & 31)
+                _fill_seen(
+                    row_P,
+                    k,
+                    weights,
+                    j1 - j0,
+                    mode,
+                    rowx[j0:j1],
+                    rowy[j0:j1],
+                    row16[2 * j0 : 2 * j1],
+                    rowf16[j0:j1],
+                )
             elif cell_class == CELL_UNSEEN:
-                for j in range(j0, j1):
-                    _view_store(i, j, _NAN, _NAN, mode, outx, outy, out16, outf16)
+                _fill_unseen(
+                    j1 - j0, mode, rowx[j0:j1], rowy[j0:j1], row16[2 * j0 : 2 * j1], rowf16[j0:j1]
+                )
             else:  # refined (coarse cells are never EDGE: classify_cells without allow_edge)
                 c = refined_index[r, k]
                 pending_rows[i] += _fill_refined_cell(

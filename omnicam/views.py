@@ -430,15 +430,18 @@ def _table(camera, kind, A, p0, p1, az_step, size, depth, viewpoint, m1type, ste
         raise ValueError(f"step must be a multiple of 4, got {step}")
     view = _view_args(camera, kind, A, p0, p1, az_step, depth, viewpoint)
     rig = _rig_args(camera)
+    # both maps are views of one buffer: numpy asks the kernel for transparent huge pages from
+    # 4 MiB on, which spares the page faults of first writing a fresh table (~2 ms of a 1024x768
+    # one otherwise)
     if m1type == cv2.CV_16SC2:
         mode = 1
         outx = outy = np.empty((1, 1), np.float32)
-        out16 = np.empty((h, w, 2), np.int16)
-        outf16 = np.empty((h, w), np.uint16)
+        buf = np.empty(h * w * 6, np.uint8)
+        out16 = buf[: h * w * 4].view(np.int16).reshape(h, w, 2)
+        outf16 = buf[h * w * 4 :].view(np.uint16).reshape(h, w)
     else:
         mode = 0
-        outx = np.empty((h, w), np.float32)
-        outy = np.empty((h, w), np.float32)
+        outx, outy = np.empty((2, h, w), np.float32)
         out16 = np.empty((1, 1, 2), np.int16)
         outf16 = np.empty((1, 1), np.uint16)
     st = np.zeros(8, np.int64) if stats is None else stats

@@ -345,6 +345,21 @@ def test_m1type_variants_agree(kind):
     assert np.abs(back_y - fy).max() <= 1 / 64 + 1e-6
 
 
+def test_fixed_point_rounding_is_rint_of_32x_with_ties_to_even():
+    """The vectorised fixed point of SEEN cells (1.5 * 2^52 trick) is cvRound(x * 32) as
+    np.rint gives it, ties to even included, and saturates beyond its clamp."""
+    from omnicam._kernels import _round_fixed
+
+    ties = np.arange(-200, 200) / 64.0  # x * 32 = k / 2: every other one a tie
+    rng = np.random.default_rng(1)
+    values = np.concatenate([ties, rng.uniform(-5000.0, 5000.0, 2000), [0.0, -0.0, -10.0]])
+    for f in values.astype(np.float32):
+        assert _round_fixed(f) == int(np.rint(np.float64(f) * 32.0)), f
+    for f in (np.float32(1e20), np.float32(-1e20)):
+        r = _round_fixed(f)
+        assert r % 32 == 0 and abs(r) >> 5 > 32767
+
+
 def test_default_m1type_is_fixed_point():
     cam = synthetic.aligned_rig()
     m1, m2 = cam.init_panorama_maps((64, 16))
