@@ -140,7 +140,7 @@ def temp_beside(path):
 
 
 @contextlib.contextmanager
-def _sigint_deferred():
+def sigint_deferred():
     """Hold SIGINT back (POSIX, main thread) for the body; a Ctrl-C then arrives right after."""
     import signal
     import threading
@@ -224,7 +224,7 @@ def atomic_output(path, *, what="file", overwrite=True, verify=None, allow_empty
         raise OutputError(f"cannot write {what} {path}: it exists")
     tmp = None
     try:
-        with _sigint_deferred():  # no Ctrl-C between creating the file and owning it
+        with sigint_deferred():  # no Ctrl-C between creating the file and owning it
             tmp = temp_beside(path)
         try:
             yield tmp

@@ -57,7 +57,7 @@ import sys
 import cv2
 import numpy as np
 
-from ._atomic import OutputError, atomic_output, write_bytes
+from ._atomic import OutputError, atomic_output, sigint_deferred, write_bytes
 from ._typing import ArrayLike, FloatArray, PathLike, Size
 from ._validate import validate_D, validate_image_size, validate_K
 from .mirror import HyperbolicMirror
@@ -701,15 +701,20 @@ def _atomic_filestorage(path, what, write, read_back):
     _suffix(path, what)
 
     with opencv_silenced(), atomic_output(path, what=what, verify=read_back) as tmp:
-        fs = cv2.FileStorage(tmp, cv2.FILE_STORAGE_WRITE)
+        fs = None
         try:
+            # an unreleased FileStorage writes its file when it is collected, possibly after
+            # the temporary was removed: no Ctrl-C between creating it and owning it
+            with sigint_deferred():
+                fs = cv2.FileStorage(tmp, cv2.FILE_STORAGE_WRITE)
             if not fs.isOpened():
                 raise OutputError(
                     f"cannot write {what} {shown(path)}: OpenCV cannot open it for writing"
                 )
             write(fs)
         finally:
-            fs.release()
+            if fs is not None:
+                fs.release()
 
 
 def _write_seq(fs, name, values):
