@@ -2483,7 +2483,9 @@ class Runner:
                 ("saves", self.saves),
                 ("disks", lambda: self.disks((0,) if q else (0, 1024, 3000, 6000, 12000))),
                 ("permissions", lambda: None if q else self.permissions()),
-                ("sigint", lambda: self.sigint(0 if q else 8, 2 if q else 8, 0 if q else 4)),
+                # Ctrl-C at random moments only in the full run: its outcome depends on timing,
+                # and CI must not pass or fail by chance (the full run's count is the figure)
+                ("sigint", lambda: None if q else self.sigint(8, 8, 4)),
                 ("sigkill", lambda: self.sigkill_saves(2 if q else 20)),
             ]
             for name, step in steps:
