@@ -120,3 +120,38 @@ def white_holder_render(
         u = np.array([np.cos(np.deg2rad(ang)), np.sin(np.deg2rad(ang))])
         img[(np.abs(q @ np.array([-u[1], u[0]])) < 0.02 * size) & (q @ u > 0.35 * rim_px)] = 45
     return img, cam
+
+
+# -- helpers of the CLI tests -----------------------------------------------------------
+def make_frame(i, size=(200, 200)):
+    """A textured frame with a moving bright square, so frames differ and compress honestly."""
+    w, h = size
+    y, x = np.mgrid[0:h, 0:w]
+    img = np.stack([(x * 255 // w), (y * 255 // h), np.full_like(x, 40 * (i % 6))], axis=-1)
+    img = img.astype(np.uint8)
+    s = 10 * i % (w - 20)
+    img[s : s + 20, s : s + 20] = 255
+    return img
+
+
+def write_video(path, n, size=(200, 200), fps=10):
+    writer = cv2.VideoWriter(str(path), cv2.VideoWriter_fourcc(*"MJPG"), fps, size)
+    assert writer.isOpened()
+    for i in range(n):
+        writer.write(make_frame(i, size))
+    writer.release()
+    return path
+
+
+def one_error_line(err):
+    """The stderr of a failed command: exactly one line, ours."""
+    lines = [ln for ln in err.splitlines() if ln.strip()]
+    assert len(lines) == 1, err
+    assert lines[0].startswith("omnicam: error: "), err
+    assert "Traceback" not in err
+    return lines[0]
+
+
+def leftovers(folder):
+    """Temporary files the CLI may have left behind."""
+    return sorted(p.name for p in folder.iterdir() if p.name.startswith("."))

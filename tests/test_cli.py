@@ -9,48 +9,13 @@ import sys
 import cv2
 import numpy as np
 import pytest
-from conftest import video_frames
+from conftest import leftovers, make_frame, one_error_line, video_frames, write_video
 
 from omnicam import synthetic
 from omnicam.cli import main
 from omnicam.io import read_intrinsics
 
 SIZE = (200, 200)  # frames of the small test videos and images
-
-
-# -- helpers ----------------------------------------------------------------------------------
-def make_frame(i, size=SIZE):
-    """A textured frame with a moving bright square, so frames differ and compress honestly."""
-    w, h = size
-    y, x = np.mgrid[0:h, 0:w]
-    img = np.stack([(x * 255 // w), (y * 255 // h), np.full_like(x, 40 * (i % 6))], axis=-1)
-    img = img.astype(np.uint8)
-    s = 10 * i % (w - 20)
-    img[s : s + 20, s : s + 20] = 255
-    return img
-
-
-def write_video(path, n, size=SIZE, fps=10):
-    writer = cv2.VideoWriter(str(path), cv2.VideoWriter_fourcc(*"MJPG"), fps, size)
-    assert writer.isOpened()
-    for i in range(n):
-        writer.write(make_frame(i, size))
-    writer.release()
-    return path
-
-
-def one_error_line(err):
-    """The stderr of a failed command: exactly one line, ours."""
-    lines = [ln for ln in err.splitlines() if ln.strip()]
-    assert len(lines) == 1, err
-    assert lines[0].startswith("omnicam: error: "), err
-    assert "Traceback" not in err
-    return lines[0]
-
-
-def leftovers(folder):
-    """Temporary files the CLI may have left behind."""
-    return sorted(p.name for p in folder.iterdir() if p.name.startswith("."))
 
 
 # -- fixtures ---------------------------------------------------------------------------------

@@ -14,42 +14,14 @@ import warnings
 import cv2
 import numpy as np
 import pytest
-from conftest import video_frames
+from conftest import leftovers as hidden
+from conftest import make_frame, one_error_line, video_frames, write_video
 
 from omnicam import synthetic
 from omnicam.cli import main
 from omnicam.views import K_from_fov, rotation_from_ypr
 
 SIZE = (200, 200)
-
-
-def make_frame(i, size=SIZE):
-    w, h = size
-    y, x = np.mgrid[0:h, 0:w]
-    img = np.stack([(x * 255 // w), (y * 255 // h), np.full_like(x, 40 * (i % 6))], axis=-1)
-    img = img.astype(np.uint8)
-    s = 10 * i % (w - 20)
-    img[s : s + 20, s : s + 20] = 255
-    return img
-
-
-def write_video(path, n, size=SIZE):
-    w = cv2.VideoWriter(str(path), cv2.VideoWriter_fourcc(*"MJPG"), 10, size)
-    for i in range(n):
-        w.write(make_frame(i, size))
-    w.release()
-    return path
-
-
-def one_error_line(err):
-    lines = [ln for ln in err.splitlines() if ln.strip()]
-    assert len(lines) == 1, err
-    assert lines[0].startswith("omnicam: error: ") and "Traceback" not in err, err
-    return lines[0]
-
-
-def hidden(folder):
-    return sorted(p.name for p in folder.iterdir() if p.name.startswith("."))
 
 
 @pytest.fixture(scope="module")
