@@ -22,6 +22,7 @@ Targets (issue 8): 0 silent failures; with the reflection visible the right cand
 line; median(actual axis error / reported axis std) between 0.5 and 2.
 
     python benchmarks/bench_stress.py --n 100 --seed 0 [--json FILE] [--list] [--reference]
+        [--lens-z] [--image-size 1920x1080]
 
 ``--reference`` adds a third run per case, ``lens=False`` with the same far line (mode
 ``ref``): the rim and the line alone, a check that the renders agree with the model where the
@@ -44,6 +45,7 @@ from omnicam.synthetic import realistic
 
 MODES = ("default", "1 line")
 REFERENCE = "ref"  # lens=False and one far line: the rim and the line alone (--reference)
+LENS_Z = "lens z"  # the barrel's front z given (lens_z), as measured on the rig (--lens-z)
 
 
 def posture_errors(camera, truth):
@@ -84,6 +86,12 @@ def run_one(render, mode):
     }
     lines = None
     lens = False if mode == REFERENCE else "auto"
+    extra = {}
+    if mode == LENS_Z:
+        if render.case.body is None:
+            rec.update(status="skipped", message="no camera body")
+            return rec
+        extra["lens_z"] = render.case.body.z_barrel
     if mode in ("1 line", REFERENCE):
         if not render.far_lines:
             rec.update(status="skipped", message="no far line seen")
@@ -92,7 +100,13 @@ def run_one(render, mode):
     t0 = time.perf_counter()
     try:
         cam, report = MisalignedHyperbolicCamera.calibrate(
-            truth.K, truth.mirror, image=render.image, D=truth.D, far_lines=lines, lens=lens
+            truth.K,
+            truth.mirror,
+            image=render.image,
+            D=truth.D,
+            far_lines=lines,
+            lens=lens,
+            **extra,
         )
     except Exception as exc:  # noqa: BLE001 -- every failure is a result here
         rec.update(
@@ -183,11 +197,23 @@ def main(argv=None):
         action="store_true",
         help="also run lens=False with one far line (mode 'ref'): the rim and the line alone",
     )
+    ap.add_argument(
+        "--lens-z",
+        action="store_true",
+        help="also run with the barrel front's z given (mode 'lens z'), as a user who "
+        "measured it would",
+    )
+    ap.add_argument(
+        "--image-size",
+        help="WxH: every case at this size (clipped cases: a 16:9 frame of the same width); "
+        "the default draws 640x480 to 1000x1000",
+    )
     args = ap.parse_args(argv)
-    modes = MODES + ((REFERENCE,) if args.reference else ())
+    modes = MODES + ((REFERENCE,) if args.reference else ()) + ((LENS_Z,) if args.lens_z else ())
+    size = tuple(int(v) for v in args.image_size.lower().split("x")) if args.image_size else None
     records = []
     render_times = []
-    for case in realistic.stress_cases(args.n, args.seed):
+    for case in realistic.stress_cases(args.n, args.seed, image_size=size):
         t0 = time.perf_counter()
         render = realistic.render_case(case)
         render_times.append(time.perf_counter() - t0)

@@ -372,3 +372,44 @@ def conftest_rig(name):
     import conftest
 
     return conftest.RIGS[name]
+
+
+def test_an_outline_that_moves_the_axis_beyond_the_rims_uncertainty_is_left_out(monkeypatch):
+    # the outline of the truth tilted by 0.1 deg (a biased detection): the rim's chi-square
+    # barely rises, but the axis moves far outside what the rim alone allows there (the
+    # Hausman test of steps.CUE_SHIFT_CHI2), so the rim alone decides
+    from omnicam.calibration import steps
+
+    truth = RIGS[1]
+    tilted = truth.replace(
+        rvec=cv2.Rodrigues(cv2.Rodrigues(np.radians([0.1, 0, 0]))[0] @ truth.R)[0].ravel()
+    )
+    biased, _ = reflection.outline_pixels(tilted, R_C, Z_C, 64)
+    rim = truth.rim_image_points(360) + np.random.default_rng(1).normal(size=(360, 2)) * 0.05
+    args = (truth.K, truth.mirror)
+    kw = dict(boundary_points=rim, lens=biased, lens_z=Z_C)
+    _, rim_only = calibrate(*args, boundary_points=rim, lens=False)
+    monkeypatch.setattr(steps, "CUE_SHIFT_CHI2", math.inf)
+    cam, report = calibrate(*args, **kw)
+    assert report.accepted_cues == ("reflection",)  # the rim's own test lets it in
+    assert axis_error_deg(cam, truth) > 2 * rim_only.axis_std_deg
+    monkeypatch.undo()
+    cam, report = calibrate(*args, **kw)
+    assert [c for c, _ in report.rejected_cues] == ["reflection"]
+    assert "moved the mirror axis" in report.rejected_cues[0][1]
+    assert axis_error_deg(cam, truth) < 2 * report.axis_std_deg
+
+
+def test_a_biased_outline_the_test_lets_in_widens_the_reported_uncertainty():
+    # a shift the statistics cannot tell from a consistent one is added to the uncertainty
+    # (steps._disagreement's bias_cov): the error stays within twice what is reported
+    truth = RIGS[3]
+    tilted = truth.replace(
+        rvec=cv2.Rodrigues(cv2.Rodrigues(np.radians([0.1, 0, 0]))[0] @ truth.R)[0].ravel()
+    )
+    biased, _ = reflection.outline_pixels(tilted, R_C, Z_C, 64)
+    rim = truth.rim_image_points(360) + np.random.default_rng(1).normal(size=(360, 2)) * 0.05
+    cam, report = calibrate(truth.K, truth.mirror, boundary_points=rim, lens=biased, lens_z=Z_C)
+    assert report.accepted_cues == ("reflection",)
+    assert axis_error_deg(cam, truth) < 2 * report.axis_std_deg
+    assert report.warnings  # an axis uncertain by several tenths of a degree is said

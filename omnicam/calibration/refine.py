@@ -56,6 +56,7 @@ from ..gauge import rotate_vector as _rotate
 from .robust import mad_sigma
 
 __all__ = [
+    "posture_offsets",
     "RefineResult",
     "Uncertainty",
     "RimTerm",
@@ -63,6 +64,7 @@ __all__ = [
     "ReflectionTerm",
     "refine_posture",
     "posture_uncertainty",
+    "uncertainty_from_cov",
     "gauge_rotation",
 ]
 
@@ -657,6 +659,9 @@ class Uncertainty:
         is a tilt of ``weak_tilt_deg`` with a shift of the origin of ``weak_shift``.
     weak_share : float
         Fraction of the posture's variance along that direction.
+    cov : (5, 5) ndarray or None
+        The posture's covariance: two small rotations of the mirror axis (radians, about the
+        axes of :func:`posture_offsets`) and the origin's shift (length unit).
     """
 
     axis_std_deg: float
@@ -664,6 +669,7 @@ class Uncertainty:
     weak_tilt_deg: float = math.nan
     weak_shift: float = math.nan
     weak_share: float = math.nan
+    cov: object = dataclasses.field(default=None, compare=False, repr=False)
 
     def describe(self):
         """The weakly determined direction in words."""
@@ -738,6 +744,13 @@ def posture_uncertainty(
         cov = np.linalg.inv(J.T @ J)[:_N_POSTURE, :_N_POSTURE]
     except np.linalg.LinAlgError:
         return Uncertainty(math.inf, math.inf)
+    return uncertainty_from_cov(cov, t)
+
+
+def uncertainty_from_cov(cov, tvec):
+    """The :class:`Uncertainty` of a (5, 5) posture covariance at the posture with ``tvec``."""
+    cov = np.asarray(cov, np.float64)
+    t = np.asarray(tvec, np.float64)
     axis_std = math.degrees(math.sqrt(max(cov[0, 0] + cov[1, 1], 0.0)))
     origin_std = math.sqrt(max(float(np.trace(cov[2:5, 2:5])), 0.0))
     L = float(np.linalg.norm(t))  # angles -> lengths at the camera's distance
@@ -751,4 +764,24 @@ def posture_uncertainty(
         math.degrees(float(np.hypot(v[0], v[1])) / L),
         float(np.linalg.norm(v[2:5])),
         share,
+        cov,
     )
+
+
+def posture_offsets(rvec0, tvec0, rvec1, tvec1):
+    """The second posture in the 5 parameters of the first's covariance (:class:`Uncertainty`).
+
+    Returns
+    -------
+    (5,) ndarray
+        The rotation taking the first mirror axis to the second, on the two axes perpendicular
+        to the first (radians), and ``tvec1 - tvec0``.
+    """
+    R0 = cv2.Rodrigues(np.asarray(rvec0, np.float64).reshape(3, 1))[0]
+    R1 = cv2.Rodrigues(np.asarray(rvec1, np.float64).reshape(3, 1))[0]
+    a0, a1 = R0[:, 2], R1[:, 2]
+    w = np.cross(a0, a1)
+    s = float(np.linalg.norm(w))
+    w = w * (math.atan2(s, float(a0 @ a1)) / s) if s > 0 else w
+    b1, b2 = _perp_basis(a0)
+    return np.concatenate([[w @ b1, w @ b2], np.asarray(tvec1, np.float64) - tvec0])
