@@ -361,6 +361,44 @@ def test_office_photo_with_a_guessed_K_says_that_no_posture_explains_the_reflect
     assert any("check K" in w for w in report.warnings)
 
 
+@pytest.mark.skipif(not REAL_PHOTO.exists(), reason="shared real photograph not available")
+def test_office_photo_reflection_is_found_with_the_principal_point_at_the_image_centre():
+    """The postures of a K 25 px off put the predicted self-reflection where there is no lens;
+    the detection then looks around the rim centre and finds it (measured: 594 points), and
+    the report still says that no posture explains it."""
+    image = cv2.imread(str(REAL_PHOTO))
+    rim = detect_rim(image)
+    m = synthetic.default_mirror()
+    f = float(np.mean(rim.axes)) * (m.z_rim + m.c) / m.rim_radius
+    h, w = image.shape[:2]
+    K = np.array([[f, 0, (w - 1) / 2], [0, f, (h - 1) / 2], [0, 0, 1.0]])
+    _, report = calibrate(K, m, image=image)
+    assert report.lens_used, report.lens_note
+    assert any("check K" in w for w in report.warnings)
+
+
+@pytest.mark.skipif(not REAL_PHOTO.exists(), reason="shared real photograph not available")
+def test_office_photo_with_the_rims_aspect_as_pixel_aspect_is_not_called_decisive():
+    """K guessed with fx / fy from the rim's extents (benchmarks/bench_real_photo.py, "rim
+    aspect"): both postures fit the outline at 1.40 and 1.52 px, and the camera sees itself
+    between their predictions (10 px from each, 20 px apart). The misfit is a smooth field
+    along the outline, worth about 30 of its 598 points: no 3-sigma choice, and it says so
+    (598 independent points would have called it a 7-sigma gap, confidence 1.0)."""
+    image = cv2.imread(str(REAL_PHOTO))
+    rim = detect_rim(image)
+    m = synthetic.default_mirror()
+    f = math.sqrt(rim.axes[0] * rim.axes[1]) * (m.z_rim + m.c) / m.rim_radius
+    ex, ey = np.linalg.norm(rim.shape_matrix, axis=1)
+    K = np.array(
+        [[f * math.sqrt(ex / ey), 0, rim.center[0]], [0, f * math.sqrt(ey / ex), rim.center[1]]]
+        + [[0, 0, 1.0]]
+    )
+    _, report = calibrate(K, m, image=image)
+    assert report.lens_used and report.lens_rms < 2.0, report.summary()
+    assert report.ambiguous and report.confidence < 0.9, report.summary()
+    assert any("barely separate" in w for w in report.warnings)
+
+
 def test_self_reflection_pixel_with_distortion_is_the_seen_pixel():
     truth = conftest_rig("distorted")
     u = reflection.self_reflection_pixel(truth.mirror, truth.R, truth.tvec, truth.K, truth.D)

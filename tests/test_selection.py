@@ -117,12 +117,12 @@ def test_single_physical_candidate_has_full_confidence():
 
 
 def test_reflection_costs_are_the_outline_separation_in_sigma():
-    # two candidates 0.1 px and 0.3 px RMS, 200 points of 0.1 px scatter: 100 (0.09 - 0.01)
-    # / 0.01 = 800 chi-square units, about 28 sigma
-    c = selection.reflection_costs({0: 0.1, 1: 0.3}, 200, 0.1)
+    # two candidates 0.1 px and 0.3 px RMS, 100 effective points of 0.1 px scatter:
+    # 100 (0.09 - 0.01) / 0.01 = 800 chi-square units, about 28 sigma
+    c = selection.reflection_costs({0: 0.1, 1: 0.3}, 100, 0.1)
     assert c[0] == 0.0 and c[1] == pytest.approx(800.0)
     # the best candidate's own misfit counts as noise: 1.0 vs 1.2 px over 200 points
-    c = selection.reflection_costs({0: 1.0, 1: 1.2}, 200, 0.1)
+    c = selection.reflection_costs({0: 1.0, 1: 1.2}, 100, 0.1)
     assert c[1] == pytest.approx(100 * 0.44)
 
 
@@ -132,13 +132,13 @@ def test_reflection_chooses_without_far_lines_and_adds_to_the_far_lines():
     phys = [i for i, c in enumerate(cands) if c.physical]
     true = min(phys, key=lambda i: np.linalg.norm(cands[i].tvec - cam.tvec))
     other = next(i for i in phys if i != true)
-    spec = {"rms": {true: 0.1, other: 0.3}, "n": 200, "sigma": 0.1, "self_px": {}}
+    spec = {"rms": {true: 0.1, other: 0.3}, "n": 100, "sigma": 0.1, "self_px": {}}
     sel = selection.select_candidate(cands, None, [], (0, 0, -cam.mirror.c), spec)
     assert sel.chosen == true and sel.confidence > 0.99 and not sel.ambiguous
     assert sel.sigma["reflection"] == pytest.approx(math.sqrt(800.0))
     assert sel.scores_per_cue["reflection rms px"] == {true: 0.1, other: 0.3}
     # barely separated (1.5 sigma): chosen, flagged ambiguous, with a warning
-    spec = {"rms": {true: 0.1, other: 0.1 * math.sqrt(1 + 2.25 / 100)}, "n": 200, "sigma": 0.1}
+    spec = {"rms": {true: 0.1, other: 0.1 * math.sqrt(1 + 2.25 / 100)}, "n": 100, "sigma": 0.1}
     sel = selection.select_candidate(cands, None, [], (0, 0, -cam.mirror.c), spec)
     assert sel.chosen == true and sel.ambiguous and sel.warnings
     assert sel.sigma["reflection"] == pytest.approx(1.5)

@@ -189,7 +189,8 @@ def reflection_costs(rms, n_points, sigma_measured):
 
     The predictions of two candidates differ by a displacement field along the outline; with
     ``N`` points of noise ``sigma`` its chi-square is ``N_eff (rms_k^2 - rms_best^2) / sigma^2``
-    with ``N_eff = N / 2`` (neighbouring edge points are correlated) and ``sigma`` the larger
+    with ``N_eff`` the outline's effective number of independent points (``n_points``: at
+    most ``N / 2``, fewer when the residuals are correlated along it) and ``sigma`` the larger
     of the measurement's own scatter (the detection's RMS to its ellipse), the best
     candidate's RMS (model error counts as noise) and 0.05 px.
     """
@@ -198,7 +199,7 @@ def reflection_costs(rms, n_points, sigma_measured):
         return {i: 0.0 for i in rms}
     best = min(finite)
     s = max(float(sigma_measured) if np.isfinite(sigma_measured) else 0.0, best, 0.05)
-    n_eff = 0.5 * n_points
+    n_eff = float(n_points)
     return {
         i: (n_eff * max(v * v - best * best, 0.0) / (s * s) if np.isfinite(v) else math.inf)
         for i, v in rms.items()
@@ -218,7 +219,8 @@ def select_candidate(candidates, make_camera, far_lines, lower_focus, reflection
     lower_focus : (3,) array_like
         ``(0, 0, -c)``, for the fallback without any cue.
     reflection : dict, optional
-        ``{"rms": {index: px}, "n": points, "sigma": px, "self_px": {index: px}, "limit": px}``:
+        ``{"rms": {index: px}, "n": points, "sigma": px, "self_px": {index: px}, "limit": px}``
+        (``n`` the outline's effective number of independent points):
         the camera's reflection fitted under each physical candidate
         (:func:`.reflection.fit_circle`); it chooses only if the best RMS is within ``limit``.
 
