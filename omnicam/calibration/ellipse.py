@@ -6,14 +6,16 @@ normalised direct fit, RANSAC over five-point conics with Sampson distances, and
 orthogonal (geometric) refinement used by :func:`omnicam.calibration.rim.fit_rim`.
 
 scikit-image against the hand-written pieces, both in one run of ``python
-benchmarks/bench_ellipse_skimage.py`` (2 shared, loaded cores; the sections are the script's):
+benchmarks/bench_ellipse_skimage.py`` (2 shared cores under a load of 8; the sections are the
+script's):
 
 - the direct fit is scikit-image's ``measure.EllipseModel`` (:func:`direct_ellipse`): the same
-  accuracy as the hand-written fit it replaced (section 1), the rim and Chen's candidates of a
-  calibration within 1e-9 px and 1e-9 mm (section 5). Its costs: 0.56 ms against 0.23 ms a fit
-  (24-31 fits, about 15 ms more a calibration), and the first fit of a process imports
-  ``scipy.optimize`` and ``scipy.spatial`` (0.6-0.9 s; about 7 ms once the refinement has
-  loaded ``scipy.optimize``, so a whole calibration pays it anyway: section 6);
+  accuracy as the hand-written fit it replaced (section 1: true rim to the fit median 0.0369 px,
+  max 0.0700 px for both on 30 clipped noisy rims), the rim and Chen's candidates of a
+  calibration within 1e-9 px and 1e-10 mm (section 5). Its costs: 0.32 against 0.13 ms a fit
+  (the 24-31 fits of a 1080p calibration: 34-39 ms against 12-16 ms), and the first fit in a
+  process imports ``scipy.optimize`` and ``scipy.spatial`` (0.75 s; 7 ms once the refinement
+  has loaded ``scipy.optimize``, so a calibration pays it anyway: section 6);
 - RANSAC, the orthogonal distances and the geometric refinement stay hand-written: each says
   why with its figure.
 """
@@ -197,7 +199,7 @@ def orthogonal_residuals(pts, center, S, iters=12):
 
     Hand-written rather than ``skimage.measure.EllipseModel.residuals`` (one
     ``scipy.optimize.leastsq`` per point, unsigned, no feet or normals): the same distances
-    within 2.7e-6 px, 0.52 ms against 282 ms for 3000 points of a 1080p rim (section 3 of
+    within 2.7e-6 px, 0.58 ms against 271 ms for 3000 points of a 1080p rim (section 3 of
     ``python benchmarks/bench_ellipse_skimage.py``).
     """
     q = pts - center
@@ -321,12 +323,12 @@ def ransac_conic(pts_n, thr_n, rng, max_trials, confidence=0.999, batch=64):
     ``batch`` five-point conics are solved and scored per numpy call, on at most 1000 points.
     With the same model and Sampson distance in ``skimage.measure.ransac`` the accuracy is the
     same on 1080p rims (~3000 rim points; 10-70 % outliers: clutter and holder arms) but the
-    time grows with the outliers: median 8.3 against 4.2 ms at 10 %, 4.8 against 12.1 ms at
-    30 %, 10.1 against 55.2 ms at 50 %, 53 against 644 ms (max 1.8 s) at 70 %; a real 1080p
-    photograph's calibration takes 0.6 s longer with it (sections 2 and 5 of ``python
-    benchmarks/bench_ellipse_skimage.py``). At 70 % outliers both miss a rim now and then
-    (1 of 30 here, 0 of 30 with scikit-image's; 3 and 1 of 40 seeds on two rigs): 2000 trials
-    are fewer than 0.999 confidence needs there.
+    time grows with the outliers: median 4.5 against 2.0 ms at 10 %, 3.2 against 10.4 ms at
+    30 %, 8.9 against 49.1 ms at 50 %, 60 against 626 ms at 70 % (sections 2 and 5 of ``python
+    benchmarks/bench_ellipse_skimage.py``), and the real 1080p photograph's calibration takes
+    0.24 s longer with it (0.6 and 0.85 s in two earlier runs). At 70 % outliers 2000 trials
+    are fewer than 0.999 confidence needs, and either may miss the rim (1 of 30 rigs here, 0 of
+    30 with scikit-image's sampling).
     """
     n = len(pts_n)
     ph_all = np.concatenate([pts_n, np.ones((n, 1))], axis=1)
