@@ -64,6 +64,10 @@ def edge_points_along_normals(
 
     Returns ``(points, n_tried)``: the (M, 2) edge points and the number of normals whose whole
     profile was inside the image.
+
+    The profiles come from one ``cv2.remap`` of all normals: scikit-image's nearest piece,
+    ``measure.profile_line``, samples one line per call at fixed 1 px steps (3000 normals of a
+    1080p rim: 0.5 ms against 2.1 s; section 7 of ``python benchmarks/bench_ellipse_skimage.py``).
     """
     h, w = G.shape
     axes, _ = axes_angle(S)
