@@ -1,5 +1,6 @@
 """Selection of the posture with far lines (paper section 3.2, eq. 31)."""
 
+import dataclasses
 import math
 
 import numpy as np
@@ -159,3 +160,16 @@ def test_far_lines_alone_give_the_papers_confidence():
     cands, chosen, conf, _ = _select(cam, synthetic.far_line_pixels(cam, n_lines=1, rng=3))
     phys = sorted(c.score for c in cands if c.physical)
     assert conf == pytest.approx(1.0 - phys[0] / phys[1], abs=1e-9)
+
+
+def test_the_fallback_breaks_a_tie_by_the_lower_index():
+    # mirror-image postures at the same distance from the lower focus (to the last digits):
+    # without far lines or a reflection the first one is chosen, whatever the rounding
+    cam = RIGS[5]
+    cands = list(candidates_of(cam))
+    phys = [i for i, c in enumerate(cands) if c.physical]
+    for eps in (0.0, 1e-13, -1e-13):
+        twin = dataclasses.replace(cands[phys[0]], tvec=cands[phys[0]].tvec * (1 + eps))
+        moved = [twin if i == phys[1] else c for i, c in enumerate(cands)]
+        sel = selection.select_candidate(moved, None, [], (0, 0, -cam.mirror.c), None)
+        assert sel.chosen == phys[0] and sel.ambiguous

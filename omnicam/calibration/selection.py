@@ -294,7 +294,11 @@ def select_candidate(candidates, make_camera, far_lines, lower_focus, reflection
             )
             for i in phys
         ]
-        chosen = phys[int(np.argmin(dist))]
+        # the two physical postures are mirror images, often at equal distances: a tie (within
+        # 1e-9 relative) goes to the lower index, so rounding in the rim's last digits cannot
+        # flip the fallback between runs or versions
+        near = min(dist) * (1.0 + 1e-9) + 1e-12
+        chosen = next(i for i, d in zip(phys, dist) if d <= near)
         warnings.append(
             "no far_lines given and no camera reflection used: the choice between "
             "the physical postures is ambiguous (fallback: the camera nearest the "
