@@ -173,3 +173,18 @@ def test_the_fallback_breaks_a_tie_by_the_lower_index():
         moved = [twin if i == phys[1] else c for i, c in enumerate(cands)]
         sel = selection.select_candidate(moved, None, [], (0, 0, -cam.mirror.c), None)
         assert sel.chosen == phys[0] and sel.ambiguous
+
+
+def test_uncertain_predictions_limit_the_reflections_cost():
+    # a gap of 5 px between the two predicted self-reflection pixels measured at 10 sigma
+    # (cost 100): exact predictions keep it; predictions each uncertain by 0.35 px (variances
+    # summing to 0.25 px^2) halve it, c / (1 + c v / d^2); a gap the postures' uncertainty
+    # covers costs (almost) nothing
+    costs = {0: 0.0, 2: 100.0}
+    exact = {0: ((100.0, 100.0), 0.0), 2: ((105.0, 100.0), 0.0)}
+    assert selection.prediction_limited(costs, exact) == costs
+    unsure = {0: ((100.0, 100.0), 0.125), 2: ((105.0, 100.0), 0.125)}
+    assert selection.prediction_limited(costs, unsure)[2] == pytest.approx(50.0)
+    covered = {0: ((100.0, 100.0), 12.5), 2: ((105.0, 100.0), 12.5)}
+    assert selection.prediction_limited(costs, covered)[2] < 1.0
+    assert selection.prediction_limited(costs, {}) == costs

@@ -170,7 +170,7 @@ def calibrate(
     def make_camera(c):
         return camera_cls(K, mirror, c.rvec, c.tvec, D=D, image_size=image_size)
 
-    sel, circles = steps.selection_step(cands, cue, lines, mirror, K, D, make_camera)
+    sel, circles = steps.selection_step(cands, cue, lines, mirror, K, D, make_camera, rim)
     ref = steps.refinement_step(
         K, mirror, cands.all[sel.chosen], rim, lines_xn, cue, circles.get(sel.chosen), refine
     )

@@ -46,6 +46,7 @@ __all__ = [
     "line_score",
     "line_costs",
     "reflection_costs",
+    "prediction_limited",
     "select_candidate",
 ]
 
@@ -206,6 +207,33 @@ def reflection_costs(rms, n_points, sigma_measured):
     }
 
 
+def prediction_limited(costs, pred):
+    """Costs of a cue whose predictions are uncertain: ``c / (1 + c v / d^2)``.
+
+    A cost ``c`` (chi-square units) measures the gap ``d`` between two candidates'
+    predictions (here the pixel where each says the camera sees itself) against the
+    measurement's noise, ``c = d^2 / s^2``. When each prediction is itself uncertain (its
+    posture is, ``pred[i] = (pixel, variance px^2)``), the gap is known to ``s^2 + v`` with
+    ``v`` the two variances' sum, so ``c' = d^2 / (d^2 / c + v)``.
+    """
+    finite = {i: c for i, c in costs.items() if np.isfinite(c)}
+    if not pred or not finite:
+        return dict(costs)
+    best = min(finite, key=finite.get)
+    if best not in pred:
+        return dict(costs)
+    u0, v0 = pred[best]
+    out = {}
+    for i, c in costs.items():
+        if i == best or i not in pred or not np.isfinite(c) or c <= 0:
+            out[i] = c
+            continue
+        u, v = pred[i]
+        d2 = float(np.sum((np.asarray(u) - np.asarray(u0)) ** 2))
+        out[i] = c / (1.0 + c * (v + v0) / d2) if d2 > 0 else 0.0
+    return out
+
+
 def select_candidate(candidates, make_camera, far_lines, lower_focus, reflection=None):
     """Score the physical candidates by every cue given and choose one (section 3.2).
 
@@ -220,7 +248,9 @@ def select_candidate(candidates, make_camera, far_lines, lower_focus, reflection
         ``(0, 0, -c)``, for the fallback without any cue.
     reflection : dict, optional
         ``{"rms": {index: px}, "n": points, "sigma": px, "self_px": {index: px}, "limit": px}``
-        (``n`` the outline's effective number of independent points):
+        (``n`` the outline's effective number of independent points; optional ``"pred"``:
+        ``{index: (self-reflection pixel, its variance px^2)}`` from each posture's uncertainty,
+        :func:`prediction_limited`):
         the camera's reflection fitted under each physical candidate
         (:func:`.reflection.fit_circle`); it chooses only if the best RMS is within ``limit``.
 
@@ -268,7 +298,10 @@ def select_candidate(candidates, make_camera, far_lines, lower_focus, reflection
                 scores["self-reflection px"] = dict(reflection["self_px"])
             limit = float(reflection.get("limit", math.inf))
             if min(rms.values()) <= limit:
-                costs["reflection"] = reflection_costs(rms, reflection["n"], reflection["sigma"])
+                costs["reflection"] = prediction_limited(
+                    reflection_costs(rms, reflection["n"], reflection["sigma"]),
+                    reflection.get("pred") or {},
+                )
             else:  # no posture explains it: it cannot tell them apart either
                 where = reflection.get("self_px") or {}
                 off = (

@@ -338,8 +338,40 @@ def _effective_points(cands, cue, circles, K, mirror):
     return min(0.5 * n, n / (f * f))
 
 
-def selection_step(cands, cue, lines, mirror, K, D, make_camera):
+def _predictions(cands, rim, K, mirror, D):
+    """Each physical candidate's self-reflection pixel and its variance (px^2, summed over the
+    image axes) from the uncertainty of its posture given the rim alone
+    (:func:`.refine.posture_uncertainty`, propagated by difference quotients): the predicted
+    outline is only as sure as the posture."""
+    from .refine import _Posture, posture_uncertainty
+    from .reflection import self_reflection_pixel
+
+    out = {}
+    for i in cands.physical:
+        c = cands.all[i]
+        unc = posture_uncertainty(K, mirror, c.rvec, c.tvec, rim.points, rim.fit.rms)
+        if unc.cov is None or not np.isfinite(unc.cov).all():
+            continue
+        post = _Posture(c.R, c.tvec)
+        u0 = self_reflection_pixel(mirror, *post(np.zeros(5)), K, D)
+        steps = np.array([1e-5, 1e-5, 1e-3, 1e-3, 1e-3])
+        J = np.stack(
+            [
+                (self_reflection_pixel(mirror, *post(h * e), K, D) - u0) / h
+                for h, e in zip(steps, np.eye(5))
+            ],
+            axis=1,
+        )
+        out[i] = (u0, float(np.trace(J @ unc.cov @ J.T)))
+    return out
+
+
+def selection_step(cands, cue, lines, mirror, K, D, make_camera, rim=None):
     """Score every physical candidate by every cue and choose (:func:`.selection.select_candidate`).
+
+    With ``rim`` the outline's scores allow for the uncertainty of each posture's prediction
+    (:func:`_predictions`, :func:`.selection.prediction_limited`): a rim that pins the posture
+    poorly cannot make a choice by the reflection decisive.
 
     Returns
     -------
@@ -355,6 +387,7 @@ def selection_step(cands, cue, lines, mirror, K, D, make_camera):
         spec = {
             "rms": {i: c.rms for i, c in circles.items()},
             "n": _effective_points(cands, cue, circles, K, mirror),
+            "pred": _predictions(cands, rim, K, mirror, D) if rim is not None else {},
             "sigma": cue.sigma,
             "self_px": self_px,
             # the reflection must fit some posture: within 5x its own scatter, at least 2 px
