@@ -17,6 +17,9 @@ candidate closer to it than the chosen one), the warnings, the reported axis unc
 * ``SILENT``: axis error > 0.1 deg or the wrong candidate, with no warning (a silent failure);
 * ``error``: an exception (its message is kept).
 
+Column ``coin``: runs where no cue chose (confidence 0, the fallback: the camera nearest the
+lower focus, warned as ambiguous); their ``right`` is a coin flip.
+
 Targets (issue 8): 0 silent failures; with the reflection visible the right candidate in
 >= 99 % without far lines; the axis within 0.05 deg in >= 95 % with the reflection or one far
 line; median(actual axis error / reported axis std) between 0.5 and 2.
@@ -153,6 +156,8 @@ def summarise(records):
         "silent": status["SILENT"],
         "error": status["error"],
         "right_pct": 100.0 * sum(r["right"] for r in done) / n if n else math.nan,
+        # the fallback (no cue chose: the camera nearest the lower focus, a coin flip, warned)
+        "fallback": sum(r["confidence"] == 0.0 for r in done),
         "within_005_pct": 100.0 * sum(r["axis_err"] <= 0.05 for r in done) / n if n else math.nan,
         "median_ratio": statistics.median(ratios) if ratios else math.nan,
         "median_time": statistics.median(r["time"] for r in runs) if runs else math.nan,
@@ -163,7 +168,7 @@ def summarise(records):
 def print_table(records, modes=MODES):
     head = (
         f"{'rows':<22}{'mode':<9}{'n':>4}{'ok':>4}{'warn':>5}{'SILENT':>7}{'err':>4}"
-        f"{'right%':>8}{'<=.05%':>8}{'med.err':>9}{'err/std':>9}{'t(s)':>7}"
+        f"{'right%':>8}{'coin':>5}{'<=.05%':>8}{'med.err':>9}{'err/std':>9}{'t(s)':>7}"
     )
     print(head)
     print("-" * len(head))
@@ -181,7 +186,7 @@ def print_table(records, modes=MODES):
                 continue
             print(
                 f"{name:<22}{mode:<9}{s['n']:>4}{s['ok']:>4}{s['warned']:>5}{s['silent']:>7}"
-                f"{s['error']:>4}{s['right_pct']:>8.1f}{s['within_005_pct']:>8.1f}"
+                f"{s['error']:>4}{s['right_pct']:>8.1f}{s['fallback']:>5}{s['within_005_pct']:>8.1f}"
                 f"{s['median_axis_err']:>9.3f}{s['median_ratio']:>9.2f}{s['median_time']:>7.2f}"
             )
 

@@ -296,6 +296,11 @@ class ReflectionFit:
         Fraction of the search rays that gave an inlier edge point, in [0, 1].
     contrast : float
         Median grey-level rise across the outline.
+    core : bool
+        Whether the silhouette has a darker core (the lens glass). Only
+        ``detect_reflection(..., allow_coreless=True)`` returns one without: a uniformly dark
+        silhouette may be a camera with dark glass or a dark floor, which the caller tells apart
+        by the size of its circle.
     """
 
     points: np.ndarray
@@ -305,6 +310,7 @@ class ReflectionFit:
     center_std: float
     quality: float
     contrast: float
+    core: bool = True
 
     def __post_init__(self):
         for name in ("points", "center"):
@@ -364,7 +370,15 @@ def _rises(prof, dr, min_rise, dark_max, k=3):
 
 
 def detect_reflection(
-    image, rim, *, center=None, center_search=0.08, max_radius=0.6, min_radius=0.03, rng=0
+    image,
+    rim,
+    *,
+    center=None,
+    center_search=0.08,
+    max_radius=0.6,
+    min_radius=0.03,
+    rng=0,
+    allow_coreless=False,
 ):
     """Find the outermost round dark silhouette around the image of the camera centre.
 
@@ -407,6 +421,10 @@ def detect_reflection(
         Search radii in units of the rim's minor semi-axis.
     rng : int or numpy.random.Generator
         Seed of the RANSAC sampling.
+    allow_coreless : bool
+        Instead of declining, return the first round dark silhouette that only lacked a darker
+        core (``ReflectionFit.core`` False): the calibration keeps it only if its circle is
+        camera-sized (:func:`omnicam.calibration.steps.reflection_step`).
 
     Returns
     -------
@@ -420,7 +438,12 @@ def detect_reflection(
     ValueError
         Bad arguments.
     """
-    return _detect(image, rim, center, center_search, max_radius, min_radius, rng, None)
+    try:
+        return _detect(image, rim, center, center_search, max_radius, min_radius, rng, None)
+    except _Coreless as err:
+        if allow_coreless:
+            return err.fit
+        raise EstimationError(str(err)) from None
 
 
 def _detect(image, rim, center, center_search, max_radius, min_radius, rng, scene_level):
@@ -523,13 +546,17 @@ def _detect(image, rim, center, center_search, max_radius, min_radius, rng, scen
             "no camera reflection found: no round dark silhouette around the image centre "
             "(edges on fewer than 40 % of the rays share a circle that is dark inside)"
         )
-    first_why, surround = None, None
+    first_why, surround, coreless = None, None, None
     for j, _ in circles[:4]:
         for p in (far_pts, pts) if len(pts) > len(far_pts) else (pts,):
             try:
                 return _refine_silhouette(gray, G, p, found[j][1], j * bw, bw, sig, contrast, rng)
             except _BrightInside as err:  # a dark surround (e.g. a dark floor) holding the body
                 first_why, surround = first_why or err, surround or err
+                coreless = coreless or err
+                break
+            except _Coreless as err:  # dark glass or a dark floor: the caller decides
+                first_why, coreless = first_why or err, coreless or err
                 break
             except EstimationError as err:  # e.g. a square box behind the barrel: try inside it
                 first_why = first_why or err
@@ -541,16 +568,25 @@ def _detect(image, rim, center, center_search, max_radius, min_radius, rng, scen
             return _detect(image, rim, c0, center_search, inner, min_radius, rng, surround.interior)
         except EstimationError:
             pass
-    raise first_why
+    raise coreless or first_why
 
 
-class _BrightInside(EstimationError):
-    """A round dark silhouette whose interior is brighter than its edge band: a dark surround
-    (a dark floor, a dark holder) with something brighter, the camera's body, inside."""
+class _Coreless(EstimationError):
+    """A round dark silhouette without a darker core; ``fit`` is its :class:`ReflectionFit`."""
 
-    def __init__(self, message, radius, interior):
+    def __init__(self, message, fit):
         super().__init__(message)
-        self.radius, self.interior = float(radius), float(interior)
+        self.fit = fit
+
+
+class _BrightInside(_Coreless):
+    """A round dark silhouette whose interior is brighter than its edge band: a dark surround
+    (a dark floor, a dark holder) with something brighter, the camera's body, inside; or dark
+    glass with bright highlights (``fit``, when nothing is found inside)."""
+
+    def __init__(self, message, fit, interior):
+        super().__init__(message, fit)
+        self.radius, self.interior = float(fit.radius), float(interior)
 
 
 def _refine_silhouette(gray, G, pts, c_est, r_est, bw, sig, contrast, rng):
@@ -622,13 +658,8 @@ def _refine_silhouette(gray, G, pts, c_est, r_est, bw, sig, contrast, rng):
             f"the silhouette has no darker core (grey {core_level:.0f} inside, "
             f"{shell_level:.0f} near its edge): no lens glass, e.g. a dark floor"
         )
-        inside = _polar(G, fit.center, np.linspace(0.0, 0.6, 16) * radius, ang[::2])
-        interior = float(np.nanpercentile(inside, 90))
-        if interior > shell_level + max(3.0, 0.05 * contrast):  # brighter things inside
-            raise _BrightInside(f"no camera reflection found: {why}", radius, interior)
-        raise EstimationError(f"no camera reflection found: {why}")
     n = len(fit.points)
-    return ReflectionFit(
+    out = ReflectionFit(
         points=fit.points,
         center=fit.center,
         radius=radius,
@@ -636,4 +667,12 @@ def _refine_silhouette(gray, G, pts, c_est, r_est, bw, sig, contrast, rng):
         center_std=float(fit.rms * math.sqrt(2.0 / max(n, 1))),
         quality=float(quality),
         contrast=edge_rise,
+        core=why is None,
     )
+    if why is not None:
+        inside = _polar(G, fit.center, np.linspace(0.0, 0.6, 16) * radius, ang[::2])
+        interior = float(np.nanpercentile(inside, 90))
+        if interior > shell_level + max(3.0, 0.05 * contrast):  # brighter things inside
+            raise _BrightInside(f"no camera reflection found: {why}", out, interior)
+        raise _Coreless(f"no camera reflection found: {why}", out)
+    return out

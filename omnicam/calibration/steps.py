@@ -255,14 +255,14 @@ def reflection_step(lens, image, rim, K, D, r=None, z=None, cands=None, mirror=N
                     spread = float(np.linalg.norm(u - c, axis=1).max()) / float(min(rim.axes))
                     where = {"center": c, "center_search": min(0.5, 0.08 + spread)}
             try:
-                fit = detect_reflection(image, rim, **where)
+                fit = detect_reflection(image, rim, allow_coreless=True, **where)
             except EstimationError:
                 if not where:
                     raise
                 # a K or D a little off moves the predictions but not the reflection, which
                 # stays near the rim centre for the misalignments of real rigs (the office
                 # photograph with the principal point at the image centre: 25 px off)
-                fit = detect_reflection(image, rim)
+                fit = detect_reflection(image, rim, allow_coreless=True)
         except EstimationError as err:  # optional: the report says why it was not used
             return ReflectionCue(None, None, None, sigma, r, z, f"not used: {err}")
         px, sigma = np.asarray(fit.points, np.float64), float(fit.rms)
@@ -278,7 +278,43 @@ def reflection_step(lens, image, rim, K, D, r=None, z=None, cands=None, mirror=N
     xn = normalize(px, K, D)
     if not np.isfinite(xn).all():
         raise ValueError("some lens outline points cannot be undistorted with D; check D")
-    return ReflectionCue(px, xn, fit, sigma, r, z, f"used: {len(px)} outline points")
+    note = f"used: {len(px)} outline points"
+    if fit is not None and not fit.core:
+        why = _coreless_why(fit, xn, cands, K, mirror, r, z)
+        if why is not None:
+            return ReflectionCue(None, None, None, math.nan, r, z, f"not used: {why}")
+        note += " (uniformly dark: a posture explains it as the camera's circle)"
+    return ReflectionCue(px, xn, fit, sigma, r, z, note)
+
+
+#: A silhouette without a darker core (uniformly dark glass, or a dark floor) is taken for the
+#: camera only if some physical posture explains it as a coaxial circle to within this many px
+#: (or 3x its own scatter). A floor's edge is a cone of directions, not a circle at a finite
+#: distance, and misfits: the own renderer's floor below -65 deg fits at 1.18 px best (its
+#: edge scatter 0.05 px); dark lenses of the stress renders (seed 0, cases 37, 59, 79, 87) at
+#: 0.08-0.32 px.
+CORELESS_MAX_RMS = 0.5
+
+
+def _coreless_why(fit, xn, cands, K, mirror, r, z):
+    """Why a silhouette without a darker core is not the camera's, or None if it may be."""
+    from .reflection import fit_circle
+
+    if cands is None or mirror is None or not cands.physical:
+        return "the silhouette has no darker core and no posture to test it against"
+    Kinv2 = np.linalg.inv(K)[:2, :2]
+    best = min(
+        fit_circle(mirror, cands.all[i].R, cands.all[i].tvec, xn, Kinv2, r=r, z=z).rms
+        for i in cands.physical
+    )
+    limit = max(CORELESS_MAX_RMS, 3.0 * fit.rms)
+    if best <= limit:
+        return None
+    return (
+        f"no camera reflection found: the round dark silhouette (radius {fit.radius:.1f} px) "
+        f"has no darker core and no posture explains it as the camera's circle (best RMS "
+        f"{best:.2f} px, allowed {limit:.2f}): a dark floor or clutter"
+    )
 
 
 # -- 3. candidates -----------------------------------------------------------------------------
