@@ -41,7 +41,7 @@ def _match(found, truth):
     [
         (-8.0, 40.0, 1000.0),  # next to the rim
         (-25.0, 160.0, 450.0),  # the middle of the annulus
-        (-55.0, 250.0, 350.0),  # towards the centre
+        (-50.0, 250.0, 500.0),  # towards the centre, next to the camera's reflection
     ],
     ids=["rim", "middle", "centre"],
 )
