@@ -36,7 +36,8 @@ import numpy as np
 
 import omnicam
 from omnicam import synthetic
-from omnicam.calibration.reflection import detect_reflection
+from omnicam.calibration.pattern import pattern_uncertainty
+from omnicam.calibration.reflection import detect_reflection, outline_pixels
 from omnicam.calibration.rim import detect_rim
 from omnicam.gauge import posture_error
 from omnicam.raytrace import undistort_normalized
@@ -44,6 +45,8 @@ from omnicam.synthetic import boards
 
 PATTERN, SQUARE = (9, 6), 60.0
 SIZE = (1000, 1000)
+#: The issue's targets: |fx|, |fy| (%), principal point (px), axis (deg), origin (mm).
+TARGETS = {"fx": 0.3, "fy": 0.3, "pp": 1.0, "axis": 0.05, "origin": 0.2}
 
 
 def target_rig():
@@ -97,14 +100,44 @@ def run_omnidir(obj, image_points):
     return float(rms), K, float(np.ravel(xi)[0]), D, np.ravel(idx)
 
 
-def accuracy_trial(truth, n_views, noise, seed, dist_model, use_lens=True):
+def distance_to_curve(points, curve):
+    """Distance of each point to a densely sampled curve (nearest sample), px."""
+    from scipy.spatial import cKDTree
+
+    curve = curve[np.isfinite(curve).all(axis=1)]
+    return cKDTree(curve).query(np.asarray(points, np.float64).reshape(-1, 2))[0]
+
+
+def information_limit(truth, poses, rim, lens, lens_z, noise, sig_rim, sig_lens, dist_model):
+    """Cramer-Rao bound at the truth (pattern_uncertainty) in the benchmark's units."""
+    s = pattern_uncertainty(
+        truth,
+        PATTERN,
+        SQUARE,
+        poses,
+        rim,
+        noise,
+        sig_rim,
+        lens_points=lens,
+        lens_z=lens_z,
+        sigma_lens=sig_lens,
+        dist_model=dist_model,
+    )
+    return {
+        "fx": 100 * s["fx"] / truth.K[0, 0],
+        "fy": 100 * s["fy"] / truth.K[1, 1],
+        "pp": math.hypot(s["cx"], s["cy"]),
+        "axis": s["axis_deg"],
+        "origin": s["origin"],
+    }
+
+
+def accuracy_trial(truth, n_views, noise, seed, dist_model, use_lens=True, lens_z=None):
     rng = np.random.default_rng(seed)
     poses = boards.random_board_poses(truth, n_views, PATTERN, SQUARE, max_tilt_deg=50.0, rng=rng)
     exact = [boards.board_corners(truth, PATTERN, SQUARE, *p) for p in poses]
     noisy = [p + rng.normal(0.0, noise, p.shape) for p in exact]
-    scene = boards.render_board(
-        truth, PATTERN, SQUARE, None, None, supersample=3, noise=1.0, seed=seed
-    )
+    scene = boards.render_board(truth, PATTERN, SQUARE, None, None, supersample=3, seed=seed)
     rim_fit = detect_rim(scene)
     rim = rim_fit.points
     lens = None
@@ -113,6 +146,13 @@ def accuracy_trial(truth, n_views, noise, seed, dist_model, use_lens=True):
             lens = detect_reflection(scene, rim_fit).points
         except ValueError as e:  # declined (EstimationError): calibrate without it
             print(f"  (no camera reflection: {e})")
+    # how well the rim and the reflection's outline were detected (against the truth curves)
+    sig_rim = float(np.sqrt(np.mean(distance_to_curve(rim, truth.rim_image_points(20000)) ** 2)))
+    sig_lens = math.nan
+    if lens is not None:
+        body = boards.BOARD_BODY
+        curve = outline_pixels(truth, body.r_barrel, body.z_barrel, 4000)[0]
+        sig_lens = float(np.sqrt(np.mean(distance_to_curve(lens, curve) ** 2)))
     pix, d_true = annulus_pixels(truth)
     obj = boards.board_object_points(PATTERN, SQUARE)
     row = {}
@@ -129,6 +169,7 @@ def accuracy_trial(truth, n_views, noise, seed, dist_model, use_lens=True):
             boundary_points=rim,
             dist_model=dist_model,
             lens=lens,
+            lens_z=lens_z if lens is not None else None,
         )
     t_omni = time.perf_counter() - t
     _, d_fit = cam.unproject(pix)
@@ -145,9 +186,25 @@ def accuracy_trial(truth, n_views, noise, seed, dist_model, use_lens=True):
         "axis": axis,
         "origin": origin,
         "time": t_omni,
+        "std_fx": 100 * rep.std["fx"] / truth.K[0, 0],
         "std_axis": rep.std["axis_deg"],
         "std_pp": math.hypot(rep.std["cx"], rep.std["cy"]),
+        "std_origin": rep.std["origin"],
+        "sig_rim": sig_rim,
+        "sig_lens": sig_lens,
+        "n_lens": 0 if lens is None else len(lens),
     }
+    row["crb"] = information_limit(
+        truth,
+        poses,
+        rim,
+        lens,
+        lens_z if lens is not None else None,
+        noise,
+        sig_rim,
+        sig_lens,
+        dist_model,
+    )
     t = time.perf_counter()
     try:
         rms, K, xi, D, idx = run_omnidir(obj, noisy)
@@ -181,20 +238,35 @@ def accuracy(args):
     )
     rows = [
         accuracy_trial(
-            truth, args.views, args.noise, args.seed + k, args.dist_model, not args.no_lens
+            truth,
+            args.views,
+            args.noise,
+            args.seed + k,
+            args.dist_model,
+            not args.no_lens,
+            None if args.lens_z_free else boards.BOARD_BODY.z_barrel,
         )
         for k in range(args.trials)
     ]
     print(
         f"{'trial':>5} {'method':<12} {'rms px':>7} {'dir deg':>8} {'fx %':>7} {'fy %':>7} "
-        f"{'pp px':>6} {'axis deg':>8} {'origin':>7} {'s_axis':>7} {'s_pp':>6} {'time s':>6}"
+        f"{'pp px':>6} {'axis deg':>8} {'origin':>7} {'time s':>6}"
     )
     for k, row in enumerate(rows):
-        o = row["omnicam"]
+        o, b = row["omnicam"], row["crb"]
         print(
             f"{k:>5} {'omnicam':<12} {o['rms']:>7.3f} {o['dir']:>8.4f} {o['fx']:>7.3f} "
             f"{o['fy']:>7.3f} {o['pp']:>6.2f} {o['axis']:>8.4f} {o['origin']:>7.3f} "
-            f"{o['std_axis']:>7.4f} {o['std_pp']:>6.2f} {o['time']:>6.1f}"
+            f"{o['time']:>6.1f}"
+        )
+        print(
+            f"{'':>5} {'  reported':<12} {'':>7} {'':>8} {o['std_fx']:>7.3f} {'':>7} "
+            f"{o['std_pp']:>6.2f} {o['std_axis']:>8.4f} {o['std_origin']:>7.3f}"
+        )
+        print(
+            f"{'':>5} {'  CRB':<12} {'':>7} {'':>8} {b['fx']:>7.3f} {b['fy']:>7.3f} "
+            f"{b['pp']:>6.2f} {b['axis']:>8.4f} {b['origin']:>7.3f}   (rim {o['sig_rim']:.3f} "
+            f"px, outline {o['sig_lens']:.3f} px x {o['n_lens']})"
         )
         c = row["cv2.omnidir"]
         if "error" in c:
@@ -202,7 +274,7 @@ def accuracy(args):
         else:
             print(
                 f"{k:>5} {'cv2.omnidir':<12} {c['rms']:>7.3f} {c['dir']:>8.4f} "
-                f"{'':>7} {'':>7} {'':>6} {'':>8} {'':>7} {'':>7} {'':>6} {c['time']:>6.1f}"
+                f"{'':>7} {'':>7} {'':>6} {'':>8} {'':>7} {c['time']:>6.1f}"
             )
     for name in ("omnicam", "cv2.omnidir"):
         vals = [r[name] for r in rows if "error" not in r[name]]
@@ -213,12 +285,22 @@ def accuracy(args):
                 f"{med['dir']:.4f} deg ({len(vals)} of {len(rows)} trials)"
             )
     o = [r["omnicam"] for r in rows]
-    m = {
-        k: float(np.median(np.abs([v[k] for v in o]))) for k in ("fx", "fy", "pp", "axis", "origin")
-    }
+    keys = ("fx", "fy", "pp", "axis", "origin")
+    m = {k: float(np.median(np.abs([v[k] for v in o]))) for k in keys}
+    crb = {k: float(np.median([r["crb"][k] for r in rows])) for k in keys}
+    print(f"{'':<22} {'fx %':>7} {'fy %':>7} {'pp px':>7} {'axis deg':>8} {'origin mm':>9}")
+    for label, d in (("omnicam median |error|", m), ("CRB median std", crb), ("target", TARGETS)):
+        print(
+            f"{label:<22} {d['fx']:>7.3f} {d['fy']:>7.3f} {d['pp']:>7.2f} {d['axis']:>8.4f} "
+            f"{d['origin']:>9.3f}"
+        )
     print(
-        f"omnicam median |fx| {m['fx']:.3f} %, |fy| {m['fy']:.3f} %, pp {m['pp']:.2f} px, "
-        f"axis {m['axis']:.4f} deg, origin {m['origin']:.3f} mm"
+        "met (median error within target): "
+        + ", ".join(f"{k} {'yes' if m[k] <= TARGETS[k] else 'no'}" for k in keys)
+    )
+    print(
+        "reachable (CRB std within target): "
+        + ", ".join(f"{k} {'yes' if crb[k] <= TARGETS[k] else 'no'}" for k in keys)
     )
 
 
@@ -321,6 +403,11 @@ def main():
     ap.add_argument("--detect", action="store_true")
     ap.add_argument("--renders", type=int, default=40)
     ap.add_argument("--timing", action="store_true")
+    ap.add_argument(
+        "--lens-z-free",
+        action="store_true",
+        help="the reflection's circle plane z unknown (default: the barrel front's, known)",
+    )
     ap.add_argument(
         "--no-lens",
         action="store_true",
