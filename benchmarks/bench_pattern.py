@@ -1,10 +1,15 @@
 """calibrate_pattern against cv2.omnidir.calibrate on the same corners; find_pattern's detection.
 
-Accuracy (default): renders of a rig tilted 3 deg and offset 3 mm (1000x1000), ``--views``
-chessboards 0.3-1.5 m away; the ground-truth corners (exact projection) plus Gaussian noise of
-``--noise`` px are given to both methods (the same corners), omnicam also gets the rim detected
-in a render of the scene, and the outline of the camera's reflection detected there (unless
-``--no-lens``). For each method: the reprojection RMS, the **direction error over the
+Accuracy (default): a rig tilted 3 deg and offset 3 mm (1000x1000), ``--views`` chessboards
+0.3-1.5 m away; the ground-truth corners (exact projection) plus Gaussian noise of ``--noise``
+px (or, with ``--detected``, the corners ``find_pattern`` finds in independent renders,
+:mod:`omnicam.synthetic.realistic`) are given to both methods (the same corners); omnicam also
+gets the rim detected in a render of the scene and the outline of the camera's reflection (the
+lens barrel's front circle) detected there (unless ``--no-lens``), with the circle's plane
+known (``--lens-z-free``: fitted). Besides the errors and the standard deviations the
+calibration reports, it prints the information limit: ``pattern_uncertainty`` at the truth (a
+Cramer-Rao bound) with the measured noise of the corners, the rim and the outline, against the
+issue's targets. For each method: the reprojection RMS, the **direction error over the
 annulus** (RMS angle between each pixel's fitted and true ray direction, every 4th pixel inside
 the rim, after the best rotation between the two frames, Kabsch on the direction pairs), and
 omnicam's K, axis and origin errors (``omnicam.gauge.posture_error``). cv2.omnidir is Mei's
@@ -135,7 +140,27 @@ def information_limit(truth, poses, rim, lens, lens_z, noise, sig_rim, sig_lens,
     }
 
 
-def accuracy_trial(truth, n_views, noise, seed, dist_model, use_lens=True, lens_z=None):
+def detected_corners(truth, poses, rim_fit, seed):
+    """find_pattern's corners in renders of the poses (None where not found), aimed by the
+    start of calibrate_pattern (K from the rim, Chen's posture)."""
+    r_px = math.sqrt(rim_fit.axes[0] * rim_fit.axes[1])
+    m = truth.mirror
+    f0 = r_px * (m.z_rim + m.c) / m.rim_radius
+    K0 = np.array([[f0, 0, (SIZE[0] - 1) / 2], [0, f0, (SIZE[1] - 1) / 2], [0, 0, 1.0]])
+    start, _ = omnicam.MisalignedHyperbolicCamera.calibrate(
+        K0, m, boundary_points=rim_fit.points, image_size=SIZE, lens=None
+    )
+    out = []
+    for k, p in enumerate(poses):
+        img = boards.render_board(truth, PATTERN, SQUARE, *p, supersample=3, seed=100 * seed + k)
+        c = omnicam.find_pattern(img, PATTERN, start)
+        out.append(None if c is None else c.astype(np.float64))
+    return out
+
+
+def accuracy_trial(
+    truth, n_views, noise, seed, dist_model, use_lens=True, lens_z=None, detected=False
+):
     rng = np.random.default_rng(seed)
     poses = boards.random_board_poses(truth, n_views, PATTERN, SQUARE, max_tilt_deg=50.0, rng=rng)
     exact = [boards.board_corners(truth, PATTERN, SQUARE, *p) for p in poses]
@@ -143,6 +168,20 @@ def accuracy_trial(truth, n_views, noise, seed, dist_model, use_lens=True, lens_
     scene = boards.render_board(truth, PATTERN, SQUARE, None, None, supersample=3, seed=seed)
     rim_fit = detect_rim(scene)
     rim = rim_fit.points
+    if detected:  # the corners find_pattern gives in renders, views it misses left out
+        found = detected_corners(truth, poses, rim_fit, seed)
+        keep = [k for k, c in enumerate(found) if c is not None]
+        poses = [poses[k] for k in keep]
+        exact = [exact[k] for k in keep]
+        noisy = []
+        for k in keep:  # OpenCV's order up to the board's 180-degree turn: match the truth
+            c = found[k]
+            if np.abs(c - exact[len(noisy)]).max() > np.abs(c[::-1] - exact[len(noisy)]).max():
+                c = c[::-1].copy()
+            noisy.append(c)
+        noise = float(np.sqrt(np.mean((np.concatenate(noisy) - np.concatenate(exact)) ** 2)))
+        if len(keep) < n_views:
+            print(f"  ({n_views - len(keep)} of {n_views} views not detected)")
     lens = None
     if use_lens:
         try:
@@ -197,6 +236,8 @@ def accuracy_trial(truth, n_views, noise, seed, dist_model, use_lens=True, lens_
         "sig_lens": sig_lens,
         "n_lens": 0 if lens is None else len(lens),
     }
+    row["omnicam"]["noise"] = noise
+    row["omnicam"]["views"] = len(poses)
     row["crb"] = information_limit(
         truth,
         poses,
@@ -235,9 +276,12 @@ def accuracy(args):
     truth = target_rig()
     print(
         f"rig: tilt 3 deg, offset 3 mm, {SIZE[0]}x{SIZE[1]}; {args.views} views of a "
-        f"{PATTERN[0]}x{PATTERN[1]} board ({SQUARE:g} mm squares) 0.3-1.5 m away; corner "
-        f"noise {args.noise} px; dist_model {args.dist_model}; camera's reflection "
-        f"{'not ' if args.no_lens else ''}used; {args.trials} trials"
+        f"{PATTERN[0]}x{PATTERN[1]} board ({SQUARE:g} mm squares) 0.3-1.5 m away; corners: "
+        + ("find_pattern's in renders" if args.detected else f"truth + {args.noise} px noise")
+        + f"; dist_model {args.dist_model}; camera's reflection "
+        f"{'not used' if args.no_lens else 'used'}"
+        f"{', its plane fitted' if args.lens_z_free and not args.no_lens else ''}; "
+        f"{args.trials} trials"
     )
     rows = [
         accuracy_trial(
@@ -248,6 +292,7 @@ def accuracy(args):
             args.dist_model,
             not args.no_lens,
             None if args.lens_z_free else boards.BOARD_BODY.z_barrel,
+            args.detected,
         )
         for k in range(args.trials)
     ]
@@ -268,8 +313,9 @@ def accuracy(args):
         )
         print(
             f"{'':>5} {'  CRB':<12} {'':>7} {'':>8} {b['fx']:>7.3f} {b['fy']:>7.3f} "
-            f"{b['pp']:>6.2f} {b['axis']:>8.4f} {b['origin']:>7.3f}   (rim {o['sig_rim']:.3f} "
-            f"px, outline {o['sig_lens']:.3f} px x {o['n_lens']})"
+            f"{b['pp']:>6.2f} {b['axis']:>8.4f} {b['origin']:>7.3f}   (corners "
+            f"{o['noise']:.3f} px x {o['views']} views, rim {o['sig_rim']:.3f} px, outline "
+            f"{o['sig_lens']:.3f} px x {o['n_lens']})"
         )
         c = row["cv2.omnidir"]
         if "error" in c:
@@ -448,6 +494,11 @@ def main():
     ap.add_argument("--renders", type=int, default=40)
     ap.add_argument("--timing", action="store_true")
     ap.add_argument("--save", default=None, help="folder to write the missed renders to")
+    ap.add_argument(
+        "--detected",
+        action="store_true",
+        help="both methods get find_pattern's corners in renders (not truth + --noise)",
+    )
     ap.add_argument(
         "--lens-z-free",
         action="store_true",
