@@ -1,6 +1,7 @@
 """calibrate_pattern: K, D and the posture from chessboard corners seen through the mirror."""
 
 import math
+import warnings
 
 import cv2
 import numpy as np
@@ -207,3 +208,66 @@ def test_the_camera_reflection_with_a_known_plane_pins_the_tilt_against_the_prin
     assert axis < 4.0 * report.std["axis_deg"]
     assert abs(cam.K[0, 2] - RIG.K[0, 2]) < 4.0 * report.std["cx"]
     assert report.lens_rms < 0.3 and report.lens_note.startswith("used")
+
+
+def test_information_limit_at_the_truth_matches_the_reported_uncertainty_and_the_cues():
+    from omnicam.calibration.pattern import pattern_uncertainty
+    from omnicam.calibration.reflection import outline_pixels
+
+    rim = RIG.rim_image_points(360)  # as many as the adjustment keeps
+    lens = outline_pixels(RIG, 10.0, 8.0, 120)[0]
+    lens = lens[np.isfinite(lens).all(axis=1)]
+
+    def bound(**kw):
+        return pattern_uncertainty(RIG, PATTERN, SQUARE, POSES, rim, 0.2, 0.2, **kw)
+
+    none = bound(dist_model="none")
+    # the report's standard deviations pool one sigma over all rows: rim noise as the corners'
+    _, report = _calibrate(_corners(noise=0.2, seed=5), rim=_rim(0.2, 5), dist_model="none")
+    for k in ("fx", "cx", "cy", "axis_deg", "origin"):
+        assert 0.5 < report.std[k] / none[k] < 2.0, k
+    # each cue can only add information: a known plane more than a fitted one, and free
+    # tangential distortion takes some away
+    free = bound(dist_model="none", lens_points=lens, sigma_lens=0.1)
+    known = bound(dist_model="none", lens_points=lens, lens_z=8.0, sigma_lens=0.1)
+    assert known["cx"] < free["cx"] < none["cx"]
+    assert known["axis_deg"] < free["axis_deg"] < none["axis_deg"]
+    assert "lens_z" in free and "lens_z" not in known
+    assert bound(dist_model="k1k2p1p2")["cx"] > 2.0 * none["cx"]
+
+
+def _shape_calibration(noise, seed, n_views):
+    from omnicam.mirror import HyperbolicMirror
+
+    m = RIG.mirror
+    start = HyperbolicMirror(1.02 * m.a, 0.98 * m.b, m.rim_radius)  # 2 % off
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", RuntimeWarning)
+        return omnicam.calibrate_pattern(
+            None,
+            PATTERN,
+            SQUARE,
+            start,
+            image_size=SIZE,
+            image_points=_corners(noise, seed)[:n_views],
+            boundary_points=_rim(noise / 2),
+            refine_mirror_shape=True,
+            dist_model="none",
+        )
+
+
+def test_mirror_shape_is_recovered_from_exact_corners_started_off():
+    cam, report = _shape_calibration(0.0, 0, 4)
+    assert abs(cam.mirror.a / RIG.mirror.a - 1.0) < 1e-6
+    assert abs(cam.mirror.b / RIG.mirror.b - 1.0) < 1e-6
+    assert abs(cam.K[0, 0] / RIG.K[0, 0] - 1.0) < 1e-6
+    assert posture_error(cam, RIG)[0] < 1e-5
+
+
+def test_mirror_shape_from_noisy_corners_is_within_its_uncertainty_and_reported_as_weak():
+    cam, report = _shape_calibration(0.2, 0, 5)
+    for k in ("a", "b"):
+        assert abs(getattr(cam.mirror, k) - getattr(RIG.mirror, k)) < 4.0 * report.std[k], k
+    # at 0.2 px the shape is not determined (a, b trade against f and the axial distance)
+    assert report.std["b"] > 0.01 * RIG.mirror.b
+    assert any("NOT determined" in w for w in report.warnings)

@@ -10,25 +10,33 @@ row by row, ``(i * s, j * s, 0)`` for column ``i`` and row ``j``) and a pose
   sees) and distances, roughly facing the rig, each checked to be wholly visible;
 * :func:`board_corners`: the ground-truth image points, the exact non-central projection
   (:meth:`~omnicam.camera.MisalignedHyperbolicCamera.project`) of the inner corners;
-* :func:`render_board`: the image, by tracing every subpixel
-  (:meth:`~omnicam.camera.MisalignedHyperbolicCamera.unproject`), intersecting the board plane
-  and taking the checker colour there (a white margin of one square around the squares), the
-  procedural environment elsewhere, the housing outside the rim and the camera's reflection.
+* :func:`render_board`: the image, by the independent tracer of
+  :mod:`omnicam.synthetic.realistic` (its own camera rays, mirror intersection and reflection;
+  nothing of the estimator): the board (:class:`~.realistic.Chessboard`, a white margin of one
+  square around the squares), a room at infinity elsewhere, the dark housing outside the rim
+  and the camera's own body (:data:`BOARD_BODY`, a lens barrel coaxial with the optical axis,
+  whose reflection is the round dark silhouette :func:`omnicam.calibration.reflection.
+  detect_reflection` finds), then blur, sensor noise and JPEG (:func:`~.realistic.degrade`).
 
-The renderer shares nothing with the estimator but ``unproject``; the ground truth shares nothing
-with the renderer but ``project`` (their agreement is tested in ``tests/test_camera.py``).
+The ground truth (:func:`board_corners`) is ``camera.project``, the estimator's projection; the
+renderer shares nothing with it, and ``tests/test_boards.py`` checks that the independent
+tracer's rays of the truth pixels pass through the corners.
 """
 
 from __future__ import annotations
 
+import dataclasses
 import math
 
 import cv2
 import numpy as np
 
-from . import HOUSING_COLOR, _check_camera, _render, _sample_equirect, make_environment
+from . import _check_camera
+from . import realistic as _rl
 
 __all__ = [
+    "BOARD_BODY",
+    "BOARD_PHOTOMETRIC",
     "board_corners",
     "board_object_points",
     "board_outline",
@@ -36,7 +44,24 @@ __all__ = [
     "render_board",
 ]
 
-_BLACK, _WHITE = 25.0, 230.0
+#: The camera's body in the board renders: a lens barrel of radius 15 mm whose front edge is
+#: 25 mm ahead of the camera centre, on a small box hidden behind it, so that the outline of
+#: its reflection is the barrel's front circle ``(r, z) = (15, 25)``
+#: (docs/conventions.md, "The camera's own reflection").
+BOARD_BODY = _rl.BodyGeometry(
+    r_barrel=15.0,
+    z_barrel=25.0,
+    r_glass=12.0,
+    r_aperture=3.0,
+    rings=(6.0, 9.5),
+    highlights=((4.0, -5.0, 0.9), (-2.5, 4.0, 0.6)),
+    z_box=-8.0,
+    w_box=16.0,
+    h_box=13.0,
+    depth_box=30.0,
+)
+#: Photographic degradations of the board renders: slight blur, sensor noise, JPEG 92.
+BOARD_PHOTOMETRIC = _rl.Photometric(blur_sigma=0.6, noise_sigma=1.5, jpeg_quality=92)
 
 
 def _pattern(pattern_size):
@@ -79,10 +104,10 @@ def board_corners(camera, pattern_size, square_size, rvec, tvec):
     return camera.project(_to_mirror(obj, rvec, tvec)).reshape(-1, 1, 2)
 
 
-def _visible(camera, pattern_size, square_size, rvec, tvec, margin, min_spacing, body_radius):
+def _visible(camera, pattern_size, square_size, rvec, tvec, margin, min_spacing, body):
     w, h = camera.image_size
     corners = board_corners(camera, pattern_size, square_size, rvec, tvec).reshape(-1, 2)
-    edge = camera.project(_to_mirror(board_outline(pattern_size, square_size), rvec, tvec))
+    edge = camera.project(_to_mirror(board_outline(pattern_size, square_size, 16), rvec, tvec))
     pts = np.concatenate([corners, edge])
     if not np.isfinite(pts).all():
         return False
@@ -92,16 +117,11 @@ def _visible(camera, pattern_size, square_size, rvec, tvec, margin, min_spacing,
         or (pts[:, 1] > h - 1 - margin).any()
     ):
         return False
-    # the board must stay clear of the camera's own reflection (the ball of render_board):
-    # no ray of a corner or of the board's edge may hit it
-    P, d = camera.unproject(pts)
-    if not np.isfinite(d).all():
-        return False
-    if body_radius is not None:
-        w_ = P - camera.camera_center
-        b = np.einsum("ij,ij->i", w_, d)
-        disc = b * b - (np.einsum("ij,ij->i", w_, w_) - (1.2 * body_radius) ** 2)
-        if ((disc >= 0) & (-b + np.sqrt(np.maximum(disc, 0)) > 0)).any():
+    # no corner and no point of the board's edge hidden by the camera's own body (or off the
+    # mirror), by the independent tracer
+    if body is not None:
+        labels, *_ = _rl.trace(camera, pts, _rl.Rig(body=body))
+        if (labels != _rl.LABELS["scene"]).any():
             return False
     cols, rows = _pattern(pattern_size)
     g = corners.reshape(rows, cols, 2)
@@ -124,7 +144,7 @@ def random_board_poses(
     margin=3.0,
     rng=0,
     max_tries=20000,
-    body_radius=10.0,
+    body=BOARD_BODY,
     azimuth=(0.0, 360.0),
 ):
     """``n`` board poses ``(rvec_b, tvec_b)`` (mirror frame), each wholly visible in ``camera``.
@@ -134,8 +154,8 @@ def random_board_poses(
     origin, tilted by up to ``max_tilt_deg`` and turned by a random angle in its plane. A pose is
     kept when every inner corner and the board's outer edge (white margin included) project
     inside the image with ``margin`` px to spare and the smallest corner spacing is at least
-    ``min_spacing`` px, and none of their rays meets the camera's reflection (a ball of
-    ``1.2 * body_radius`` about the camera centre; ``render_board``'s ``body_radius``).
+    ``min_spacing`` px, and none of their reflected rays meets the camera's ``body`` (a
+    :class:`~.realistic.BodyGeometry`, traced by :func:`~.realistic.trace`; None: not checked).
 
     Returns
     -------
@@ -167,7 +187,7 @@ def random_board_poses(
         Rb = Rb @ tilt @ spin
         rvec = cv2.Rodrigues(Rb)[0].ravel()
         tvec = dist * u - Rb @ centre
-        if _visible(camera, (cols, rows), s, rvec, tvec, margin, min_spacing, body_radius):
+        if _visible(camera, (cols, rows), s, rvec, tvec, margin, min_spacing, body):
             poses.append((rvec, tvec))
     if len(poses) < n:
         raise ValueError(
@@ -184,19 +204,36 @@ def render_board(
     rvec,
     tvec,
     supersample=4,
-    noise=0.0,
-    seed=None,
-    environment=None,
-    body_radius=10.0,
-    housing_color=HOUSING_COLOR,
+    noise=None,
+    seed=0,
+    body=BOARD_BODY,
+    room=None,
+    photometric=BOARD_PHOTOMETRIC,
 ):
     """What the rig sees of a chessboard (or of the scene alone, ``rvec=tvec=None``).
 
-    Every subpixel's reflected ray ``P + t d`` (:meth:`unproject`) is intersected with the
-    board plane; inside the board (squares of side ``square_size`` around the inner corners and
-    a white margin of one square) it takes the checker colour, elsewhere the environment's
-    colour in its direction (:func:`omnicam.synthetic.make_environment`). Supersampled, so an
-    edge's pixel value is its area coverage.
+    Rendered by :func:`omnicam.synthetic.realistic.render_rig` (its own tracer, nothing of the
+    estimator) with the board as a :class:`~.realistic.Chessboard`, the camera's ``body``, the
+    ``room`` at infinity (default :class:`~.realistic.RoomScene`) and a near-black housing
+    around the mirror; then :func:`~.realistic.degrade` with ``photometric``.
+
+    Parameters
+    ----------
+    camera : MisalignedHyperbolicCamera
+        The truth (read as numbers by the renderer).
+    pattern_size, square_size, rvec, tvec
+        The board (:func:`board_object_points`, ``X_mirror = R(rvec) X_board + tvec``).
+    supersample : int
+        Samples per pixel side near edges (1..8).
+    noise : float or None
+        Sensor noise in grey levels, replacing ``photometric``'s (None keeps it).
+    seed : int
+        Seed of the sensor noise.
+    body : BodyGeometry or None
+        The camera's body (default :data:`BOARD_BODY`).
+    room : RoomScene or None
+    photometric : Photometric or None
+        Degradations (default :data:`BOARD_PHOTOMETRIC`); None: only rounding to uint8.
 
     Returns
     -------
@@ -205,34 +242,19 @@ def render_board(
     _check_camera(camera)
     cols, rows = _pattern(pattern_size)
     s = float(square_size)
-    env = np.ascontiguousarray(
-        make_environment() if environment is None else environment, dtype=np.float32
-    )
-    if rvec is None:
-
-        def shade(P, d):
-            return _sample_equirect(env, d)
-
-        return _render(camera, shade, supersample, noise, seed, housing_color, body_radius, None)
-    Rb = cv2.Rodrigues(np.asarray(rvec, np.float64).reshape(3, 1))[0]
-    tb = np.asarray(tvec, np.float64)
-    n = Rb[:, 2]
-
-    def shade(P, d):
-        col = _sample_equirect(env, d)
-        den = d @ n
-        with np.errstate(divide="ignore", invalid="ignore"):
-            t = ((tb - P) @ n) / den
-        hit = np.isfinite(t) & (t > 0)
-        X = P[hit] + t[hit, None] * d[hit]
-        xb = (X - tb) @ Rb  # board frame: R^T (X - t)
-        fx, fy = xb[:, 0] / s, xb[:, 1] / s
-        inside = (fx >= -2) & (fx <= cols + 1) & (fy >= -2) & (fy <= rows + 1)
-        squares = (fx >= -1) & (fx <= cols) & (fy >= -1) & (fy <= rows)
-        black = squares & ((np.floor(fx).astype(np.int64) + np.floor(fy).astype(np.int64)) % 2 == 0)
-        val = np.where(black, _BLACK, _WHITE).astype(np.float32)
-        idx = np.flatnonzero(hit)[inside]
-        col[idx] = val[inside, None]
-        return col
-
-    return _render(camera, shade, supersample, noise, seed, housing_color, body_radius, None)
+    board = ()
+    if rvec is not None:
+        board = (
+            _rl.Chessboard(
+                (cols, rows),
+                s,
+                tuple(float(v) for v in np.ravel(rvec)),
+                tuple(float(v) for v in np.ravel(tvec)),
+            ),
+        )
+    rig = _rl.Rig(body=body, room=_rl.RoomScene() if room is None else room, boards=board)
+    rendering = _rl.render_rig(camera, rig, supersample)
+    photo = _rl.Photometric() if photometric is None else photometric
+    if noise is not None:
+        photo = dataclasses.replace(photo, noise_sigma=float(noise))
+    return _rl.degrade(rendering.image, photo, seed=seed)

@@ -14,7 +14,8 @@ mirror's ``a, b, rim_radius``) and traces every subpixel itself:
    may hit the holder plate in the rim plane, else it shows the background;
 3. the reflection ``V_out = V - 2 N (N, V)`` with the unit normal ``N`` of eq. 14 (eq. 15);
 4. the reflected ray meets, nearest first, the camera's own body (a lens barrel coaxial with
-   the optical axis with a glass front disc, in front of a wider box) or a strut; otherwise it
+   the optical axis with a glass front disc, in front of a wider box), a strut or a chessboard
+   (:class:`Chessboard`, a plane at a finite distance, for pattern calibration); otherwise it
    sees a room at infinity (:class:`RoomScene`, looked up by direction only).
 
 Hostile elements (:data:`VARIANTS`), each switchable: the camera body, a holder ring around the
@@ -49,6 +50,7 @@ __all__ = [
     "LABELS",
     "VARIANTS",
     "BodyGeometry",
+    "Chessboard",
     "Holder",
     "Photometric",
     "RealisticRender",
@@ -98,9 +100,10 @@ LABELS = {
     "barrel_side": 7,  # ... the barrel's side
     "box": 8,  # ... the camera box behind the barrel
     "strut_reflected": 9,  # ... a strut, seen in the mirror
+    "board": 10,  # ... a chessboard (Rig.boards)
 }
 _L = LABELS
-_MIRROR_LABELS = (3, 4, 5, 6, 7, 8, 9)
+_MIRROR_LABELS = (3, 4, 5, 6, 7, 8, 9, 10)
 _FRONT_LABELS = (5, 6)
 _CHUNK = 1 << 18  # samples traced per chunk
 _CRITERIA = (cv2.TERM_CRITERIA_COUNT | cv2.TERM_CRITERIA_EPS, 100, 1e-14)
@@ -260,6 +263,35 @@ class Photometric:
 
 
 @dataclasses.dataclass(frozen=True)
+class Chessboard:
+    """A flat chessboard in the scene (mirror frame), as OpenCV describes one.
+
+    ``pattern_size = (cols, rows)`` inner corners at ``(i s, j s, 0)`` of the board frame
+    (``s = square_size``, docs/conventions.md "Pattern calibration"), placed by
+    ``X_mirror = R(rvec) X_board + tvec``. The squares cover ``-s <= x <= cols s``,
+    ``-s <= y <= rows s`` (the square at the origin's lower left, ``floor(x/s) + floor(y/s)``
+    even, is black), inside a white margin of ``margin`` squares; both faces are printed.
+
+    Attributes
+    ----------
+    pattern_size : (int, int)
+    square_size : float
+    rvec, tvec : (3,) tuple
+    margin : float
+        White border around the squares, in squares.
+    black, white : BGR tuples
+    """
+
+    pattern_size: tuple
+    square_size: float
+    rvec: tuple
+    tvec: tuple
+    margin: float = 1.0
+    black: tuple = (28.0, 28.0, 30.0)
+    white: tuple = (226.0, 230.0, 232.0)
+
+
+@dataclasses.dataclass(frozen=True)
 class Rig:
     """Everything a render needs besides the camera: what sits around the mirror.
 
@@ -273,6 +305,8 @@ class Rig:
         What the camera sees beside the mirror and holder (None: near-black).
     mirror_gain : float
         Reflectance of the mirror coating.
+    boards : tuple of Chessboard
+        Chessboards at finite distances, seen in the mirror (none in the stress cases).
     """
 
     body: object = None
@@ -281,6 +315,7 @@ class Rig:
     room: RoomScene = RoomScene()
     background: object = None
     mirror_gain: float = 0.92
+    boards: tuple = ()
 
 
 # -- small linear algebra without BLAS (an (N, 3) @ (3, 3) product is slow under load) ---------
@@ -502,6 +537,32 @@ def _body_hits(o, v, body):
     return t_best, label, X
 
 
+def _board_hits(o, v, board):
+    """Hits of rays ``o + t v`` (mirror frame, t > 0) on a :class:`Chessboard`: ``t`` (inf where
+    missed) and the BGR colour of the hit (black or white square, or the white margin)."""
+    Rb = cv2.Rodrigues(np.asarray(board.rvec, np.float64).reshape(3, 1))[0]
+    tb = np.asarray(board.tvec, np.float64)
+    nrm = Rb[:, 2]
+    den = _dot(v, nrm)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        t = (float(tb @ nrm) - _dot(o, nrm)) / den
+        X = o + np.where(np.isfinite(t), t, 0.0)[:, None] * v
+    xb = _lin(X - tb, Rb.T)  # board frame: R^T (X - t)
+    cols, rows = (int(c) for c in board.pattern_size)
+    fx = xb[:, 0] / board.square_size
+    fy = xb[:, 1] / board.square_size
+    m = 1.0 + float(board.margin)
+    with np.errstate(invalid="ignore"):
+        hit = np.isfinite(t) & (t > 0)
+        inside = hit & (fx >= -m) & (fx <= cols + m - 1) & (fy >= -m) & (fy <= rows + m - 1)
+        squares = (fx >= -1) & (fx <= cols) & (fy >= -1) & (fy <= rows)
+    parity = (np.floor(np.nan_to_num(fx)) + np.floor(np.nan_to_num(fy))) % 2 == 0
+    col = np.where(
+        (squares & parity)[:, None], np.asarray(board.black), np.asarray(board.white)
+    ).astype(np.float64)
+    return np.where(inside, t, np.inf), col
+
+
 # -- shading -------------------------------------------------------------------------------------
 def _shade_room(room, d):
     """Colours (N, 3) float64 of unit directions ``d`` (mirror frame) in the room at infinity."""
@@ -672,6 +733,13 @@ def _trace_chunk(num, rig, pixels):
                     np.asarray(strut.color)
                     * (0.7 + 0.3 * np.sqrt(np.clip(1.0 - q[nearer] ** 2, 0.0, 1.0)))[:, None]
                 )
+        for board in rig.boards:
+            tb, cb = _board_hits(Pm, dm, board)
+            nearer = tb < t_best
+            if nearer.any():
+                t_best = np.where(nearer, tb, t_best)
+                lab[nearer] = 10
+                c_out[nearer] = cb[nearer]
         sky = ~np.isfinite(t_best)
         if sky.any():
             c_sky, l_sky = _shade_room(rig.room, dm[sky])
