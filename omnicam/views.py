@@ -585,13 +585,15 @@ def _build_table(view, rig, size, step, mode, outputs, stats):
     coarse = _GridStack(view, rig, np.zeros((1, 2)), float(step), (ny, nx))
     cls = coarse.classify(view, size, half_tol, False)[0]
     # refine the failing cells on grids FINE times finer (own nodes, checks and classes)
-    cells = np.argwhere(cls == k.CELL_BAD).astype(np.int64)
+    # C order as every other array the kernels take (np.argwhere's is F: a second signature
+    # of each grid kernel, compiled cold and loaded warm)
+    cells = np.ascontiguousarray(np.argwhere(cls == k.CELL_BAD), dtype=np.int64)
     refined_index = np.full((ny, nx), -1, np.int64)
     refined_index[cells[:, 0], cells[:, 1]] = np.arange(len(cells))
     fine = _GridStack(
         view,
         rig,
-        (cells[:, ::-1] * step).astype(np.float64),
+        np.ascontiguousarray(cells[:, ::-1] * step, dtype=np.float64),
         float(step // k.FINE),
         (k.FINE, k.FINE),
         coarse,
