@@ -107,6 +107,7 @@ def warm_first_table(tmp, n):
     # compiles them; with PYTHONDONTWRITEBYTECODE=1 every process compiles omnicam's source);
     # the two interleaved
     with_pyc = {k: v for k, v in env.items() if k != "PYTHONDONTWRITEBYTECODE"}
+    with_pyc["PYTHONPYCACHEPREFIX"] = os.path.join(tmp, "pycache")  # not into the source tree
     run([sys.executable, "-c", code], with_pyc)  # writes the .pyc files
     times = {"as run": ([], []), "with .pyc": ([], [])}
     for _ in range(n):

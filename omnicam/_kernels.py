@@ -317,9 +317,11 @@ def project_points(lo, hi, X, at_infinity, R, t, C, a, b, rim_radius, K, out):
 # (or that has a node without a solution) is refined once: the same construction on a grid
 # ``FINE`` times finer inside it; a sub-cell that still fails is computed exactly pixel by pixel.
 # Cells wholly and clearly seen interpolate the pixel itself; cells wholly and clearly unseen are
-# written unseen; in the others visibility (rim, eqs. 12 and 15, in front of the camera) is
-# decided per pixel from the interpolated mirror point with a margin, and pixels inside the
-# margin are solved exactly.
+# written unseen ("clearly": the exact margins at the 3 x 3 lattice of corners and check points
+# beyond VIEW_CLEAR, or beyond VIEW_CLEAR_BOUND over the whole cell by the bound that their
+# second differences give, _lattice_bounds); in the others visibility (rim, eqs. 12 and 15, in
+# front of the camera) is decided per pixel from the interpolated mirror point with a margin,
+# and pixels inside the margin are solved exactly.
 #
 # The phases are separate kernels, run in this order by omnicam.views._build_table:
 #   grid_node_points   output positions of the nodes (and Newton starts of refined grids)
@@ -365,6 +367,8 @@ ViewArgs = namedtuple(
 VIEW_RIM_MARGIN = 2e-3  # relative margin on s1^2 + s2^2 against rim_radius^2
 VIEW_COS_MARGIN = 1e-3  # margin on the cosines of the other visibility tests
 VIEW_CLEAR = 0.05  # margins (relative rim, cosines, body) of cells wholly seen or unseen
+VIEW_CLEAR_BOUND = 5e-3  # the same, for a bound of the margin over the cell (_lattice_bounds)
+LATTICE_SAFETY = 8.0  # factor on _lattice_bounds' estimate of the bilinear interpolation error
 UNSEEN = -10.0  # omnicam.views.UNSEEN
 FINE = 4  # refinement factor of failing cells
 CELL_BAD = 0  # refined, else computed exactly pixel by pixel
@@ -798,7 +802,9 @@ def score_check_points(lo, hi, ok, P, margins, estimates, pixel_error, mirror_er
 def _cell_check_extremes(node_margins, check_margins, r, k):
     """Least visibility and largest rim margin over cell (r, k)'s corners and check points.
 
-    The margins are smooth; "clearly" seen or unseen means beyond ``VIEW_CLEAR`` at all nine.
+    The margins are smooth; "clearly" seen or unseen means beyond ``VIEW_CLEAR`` at all nine,
+    or beyond ``VIEW_CLEAR_BOUND`` everywhere by :func:`_lattice_bounds` (the third and fourth
+    values, the bounds of the visibility and rim margins over the cell, in the same units).
     """
     vmin = np.inf
     rmax = -np.inf
@@ -814,7 +820,45 @@ def _cell_check_extremes(node_margins, check_margins, r, k):
         kk = k + 1 if e == 4 else k
         vmin = min(vmin, check_margins[which, rr, kk, 0])
         rmax = max(rmax, check_margins[which, rr, kk, 1])
-    return vmin, rmax
+    vlo, _vhi = _lattice_bounds(node_margins, check_margins, r, k, 0)
+    _rlo, rhi = _lattice_bounds(node_margins, check_margins, r, k, 1)
+    return vmin, rmax, vlo, rhi
+
+
+@kernel
+def _lattice_bounds(node_margins, check_margins, r, k, m):
+    """Bounds ``(lo, hi)`` of the smooth margin ``m`` (0 visibility, 1 rim) over cell (r, k).
+
+    Its nine samples form a 3 x 3 lattice of spacing h = 1/2 cell (corners: nodes; middles of
+    the edges and centre: check points). On each quarter cell the bilinear interpolant of the
+    four samples lies between their extremes, and the function differs from it by at most
+    ``h^2 / 8 (|f_uu| + |f_vv|)``; the second derivatives are estimated by the largest second
+    differences along the lattice's rows and columns (``f'' h^2``), so the error bound is
+    ``(d_uu + d_vv) / 8``, widened by ``LATTICE_SAFETY`` for their variation over the cell.
+    ``(-inf, inf)`` if a sample is not solved.
+    """
+    f00 = node_margins[r + 1, k + 1, m]
+    f02 = node_margins[r + 1, k + 2, m]
+    f20 = node_margins[r + 2, k + 1, m]
+    f22 = node_margins[r + 2, k + 2, m]
+    f01 = check_margins[CHECK_HORIZONTAL_EDGE, r, k, m]
+    f21 = check_margins[CHECK_HORIZONTAL_EDGE, r + 1, k, m]
+    f10 = check_margins[CHECK_VERTICAL_EDGE, r, k, m]
+    f12 = check_margins[CHECK_VERTICAL_EDGE, r, k + 1, m]
+    f11 = check_margins[CHECK_CENTRE, r, k, m]
+    total = f00 + f01 + f02 + f10 + f11 + f12 + f20 + f21 + f22
+    if not total - total == 0.0:  # an unsolved sample (+-inf) or NaN
+        return -np.inf, np.inf
+    d_uu = max(
+        abs(f00 - 2.0 * f01 + f02), max(abs(f10 - 2.0 * f11 + f12), abs(f20 - 2.0 * f21 + f22))
+    )
+    d_vv = max(
+        abs(f00 - 2.0 * f10 + f20), max(abs(f01 - 2.0 * f11 + f21), abs(f02 - 2.0 * f12 + f22))
+    )
+    widen = LATTICE_SAFETY * (d_uu + d_vv) / 8.0
+    lo = min(min(min(f00, f01), min(f02, f10)), min(min(f11, f12), min(f20, min(f21, f22))))
+    hi = max(max(max(f00, f01), max(f02, f10)), max(max(f11, f12), max(f20, max(f21, f22))))
+    return lo - widen, hi + widen
 
 
 @kernel
@@ -834,8 +878,9 @@ def classify_cells(
 ):
     """Classes (the CELL_* constants) of the cells of a grid stack, ``cls`` (G, ny, nx).
 
-    A cell needs all 16 of its nodes solved; it is SEEN when clearly seen with an error estimate
-    (:func:`_cell_error`) of the pixels within ``half_tol``, UNSEEN when clearly unseen, EDGE
+    A cell needs all 16 of its nodes solved; it is SEEN when clearly seen
+    (:func:`_cell_check_extremes`) with an error estimate (:func:`_cell_error`) of the pixels
+    within ``half_tol``, UNSEEN when clearly outside the rim, EDGE
     when that of the mirror points is within ``half_tol`` (only with ``allow_edge``: on the
     coarse grid such a cell is refined instead), else BAD.
     """
@@ -847,12 +892,14 @@ def classify_cells(
                     for n in range(4):
                         if not node_margins[c, r + m, k + n, 0] > -np.inf:
                             solved = False
-                vmin, rmax = _cell_check_extremes(node_margins[c], check_margins[c], r, k)
+                vmin, rmax, vlo, rhi = _cell_check_extremes(node_margins[c], check_margins[c], r, k)
+                seen = vmin >= 1.0 or vlo * VIEW_CLEAR >= VIEW_CLEAR_BOUND  # vis: / VIEW_CLEAR
+                unseen = rmax <= -VIEW_CLEAR or rhi <= -VIEW_CLEAR_BOUND
                 cell_class = CELL_BAD
                 if solved:
-                    if vmin >= 1.0 and _cell_error(pixel_error[c], r, k) <= half_tol:
+                    if seen and _cell_error(pixel_error[c], r, k) <= half_tol:
                         cell_class = CELL_SEEN
-                    elif rmax <= -VIEW_CLEAR:
+                    elif unseen:
                         cell_class = CELL_UNSEEN
                     elif _cell_error(mirror_error[c], r, k) <= half_tol and allow_edge:
                         cell_class = CELL_EDGE
