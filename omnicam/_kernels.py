@@ -1109,10 +1109,10 @@ def _fill_refined_cell(
     column_cos,
     column_sin,
     mode,
-    outx,
-    outy,
-    out16,
-    outf16,
+    rowx,
+    rowy,
+    row16,
+    rowf16,
     pending,
 ):
     """Entries of row i, columns j0:j1 of a refined coarse cell, sub-cell by sub-cell.
@@ -1120,24 +1120,48 @@ def _fill_refined_cell(
     ``fine_S, fine_P`` (FINE + 3, FINE + 3, 2), ``fine_cls`` (FINE, FINE): the cell's refined
     grid; ``fine_row, fine_tv``: the sub-cell row and the position in it; ``fine_weights``
     (4, g): column weights per column offset in a sub-cell. SEEN sub-cells interpolate the
-    pixel, UNSEEN ones are unseen, EDGE ones decide per pixel from the interpolated mirror point
-    (:func:`_edge_pixel`); what stays undecided is marked in ``pending`` (returns how many).
+    pixel, UNSEEN ones are unseen (both as :func:`fill_rows` writes coarse cells), EDGE ones
+    decide per pixel from the interpolated mirror point (:func:`_edge_pixel`); what stays
+    undecided is marked in ``pending``. ``rowx, rowy, row16, rowf16``: row i of the maps
+    (:func:`fill_rows`). Returns the counts of pending and of unseen entries.
     """
     g = fine_weights.shape[1]
     v0, v1, v2, v3 = _lagrange4(fine_tv)
     n_pending = 0
+    n_unseen = 0
     for fb in range(FINE):
         k0 = j0 + fb * g
-        k1 = min(j1, k0 + g)
+        k1 = max(k0, min(j1, k0 + g))  # sub-cells past the image's last column are empty
         fine_class = fine_cls[fine_row, fb]
         if fine_class == CELL_UNSEEN:
-            for j in range(k0, k1):
-                _view_store(i, j, _NAN, _NAN, mode, outx, outy, out16, outf16)
+            _fill_unseen(
+                k1 - k0, mode, rowx[k0:k1], rowy[k0:k1], row16[2 * k0 : 2 * k1], rowf16[k0:k1]
+            )
+            n_unseen += k1 - k0
             continue
         # the sub-cell's four node columns interpolated to this row: pixels of SEEN sub-cells,
         # mirror points of the others; per pixel only the column weights remain
         src = fine_P if fine_class == CELL_SEEN else fine_S
         a0, a1, a2, a3, b0, b1, b2, b3 = _row_columns(src, fine_row, fb, v0, v1, v2, v3)
+        if fine_class == CELL_SEEN:
+            _fill_seen(
+                a0,
+                a1,
+                a2,
+                a3,
+                b0,
+                b1,
+                b2,
+                b3,
+                fine_weights,
+                k1 - k0,
+                mode,
+                rowx[k0:k1],
+                rowy[k0:k1],
+                row16[2 * k0 : 2 * k1],
+                rowf16[k0:k1],
+            )
+            continue
         for j in range(k0, k1):
             tu = j - k0
             u0 = fine_weights[0, tu]
@@ -1146,9 +1170,6 @@ def _fill_refined_cell(
             u3 = fine_weights[3, tu]
             c1 = u0 * a0 + u1 * a1 + u2 * a2 + u3 * a3
             c2 = u0 * b0 + u1 * b1 + u2 * b2 + u3 * b3
-            if fine_class == CELL_SEEN:
-                _view_store(i, j, c1, c2, mode, outx, outy, out16, outf16)
-                continue
             dx, dy, dz = _pixel_direction(view, i, j, row_z, row_cos, column_cos, column_sin)
             x = _NAN
             y = _NAN
@@ -1156,11 +1177,13 @@ def _fill_refined_cell(
             if not decided and fine_class == CELL_EDGE:
                 x, y, decided = _edge_pixel(view, rig, c1, c2, dx, dy, dz)
             if decided:
-                _view_store(i, j, x, y, mode, outx, outy, out16, outf16)
+                _row_store(j, x, y, mode, rowx, rowy, row16, rowf16)
+                if not (x == x and y == y):
+                    n_unseen += 1
             else:
                 pending[i, j] = 1
                 n_pending += 1
-    return n_pending
+    return n_pending, n_unseen
 
 
 #: 1.5 * 2^52: ``(x + ROUND_MAGIC) - ROUND_MAGIC`` rounds |x| <= 2^51 to the nearest integer,
@@ -1180,22 +1203,14 @@ def _round_fixed(f):
 
 
 @kernel(inline="always")
-def _fill_seen(row_P, k, weights, n, mode, ox, oy, o16, of16):
+def _fill_seen(a0, a1, a2, a3, b0, b1, b2, b3, weights, n, mode, ox, oy, o16, of16):
     """Entries ``0:n`` of a SEEN cell's row segment (row slices ``ox, oy``, or ``o16`` (x, y
-    interleaved) and ``of16``):
-    the cubic in the column of the row-interpolated node pixels ``row_P[k:k + 4]``.
+    interleaved) and ``of16``): the cubic in the column (``weights`` (4, >= n)) of the
+    row-interpolated values ``a*`` (x) and ``b*`` (y) of the cell's four node columns.
 
     The outputs are 1-D slices indexed from 0, so the stores are contiguous (an index numba
     cannot prove non-negative gets a wraparound select, and the vectorised loop then scatters).
     """
-    a0 = row_P[k, 0]
-    a1 = row_P[k + 1, 0]
-    a2 = row_P[k + 2, 0]
-    a3 = row_P[k + 3, 0]
-    b0 = row_P[k, 1]
-    b1 = row_P[k + 1, 1]
-    b2 = row_P[k + 2, 1]
-    b3 = row_P[k + 3, 1]
     w0 = weights[0]
     w1 = weights[1]
     w2 = weights[2]
@@ -1213,6 +1228,25 @@ def _fill_seen(row_P, k, weights, n, mode, ox, oy, o16, of16):
             o16[2 * t] = max(-32768, min(32767, ix >> 5))
             o16[2 * t + 1] = max(-32768, min(32767, iy >> 5))
             of16[t] = (iy & 31) * 32 + (ix & 31)
+
+
+@kernel(inline="always")
+def _row_store(j, x, y, mode, rowx, rowy, row16, rowf16):
+    """:func:`_view_store` of entry j of a row (``row16``: the row's (x, y) pairs)."""
+    if not (x == x and y == y):
+        x = UNSEEN
+        y = UNSEEN
+    fx = np.float32(x)
+    fy = np.float32(y)
+    if mode == 0:
+        rowx[j] = fx
+        rowy[j] = fy
+    else:
+        ix = int(np.rint(np.float64(fx) * 32.0))
+        iy = int(np.rint(np.float64(fy) * 32.0))
+        row16[2 * j] = max(-32768, min(32767, ix >> 5))
+        row16[2 * j + 1] = max(-32768, min(32767, iy >> 5))
+        rowf16[j] = (iy & 31) * 32 + (ix & 31)
 
 
 @kernel(inline="always")
@@ -1255,7 +1289,7 @@ def fill_rows(
     out16,
     outf16,
     pending,
-    pending_rows,
+    row_counts,
 ):
     """Table entries of rows ``lo:hi``; pixels that need an exact solution are marked pending.
 
@@ -1264,7 +1298,7 @@ def fill_rows(
     ``weights`` (4, step), ``fine_weights`` (4, step / FINE): :func:`table_weights`.
     ``mode`` 0 writes float32 ``outx, outy`` (H, W); mode 1 writes ``out16`` (H, W, 2) int16
     and ``outf16`` (H, W) uint16 as ``cv2.convertMaps(.., CV_16SC2)`` does.
-    ``pending_rows`` (H,): pending pixels per row.
+    ``row_counts`` (H, 2): pending and unseen entries per row.
     """
     h = weights.shape[1]
     g = fine_weights.shape[1]
@@ -1275,7 +1309,8 @@ def fill_rows(
     # (H, 2 W): the (x, y) pairs of a row one after the other, for contiguous 1-D row slices
     out16_rows = out16.reshape((out16.shape[0], 2 * out16.shape[1]))
     for i in range(lo, hi):
-        pending_rows[i] = 0
+        n_pending = 0
+        n_unseen = 0
         r = i // h
         v0, v1, v2, v3 = _lagrange4((i - r * h) / h)
         for q in range(NX):
@@ -1308,8 +1343,14 @@ def fill_rows(
             cell_class = cls[r, k]
             if cell_class == CELL_SEEN:
                 _fill_seen(
-                    row_P,
-                    k,
+                    row_P[k, 0],
+                    row_P[k + 1, 0],
+                    row_P[k + 2, 0],
+                    row_P[k + 3, 0],
+                    row_P[k, 1],
+                    row_P[k + 1, 1],
+                    row_P[k + 2, 1],
+                    row_P[k + 3, 1],
                     weights,
                     j1 - j0,
                     mode,
@@ -1322,9 +1363,10 @@ def fill_rows(
                 _fill_unseen(
                     j1 - j0, mode, rowx[j0:j1], rowy[j0:j1], row16[2 * j0 : 2 * j1], rowf16[j0:j1]
                 )
+                n_unseen += j1 - j0
             else:  # refined (coarse cells are never EDGE: classify_cells without allow_edge)
                 c = refined_index[r, k]
-                pending_rows[i] += _fill_refined_cell(
+                p, u = _fill_refined_cell(
                     view,
                     rig,
                     i,
@@ -1341,12 +1383,16 @@ def fill_rows(
                     column_cos,
                     column_sin,
                     mode,
-                    outx,
-                    outy,
-                    out16,
-                    outf16,
+                    rowx,
+                    rowy,
+                    row16,
+                    rowf16,
                     pending,
                 )
+                n_pending += p
+                n_unseen += u
+        row_counts[i, 0] = n_pending
+        row_counts[i, 1] = n_unseen
 
 
 @kernel

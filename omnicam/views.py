@@ -415,7 +415,7 @@ def _table(camera, kind, A, p0, p1, az_step, size, depth, viewpoint, m1type, ste
 
     ``kind, A, p0, p1, az_step`` define the output directions
     (:func:`omnicam._kernels._view_direction`), ``step`` the node spacing (a multiple of 4;
-    by default from ``CELL_DEGREES``), ``stats`` (8,) int64 receives the counts of
+    by default from ``CELL_DEGREES``), ``stats`` (9,) int64 receives the counts of
     :func:`_build_table`.
     """
     w, h = size
@@ -444,7 +444,7 @@ def _table(camera, kind, A, p0, p1, az_step, size, depth, viewpoint, m1type, ste
         outx, outy = np.empty((2, h, w), np.float32)
         out16 = np.empty((1, 1, 2), np.int16)
         outf16 = np.empty((1, 1), np.uint16)
-    st = np.zeros(8, np.int64) if stats is None else stats
+    st = np.zeros(9, np.int64) if stats is None else stats
     _build_table(view, rig, (w, h), step, mode, (outx, outy, out16, outf16), st)
     if mode == 1:
         return out16, outf16
@@ -573,8 +573,9 @@ def _solve(view, rig, positions, starts, pixels_only=False):
 def _build_table(view, rig, size, step, mode, outputs, stats):
     """The phases of a table (section comment of :mod:`omnicam._kernels`), writing ``outputs``.
 
-    ``stats`` (8,) int64 receives: nodes and check points solved, coarse cells seen / unseen /
-    edge / refined, refined sub-cells left to exact pixels, pixels solved exactly.
+    ``stats`` (9,) int64 receives: nodes and check points solved, coarse cells seen / unseen /
+    edge / refined, refined sub-cells left to exact pixels, pixels solved exactly, entries
+    written unseen.
     """
     from . import _kernels as k
 
@@ -605,7 +606,7 @@ def _build_table(view, rig, size, step, mode, outputs, stats):
     weights, fine_weights = np.empty((4, step)), np.empty((4, step // k.FINE))
     k.table_weights(view, column_cos, column_sin, weights, fine_weights)
     pending = np.zeros((h, w), np.uint8)
-    pending_rows = np.empty(h, np.int64)
+    row_counts = np.empty((h, 2), np.int64)  # pending and unseen entries per row
     outx, outy, out16, outf16 = outputs
     run_chunks(
         k.fill_rows,
@@ -628,16 +629,19 @@ def _build_table(view, rig, size, step, mode, outputs, stats):
         out16,
         outf16,
         pending,
-        pending_rows,
+        row_counts,
         min_chunk=16,
     )
-    rows = np.flatnonzero(pending_rows)
+    rows = np.flatnonzero(row_counts[:, 0])
     sub_rows, columns = np.nonzero(pending[rows])
     index = rows[sub_rows] * w + columns
     positions = np.stack([index % w, index // w], axis=1).astype(np.float64)
+    n_unseen = int(row_counts[:, 1].sum())
     if len(index):
-        P = _solve(view, rig, positions, positions, pixels_only=True)[1]
+        # no start of the pixels' own (NaN): Newton from the aligned start
+        P = _solve(view, rig, positions, np.full_like(positions, np.nan), pixels_only=True)[1]
         k.store_entries(0, len(index), index, P, mode, outx, outy, out16, outf16)
+        n_unseen += int(np.count_nonzero(np.isnan(P[:, 0])))
     n_nodes, n_checks = coarse.n_solved()
     f_nodes, f_checks = fine.n_solved()
     stats[0] = n_nodes + f_nodes
@@ -647,6 +651,7 @@ def _build_table(view, rig, size, step, mode, outputs, stats):
     ]
     stats[6] = np.count_nonzero(fine_cls == k.CELL_BAD)
     stats[7] = len(index)
+    stats[8] = n_unseen
 
 
 def _panorama_params(size, lo, hi, projection):
@@ -747,8 +752,11 @@ def init_panorama_maps(
         lo, hi = _check_elevation_range(elevation_range, projection)
     vp = _check_viewpoint(camera, viewpoint, depth)
     p0, p1, az_step = _panorama_params((w, h), lo, hi, projection)
-    maps = _table(camera, _KIND[projection], Rm.T, p0, p1, az_step, (w, h), depth, vp, m1type)
-    _warn_if_unseen(camera, maps, "panorama")
+    st = np.zeros(9, np.int64)
+    maps = _table(
+        camera, _KIND[projection], Rm.T, p0, p1, az_step, (w, h), depth, vp, m1type, stats=st
+    )
+    _warn_if_unseen(camera, st[8] / (w * h), "panorama")
     return maps
 
 
@@ -809,8 +817,9 @@ def init_perspective_maps(
     M = Rm.T @ np.linalg.inv(K_new)
     # a pixel at the principal point spans 1 / f radians (the most of any pixel of the view)
     step = _step_for(math.degrees(1.0 / min(abs(K_new[0, 0]), abs(K_new[1, 1]))))
-    maps = _table(camera, 0, M, 0.0, 0.0, 0.0, (w, h), depth, vp, m1type, step=step)
-    _warn_if_unseen(camera, maps, "perspective view")
+    st = np.zeros(9, np.int64)
+    maps = _table(camera, 0, M, 0.0, 0.0, 0.0, (w, h), depth, vp, m1type, step=step, stats=st)
+    _warn_if_unseen(camera, st[8] / (w * h), "perspective view")
     return maps
 
 
@@ -839,11 +848,10 @@ def _refuse_swapped(matrix_arg, size_arg, signature):
 UNSEEN_WARN_FRACTION = 0.5
 
 
-def _warn_if_unseen(camera, maps, what):
-    """RuntimeWarning when most of a view lies outside the band the mirror sees."""
-    map1 = maps[0]
-    x = map1 if map1.ndim == 2 else map1[..., 0]
-    frac = float(np.count_nonzero(x == UNSEEN)) / x.size
+def _warn_if_unseen(camera, frac, what):
+    """RuntimeWarning when most of a view (the fraction ``frac`` of its entries unseen) lies
+    outside the band the mirror sees."""
+    frac = float(frac)
     if frac > UNSEEN_WARN_FRACTION:
         import warnings
 
