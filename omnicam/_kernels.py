@@ -751,10 +751,11 @@ def solve_view_points(
     :func:`_view_point` at each: the mirror point ``S``, its pixel ``P`` (the exact table
     entry for ``pixels_only``, NaN if unseen) and ``margins`` = (vis, rim_m) (``-inf, inf``
     and ``ok`` False when not solved), Newton started from ``starts`` where not NaN.
-    ``start_pixels``: the pixels of the starts (grid points only).
+    ``start_pixels``: the pixels of the starts (check points only; empty for no such output).
     """
+    with_start_pixels = start_pixels.shape[0] > 0
     for n in range(lo, hi):
-        if not pixels_only:
+        if with_start_pixels:
             # the pixel of a mirror point does not depend on the target (margins only)
             x, y, _m = _view_pixel(rig, starts[n, 0], starts[n, 1], 1.0, 0.0, 0.0, True)
             start_pixels[n, 0] = x
@@ -803,8 +804,7 @@ def _cell_check_extremes(node_margins, check_margins, r, k):
     """Least visibility and largest rim margin over cell (r, k)'s corners and check points.
 
     The margins are smooth; "clearly" seen or unseen means beyond ``VIEW_CLEAR`` at all nine,
-    or beyond ``VIEW_CLEAR_BOUND`` everywhere by :func:`_lattice_bounds` (the third and fourth
-    values, the bounds of the visibility and rim margins over the cell, in the same units).
+    or beyond ``VIEW_CLEAR_BOUND`` everywhere by :func:`_lattice_bounds` (:func:`_clearly`).
     """
     vmin = np.inf
     rmax = -np.inf
@@ -820,9 +820,22 @@ def _cell_check_extremes(node_margins, check_margins, r, k):
         kk = k + 1 if e == 4 else k
         vmin = min(vmin, check_margins[which, rr, kk, 0])
         rmax = max(rmax, check_margins[which, rr, kk, 1])
-    vlo, _vhi = _lattice_bounds(node_margins, check_margins, r, k, 0)
-    _rlo, rhi = _lattice_bounds(node_margins, check_margins, r, k, 1)
-    return vmin, rmax, vlo, rhi
+    return vmin, rmax
+
+
+@kernel
+def _clearly(node_margins, check_margins, r, k, vmin, rmax):
+    """Whether cell (r, k) is clearly seen and whether it is clearly outside the rim, from
+    :func:`_cell_check_extremes` ``vmin, rmax`` or else :func:`_lattice_bounds`."""
+    seen = vmin >= 1.0  # vis is the visibility margin / VIEW_CLEAR
+    if not seen:
+        vlo, _vhi = _lattice_bounds(node_margins, check_margins, r, k, 0)
+        seen = vlo * VIEW_CLEAR >= VIEW_CLEAR_BOUND
+    unseen = rmax <= -VIEW_CLEAR
+    if not unseen and not seen:
+        _rlo, rhi = _lattice_bounds(node_margins, check_margins, r, k, 1)
+        unseen = rhi <= -VIEW_CLEAR_BOUND
+    return seen, unseen
 
 
 @kernel
@@ -879,7 +892,7 @@ def classify_cells(
     """Classes (the CELL_* constants) of the cells of a grid stack, ``cls`` (G, ny, nx).
 
     A cell needs all 16 of its nodes solved; it is SEEN when clearly seen
-    (:func:`_cell_check_extremes`) with an error estimate (:func:`_cell_error`) of the pixels
+    (:func:`_clearly`) with an error estimate (:func:`_cell_error`) of the pixels
     within ``half_tol``, UNSEEN when clearly outside the rim, EDGE
     when that of the mirror points is within ``half_tol`` (only with ``allow_edge``: on the
     coarse grid such a cell is refined instead), else BAD.
@@ -892,9 +905,8 @@ def classify_cells(
                     for n in range(4):
                         if not node_margins[c, r + m, k + n, 0] > -np.inf:
                             solved = False
-                vmin, rmax, vlo, rhi = _cell_check_extremes(node_margins[c], check_margins[c], r, k)
-                seen = vmin >= 1.0 or vlo * VIEW_CLEAR >= VIEW_CLEAR_BOUND  # vis: / VIEW_CLEAR
-                unseen = rmax <= -VIEW_CLEAR or rhi <= -VIEW_CLEAR_BOUND
+                vmin, rmax = _cell_check_extremes(node_margins[c], check_margins[c], r, k)
+                seen, unseen = _clearly(node_margins[c], check_margins[c], r, k, vmin, rmax)
                 cell_class = CELL_BAD
                 if solved:
                     if seen and _cell_error(pixel_error[c], r, k) <= half_tol:

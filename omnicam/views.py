@@ -482,13 +482,13 @@ class _GridStack:
         k.grid_node_points(
             0, positions[..., 0].size, origins, spacing, coarse_S, cells, positions, starts
         )
-        self.S, self.P, self.node_margins, _ok, _sp = _solve(view, rig, positions, starts)
+        self.S, self.P, self.node_margins, _ok, _sp = _solve(view, rig, positions, starts, False)
         checks = (G, 3, ny + 1, nx + 1)
         positions = np.empty(checks + (2,))
         starts = np.empty(checks + (2,))
         interpolated = np.empty(checks + (2,))
-        k.grid_check_points(
-            0,
+        run_chunks(
+            k.grid_check_points,
             positions[..., 0].size,
             origins,
             spacing,
@@ -497,8 +497,9 @@ class _GridStack:
             positions,
             starts,
             interpolated,
+            min_chunk=512,
         )
-        _S, P, margins, ok, start_pixels = _solve(view, rig, positions, starts)
+        _S, P, margins, ok, start_pixels = _solve(view, rig, positions, starts, True)
         estimates = np.concatenate([interpolated, start_pixels], axis=-1)
         self.pixel_error = np.empty(checks)
         self.mirror_error = np.empty(checks)
@@ -541,8 +542,9 @@ class _GridStack:
         )
 
 
-def _solve(view, rig, positions, starts, pixels_only=False):
-    """:func:`omnicam._kernels.solve_view_points` over arrays of positions (..., 2)."""
+def _solve(view, rig, positions, starts, with_start_pixels, pixels_only=False):
+    """:func:`omnicam._kernels.solve_view_points` over arrays of positions (..., 2); the pixels
+    of the starts (check points' estimates) only ``with_start_pixels`` (else an empty array)."""
     from . import _kernels as k
 
     shape = positions.shape[:-1]
@@ -551,7 +553,7 @@ def _solve(view, rig, positions, starts, pixels_only=False):
     S = np.empty(shape + (2,))
     P = np.empty(shape + (2,))
     margins = np.empty(shape + (2,))
-    start_pixels = np.empty(shape + (2,))
+    start_pixels = np.empty(shape + (2,) if with_start_pixels else (0, 2))
     run_chunks(
         k.solve_view_points,
         n,
@@ -639,7 +641,7 @@ def _build_table(view, rig, size, step, mode, outputs, stats):
     n_unseen = int(row_counts[:, 1].sum())
     if len(index):
         # no start of the pixels' own (NaN): Newton from the aligned start
-        P = _solve(view, rig, positions, np.full_like(positions, np.nan), pixels_only=True)[1]
+        P = _solve(view, rig, positions, np.full_like(positions, np.nan), False, True)[1]
         k.store_entries(0, len(index), index, P, mode, outx, outy, out16, outf16)
         n_unseen += int(np.count_nonzero(np.isnan(P[:, 0])))
     n_nodes, n_checks = coarse.n_solved()
