@@ -1182,12 +1182,19 @@ def _fill_refined_cell(
             u3 = fine_weights[3, tu]
             c1 = u0 * a0 + u1 * a1 + u2 * a2 + u3 * a3
             c2 = u0 * b0 + u1 * b1 + u2 * b2 + u3 * b3
-            dx, dy, dz = _pixel_direction(view, i, j, row_z, row_cos, column_cos, column_sin)
             x = _NAN
             y = _NAN
-            decided = not dz <= view.sin_reject  # above every elevation the rig sees
-            if not decided and fine_class == CELL_EDGE:
-                x, y, decided = _edge_pixel(view, rig, c1, c2, dx, dy, dz)
+            rim2 = rig.rim_radius * rig.rim_radius
+            if fine_class == CELL_EDGE and (rim2 - (c1 * c1 + c2 * c2)) / rim2 < -VIEW_RIM_MARGIN:
+                # clearly outside the rim: unseen whatever the tests on the direction say, as
+                # _edge_pixel decides it (the half of an edge sub-cell past the rim costs no
+                # direction)
+                decided = True
+            else:
+                dx, dy, dz = _pixel_direction(view, i, j, row_z, row_cos, column_cos, column_sin)
+                decided = not dz <= view.sin_reject  # above every elevation the rig sees
+                if not decided and fine_class == CELL_EDGE:
+                    x, y, decided = _edge_pixel(view, rig, c1, c2, dx, dy, dz)
             if decided:
                 _row_store(j, x, y, mode, rowx, rowy, row16, rowf16)
                 if not (x == x and y == y):
