@@ -1200,7 +1200,7 @@ def _fill_refined_cell(
                 if not (x == x and y == y):
                     n_unseen += 1
             else:
-                pending[i, j] = 1
+                pending[i, j] = True
                 n_pending += 1
     return n_pending, n_unseen
 

@@ -238,19 +238,13 @@ def _check_elevation_range(elevation_range, projection):
 
 
 # -- the band a mirror sees ---------------------------------------------------------------------
-def _rim_directions(camera, n=3600):
+@functools.lru_cache(maxsize=8)
+def _rim_directions_of(mirror, a, b, rim_radius, centre_bytes, n):
     """Reflected directions of ``n`` rim points (eqs. 14-15 at the rim), mirror frame.
 
     They depend on the mirror and the camera centre only; the last few rigs' are kept (every
     table needs them, and they cost about as much as a small table).
     """
-    m = camera.mirror
-    C = np.asarray(camera.camera_center, dtype=np.float64)
-    return _rim_directions_of(m, float(m.a), float(m.b), float(m.rim_radius), C.tobytes(), n)
-
-
-@functools.lru_cache(maxsize=8)
-def _rim_directions_of(mirror, a, b, rim_radius, centre_bytes, n):
     P = mirror.rim_points(n)
     V = P - np.frombuffer(centre_bytes, dtype=np.float64)
     V /= np.linalg.norm(V, axis=1, keepdims=True)
@@ -260,19 +254,35 @@ def _rim_directions_of(mirror, a, b, rim_radius, centre_bytes, n):
     return out
 
 
+def _rim_band(camera):
+    """``(lowest, highest)`` elevation of the rim's reflected directions (degrees,
+    :func:`_rim_directions_of`) and whether the nadir is seen (:func:`_nadir_seen`); the last
+    few rigs' are kept."""
+    m = camera.mirror
+    C = np.asarray(camera.camera_center, dtype=np.float64)
+    return _rim_band_of(m, float(m.a), float(m.b), float(m.rim_radius), C.tobytes())
+
+
+@functools.lru_cache(maxsize=8)
+def _rim_band_of(mirror, a, b, rim_radius, centre_bytes, n=3600):
+    rim_dirs = _rim_directions_of(mirror, a, b, rim_radius, centre_bytes, n)
+    el = _elevation_deg(rim_dirs)
+    nadir = bool(_nadir_seen(b, np.frombuffer(centre_bytes, dtype=np.float64), rim_dirs))
+    return float(np.min(el)), float(np.max(el)), nadir
+
+
 def _elevation_deg(d):
     return np.degrees(np.arctan2(d[..., 2], np.hypot(d[..., 0], d[..., 1])))
 
 
-def _nadir_seen(camera, rim_dirs):
+def _nadir_seen(b, camera_center, rim_dirs):
     """Whether the straight-down direction (0, 0, -1) is among those the mirror shows.
 
     The cap maps one-to-one onto the directions it shows, so these are the region bounded by
     the closed curve of rim rays that contains the ray of the apex. The nadir is in it when that
     curve winds around the mirror axis and the apex ray lies below the whole curve.
     """
-    m = camera.mirror
-    V = np.array([0.0, 0.0, m.b]) - camera.camera_center
+    V = np.array([0.0, 0.0, b]) - camera_center
     apex_ray = np.array([V[0], V[1], -V[2]])  # reflection about the apex normal (0, 0, -1)
     az = np.arctan2(rim_dirs[:, 1], rim_dirs[:, 0])
     turns = np.diff(np.append(az, az[0]))
@@ -292,10 +302,8 @@ def visible_elevation_range(camera) -> tuple[float, float]:
     is the union over azimuths, so some pixels near ``hi`` are unseen at some azimuths.
     """
     _check_camera(camera)
-    rim_dirs = _rim_directions(camera)
-    el = _elevation_deg(rim_dirs)
-    hi = float(np.max(el))
-    lo = -90.0 if _nadir_seen(camera, rim_dirs) else float(np.min(el))
+    lowest, hi, nadir = _rim_band(camera)
+    lo = -90.0 if nadir else lowest
     return lo, hi
 
 
@@ -350,7 +358,7 @@ def _reject_sines(camera, depth, viewpoint):
     mirror point, is seen along a ray within ``asin(rho / depth)`` of its direction from the
     viewpoint, so its elevation from there is at most ``hi + asin(rho / depth)``.
     """
-    hi = float(np.max(_elevation_deg(_rim_directions(camera))))
+    hi = _rim_band(camera)[1]
     limit = hi + 0.5  # slack for the rim sampling
     if depth is not None:
         rho = _cap_radius(camera, viewpoint)
@@ -607,7 +615,7 @@ def _build_table(view, rig, size, step, mode, outputs, stats):
     column_cos, column_sin = np.empty(w), np.empty(w)
     weights, fine_weights = np.empty((4, step)), np.empty((4, step // k.FINE))
     k.table_weights(view, column_cos, column_sin, weights, fine_weights)
-    pending = np.zeros((h, w), np.uint8)
+    pending = np.zeros((h, w), np.bool_)  # bool: numpy's nonzero is ten times faster than on uint8
     row_counts = np.empty((h, 2), np.int64)  # pending and unseen entries per row
     outx, outy, out16, outf16 = outputs
     run_chunks(
@@ -635,8 +643,8 @@ def _build_table(view, rig, size, step, mode, outputs, stats):
         min_chunk=16,
     )
     rows = np.flatnonzero(row_counts[:, 0])
-    sub_rows, columns = np.nonzero(pending[rows])
-    index = rows[sub_rows] * w + columns
+    q = np.flatnonzero(pending[rows])
+    index = rows[q // w] * w + q % w
     positions = np.stack([index % w, index // w], axis=1).astype(np.float64)
     n_unseen = int(row_counts[:, 1].sum())
     if len(index):
