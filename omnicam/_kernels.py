@@ -1103,7 +1103,7 @@ def _row_columns(S, r, k, v0, v1, v2, v3):
     return a0, a1, a2, a3, b0, b1, b2, b3
 
 
-@kernel
+@kernel(inline="always")
 def _fill_refined_cell(
     view,
     rig,
