@@ -330,7 +330,8 @@ def project_points(lo, hi, X, at_infinity, R, t, C, a, b, rim_radius, K, out):
 #   score_check_points interpolation errors and margins at the check points
 #   classify_cells     each cell's class from its nodes and check points
 #   fill_rows          table entries of decided pixels; the others are marked pending
-#   store_entries      entries of the pending pixels once solved
+# (the entries of the pending pixels, solved by solve_view_points, are written by numpy in
+# omnicam.views._store_entries: one kernel fewer to load)
 # A "grid stack" holds G grids of the same shape and spacing: the coarse grid (G = 1) or the
 # refined grids of the failing coarse cells (G = their number).
 
@@ -635,27 +636,6 @@ def _interp_cell(S, r, k, tv, tu):
     v0, v1, v2, v3 = _lagrange4(tv)
     u0, u1, u2, u3 = _lagrange4(tu)
     return _interp_weighted(S, r, k, v0, v1, v2, v3, u0, u1, u2, u3)
-
-
-@kernel(inline="always")
-def _view_store(i, j, x, y, mode, outx, outy, out16, outf16):
-    """Write one entry: float maps (mode 0) or cv2.convertMaps' CV_16SC2 fixed point (mode 1)."""
-    if not (x == x and y == y):
-        x = UNSEEN
-        y = UNSEEN
-    fx = np.float32(x)
-    fy = np.float32(y)
-    if mode == 0:
-        outx[i, j] = fx
-        outy[i, j] = fy
-    else:
-        # cv2.convertMaps: cvRound(x * 32) (to nearest, ties to even), integer part >> 5 and
-        # the fraction & 31; the float32 entry times 32 is exact in float64
-        ix = int(np.rint(np.float64(fx) * 32.0))
-        iy = int(np.rint(np.float64(fy) * 32.0))
-        out16[i, j, 0] = max(-32768, min(32767, ix >> 5))
-        out16[i, j, 1] = max(-32768, min(32767, iy >> 5))
-        outf16[i, j] = (iy & 31) * 32 + (ix & 31)
 
 
 # -- the phases ---------------------------------------------------------------------------------
@@ -1238,7 +1218,7 @@ def _fill_seen(a0, a1, a2, a3, b0, b1, b2, b3, weights, n, mode, ox, oy, o16, of
         for t in range(n):
             ox[t] = np.float32(w0[t] * a0 + w1[t] * a1 + w2[t] * a2 + w3[t] * a3)
             oy[t] = np.float32(w0[t] * b0 + w1[t] * b1 + w2[t] * b2 + w3[t] * b3)
-    else:  # _view_store's fixed point; finite here (all 16 nodes solved)
+    else:  # _row_store's fixed point; finite here (all 16 nodes solved)
         for t in range(n):
             fx = np.float32(w0[t] * a0 + w1[t] * a1 + w2[t] * a2 + w3[t] * a3)
             fy = np.float32(w0[t] * b0 + w1[t] * b1 + w2[t] * b2 + w3[t] * b3)
@@ -1251,7 +1231,8 @@ def _fill_seen(a0, a1, a2, a3, b0, b1, b2, b3, weights, n, mode, ox, oy, o16, of
 
 @kernel(inline="always")
 def _row_store(j, x, y, mode, rowx, rowy, row16, rowf16):
-    """:func:`_view_store` of entry j of a row (``row16``: the row's (x, y) pairs)."""
+    """Write entry j of a row: float maps (mode 0) or cv2.convertMaps' CV_16SC2 fixed point
+    (mode 1; ``row16``: the row's (x, y) pairs); NaN is written ``UNSEEN``."""
     if not (x == x and y == y):
         x = UNSEEN
         y = UNSEEN
@@ -1261,6 +1242,8 @@ def _row_store(j, x, y, mode, rowx, rowy, row16, rowf16):
         rowx[j] = fx
         rowy[j] = fy
     else:
+        # cv2.convertMaps: cvRound(x * 32) (to nearest, ties to even), integer part >> 5 and
+        # the fraction & 31; the float32 entry times 32 is exact in float64
         ix = int(np.rint(np.float64(fx) * 32.0))
         iy = int(np.rint(np.float64(fy) * 32.0))
         row16[2 * j] = max(-32768, min(32767, ix >> 5))
@@ -1270,7 +1253,7 @@ def _row_store(j, x, y, mode, rowx, rowy, row16, rowf16):
 
 @kernel(inline="always")
 def _fill_unseen(n, mode, ox, oy, o16, of16):
-    """Entries ``0:n`` of an UNSEEN cell's row segment: ``UNSEEN`` as :func:`_view_store`
+    """Entries ``0:n`` of an UNSEEN cell's row segment: ``UNSEEN`` as :func:`_row_store`
     writes it."""
     if mode == 0:
         for t in range(n):
@@ -1412,13 +1395,3 @@ def fill_rows(
                 n_unseen += u
         row_counts[i, 0] = n_pending
         row_counts[i, 1] = n_unseen
-
-
-@kernel
-def store_entries(lo, hi, pixel_index, P, mode, outx, outy, out16, outf16):
-    """Write the solved entries ``P[n]`` of the pending pixels ``pixel_index[n]`` (flat)."""
-    W = outf16.shape[1] if mode == 1 else outx.shape[1]
-    for n in range(lo, hi):
-        i = pixel_index[n] // W
-        j = pixel_index[n] % W
-        _view_store(i, j, P[n, 0], P[n, 1], mode, outx, outy, out16, outf16)

@@ -507,7 +507,12 @@ class _GridStack:
             interpolated,
             min_chunk=512,
         )
-        _S, P, margins, ok, start_pixels = _solve(view, rig, positions, starts, True)
+        # the pixels of the interpolated mirror points only where EDGE cells can be (refined
+        # grids, classify's allow_edge); the coarse grid's mirror errors stay inf, unused
+        refined = cells.shape[0] > 0
+        _S, P, margins, ok, start_pixels = _solve(view, rig, positions, starts, refined)
+        if not refined:
+            start_pixels = np.full(checks + (2,), np.nan)
         estimates = np.concatenate([interpolated, start_pixels], axis=-1)
         self.pixel_error = np.empty(checks)
         self.mirror_error = np.empty(checks)
@@ -650,8 +655,7 @@ def _build_table(view, rig, size, step, mode, outputs, stats):
     if len(index):
         # no start of the pixels' own (NaN): Newton from the aligned start
         P = _solve(view, rig, positions, np.full_like(positions, np.nan), False, True)[1]
-        k.store_entries(0, len(index), index, P, mode, outx, outy, out16, outf16)
-        n_unseen += int(np.count_nonzero(np.isnan(P[:, 0])))
+        n_unseen += _store_entries(index, P, mode, outputs)
     n_nodes, n_checks = coarse.n_solved()
     f_nodes, f_checks = fine.n_solved()
     stats[0] = n_nodes + f_nodes
@@ -662,6 +666,28 @@ def _build_table(view, rig, size, step, mode, outputs, stats):
     stats[6] = np.count_nonzero(fine_cls == k.CELL_BAD)
     stats[7] = len(index)
     stats[8] = n_unseen
+
+
+def _store_entries(index, P, mode, outputs):
+    """Write the solved entries ``P`` (n, 2) of the pixels ``index`` (flat) into ``outputs``
+    as fill_rows' ``_row_store`` does: NaN as ``UNSEEN``, float32 maps (mode 0) or
+    cv2.convertMaps' CV_16SC2 fixed point (mode 1: cvRound(x * 32), ties to even, the integer
+    part >> 5 saturated to int16 and the fraction & 31). Returns how many were unseen."""
+    outx, outy, out16, outf16 = outputs
+    unseen = np.isnan(P).any(axis=1)
+    fx = np.where(unseen, UNSEEN, P[:, 0]).astype(np.float32)
+    fy = np.where(unseen, UNSEEN, P[:, 1]).astype(np.float32)
+    if mode == 0:
+        outx.reshape(-1)[index] = fx
+        outy.reshape(-1)[index] = fy
+        return int(np.count_nonzero(unseen))
+    ix = np.rint(fx.astype(np.float64) * 32.0).astype(np.int64)
+    iy = np.rint(fy.astype(np.float64) * 32.0).astype(np.int64)
+    pairs = out16.reshape(-1, 2)
+    pairs[index, 0] = np.clip(ix >> 5, -32768, 32767)
+    pairs[index, 1] = np.clip(iy >> 5, -32768, 32767)
+    outf16.reshape(-1)[index] = (iy & 31) * 32 + (ix & 31)
+    return int(np.count_nonzero(unseen))
 
 
 def _panorama_params(size, lo, hi, projection):
