@@ -839,9 +839,10 @@ def _lattice_bounds(node_margins, check_margins, r, k, m):
     f10 = check_margins[CHECK_VERTICAL_EDGE, r, k, m]
     f12 = check_margins[CHECK_VERTICAL_EDGE, r, k + 1, m]
     f11 = check_margins[CHECK_CENTRE, r, k, m]
-    total = f00 + f01 + f02 + f10 + f11 + f12 + f20 + f21 + f22
-    if not total - total == 0.0:  # an unsolved sample (+-inf) or NaN
-        return -np.inf, np.inf
+    # an unsolved sample (+-inf) or NaN (compared one by one: no inf - inf, no max of a NaN)
+    for f in (f00, f01, f02, f10, f11, f12, f20, f21, f22):
+        if not abs(f) < np.inf:
+            return -np.inf, np.inf
     d_uu = max(
         abs(f00 - 2.0 * f01 + f02), max(abs(f10 - 2.0 * f11 + f12), abs(f20 - 2.0 * f21 + f22))
     )
