@@ -1084,7 +1084,7 @@ def _row_columns(S, r, k, v0, v1, v2, v3):
     return a0, a1, a2, a3, b0, b1, b2, b3
 
 
-@kernel(inline="always")
+@kernel
 def _fill_refined_cell(
     view,
     rig,
