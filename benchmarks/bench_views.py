@@ -147,8 +147,9 @@ def accuracy(cam, n=200_000):
                     cam, PANO, projection=name, m1type=cv2.CV_32FC1, depth=depth
                 )
                 lo, hi = views.visible_elevation_range(cam)
+                lo = max(lo, views.CYLINDRICAL_MIN_ELEVATION)  # the default of both projections
                 if name == "cylindrical":
-                    lo = max(lo, views.CYLINDRICAL_MIN_ELEVATION)
+                    hi = min(hi, 89.0)
                 h, w = mx.shape
                 ii, jj = rng.integers(0, h, n), rng.integers(0, w, n)
                 az = -2 * np.pi * jj / w

@@ -317,9 +317,11 @@ def project_points(lo, hi, X, at_infinity, R, t, C, a, b, rim_radius, K, out):
 # (or that has a node without a solution) is refined once: the same construction on a grid
 # ``FINE`` times finer inside it; a sub-cell that still fails is computed exactly pixel by pixel.
 # Cells wholly and clearly seen interpolate the pixel itself; cells wholly and clearly unseen are
-# written unseen; in the others visibility (rim, eqs. 12 and 15, in front of the camera) is
-# decided per pixel from the interpolated mirror point with a margin, and pixels inside the
-# margin are solved exactly.
+# written unseen ("clearly": the exact margins at the 3 x 3 lattice of corners and check points
+# beyond VIEW_CLEAR, or beyond VIEW_CLEAR_BOUND over the whole cell by the bound that their
+# second differences give, _lattice_bounds); in the others visibility (rim, eqs. 12 and 15, in
+# front of the camera) is decided per pixel from the interpolated mirror point with a margin,
+# and pixels inside the margin are solved exactly.
 #
 # The phases are separate kernels, run in this order by omnicam.views._build_table:
 #   grid_node_points   output positions of the nodes (and Newton starts of refined grids)
@@ -328,7 +330,8 @@ def project_points(lo, hi, X, at_infinity, R, t, C, a, b, rim_radius, K, out):
 #   score_check_points interpolation errors and margins at the check points
 #   classify_cells     each cell's class from its nodes and check points
 #   fill_rows          table entries of decided pixels; the others are marked pending
-#   store_entries      entries of the pending pixels once solved
+# (the entries of the pending pixels, solved by solve_view_points, are written by numpy in
+# omnicam.views._store_entries: one kernel fewer to load)
 # A "grid stack" holds G grids of the same shape and spacing: the coarse grid (G = 1) or the
 # refined grids of the failing coarse cells (G = their number).
 
@@ -365,6 +368,8 @@ ViewArgs = namedtuple(
 VIEW_RIM_MARGIN = 2e-3  # relative margin on s1^2 + s2^2 against rim_radius^2
 VIEW_COS_MARGIN = 1e-3  # margin on the cosines of the other visibility tests
 VIEW_CLEAR = 0.05  # margins (relative rim, cosines, body) of cells wholly seen or unseen
+VIEW_CLEAR_BOUND = 5e-3  # the same, for a bound of the margin over the cell (_lattice_bounds)
+LATTICE_SAFETY = 8.0  # factor on _lattice_bounds' estimate of the bilinear interpolation error
 UNSEEN = -10.0  # omnicam.views.UNSEEN
 FINE = 4  # refinement factor of failing cells
 CELL_BAD = 0  # refined, else computed exactly pixel by pixel
@@ -633,27 +638,6 @@ def _interp_cell(S, r, k, tv, tu):
     return _interp_weighted(S, r, k, v0, v1, v2, v3, u0, u1, u2, u3)
 
 
-@kernel(inline="always")
-def _view_store(i, j, x, y, mode, outx, outy, out16, outf16):
-    """Write one entry: float maps (mode 0) or cv2.convertMaps' CV_16SC2 fixed point (mode 1)."""
-    if not (x == x and y == y):
-        x = UNSEEN
-        y = UNSEEN
-    fx = np.float32(x)
-    fy = np.float32(y)
-    if mode == 0:
-        outx[i, j] = fx
-        outy[i, j] = fy
-    else:
-        # cv2.convertMaps: cvRound(x * 32) (to nearest, ties to even), integer part >> 5 and
-        # the fraction & 31; the float32 entry times 32 is exact in float64
-        ix = int(np.rint(np.float64(fx) * 32.0))
-        iy = int(np.rint(np.float64(fy) * 32.0))
-        out16[i, j, 0] = max(-32768, min(32767, ix >> 5))
-        out16[i, j, 1] = max(-32768, min(32767, iy >> 5))
-        outf16[i, j] = (iy & 31) * 32 + (ix & 31)
-
-
 # -- the phases ---------------------------------------------------------------------------------
 @kernel
 def grid_node_points(lo, hi, origins, spacing, coarse_S, cells, positions, starts):
@@ -747,10 +731,11 @@ def solve_view_points(
     :func:`_view_point` at each: the mirror point ``S``, its pixel ``P`` (the exact table
     entry for ``pixels_only``, NaN if unseen) and ``margins`` = (vis, rim_m) (``-inf, inf``
     and ``ok`` False when not solved), Newton started from ``starts`` where not NaN.
-    ``start_pixels``: the pixels of the starts (grid points only).
+    ``start_pixels``: the pixels of the starts (check points only; empty for no such output).
     """
+    with_start_pixels = start_pixels.shape[0] > 0
     for n in range(lo, hi):
-        if not pixels_only:
+        if with_start_pixels:
             # the pixel of a mirror point does not depend on the target (margins only)
             x, y, _m = _view_pixel(rig, starts[n, 0], starts[n, 1], 1.0, 0.0, 0.0, True)
             start_pixels[n, 0] = x
@@ -798,7 +783,8 @@ def score_check_points(lo, hi, ok, P, margins, estimates, pixel_error, mirror_er
 def _cell_check_extremes(node_margins, check_margins, r, k):
     """Least visibility and largest rim margin over cell (r, k)'s corners and check points.
 
-    The margins are smooth; "clearly" seen or unseen means beyond ``VIEW_CLEAR`` at all nine.
+    The margins are smooth; "clearly" seen or unseen means beyond ``VIEW_CLEAR`` at all nine,
+    or beyond ``VIEW_CLEAR_BOUND`` everywhere by :func:`_lattice_bounds` (:func:`_clearly`).
     """
     vmin = np.inf
     rmax = -np.inf
@@ -818,6 +804,58 @@ def _cell_check_extremes(node_margins, check_margins, r, k):
 
 
 @kernel
+def _clearly(node_margins, check_margins, r, k, vmin, rmax):
+    """Whether cell (r, k) is clearly seen and whether it is clearly outside the rim, from
+    :func:`_cell_check_extremes` ``vmin, rmax`` or else :func:`_lattice_bounds`."""
+    seen = vmin >= 1.0  # vis is the visibility margin / VIEW_CLEAR
+    if not seen:
+        vlo, _vhi = _lattice_bounds(node_margins, check_margins, r, k, 0)
+        seen = vlo * VIEW_CLEAR >= VIEW_CLEAR_BOUND
+    unseen = rmax <= -VIEW_CLEAR
+    if not unseen and not seen:
+        _rlo, rhi = _lattice_bounds(node_margins, check_margins, r, k, 1)
+        unseen = rhi <= -VIEW_CLEAR_BOUND
+    return seen, unseen
+
+
+@kernel
+def _lattice_bounds(node_margins, check_margins, r, k, m):
+    """Bounds ``(lo, hi)`` of the smooth margin ``m`` (0 visibility, 1 rim) over cell (r, k).
+
+    Its nine samples form a 3 x 3 lattice of spacing h = 1/2 cell (corners: nodes; middles of
+    the edges and centre: check points). On each quarter cell the bilinear interpolant of the
+    four samples lies between their extremes, and the function differs from it by at most
+    ``h^2 / 8 (|f_uu| + |f_vv|)``; the second derivatives are estimated by the largest second
+    differences along the lattice's rows and columns (``f'' h^2``), so the error bound is
+    ``(d_uu + d_vv) / 8``, widened by ``LATTICE_SAFETY`` for their variation over the cell.
+    ``(-inf, inf)`` if a sample is not solved.
+    """
+    f00 = node_margins[r + 1, k + 1, m]
+    f02 = node_margins[r + 1, k + 2, m]
+    f20 = node_margins[r + 2, k + 1, m]
+    f22 = node_margins[r + 2, k + 2, m]
+    f01 = check_margins[CHECK_HORIZONTAL_EDGE, r, k, m]
+    f21 = check_margins[CHECK_HORIZONTAL_EDGE, r + 1, k, m]
+    f10 = check_margins[CHECK_VERTICAL_EDGE, r, k, m]
+    f12 = check_margins[CHECK_VERTICAL_EDGE, r, k + 1, m]
+    f11 = check_margins[CHECK_CENTRE, r, k, m]
+    # an unsolved sample (+-inf) or NaN (compared one by one: no inf - inf, no max of a NaN)
+    for f in (f00, f01, f02, f10, f11, f12, f20, f21, f22):
+        if not abs(f) < np.inf:
+            return -np.inf, np.inf
+    d_uu = max(
+        abs(f00 - 2.0 * f01 + f02), max(abs(f10 - 2.0 * f11 + f12), abs(f20 - 2.0 * f21 + f22))
+    )
+    d_vv = max(
+        abs(f00 - 2.0 * f10 + f20), max(abs(f01 - 2.0 * f11 + f21), abs(f02 - 2.0 * f12 + f22))
+    )
+    widen = LATTICE_SAFETY * (d_uu + d_vv) / 8.0
+    lo = min(min(min(f00, f01), min(f02, f10)), min(min(f11, f12), min(f20, min(f21, f22))))
+    hi = max(max(max(f00, f01), max(f02, f10)), max(max(f11, f12), max(f20, max(f21, f22))))
+    return lo - widen, hi + widen
+
+
+@kernel
 def _cell_error(errors, r, k):
     """Error estimate of cell (r, k): the tensor cubic's error ~ A(v) w(t) + B(u) w(s) peaks
     mid-cell and is bounded by the sum of its mid-edge values; also the centre's own error."""
@@ -834,8 +872,9 @@ def classify_cells(
 ):
     """Classes (the CELL_* constants) of the cells of a grid stack, ``cls`` (G, ny, nx).
 
-    A cell needs all 16 of its nodes solved; it is SEEN when clearly seen with an error estimate
-    (:func:`_cell_error`) of the pixels within ``half_tol``, UNSEEN when clearly unseen, EDGE
+    A cell needs all 16 of its nodes solved; it is SEEN when clearly seen
+    (:func:`_clearly`) with an error estimate (:func:`_cell_error`) of the pixels
+    within ``half_tol``, UNSEEN when clearly outside the rim, EDGE
     when that of the mirror points is within ``half_tol`` (only with ``allow_edge``: on the
     coarse grid such a cell is refined instead), else BAD.
     """
@@ -848,11 +887,12 @@ def classify_cells(
                         if not node_margins[c, r + m, k + n, 0] > -np.inf:
                             solved = False
                 vmin, rmax = _cell_check_extremes(node_margins[c], check_margins[c], r, k)
+                seen, unseen = _clearly(node_margins[c], check_margins[c], r, k, vmin, rmax)
                 cell_class = CELL_BAD
                 if solved:
-                    if vmin >= 1.0 and _cell_error(pixel_error[c], r, k) <= half_tol:
+                    if seen and _cell_error(pixel_error[c], r, k) <= half_tol:
                         cell_class = CELL_SEEN
-                    elif rmax <= -VIEW_CLEAR:
+                    elif unseen:
                         cell_class = CELL_UNSEEN
                     elif _cell_error(mirror_error[c], r, k) <= half_tol and allow_edge:
                         cell_class = CELL_EDGE
@@ -1062,10 +1102,10 @@ def _fill_refined_cell(
     column_cos,
     column_sin,
     mode,
-    outx,
-    outy,
-    out16,
-    outf16,
+    rowx,
+    rowy,
+    row16,
+    rowf16,
     pending,
 ):
     """Entries of row i, columns j0:j1 of a refined coarse cell, sub-cell by sub-cell.
@@ -1073,24 +1113,48 @@ def _fill_refined_cell(
     ``fine_S, fine_P`` (FINE + 3, FINE + 3, 2), ``fine_cls`` (FINE, FINE): the cell's refined
     grid; ``fine_row, fine_tv``: the sub-cell row and the position in it; ``fine_weights``
     (4, g): column weights per column offset in a sub-cell. SEEN sub-cells interpolate the
-    pixel, UNSEEN ones are unseen, EDGE ones decide per pixel from the interpolated mirror point
-    (:func:`_edge_pixel`); what stays undecided is marked in ``pending`` (returns how many).
+    pixel, UNSEEN ones are unseen (both as :func:`fill_rows` writes coarse cells), EDGE ones
+    decide per pixel from the interpolated mirror point (:func:`_edge_pixel`); what stays
+    undecided is marked in ``pending``. ``rowx, rowy, row16, rowf16``: row i of the maps
+    (:func:`fill_rows`). Returns the counts of pending and of unseen entries.
     """
     g = fine_weights.shape[1]
     v0, v1, v2, v3 = _lagrange4(fine_tv)
     n_pending = 0
+    n_unseen = 0
     for fb in range(FINE):
         k0 = j0 + fb * g
-        k1 = min(j1, k0 + g)
+        k1 = max(k0, min(j1, k0 + g))  # sub-cells past the image's last column are empty
         fine_class = fine_cls[fine_row, fb]
         if fine_class == CELL_UNSEEN:
-            for j in range(k0, k1):
-                _view_store(i, j, _NAN, _NAN, mode, outx, outy, out16, outf16)
+            _fill_unseen(
+                k1 - k0, mode, rowx[k0:k1], rowy[k0:k1], row16[2 * k0 : 2 * k1], rowf16[k0:k1]
+            )
+            n_unseen += k1 - k0
             continue
         # the sub-cell's four node columns interpolated to this row: pixels of SEEN sub-cells,
         # mirror points of the others; per pixel only the column weights remain
         src = fine_P if fine_class == CELL_SEEN else fine_S
         a0, a1, a2, a3, b0, b1, b2, b3 = _row_columns(src, fine_row, fb, v0, v1, v2, v3)
+        if fine_class == CELL_SEEN:
+            _fill_seen(
+                a0,
+                a1,
+                a2,
+                a3,
+                b0,
+                b1,
+                b2,
+                b3,
+                fine_weights,
+                k1 - k0,
+                mode,
+                rowx[k0:k1],
+                rowy[k0:k1],
+                row16[2 * k0 : 2 * k1],
+                rowf16[k0:k1],
+            )
+            continue
         for j in range(k0, k1):
             tu = j - k0
             u0 = fine_weights[0, tu]
@@ -1099,21 +1163,27 @@ def _fill_refined_cell(
             u3 = fine_weights[3, tu]
             c1 = u0 * a0 + u1 * a1 + u2 * a2 + u3 * a3
             c2 = u0 * b0 + u1 * b1 + u2 * b2 + u3 * b3
-            if fine_class == CELL_SEEN:
-                _view_store(i, j, c1, c2, mode, outx, outy, out16, outf16)
-                continue
-            dx, dy, dz = _pixel_direction(view, i, j, row_z, row_cos, column_cos, column_sin)
             x = _NAN
             y = _NAN
-            decided = not dz <= view.sin_reject  # above every elevation the rig sees
-            if not decided and fine_class == CELL_EDGE:
-                x, y, decided = _edge_pixel(view, rig, c1, c2, dx, dy, dz)
-            if decided:
-                _view_store(i, j, x, y, mode, outx, outy, out16, outf16)
+            rim2 = rig.rim_radius * rig.rim_radius
+            if fine_class == CELL_EDGE and (rim2 - (c1 * c1 + c2 * c2)) / rim2 < -VIEW_RIM_MARGIN:
+                # clearly outside the rim: unseen whatever the tests on the direction say, as
+                # _edge_pixel decides it (the half of an edge sub-cell past the rim costs no
+                # direction)
+                decided = True
             else:
-                pending[i, j] = 1
+                dx, dy, dz = _pixel_direction(view, i, j, row_z, row_cos, column_cos, column_sin)
+                decided = not dz <= view.sin_reject  # above every elevation the rig sees
+                if not decided and fine_class == CELL_EDGE:
+                    x, y, decided = _edge_pixel(view, rig, c1, c2, dx, dy, dz)
+            if decided:
+                _row_store(j, x, y, mode, rowx, rowy, row16, rowf16)
+                if not (x == x and y == y):
+                    n_unseen += 1
+            else:
+                pending[i, j] = True
                 n_pending += 1
-    return n_pending
+    return n_pending, n_unseen
 
 
 #: 1.5 * 2^52: ``(x + ROUND_MAGIC) - ROUND_MAGIC`` rounds |x| <= 2^51 to the nearest integer,
@@ -1133,22 +1203,14 @@ def _round_fixed(f):
 
 
 @kernel(inline="always")
-def _fill_seen(row_P, k, weights, n, mode, ox, oy, o16, of16):
+def _fill_seen(a0, a1, a2, a3, b0, b1, b2, b3, weights, n, mode, ox, oy, o16, of16):
     """Entries ``0:n`` of a SEEN cell's row segment (row slices ``ox, oy``, or ``o16`` (x, y
-    interleaved) and ``of16``):
-    the cubic in the column of the row-interpolated node pixels ``row_P[k:k + 4]``.
+    interleaved) and ``of16``): the cubic in the column (``weights`` (4, >= n)) of the
+    row-interpolated values ``a*`` (x) and ``b*`` (y) of the cell's four node columns.
 
     The outputs are 1-D slices indexed from 0, so the stores are contiguous (an index numba
     cannot prove non-negative gets a wraparound select, and the vectorised loop then scatters).
     """
-    a0 = row_P[k, 0]
-    a1 = row_P[k + 1, 0]
-    a2 = row_P[k + 2, 0]
-    a3 = row_P[k + 3, 0]
-    b0 = row_P[k, 1]
-    b1 = row_P[k + 1, 1]
-    b2 = row_P[k + 2, 1]
-    b3 = row_P[k + 3, 1]
     w0 = weights[0]
     w1 = weights[1]
     w2 = weights[2]
@@ -1157,7 +1219,7 @@ def _fill_seen(row_P, k, weights, n, mode, ox, oy, o16, of16):
         for t in range(n):
             ox[t] = np.float32(w0[t] * a0 + w1[t] * a1 + w2[t] * a2 + w3[t] * a3)
             oy[t] = np.float32(w0[t] * b0 + w1[t] * b1 + w2[t] * b2 + w3[t] * b3)
-    else:  # _view_store's fixed point; finite here (all 16 nodes solved)
+    else:  # _row_store's fixed point; finite here (all 16 nodes solved)
         for t in range(n):
             fx = np.float32(w0[t] * a0 + w1[t] * a1 + w2[t] * a2 + w3[t] * a3)
             fy = np.float32(w0[t] * b0 + w1[t] * b1 + w2[t] * b2 + w3[t] * b3)
@@ -1169,8 +1231,30 @@ def _fill_seen(row_P, k, weights, n, mode, ox, oy, o16, of16):
 
 
 @kernel(inline="always")
+def _row_store(j, x, y, mode, rowx, rowy, row16, rowf16):
+    """Write entry j of a row: float maps (mode 0) or cv2.convertMaps' CV_16SC2 fixed point
+    (mode 1; ``row16``: the row's (x, y) pairs); NaN is written ``UNSEEN``."""
+    if not (x == x and y == y):
+        x = UNSEEN
+        y = UNSEEN
+    fx = np.float32(x)
+    fy = np.float32(y)
+    if mode == 0:
+        rowx[j] = fx
+        rowy[j] = fy
+    else:
+        # cv2.convertMaps: cvRound(x * 32) (to nearest, ties to even), integer part >> 5 and
+        # the fraction & 31; the float32 entry times 32 is exact in float64
+        ix = int(np.rint(np.float64(fx) * 32.0))
+        iy = int(np.rint(np.float64(fy) * 32.0))
+        row16[2 * j] = max(-32768, min(32767, ix >> 5))
+        row16[2 * j + 1] = max(-32768, min(32767, iy >> 5))
+        rowf16[j] = (iy & 31) * 32 + (ix & 31)
+
+
+@kernel(inline="always")
 def _fill_unseen(n, mode, ox, oy, o16, of16):
-    """Entries ``0:n`` of an UNSEEN cell's row segment: ``UNSEEN`` as :func:`_view_store`
+    """Entries ``0:n`` of an UNSEEN cell's row segment: ``UNSEEN`` as :func:`_row_store`
     writes it."""
     if mode == 0:
         for t in range(n):
@@ -1208,7 +1292,7 @@ def fill_rows(
     out16,
     outf16,
     pending,
-    pending_rows,
+    row_counts,
 ):
     """Table entries of rows ``lo:hi``; pixels that need an exact solution are marked pending.
 
@@ -1217,7 +1301,7 @@ def fill_rows(
     ``weights`` (4, step), ``fine_weights`` (4, step / FINE): :func:`table_weights`.
     ``mode`` 0 writes float32 ``outx, outy`` (H, W); mode 1 writes ``out16`` (H, W, 2) int16
     and ``outf16`` (H, W) uint16 as ``cv2.convertMaps(.., CV_16SC2)`` does.
-    ``pending_rows`` (H,): pending pixels per row.
+    ``row_counts`` (H, 2): pending and unseen entries per row.
     """
     h = weights.shape[1]
     g = fine_weights.shape[1]
@@ -1228,7 +1312,8 @@ def fill_rows(
     # (H, 2 W): the (x, y) pairs of a row one after the other, for contiguous 1-D row slices
     out16_rows = out16.reshape((out16.shape[0], 2 * out16.shape[1]))
     for i in range(lo, hi):
-        pending_rows[i] = 0
+        n_pending = 0
+        n_unseen = 0
         r = i // h
         v0, v1, v2, v3 = _lagrange4((i - r * h) / h)
         for q in range(NX):
@@ -1261,8 +1346,14 @@ def fill_rows(
             cell_class = cls[r, k]
             if cell_class == CELL_SEEN:
                 _fill_seen(
-                    row_P,
-                    k,
+                    row_P[k, 0],
+                    row_P[k + 1, 0],
+                    row_P[k + 2, 0],
+                    row_P[k + 3, 0],
+                    row_P[k, 1],
+                    row_P[k + 1, 1],
+                    row_P[k + 2, 1],
+                    row_P[k + 3, 1],
                     weights,
                     j1 - j0,
                     mode,
@@ -1275,9 +1366,10 @@ def fill_rows(
                 _fill_unseen(
                     j1 - j0, mode, rowx[j0:j1], rowy[j0:j1], row16[2 * j0 : 2 * j1], rowf16[j0:j1]
                 )
+                n_unseen += j1 - j0
             else:  # refined (coarse cells are never EDGE: classify_cells without allow_edge)
                 c = refined_index[r, k]
-                pending_rows[i] += _fill_refined_cell(
+                p, u = _fill_refined_cell(
                     view,
                     rig,
                     i,
@@ -1294,19 +1386,13 @@ def fill_rows(
                     column_cos,
                     column_sin,
                     mode,
-                    outx,
-                    outy,
-                    out16,
-                    outf16,
+                    rowx,
+                    rowy,
+                    row16,
+                    rowf16,
                     pending,
                 )
-
-
-@kernel
-def store_entries(lo, hi, pixel_index, P, mode, outx, outy, out16, outf16):
-    """Write the solved entries ``P[n]`` of the pending pixels ``pixel_index[n]`` (flat)."""
-    W = outf16.shape[1] if mode == 1 else outx.shape[1]
-    for n in range(lo, hi):
-        i = pixel_index[n] // W
-        j = pixel_index[n] % W
-        _view_store(i, j, P[n, 0], P[n, 1], mode, outx, outy, out16, outf16)
+                n_pending += p
+                n_unseen += u
+        row_counts[i, 0] = n_pending
+        row_counts[i, 1] = n_unseen

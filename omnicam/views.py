@@ -238,19 +238,13 @@ def _check_elevation_range(elevation_range, projection):
 
 
 # -- the band a mirror sees ---------------------------------------------------------------------
-def _rim_directions(camera, n=3600):
+@functools.lru_cache(maxsize=8)
+def _rim_directions_of(mirror, a, b, rim_radius, centre_bytes, n):
     """Reflected directions of ``n`` rim points (eqs. 14-15 at the rim), mirror frame.
 
     They depend on the mirror and the camera centre only; the last few rigs' are kept (every
     table needs them, and they cost about as much as a small table).
     """
-    m = camera.mirror
-    C = np.asarray(camera.camera_center, dtype=np.float64)
-    return _rim_directions_of(m, float(m.a), float(m.b), float(m.rim_radius), C.tobytes(), n)
-
-
-@functools.lru_cache(maxsize=8)
-def _rim_directions_of(mirror, a, b, rim_radius, centre_bytes, n):
     P = mirror.rim_points(n)
     V = P - np.frombuffer(centre_bytes, dtype=np.float64)
     V /= np.linalg.norm(V, axis=1, keepdims=True)
@@ -260,19 +254,35 @@ def _rim_directions_of(mirror, a, b, rim_radius, centre_bytes, n):
     return out
 
 
+def _rim_band(camera):
+    """``(lowest, highest)`` elevation of the rim's reflected directions (degrees,
+    :func:`_rim_directions_of`) and whether the nadir is seen (:func:`_nadir_seen`); the last
+    few rigs' are kept."""
+    m = camera.mirror
+    C = np.asarray(camera.camera_center, dtype=np.float64)
+    return _rim_band_of(m, float(m.a), float(m.b), float(m.rim_radius), C.tobytes())
+
+
+@functools.lru_cache(maxsize=8)
+def _rim_band_of(mirror, a, b, rim_radius, centre_bytes, n=3600):
+    rim_dirs = _rim_directions_of(mirror, a, b, rim_radius, centre_bytes, n)
+    el = _elevation_deg(rim_dirs)
+    nadir = bool(_nadir_seen(b, np.frombuffer(centre_bytes, dtype=np.float64), rim_dirs))
+    return float(np.min(el)), float(np.max(el)), nadir
+
+
 def _elevation_deg(d):
     return np.degrees(np.arctan2(d[..., 2], np.hypot(d[..., 0], d[..., 1])))
 
 
-def _nadir_seen(camera, rim_dirs):
+def _nadir_seen(b, camera_center, rim_dirs):
     """Whether the straight-down direction (0, 0, -1) is among those the mirror shows.
 
     The cap maps one-to-one onto the directions it shows, so these are the region bounded by
     the closed curve of rim rays that contains the ray of the apex. The nadir is in it when that
     curve winds around the mirror axis and the apex ray lies below the whole curve.
     """
-    m = camera.mirror
-    V = np.array([0.0, 0.0, m.b]) - camera.camera_center
+    V = np.array([0.0, 0.0, b]) - camera_center
     apex_ray = np.array([V[0], V[1], -V[2]])  # reflection about the apex normal (0, 0, -1)
     az = np.arctan2(rim_dirs[:, 1], rim_dirs[:, 0])
     turns = np.diff(np.append(az, az[0]))
@@ -292,10 +302,8 @@ def visible_elevation_range(camera) -> tuple[float, float]:
     is the union over azimuths, so some pixels near ``hi`` are unseen at some azimuths.
     """
     _check_camera(camera)
-    rim_dirs = _rim_directions(camera)
-    el = _elevation_deg(rim_dirs)
-    hi = float(np.max(el))
-    lo = -90.0 if _nadir_seen(camera, rim_dirs) else float(np.min(el))
+    lowest, hi, nadir = _rim_band(camera)
+    lo = -90.0 if nadir else lowest
     return lo, hi
 
 
@@ -350,7 +358,7 @@ def _reject_sines(camera, depth, viewpoint):
     mirror point, is seen along a ray within ``asin(rho / depth)`` of its direction from the
     viewpoint, so its elevation from there is at most ``hi + asin(rho / depth)``.
     """
-    hi = float(np.max(_elevation_deg(_rim_directions(camera))))
+    hi = _rim_band(camera)[1]
     limit = hi + 0.5  # slack for the rim sampling
     if depth is not None:
         rho = _cap_radius(camera, viewpoint)
@@ -415,7 +423,7 @@ def _table(camera, kind, A, p0, p1, az_step, size, depth, viewpoint, m1type, ste
 
     ``kind, A, p0, p1, az_step`` define the output directions
     (:func:`omnicam._kernels._view_direction`), ``step`` the node spacing (a multiple of 4;
-    by default from ``CELL_DEGREES``), ``stats`` (8,) int64 receives the counts of
+    by default from ``CELL_DEGREES``), ``stats`` (9,) int64 receives the counts of
     :func:`_build_table`.
     """
     w, h = size
@@ -444,7 +452,7 @@ def _table(camera, kind, A, p0, p1, az_step, size, depth, viewpoint, m1type, ste
         outx, outy = np.empty((2, h, w), np.float32)
         out16 = np.empty((1, 1, 2), np.int16)
         outf16 = np.empty((1, 1), np.uint16)
-    st = np.zeros(8, np.int64) if stats is None else stats
+    st = np.zeros(9, np.int64) if stats is None else stats
     _build_table(view, rig, (w, h), step, mode, (outx, outy, out16, outf16), st)
     if mode == 1:
         return out16, outf16
@@ -482,13 +490,13 @@ class _GridStack:
         k.grid_node_points(
             0, positions[..., 0].size, origins, spacing, coarse_S, cells, positions, starts
         )
-        self.S, self.P, self.node_margins, _ok, _sp = _solve(view, rig, positions, starts)
+        self.S, self.P, self.node_margins, _ok, _sp = _solve(view, rig, positions, starts, False)
         checks = (G, 3, ny + 1, nx + 1)
         positions = np.empty(checks + (2,))
         starts = np.empty(checks + (2,))
         interpolated = np.empty(checks + (2,))
-        k.grid_check_points(
-            0,
+        run_chunks(
+            k.grid_check_points,
             positions[..., 0].size,
             origins,
             spacing,
@@ -497,8 +505,14 @@ class _GridStack:
             positions,
             starts,
             interpolated,
+            min_chunk=512,
         )
-        _S, P, margins, ok, start_pixels = _solve(view, rig, positions, starts)
+        # the pixels of the interpolated mirror points only where EDGE cells can be (refined
+        # grids, classify's allow_edge); the coarse grid's mirror errors stay inf, unused
+        refined = cells.shape[0] > 0
+        _S, P, margins, ok, start_pixels = _solve(view, rig, positions, starts, refined)
+        if not refined:
+            start_pixels = np.full(checks + (2,), np.nan)
         estimates = np.concatenate([interpolated, start_pixels], axis=-1)
         self.pixel_error = np.empty(checks)
         self.mirror_error = np.empty(checks)
@@ -541,8 +555,9 @@ class _GridStack:
         )
 
 
-def _solve(view, rig, positions, starts, pixels_only=False):
-    """:func:`omnicam._kernels.solve_view_points` over arrays of positions (..., 2)."""
+def _solve(view, rig, positions, starts, with_start_pixels, pixels_only=False):
+    """:func:`omnicam._kernels.solve_view_points` over arrays of positions (..., 2); the pixels
+    of the starts (check points' estimates) only ``with_start_pixels`` (else an empty array)."""
     from . import _kernels as k
 
     shape = positions.shape[:-1]
@@ -551,7 +566,7 @@ def _solve(view, rig, positions, starts, pixels_only=False):
     S = np.empty(shape + (2,))
     P = np.empty(shape + (2,))
     margins = np.empty(shape + (2,))
-    start_pixels = np.empty(shape + (2,))
+    start_pixels = np.empty(shape + (2,) if with_start_pixels else (0, 2))
     run_chunks(
         k.solve_view_points,
         n,
@@ -573,8 +588,9 @@ def _solve(view, rig, positions, starts, pixels_only=False):
 def _build_table(view, rig, size, step, mode, outputs, stats):
     """The phases of a table (section comment of :mod:`omnicam._kernels`), writing ``outputs``.
 
-    ``stats`` (8,) int64 receives: nodes and check points solved, coarse cells seen / unseen /
-    edge / refined, refined sub-cells left to exact pixels, pixels solved exactly.
+    ``stats`` (9,) int64 receives: nodes and check points solved, coarse cells seen / unseen /
+    edge / refined, refined sub-cells left to exact pixels, pixels solved exactly, entries
+    written unseen.
     """
     from . import _kernels as k
 
@@ -585,13 +601,15 @@ def _build_table(view, rig, size, step, mode, outputs, stats):
     coarse = _GridStack(view, rig, np.zeros((1, 2)), float(step), (ny, nx))
     cls = coarse.classify(view, size, half_tol, False)[0]
     # refine the failing cells on grids FINE times finer (own nodes, checks and classes)
-    cells = np.argwhere(cls == k.CELL_BAD).astype(np.int64)
+    # C order as every other array the kernels take (np.argwhere's is F: a second signature
+    # of each grid kernel, compiled cold and loaded warm)
+    cells = np.ascontiguousarray(np.argwhere(cls == k.CELL_BAD), dtype=np.int64)
     refined_index = np.full((ny, nx), -1, np.int64)
     refined_index[cells[:, 0], cells[:, 1]] = np.arange(len(cells))
     fine = _GridStack(
         view,
         rig,
-        (cells[:, ::-1] * step).astype(np.float64),
+        np.ascontiguousarray(cells[:, ::-1] * step, dtype=np.float64),
         float(step // k.FINE),
         (k.FINE, k.FINE),
         coarse,
@@ -602,8 +620,8 @@ def _build_table(view, rig, size, step, mode, outputs, stats):
     column_cos, column_sin = np.empty(w), np.empty(w)
     weights, fine_weights = np.empty((4, step)), np.empty((4, step // k.FINE))
     k.table_weights(view, column_cos, column_sin, weights, fine_weights)
-    pending = np.zeros((h, w), np.uint8)
-    pending_rows = np.empty(h, np.int64)
+    pending = np.zeros((h, w), np.bool_)  # bool: numpy's nonzero is ten times faster than on uint8
+    row_counts = np.empty((h, 2), np.int64)  # pending and unseen entries per row
     outx, outy, out16, outf16 = outputs
     run_chunks(
         k.fill_rows,
@@ -626,16 +644,18 @@ def _build_table(view, rig, size, step, mode, outputs, stats):
         out16,
         outf16,
         pending,
-        pending_rows,
+        row_counts,
         min_chunk=16,
     )
-    rows = np.flatnonzero(pending_rows)
-    sub_rows, columns = np.nonzero(pending[rows])
-    index = rows[sub_rows] * w + columns
+    rows = np.flatnonzero(row_counts[:, 0])
+    q = np.flatnonzero(pending[rows])
+    index = rows[q // w] * w + q % w
     positions = np.stack([index % w, index // w], axis=1).astype(np.float64)
+    n_unseen = int(row_counts[:, 1].sum())
     if len(index):
-        P = _solve(view, rig, positions, positions, pixels_only=True)[1]
-        k.store_entries(0, len(index), index, P, mode, outx, outy, out16, outf16)
+        # no start of the pixels' own (NaN): Newton from the aligned start
+        P = _solve(view, rig, positions, np.full_like(positions, np.nan), False, True)[1]
+        n_unseen += _store_entries(index, P, mode, outputs)
     n_nodes, n_checks = coarse.n_solved()
     f_nodes, f_checks = fine.n_solved()
     stats[0] = n_nodes + f_nodes
@@ -645,6 +665,29 @@ def _build_table(view, rig, size, step, mode, outputs, stats):
     ]
     stats[6] = np.count_nonzero(fine_cls == k.CELL_BAD)
     stats[7] = len(index)
+    stats[8] = n_unseen
+
+
+def _store_entries(index, P, mode, outputs):
+    """Write the solved entries ``P`` (n, 2) of the pixels ``index`` (flat) into ``outputs``
+    as fill_rows' ``_row_store`` does: NaN as ``UNSEEN``, float32 maps (mode 0) or
+    cv2.convertMaps' CV_16SC2 fixed point (mode 1: cvRound(x * 32), ties to even, the integer
+    part >> 5 saturated to int16 and the fraction & 31). Returns how many were unseen."""
+    outx, outy, out16, outf16 = outputs
+    unseen = np.isnan(P).any(axis=1)
+    fx = np.where(unseen, UNSEEN, P[:, 0]).astype(np.float32)
+    fy = np.where(unseen, UNSEEN, P[:, 1]).astype(np.float32)
+    if mode == 0:
+        outx.reshape(-1)[index] = fx
+        outy.reshape(-1)[index] = fy
+        return int(np.count_nonzero(unseen))
+    ix = np.rint(fx.astype(np.float64) * 32.0).astype(np.int64)
+    iy = np.rint(fy.astype(np.float64) * 32.0).astype(np.int64)
+    pairs = out16.reshape(-1, 2)
+    pairs[index, 0] = np.clip(ix >> 5, -32768, 32767)
+    pairs[index, 1] = np.clip(iy >> 5, -32768, 32767)
+    outf16.reshape(-1)[index] = (iy & 31) * 32 + (ix & 31)
+    return int(np.count_nonzero(unseen))
 
 
 def _panorama_params(size, lo, hi, projection):
@@ -745,8 +788,11 @@ def init_panorama_maps(
         lo, hi = _check_elevation_range(elevation_range, projection)
     vp = _check_viewpoint(camera, viewpoint, depth)
     p0, p1, az_step = _panorama_params((w, h), lo, hi, projection)
-    maps = _table(camera, _KIND[projection], Rm.T, p0, p1, az_step, (w, h), depth, vp, m1type)
-    _warn_if_unseen(camera, maps, "panorama")
+    st = np.zeros(9, np.int64)
+    maps = _table(
+        camera, _KIND[projection], Rm.T, p0, p1, az_step, (w, h), depth, vp, m1type, stats=st
+    )
+    _warn_if_unseen(camera, st[8] / (w * h), "panorama")
     return maps
 
 
@@ -807,8 +853,9 @@ def init_perspective_maps(
     M = Rm.T @ np.linalg.inv(K_new)
     # a pixel at the principal point spans 1 / f radians (the most of any pixel of the view)
     step = _step_for(math.degrees(1.0 / min(abs(K_new[0, 0]), abs(K_new[1, 1]))))
-    maps = _table(camera, 0, M, 0.0, 0.0, 0.0, (w, h), depth, vp, m1type, step=step)
-    _warn_if_unseen(camera, maps, "perspective view")
+    st = np.zeros(9, np.int64)
+    maps = _table(camera, 0, M, 0.0, 0.0, 0.0, (w, h), depth, vp, m1type, step=step, stats=st)
+    _warn_if_unseen(camera, st[8] / (w * h), "perspective view")
     return maps
 
 
@@ -837,11 +884,10 @@ def _refuse_swapped(matrix_arg, size_arg, signature):
 UNSEEN_WARN_FRACTION = 0.5
 
 
-def _warn_if_unseen(camera, maps, what):
-    """RuntimeWarning when most of a view lies outside the band the mirror sees."""
-    map1 = maps[0]
-    x = map1 if map1.ndim == 2 else map1[..., 0]
-    frac = float(np.count_nonzero(x == UNSEEN)) / x.size
+def _warn_if_unseen(camera, frac, what):
+    """RuntimeWarning when most of a view (the fraction ``frac`` of its entries unseen) lies
+    outside the band the mirror sees."""
+    frac = float(frac)
     if frac > UNSEEN_WARN_FRACTION:
         import warnings
 

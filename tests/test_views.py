@@ -136,7 +136,7 @@ def test_views_across_the_edge_of_the_band_keep_the_bound(ypr):
     size = (320, 240)
     K = np.array([[125.0, 0.0, 159.5], [0.0, 125.0, 119.5], [0.0, 0.0, 1.0]])
     R = rotation_from_ypr(*ypr)
-    stats = np.zeros(8, np.int64)
+    stats = np.zeros(9, np.int64)
     step = views._step_for(math.degrees(1.0 / 125.0))
     mapx, mapy = views._table(
         cam,
@@ -154,6 +154,7 @@ def test_views_across_the_edge_of_the_band_keep_the_bound(ypr):
     )
     assert (mapx == views.UNSEEN).any() and (mapx != views.UNSEEN).any()
     assert stats[5] > 0  # cells on the edge were refined
+    assert stats[8] == np.count_nonzero(mapx == views.UNSEEN)  # the unseen count of the warning
     assert_matches_exact(cam, mapx, mapy, exact(cam, perspective_dirs(K, size, R)))
 
 
@@ -175,7 +176,7 @@ def test_large_tables_are_interpolated_and_keep_the_bound():
     size = (1024, 256)
     lo, hi = views.visible_elevation_range(cam)
     p0, p1, az = views._panorama_params(size, lo, hi, "equirectangular")
-    stats = np.zeros(8, np.int64)
+    stats = np.zeros(9, np.int64)
     mapx, mapy = views._table(
         cam, 2, np.eye(3), p0, p1, az, size, None, None, cv2.CV_32FC1, stats=stats
     )
