@@ -354,8 +354,9 @@ def select_candidate(candidates, make_camera, far_lines, lower_focus, reflection
     ambiguous = confidence < needed
     if ambiguous:
         cues = " and ".join(costs)
+        verb = "separate" if len(costs) > 1 or cues == "far lines" else "separates"
         warnings.append(
-            f"the {cues} barely separate the physical postures (confidence "
+            f"the {cues} barely {verb} the physical postures (confidence "
             f"{confidence:.3f}): the choice may be wrong; give more or longer far "
             f"lines, far from the image centre"
         )
