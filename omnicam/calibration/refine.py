@@ -57,6 +57,7 @@ from .robust import mad_sigma
 
 __all__ = [
     "posture_offsets",
+    "perturbed_posture",
     "RefineResult",
     "Uncertainty",
     "RimTerm",
@@ -766,6 +767,12 @@ def uncertainty_from_cov(cov, tvec):
         share,
         cov,
     )
+
+
+def perturbed_posture(R0, t0, x):
+    """The posture ``x`` away from ``(R0, t0)`` in the 5 parameters of :class:`Uncertainty`:
+    ``(R, t)``, the mirror axis turned by ``x[:2]`` (radians) and the origin moved by ``x[2:]``."""
+    return _Posture(np.asarray(R0, np.float64), t0)(np.asarray(x, np.float64))
 
 
 def posture_offsets(rvec0, tvec0, rvec1, tvec1):

@@ -379,22 +379,22 @@ def _predictions(cands, rim, K, mirror, D):
     image axes) from the uncertainty of its posture given the rim alone
     (:func:`.refine.posture_uncertainty`, propagated by difference quotients): the predicted
     outline is only as sure as the posture."""
-    from .refine import _Posture, posture_uncertainty
+    from .refine import perturbed_posture, posture_uncertainty
     from .reflection import self_reflection_pixel
 
+    dx = np.array([1e-5, 1e-5, 1e-3, 1e-3, 1e-3])  # radians, then the mirror's length unit
     out = {}
     for i in cands.physical:
         c = cands.all[i]
         unc = posture_uncertainty(K, mirror, c.rvec, c.tvec, rim.points, rim.fit.rms)
         if unc.cov is None or not np.isfinite(unc.cov).all():
             continue
-        post = _Posture(c.R, c.tvec)
-        u0 = self_reflection_pixel(mirror, *post(np.zeros(5)), K, D)
-        steps = np.array([1e-5, 1e-5, 1e-3, 1e-3, 1e-3])
+        u0 = self_reflection_pixel(mirror, *perturbed_posture(c.R, c.tvec, np.zeros(5)), K, D)
         J = np.stack(
             [
-                (self_reflection_pixel(mirror, *post(h * e), K, D) - u0) / h
-                for h, e in zip(steps, np.eye(5))
+                (self_reflection_pixel(mirror, *perturbed_posture(c.R, c.tvec, h * e), K, D) - u0)
+                / h
+                for h, e in zip(dx, np.eye(5))
             ],
             axis=1,
         )
@@ -632,9 +632,8 @@ def refinement_step(K, mirror, cand, rim, lines_xn, cue, circle, refine=True):
                         f"{own:.2f} px (allowed {cap:.2f})",
                     )
                 )
-            elif (
-                name == "reflection"
-                and (shift := _disagreement(K, mirror, rim_px, base, res, spec))[0] > CUE_SHIFT_CHI2
+            elif name == "reflection" and (
+                (shift := _disagreement(K, mirror, rim_px, base, res, spec))[0] > CUE_SHIFT_CHI2
             ):
                 rejected.append(
                     (
