@@ -271,11 +271,14 @@ def _fit_with_mask(pts, N, mask, robust, threshold):
 
 
 def _coarse_edges(gray):
-    """Edge pixels of a copy whose longer side is ``_COARSE_SIZE`` px, for :func:`_coarse_ellipse`:
+    """Edge pixels of a copy whose longer side is ``_COARSE_SIZE`` px (its shorter side at least
+    3/4 of that), for :func:`_coarse_ellipse`:
     ``(p, g, (H, W), (sx, sy))``: pixels, unit gradients, the copy's shape and its scale per
     axis."""
     h, w = gray.shape
-    s = min(1.0, _COARSE_SIZE / max(h, w))
+    # the longer side to _COARSE_SIZE, but the shorter (where a clipped rim spans the frame) to
+    # at least 3/4 of it: a 16:9 frame otherwise shrinks its rim more than a 4:3 one
+    s = min(1.0, max(_COARSE_SIZE / max(h, w), 0.75 * _COARSE_SIZE / min(h, w)))
     small = (
         cv2.resize(gray, (max(8, round(w * s)), max(8, round(h * s))), interpolation=cv2.INTER_AREA)
         if s < 1.0
