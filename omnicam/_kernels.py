@@ -807,13 +807,17 @@ def _cell_check_extremes(node_margins, check_margins, r, k):
 def _clearly(node_margins, check_margins, r, k, vmin, rmax):
     """Whether cell (r, k) is clearly seen and whether it is clearly outside the rim, from
     :func:`_cell_check_extremes` ``vmin, rmax`` or else :func:`_lattice_bounds`."""
+    # the margins' indices typed int64, not as the literals 0 and 1: one signature of
+    # _lattice_bounds, not one per literal (each compiled cold)
+    MARGIN_VIS = np.int64(0)
+    MARGIN_RIM = np.int64(1)
     seen = vmin >= 1.0  # vis is the visibility margin / VIEW_CLEAR
     if not seen:
-        vlo, _vhi = _lattice_bounds(node_margins, check_margins, r, k, 0)
+        vlo, _vhi = _lattice_bounds(node_margins, check_margins, r, k, MARGIN_VIS)
         seen = vlo * VIEW_CLEAR >= VIEW_CLEAR_BOUND
     unseen = rmax <= -VIEW_CLEAR
     if not unseen and not seen:
-        _rlo, rhi = _lattice_bounds(node_margins, check_margins, r, k, 1)
+        _rlo, rhi = _lattice_bounds(node_margins, check_margins, r, k, MARGIN_RIM)
         unseen = rhi <= -VIEW_CLEAR_BOUND
     return seen, unseen
 
