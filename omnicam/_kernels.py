@@ -807,13 +807,17 @@ def _cell_check_extremes(node_margins, check_margins, r, k):
 def _clearly(node_margins, check_margins, r, k, vmin, rmax):
     """Whether cell (r, k) is clearly seen and whether it is clearly outside the rim, from
     :func:`_cell_check_extremes` ``vmin, rmax`` or else :func:`_lattice_bounds`."""
+    # the margins' indices typed int64, not as the literals 0 and 1: one signature of
+    # _lattice_bounds, not one per literal (each compiled cold)
+    MARGIN_VIS = np.int64(0)
+    MARGIN_RIM = np.int64(1)
     seen = vmin >= 1.0  # vis is the visibility margin / VIEW_CLEAR
     if not seen:
-        vlo, _vhi = _lattice_bounds(node_margins, check_margins, r, k, 0)
+        vlo, _vhi = _lattice_bounds(node_margins, check_margins, r, k, MARGIN_VIS)
         seen = vlo * VIEW_CLEAR >= VIEW_CLEAR_BOUND
     unseen = rmax <= -VIEW_CLEAR
     if not unseen and not seen:
-        _rlo, rhi = _lattice_bounds(node_margins, check_margins, r, k, 1)
+        _rlo, rhi = _lattice_bounds(node_margins, check_margins, r, k, MARGIN_RIM)
         unseen = rhi <= -VIEW_CLEAR_BOUND
     return seen, unseen
 
@@ -1101,11 +1105,8 @@ def _fill_refined_cell(
     row_cos,
     column_cos,
     column_sin,
-    mode,
     rowx,
     rowy,
-    row16,
-    rowf16,
     pending,
 ):
     """Entries of row i, columns j0:j1 of a refined coarse cell, sub-cell by sub-cell.
@@ -1115,7 +1116,7 @@ def _fill_refined_cell(
     (4, g): column weights per column offset in a sub-cell. SEEN sub-cells interpolate the
     pixel, UNSEEN ones are unseen (both as :func:`fill_rows` writes coarse cells), EDGE ones
     decide per pixel from the interpolated mirror point (:func:`_edge_pixel`); what stays
-    undecided is marked in ``pending``. ``rowx, rowy, row16, rowf16``: row i of the maps
+    undecided is marked in ``pending``. ``rowx, rowy``: row i of the float maps
     (:func:`fill_rows`). Returns the counts of pending and of unseen entries.
     """
     g = fine_weights.shape[1]
@@ -1127,9 +1128,7 @@ def _fill_refined_cell(
         k1 = max(k0, min(j1, k0 + g))  # sub-cells past the image's last column are empty
         fine_class = fine_cls[fine_row, fb]
         if fine_class == CELL_UNSEEN:
-            _fill_unseen(
-                k1 - k0, mode, rowx[k0:k1], rowy[k0:k1], row16[2 * k0 : 2 * k1], rowf16[k0:k1]
-            )
+            _fill_unseen(k1 - k0, rowx[k0:k1], rowy[k0:k1])
             n_unseen += k1 - k0
             continue
         # the sub-cell's four node columns interpolated to this row: pixels of SEEN sub-cells,
@@ -1148,11 +1147,8 @@ def _fill_refined_cell(
                 b3,
                 fine_weights,
                 k1 - k0,
-                mode,
                 rowx[k0:k1],
                 rowy[k0:k1],
-                row16[2 * k0 : 2 * k1],
-                rowf16[k0:k1],
             )
             continue
         for j in range(k0, k1):
@@ -1176,13 +1172,14 @@ def _fill_refined_cell(
                 decided = not dz <= view.sin_reject  # above every elevation the rig sees
                 if not decided and fine_class == CELL_EDGE:
                     x, y, decided = _edge_pixel(view, rig, c1, c2, dx, dy, dz)
-            if decided:
-                _row_store(j, x, y, mode, rowx, rowy, row16, rowf16)
-                if not (x == x and y == y):
-                    n_unseen += 1
-            else:
+            # pending entries are written too (unseen, until solved): every entry of the row
+            # is finite for fill_rows' fixed-point conversion
+            _row_store(j, x, y, rowx, rowy)
+            if not decided:
                 pending[i, j] = True
                 n_pending += 1
+            elif not (x == x and y == y):
+                n_unseen += 1
     return n_pending, n_unseen
 
 
@@ -1203,10 +1200,10 @@ def _round_fixed(f):
 
 
 @kernel(inline="always")
-def _fill_seen(a0, a1, a2, a3, b0, b1, b2, b3, weights, n, mode, ox, oy, o16, of16):
-    """Entries ``0:n`` of a SEEN cell's row segment (row slices ``ox, oy``, or ``o16`` (x, y
-    interleaved) and ``of16``): the cubic in the column (``weights`` (4, >= n)) of the
-    row-interpolated values ``a*`` (x) and ``b*`` (y) of the cell's four node columns.
+def _fill_seen(a0, a1, a2, a3, b0, b1, b2, b3, weights, n, ox, oy):
+    """Entries ``0:n`` of a SEEN cell's row segment (float row slices ``ox, oy``): the cubic in
+    the column (``weights`` (4, >= n)) of the row-interpolated values ``a*`` (x) and ``b*`` (y)
+    of the cell's four node columns; the bulk of a table, a tight loop the compiler vectorises.
 
     The outputs are 1-D slices indexed from 0, so the stores are contiguous (an index numba
     cannot prove non-negative gets a wraparound select, and the vectorised loop then scatters).
@@ -1215,59 +1212,41 @@ def _fill_seen(a0, a1, a2, a3, b0, b1, b2, b3, weights, n, mode, ox, oy, o16, of
     w1 = weights[1]
     w2 = weights[2]
     w3 = weights[3]
-    if mode == 0:  # the bulk of a table: a tight loop the compiler vectorises
-        for t in range(n):
-            ox[t] = np.float32(w0[t] * a0 + w1[t] * a1 + w2[t] * a2 + w3[t] * a3)
-            oy[t] = np.float32(w0[t] * b0 + w1[t] * b1 + w2[t] * b2 + w3[t] * b3)
-    else:  # _row_store's fixed point; finite here (all 16 nodes solved)
-        for t in range(n):
-            fx = np.float32(w0[t] * a0 + w1[t] * a1 + w2[t] * a2 + w3[t] * a3)
-            fy = np.float32(w0[t] * b0 + w1[t] * b1 + w2[t] * b2 + w3[t] * b3)
-            ix = _round_fixed(fx)
-            iy = _round_fixed(fy)
-            o16[2 * t] = max(-32768, min(32767, ix >> 5))
-            o16[2 * t + 1] = max(-32768, min(32767, iy >> 5))
-            of16[t] = (iy & 31) * 32 + (ix & 31)
+    for t in range(n):
+        ox[t] = np.float32(w0[t] * a0 + w1[t] * a1 + w2[t] * a2 + w3[t] * a3)
+        oy[t] = np.float32(w0[t] * b0 + w1[t] * b1 + w2[t] * b2 + w3[t] * b3)
 
 
 @kernel(inline="always")
-def _row_store(j, x, y, mode, rowx, rowy, row16, rowf16):
-    """Write entry j of a row: float maps (mode 0) or cv2.convertMaps' CV_16SC2 fixed point
-    (mode 1; ``row16``: the row's (x, y) pairs); NaN is written ``UNSEEN``."""
+def _row_store(j, x, y, rowx, rowy):
+    """Write entry j of a float row; NaN is written ``UNSEEN``."""
     if not (x == x and y == y):
         x = UNSEEN
         y = UNSEEN
-    fx = np.float32(x)
-    fy = np.float32(y)
-    if mode == 0:
-        rowx[j] = fx
-        rowy[j] = fy
-    else:
-        # cv2.convertMaps: cvRound(x * 32) (to nearest, ties to even), integer part >> 5 and
-        # the fraction & 31; the float32 entry times 32 is exact in float64
-        ix = int(np.rint(np.float64(fx) * 32.0))
-        iy = int(np.rint(np.float64(fy) * 32.0))
-        row16[2 * j] = max(-32768, min(32767, ix >> 5))
-        row16[2 * j + 1] = max(-32768, min(32767, iy >> 5))
-        rowf16[j] = (iy & 31) * 32 + (ix & 31)
+    rowx[j] = np.float32(x)
+    rowy[j] = np.float32(y)
 
 
 @kernel(inline="always")
-def _fill_unseen(n, mode, ox, oy, o16, of16):
+def _fill_unseen(n, ox, oy):
     """Entries ``0:n`` of an UNSEEN cell's row segment: ``UNSEEN`` as :func:`_row_store`
     writes it."""
-    if mode == 0:
-        for t in range(n):
-            ox[t] = np.float32(UNSEEN)
-            oy[t] = np.float32(UNSEEN)
-    else:
-        iu = int(np.rint(np.float64(np.float32(UNSEEN)) * 32.0))
-        hi = max(-32768, min(32767, iu >> 5))
-        lo = (iu & 31) * 32 + (iu & 31)
-        for t in range(n):
-            o16[2 * t] = hi
-            o16[2 * t + 1] = hi
-            of16[t] = lo
+    for t in range(n):
+        ox[t] = np.float32(UNSEEN)
+        oy[t] = np.float32(UNSEEN)
+
+
+@kernel(inline="always")
+def _row_fixed(rowx, rowy, row16, rowf16):
+    """A float row (finite: NaN is already ``UNSEEN``) in cv2.convertMaps' CV_16SC2 fixed
+    point: cvRound(x * 32) (:func:`_round_fixed`), the integer part ``>> 5`` saturated to int16
+    (``row16``: the row's (x, y) pairs) and the fraction ``& 31`` (``rowf16``)."""
+    for t in range(rowx.shape[0]):
+        ix = _round_fixed(rowx[t])
+        iy = _round_fixed(rowy[t])
+        row16[2 * t] = max(-32768, min(32767, ix >> 5))
+        row16[2 * t + 1] = max(-32768, min(32767, iy >> 5))
+        rowf16[t] = (iy & 31) * 32 + (ix & 31)
 
 
 @kernel
@@ -1300,7 +1279,9 @@ def fill_rows(
     ``refined_index`` (ny, nx): which grid of the refined stack (``fine_*``) refines a BAD cell.
     ``weights`` (4, step), ``fine_weights`` (4, step / FINE): :func:`table_weights`.
     ``mode`` 0 writes float32 ``outx, outy`` (H, W); mode 1 writes ``out16`` (H, W, 2) int16
-    and ``outf16`` (H, W) uint16 as ``cv2.convertMaps(.., CV_16SC2)`` does.
+    and ``outf16`` (H, W) uint16 as ``cv2.convertMaps(.., CV_16SC2)`` does, each row written
+    in float first (to a scratch row) and converted once (:func:`_row_fixed`): the cells'
+    loops are compiled for one output type only.
     ``row_counts`` (H, 2): pending and unseen entries per row.
     """
     h = weights.shape[1]
@@ -1311,6 +1292,7 @@ def fill_rows(
     row_P = np.empty((NX, 2))
     # (H, 2 W): the (x, y) pairs of a row one after the other, for contiguous 1-D row slices
     out16_rows = out16.reshape((out16.shape[0], 2 * out16.shape[1]))
+    scratch = np.empty((2, W), np.float32)  # the float row of mode 1
     for i in range(lo, hi):
         n_pending = 0
         n_unseen = 0
@@ -1336,10 +1318,12 @@ def fill_rows(
         fine_row = (i - r * h) // g  # row of the sub-cells of refined cells
         fine_tv = (i - r * h - fine_row * g) / g
         # this row of the maps being written (row 0 of the unused 1 x 1 ones)
-        rowx = outx[i if mode == 0 else 0]
-        rowy = outy[i if mode == 0 else 0]
-        row16 = out16_rows[i if mode == 1 else 0]
-        rowf16 = outf16[i if mode == 1 else 0]
+        if mode == 0:
+            rowx = outx[i]
+            rowy = outy[i]
+        else:
+            rowx = scratch[0]
+            rowy = scratch[1]
         for k in range(nx):
             j0 = k * h
             j1 = min(W, j0 + h)
@@ -1356,16 +1340,11 @@ def fill_rows(
                     row_P[k + 3, 1],
                     weights,
                     j1 - j0,
-                    mode,
                     rowx[j0:j1],
                     rowy[j0:j1],
-                    row16[2 * j0 : 2 * j1],
-                    rowf16[j0:j1],
                 )
             elif cell_class == CELL_UNSEEN:
-                _fill_unseen(
-                    j1 - j0, mode, rowx[j0:j1], rowy[j0:j1], row16[2 * j0 : 2 * j1], rowf16[j0:j1]
-                )
+                _fill_unseen(j1 - j0, rowx[j0:j1], rowy[j0:j1])
                 n_unseen += j1 - j0
             else:  # refined (coarse cells are never EDGE: classify_cells without allow_edge)
                 c = refined_index[r, k]
@@ -1385,14 +1364,13 @@ def fill_rows(
                     row_cos,
                     column_cos,
                     column_sin,
-                    mode,
                     rowx,
                     rowy,
-                    row16,
-                    rowf16,
                     pending,
                 )
                 n_pending += p
                 n_unseen += u
+        if mode == 1:
+            _row_fixed(rowx, rowy, out16_rows[i], outf16[i])
         row_counts[i, 0] = n_pending
         row_counts[i, 1] = n_unseen
