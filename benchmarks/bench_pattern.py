@@ -143,16 +143,22 @@ def information_limit(truth, poses, rim, lens, lens_z, noise, sig_rim, sig_lens,
     }
 
 
-def detected_corners(truth, poses, rim_fit, seed):
-    """find_pattern's corners in renders of the poses (None where not found), aimed by the
-    start of calibrate_pattern (K from the rim, Chen's posture)."""
+def rim_start(rim_fit, m):
+    """The start of calibrate_pattern: K from the rim (f from its size, the principal point at
+    the image centre) and Chen's posture, as a camera."""
     r_px = math.sqrt(rim_fit.axes[0] * rim_fit.axes[1])
-    m = truth.mirror
     f0 = r_px * (m.z_rim + m.c) / m.rim_radius
     K0 = np.array([[f0, 0, (SIZE[0] - 1) / 2], [0, f0, (SIZE[1] - 1) / 2], [0, 0, 1.0]])
     start, _ = omnicam.MisalignedHyperbolicCamera.calibrate(
         K0, m, boundary_points=rim_fit.points, image_size=SIZE, lens=None
     )
+    return start
+
+
+def detected_corners(truth, poses, rim_fit, seed):
+    """find_pattern's corners in renders of the poses (None where not found), aimed by the
+    start of calibrate_pattern (K from the rim, Chen's posture)."""
+    start = rim_start(rim_fit, truth.mirror)
     out = []
     for img in view_renders(truth, poses, seed):
         c = omnicam.find_pattern(img, PATTERN, start)
@@ -425,14 +431,7 @@ def detect(args):
             )
 
         scene = render((None, None), tried)
-        rim = detect_rim(scene)
-        r_px = math.sqrt(rim.axes[0] * rim.axes[1])
-        m = truth.mirror
-        f0 = r_px * (m.z_rim + m.c) / m.rim_radius
-        K0 = np.array([[f0, 0, (SIZE[0] - 1) / 2], [0, f0, (SIZE[1] - 1) / 2], [0, 0, 1.0]])
-        start, _ = omnicam.MisalignedHyperbolicCamera.calibrate(
-            K0, m, boundary_points=rim.points, image_size=SIZE, lens=None
-        )
+        start = rim_start(detect_rim(scene), truth.mirror)
         # no board: must give None
         empty += 1
         if omnicam.find_pattern(scene, PATTERN, start) is not None:

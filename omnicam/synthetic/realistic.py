@@ -441,6 +441,17 @@ def reflect(dirs, normals):
 
 
 # -- primitives ----------------------------------------------------------------------------------
+def _keep_nearer(t_best, lab, c_out, t, label, colors):
+    """Where ``t < t_best`` the hit at ``t`` wins: its label and colour are written into
+    ``lab`` and ``c_out`` (in place); returns the new nearest distances."""
+    nearer = t < t_best
+    if not nearer.any():
+        return t_best
+    lab[nearer] = label
+    c_out[nearer] = colors[nearer]
+    return np.where(nearer, t, t_best)
+
+
 def _rod_hits(o, v, strut):
     """Entry ``t`` of unit rays on a strut's cylinder (inf where missed) and ``dist / radius``.
 
@@ -725,21 +736,14 @@ def _trace_chunk(num, rig, pixels):
             c_out[near[got]] = _shade_body(rig.body, Xb[got], lb[got])
         for strut in rig.struts:
             ts, q = _rod_hits(Pm, dm, strut)
-            nearer = ts < t_best
-            if nearer.any():
-                t_best = np.where(nearer, ts, t_best)
-                lab[nearer] = 9
-                c_out[nearer] = (
-                    np.asarray(strut.color)
-                    * (0.7 + 0.3 * np.sqrt(np.clip(1.0 - q[nearer] ** 2, 0.0, 1.0)))[:, None]
-                )
+            shade = (
+                np.asarray(strut.color)
+                * (0.7 + 0.3 * np.sqrt(np.clip(1.0 - q**2, 0.0, 1.0)))[:, None]
+            )
+            t_best = _keep_nearer(t_best, lab, c_out, ts, 9, shade)
         for board in rig.boards:
             tb, cb = _board_hits(Pm, dm, board)
-            nearer = tb < t_best
-            if nearer.any():
-                t_best = np.where(nearer, tb, t_best)
-                lab[nearer] = 10
-                c_out[nearer] = cb[nearer]
+            t_best = _keep_nearer(t_best, lab, c_out, tb, 10, cb)
         sky = ~np.isfinite(t_best)
         if sky.any():
             c_sky, l_sky = _shade_room(rig.room, dm[sky])
