@@ -546,20 +546,19 @@ def _detect(image, rim, center, center_search, max_radius, min_radius, rng, scen
             "no camera reflection found: no round dark silhouette around the image centre "
             "(edges on fewer than 40 % of the rays share a circle that is dark inside)"
         )
-    first_why, surround, coreless = None, None, None
-    for j, _ in circles[:4]:
-        for p in (far_pts, pts) if len(pts) > len(far_pts) else (pts,):
-            try:
-                return _refine_silhouette(gray, G, p, found[j][1], j * bw, bw, sig, contrast, rng)
-            except _BrightInside as err:  # a dark surround (e.g. a dark floor) holding the body
-                first_why, surround = first_why or err, surround or err
-                coreless = coreless or err
-                break
-            except _Coreless as err:  # dark glass or a dark floor: the caller decides
-                first_why, coreless = first_why or err, coreless or err
-                break
-            except EstimationError as err:  # e.g. a square box behind the barrel: try inside it
-                first_why = first_why or err
+    seeds = [(found[j][1], j * bw) for j, _ in circles[:4]]
+    fit, first_why, surround, coreless = _try_silhouettes(
+        gray,
+        G,
+        seeds,
+        (far_pts, pts) if len(pts) > len(far_pts) else (pts,),
+        bw,
+        sig,
+        contrast,
+        rng,
+    )
+    if fit is not None:
+        return fit
     inner = None if surround is None else 0.85 * surround.radius / r_rim
     if scene_level is None and inner is not None and inner > 2.0 * min_radius:
         # 6. the body inside a dark surround: its edges rise against the surround's interior,
@@ -569,6 +568,32 @@ def _detect(image, rim, center, center_search, max_radius, min_radius, rng, scen
         except EstimationError:
             pass
     raise coreless or first_why
+
+
+def _try_silhouettes(gray, G, seeds, point_sets, bw, sig, contrast, rng):
+    """Steps 4-5 on the voted circles ``seeds`` (centre, radius), outermost first.
+
+    Returns ``(fit, first_why, surround, coreless)``: the first silhouette accepted (else
+    None), the first reason one was declined, the first dark surround holding something
+    brighter (:class:`_BrightInside`) and the first silhouette without a darker core
+    (:class:`_Coreless`).
+    """
+    first_why, surround, coreless = None, None, None
+    for c_est, r_est in seeds:
+        for p in point_sets:
+            try:
+                fit = _refine_silhouette(gray, G, p, c_est, r_est, bw, sig, contrast, rng)
+                return fit, first_why, surround, coreless
+            except _BrightInside as err:  # a dark surround (e.g. a dark floor) holding the body
+                first_why, surround = first_why or err, surround or err
+                coreless = coreless or err
+                break
+            except _Coreless as err:  # dark glass or a dark floor: the caller decides
+                first_why, coreless = first_why or err, coreless or err
+                break
+            except EstimationError as err:  # e.g. a square box behind the barrel: try inside it
+                first_why = first_why or err
+    return None, first_why, surround, coreless
 
 
 class _Coreless(EstimationError):

@@ -234,6 +234,38 @@ def prediction_limited(costs, pred):
     return out
 
 
+def _score_reflection(reflection, phys, scores, costs, warnings):
+    """The reflection's scores and costs per physical candidate (:func:`select_candidate`),
+    written into ``scores``, ``costs`` and ``warnings``: costs only if some posture explains
+    the outline within ``reflection["limit"]``, else a warning that it fits none."""
+    rms = {i: float(reflection["rms"].get(i, math.inf)) for i in phys}
+    if not any(np.isfinite(v) for v in rms.values()):
+        return
+    scores["reflection rms px"] = rms
+    if reflection.get("self_px"):
+        scores["self-reflection px"] = dict(reflection["self_px"])
+    limit = float(reflection.get("limit", math.inf))
+    if min(rms.values()) <= limit:
+        costs["reflection"] = prediction_limited(
+            reflection_costs(rms, reflection["n"], reflection["sigma"]),
+            reflection.get("pred") or {},
+        )
+        return
+    # no posture explains it: it cannot tell them apart either
+    where = reflection.get("self_px") or {}
+    off = (
+        f"; the camera sees itself {min(where.values()):.0f} px or more from where the "
+        f"postures predict"
+        if where
+        else ""
+    )
+    warnings.append(
+        f"the camera's reflection fits none of the rim's postures (best RMS "
+        f"{min(rms.values()):.2f} px, allowed {limit:.2f}{off}) and was not used to choose: "
+        f"check K (the principal point), D and the mirror's a, b and rim_radius"
+    )
+
+
 def select_candidate(candidates, make_camera, far_lines, lower_focus, reflection=None):
     """Score the physical candidates by every cue given and choose one (section 3.2).
 
@@ -291,31 +323,7 @@ def select_candidate(candidates, make_camera, far_lines, lower_focus, reflection
         scores["far lines"] = line_s
         costs["far lines"] = line_costs(line_s)
     if reflection is not None and len(phys) > 1:
-        rms = {i: float(reflection["rms"].get(i, math.inf)) for i in phys}
-        if any(np.isfinite(v) for v in rms.values()):
-            scores["reflection rms px"] = rms
-            if reflection.get("self_px"):
-                scores["self-reflection px"] = dict(reflection["self_px"])
-            limit = float(reflection.get("limit", math.inf))
-            if min(rms.values()) <= limit:
-                costs["reflection"] = prediction_limited(
-                    reflection_costs(rms, reflection["n"], reflection["sigma"]),
-                    reflection.get("pred") or {},
-                )
-            else:  # no posture explains it: it cannot tell them apart either
-                where = reflection.get("self_px") or {}
-                off = (
-                    f"; the camera sees itself {min(where.values()):.0f} px or more from "
-                    f"where the postures predict"
-                    if where
-                    else ""
-                )
-                warnings.append(
-                    f"the camera's reflection fits none of the rim's postures "
-                    f"(best RMS {min(rms.values()):.2f} px, allowed {limit:.2f}{off}) "
-                    f"and was not used to choose: check K (the principal point), D "
-                    f"and the mirror's a, b and rim_radius"
-                )
+        _score_reflection(reflection, phys, scores, costs, warnings)
     if len(phys) == 1:
         return Selection(tuple(scored), phys[0], 1.0, False, scores, costs, sigma, tuple(warnings))
     if not costs:

@@ -532,6 +532,40 @@ def _disagreement(K, mirror, rim_px, base, res, spec):
     return float(np.sum(q * q / lam)), shift_deg, s * np.outer(D, D)
 
 
+def _cue_verdict(name, res, base, var, own, cap, K, mirror, rim_px, spec):
+    """Whether the joint fit ``res`` of a cue with the rim keeps the rim at its own noise
+    level (:func:`refinement_step`): ``(None, bias_cov)`` if it may join (``bias_cov`` from
+    :func:`_disagreement` for the reflection, else None), ``(why, None)`` if not."""
+    chi2 = 2.0 * (res.rim_cost - base.rim_cost) / var
+    if name == "reflection":
+        lo, hi = _z_range(mirror, res)
+        if not lo <= res.z <= hi:
+            return (
+                f"the fitted circle lies at z = {res.z:.1f}, not between the camera and the "
+                f"mirror ({lo:.1f} to {hi:.1f})",
+                None,
+            )
+    if chi2 > CUE_CHI2:
+        return (
+            f"joining it raised the rim's RMS from {base.rim_rms:.3f} to {res.rim_rms:.3f} px "
+            f"(chi-square +{chi2:.0f}, allowed {CUE_CHI2:.0f})",
+            None,
+        )
+    if not own <= cap:
+        return f"its own RMS residual after the joint fit is {own:.2f} px (allowed {cap:.2f})", None
+    if name != "reflection":
+        return None, None
+    H, shift_deg, bias_cov = _disagreement(K, mirror, rim_px, base, res, spec)
+    if H > CUE_SHIFT_CHI2:
+        return (
+            f"it moved the mirror axis by {shift_deg:.3f} deg, {math.sqrt(H):.1f} times what "
+            f"the rim alone allows there (a bias in one of them: an outline of another circle, "
+            f"a blurred or clipped edge)",
+            None,
+        )
+    return None, bias_cov
+
+
 def refinement_step(K, mirror, cand, rim, lines_xn, cue, circle, refine=True):
     """Refine on the rim and every cue that agrees with it; see :class:`Refinement`.
 
@@ -604,51 +638,13 @@ def refinement_step(K, mirror, cand, rim, lines_xn, cue, circle, refine=True):
             else:
                 res = refine_posture(K, mirror, rvec, tvec, rim_px, lines_xn)
                 own, cap = res.line_rms, 3.0
-            chi2 = 2.0 * (res.rim_cost - base.rim_cost) / var
-            z_range = _z_range(mirror, res) if name == "reflection" else None
-            if z_range is not None and not z_range[0] <= res.z <= z_range[1]:
-                rejected.append(
-                    (
-                        name,
-                        f"the fitted circle lies at z = {res.z:.1f}, not between "
-                        f"the camera and the mirror ({z_range[0]:.1f} to "
-                        f"{z_range[1]:.1f})",
-                    )
-                )
-            elif chi2 > CUE_CHI2:
-                rejected.append(
-                    (
-                        name,
-                        f"joining it raised the rim's RMS from {base.rim_rms:.3f} "
-                        f"to {res.rim_rms:.3f} px (chi-square +{chi2:.0f}, "
-                        f"allowed {CUE_CHI2:.0f})",
-                    )
-                )
-            elif not own <= cap:
-                rejected.append(
-                    (
-                        name,
-                        f"its own RMS residual after the joint fit is "
-                        f"{own:.2f} px (allowed {cap:.2f})",
-                    )
-                )
-            elif name == "reflection" and (
-                (shift := _disagreement(K, mirror, rim_px, base, res, spec))[0] > CUE_SHIFT_CHI2
-            ):
-                rejected.append(
-                    (
-                        name,
-                        f"it moved the mirror axis by {shift[1]:.3f} deg, "
-                        f"{math.sqrt(shift[0]):.1f} times what the rim alone allows there "
-                        f"(a bias in one of them: an outline of another circle, a "
-                        f"blurred or clipped edge)",
-                    )
-                )
+            why, bias = _cue_verdict(name, res, base, var, own, cap, K, mirror, rim_px, spec)
+            if why is not None:
+                rejected.append((name, why))
             else:
                 accepted.append(name)
                 kept = res
-                if name == "reflection":
-                    bias_cov = shift[2]
+                bias_cov = bias if name == "reflection" else bias_cov
         rvec, tvec = kept.rvec, kept.tvec
     # the candidates (chen) and refine_posture (gauge_rotation) already return the gauge
     R = cv2.Rodrigues(np.asarray(rvec, np.float64).reshape(3, 1))[0]
