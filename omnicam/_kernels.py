@@ -1043,49 +1043,27 @@ def _pixel_direction(view, i, j, row_z, row_cos, column_cos, column_sin):
 
 
 @kernel(inline="always")
+def _column_at_row(S, r, k, c, v0, v1, v2, v3):
+    """Component ``c`` of the node values S (NY, NX, 2) of column ``k``, rows ``r:r + 4``,
+    weighted by the row weights ``v*``."""
+    return v0 * S[r, k, c] + v1 * S[r + 1, k, c] + v2 * S[r + 2, k, c] + v3 * S[r + 3, k, c]
+
+
+@kernel(inline="always")
 def _row_columns(S, r, k, v0, v1, v2, v3):
     """Node values S (NY, NX, 2) of columns ``k:k + 4`` interpolated to a row of cell (r, k)
     with the row weights ``v*``: ``(x0..x3, y0..y3)``. Their column-weighted sum is
     :func:`_interp_weighted`'s tensor cubic summed in the other order."""
-    a0 = v0 * S[r, k, 0] + v1 * S[r + 1, k, 0] + v2 * S[r + 2, k, 0] + v3 * S[r + 3, k, 0]
-    a1 = (
-        v0 * S[r, k + 1, 0]
-        + v1 * S[r + 1, k + 1, 0]
-        + v2 * S[r + 2, k + 1, 0]
-        + v3 * S[r + 3, k + 1, 0]
+    return (
+        _column_at_row(S, r, k, 0, v0, v1, v2, v3),
+        _column_at_row(S, r, k + 1, 0, v0, v1, v2, v3),
+        _column_at_row(S, r, k + 2, 0, v0, v1, v2, v3),
+        _column_at_row(S, r, k + 3, 0, v0, v1, v2, v3),
+        _column_at_row(S, r, k, 1, v0, v1, v2, v3),
+        _column_at_row(S, r, k + 1, 1, v0, v1, v2, v3),
+        _column_at_row(S, r, k + 2, 1, v0, v1, v2, v3),
+        _column_at_row(S, r, k + 3, 1, v0, v1, v2, v3),
     )
-    a2 = (
-        v0 * S[r, k + 2, 0]
-        + v1 * S[r + 1, k + 2, 0]
-        + v2 * S[r + 2, k + 2, 0]
-        + v3 * S[r + 3, k + 2, 0]
-    )
-    a3 = (
-        v0 * S[r, k + 3, 0]
-        + v1 * S[r + 1, k + 3, 0]
-        + v2 * S[r + 2, k + 3, 0]
-        + v3 * S[r + 3, k + 3, 0]
-    )
-    b0 = v0 * S[r, k, 1] + v1 * S[r + 1, k, 1] + v2 * S[r + 2, k, 1] + v3 * S[r + 3, k, 1]
-    b1 = (
-        v0 * S[r, k + 1, 1]
-        + v1 * S[r + 1, k + 1, 1]
-        + v2 * S[r + 2, k + 1, 1]
-        + v3 * S[r + 3, k + 1, 1]
-    )
-    b2 = (
-        v0 * S[r, k + 2, 1]
-        + v1 * S[r + 1, k + 2, 1]
-        + v2 * S[r + 2, k + 2, 1]
-        + v3 * S[r + 3, k + 2, 1]
-    )
-    b3 = (
-        v0 * S[r, k + 3, 1]
-        + v1 * S[r + 1, k + 3, 1]
-        + v2 * S[r + 2, k + 3, 1]
-        + v3 * S[r + 3, k + 3, 1]
-    )
-    return a0, a1, a2, a3, b0, b1, b2, b3
 
 
 @kernel

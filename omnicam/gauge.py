@@ -13,7 +13,13 @@ import math
 import cv2
 import numpy as np
 
-__all__ = ["canonical_rvec", "gauge_rotation", "posture_error", "rotate_vector"]
+__all__ = [
+    "canonical_rvec",
+    "gauge_rotation",
+    "posture_error",
+    "rotate_vector",
+    "perpendicular_basis",
+]
 
 
 def canonical_rvec(rvec):
@@ -101,3 +107,22 @@ def rotate_vector(v, w):
         return v.copy()
     k = w / th
     return v * math.cos(th) + np.cross(k, v) * math.sin(th) + k * (k @ v) * (1 - math.cos(th))
+
+
+def perpendicular_basis(v):
+    """Two unit vectors perpendicular to ``v`` and to each other, ``(b1, b2)`` with
+    ``(v / |v|, b1, b2)`` right-handed: the axes of the two small rotations of a direction.
+
+    Parameters
+    ----------
+    v : (3,) ndarray
+
+    Returns
+    -------
+    b1, b2 : (3,) ndarray
+    """
+    v = v / np.linalg.norm(v)
+    h = np.array([1.0, 0.0, 0.0]) if abs(v[0]) < 0.9 else np.array([0.0, 1.0, 0.0])
+    b1 = np.cross(v, h)
+    b1 /= np.linalg.norm(b1)
+    return b1, np.cross(v, b1)

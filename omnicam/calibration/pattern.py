@@ -58,6 +58,7 @@ import warnings as _warnings
 import cv2
 import numpy as np
 
+from ..gauge import perpendicular_basis
 from .intrinsics import _pattern  # one check of pattern_size (cv2.findChessboardCorners)
 
 __all__ = [
@@ -204,14 +205,6 @@ def object_points(pattern_size, square_size):
     return obj
 
 
-def _perp_basis(v):
-    v = v / np.linalg.norm(v)
-    h = np.array([1.0, 0.0, 0.0]) if abs(v[0]) < 0.9 else np.array([0.0, 1.0, 0.0])
-    b1 = np.cross(v, h)
-    b1 /= np.linalg.norm(b1)
-    return b1, np.cross(v, b1)
-
-
 def _rodrigues(rvec):
     return cv2.Rodrigues(np.asarray(rvec, np.float64).reshape(3, 1))[0]
 
@@ -242,7 +235,7 @@ def board_pose_from_rays(origins, directions, obj, viewpoint):
 
     m = directions.mean(axis=0)
     m /= np.linalg.norm(m)
-    b1, b2 = _perp_basis(m)
+    b1, b2 = perpendicular_basis(m)
     Rv = np.stack([b1, b2, m])  # mirror -> virtual camera
     dv = directions @ Rv.T
     xn = (dv[:, :2] / dv[:, 2:3]).reshape(-1, 1, 2)

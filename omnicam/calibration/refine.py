@@ -51,7 +51,10 @@ import math
 import cv2
 import numpy as np
 
-from ..gauge import gauge_rotation  # re-exported: refine.gauge_rotation
+from ..gauge import (
+    gauge_rotation,  # re-exported: refine.gauge_rotation
+    perpendicular_basis,
+)
 from ..gauge import rotate_vector as _rotate
 from .robust import mad_sigma
 
@@ -122,14 +125,6 @@ class RefineResult:
     n_rim: int = 0
 
 
-def _perp_basis(v):
-    v = v / np.linalg.norm(v)
-    h = np.array([1.0, 0.0, 0.0]) if abs(v[0]) < 0.9 else np.array([0.0, 1.0, 0.0])
-    b1 = np.cross(v, h)
-    b1 /= np.linalg.norm(b1)
-    return b1, np.cross(v, b1)
-
-
 def _line_from_rays(P, V, N, rim_radius):
     """The 3-D line meeting every ray ``(P_i, V_i)``, linearly in Plucker coordinates.
 
@@ -166,7 +161,7 @@ class _Posture:
 
     def __init__(self, R0, t0):
         self.a0 = R0[:, 2] / np.linalg.norm(R0[:, 2])
-        self.b1, self.b2 = _perp_basis(self.a0)
+        self.b1, self.b2 = perpendicular_basis(self.a0)
         self.t0 = np.asarray(t0, np.float64)
 
     def __call__(self, x):
@@ -790,5 +785,5 @@ def posture_offsets(rvec0, tvec0, rvec1, tvec1):
     w = np.cross(a0, a1)
     s = float(np.linalg.norm(w))
     w = w * (math.atan2(s, float(a0 @ a1)) / s) if s > 0 else w
-    b1, b2 = _perp_basis(a0)
+    b1, b2 = perpendicular_basis(a0)
     return np.concatenate([[w @ b1, w @ b2], np.asarray(tvec1, np.float64) - tvec0])
