@@ -57,6 +57,26 @@ __all__ = [
 Z_MAX_FRACTION = 0.9
 Z_GRID = 25
 
+#: A dark-to-bright rise votes for a silhouette when it exceeds this fraction of the contrast
+#: between the dark centre and the mirror's scene: the barrel's front ring against a dark box
+#: behind it rises by a fifth of that or less (stress renders, seed 0, 1920x1080, case 6: grey
+#: 26 to 51 against a contrast of 117).
+RISE_FRACTION = 0.1
+
+#: Inlier cut (px) of the consensus on the subpixel outline points (the cut then grows with the
+#: points' own scatter, :func:`.rim.fit_rim`).
+SUBPIXEL_INLIER_PX = 0.75
+
+#: Subpixel rounds along rays from the current ellipse: at least two, more while the ellipse
+#: still moves (by 0.05 px or more in its centre or axes), up to this many (a vote centred a
+#: third of the radius off, e.g. on a box's edges, needs a third round).
+SUBPIXEL_ROUNDS = 5
+
+#: A silhouette is dark inside when this fraction of the annulus 0.6-0.95 of its radius is
+#: darker than the dark centre plus 60 % of the contrast (for the voted circle and again for
+#: the refined one).
+DARK_INSIDE = 0.8
+
 
 @dataclasses.dataclass(frozen=True)
 class ReflectionCircle:
@@ -492,7 +512,7 @@ def _detect(image, rim, center, center_search, max_radius, min_radius, rng, scen
             f"no camera reflection found: the centre (grey {dark:.0f}) is not clearly darker "
             f"than the mirror's scene (grey {scene:.0f})"
         )
-    ri, rj = _rises(prof, dr, 0.2 * contrast, dark + 0.6 * contrast)
+    ri, rj = _rises(prof, dr, RISE_FRACTION * contrast, dark + 0.6 * contrast)
     # rises from 3 px of c0 on: a small lens off c0 has its near side nearer than R_min; they
     # vote, and step 4 tries the rises beyond R_min first (highlights lie near c0), then all
     keep = radii[rj] >= (3.0 if scene_level is None else R_min)  # (not inside a surround)
@@ -507,11 +527,11 @@ def _detect(image, rim, center, center_search, max_radius, min_radius, rng, scen
     dark_max = dark + 0.6 * contrast
 
     def dark_inside(rho, c):
-        """A silhouette is dark inside: 80 % of the annulus 0.6-0.95 of its radius about its
-        centre ``c`` is dark (a dark scene line or ring is dark only along itself)."""
+        """A silhouette is dark inside: ``DARK_INSIDE`` of the annulus 0.6-0.95 of its radius
+        about its centre ``c`` is dark (a dark scene line or ring is dark only along itself)."""
         band = _polar(G, c, np.linspace(0.6, 0.95, 8) * rho, ang[::2])
         ok = np.isfinite(band)
-        return ok.any() and float(np.mean(band[ok] < dark_max)) >= 0.8
+        return ok.any() and float(np.mean(band[ok] < dark_max)) >= DARK_INSIDE
 
     # 3. vote over centres and radii, one vote per (ray, radius bin)
     half = float(center_search) * r_rim
@@ -532,11 +552,13 @@ def _detect(image, rim, center, center_search, max_radius, min_radius, rng, scen
             for j in np.flatnonzero((hist >= 0.4 * n_rays) & (np.arange(nb) * bw >= R_min)):
                 if int(j) not in found or hist[j] > found[int(j)][0]:
                     found[int(j)] = (hist[j], c)
-    # circles dark inside, outermost first; neighbouring bins are one circle (its best centre)
+    # circles dark inside, outermost first; bins within 2 of a group's outermost are one circle
+    # (its best centre); a chain of neighbours is not: a knurled front ring a few bins wide
+    # would otherwise merge the barrel's edge with the glass's
     order = [j for j in sorted(found, reverse=True) if dark_inside((j + 1) * bw, found[j][1])]
     circles = []
     for j in order:
-        if circles and circles[-1][0] - j <= 2:
+        if circles and circles[-1][1] - j <= 2:
             if found[j][0] > found[circles[-1][0]][0]:
                 circles[-1] = (j, circles[-1][1])
             continue
@@ -554,7 +576,7 @@ def _detect(image, rim, center, center_search, max_radius, min_radius, rng, scen
         (far_pts, pts) if len(pts) > len(far_pts) else (pts,),
         bw,
         sig,
-        contrast,
+        (contrast, dark_max),
         rng,
     )
     if fit is not None:
@@ -570,7 +592,7 @@ def _detect(image, rim, center, center_search, max_radius, min_radius, rng, scen
     raise coreless or first_why
 
 
-def _try_silhouettes(gray, G, seeds, point_sets, bw, sig, contrast, rng):
+def _try_silhouettes(gray, G, seeds, point_sets, bw, sig, levels, rng):
     """Steps 4-5 on the voted circles ``seeds`` (centre, radius), outermost first.
 
     Returns ``(fit, first_why, surround, coreless)``: the first silhouette accepted (else
@@ -582,8 +604,12 @@ def _try_silhouettes(gray, G, seeds, point_sets, bw, sig, contrast, rng):
     for c_est, r_est in seeds:
         for p in point_sets:
             try:
-                fit = _refine_silhouette(gray, G, p, c_est, r_est, bw, sig, contrast, rng)
-                return fit, first_why, surround, coreless
+                fit = _refine_silhouette(gray, G, p, c_est, r_est, bw, sig, levels, rng)
+                if coreless is None or _within(fit, coreless, max(1.0, 2.0 * sig)):
+                    return fit, first_why, surround, coreless
+                # not a body inside the dark silhouette but an ellipse that wandered off an
+                # inner ring (struts, highlights)
+                break
             except _BrightInside as err:  # a dark surround (e.g. a dark floor) holding the body
                 first_why, surround = first_why or err, surround or err
                 coreless = coreless or err
@@ -594,6 +620,70 @@ def _try_silhouettes(gray, G, seeds, point_sets, bw, sig, contrast, rng):
             except EstimationError as err:  # e.g. a square box behind the barrel: try inside it
                 first_why = first_why or err
     return None, first_why, surround, coreless
+
+
+def _within(fit, outer, tol):
+    """Whether ``fit`` may be what the declined dark silhouette ``outer`` (a :class:`_Coreless`)
+    holds: inside it (:func:`_inside`) and, unless ``outer`` is brighter inside (a dark
+    surround holding a body, :class:`_BrightInside`), concentric with it to a tenth of its
+    radius: a uniformly dark silhouette holds only its own glass's rings."""
+    if not isinstance(outer, _BrightInside):
+        off = float(np.linalg.norm(fit.center - outer.fit.center))
+        if off > max(tol, 0.1 * outer.fit.radius):
+            return False
+    return _inside(fit, outer.fit, tol)
+
+
+def _inside(fit, outer, tol):
+    """Whether the whole ellipse through ``fit``'s outline points lies within ``tol`` px outside
+    ``outer``'s outline (radii about ``outer``'s centre, interpolated over the angle)."""
+    from .rim import fit_rim
+
+    try:
+        ell = fit_rim(fit.points, robust=False)
+    except ValueError:
+        return False
+    ang = np.linspace(0.0, 2.0 * np.pi, 72, endpoint=False)
+    e = np.stack([np.cos(ang), np.sin(ang)], axis=1)
+    r_ray = 1.0 / np.linalg.norm(e @ np.linalg.inv(ell.shape_matrix).T, axis=1)
+    curve = np.asarray(ell.center) + r_ray[:, None] * e
+
+    def polar(p):
+        d = np.asarray(p) - outer.center
+        return np.arctan2(d[:, 1], d[:, 0]), np.hypot(d[:, 0], d[:, 1])
+
+    ta, ra = polar(outer.points)
+    order = np.argsort(ta)
+    tb, rb = polar(curve)
+    limit = np.interp(tb, ta[order], ra[order], period=2.0 * np.pi)
+    return bool(np.all(rb <= limit + tol))
+
+
+def _outermost_peak(d, strength=0.3, valley=0.5):
+    """Per row of the radial derivative ``d`` (inside to outside), the index of the outermost
+    rise: the steepest sample, or a local maximum outside it of at least ``strength`` times its
+    height that is a separate edge (between the two, ``d`` falls below ``valley`` times the
+    outer peak's height).
+
+    The steepest sample alone is not the silhouette's edge on a knurled front ring: where a
+    bright tooth meets dark glass the inner rise (the glass's edge) can be the steeper one.
+    A shoulder of one blurred edge has no valley and does not count.
+    """
+    n = d.shape[1]
+    d = np.where(np.isfinite(d), d, -np.inf)
+    m = np.clip(np.argmax(d, axis=1), 1, n - 2)
+    idx = np.arange(n)[None, :]
+    peak = np.zeros(d.shape, bool)
+    peak[:, 1:-1] = (d[:, 1:-1] > 0) & (d[:, 1:-1] >= d[:, :-2]) & (d[:, 1:-1] > d[:, 2:])
+    low = np.minimum.accumulate(np.where(idx >= m[:, None], d, np.inf), axis=1)
+    outer = (
+        peak
+        & (idx > m[:, None])
+        & (d >= strength * d.max(axis=1, keepdims=True))
+        & (low < valley * d)
+    )
+    last = n - 1 - np.argmax(outer[:, ::-1], axis=1)
+    return np.where(outer.any(axis=1), last, m)
 
 
 class _Coreless(EstimationError):
@@ -614,8 +704,10 @@ class _BrightInside(_Coreless):
         self.radius, self.interior = float(fit.radius), float(interior)
 
 
-def _refine_silhouette(gray, G, pts, c_est, r_est, bw, sig, contrast, rng):
-    """Steps 4-5 of :func:`detect_reflection` for one voted circle."""
+def _refine_silhouette(gray, G, pts, c_est, r_est, bw, sig, levels, rng):
+    """Steps 4-5 of :func:`detect_reflection` for one voted circle; ``levels`` is the contrast
+    (scene minus dark centre) and the grey below which a pixel is dark."""
+    contrast, dark_max = levels
     from .rim import fit_rim
 
     rad = np.hypot(pts[:, 0] - c_est[0], pts[:, 1] - c_est[1])
@@ -630,8 +722,8 @@ def _refine_silhouette(gray, G, pts, c_est, r_est, bw, sig, contrast, rng):
     G1 = cv2.GaussianBlur(gray, (0, 0), 0.7)
     n_rays = int(np.clip(2 * np.pi * float(fit.axes.mean()) / 2.0, 90, 1440))
     ang = np.linspace(0, 2 * np.pi, n_rays, endpoint=False)
-    for _ in range(2):
-        c = np.asarray(fit.center)
+    for k in range(SUBPIXEL_ROUNDS):
+        c, axes = np.asarray(fit.center), np.asarray(fit.axes)
         e = np.stack([np.cos(ang), np.sin(ang)], axis=1)
         # radius of the ellipse along each ray: |S^-1 e| = 1 / r
         r_ray = 1.0 / np.linalg.norm(e @ np.linalg.inv(fit.shape_matrix).T, axis=1)
@@ -645,7 +737,7 @@ def _refine_silhouette(gray, G, pts, c_est, r_est, bw, sig, contrast, rng):
         d = np.gradient(f, axis=1)
         rise = f[:, -1] - f[:, 0]
         dd = np.where(np.isfinite(d), d, -np.inf)
-        j = np.clip(np.argmax(dd, axis=1), 1, len(tau) - 2)
+        j = _outermost_peak(dd)
         good = np.isfinite(rise) & (rise > 0.15 * contrast) & np.isfinite(dd.max(axis=1))
         # the centroid of the rise within 1.5 px of its steepest sample: the parabola through
         # the peak scatters by 0.15 px on an exact anti-aliased disk, the centroid by 0.01 px
@@ -657,17 +749,23 @@ def _refine_silhouette(gray, G, pts, c_est, r_est, bw, sig, contrast, rng):
         p, rise_k = p[good], rise[good]
         if len(p) < 12:
             raise EstimationError("no camera reflection found: its outline faded on refinement")
-        dist = np.abs(fit.distance(p))
-        mask = dist <= max(0.5, 3.5 * mad_sigma(dist))
         try:
-            fit = fit_rim(p[mask], robust=False)  # outliers already cut by the ellipse
+            # a consensus of its own: where the barrel's edge does not contrast with what is
+            # behind it (a strut, a patch of the scene as dark as the ring), the ray's only
+            # rise is an inner one (the glass's edge) a few px inside, which a least-squares
+            # ellipse would follow
+            fit = fit_rim(p, threshold=SUBPIXEL_INLIER_PX, rng=rng)
         except ValueError as err:
             raise EstimationError(f"no camera reflection found: {err}") from None
+        moved = float(np.abs(np.r_[fit.center - c, fit.axes - axes]).max())
+        if k >= 1 and moved < 0.05:
+            break
     quality = len(fit.points) / n_rays
     radius = float(np.mean(fit.axes))
     core = _polar(G, fit.center, np.linspace(0.0, 0.5, 12) * radius, ang[::4])
     shell = _polar(G, fit.center, np.linspace(0.75, 0.95, 8) * radius, ang[::4])
     core_level, shell_level = float(np.nanmedian(core)), float(np.nanmedian(shell))
+    band = _polar(G, fit.center, np.linspace(0.6, 0.95, 8) * radius, ang[::2])
     edge_rise = float(np.median(rise_k))
     why = None
     if quality < 0.4:
@@ -676,6 +774,10 @@ def _refine_silhouette(gray, G, pts, c_est, r_est, bw, sig, contrast, rng):
         why = f"the silhouette is not round (axes {fit.axes[0]:.1f} and {fit.axes[1]:.1f} px)"
     elif fit.rms > max(0.75, 0.02 * radius):
         why = f"the silhouette's edge is ragged (RMS {fit.rms:.2f} px to an ellipse)"
+    elif not float(np.mean(band[np.isfinite(band)] < dark_max)) >= DARK_INSIDE:
+        # the vote tested its own circle; the refined one may have moved to a dark scene line
+        # around the camera (a thin ring is dark only along itself)
+        why = "the refined silhouette is not dark inside (a dark line, not a body)"
     if why is not None:
         raise EstimationError(f"no camera reflection found: {why}")
     if not core_level < shell_level - max(3.0, 0.05 * contrast):
