@@ -58,8 +58,9 @@ Z_MAX_FRACTION = 0.9
 Z_GRID = 25
 
 #: A dark-to-bright rise votes for a silhouette when it exceeds this fraction of the contrast
-#: between the dark centre and the mirror's scene: a fifth first; when that finds nothing (not
-#: even a silhouette without a core), a tenth: the barrel's front ring against a dark box
+#: between the dark centre and the mirror's scene: a fifth first; when that finds nothing, or
+#: only a silhouette without a core, a tenth (kept if it finds one with a core around the
+#: coreless one, else the coreless one stands): the barrel's front ring against a dark box
 #: behind it rises by a fifth of the contrast or less (stress renders, seed 0, 1920x1080,
 #: case 6: grey 26 to 51 against 117). A tenth at once would let the glass's inner rings vote
 #: and win over a uniformly dark barrel (seed 0, case 87).
@@ -467,19 +468,26 @@ def detect_reflection(
     ValueError
         Bad arguments.
     """
+    coreless = None
     for k, fraction in enumerate(RISE_FRACTIONS):
         try:
-            return _detect(
+            fit = _detect(
                 image, rim, center, center_search, max_radius, min_radius, rng, None, fraction
             )
         except _Coreless as err:
-            if allow_coreless:
-                return err.fit
-            raise EstimationError(str(err)) from None
+            coreless = coreless or err
+            continue
         except EstimationError:
-            if k == len(RISE_FRACTIONS) - 1:
+            if k == len(RISE_FRACTIONS) - 1 and coreless is None:
                 raise
-    raise AssertionError("unreachable")  # pragma: no cover
+            continue
+        # the weaker rises may find a silhouette with a core around the one without: the
+        # outermost is the body's (a knurled front ring around uniformly dark glass)
+        if coreless is None or _inside(coreless.fit, fit, 1.0):
+            return fit
+    if allow_coreless:
+        return coreless.fit
+    raise EstimationError(str(coreless)) from None
 
 
 def _detect(image, rim, center, center_search, max_radius, min_radius, rng, scene_level, fraction):
@@ -611,7 +619,75 @@ def _detect(image, rim, center, center_search, max_radius, min_radius, rng, scen
                 break
             except EstimationError:
                 pass
+        # 7. a body brighter than the surround at its edge (a grey front ring on a dark floor)
+        try:
+            return _body_in_surround(gray, G, surround, bw, sig, rng)
+        except _Coreless as err:
+            coreless = err
+        except EstimationError:
+            pass
     raise coreless or first_why
+
+
+def _body_in_surround(gray, G, surround, bw, sig, rng):
+    """Step 7 of :func:`detect_reflection`: the body inside the dark surround ``surround`` (a
+    :class:`_BrightInside`) where its edge falls to the surround's level.
+
+    Only in a uniform surround (the 10-90 % spread of its grey at 0.85-0.93 of its radius
+    within a quarter of the contrast). Per ray from the surround's centre (within 90 % of its
+    radius) the outermost crossing, going out, from above to below the level halfway between
+    the surround's and its interior's; a robust ellipse through them; then steps 4-5 on the
+    negated image (the fall is a rise there), the core tested on the image itself.
+    """
+    from .rim import fit_rim
+
+    c, floor, interior = surround.fit.center, surround.shell, surround.interior
+    contrast = interior - floor
+    if not (contrast > 10.0 and surround.spread < 0.25 * contrast):
+        # a textured band (a checkered ground's ring) is no dark floor or holder
+        raise EstimationError(
+            "no camera reflection found: no uniformly dark surround with something brighter inside"
+        )
+    r_max = 0.9 * surround.radius
+    n_rays = int(np.clip(2 * np.pi * r_max / 3.0, 90, 720))
+    ang = np.linspace(0, 2 * np.pi, n_rays, endpoint=False)
+    dr = max(0.5, sig / 2)
+    radii = np.arange(2 * dr, r_max, dr)
+    prof = _polar(G, c, radii, ang)
+    above = np.nan_to_num(prof, nan=-np.inf) > floor + 0.5 * contrast
+    seen = above.any(axis=1)
+    last = len(radii) - 1 - np.argmax(above[:, ::-1], axis=1)
+    ok = seen & (last < len(radii) - 1)
+    if ok.sum() < 0.4 * n_rays:
+        raise EstimationError("no camera reflection found: no body's edge inside the surround")
+    e = np.stack([np.cos(ang[ok]), np.sin(ang[ok])], axis=1)
+    pts = c + radii[last[ok], None] * e
+    try:
+        fit0 = fit_rim(pts, threshold=max(1.0, 2 * sig), rng=rng)
+    except ValueError as err:
+        raise EstimationError(f"no camera reflection found: {err}") from None
+    r0 = float(np.mean(fit0.axes))
+    neg = 255.0 - gray
+    try:  # on the negated image the surround is bright and nothing needs to be dark inside
+        fit = _refine_silhouette(
+            neg, 255.0 - G, pts, fit0.center, r0 - bw, bw, sig, (contrast, np.inf), rng
+        )
+    except _Coreless as err:
+        fit = err.fit
+    if not fit.radius < r_max:
+        raise EstimationError("no camera reflection found: the body fills the surround")
+    core = _polar(G, fit.center, np.linspace(0.0, 0.5, 12) * fit.radius, ang[::4])
+    shell = _polar(G, fit.center, np.linspace(0.75, 0.95, 8) * fit.radius, ang[::4])
+    core_level, shell_level = float(np.nanmedian(core)), float(np.nanmedian(shell))
+    has_core = core_level < shell_level - max(3.0, 0.05 * contrast)
+    fit = dataclasses.replace(fit, core=bool(has_core))
+    if not has_core:
+        raise _Coreless(
+            f"no camera reflection found: the body inside the dark surround has no darker core "
+            f"(grey {core_level:.0f} inside, {shell_level:.0f} near its edge)",
+            fit,
+        )
+    return fit
 
 
 def _try_silhouettes(gray, G, seeds, point_sets, bw, sig, levels, rng):
@@ -721,9 +797,11 @@ class _BrightInside(_Coreless):
     (a dark floor, a dark holder) with something brighter, the camera's body, inside; or dark
     glass with bright highlights (``fit``, when nothing is found inside)."""
 
-    def __init__(self, message, fit, interior):
+    def __init__(self, message, fit, interior, shell, spread):
         super().__init__(message, fit)
         self.radius, self.interior = float(fit.radius), float(interior)
+        # the level of its edge band (0.75-0.95 of its radius), the 10-90 % spread of 0.85-0.93
+        self.shell, self.spread = float(shell), float(spread)
 
 
 def _refine_silhouette(gray, G, pts, c_est, r_est, bw, sig, levels, rng):
@@ -823,6 +901,10 @@ def _refine_silhouette(gray, G, pts, c_est, r_est, bw, sig, levels, rng):
         inside = _polar(G, fit.center, np.linspace(0.0, 0.6, 16) * radius, ang[::2])
         interior = float(np.nanpercentile(inside, 90))
         if interior > shell_level + max(3.0, 0.05 * contrast):  # brighter things inside
-            raise _BrightInside(f"no camera reflection found: {why}", out, interior)
+            band = _polar(G, fit.center, np.linspace(0.85, 0.93, 4) * radius, ang)
+            spread = float(np.subtract(*np.nanpercentile(band, [90, 10])))
+            raise _BrightInside(
+                f"no camera reflection found: {why}", out, interior, shell_level, spread
+            )
         raise _Coreless(f"no camera reflection found: {why}", out)
     return out
