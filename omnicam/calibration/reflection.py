@@ -415,26 +415,39 @@ def detect_reflection(
     1. Radial profiles from ``center`` (default the rim centre) out to ``max_radius`` times the
        rim's minor semi-axis, of the image smoothed in proportion to the rim's size.
     2. Per ray, every strong dark-to-bright rise (local maximum of the radial derivative whose
-       rise exceeds a fifth of the contrast between the dark centre and the mirror's scene,
-       with a dark inner side); highlights and inner rings of the glass give inner rises,
-       struts and scene edges give rises off the common circle.
+       rise exceeds a fraction of the contrast between the dark centre and the mirror's
+       scene, with a dark inner side): a fifth first, a tenth when that finds nothing or only
+       a silhouette without a core (:data:`RISE_FRACTIONS`; a barrel on a dark box rises
+       little); highlights and inner rings of the glass give inner rises, struts and scene
+       edges give rises off the common circle.
     3. A vote over circle centres near ``center`` and radii (one vote per ray and radius bin)
-       finds the round silhouettes; the **outermost** one supported by at least 40 % of the
-       rays is kept (the lens barrel or body, not the glass's inner rings).
-    4. Per ray the rise nearest to that circle, then a robust ellipse (RANSAC,
-       :func:`.rim.fit_rim`) rejects struts and highlights (first on the rises at least
-       ``min_radius`` from ``center``, then, if that declines, on those from 3 px: a small
-       lens off ``center`` has its near side there); two more rounds along rays from the
-       ellipse's centre in a narrow window, unsmoothed but for 0.7 px, each edge at the
-       centroid of the radial derivative within 1.5 px of its steepest sample.
+       finds the round silhouettes that are dark inside; the **outermost** one supported by at
+       least 40 % of the rays is kept (the lens barrel or body, not the glass's inner rings;
+       bins within two of a group's outermost are one circle).
+    4. The rises near that circle, then a robust ellipse (RANSAC, :func:`.rim.fit_rim`)
+       rejects struts and highlights (first on the rises at least ``min_radius`` from
+       ``center``, then, if that declines, on those from 3 px: a small lens off ``center`` has
+       its near side there); then rounds (2 to :data:`SUBPIXEL_ROUNDS`, until the ellipse
+       stops moving) along rays from the ellipse's centre in a narrow window, unsmoothed but
+       for 0.7 px: per ray the outermost separate rise (a narrow front ring's inner rise may
+       be the steeper), at the centroid of the radial derivative within 1.5 px of its peak;
+       a consensus ellipse through them (RANSAC, :data:`SUBPIXEL_INLIER_PX`) leaves out the
+       rays where the edge does not contrast and an inner rise stands in.
     5. Declines (:class:`~.errors.EstimationError`) when the centre is not darker than the
-       scene, no round silhouette has enough support, or the silhouette has no darker core (the
-       lens glass; a uniformly dark floor or clutter has none).
+       scene, no round silhouette has enough support, the refined one is not round
+       (:data:`MAX_ASPECT`), ragged or not dark inside, or the silhouette has no darker core
+       (the lens glass; a uniformly dark floor or clutter has none). A silhouette inside a
+       declined dark one must lie within it (and, if that one is uniformly dark, be
+       concentric with it: its own glass's rings).
     6. A silhouette brighter inside than near its edge (90th percentile of its inner 60 %) is
        a dark surround, e.g. a dark floor, holding the body: when no silhouette is accepted,
        steps 1-5 run once more inside it (to 85 % of its radius), with its interior's level
        as the scene's (the body's edges rise against the body, not against the mirror's
        scene).
+    7. If that finds nothing and the surround is uniform, the body's edge may fall to the
+       surround's level (a grey front ring on a black floor): per ray the outermost crossing
+       from above to below the level halfway between the surround's and its interior's,
+       then steps 4-5 on the negated image (:func:`_body_in_surround`).
 
     Parameters
     ----------
