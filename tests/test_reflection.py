@@ -467,6 +467,34 @@ def test_struts_across_the_lens_and_a_dark_patch_behind_it_leave_the_outline():
     assert report.lens_used and chose_true(report, truth), report.summary()
 
 
+def test_a_grey_front_ring_on_a_black_floor_is_found_by_its_fall():
+    """A dark floor (grey 10) around a front ring brighter than it (45; the box hidden behind
+    the barrel, blur 1 px): the floor's disk is the outermost silhouette, brighter inside, and
+    the barrel's edge falls to the floor's level instead of rising (before: the floor's disk,
+    32-61 px, 14-36 px off the barrel's outline; the stress renders, seed 0, case 51). Step 7
+    finds the outline by its falls; a textured band is not taken for a floor (the tests of
+    declining above)."""
+    from omnicam.synthetic import realistic
+
+    body = realistic.BodyGeometry(
+        r_barrel=12.0,
+        z_barrel=12.0,
+        r_glass=9.5,
+        rings=(5.0,),
+        z_box=0.0,
+        w_box=12.0,
+        h_box=12.0,
+        glass_color=(12.0, 8.0, 6.0),
+        ring_color=(45.0, 45.0, 45.0),
+        box_color=(40.0, 40.0, 40.0),
+    )
+    for seed in (1, 2):
+        r = _body_render(body, ("body", "dark_floor"), seed, realistic.Photometric(blur_sigma=1.0))
+        fit = reflection.detect_reflection(r.image, detect_rim(r.image))
+        assert fit.core and fit.quality > 0.7, fit
+        assert _known_circle_rms(r.camera, fit, 12.0, 12.0) < 0.5, fit
+
+
 def test_an_outline_no_posture_explains_does_not_choose_and_warns():
     truth = RIGS[4]
     out, _ = reflection.outline_pixels(truth, R_C, Z_C, 64)

@@ -647,7 +647,7 @@ def _body_in_surround(gray, G, surround, bw, sig, rng):
     :class:`_BrightInside`) where its edge falls to the surround's level.
 
     Only in a uniform surround (the 10-90 % spread of its grey at 0.85-0.93 of its radius
-    within a quarter of the contrast). Per ray from the surround's centre (within 90 % of its
+    within half the contrast). Per ray from the surround's centre (within 90 % of its
     radius) the outermost crossing, going out, from above to below the level halfway between
     the surround's and its interior's; a robust ellipse through them; then steps 4-5 on the
     negated image (the fall is a rise there), the core tested on the image itself.
@@ -656,8 +656,10 @@ def _body_in_surround(gray, G, surround, bw, sig, rng):
 
     c, floor, interior = surround.fit.center, surround.shell, surround.interior
     contrast = interior - floor
-    if not (contrast > 10.0 and surround.spread < 0.25 * contrast):
-        # a textured band (a checkered ground's ring) is no dark floor or holder
+    if not (contrast > 10.0 and surround.spread < 0.5 * contrast):
+        # a textured band is no dark floor or holder (the checkered ground of
+        # synthetic.render_environment: spread 1.2 times the contrast; dark floors of the
+        # realistic renders with planks, noise and blur: 0.2-0.3)
         raise EstimationError(
             "no camera reflection found: no uniformly dark surround with something brighter inside"
         )
