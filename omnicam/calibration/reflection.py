@@ -481,7 +481,7 @@ def detect_reflection(
     ValueError
         Bad arguments.
     """
-    coreless = None
+    coreless, found = None, None
     for k, fraction in enumerate(RISE_FRACTIONS):
         try:
             fit = _detect(
@@ -491,13 +491,17 @@ def detect_reflection(
             coreless = coreless or err
             continue
         except EstimationError:
-            if k == len(RISE_FRACTIONS) - 1 and coreless is None:
+            if k == len(RISE_FRACTIONS) - 1 and coreless is None and found is None:
                 raise
             continue
-        # the weaker rises may find a silhouette with a core around the one without: the
-        # outermost is the body's (a knurled front ring around uniformly dark glass)
-        if coreless is None or _inside(coreless.fit, fit, 1.0):
-            return fit
+        # the weaker rises may find a silhouette with a core around the one found (or the one
+        # without a core): the outermost is the body's (a knurled front ring around dark glass
+        # taken for a dark surround, or around its own inner rings)
+        inner = found or (coreless.fit if coreless is not None else None)
+        if inner is None or (fit.radius > inner.radius + 1.0 and _inside(inner, fit, 1.0)):
+            found = fit
+    if found is not None:
+        return found
     if allow_coreless:
         return coreless.fit
     raise EstimationError(str(coreless)) from None
