@@ -639,8 +639,6 @@ def _detect(image, rim, center, center_search, max_radius, min_radius, rng, scen
         # 7. a body brighter than the surround at its edge (a grey front ring on a dark floor)
         try:
             return _body_in_surround(gray, G, surround, bw, sig, rng)
-        except _Coreless as err:
-            coreless = err
         except EstimationError:
             pass
     raise coreless or first_why
@@ -698,15 +696,14 @@ def _body_in_surround(gray, G, surround, bw, sig, rng):
     core = _polar(G, fit.center, np.linspace(0.0, 0.5, 12) * fit.radius, ang[::4])
     shell = _polar(G, fit.center, np.linspace(0.75, 0.95, 8) * fit.radius, ang[::4])
     core_level, shell_level = float(np.nanmedian(core)), float(np.nanmedian(shell))
-    has_core = core_level < shell_level - max(3.0, 0.05 * contrast)
-    fit = dataclasses.replace(fit, core=bool(has_core))
-    if not has_core:
-        raise _Coreless(
+    if not core_level < shell_level - max(
+        3.0, 0.05 * contrast
+    ):  # e.g. a highlight on dark glass taken for a surround: the surround stands
+        raise EstimationError(
             f"no camera reflection found: the body inside the dark surround has no darker core "
-            f"(grey {core_level:.0f} inside, {shell_level:.0f} near its edge)",
-            fit,
+            f"(grey {core_level:.0f} inside, {shell_level:.0f} near its edge)"
         )
-    return fit
+    return dataclasses.replace(fit, core=True)
 
 
 def _try_silhouettes(gray, G, seeds, point_sets, bw, sig, levels, rng):
