@@ -639,6 +639,8 @@ def _detect(image, rim, center, center_search, max_radius, min_radius, rng, scen
         # 7. a body brighter than the surround at its edge (a grey front ring on a dark floor)
         try:
             return _body_in_surround(gray, G, surround, bw, sig, rng)
+        except _Coreless as err:  # a uniformly dark body in the surround, rather than it
+            coreless = err
         except EstimationError:
             pass
     raise coreless or first_why
@@ -696,14 +698,19 @@ def _body_in_surround(gray, G, surround, bw, sig, rng):
     core = _polar(G, fit.center, np.linspace(0.0, 0.5, 12) * fit.radius, ang[::4])
     shell = _polar(G, fit.center, np.linspace(0.75, 0.95, 8) * fit.radius, ang[::4])
     core_level, shell_level = float(np.nanmedian(core)), float(np.nanmedian(shell))
-    if not core_level < shell_level - max(
-        3.0, 0.05 * contrast
-    ):  # e.g. a highlight on dark glass taken for a surround: the surround stands
+    margin = max(3.0, 0.05 * contrast)
+    if core_level < shell_level - margin:
+        return dataclasses.replace(fit, core=True)
+    if core_level > shell_level + margin:  # a highlight on dark glass: the surround stands
         raise EstimationError(
-            f"no camera reflection found: the body inside the dark surround has no darker core "
-            f"(grey {core_level:.0f} inside, {shell_level:.0f} near its edge)"
+            f"no camera reflection found: the spot inside the dark surround is brighter inside "
+            f"(grey {core_level:.0f}) than near its edge ({shell_level:.0f}): a highlight"
         )
-    return dataclasses.replace(fit, core=True)
+    raise _Coreless(  # a uniformly dark body: the caller decides, as for any such silhouette
+        f"no camera reflection found: the body inside the dark surround has no darker core "
+        f"(grey {core_level:.0f} inside, {shell_level:.0f} near its edge)",
+        dataclasses.replace(fit, core=False),
+    )
 
 
 def _try_silhouettes(gray, G, seeds, point_sets, bw, sig, levels, rng):
