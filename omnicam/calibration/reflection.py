@@ -57,6 +57,36 @@ __all__ = [
 Z_MAX_FRACTION = 0.9
 Z_GRID = 25
 
+#: A dark-to-bright rise votes for a silhouette when it exceeds this fraction of the contrast
+#: between the dark centre and the mirror's scene: a fifth first; when that finds nothing, or
+#: only a silhouette without a core, a tenth (kept if it finds one with a core around the
+#: coreless one, else the coreless one stands): the barrel's front ring against a dark box
+#: behind it rises by a fifth of the contrast or less (stress renders, seed 0, 1920x1080,
+#: case 6: grey 26 to 51 against 117). A tenth at once would let the glass's inner rings vote
+#: and win over a uniformly dark barrel (seed 0, case 87).
+RISE_FRACTIONS = (0.2, 0.1)
+
+#: Inlier cut (px) of the consensus on the subpixel outline points (the cut then grows with the
+#: points' own scatter, :func:`.rim.fit_rim`).
+SUBPIXEL_INLIER_PX = 0.75
+
+#: Subpixel rounds along rays from the current ellipse: at least two, more while the ellipse
+#: still moves (by 0.05 px or more in its centre or axes), up to this many (a vote centred a
+#: third of the radius off, e.g. on a box's edges, needs a third round).
+SUBPIXEL_ROUNDS = 5
+
+#: A silhouette is dark inside when this fraction of the annulus 0.6-0.95 of its radius is
+#: darker than the dark centre plus 60 % of the contrast (for the voted circle and again for
+#: the refined one).
+DARK_INSIDE = 0.8
+
+#: A silhouette is round when its ellipse's axes differ by at most this ratio. The outline of
+#: a coaxial circle is nearly a circle: the stress renders' barrels (tilts up to 5 deg, offsets
+#: up to 5 mm, mild distortion; seeds 0-2, 199 outlines) give 1.003 (median) to 1.009 (max);
+#: a pixel aspect of a few % adds as much. An ellipse through the barrel's edge on some rays
+#: and the glass's on others is flatter (seed 0, case 37: 1.12). (Was 1.4.)
+MAX_ASPECT = 1.1
+
 
 @dataclasses.dataclass(frozen=True)
 class ReflectionCircle:
@@ -385,26 +415,39 @@ def detect_reflection(
     1. Radial profiles from ``center`` (default the rim centre) out to ``max_radius`` times the
        rim's minor semi-axis, of the image smoothed in proportion to the rim's size.
     2. Per ray, every strong dark-to-bright rise (local maximum of the radial derivative whose
-       rise exceeds a fifth of the contrast between the dark centre and the mirror's scene,
-       with a dark inner side); highlights and inner rings of the glass give inner rises,
-       struts and scene edges give rises off the common circle.
+       rise exceeds a fraction of the contrast between the dark centre and the mirror's
+       scene, with a dark inner side): a fifth first, a tenth when that finds nothing or only
+       a silhouette without a core (:data:`RISE_FRACTIONS`; a barrel on a dark box rises
+       little); highlights and inner rings of the glass give inner rises, struts and scene
+       edges give rises off the common circle.
     3. A vote over circle centres near ``center`` and radii (one vote per ray and radius bin)
-       finds the round silhouettes; the **outermost** one supported by at least 40 % of the
-       rays is kept (the lens barrel or body, not the glass's inner rings).
-    4. Per ray the rise nearest to that circle, then a robust ellipse (RANSAC,
-       :func:`.rim.fit_rim`) rejects struts and highlights (first on the rises at least
-       ``min_radius`` from ``center``, then, if that declines, on those from 3 px: a small
-       lens off ``center`` has its near side there); two more rounds along rays from the
-       ellipse's centre in a narrow window, unsmoothed but for 0.7 px, each edge at the
-       centroid of the radial derivative within 1.5 px of its steepest sample.
+       finds the round silhouettes that are dark inside; the **outermost** one supported by at
+       least 40 % of the rays is kept (the lens barrel or body, not the glass's inner rings;
+       bins within two of a group's outermost are one circle).
+    4. The rises near that circle, then a robust ellipse (RANSAC, :func:`.rim.fit_rim`)
+       rejects struts and highlights (first on the rises at least ``min_radius`` from
+       ``center``, then, if that declines, on those from 3 px: a small lens off ``center`` has
+       its near side there); then rounds (2 to :data:`SUBPIXEL_ROUNDS`, until the ellipse
+       stops moving) along rays from the ellipse's centre in a narrow window, unsmoothed but
+       for 0.7 px: per ray the outermost separate rise (a narrow front ring's inner rise may
+       be the steeper), at the centroid of the radial derivative within 1.5 px of its peak;
+       a consensus ellipse through them (RANSAC, :data:`SUBPIXEL_INLIER_PX`) leaves out the
+       rays where the edge does not contrast and an inner rise stands in.
     5. Declines (:class:`~.errors.EstimationError`) when the centre is not darker than the
-       scene, no round silhouette has enough support, or the silhouette has no darker core (the
-       lens glass; a uniformly dark floor or clutter has none).
+       scene, no round silhouette has enough support, the refined one is not round
+       (:data:`MAX_ASPECT`), ragged or not dark inside, or the silhouette has no darker core
+       (the lens glass; a uniformly dark floor or clutter has none). A silhouette inside a
+       declined dark one must lie within it (and, if that one is uniformly dark, be
+       concentric with it: its own glass's rings).
     6. A silhouette brighter inside than near its edge (90th percentile of its inner 60 %) is
        a dark surround, e.g. a dark floor, holding the body: when no silhouette is accepted,
        steps 1-5 run once more inside it (to 85 % of its radius), with its interior's level
        as the scene's (the body's edges rise against the body, not against the mirror's
        scene).
+    7. If that finds nothing and the surround is uniform, the body's edge may fall to the
+       surround's level (a grey front ring on a black floor): per ray the outermost crossing
+       from above to below the level halfway between the surround's and its interior's,
+       then steps 4-5 on the negated image (:func:`_body_in_surround`).
 
     Parameters
     ----------
@@ -438,15 +481,33 @@ def detect_reflection(
     ValueError
         Bad arguments.
     """
-    try:
-        return _detect(image, rim, center, center_search, max_radius, min_radius, rng, None)
-    except _Coreless as err:
-        if allow_coreless:
-            return err.fit
-        raise EstimationError(str(err)) from None
+    coreless, found = None, None
+    for k, fraction in enumerate(RISE_FRACTIONS):
+        try:
+            fit = _detect(
+                image, rim, center, center_search, max_radius, min_radius, rng, None, fraction
+            )
+        except _Coreless as err:
+            coreless = coreless or err
+            continue
+        except EstimationError:
+            if k == len(RISE_FRACTIONS) - 1 and coreless is None and found is None:
+                raise
+            continue
+        # the weaker rises may find a silhouette with a core around the one found (or the one
+        # without a core): the outermost is the body's (a knurled front ring around dark glass
+        # taken for a dark surround, or around its own inner rings)
+        inner = found or (coreless.fit if coreless is not None else None)
+        if inner is None or (fit.radius > inner.radius + 1.0 and _inside(inner, fit, 1.0)):
+            found = fit
+    if found is not None:
+        return found
+    if allow_coreless:
+        return coreless.fit
+    raise EstimationError(str(coreless)) from None
 
 
-def _detect(image, rim, center, center_search, max_radius, min_radius, rng, scene_level):
+def _detect(image, rim, center, center_search, max_radius, min_radius, rng, scene_level, fraction):
     """:func:`detect_reflection`; ``scene_level`` (grey) replaces the mirror scene's level when
     looking inside a dark surround."""
     from .rim import RimFit
@@ -492,7 +553,7 @@ def _detect(image, rim, center, center_search, max_radius, min_radius, rng, scen
             f"no camera reflection found: the centre (grey {dark:.0f}) is not clearly darker "
             f"than the mirror's scene (grey {scene:.0f})"
         )
-    ri, rj = _rises(prof, dr, 0.2 * contrast, dark + 0.6 * contrast)
+    ri, rj = _rises(prof, dr, fraction * contrast, dark + 0.6 * contrast)
     # rises from 3 px of c0 on: a small lens off c0 has its near side nearer than R_min; they
     # vote, and step 4 tries the rises beyond R_min first (highlights lie near c0), then all
     keep = radii[rj] >= (3.0 if scene_level is None else R_min)  # (not inside a surround)
@@ -507,11 +568,11 @@ def _detect(image, rim, center, center_search, max_radius, min_radius, rng, scen
     dark_max = dark + 0.6 * contrast
 
     def dark_inside(rho, c):
-        """A silhouette is dark inside: 80 % of the annulus 0.6-0.95 of its radius about its
-        centre ``c`` is dark (a dark scene line or ring is dark only along itself)."""
+        """A silhouette is dark inside: ``DARK_INSIDE`` of the annulus 0.6-0.95 of its radius
+        about its centre ``c`` is dark (a dark scene line or ring is dark only along itself)."""
         band = _polar(G, c, np.linspace(0.6, 0.95, 8) * rho, ang[::2])
         ok = np.isfinite(band)
-        return ok.any() and float(np.mean(band[ok] < dark_max)) >= 0.8
+        return ok.any() and float(np.mean(band[ok] < dark_max)) >= DARK_INSIDE
 
     # 3. vote over centres and radii, one vote per (ray, radius bin)
     half = float(center_search) * r_rim
@@ -532,11 +593,13 @@ def _detect(image, rim, center, center_search, max_radius, min_radius, rng, scen
             for j in np.flatnonzero((hist >= 0.4 * n_rays) & (np.arange(nb) * bw >= R_min)):
                 if int(j) not in found or hist[j] > found[int(j)][0]:
                     found[int(j)] = (hist[j], c)
-    # circles dark inside, outermost first; neighbouring bins are one circle (its best centre)
+    # circles dark inside, outermost first; bins within 2 of a group's outermost are one circle
+    # (its best centre); a chain of neighbours is not: a knurled front ring a few bins wide
+    # would otherwise merge the barrel's edge with the glass's
     order = [j for j in sorted(found, reverse=True) if dark_inside((j + 1) * bw, found[j][1])]
     circles = []
     for j in order:
-        if circles and circles[-1][0] - j <= 2:
+        if circles and circles[-1][1] - j <= 2:
             if found[j][0] > found[circles[-1][0]][0]:
                 circles[-1] = (j, circles[-1][1])
             continue
@@ -554,7 +617,7 @@ def _detect(image, rim, center, center_search, max_radius, min_radius, rng, scen
         (far_pts, pts) if len(pts) > len(far_pts) else (pts,),
         bw,
         sig,
-        contrast,
+        (contrast, dark_max),
         rng,
     )
     if fit is not None:
@@ -562,15 +625,95 @@ def _detect(image, rim, center, center_search, max_radius, min_radius, rng, scen
     inner = None if surround is None else 0.85 * surround.radius / r_rim
     if scene_level is None and inner is not None and inner > 2.0 * min_radius:
         # 6. the body inside a dark surround: its edges rise against the surround's interior,
-        # not against the mirror's scene; look again inside, once
+        # not against the mirror's scene; look again inside, once per rise fraction (the body
+        # may contrast little with what is around it inside the surround)
+        for f in RISE_FRACTIONS[RISE_FRACTIONS.index(fraction) :]:
+            try:
+                return _detect(
+                    image, rim, c0, center_search, inner, min_radius, rng, surround.interior, f
+                )
+            except _Coreless:
+                break
+            except EstimationError:
+                pass
+        # 7. a body brighter than the surround at its edge (a grey front ring on a dark floor)
         try:
-            return _detect(image, rim, c0, center_search, inner, min_radius, rng, surround.interior)
+            return _body_in_surround(gray, G, surround, bw, sig, rng)
+        except _Coreless as err:  # a uniformly dark body in the surround, rather than it
+            coreless = err
         except EstimationError:
             pass
     raise coreless or first_why
 
 
-def _try_silhouettes(gray, G, seeds, point_sets, bw, sig, contrast, rng):
+def _body_in_surround(gray, G, surround, bw, sig, rng):
+    """Step 7 of :func:`detect_reflection`: the body inside the dark surround ``surround`` (a
+    :class:`_BrightInside`) where its edge falls to the surround's level.
+
+    Only in a uniform surround (the 10-90 % spread of its grey at 0.85-0.93 of its radius
+    within half the contrast). Per ray from the surround's centre (within 90 % of its
+    radius) the outermost crossing, going out, from above to below the level halfway between
+    the surround's and its interior's; a robust ellipse through them; then steps 4-5 on the
+    negated image (the fall is a rise there), the core tested on the image itself.
+    """
+    from .rim import fit_rim
+
+    c, floor, interior = surround.fit.center, surround.shell, surround.interior
+    contrast = interior - floor
+    if not (contrast > 10.0 and surround.spread < 0.5 * contrast):
+        # a textured band is no dark floor or holder (the checkered ground of
+        # synthetic.render_environment: spread 1.2 times the contrast; dark floors of the
+        # realistic renders with planks, noise and blur: 0.2-0.3)
+        raise EstimationError(
+            "no camera reflection found: no uniformly dark surround with something brighter inside"
+        )
+    r_max = 0.9 * surround.radius
+    n_rays = int(np.clip(2 * np.pi * r_max / 3.0, 90, 720))
+    ang = np.linspace(0, 2 * np.pi, n_rays, endpoint=False)
+    dr = max(0.5, sig / 2)
+    radii = np.arange(2 * dr, r_max, dr)
+    prof = _polar(G, c, radii, ang)
+    above = np.nan_to_num(prof, nan=-np.inf) > floor + 0.5 * contrast
+    seen = above.any(axis=1)
+    last = len(radii) - 1 - np.argmax(above[:, ::-1], axis=1)
+    ok = seen & (last < len(radii) - 1)
+    if ok.sum() < 0.4 * n_rays:
+        raise EstimationError("no camera reflection found: no body's edge inside the surround")
+    e = np.stack([np.cos(ang[ok]), np.sin(ang[ok])], axis=1)
+    pts = c + radii[last[ok], None] * e
+    try:
+        fit0 = fit_rim(pts, threshold=max(1.0, 2 * sig), rng=rng)
+    except ValueError as err:
+        raise EstimationError(f"no camera reflection found: {err}") from None
+    r0 = float(np.mean(fit0.axes))
+    neg = 255.0 - gray
+    try:  # on the negated image the surround is bright and nothing needs to be dark inside
+        fit = _refine_silhouette(
+            neg, 255.0 - G, pts, fit0.center, r0 - bw, bw, sig, (contrast, np.inf), rng
+        )
+    except _Coreless as err:
+        fit = err.fit
+    if not fit.radius < r_max:
+        raise EstimationError("no camera reflection found: the body fills the surround")
+    core = _polar(G, fit.center, np.linspace(0.0, 0.5, 12) * fit.radius, ang[::4])
+    shell = _polar(G, fit.center, np.linspace(0.75, 0.95, 8) * fit.radius, ang[::4])
+    core_level, shell_level = float(np.nanmedian(core)), float(np.nanmedian(shell))
+    margin = max(3.0, 0.05 * contrast)
+    if core_level < shell_level - margin:
+        return dataclasses.replace(fit, core=True)
+    if core_level > shell_level + margin:  # a highlight on dark glass: the surround stands
+        raise EstimationError(
+            f"no camera reflection found: the spot inside the dark surround is brighter inside "
+            f"(grey {core_level:.0f}) than near its edge ({shell_level:.0f}): a highlight"
+        )
+    raise _Coreless(  # a uniformly dark body: the caller decides, as for any such silhouette
+        f"no camera reflection found: the body inside the dark surround has no darker core "
+        f"(grey {core_level:.0f} inside, {shell_level:.0f} near its edge)",
+        dataclasses.replace(fit, core=False),
+    )
+
+
+def _try_silhouettes(gray, G, seeds, point_sets, bw, sig, levels, rng):
     """Steps 4-5 on the voted circles ``seeds`` (centre, radius), outermost first.
 
     Returns ``(fit, first_why, surround, coreless)``: the first silhouette accepted (else
@@ -582,8 +725,12 @@ def _try_silhouettes(gray, G, seeds, point_sets, bw, sig, contrast, rng):
     for c_est, r_est in seeds:
         for p in point_sets:
             try:
-                fit = _refine_silhouette(gray, G, p, c_est, r_est, bw, sig, contrast, rng)
-                return fit, first_why, surround, coreless
+                fit = _refine_silhouette(gray, G, p, c_est, r_est, bw, sig, levels, rng)
+                if coreless is None or _within(fit, coreless, max(1.0, 2.0 * sig)):
+                    return fit, first_why, surround, coreless
+                # not a body inside the dark silhouette but an ellipse that wandered off an
+                # inner ring (struts, highlights)
+                break
             except _BrightInside as err:  # a dark surround (e.g. a dark floor) holding the body
                 first_why, surround = first_why or err, surround or err
                 coreless = coreless or err
@@ -594,6 +741,70 @@ def _try_silhouettes(gray, G, seeds, point_sets, bw, sig, contrast, rng):
             except EstimationError as err:  # e.g. a square box behind the barrel: try inside it
                 first_why = first_why or err
     return None, first_why, surround, coreless
+
+
+def _within(fit, outer, tol):
+    """Whether ``fit`` may be what the declined dark silhouette ``outer`` (a :class:`_Coreless`)
+    holds: inside it (:func:`_inside`) and, unless ``outer`` is brighter inside (a dark
+    surround holding a body, :class:`_BrightInside`), concentric with it to a tenth of its
+    radius: a uniformly dark silhouette holds only its own glass's rings."""
+    if not isinstance(outer, _BrightInside):
+        off = float(np.linalg.norm(fit.center - outer.fit.center))
+        if off > max(tol, 0.1 * outer.fit.radius):
+            return False
+    return _inside(fit, outer.fit, tol)
+
+
+def _inside(fit, outer, tol):
+    """Whether the whole ellipse through ``fit``'s outline points lies within ``tol`` px outside
+    ``outer``'s outline (radii about ``outer``'s centre, interpolated over the angle)."""
+    from .rim import fit_rim
+
+    try:
+        ell = fit_rim(fit.points, robust=False)
+    except ValueError:
+        return False
+    ang = np.linspace(0.0, 2.0 * np.pi, 72, endpoint=False)
+    e = np.stack([np.cos(ang), np.sin(ang)], axis=1)
+    r_ray = 1.0 / np.linalg.norm(e @ np.linalg.inv(ell.shape_matrix).T, axis=1)
+    curve = np.asarray(ell.center) + r_ray[:, None] * e
+
+    def polar(p):
+        d = np.asarray(p) - outer.center
+        return np.arctan2(d[:, 1], d[:, 0]), np.hypot(d[:, 0], d[:, 1])
+
+    ta, ra = polar(outer.points)
+    order = np.argsort(ta)
+    tb, rb = polar(curve)
+    limit = np.interp(tb, ta[order], ra[order], period=2.0 * np.pi)
+    return bool(np.all(rb <= limit + tol))
+
+
+def _outermost_peak(d, strength=0.3, valley=0.5):
+    """Per row of the radial derivative ``d`` (inside to outside), the index of the outermost
+    rise: the steepest sample, or a local maximum outside it of at least ``strength`` times its
+    height that is a separate edge (between the two, ``d`` falls below ``valley`` times the
+    outer peak's height).
+
+    The steepest sample alone is not the silhouette's edge on a knurled front ring: where a
+    bright tooth meets dark glass the inner rise (the glass's edge) can be the steeper one.
+    A shoulder of one blurred edge has no valley and does not count.
+    """
+    n = d.shape[1]
+    d = np.where(np.isfinite(d), d, -np.inf)
+    m = np.clip(np.argmax(d, axis=1), 1, n - 2)
+    idx = np.arange(n)[None, :]
+    peak = np.zeros(d.shape, bool)
+    peak[:, 1:-1] = (d[:, 1:-1] > 0) & (d[:, 1:-1] >= d[:, :-2]) & (d[:, 1:-1] > d[:, 2:])
+    low = np.minimum.accumulate(np.where(idx >= m[:, None], d, np.inf), axis=1)
+    outer = (
+        peak
+        & (idx > m[:, None])
+        & (d >= strength * d.max(axis=1, keepdims=True))
+        & (low < valley * d)
+    )
+    last = n - 1 - np.argmax(outer[:, ::-1], axis=1)
+    return np.where(outer.any(axis=1), last, m)
 
 
 class _Coreless(EstimationError):
@@ -609,14 +820,19 @@ class _BrightInside(_Coreless):
     (a dark floor, a dark holder) with something brighter, the camera's body, inside; or dark
     glass with bright highlights (``fit``, when nothing is found inside)."""
 
-    def __init__(self, message, fit, interior):
+    def __init__(self, message, fit, interior, shell, spread):
         super().__init__(message, fit)
         self.radius, self.interior = float(fit.radius), float(interior)
+        # the level of its edge band (0.75-0.95 of its radius), the 10-90 % spread of 0.85-0.93
+        self.shell, self.spread = float(shell), float(spread)
 
 
-def _refine_silhouette(gray, G, pts, c_est, r_est, bw, sig, contrast, rng):
-    """Steps 4-5 of :func:`detect_reflection` for one voted circle."""
+def _refine_silhouette(gray, G, pts, c_est, r_est, bw, sig, levels, rng):
+    """Steps 4-5 of :func:`detect_reflection` for one voted circle; ``levels`` is the contrast
+    (scene minus dark centre) and the grey below which a pixel is dark."""
     from .rim import fit_rim
+
+    contrast, dark_max = levels
 
     rad = np.hypot(pts[:, 0] - c_est[0], pts[:, 1] - c_est[1])
     near = np.abs(rad - (r_est + bw)) <= 2.5 * bw
@@ -630,8 +846,8 @@ def _refine_silhouette(gray, G, pts, c_est, r_est, bw, sig, contrast, rng):
     G1 = cv2.GaussianBlur(gray, (0, 0), 0.7)
     n_rays = int(np.clip(2 * np.pi * float(fit.axes.mean()) / 2.0, 90, 1440))
     ang = np.linspace(0, 2 * np.pi, n_rays, endpoint=False)
-    for _ in range(2):
-        c = np.asarray(fit.center)
+    for k in range(SUBPIXEL_ROUNDS):
+        c, axes = np.asarray(fit.center), np.asarray(fit.axes)
         e = np.stack([np.cos(ang), np.sin(ang)], axis=1)
         # radius of the ellipse along each ray: |S^-1 e| = 1 / r
         r_ray = 1.0 / np.linalg.norm(e @ np.linalg.inv(fit.shape_matrix).T, axis=1)
@@ -645,7 +861,7 @@ def _refine_silhouette(gray, G, pts, c_est, r_est, bw, sig, contrast, rng):
         d = np.gradient(f, axis=1)
         rise = f[:, -1] - f[:, 0]
         dd = np.where(np.isfinite(d), d, -np.inf)
-        j = np.clip(np.argmax(dd, axis=1), 1, len(tau) - 2)
+        j = _outermost_peak(dd)
         good = np.isfinite(rise) & (rise > 0.15 * contrast) & np.isfinite(dd.max(axis=1))
         # the centroid of the rise within 1.5 px of its steepest sample: the parabola through
         # the peak scatters by 0.15 px on an exact anti-aliased disk, the centroid by 0.01 px
@@ -657,25 +873,35 @@ def _refine_silhouette(gray, G, pts, c_est, r_est, bw, sig, contrast, rng):
         p, rise_k = p[good], rise[good]
         if len(p) < 12:
             raise EstimationError("no camera reflection found: its outline faded on refinement")
-        dist = np.abs(fit.distance(p))
-        mask = dist <= max(0.5, 3.5 * mad_sigma(dist))
         try:
-            fit = fit_rim(p[mask], robust=False)  # outliers already cut by the ellipse
+            # a consensus of its own: where the barrel's edge does not contrast with what is
+            # behind it (a strut, a patch of the scene as dark as the ring), the ray's only
+            # rise is an inner one (the glass's edge) a few px inside, which a least-squares
+            # ellipse would follow
+            fit = fit_rim(p, threshold=SUBPIXEL_INLIER_PX, rng=rng)
         except ValueError as err:
             raise EstimationError(f"no camera reflection found: {err}") from None
+        moved = float(np.abs(np.r_[fit.center - c, fit.axes - axes]).max())
+        if k >= 1 and moved < 0.05:
+            break
     quality = len(fit.points) / n_rays
     radius = float(np.mean(fit.axes))
     core = _polar(G, fit.center, np.linspace(0.0, 0.5, 12) * radius, ang[::4])
     shell = _polar(G, fit.center, np.linspace(0.75, 0.95, 8) * radius, ang[::4])
     core_level, shell_level = float(np.nanmedian(core)), float(np.nanmedian(shell))
+    band = _polar(G, fit.center, np.linspace(0.6, 0.95, 8) * radius, ang[::2])
     edge_rise = float(np.median(rise_k))
     why = None
     if quality < 0.4:
         why = f"its outline is found on only {100 * quality:.0f} % of the rays (need 40 %)"
-    elif fit.axes[0] > 1.4 * fit.axes[1]:
+    elif fit.axes[0] > MAX_ASPECT * fit.axes[1]:
         why = f"the silhouette is not round (axes {fit.axes[0]:.1f} and {fit.axes[1]:.1f} px)"
     elif fit.rms > max(0.75, 0.02 * radius):
         why = f"the silhouette's edge is ragged (RMS {fit.rms:.2f} px to an ellipse)"
+    elif not float(np.mean(band[np.isfinite(band)] < dark_max)) >= DARK_INSIDE:
+        # the vote tested its own circle; the refined one may have moved to a dark scene line
+        # around the camera (a thin ring is dark only along itself)
+        why = "the refined silhouette is not dark inside (a dark line, not a body)"
     if why is not None:
         raise EstimationError(f"no camera reflection found: {why}")
     if not core_level < shell_level - max(3.0, 0.05 * contrast):
@@ -698,6 +924,10 @@ def _refine_silhouette(gray, G, pts, c_est, r_est, bw, sig, contrast, rng):
         inside = _polar(G, fit.center, np.linspace(0.0, 0.6, 16) * radius, ang[::2])
         interior = float(np.nanpercentile(inside, 90))
         if interior > shell_level + max(3.0, 0.05 * contrast):  # brighter things inside
-            raise _BrightInside(f"no camera reflection found: {why}", out, interior)
+            band = _polar(G, fit.center, np.linspace(0.85, 0.93, 4) * radius, ang)
+            spread = float(np.subtract(*np.nanpercentile(band, [90, 10])))
+            raise _BrightInside(
+                f"no camera reflection found: {why}", out, interior, shell_level, spread
+            )
         raise _Coreless(f"no camera reflection found: {why}", out)
     return out
