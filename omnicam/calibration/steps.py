@@ -210,15 +210,12 @@ def reflection_step(lens, image, rim, K, D, r=None, z=None, cands=None, mirror=N
 
     With ``cands`` (and ``mirror``) the detection looks around the physical candidates' self-
     reflection pixels (their mean, within their spread plus 8 % of the rim's semi-axis): a
-    tilted mirror moves the camera's reflection well away from the rim centre. When nothing is
-    found there it looks around the rim centre (the default search): predictions from a K that
-    is a little off miss the reflection, the rim centre does not.
+    tilted mirror moves the camera's reflection well away from the rim centre; then around the
+    rim centre (:func:`_detect_outline`).
 
     ``lens`` is ``"auto"`` (detect in ``image``), ``None``/``False`` (not used) or an
     ``(M, 2)`` array of outline pixels.
     """
-    from .reflection import detect_reflection
-
     for name, v in (("lens_r", r), ("lens_z", z)):
         if v is not None and not (np.isfinite(v) and (name == "lens_z" or v > 0)):
             raise ValueError(f"{name} must be a finite number (lens_r > 0) or None, got {v!r}")
@@ -254,18 +251,12 @@ def reflection_step(lens, image, rim, K, D, r=None, z=None, cands=None, mirror=N
                     c = u.mean(axis=0)
                     spread = float(np.linalg.norm(u - c, axis=1).max()) / float(min(rim.axes))
                     where = {"center": c, "center_search": min(0.5, 0.08 + spread)}
-            try:
-                fit = detect_reflection(image, rim, allow_coreless=True, **where)
-            except EstimationError:
-                if not where:
-                    raise
-                # a K or D a little off moves the predictions but not the reflection, which
-                # stays near the rim centre for the misalignments of real rigs (the office
-                # photograph with the principal point at the image centre: 25 px off)
-                fit = detect_reflection(image, rim, allow_coreless=True)
+            fit, px, xn, why = _detect_outline(image, rim, where, cands, K, D, mirror, r, z)
         except EstimationError as err:  # optional: the report says why it was not used
             return ReflectionCue(None, None, None, sigma, r, z, f"not used: {err}")
-        px, sigma = np.asarray(fit.points, np.float64), float(fit.rms)
+        if why is not None:
+            return ReflectionCue(None, None, None, sigma, r, z, f"not used: {why}")
+        sigma = float(fit.rms)
     elif lens is None or lens is False:
         return ReflectionCue(None, None, None, sigma, r, z, "not used (lens=None)")
     else:
@@ -275,16 +266,46 @@ def reflection_step(lens, image, rim, K, D, r=None, z=None, cands=None, mirror=N
                 f"lens has {len(px)} point(s) or non-finite values; give at least 8 finite "
                 f"pixels along the outline of the camera's reflection"
             )
-    xn = normalize(px, K, D)
-    if not np.isfinite(xn).all():
-        raise ValueError("some lens outline points cannot be undistorted with D; check D")
+        xn = normalize(px, K, D)
+        if not np.isfinite(xn).all():
+            raise ValueError("some lens outline points cannot be undistorted with D; check D")
     note = f"used: {len(px)} outline points"
     if fit is not None and not fit.core:
-        why = _coreless_why(fit, xn, cands, K, mirror, r, z)
-        if why is not None:
-            return ReflectionCue(None, None, None, math.nan, r, z, f"not used: {why}")
         note += " (uniformly dark: a posture explains it as the camera's circle)"
     return ReflectionCue(px, xn, fit, sigma, r, z, note)
+
+
+def _detect_outline(image, rim, where, cands, K, D, mirror, r, z):
+    """The camera's reflection detected around ``where`` (the postures' predicted self-reflection
+    pixel), else around the rim centre: a K or D a little off moves the predictions but not the
+    reflection, which stays near the rim centre for the misalignments of real rigs (the office
+    photograph with the principal point at the image centre: 25 px off). A silhouette without a
+    darker core counts only if :func:`_coreless_why` accepts it; one it rejects near the
+    predictions (an inner ring of the glass) also leads to the rim centre's search.
+
+    Returns ``(fit, px, xn, why)``: ``why`` (not ``None``) says why the only silhouette found
+    was not taken. Raises :class:`EstimationError` when nothing is found.
+    """
+    from .reflection import detect_reflection
+
+    rejected, failure = None, None
+    for search in (where, {}) if where else ({},):
+        try:
+            fit = detect_reflection(image, rim, allow_coreless=True, **search)
+        except EstimationError as err:
+            failure = failure or err
+            continue
+        px = np.asarray(fit.points, np.float64)
+        xn = normalize(px, K, D)
+        if not np.isfinite(xn).all():
+            raise ValueError("some lens outline points cannot be undistorted with D; check D")
+        why = None if fit.core else _coreless_why(fit, xn, cands, K, mirror, r, z)
+        if why is None:
+            return fit, px, xn, None
+        rejected = rejected or why
+    if rejected is not None:
+        return None, None, None, rejected
+    raise failure
 
 
 #: A silhouette without a darker core (uniformly dark glass, or a dark floor) is taken for the
