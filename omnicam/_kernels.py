@@ -323,15 +323,16 @@ def project_points(lo, hi, X, at_infinity, R, t, C, a, b, rim_radius, K, out):
 # front of the camera) is decided per pixel from the interpolated mirror point with a margin,
 # and pixels inside the margin are solved exactly.
 #
-# The phases are separate kernels, run in this order by omnicam.views._build_table:
-#   grid_node_points   output positions of the nodes (and Newton starts of refined grids)
-#   grid_check_points  positions of the check points, the interpolated starts and estimates
+# The phases, run in this order by omnicam.views._build_table; the kernels are those with
+# per-point work, the rest is a few array operations per node or cell in omnicam.views (no
+# kernel to compile or load for them):
+#   views._grid_nodes  output positions of the nodes (and Newton starts of refined grids)
+#   views._grid_checks positions of the check points, the interpolated starts and estimates
 #   solve_view_points  the exact solutions (nodes, check points, pixels left undecided)
-#   score_check_points interpolation errors and margins at the check points
+#   views._score_checks interpolation errors and margins at the check points
 #   classify_cells     each cell's class from its nodes and check points
 #   fill_rows          table entries of decided pixels; the others are marked pending
-# (the entries of the pending pixels, solved by solve_view_points, are written by numpy in
-# omnicam.views._store_entries: one kernel fewer to load)
+#   views._store_entries the entries of the pending pixels, solved by solve_view_points
 # A "grid stack" holds G grids of the same shape and spacing: the coarse grid (G = 1) or the
 # refined grids of the failing coarse cells (G = their number).
 
@@ -604,142 +605,73 @@ def _lagrange4(t):
     )
 
 
-@kernel
-def _interp_weighted(S, r, k, v0, v1, v2, v3, u0, u1, u2, u3):
-    """Tensor cubic interpolation of node values S (NY, NX, 2) in cell (r, k) with the row
-    weights ``v*`` and column weights ``u*`` (:func:`_lagrange4`)."""
-    o1 = 0.0
-    o2 = 0.0
-    for m in range(4):
-        wv = v0 if m == 0 else (v1 if m == 1 else (v2 if m == 2 else v3))
-        row1 = (
-            u0 * S[r + m, k, 0]
-            + u1 * S[r + m, k + 1, 0]
-            + u2 * S[r + m, k + 2, 0]
-            + u3 * S[r + m, k + 3, 0]
-        )
-        row2 = (
-            u0 * S[r + m, k, 1]
-            + u1 * S[r + m, k + 1, 1]
-            + u2 * S[r + m, k + 2, 1]
-            + u3 * S[r + m, k + 3, 1]
-        )
-        o1 += wv * row1
-        o2 += wv * row2
-    return o1, o2
-
-
-@kernel
-def _interp_cell(S, r, k, tv, tu):
-    """Tensor cubic Lagrange interpolation of node values S (NY, NX, 2) in cell (r, k) at the
-    cell coordinates (tv, tu) in [0, 1]^2."""
-    v0, v1, v2, v3 = _lagrange4(tv)
-    u0, u1, u2, u3 = _lagrange4(tu)
-    return _interp_weighted(S, r, k, v0, v1, v2, v3, u0, u1, u2, u3)
-
-
 # -- the phases ---------------------------------------------------------------------------------
 @kernel
-def grid_node_points(lo, hi, origins, spacing, coarse_S, cells, positions, starts):
-    """Output positions and Newton starts of the nodes ``lo:hi`` of a grid stack.
+def cubic_blocks(offsets, blocks, weights, S, out):
+    """Tensor cubic Lagrange interpolation of node values ``S`` into blocks of ``out``.
 
-    Grid ``c`` (of ``positions.shape[0]``) has node (p, q) at output pixel
-    ``origins[c] + ((q - 1) spacing, (p - 1) spacing)``. A refined grid (``cells`` (G, 2): the
-    coarse cell (row, column) it refines) starts Newton from the coarse grid's interpolation
-    ``coarse_S``; the coarse grid (``cells`` empty) has no start (NaN).
-    ``positions``, ``starts``: (G, NY, NX, 2), flat index ``lo:hi`` over (G, NY, NX).
+    ``out`` (G, rows, columns, 2); ``S`` (G, NY, NX, 2), or (1, NY, NX, 2) for one grid that
+    all of ``out``'s grids interpolate. Block b: the entries (i, j) in rows
+    ``blocks[b, 0]:blocks[b, 1]``, columns ``blocks[b, 2]:blocks[b, 3]`` of each grid c are the
+    cubic of cell ``(i + blocks[b, 4] + offsets[c, 0], j + blocks[b, 5] + offsets[c, 1])`` at the
+    cell coordinates whose :func:`_lagrange4` weights are ``weights[b, 0:4]`` (rows) and
+    ``weights[b, 4:8]`` (columns): each of the cell's four node rows summed over its columns,
+    then the rows.
     """
-    NY = positions.shape[1]
-    NX = positions.shape[2]
-    refine = cells.shape[0] > 0
-    for n in range(lo, hi):
-        c = n // (NY * NX)
-        p = (n // NX) % NY
-        q = n % NX
-        positions[c, p, q, 0] = origins[c, 0] + (q - 1.0) * spacing
-        positions[c, p, q, 1] = origins[c, 1] + (p - 1.0) * spacing
-        s1 = _NAN
-        s2 = _NAN
-        if refine:
-            s1, s2 = _interp_cell(
-                coarse_S, cells[c, 0], cells[c, 1], (p - 1.0) / FINE, (q - 1.0) / FINE
-            )
-        starts[c, p, q, 0] = s1
-        starts[c, p, q, 1] = s2
-
-
-@kernel
-def grid_check_points(lo, hi, origins, spacing, S, P, positions, starts, estimates):
-    """Check points ``lo:hi`` of a grid stack: positions, starts and interpolated pixels.
-
-    Check point (c, which, r, k) of grid c with ny x nx cells: ``which`` CHECK_CENTRE: centre of
-    cell (r, k); CHECK_HORIZONTAL_EDGE: middle of the horizontal edge above cell (r, k) (r = ny:
-    below the last row); CHECK_VERTICAL_EDGE: middle of the vertical edge left of it (k = nx:
-    right of the last column). Combinations that name no edge get NaN positions (never solved).
-    ``estimates``: the pixel interpolated from the nodes' pixels ``P``; ``starts``: the mirror
-    point interpolated from ``S`` (solve_view_points gives its pixel). Arrays are
-    (G, 3, ny + 1, nx + 1, k), flat index ``lo:hi``.
-    """
-    ny = positions.shape[2] - 1
-    nx = positions.shape[3] - 1
-    for n in range(lo, hi):
-        k = n % (nx + 1)
-        r = (n // (nx + 1)) % (ny + 1)
-        which = (n // ((nx + 1) * (ny + 1))) % 3
-        c = n // (3 * (nx + 1) * (ny + 1))
-        for m in range(2):
-            positions[c, which, r, k, m] = _NAN
-            starts[c, which, r, k, m] = _NAN
-        for m in range(2):
-            estimates[c, which, r, k, m] = _NAN
-        if which == CHECK_CENTRE and (r == ny or k == nx):
-            continue
-        if which == CHECK_HORIZONTAL_EDGE and k == nx:
-            continue
-        if which == CHECK_VERTICAL_EDGE and r == ny:
-            continue
-        cr = r
-        ck = k
-        tv = 0.5
-        tu = 0.5
-        if which == CHECK_HORIZONTAL_EDGE:
-            tv = 0.0
-            if cr == ny:
-                cr = ny - 1
-                tv = 1.0
-        elif which == CHECK_VERTICAL_EDGE:
-            tu = 0.0
-            if ck == nx:
-                ck = nx - 1
-                tu = 1.0
-        positions[c, which, r, k, 0] = origins[c, 0] + (ck + tu) * spacing
-        positions[c, which, r, k, 1] = origins[c, 1] + (cr + tv) * spacing
-        si1, si2 = _interp_cell(S[c], cr, ck, tv, tu)
-        starts[c, which, r, k, 0] = si1
-        starts[c, which, r, k, 1] = si2
-        xi, yi = _interp_cell(P[c], cr, ck, tv, tu)
-        estimates[c, which, r, k, 0] = xi
-        estimates[c, which, r, k, 1] = yi
+    for c in range(out.shape[0]):
+        src = min(c, S.shape[0] - 1)
+        for b in range(blocks.shape[0]):
+            for i in range(blocks[b, 0], blocks[b, 1]):
+                r = i + blocks[b, 4] + offsets[c, 0]
+                for j in range(blocks[b, 2], blocks[b, 3]):
+                    k = j + blocks[b, 5] + offsets[c, 1]
+                    for cc in range(2):
+                        o = 0.0
+                        for m in range(4):
+                            row = (
+                                weights[b, 4] * S[src, r + m, k, cc]
+                                + weights[b, 5] * S[src, r + m, k + 1, cc]
+                                + weights[b, 6] * S[src, r + m, k + 2, cc]
+                                + weights[b, 7] * S[src, r + m, k + 3, cc]
+                            )
+                            o += weights[b, m] * row
+                        out[c, i, j, cc] = o
 
 
 @kernel
 def solve_view_points(
-    lo, hi, view, rig, positions, starts, pixels_only, ok, S, P, margins, start_pixels
+    lo,
+    hi,
+    view,
+    rig,
+    positions,
+    starts,
+    pixels_only,
+    estimates,
+    with_mirror_error,
+    ok,
+    S,
+    P,
+    margins,
+    errors,
 ):
     """Exact solutions at the output positions ``lo:hi`` (N, 2).
 
     :func:`_view_point` at each: the mirror point ``S``, its pixel ``P`` (the exact table
     entry for ``pixels_only``, NaN if unseen) and ``margins`` = (vis, rim_m) (``-inf, inf``
     and ``ok`` False when not solved), Newton started from ``starts`` where not NaN.
-    ``start_pixels``: the pixels of the starts (check points only; empty for no such output).
+    Check points (``estimates`` (N, 2) the pixels interpolated from the nodes' pixels; empty
+    for nodes and pixels) get their interpolation ``errors`` (N, 2): |exact pixel - estimate|
+    and, ``with_mirror_error``, |exact pixel - pixel of the start| (the interpolated mirror
+    point); inf where not solved or not computed.
     """
-    with_start_pixels = start_pixels.shape[0] > 0
+    checks = estimates.shape[0] > 0
     for n in range(lo, hi):
-        if with_start_pixels:
+        xs = _NAN
+        ys = _NAN
+        if checks and with_mirror_error:
             # the pixel of a mirror point does not depend on the target (margins only)
-            x, y, _m = _view_pixel(rig, starts[n, 0], starts[n, 1], 1.0, 0.0, 0.0, True)
-            start_pixels[n, 0] = x
-            start_pixels[n, 1] = y
+            xs, ys, _m = _view_pixel(rig, starts[n, 0], starts[n, 1], 1.0, 0.0, 0.0, True)
         solved, s1, s2, x, y, vis, rim_m = _view_point(
             view, rig, positions[n, 0], positions[n, 1], starts[n, 0], starts[n, 1], pixels_only
         )
@@ -750,33 +682,16 @@ def solve_view_points(
         P[n, 1] = y
         margins[n, 0] = vis if solved else -np.inf
         margins[n, 1] = rim_m if solved else np.inf
-
-
-@kernel
-def score_check_points(lo, hi, ok, P, margins, estimates, pixel_error, mirror_error, check_margins):
-    """Interpolation errors at the check points ``lo:hi`` from their exact solutions.
-
-    ``pixel_error``: |exact pixel - pixel interpolated from the nodes' pixels|;
-    ``mirror_error``: |exact pixel - pixel of the interpolated mirror point|;
-    ``check_margins``: the exact margins. inf / (-inf, inf) where not solved.
-    """
-    for n in range(lo, hi):
-        check_margins[n, 0] = -np.inf
-        check_margins[n, 1] = np.inf
-        pixel_error[n] = np.inf
-        mirror_error[n] = np.inf
-        if not ok[n]:
-            continue
-        check_margins[n, 0] = margins[n, 0]
-        check_margins[n, 1] = margins[n, 1]
-        xe = P[n, 0]
-        ye = P[n, 1]
-        err = math.sqrt((xe - estimates[n, 0]) ** 2 + (ye - estimates[n, 1]) ** 2)
-        if err == err:
-            pixel_error[n] = err
-        err = math.sqrt((xe - estimates[n, 2]) ** 2 + (ye - estimates[n, 3]) ** 2)
-        if err == err:
-            mirror_error[n] = err
+        if checks:
+            errors[n, 0] = np.inf
+            errors[n, 1] = np.inf
+            if solved:
+                err = math.sqrt((x - estimates[n, 0]) ** 2 + (y - estimates[n, 1]) ** 2)
+                if err == err:
+                    errors[n, 0] = err
+                err = math.sqrt((x - xs) ** 2 + (y - ys) ** 2)
+                if err == err:
+                    errors[n, 1] = err
 
 
 @kernel
@@ -872,7 +787,18 @@ def _cell_error(errors, r, k):
 
 @kernel
 def classify_cells(
-    node_margins, check_margins, pixel_error, mirror_error, half_tol, allow_edge, cls
+    view,
+    origins,
+    spacing,
+    W,
+    H,
+    node_margins,
+    check_margins,
+    pixel_error,
+    mirror_error,
+    half_tol,
+    allow_edge,
+    cls,
 ):
     """Classes (the CELL_* constants) of the cells of a grid stack, ``cls`` (G, ny, nx).
 
@@ -881,7 +807,15 @@ def classify_cells(
     within ``half_tol``, UNSEEN when clearly outside the rim, EDGE
     when that of the mirror points is within ``half_tol`` (only with ``allow_edge``: on the
     coarse grid such a cell is refined instead), else BAD.
+
+    A BAD cell of a perspective view (grid c's cell (r, k) spans the output pixels from
+    ``origins[c] + (k, r) spacing``; the view is ``W`` x ``H``) whose every pixel looks above
+    ``sin_reject`` (where nothing is seen) is UNSEEN instead, neither refined nor visited:
+    with ``sin_reject > 0`` the directions above that elevation form a convex cone, and the
+    pixels whose directions lie in it a convex set of the image plane, so a cell is in it when
+    its four corner pixels are (with a margin of ``1e-9`` for rounding).
     """
+    above_band = view.kind == 0 and 0.0 < view.sin_reject < 1.0
     for c in range(cls.shape[0]):
         for r in range(cls.shape[1]):
             for k in range(cls.shape[2]):
@@ -900,39 +834,28 @@ def classify_cells(
                         cell_class = CELL_UNSEEN
                     elif _cell_error(mirror_error[c], r, k) <= half_tol and allow_edge:
                         cell_class = CELL_EDGE
+                if cell_class == CELL_BAD and above_band:
+                    u0 = origins[c, 0] + k * spacing
+                    v0 = origins[c, 1] + r * spacing
+                    if _corners_above(view, u0, v0, spacing, W, H):
+                        cell_class = CELL_UNSEEN
                 cls[c, r, k] = cell_class
 
 
-@kernel
-def mark_cells_above_band(view, origins, spacing, W, H, cls):
-    """Make UNSEEN the BAD cells of a perspective grid stack whose every pixel looks above
-    ``sin_reject`` (where nothing is seen), so that they are neither refined nor visited.
-
-    With ``sin_reject > 0`` the directions above that elevation form a convex cone, and the
-    pixels whose directions lie in it a convex set of the image plane: a cell is in it when
-    its four corner pixels are (with a margin of ``1e-9`` for rounding).
-    """
-    if view.kind != 0 or not 0.0 < view.sin_reject < 1.0:
-        return
+@kernel(inline="always")
+def _corners_above(view, u0, v0, spacing, W, H):
+    """Whether the four corner pixels of the perspective cell from output pixel (u0, v0) look
+    above ``sin_reject + 1e-9`` (:func:`_view_direction`'s elevation)."""
     limit = view.sin_reject + 1e-9
-    for c in range(cls.shape[0]):
-        for r in range(cls.shape[1]):
-            for k in range(cls.shape[2]):
-                if cls[c, r, k] != CELL_BAD:
-                    continue
-                u0 = origins[c, 0] + k * spacing
-                v0 = origins[c, 1] + r * spacing
-                u1 = min(u0 + spacing - 1.0, W - 1.0)
-                v1 = min(v0 + spacing - 1.0, H - 1.0)
-                above = True
-                for corner in range(4):
-                    u = u0 if corner % 2 == 0 else u1
-                    v = v0 if corner < 2 else v1
-                    _dx, _dy, dz = _view_direction(view, u, v)
-                    if not dz > limit:
-                        above = False
-                if above:
-                    cls[c, r, k] = CELL_UNSEEN
+    u1 = min(u0 + spacing - 1.0, W - 1.0)
+    v1 = min(v0 + spacing - 1.0, H - 1.0)
+    for corner in range(4):
+        u = u0 if corner % 2 == 0 else u1
+        v = v0 if corner < 2 else v1
+        _dx, _dy, dz = _view_direction(view, u, v)
+        if not dz > limit:
+            return False
+    return True
 
 
 @kernel(inline="always")
@@ -1053,7 +976,7 @@ def _column_at_row(S, r, k, c, v0, v1, v2, v3):
 def _row_columns(S, r, k, v0, v1, v2, v3):
     """Node values S (NY, NX, 2) of columns ``k:k + 4`` interpolated to a row of cell (r, k)
     with the row weights ``v*``: ``(x0..x3, y0..y3)``. Their column-weighted sum is
-    :func:`_interp_weighted`'s tensor cubic summed in the other order."""
+    the tensor cubic of omnicam.views._interp_cells summed in the other order."""
     return (
         _column_at_row(S, r, k, 0, v0, v1, v2, v3),
         _column_at_row(S, r, k + 1, 0, v0, v1, v2, v3),
