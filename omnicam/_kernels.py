@@ -377,6 +377,7 @@ CELL_BAD = 0  # refined, else computed exactly pixel by pixel
 CELL_SEEN = 1  # pixels interpolated directly from the nodes' pixels
 CELL_UNSEEN = 2  # every pixel unseen
 CELL_EDGE = 3  # mirror point interpolated, visibility decided per pixel
+CELL_RIM = 4  # as EDGE, every test but the rim's clearly passed: the rim decides per pixel
 CHECK_CENTRE, CHECK_HORIZONTAL_EDGE, CHECK_VERTICAL_EDGE = 0, 1, 2  # kinds of check points
 
 
@@ -532,7 +533,7 @@ def _newton_warm(rig, s1, s2, Xx, Xy, Xz, at_infinity, tol):
 
 @kernel
 def _view_point(view, rig, u, v, g1, g2, pixels_only):
-    """Exact solution at output position (u, v): ``ok, s1, s2, x, y, vis, rim_m``.
+    """Exact solution at output position (u, v): ``ok, s1, s2, x, y, vis, rim_m, other``.
 
     The mirror point ``s`` whose reflection joins the camera centre and the pixel's target
     (``_reflection_point``; from ``(g1, g2)`` first when not NaN, a start interpolated from
@@ -541,7 +542,8 @@ def _view_point(view, rig, u, v, g1, g2, pixels_only):
     Grid points (``pixels_only`` False) are solved on the sheet extended past the rim, up to
     the elevation ``sin_try``, with their margins: ``vis`` = the least of the relative rim
     margin, the cosines of :func:`_view_pixel` and the body test of finite targets, over
-    ``VIEW_CLEAR`` (>= 1: clearly seen), and ``rim_m = 1 - |s|^2 / rim_radius^2``.
+    ``VIEW_CLEAR`` (>= 1: clearly seen), ``rim_m = 1 - |s|^2 / rim_radius^2`` and ``other``,
+    the least of the same margins but the rim's, over ``VIEW_CLEAR``.
     Pixels (``pixels_only``) get project_points' answer: not ok (NaN) when unseen, i.e. above
     ``sin_reject`` (proved in omnicam.views), inside the mirror body, outside the rim, or
     failing a visibility test; no margins.
@@ -552,10 +554,10 @@ def _view_point(view, rig, u, v, g1, g2, pixels_only):
     rim2 = rig.rim_radius * rig.rim_radius
     dx, dy, dz = _view_direction(view, u, v)
     if not dz <= (view.sin_reject if pixels_only else view.sin_try):
-        return False, _NAN, _NAN, _NAN, _NAN, _NAN, _NAN
+        return False, _NAN, _NAN, _NAN, _NAN, _NAN, _NAN, _NAN
     Xx, Xy, Xz = _view_target(view, dx, dy, dz)
     if pixels_only and not at_infinity and _inside_mirror_body(Xx, Xy, Xz, a, b):
-        return False, _NAN, _NAN, _NAN, _NAN, _NAN, _NAN
+        return False, _NAN, _NAN, _NAN, _NAN, _NAN, _NAN, _NAN
     ok = False
     if g1 == g1 and g2 == g2:
         s1, s2, ok = _newton_warm(rig, g1, g2, Xx, Xy, Xz, at_infinity, view.newton_tol)
@@ -576,22 +578,25 @@ def _view_point(view, rig, u, v, g1, g2, pixels_only):
             NEWTON_MAX_ITER,
         )
     if not ok or (pixels_only and s1 * s1 + s2 * s2 > rim2):
-        return False, _NAN, _NAN, _NAN, _NAN, _NAN, _NAN
+        return False, _NAN, _NAN, _NAN, _NAN, _NAN, _NAN, _NAN
     x, y, m = _view_pixel(rig, s1, s2, Xx, Xy, Xz, at_infinity)
     if pixels_only:
         if not m > 0.0:
-            return False, _NAN, _NAN, _NAN, _NAN, _NAN, _NAN
-        return True, s1, s2, x, y, _NAN, _NAN
+            return False, _NAN, _NAN, _NAN, _NAN, _NAN, _NAN, _NAN
+        return True, s1, s2, x, y, _NAN, _NAN, _NAN
     if not (x == x and y == y):
-        return False, _NAN, _NAN, _NAN, _NAN, _NAN, _NAN
+        return False, _NAN, _NAN, _NAN, _NAN, _NAN, _NAN, _NAN
     rim_m = 1.0 - (s1 * s1 + s2 * s2) / rim2
     vis = min(rim_m, m)
+    other = m  # every margin but the rim's
     if not at_infinity:
         rx = (Xx * Xx + Xy * Xy) / (a * a)
         rz = Xz * Xz / (b * b)
         if Xz > -VIEW_CLEAR * math.sqrt(Xx * Xx + Xy * Xy + Xz * Xz):
-            vis = min(vis, (rx - rz + 1.0) / (rx + rz + 1.0))
-    return True, s1, s2, x, y, vis / VIEW_CLEAR, rim_m
+            body = (rx - rz + 1.0) / (rx + rz + 1.0)
+            vis = min(vis, body)
+            other = min(other, body)
+    return True, s1, s2, x, y, vis / VIEW_CLEAR, rim_m, other / VIEW_CLEAR
 
 
 @kernel
@@ -658,8 +663,9 @@ def solve_view_points(
     """Exact solutions at the output positions ``lo:hi`` (N, 2).
 
     :func:`_view_point` at each: the mirror point ``S``, its pixel ``P`` (the exact table
-    entry for ``pixels_only``, NaN if unseen) and ``margins`` = (vis, rim_m) (``-inf, inf``
-    and ``ok`` False when not solved), Newton started from ``starts`` where not NaN.
+    entry for ``pixels_only``, NaN if unseen) and ``margins`` = (vis, rim_m, other)
+    (``-inf, inf, -inf`` and ``ok`` False when not solved), Newton started from ``starts``
+    where not NaN.
     Check points (``estimates`` (N, 2) the pixels interpolated from the nodes' pixels; empty
     for nodes and pixels) get their interpolation ``errors`` (N, 2): |exact pixel - estimate|
     and, ``with_mirror_error``, |exact pixel - pixel of the start| (the interpolated mirror
@@ -672,7 +678,7 @@ def solve_view_points(
         if checks and with_mirror_error:
             # the pixel of a mirror point does not depend on the target (margins only)
             xs, ys, _m = _view_pixel(rig, starts[n, 0], starts[n, 1], 1.0, 0.0, 0.0, True)
-        solved, s1, s2, x, y, vis, rim_m = _view_point(
+        solved, s1, s2, x, y, vis, rim_m, other = _view_point(
             view, rig, positions[n, 0], positions[n, 1], starts[n, 0], starts[n, 1], pixels_only
         )
         ok[n] = solved
@@ -682,6 +688,7 @@ def solve_view_points(
         P[n, 1] = y
         margins[n, 0] = vis if solved else -np.inf
         margins[n, 1] = rim_m if solved else np.inf
+        margins[n, 2] = other if solved else -np.inf
         if checks:
             errors[n, 0] = np.inf
             errors[n, 1] = np.inf
@@ -738,8 +745,18 @@ def _clearly(node_margins, check_margins, r, k, vmin, rmax):
 
 
 @kernel
+def _clearly_seen_but_rim(node_margins, check_margins, r, k):
+    """Whether every visibility margin of cell (r, k) but the rim's (margin 2: the cosines
+    and the body test) is beyond ``VIEW_CLEAR_BOUND`` over the whole cell by
+    :func:`_lattice_bounds`: then the rim alone decides what is seen in it."""
+    lo, _hi = _lattice_bounds(node_margins, check_margins, r, k, np.int64(2))
+    return lo * VIEW_CLEAR >= VIEW_CLEAR_BOUND
+
+
+@kernel
 def _lattice_bounds(node_margins, check_margins, r, k, m):
-    """Bounds ``(lo, hi)`` of the smooth margin ``m`` (0 visibility, 1 rim) over cell (r, k).
+    """Bounds ``(lo, hi)`` of the smooth margin ``m`` (0 visibility, 1 rim, 2 visibility but
+    the rim) over cell (r, k).
 
     Its nine samples form a 3 x 3 lattice of spacing h = 1/2 cell (corners: nodes; middles of
     the edges and centre: check points). On each quarter cell the bilinear interpolant of the
@@ -806,7 +823,8 @@ def classify_cells(
     (:func:`_clearly`) with an error estimate (:func:`_cell_error`) of the pixels
     within ``half_tol``, UNSEEN when clearly outside the rim, EDGE
     when that of the mirror points is within ``half_tol`` (only with ``allow_edge``: on the
-    coarse grid such a cell is refined instead), else BAD.
+    coarse grid such a cell is refined instead), RIM instead of EDGE when every margin but
+    the rim's is clearly positive over it (:func:`_clearly_seen_but_rim`), else BAD.
 
     A BAD cell of a perspective view (grid c's cell (r, k) spans the output pixels from
     ``origins[c] + (k, r) spacing``; the view is ``W`` x ``H``) whose every pixel looks above
@@ -834,6 +852,8 @@ def classify_cells(
                         cell_class = CELL_UNSEEN
                     elif _cell_error(mirror_error[c], r, k) <= half_tol and allow_edge:
                         cell_class = CELL_EDGE
+                        if _clearly_seen_but_rim(node_margins[c], check_margins[c], r, k):
+                            cell_class = CELL_RIM
                 if cell_class == CELL_BAD and above_band:
                     u0 = origins[c, 0] + k * spacing
                     v0 = origins[c, 1] + r * spacing
@@ -886,8 +906,6 @@ def _edge_pixel(view, rig, s1, s2, dx, dy, dz):
     if rim_m < -VIEW_RIM_MARGIN:
         return _NAN, _NAN, True  # clearly outside the rim
     C = rig.C
-    Rc = rig.R
-    tc = rig.t
     z = rig.b * math.sqrt(1.0 + (s1 * s1 + s2 * s2) / a2)
     Nx = b2 * s1 / (a2 * z)
     Ny = b2 * s2 / (a2 * z)
@@ -907,14 +925,30 @@ def _edge_pixel(view, rig, s1, s2, dx, dy, dz):
     target = _clear_sign(
         Nx * ex + Ny * ey - ez, nn2 * (ex * ex + ey * ey + ez * ez), VIEW_COS_MARGIN
     )
-    xc = Rc[0, 0] * s1 + Rc[0, 1] * s2 + Rc[0, 2] * z + tc[0]
-    yc = Rc[1, 0] * s1 + Rc[1, 1] * s2 + Rc[1, 2] * z + tc[1]
-    zc = Rc[2, 0] * s1 + Rc[2, 1] * s2 + Rc[2, 2] * z + tc[2]
+    xc, yc, zc = _camera_frame(rig, s1, s2, z)
     front = _clear_sign(zc, xc * xc + yc * yc + zc * zc, VIEW_COS_MARGIN)
     if camera < 0 or target < 0 or front < 0:
         return _NAN, _NAN, True  # clearly unseen
     if not (rim_m > VIEW_RIM_MARGIN and camera > 0 and target > 0 and front > 0):
         return _NAN, _NAN, False
+    return _camera_pixel(rig, xc, yc, zc)
+
+
+@kernel(inline="always")
+def _camera_frame(rig, s1, s2, z):
+    """The mirror point (s1, s2, z) in the camera frame."""
+    Rc = rig.R
+    tc = rig.t
+    xc = Rc[0, 0] * s1 + Rc[0, 1] * s2 + Rc[0, 2] * z + tc[0]
+    yc = Rc[1, 0] * s1 + Rc[1, 1] * s2 + Rc[1, 2] * z + tc[1]
+    zc = Rc[2, 0] * s1 + Rc[2, 1] * s2 + Rc[2, 2] * z + tc[2]
+    return xc, yc, zc
+
+
+@kernel(inline="always")
+def _camera_pixel(rig, xc, yc, zc):
+    """Pixel of a camera-frame point in front of the camera, as :func:`_view_pixel` computes
+    it: ``(x, y, True)``, or ``(NaN, NaN, False)`` if not finite."""
     xn = xc / zc
     yn = yc / zc
     if rig.has_dist:
@@ -925,6 +959,23 @@ def _edge_pixel(view, rig, s1, s2, dx, dy, dz):
     if xi == xi and yi == yi:
         return xi, yi, True
     return _NAN, _NAN, False
+
+
+@kernel(inline="always")
+def _rim_pixel(rig, s1, s2):
+    """Entry of a pixel of a RIM sub-cell from its interpolated mirror point: ``(x, y,
+    decided)``. Every test but the rim's clearly passes in such a cell, so the entry is the
+    one :func:`_edge_pixel` gives: unseen past the rim's margin, the pixel of the mirror
+    point inside it, undecided within it."""
+    rim2 = rig.rim_radius * rig.rim_radius
+    rim_m = (rim2 - (s1 * s1 + s2 * s2)) / rim2
+    if rim_m < -VIEW_RIM_MARGIN:
+        return _NAN, _NAN, True
+    if not rim_m > VIEW_RIM_MARGIN:
+        return _NAN, _NAN, False
+    z = rig.b * math.sqrt(1.0 + (s1 * s1 + s2 * s2) / (rig.a * rig.a))
+    xc, yc, zc = _camera_frame(rig, s1, s2, z)
+    return _camera_pixel(rig, xc, yc, zc)
 
 
 @kernel
@@ -1016,7 +1067,8 @@ def _fill_refined_cell(
     grid; ``fine_row, fine_tv``: the sub-cell row and the position in it; ``fine_weights``
     (4, g): column weights per column offset in a sub-cell. SEEN sub-cells interpolate the
     pixel, UNSEEN ones are unseen (both as :func:`fill_rows` writes coarse cells), EDGE ones
-    decide per pixel from the interpolated mirror point (:func:`_edge_pixel`); what stays
+    decide per pixel from the interpolated mirror point (:func:`_edge_pixel`), RIM ones by
+    its rim margin alone (:func:`_rim_pixel`: no direction to compute); what stays
     undecided is marked in ``pending``. ``rowx, rowy``: row i of the float maps
     (:func:`fill_rows`). Returns the counts of pending and of unseen entries.
     """
@@ -1063,7 +1115,9 @@ def _fill_refined_cell(
             x = _NAN
             y = _NAN
             rim2 = rig.rim_radius * rig.rim_radius
-            if fine_class == CELL_EDGE and (rim2 - (c1 * c1 + c2 * c2)) / rim2 < -VIEW_RIM_MARGIN:
+            if fine_class == CELL_RIM:
+                x, y, decided = _rim_pixel(rig, c1, c2)
+            elif fine_class == CELL_EDGE and (rim2 - (c1 * c1 + c2 * c2)) / rim2 < -VIEW_RIM_MARGIN:
                 # clearly outside the rim: unseen whatever the tests on the direction say, as
                 # _edge_pixel decides it (the half of an edge sub-cell past the rim costs no
                 # direction)

@@ -640,7 +640,7 @@ def _solve(
     ok = np.zeros(shape, np.bool_)
     S = np.empty(shape + (2,))
     P = np.empty(shape + (2,))
-    margins = np.empty(shape + (2,))
+    margins = np.empty(shape + (3,))
     checks = estimates is not None
     if checks:
         errors = np.empty(shape + (2,))
@@ -659,7 +659,7 @@ def _solve(
         ok.reshape(-1),
         S.reshape(-1, 2),
         P.reshape(-1, 2),
-        margins.reshape(-1, 2),
+        margins.reshape(-1, 3),
         errors.reshape(-1, 2),
         min_chunk=32,
     )
