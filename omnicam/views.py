@@ -19,7 +19,7 @@ grid of nodes about ``CELL_DEGREES`` apart, on the mirror sheet extended past th
 smooth across the edge of what the mirror sees. Each cell is interpolated by the cubic Lagrange
 polynomial of its 4x4 nodes, and its error is *measured* against the exact answer at the cell centre
 and the middles of its edges (where the error of that interpolant peaks); a cell whose estimate
-exceeds ``TOLERANCE / 2`` is refined on a grid 4 times finer, and what still fails is solved pixel
+exceeds ``TOLERANCE / 2`` is refined on a grid 2 times finer, and what still fails is solved pixel
 by pixel. Visibility is decided per cell when all of it is clearly seen or clearly unseen, else per
 pixel with a margin, and exactly inside the margin. ``tests/test_views.py`` compares whole tables
 with the exact projection of every pixel.
@@ -310,7 +310,7 @@ def visible_elevation_range(camera) -> tuple[float, float]:
 # -- the fast path: the phases of omnicam._kernels -----------------------------------------------
 #: Angular size of a coarse cell, degrees: the node spacing is the multiple of 4 output pixels
 #: (between 8 and 64) closest to it. Cells whose measured interpolation error exceeds
-#: TOLERANCE / 2 are refined on a grid 4 times finer, and sub-cells that still fail are computed
+#: TOLERANCE / 2 are refined on a grid 2 times finer, and sub-cells that still fail are computed
 #: exactly pixel by pixel, so this only trades speed, never accuracy.
 CELL_DEGREES = 5.0
 
