@@ -983,25 +983,6 @@ def _rim_pixel(rig, s1, s2):
     return _camera_pixel(rig, xc, yc, zc)
 
 
-@kernel
-def table_weights(view, column_cos, column_sin, weights, fine_weights):
-    """Per-column cos / sin of the azimuth (panoramas), and the cubic weights of the node
-    columns per column offset in a cell (``weights`` (4, step)) and in a refined sub-cell
-    (``fine_weights`` (4, step / FINE))."""
-    if view.kind != 0:
-        for j in range(column_cos.shape[0]):
-            column_cos[j] = math.cos(view.az_step * j)
-            column_sin[j] = math.sin(view.az_step * j)
-    for w in (weights, fine_weights):
-        step = w.shape[1]
-        for t in range(step):
-            w0, w1, w2, w3 = _lagrange4(t / step)
-            w[0, t] = w0
-            w[1, t] = w1
-            w[2, t] = w2
-            w[3, t] = w3
-
-
 @kernel(inline="always")
 def _pixel_direction(view, i, j, row_z, row_cos, column_cos, column_sin):
     """Unit direction of output pixel (row i, column j), as :func:`_view_direction` with the
@@ -1237,7 +1218,8 @@ def fill_rows(
 
     ``cls`` (ny, nx): classes of the coarse cells, whose nodes' pixels are ``P`` (NY, NX, 2);
     ``refined_index`` (ny, nx): which grid of the refined stack (``fine_*``) refines a BAD cell.
-    ``weights`` (4, step), ``fine_weights`` (4, step / FINE): :func:`table_weights`.
+    ``weights`` (4, step), ``fine_weights`` (4, step / FINE): the column weights per column
+    offset in a cell and a sub-cell (omnicam.views._build_table).
     ``mode`` 0 writes float32 ``outx, outy`` (H, W); mode 1 writes ``out16`` (H, W, 2) int16
     and ``outf16`` (H, W) uint16 as ``cv2.convertMaps(.., CV_16SC2)`` does, each row written
     in float first (to a scratch row) and converted once (:func:`_row_fixed`): the cells'

@@ -698,9 +698,12 @@ def _build_table(view, rig, size, step, mode, outputs, stats):
     )
     fine_cls = fine.classify(view, size, half_tol, True)
     # the pixels: interpolated, unseen, decided at the edge, or pending an exact solution
-    column_cos, column_sin = np.empty(w), np.empty(w)
-    weights, fine_weights = np.empty((4, step)), np.empty((4, step // k.FINE))
-    k.table_weights(view, column_cos, column_sin, weights, fine_weights)
+    # the cubic weights of the node columns per column offset in a cell and in a refined
+    # sub-cell, and the panoramas' per-column cos / sin of the azimuth (as _view_direction)
+    weights = np.array(_lagrange4(np.arange(step) / step))
+    fine_weights = np.array(_lagrange4(np.arange(step // k.FINE) / (step // k.FINE)))
+    azimuth = view.az_step * np.arange(w)
+    column_cos, column_sin = np.cos(azimuth), np.sin(azimuth)
     pending = np.zeros((h, w), np.bool_)  # bool: numpy's nonzero is ten times faster than on uint8
     row_counts = np.empty((h, 2), np.int64)  # pending and unseen entries per row
     outx, outy, out16, outf16 = outputs
