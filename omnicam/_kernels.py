@@ -473,7 +473,6 @@ def _view_pixel(rig, s1, s2, Xx, Xy, Xz, at_infinity):
     C = rig.C
     Rc = rig.R
     tc = rig.t
-    K = rig.K
     z = rig.b * math.sqrt(1.0 + (s1 * s1 + s2 * s2) / a2)
     Nx = b2 * s1 / (a2 * z)
     Ny = b2 * s2 / (a2 * z)
@@ -496,11 +495,8 @@ def _view_pixel(rig, s1, s2, Xx, Xy, Xz, at_infinity):
     m = min(cos_camera, min(cos_target, cos_front))
     if not zc > 0.0:
         return _NAN, _NAN, m
-    xn = xc / zc
-    yn = yc / zc
-    if rig.has_dist:
-        xn, yn = _distort(rig, xn, yn)
-    return K[0, 0] * xn + K[0, 1] * yn + K[0, 2], K[1, 0] * xn + K[1, 1] * yn + K[1, 2], m
+    x, y, _finite = _camera_pixel(rig, xc, yc, zc)
+    return x, y, m
 
 
 @kernel
@@ -950,10 +946,11 @@ def _camera_frame(rig, s1, s2, z):
     return xc, yc, zc
 
 
-@kernel(inline="always")
+@kernel
 def _camera_pixel(rig, xc, yc, zc):
-    """Pixel of a camera-frame point in front of the camera, as :func:`_view_pixel` computes
-    it: ``(x, y, True)``, or ``(NaN, NaN, False)`` if not finite."""
+    """Pixel of a camera-frame point in front of the camera (eq. 6 with OpenCV's distortion,
+    :func:`_distort`, then ``K`` with skew): ``(x, y, True)``, or ``(NaN, NaN, False)`` if not
+    finite. Not inlined: the one copy of the distortion model in the view kernels."""
     xn = xc / zc
     yn = yc / zc
     if rig.has_dist:
