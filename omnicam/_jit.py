@@ -20,9 +20,9 @@ from concurrent.futures import ThreadPoolExecutor
 import numba
 
 #: Cold compile time of everything the demo and a first unwarp use, seconds (benchmarks/
-#: bench_first_run.py on 2 cores: 15.8-17.5 s wall on 2026-12-02), quoted by the first-compile
-#: notice.
-COMPILE_SECONDS = 17
+#: bench_first_run.py on 2 cores under a load of 2-3: 13.4-15.1 s wall, median 15.0 s, on
+#: 2026-12-02, against 16.4-16.8 s for the kernels before), quoted by the first-compile notice.
+COMPILE_SECONDS = 15
 
 _state = {"noticed": False, "pool": None}
 
