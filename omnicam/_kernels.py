@@ -495,7 +495,7 @@ def _view_pixel(rig, s1, s2, Xx, Xy, Xz, at_infinity):
     m = min(cos_camera, min(cos_target, cos_front))
     if not zc > 0.0:
         return _NAN, _NAN, m
-    x, y, _finite = _camera_pixel(rig, xc, yc, zc)
+    x, y, _finite = _camera_pixel_call(rig, xc, yc, zc)
     return x, y, m
 
 
@@ -932,7 +932,7 @@ def _edge_pixel(view, rig, s1, s2, dx, dy, dz):
         return _NAN, _NAN, True  # clearly unseen
     if not (rim_m > VIEW_RIM_MARGIN and camera > 0 and target > 0 and front > 0):
         return _NAN, _NAN, False
-    return _camera_pixel(rig, xc, yc, zc)
+    return _camera_pixel_call(rig, xc, yc, zc)
 
 
 @kernel(inline="always")
@@ -946,11 +946,12 @@ def _camera_frame(rig, s1, s2, z):
     return xc, yc, zc
 
 
-@kernel
+@kernel(inline="always")
 def _camera_pixel(rig, xc, yc, zc):
     """Pixel of a camera-frame point in front of the camera (eq. 6 with OpenCV's distortion,
     :func:`_distort`, then ``K`` with skew): ``(x, y, True)``, or ``(NaN, NaN, False)`` if not
-    finite. Not inlined: the one copy of the distortion model in the view kernels."""
+    finite. Inlined in the per-pixel loop of RIM cells (:func:`_rim_pixel`); the other callers
+    share one compiled copy, :func:`_camera_pixel_call`."""
     xn = xc / zc
     yn = yc / zc
     if rig.has_dist:
@@ -961,6 +962,14 @@ def _camera_pixel(rig, xc, yc, zc):
     if xi == xi and yi == yi:
         return xi, yi, True
     return _NAN, _NAN, False
+
+
+@kernel
+def _camera_pixel_call(rig, xc, yc, zc):
+    """:func:`_camera_pixel` as a function of its own, not inlined: one compiled copy of the
+    distortion model for :func:`_view_pixel` and :func:`_edge_pixel` (a call per exact
+    solution costs nothing measurable; per pixel of a RIM cell it cost a third of fill_rows)."""
+    return _camera_pixel(rig, xc, yc, zc)
 
 
 @kernel(inline="always")
