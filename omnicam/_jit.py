@@ -20,9 +20,10 @@ from concurrent.futures import ThreadPoolExecutor
 import numba
 
 #: Cold compile time of everything the demo and a first unwarp use, seconds (benchmarks/
-#: bench_first_run.py on 2 cores: 15.8-17.5 s wall on 2026-12-02), quoted by the first-compile
-#: notice.
-COMPILE_SECONDS = 17
+#: bench_first_run.py on 2 cores under a load of 2-4.6: 13.4-15.1 s wall in 5 runs, median
+#: 13.9 s, on 2026-12-02, against 16.4-17.9 s for the kernels before in the same interleaved
+#: runs), quoted by the first-compile notice.
+COMPILE_SECONDS = 15
 
 _state = {"noticed": False, "pool": None}
 

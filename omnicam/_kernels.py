@@ -323,15 +323,16 @@ def project_points(lo, hi, X, at_infinity, R, t, C, a, b, rim_radius, K, out):
 # front of the camera) is decided per pixel from the interpolated mirror point with a margin,
 # and pixels inside the margin are solved exactly.
 #
-# The phases are separate kernels, run in this order by omnicam.views._build_table:
-#   grid_node_points   output positions of the nodes (and Newton starts of refined grids)
-#   grid_check_points  positions of the check points, the interpolated starts and estimates
+# The phases, run in this order by omnicam.views._build_table; the kernels are those with
+# per-point work, the rest is a few array operations per node or cell in omnicam.views (no
+# kernel to compile or load for them):
+#   views._grid_nodes  output positions of the nodes (and Newton starts of refined grids)
+#   views._grid_checks positions of the check points, the interpolated starts and estimates
 #   solve_view_points  the exact solutions (nodes, check points, pixels left undecided)
-#   score_check_points interpolation errors and margins at the check points
+#   views._score_checks interpolation errors and margins at the check points
 #   classify_cells     each cell's class from its nodes and check points
 #   fill_rows          table entries of decided pixels; the others are marked pending
-# (the entries of the pending pixels, solved by solve_view_points, are written by numpy in
-# omnicam.views._store_entries: one kernel fewer to load)
+#   views._store_entries the entries of the pending pixels, solved by solve_view_points
 # A "grid stack" holds G grids of the same shape and spacing: the coarse grid (G = 1) or the
 # refined grids of the failing coarse cells (G = their number).
 
@@ -371,11 +372,17 @@ VIEW_CLEAR = 0.05  # margins (relative rim, cosines, body) of cells wholly seen 
 VIEW_CLEAR_BOUND = 5e-3  # the same, for a bound of the margin over the cell (_lattice_bounds)
 LATTICE_SAFETY = 8.0  # factor on _lattice_bounds' estimate of the bilinear interpolation error
 UNSEEN = -10.0  # omnicam.views.UNSEEN
-FINE = 4  # refinement factor of failing cells
+#: refinement factor of failing cells: the cubic's error falls as h^4, so halving the node
+#: spacing divides it by 16, which brings every refined cell of issue 12's straddling views
+#: (coarse estimates up to 0.06 px) and of 108 tables over the test rigs within TOLERANCE / 2
+#: (a sub-cell that still fails is solved pixel by pixel); 4 gave the same sub-cell verdicts
+#: for a third more exact solutions at nodes and check points
+FINE = 2
 CELL_BAD = 0  # refined, else computed exactly pixel by pixel
 CELL_SEEN = 1  # pixels interpolated directly from the nodes' pixels
 CELL_UNSEEN = 2  # every pixel unseen
 CELL_EDGE = 3  # mirror point interpolated, visibility decided per pixel
+CELL_RIM = 4  # as EDGE, every test but the rim's clearly passed: the rim decides per pixel
 CHECK_CENTRE, CHECK_HORIZONTAL_EDGE, CHECK_VERTICAL_EDGE = 0, 1, 2  # kinds of check points
 
 
@@ -466,7 +473,6 @@ def _view_pixel(rig, s1, s2, Xx, Xy, Xz, at_infinity):
     C = rig.C
     Rc = rig.R
     tc = rig.t
-    K = rig.K
     z = rig.b * math.sqrt(1.0 + (s1 * s1 + s2 * s2) / a2)
     Nx = b2 * s1 / (a2 * z)
     Ny = b2 * s2 / (a2 * z)
@@ -489,11 +495,8 @@ def _view_pixel(rig, s1, s2, Xx, Xy, Xz, at_infinity):
     m = min(cos_camera, min(cos_target, cos_front))
     if not zc > 0.0:
         return _NAN, _NAN, m
-    xn = xc / zc
-    yn = yc / zc
-    if rig.has_dist:
-        xn, yn = _distort(rig, xn, yn)
-    return K[0, 0] * xn + K[0, 1] * yn + K[0, 2], K[1, 0] * xn + K[1, 1] * yn + K[1, 2], m
+    x, y, _finite = _camera_pixel_call(rig, xc, yc, zc)
+    return x, y, m
 
 
 @kernel
@@ -531,7 +534,7 @@ def _newton_warm(rig, s1, s2, Xx, Xy, Xz, at_infinity, tol):
 
 @kernel
 def _view_point(view, rig, u, v, g1, g2, pixels_only):
-    """Exact solution at output position (u, v): ``ok, s1, s2, x, y, vis, rim_m``.
+    """Exact solution at output position (u, v): ``ok, s1, s2, x, y, vis, rim_m, other``.
 
     The mirror point ``s`` whose reflection joins the camera centre and the pixel's target
     (``_reflection_point``; from ``(g1, g2)`` first when not NaN, a start interpolated from
@@ -540,7 +543,8 @@ def _view_point(view, rig, u, v, g1, g2, pixels_only):
     Grid points (``pixels_only`` False) are solved on the sheet extended past the rim, up to
     the elevation ``sin_try``, with their margins: ``vis`` = the least of the relative rim
     margin, the cosines of :func:`_view_pixel` and the body test of finite targets, over
-    ``VIEW_CLEAR`` (>= 1: clearly seen), and ``rim_m = 1 - |s|^2 / rim_radius^2``.
+    ``VIEW_CLEAR`` (>= 1: clearly seen), ``rim_m = 1 - |s|^2 / rim_radius^2`` and ``other``,
+    the least of the same margins but the rim's, over ``VIEW_CLEAR``.
     Pixels (``pixels_only``) get project_points' answer: not ok (NaN) when unseen, i.e. above
     ``sin_reject`` (proved in omnicam.views), inside the mirror body, outside the rim, or
     failing a visibility test; no margins.
@@ -551,10 +555,10 @@ def _view_point(view, rig, u, v, g1, g2, pixels_only):
     rim2 = rig.rim_radius * rig.rim_radius
     dx, dy, dz = _view_direction(view, u, v)
     if not dz <= (view.sin_reject if pixels_only else view.sin_try):
-        return False, _NAN, _NAN, _NAN, _NAN, _NAN, _NAN
+        return False, _NAN, _NAN, _NAN, _NAN, _NAN, _NAN, _NAN
     Xx, Xy, Xz = _view_target(view, dx, dy, dz)
     if pixels_only and not at_infinity and _inside_mirror_body(Xx, Xy, Xz, a, b):
-        return False, _NAN, _NAN, _NAN, _NAN, _NAN, _NAN
+        return False, _NAN, _NAN, _NAN, _NAN, _NAN, _NAN, _NAN
     ok = False
     if g1 == g1 and g2 == g2:
         s1, s2, ok = _newton_warm(rig, g1, g2, Xx, Xy, Xz, at_infinity, view.newton_tol)
@@ -575,22 +579,25 @@ def _view_point(view, rig, u, v, g1, g2, pixels_only):
             NEWTON_MAX_ITER,
         )
     if not ok or (pixels_only and s1 * s1 + s2 * s2 > rim2):
-        return False, _NAN, _NAN, _NAN, _NAN, _NAN, _NAN
+        return False, _NAN, _NAN, _NAN, _NAN, _NAN, _NAN, _NAN
     x, y, m = _view_pixel(rig, s1, s2, Xx, Xy, Xz, at_infinity)
     if pixels_only:
         if not m > 0.0:
-            return False, _NAN, _NAN, _NAN, _NAN, _NAN, _NAN
-        return True, s1, s2, x, y, _NAN, _NAN
+            return False, _NAN, _NAN, _NAN, _NAN, _NAN, _NAN, _NAN
+        return True, s1, s2, x, y, _NAN, _NAN, _NAN
     if not (x == x and y == y):
-        return False, _NAN, _NAN, _NAN, _NAN, _NAN, _NAN
+        return False, _NAN, _NAN, _NAN, _NAN, _NAN, _NAN, _NAN
     rim_m = 1.0 - (s1 * s1 + s2 * s2) / rim2
     vis = min(rim_m, m)
+    other = m  # every margin but the rim's
     if not at_infinity:
         rx = (Xx * Xx + Xy * Xy) / (a * a)
         rz = Xz * Xz / (b * b)
         if Xz > -VIEW_CLEAR * math.sqrt(Xx * Xx + Xy * Xy + Xz * Xz):
-            vis = min(vis, (rx - rz + 1.0) / (rx + rz + 1.0))
-    return True, s1, s2, x, y, vis / VIEW_CLEAR, rim_m
+            body = (rx - rz + 1.0) / (rx + rz + 1.0)
+            vis = min(vis, body)
+            other = min(other, body)
+    return True, s1, s2, x, y, vis / VIEW_CLEAR, rim_m, other / VIEW_CLEAR
 
 
 @kernel
@@ -604,143 +611,75 @@ def _lagrange4(t):
     )
 
 
-@kernel
-def _interp_weighted(S, r, k, v0, v1, v2, v3, u0, u1, u2, u3):
-    """Tensor cubic interpolation of node values S (NY, NX, 2) in cell (r, k) with the row
-    weights ``v*`` and column weights ``u*`` (:func:`_lagrange4`)."""
-    o1 = 0.0
-    o2 = 0.0
-    for m in range(4):
-        wv = v0 if m == 0 else (v1 if m == 1 else (v2 if m == 2 else v3))
-        row1 = (
-            u0 * S[r + m, k, 0]
-            + u1 * S[r + m, k + 1, 0]
-            + u2 * S[r + m, k + 2, 0]
-            + u3 * S[r + m, k + 3, 0]
-        )
-        row2 = (
-            u0 * S[r + m, k, 1]
-            + u1 * S[r + m, k + 1, 1]
-            + u2 * S[r + m, k + 2, 1]
-            + u3 * S[r + m, k + 3, 1]
-        )
-        o1 += wv * row1
-        o2 += wv * row2
-    return o1, o2
-
-
-@kernel
-def _interp_cell(S, r, k, tv, tu):
-    """Tensor cubic Lagrange interpolation of node values S (NY, NX, 2) in cell (r, k) at the
-    cell coordinates (tv, tu) in [0, 1]^2."""
-    v0, v1, v2, v3 = _lagrange4(tv)
-    u0, u1, u2, u3 = _lagrange4(tu)
-    return _interp_weighted(S, r, k, v0, v1, v2, v3, u0, u1, u2, u3)
-
-
 # -- the phases ---------------------------------------------------------------------------------
 @kernel
-def grid_node_points(lo, hi, origins, spacing, coarse_S, cells, positions, starts):
-    """Output positions and Newton starts of the nodes ``lo:hi`` of a grid stack.
+def cubic_blocks(offsets, blocks, weights, S, out):
+    """Tensor cubic Lagrange interpolation of node values ``S`` into blocks of ``out``.
 
-    Grid ``c`` (of ``positions.shape[0]``) has node (p, q) at output pixel
-    ``origins[c] + ((q - 1) spacing, (p - 1) spacing)``. A refined grid (``cells`` (G, 2): the
-    coarse cell (row, column) it refines) starts Newton from the coarse grid's interpolation
-    ``coarse_S``; the coarse grid (``cells`` empty) has no start (NaN).
-    ``positions``, ``starts``: (G, NY, NX, 2), flat index ``lo:hi`` over (G, NY, NX).
+    ``out`` (G, rows, columns, 2); ``S`` (G, NY, NX, 2), or (1, NY, NX, 2) for one grid that
+    all of ``out``'s grids interpolate. Block b: the entries (i, j) in rows
+    ``blocks[b, 0]:blocks[b, 1]``, columns ``blocks[b, 2]:blocks[b, 3]`` of each grid c are the
+    cubic of cell ``(i + blocks[b, 4] + offsets[c, 0], j + blocks[b, 5] + offsets[c, 1])`` at the
+    cell coordinates whose :func:`_lagrange4` weights are ``weights[b, 0:4]`` (rows) and
+    ``weights[b, 4:8]`` (columns): each of the cell's four node rows summed over its columns,
+    then the rows.
     """
-    NY = positions.shape[1]
-    NX = positions.shape[2]
-    refine = cells.shape[0] > 0
-    for n in range(lo, hi):
-        c = n // (NY * NX)
-        p = (n // NX) % NY
-        q = n % NX
-        positions[c, p, q, 0] = origins[c, 0] + (q - 1.0) * spacing
-        positions[c, p, q, 1] = origins[c, 1] + (p - 1.0) * spacing
-        s1 = _NAN
-        s2 = _NAN
-        if refine:
-            s1, s2 = _interp_cell(
-                coarse_S, cells[c, 0], cells[c, 1], (p - 1.0) / FINE, (q - 1.0) / FINE
-            )
-        starts[c, p, q, 0] = s1
-        starts[c, p, q, 1] = s2
-
-
-@kernel
-def grid_check_points(lo, hi, origins, spacing, S, P, positions, starts, estimates):
-    """Check points ``lo:hi`` of a grid stack: positions, starts and interpolated pixels.
-
-    Check point (c, which, r, k) of grid c with ny x nx cells: ``which`` CHECK_CENTRE: centre of
-    cell (r, k); CHECK_HORIZONTAL_EDGE: middle of the horizontal edge above cell (r, k) (r = ny:
-    below the last row); CHECK_VERTICAL_EDGE: middle of the vertical edge left of it (k = nx:
-    right of the last column). Combinations that name no edge get NaN positions (never solved).
-    ``estimates``: the pixel interpolated from the nodes' pixels ``P``; ``starts``: the mirror
-    point interpolated from ``S`` (solve_view_points gives its pixel). Arrays are
-    (G, 3, ny + 1, nx + 1, k), flat index ``lo:hi``.
-    """
-    ny = positions.shape[2] - 1
-    nx = positions.shape[3] - 1
-    for n in range(lo, hi):
-        k = n % (nx + 1)
-        r = (n // (nx + 1)) % (ny + 1)
-        which = (n // ((nx + 1) * (ny + 1))) % 3
-        c = n // (3 * (nx + 1) * (ny + 1))
-        for m in range(2):
-            positions[c, which, r, k, m] = _NAN
-            starts[c, which, r, k, m] = _NAN
-        for m in range(2):
-            estimates[c, which, r, k, m] = _NAN
-        if which == CHECK_CENTRE and (r == ny or k == nx):
-            continue
-        if which == CHECK_HORIZONTAL_EDGE and k == nx:
-            continue
-        if which == CHECK_VERTICAL_EDGE and r == ny:
-            continue
-        cr = r
-        ck = k
-        tv = 0.5
-        tu = 0.5
-        if which == CHECK_HORIZONTAL_EDGE:
-            tv = 0.0
-            if cr == ny:
-                cr = ny - 1
-                tv = 1.0
-        elif which == CHECK_VERTICAL_EDGE:
-            tu = 0.0
-            if ck == nx:
-                ck = nx - 1
-                tu = 1.0
-        positions[c, which, r, k, 0] = origins[c, 0] + (ck + tu) * spacing
-        positions[c, which, r, k, 1] = origins[c, 1] + (cr + tv) * spacing
-        si1, si2 = _interp_cell(S[c], cr, ck, tv, tu)
-        starts[c, which, r, k, 0] = si1
-        starts[c, which, r, k, 1] = si2
-        xi, yi = _interp_cell(P[c], cr, ck, tv, tu)
-        estimates[c, which, r, k, 0] = xi
-        estimates[c, which, r, k, 1] = yi
+    for c in range(out.shape[0]):
+        src = min(c, S.shape[0] - 1)
+        for b in range(blocks.shape[0]):
+            for i in range(blocks[b, 0], blocks[b, 1]):
+                r = i + blocks[b, 4] + offsets[c, 0]
+                for j in range(blocks[b, 2], blocks[b, 3]):
+                    k = j + blocks[b, 5] + offsets[c, 1]
+                    for cc in range(2):
+                        o = 0.0
+                        for m in range(4):
+                            row = (
+                                weights[b, 4] * S[src, r + m, k, cc]
+                                + weights[b, 5] * S[src, r + m, k + 1, cc]
+                                + weights[b, 6] * S[src, r + m, k + 2, cc]
+                                + weights[b, 7] * S[src, r + m, k + 3, cc]
+                            )
+                            o += weights[b, m] * row
+                        out[c, i, j, cc] = o
 
 
 @kernel
 def solve_view_points(
-    lo, hi, view, rig, positions, starts, pixels_only, ok, S, P, margins, start_pixels
+    lo,
+    hi,
+    view,
+    rig,
+    positions,
+    starts,
+    pixels_only,
+    estimates,
+    with_mirror_error,
+    ok,
+    S,
+    P,
+    margins,
+    errors,
 ):
     """Exact solutions at the output positions ``lo:hi`` (N, 2).
 
     :func:`_view_point` at each: the mirror point ``S``, its pixel ``P`` (the exact table
-    entry for ``pixels_only``, NaN if unseen) and ``margins`` = (vis, rim_m) (``-inf, inf``
-    and ``ok`` False when not solved), Newton started from ``starts`` where not NaN.
-    ``start_pixels``: the pixels of the starts (check points only; empty for no such output).
+    entry for ``pixels_only``, NaN if unseen) and ``margins`` = (vis, rim_m, other)
+    (``-inf, inf, -inf`` and ``ok`` False when not solved), Newton started from ``starts``
+    where not NaN.
+    Check points (``estimates`` (N, 2) the pixels interpolated from the nodes' pixels; empty
+    for nodes and pixels) get their interpolation ``errors`` (N, 2): |exact pixel - estimate|
+    and, ``with_mirror_error``, |exact pixel - pixel of the start| (the interpolated mirror
+    point); inf where not solved or not computed.
     """
-    with_start_pixels = start_pixels.shape[0] > 0
+    checks = estimates.shape[0] > 0
     for n in range(lo, hi):
-        if with_start_pixels:
+        xs = _NAN
+        ys = _NAN
+        if checks and with_mirror_error:
             # the pixel of a mirror point does not depend on the target (margins only)
-            x, y, _m = _view_pixel(rig, starts[n, 0], starts[n, 1], 1.0, 0.0, 0.0, True)
-            start_pixels[n, 0] = x
-            start_pixels[n, 1] = y
-        solved, s1, s2, x, y, vis, rim_m = _view_point(
+            xs, ys, _m = _view_pixel(rig, starts[n, 0], starts[n, 1], 1.0, 0.0, 0.0, True)
+        solved, s1, s2, x, y, vis, rim_m, other = _view_point(
             view, rig, positions[n, 0], positions[n, 1], starts[n, 0], starts[n, 1], pixels_only
         )
         ok[n] = solved
@@ -750,33 +689,17 @@ def solve_view_points(
         P[n, 1] = y
         margins[n, 0] = vis if solved else -np.inf
         margins[n, 1] = rim_m if solved else np.inf
-
-
-@kernel
-def score_check_points(lo, hi, ok, P, margins, estimates, pixel_error, mirror_error, check_margins):
-    """Interpolation errors at the check points ``lo:hi`` from their exact solutions.
-
-    ``pixel_error``: |exact pixel - pixel interpolated from the nodes' pixels|;
-    ``mirror_error``: |exact pixel - pixel of the interpolated mirror point|;
-    ``check_margins``: the exact margins. inf / (-inf, inf) where not solved.
-    """
-    for n in range(lo, hi):
-        check_margins[n, 0] = -np.inf
-        check_margins[n, 1] = np.inf
-        pixel_error[n] = np.inf
-        mirror_error[n] = np.inf
-        if not ok[n]:
-            continue
-        check_margins[n, 0] = margins[n, 0]
-        check_margins[n, 1] = margins[n, 1]
-        xe = P[n, 0]
-        ye = P[n, 1]
-        err = math.sqrt((xe - estimates[n, 0]) ** 2 + (ye - estimates[n, 1]) ** 2)
-        if err == err:
-            pixel_error[n] = err
-        err = math.sqrt((xe - estimates[n, 2]) ** 2 + (ye - estimates[n, 3]) ** 2)
-        if err == err:
-            mirror_error[n] = err
+        margins[n, 2] = other if solved else -np.inf
+        if checks:
+            errors[n, 0] = np.inf
+            errors[n, 1] = np.inf
+            if solved:
+                err = math.sqrt((x - estimates[n, 0]) ** 2 + (y - estimates[n, 1]) ** 2)
+                if err == err:
+                    errors[n, 0] = err
+                err = math.sqrt((x - xs) ** 2 + (y - ys) ** 2)
+                if err == err:
+                    errors[n, 1] = err
 
 
 @kernel
@@ -823,8 +746,18 @@ def _clearly(node_margins, check_margins, r, k, vmin, rmax):
 
 
 @kernel
+def _clearly_seen_but_rim(node_margins, check_margins, r, k):
+    """Whether every visibility margin of cell (r, k) but the rim's (margin 2: the cosines
+    and the body test) is beyond ``VIEW_CLEAR_BOUND`` over the whole cell by
+    :func:`_lattice_bounds`: then the rim alone decides what is seen in it."""
+    lo, _hi = _lattice_bounds(node_margins, check_margins, r, k, np.int64(2))
+    return lo * VIEW_CLEAR >= VIEW_CLEAR_BOUND
+
+
+@kernel
 def _lattice_bounds(node_margins, check_margins, r, k, m):
-    """Bounds ``(lo, hi)`` of the smooth margin ``m`` (0 visibility, 1 rim) over cell (r, k).
+    """Bounds ``(lo, hi)`` of the smooth margin ``m`` (0 visibility, 1 rim, 2 visibility but
+    the rim) over cell (r, k).
 
     Its nine samples form a 3 x 3 lattice of spacing h = 1/2 cell (corners: nodes; middles of
     the edges and centre: check points). On each quarter cell the bilinear interpolant of the
@@ -872,7 +805,18 @@ def _cell_error(errors, r, k):
 
 @kernel
 def classify_cells(
-    node_margins, check_margins, pixel_error, mirror_error, half_tol, allow_edge, cls
+    view,
+    origins,
+    spacing,
+    W,
+    H,
+    node_margins,
+    check_margins,
+    pixel_error,
+    mirror_error,
+    half_tol,
+    allow_edge,
+    cls,
 ):
     """Classes (the CELL_* constants) of the cells of a grid stack, ``cls`` (G, ny, nx).
 
@@ -880,8 +824,17 @@ def classify_cells(
     (:func:`_clearly`) with an error estimate (:func:`_cell_error`) of the pixels
     within ``half_tol``, UNSEEN when clearly outside the rim, EDGE
     when that of the mirror points is within ``half_tol`` (only with ``allow_edge``: on the
-    coarse grid such a cell is refined instead), else BAD.
+    coarse grid such a cell is refined instead), RIM instead of EDGE when every margin but
+    the rim's is clearly positive over it (:func:`_clearly_seen_but_rim`), else BAD.
+
+    A BAD cell of a perspective view (grid c's cell (r, k) spans the output pixels from
+    ``origins[c] + (k, r) spacing``; the view is ``W`` x ``H``) whose every pixel looks above
+    ``sin_reject`` (where nothing is seen) is UNSEEN instead, neither refined nor visited:
+    with ``sin_reject > 0`` the directions above that elevation form a convex cone, and the
+    pixels whose directions lie in it a convex set of the image plane, so a cell is in it when
+    its four corner pixels are (with a margin of ``1e-9`` for rounding).
     """
+    above_band = view.kind == 0 and 0.0 < view.sin_reject < 1.0
     for c in range(cls.shape[0]):
         for r in range(cls.shape[1]):
             for k in range(cls.shape[2]):
@@ -900,39 +853,30 @@ def classify_cells(
                         cell_class = CELL_UNSEEN
                     elif _cell_error(mirror_error[c], r, k) <= half_tol and allow_edge:
                         cell_class = CELL_EDGE
+                        if _clearly_seen_but_rim(node_margins[c], check_margins[c], r, k):
+                            cell_class = CELL_RIM
+                if cell_class == CELL_BAD and above_band:
+                    u0 = origins[c, 0] + k * spacing
+                    v0 = origins[c, 1] + r * spacing
+                    if _corners_above(view, u0, v0, spacing, W, H):
+                        cell_class = CELL_UNSEEN
                 cls[c, r, k] = cell_class
 
 
-@kernel
-def mark_cells_above_band(view, origins, spacing, W, H, cls):
-    """Make UNSEEN the BAD cells of a perspective grid stack whose every pixel looks above
-    ``sin_reject`` (where nothing is seen), so that they are neither refined nor visited.
-
-    With ``sin_reject > 0`` the directions above that elevation form a convex cone, and the
-    pixels whose directions lie in it a convex set of the image plane: a cell is in it when
-    its four corner pixels are (with a margin of ``1e-9`` for rounding).
-    """
-    if view.kind != 0 or not 0.0 < view.sin_reject < 1.0:
-        return
+@kernel(inline="always")
+def _corners_above(view, u0, v0, spacing, W, H):
+    """Whether the four corner pixels of the perspective cell from output pixel (u0, v0) look
+    above ``sin_reject + 1e-9`` (:func:`_view_direction`'s elevation)."""
     limit = view.sin_reject + 1e-9
-    for c in range(cls.shape[0]):
-        for r in range(cls.shape[1]):
-            for k in range(cls.shape[2]):
-                if cls[c, r, k] != CELL_BAD:
-                    continue
-                u0 = origins[c, 0] + k * spacing
-                v0 = origins[c, 1] + r * spacing
-                u1 = min(u0 + spacing - 1.0, W - 1.0)
-                v1 = min(v0 + spacing - 1.0, H - 1.0)
-                above = True
-                for corner in range(4):
-                    u = u0 if corner % 2 == 0 else u1
-                    v = v0 if corner < 2 else v1
-                    _dx, _dy, dz = _view_direction(view, u, v)
-                    if not dz > limit:
-                        above = False
-                if above:
-                    cls[c, r, k] = CELL_UNSEEN
+    u1 = min(u0 + spacing - 1.0, W - 1.0)
+    v1 = min(v0 + spacing - 1.0, H - 1.0)
+    for corner in range(4):
+        u = u0 if corner % 2 == 0 else u1
+        v = v0 if corner < 2 else v1
+        _dx, _dy, dz = _view_direction(view, u, v)
+        if not dz > limit:
+            return False
+    return True
 
 
 @kernel(inline="always")
@@ -963,8 +907,6 @@ def _edge_pixel(view, rig, s1, s2, dx, dy, dz):
     if rim_m < -VIEW_RIM_MARGIN:
         return _NAN, _NAN, True  # clearly outside the rim
     C = rig.C
-    Rc = rig.R
-    tc = rig.t
     z = rig.b * math.sqrt(1.0 + (s1 * s1 + s2 * s2) / a2)
     Nx = b2 * s1 / (a2 * z)
     Ny = b2 * s2 / (a2 * z)
@@ -984,14 +926,32 @@ def _edge_pixel(view, rig, s1, s2, dx, dy, dz):
     target = _clear_sign(
         Nx * ex + Ny * ey - ez, nn2 * (ex * ex + ey * ey + ez * ez), VIEW_COS_MARGIN
     )
-    xc = Rc[0, 0] * s1 + Rc[0, 1] * s2 + Rc[0, 2] * z + tc[0]
-    yc = Rc[1, 0] * s1 + Rc[1, 1] * s2 + Rc[1, 2] * z + tc[1]
-    zc = Rc[2, 0] * s1 + Rc[2, 1] * s2 + Rc[2, 2] * z + tc[2]
+    xc, yc, zc = _camera_frame(rig, s1, s2, z)
     front = _clear_sign(zc, xc * xc + yc * yc + zc * zc, VIEW_COS_MARGIN)
     if camera < 0 or target < 0 or front < 0:
         return _NAN, _NAN, True  # clearly unseen
     if not (rim_m > VIEW_RIM_MARGIN and camera > 0 and target > 0 and front > 0):
         return _NAN, _NAN, False
+    return _camera_pixel_call(rig, xc, yc, zc)
+
+
+@kernel(inline="always")
+def _camera_frame(rig, s1, s2, z):
+    """The mirror point (s1, s2, z) in the camera frame."""
+    Rc = rig.R
+    tc = rig.t
+    xc = Rc[0, 0] * s1 + Rc[0, 1] * s2 + Rc[0, 2] * z + tc[0]
+    yc = Rc[1, 0] * s1 + Rc[1, 1] * s2 + Rc[1, 2] * z + tc[1]
+    zc = Rc[2, 0] * s1 + Rc[2, 1] * s2 + Rc[2, 2] * z + tc[2]
+    return xc, yc, zc
+
+
+@kernel(inline="always")
+def _camera_pixel(rig, xc, yc, zc):
+    """Pixel of a camera-frame point in front of the camera (eq. 6 with OpenCV's distortion,
+    :func:`_distort`, then ``K`` with skew): ``(x, y, True)``, or ``(NaN, NaN, False)`` if not
+    finite. Inlined in the per-pixel loop of RIM cells (:func:`_rim_pixel`); the other callers
+    share one compiled copy, :func:`_camera_pixel_call`."""
     xn = xc / zc
     yn = yc / zc
     if rig.has_dist:
@@ -1005,22 +965,28 @@ def _edge_pixel(view, rig, s1, s2, dx, dy, dz):
 
 
 @kernel
-def table_weights(view, column_cos, column_sin, weights, fine_weights):
-    """Per-column cos / sin of the azimuth (panoramas), and the cubic weights of the node
-    columns per column offset in a cell (``weights`` (4, step)) and in a refined sub-cell
-    (``fine_weights`` (4, step / FINE))."""
-    if view.kind != 0:
-        for j in range(column_cos.shape[0]):
-            column_cos[j] = math.cos(view.az_step * j)
-            column_sin[j] = math.sin(view.az_step * j)
-    for w in (weights, fine_weights):
-        step = w.shape[1]
-        for t in range(step):
-            w0, w1, w2, w3 = _lagrange4(t / step)
-            w[0, t] = w0
-            w[1, t] = w1
-            w[2, t] = w2
-            w[3, t] = w3
+def _camera_pixel_call(rig, xc, yc, zc):
+    """:func:`_camera_pixel` as a function of its own, not inlined: one compiled copy of the
+    distortion model for :func:`_view_pixel` and :func:`_edge_pixel` (a call per exact
+    solution costs nothing measurable; per pixel of a RIM cell it cost a third of fill_rows)."""
+    return _camera_pixel(rig, xc, yc, zc)
+
+
+@kernel(inline="always")
+def _rim_pixel(rig, s1, s2):
+    """Entry of a pixel of a RIM sub-cell from its interpolated mirror point: ``(x, y,
+    decided)``. Every test but the rim's clearly passes in such a cell, so the entry is the
+    one :func:`_edge_pixel` gives: unseen past the rim's margin, the pixel of the mirror
+    point inside it, undecided within it."""
+    rim2 = rig.rim_radius * rig.rim_radius
+    rim_m = (rim2 - (s1 * s1 + s2 * s2)) / rim2
+    if rim_m < -VIEW_RIM_MARGIN:
+        return _NAN, _NAN, True
+    if not rim_m > VIEW_RIM_MARGIN:
+        return _NAN, _NAN, False
+    z = rig.b * math.sqrt(1.0 + (s1 * s1 + s2 * s2) / (rig.a * rig.a))
+    xc, yc, zc = _camera_frame(rig, s1, s2, z)
+    return _camera_pixel(rig, xc, yc, zc)
 
 
 @kernel(inline="always")
@@ -1053,7 +1019,7 @@ def _column_at_row(S, r, k, c, v0, v1, v2, v3):
 def _row_columns(S, r, k, v0, v1, v2, v3):
     """Node values S (NY, NX, 2) of columns ``k:k + 4`` interpolated to a row of cell (r, k)
     with the row weights ``v*``: ``(x0..x3, y0..y3)``. Their column-weighted sum is
-    :func:`_interp_weighted`'s tensor cubic summed in the other order."""
+    the tensor cubic of omnicam.views._interp_cells summed in the other order."""
     return (
         _column_at_row(S, r, k, 0, v0, v1, v2, v3),
         _column_at_row(S, r, k + 1, 0, v0, v1, v2, v3),
@@ -1093,7 +1059,8 @@ def _fill_refined_cell(
     grid; ``fine_row, fine_tv``: the sub-cell row and the position in it; ``fine_weights``
     (4, g): column weights per column offset in a sub-cell. SEEN sub-cells interpolate the
     pixel, UNSEEN ones are unseen (both as :func:`fill_rows` writes coarse cells), EDGE ones
-    decide per pixel from the interpolated mirror point (:func:`_edge_pixel`); what stays
+    decide per pixel from the interpolated mirror point (:func:`_edge_pixel`), RIM ones by
+    its rim margin alone (:func:`_rim_pixel`: no direction to compute); what stays
     undecided is marked in ``pending``. ``rowx, rowy``: row i of the float maps
     (:func:`fill_rows`). Returns the counts of pending and of unseen entries.
     """
@@ -1140,7 +1107,9 @@ def _fill_refined_cell(
             x = _NAN
             y = _NAN
             rim2 = rig.rim_radius * rig.rim_radius
-            if fine_class == CELL_EDGE and (rim2 - (c1 * c1 + c2 * c2)) / rim2 < -VIEW_RIM_MARGIN:
+            if fine_class == CELL_RIM:
+                x, y, decided = _rim_pixel(rig, c1, c2)
+            elif fine_class == CELL_EDGE and (rim2 - (c1 * c1 + c2 * c2)) / rim2 < -VIEW_RIM_MARGIN:
                 # clearly outside the rim: unseen whatever the tests on the direction say, as
                 # _edge_pixel decides it (the half of an edge sub-cell past the rim costs no
                 # direction)
@@ -1255,7 +1224,8 @@ def fill_rows(
 
     ``cls`` (ny, nx): classes of the coarse cells, whose nodes' pixels are ``P`` (NY, NX, 2);
     ``refined_index`` (ny, nx): which grid of the refined stack (``fine_*``) refines a BAD cell.
-    ``weights`` (4, step), ``fine_weights`` (4, step / FINE): :func:`table_weights`.
+    ``weights`` (4, step), ``fine_weights`` (4, step / FINE): the column weights per column
+    offset in a cell and a sub-cell (omnicam.views._build_table).
     ``mode`` 0 writes float32 ``outx, outy`` (H, W); mode 1 writes ``out16`` (H, W, 2) int16
     and ``outf16`` (H, W) uint16 as ``cv2.convertMaps(.., CV_16SC2)`` does, each row written
     in float first (to a scratch row) and converted once (:func:`_row_fixed`): the cells'

@@ -19,7 +19,7 @@ grid of nodes about ``CELL_DEGREES`` apart, on the mirror sheet extended past th
 smooth across the edge of what the mirror sees. Each cell is interpolated by the cubic Lagrange
 polynomial of its 4x4 nodes, and its error is *measured* against the exact answer at the cell centre
 and the middles of its edges (where the error of that interpolant peaks); a cell whose estimate
-exceeds ``TOLERANCE / 2`` is refined on a grid 4 times finer, and what still fails is solved pixel
+exceeds ``TOLERANCE / 2`` is refined on a grid 2 times finer, and what still fails is solved pixel
 by pixel. Visibility is decided per cell when all of it is clearly seen or clearly unseen, else per
 pixel with a margin, and exactly inside the margin. ``tests/test_views.py`` compares whole tables
 with the exact projection of every pixel.
@@ -310,7 +310,7 @@ def visible_elevation_range(camera) -> tuple[float, float]:
 # -- the fast path: the phases of omnicam._kernels -----------------------------------------------
 #: Angular size of a coarse cell, degrees: the node spacing is the multiple of 4 output pixels
 #: (between 8 and 64) closest to it. Cells whose measured interpolation error exceeds
-#: TOLERANCE / 2 are refined on a grid 4 times finer, and sub-cells that still fail are computed
+#: TOLERANCE / 2 are refined on a grid 2 times finer, and sub-cells that still fail are computed
 #: exactly pixel by pixel, so this only trades speed, never accuracy.
 CELL_DEGREES = 5.0
 
@@ -475,59 +475,19 @@ class _GridStack:
     """
 
     def __init__(self, view, rig, origins, spacing, shape, coarse=None, cells=None):
-        from . import _kernels as k
-
-        G = origins.shape[0]
         ny, nx = shape
         self.origins, self.spacing = origins, spacing
-        nodes = (G, ny + 3, nx + 3)
-        positions = np.empty(nodes + (2,))
-        starts = np.empty(nodes + (2,))
-        if cells is None:
-            cells, coarse_S = np.zeros((0, 2), np.int64), np.zeros((1, 1, 2))
-        else:
-            coarse_S = coarse.S[0]
-        k.grid_node_points(
-            0, positions[..., 0].size, origins, spacing, coarse_S, cells, positions, starts
-        )
-        self.S, self.P, self.node_margins, _ok, _sp = _solve(view, rig, positions, starts, False)
-        checks = (G, 3, ny + 1, nx + 1)
-        positions = np.empty(checks + (2,))
-        starts = np.empty(checks + (2,))
-        interpolated = np.empty(checks + (2,))
-        run_chunks(
-            k.grid_check_points,
-            positions[..., 0].size,
-            origins,
-            spacing,
-            self.S,
-            self.P,
-            positions,
-            starts,
-            interpolated,
-            min_chunk=512,
-        )
+        refined = cells is not None
+        positions, starts = _grid_nodes(origins, spacing, shape, coarse, cells)
+        self.S, self.P, self.node_margins, _ok, _e = _solve(view, rig, positions, starts)
+        positions, starts, interpolated = _grid_checks(origins, spacing, self.S, self.P)
         # the pixels of the interpolated mirror points only where EDGE cells can be (refined
         # grids, classify's allow_edge); the coarse grid's mirror errors stay inf, unused
-        refined = cells.shape[0] > 0
-        _S, P, margins, ok, start_pixels = _solve(view, rig, positions, starts, refined)
-        if not refined:
-            start_pixels = np.full(checks + (2,), np.nan)
-        estimates = np.concatenate([interpolated, start_pixels], axis=-1)
-        self.pixel_error = np.empty(checks)
-        self.mirror_error = np.empty(checks)
-        self.check_margins = np.empty(checks + (2,))
-        k.score_check_points(
-            0,
-            ok.size,
-            ok.reshape(-1),
-            P.reshape(-1, 2),
-            margins.reshape(-1, 2),
-            estimates.reshape(-1, 4),
-            self.pixel_error.reshape(-1),
-            self.mirror_error.reshape(-1),
-            self.check_margins.reshape(-1, 2),
+        _S, _P, self.check_margins, _ok, errors = _solve(
+            view, rig, positions, starts, estimates=interpolated, with_mirror_error=refined
         )
+        self.pixel_error = errors[..., 0]
+        self.mirror_error = errors[..., 1]
 
     def classify(self, view, size, half_tol, allow_edge):
         from . import _kernels as k
@@ -535,16 +495,19 @@ class _GridStack:
         G, _w, ny1, nx1 = self.pixel_error.shape
         self.cls = np.empty((G, ny1 - 1, nx1 - 1), np.int64)
         k.classify_cells(
+            view,
+            self.origins,
+            self.spacing,
+            size[0],
+            size[1],
             self.node_margins,
             self.check_margins,
-            self.pixel_error,
-            self.mirror_error,
+            np.ascontiguousarray(self.pixel_error),
+            np.ascontiguousarray(self.mirror_error),
             half_tol,
             allow_edge,
             self.cls,
         )
-        if view.kind == 0:  # a convex-cone argument that holds for perspective views
-            k.mark_cells_above_band(view, self.origins, self.spacing, size[0], size[1], self.cls)
         return self.cls
 
     def n_solved(self):
@@ -555,9 +518,121 @@ class _GridStack:
         )
 
 
-def _solve(view, rig, positions, starts, with_start_pixels, pixels_only=False):
-    """:func:`omnicam._kernels.solve_view_points` over arrays of positions (..., 2); the pixels
-    of the starts (check points' estimates) only ``with_start_pixels`` (else an empty array)."""
+def _lagrange4(t):
+    """Cubic Lagrange weights of nodes at -1, 0, 1, 2: the operations of
+    :func:`omnicam._kernels._lagrange4` in the same order, so the same bits."""
+    return (
+        -t * (t - 1.0) * (t - 2.0) / 6.0,
+        (t + 1.0) * (t - 1.0) * (t - 2.0) / 2.0,
+        -(t + 1.0) * t * (t - 2.0) / 2.0,
+        (t + 1.0) * t * (t - 1.0) / 6.0,
+    )
+
+
+def _cubic_weights(tv, tu):
+    """Row and column weights of the cell coordinates (tv, tu), a row of ``cubic_blocks``'
+    ``weights``."""
+    return [*_lagrange4(np.float64(tv)), *_lagrange4(np.float64(tu))]
+
+
+@functools.lru_cache(maxsize=16)
+def _node_blocks(NY, NX):
+    """``cubic_blocks``' blocks and weights of the Newton starts of a refined grid's nodes:
+    node (p, q) is the cubic of the refined coarse cell at ((p - 1) / FINE, (q - 1) / FINE)."""
+    from ._kernels import FINE
+
+    blocks = [(p, p + 1, q, q + 1, -p, -q) for p in range(NY) for q in range(NX)]
+    weights = [
+        _cubic_weights((p - 1.0) / FINE, (q - 1.0) / FINE) for p in range(NY) for q in range(NX)
+    ]
+    return np.array(blocks, np.int64), np.array(weights)
+
+
+def _grid_nodes(origins, spacing, shape, coarse, cells):
+    """Output positions and Newton starts of the nodes of a grid stack, (G, NY, NX, 2) each.
+
+    Grid ``c`` has node (p, q) at output pixel ``origins[c] + ((q - 1) spacing,
+    (p - 1) spacing)``. A refined grid (``cells`` (G, 2): the coarse cell (row, column) it
+    refines, FINE times finer) starts Newton from the ``coarse`` grid's cubic; the coarse grid
+    (``cells`` None) has no start (NaN).
+    """
+    from ._kernels import cubic_blocks
+
+    G = origins.shape[0]
+    NY, NX = shape[0] + 3, shape[1] + 3
+    positions = np.empty((G, NY, NX, 2))
+    positions[..., 0] = origins[:, 0, None, None] + ((np.arange(NX) - 1.0) * spacing)[None, None]
+    positions[..., 1] = origins[:, 1, None, None] + ((np.arange(NY) - 1.0) * spacing)[None, :, None]
+    starts = np.full((G, NY, NX, 2), np.nan)
+    if cells is not None and G:
+        blocks, weights = _node_blocks(NY, NX)
+        cubic_blocks(cells, blocks, weights, coarse.S, starts)
+    return positions, starts
+
+
+@functools.lru_cache(maxsize=16)
+def _check_layout(ny, nx):
+    """Where the check points of a grid of ny x nx cells lie, in ``cubic_blocks``' terms.
+
+    Check point (which, r, k), rows ``which (ny + 1) + r`` of a (3 (ny + 1), nx + 1) layout:
+    ``which`` CHECK_CENTRE: centre of cell (r, k); CHECK_HORIZONTAL_EDGE: middle of the
+    horizontal edge above cell (r, k) (r = ny: below the last row); CHECK_VERTICAL_EDGE:
+    middle of the vertical edge left of it (k = nx: right of the last column). Returns
+    ``blocks, weights`` and the output offsets ``(x, y)`` (3, ny + 1, nx + 1) of each check
+    point in cells (``(cell column + tu, cell row + tv)``; NaN for the combinations that name
+    no edge, never solved).
+    """
+    from ._kernels import CHECK_CENTRE, CHECK_HORIZONTAL_EDGE, CHECK_VERTICAL_EDGE
+
+    x = np.full((3, ny + 1, nx + 1), np.nan)
+    y = np.full((3, ny + 1, nx + 1), np.nan)
+    blocks, weights = [], []
+    # (which, rows r0:r1 and columns k0:k1, the cell's offset from (r, k) (the last edge lies
+    # in the last cell), the cell coordinates (tv, tu))
+    for which, r0, r1, k0, k1, dr, dk, tv, tu in (
+        (CHECK_CENTRE, 0, ny, 0, nx, 0, 0, 0.5, 0.5),
+        (CHECK_HORIZONTAL_EDGE, 0, ny, 0, nx, 0, 0, 0.0, 0.5),
+        (CHECK_HORIZONTAL_EDGE, ny, ny + 1, 0, nx, -1, 0, 1.0, 0.5),
+        (CHECK_VERTICAL_EDGE, 0, ny, 0, nx, 0, 0, 0.5, 0.0),
+        (CHECK_VERTICAL_EDGE, 0, ny, nx, nx + 1, 0, -1, 0.5, 1.0),
+    ):
+        row0 = which * (ny + 1)
+        blocks.append((row0 + r0, row0 + r1, k0, k1, dr - row0, dk))
+        weights.append(_cubic_weights(tv, tu))
+        x[which, r0:r1, k0:k1] = (np.arange(k0, k1) + dk + tu)[None, :]
+        y[which, r0:r1, k0:k1] = (np.arange(r0, r1) + dr + tv)[:, None]
+    return np.array(blocks, np.int64), np.array(weights), x, y
+
+
+def _grid_checks(origins, spacing, S, P):
+    """Check points of a grid stack (:func:`_check_layout`): output positions, Newton starts
+    (the cubic of the nodes' mirror points ``S``) and estimates (the cubic of their pixels
+    ``P``), (G, 3, ny + 1, nx + 1, 2) each, NaN where no check point is."""
+    from ._kernels import cubic_blocks
+
+    G, NY, NX, _two = S.shape
+    ny, nx = NY - 3, NX - 3
+    blocks, weights, x, y = _check_layout(ny, nx)
+    shape = (G, 3, ny + 1, nx + 1, 2)
+    positions = np.empty(shape)
+    positions[..., 0] = origins[:, 0, None, None, None] + x * spacing
+    positions[..., 1] = origins[:, 1, None, None, None] + y * spacing
+    starts = np.full(shape, np.nan)
+    estimates = np.full(shape, np.nan)
+    if G:
+        layout = (G, 3 * (ny + 1), nx + 1, 2)
+        offsets = np.zeros((G, 2), np.int64)
+        cubic_blocks(offsets, blocks, weights, S, starts.reshape(layout))
+        cubic_blocks(offsets, blocks, weights, P, estimates.reshape(layout))
+    return positions, starts, estimates
+
+
+def _solve(
+    view, rig, positions, starts, pixels_only=False, estimates=None, with_mirror_error=False
+):
+    """:func:`omnicam._kernels.solve_view_points` over arrays of positions (..., 2): the mirror
+    points, pixels, margins and ok of each, and the errors (..., 2) of check points'
+    ``estimates`` (pixel error, mirror error) (None without estimates)."""
     from . import _kernels as k
 
     shape = positions.shape[:-1]
@@ -565,8 +640,12 @@ def _solve(view, rig, positions, starts, with_start_pixels, pixels_only=False):
     ok = np.zeros(shape, np.bool_)
     S = np.empty(shape + (2,))
     P = np.empty(shape + (2,))
-    margins = np.empty(shape + (2,))
-    start_pixels = np.empty(shape + (2,) if with_start_pixels else (0, 2))
+    margins = np.empty(shape + (3,))
+    checks = estimates is not None
+    if checks:
+        errors = np.empty(shape + (2,))
+    else:
+        estimates = errors = np.empty((0, 2))
     run_chunks(
         k.solve_view_points,
         n,
@@ -575,14 +654,16 @@ def _solve(view, rig, positions, starts, with_start_pixels, pixels_only=False):
         positions.reshape(-1, 2),
         starts.reshape(-1, 2),
         pixels_only,
+        estimates.reshape(-1, 2),
+        with_mirror_error,
         ok.reshape(-1),
         S.reshape(-1, 2),
         P.reshape(-1, 2),
-        margins.reshape(-1, 2),
-        start_pixels.reshape(-1, 2),
+        margins.reshape(-1, 3),
+        errors.reshape(-1, 2),
         min_chunk=32,
     )
-    return S, P, margins, ok, start_pixels
+    return S, P, margins, ok, errors if checks else None
 
 
 def _build_table(view, rig, size, step, mode, outputs, stats):
@@ -617,9 +698,12 @@ def _build_table(view, rig, size, step, mode, outputs, stats):
     )
     fine_cls = fine.classify(view, size, half_tol, True)
     # the pixels: interpolated, unseen, decided at the edge, or pending an exact solution
-    column_cos, column_sin = np.empty(w), np.empty(w)
-    weights, fine_weights = np.empty((4, step)), np.empty((4, step // k.FINE))
-    k.table_weights(view, column_cos, column_sin, weights, fine_weights)
+    # the cubic weights of the node columns per column offset in a cell and in a refined
+    # sub-cell, and the panoramas' per-column cos / sin of the azimuth (as _view_direction)
+    weights = np.array(_lagrange4(np.arange(step) / step))
+    fine_weights = np.array(_lagrange4(np.arange(step // k.FINE) / (step // k.FINE)))
+    azimuth = view.az_step * np.arange(w)
+    column_cos, column_sin = np.cos(azimuth), np.sin(azimuth)
     pending = np.zeros((h, w), np.bool_)  # bool: numpy's nonzero is ten times faster than on uint8
     row_counts = np.empty((h, 2), np.int64)  # pending and unseen entries per row
     outx, outy, out16, outf16 = outputs
@@ -654,7 +738,7 @@ def _build_table(view, rig, size, step, mode, outputs, stats):
     n_unseen = int(row_counts[:, 1].sum())
     if len(index):
         # no start of the pixels' own (NaN): Newton from the aligned start
-        P = _solve(view, rig, positions, np.full_like(positions, np.nan), False, True)[1]
+        P = _solve(view, rig, positions, np.full_like(positions, np.nan), pixels_only=True)[1]
         n_unseen += _store_entries(index, P, mode, outputs)
     n_nodes, n_checks = coarse.n_solved()
     f_nodes, f_checks = fine.n_solved()

@@ -317,6 +317,38 @@ def test_aligned_baseline_differs_from_calibrated_on_a_misaligned_rig():
     assert np.linalg.norm(a - b, axis=-1)[ok].max() > 5.0
 
 
+@pytest.mark.parametrize("rig_name", ["misaligned", "distorted"])
+def test_rim_cells_give_the_entries_of_edge_cells(rig_name):
+    """A RIM sub-cell (every visibility test but the rim's clearly passed) decides its pixels by
+    the rim margin alone (``_rim_pixel``); where the other tests pass, that is the entry the
+    full per-pixel test of an EDGE sub-cell (``_edge_pixel``) gives: unseen past the rim's
+    margin, undecided within it, the same pixel inside it."""
+    from omnicam import _kernels as k
+
+    cam = RIGS[rig_name]()
+    m = cam.mirror
+    view = views._view_args(cam, 0, np.eye(3), 0.0, 0.0, 0.0, None, None)
+    rig = views._rig_args(cam)
+    rng = np.random.default_rng(5)
+    radius = m.rim_radius * np.concatenate(
+        [rng.uniform(0.05, 1.05, 300), 1.0 + rng.uniform(-2e-3, 2e-3, 100)]
+    )
+    azimuth = rng.uniform(0.0, 2.0 * np.pi, radius.size)
+    s = np.stack([radius * np.cos(azimuth), radius * np.sin(azimuth)], axis=1)
+    P = np.column_stack([s, m.surface_z(s[:, 0], s[:, 1])])
+    V = P - np.asarray(cam.camera_center)
+    V /= np.linalg.norm(V, axis=1, keepdims=True)
+    d = m.reflect(V, m.unit_normal(P))  # the direction whose reflection point is s
+    verdicts = set()
+    for (s1, s2), (dx, dy, dz) in zip(s, d):
+        rim = k._rim_pixel(rig, s1, s2)
+        edge = k._edge_pixel(view, rig, s1, s2, dx, dy, dz)
+        assert rim[2] == edge[2]
+        np.testing.assert_array_equal(rim[:2], edge[:2])
+        verdicts.add((rim[2], bool(np.isfinite(rim[0]))))
+    assert verdicts == {(True, True), (True, False), (False, False)}  # seen, unseen, undecided
+
+
 # -- m1type variants and unseen entries -------------------------------------------------------
 @pytest.mark.parametrize("kind", ["panorama", "perspective"])
 def test_m1type_variants_agree(kind):
