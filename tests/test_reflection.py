@@ -287,16 +287,8 @@ def test_a_body_inside_a_dark_floor_is_found_against_the_floors_interior():
 
     mirror, size = default_mirror(), (480, 480)
     f = 0.4 * min(size) * (mirror.z_rim + mirror.c) / mirror.rim_radius
-    body = realistic.BodyGeometry(
-        r_barrel=12.0,
-        z_barrel=12.0,
-        r_glass=9.5,
-        rings=(5.0,),
-        z_box=0.0,
-        w_box=22.0,
-        h_box=18.0,
-        box_color=(60.0, 60.0, 60.0),
-        ring_color=(33.0, 33.0, 33.0),
+    body = _barrel_12(
+        w_box=22.0, h_box=18.0, box_color=(60.0, 60.0, 60.0), ring_color=(33.0, 33.0, 33.0)
     )
     case = realistic.StressCase(
         index=0,
@@ -366,6 +358,32 @@ def test_a_small_lens_in_a_box_is_found_from_half_its_radius_away():
         assert circle.rms < 0.3 and fit.quality > 0.8, (angle, fit, circle)
 
 
+def _barrel_12(**box_and_colors):
+    """A barrel of radius 12 whose front is 12 in front of the camera centre, glass of radius
+    9.5 with one inner ring, the box's front at the camera centre."""
+    from omnicam.synthetic import realistic
+
+    return realistic.BodyGeometry(
+        r_barrel=12.0, z_barrel=12.0, r_glass=9.5, rings=(5.0,), z_box=0.0, **box_and_colors
+    )
+
+
+def _barrel_14(r_glass, **box_and_colors):
+    """A barrel of radius 12 whose front is 14 in front of the camera centre, dark glass of
+    radius ``r_glass`` with one inner ring, the box's front 2 behind the camera centre."""
+    from omnicam.synthetic import realistic
+
+    return realistic.BodyGeometry(
+        r_barrel=12.0,
+        z_barrel=14.0,
+        r_glass=r_glass,
+        rings=(5.0,),
+        z_box=-2.0,
+        glass_color=(12.0, 8.0, 6.0),
+        **box_and_colors,
+    )
+
+
 def _body_render(body, flags=("body",), seed=3, photometric=None, size=(640, 640)):
     """A render of ``body`` (realistic tracer): tilt 3 deg, offset 1.4 mm, the rim at 0.4 of
     the image's smaller side."""
@@ -403,17 +421,8 @@ def test_a_barrel_on_a_dark_box_is_found_at_its_front_edge():
     from omnicam.synthetic import realistic
 
     for ring, box in ((28.0, 52.0), (30.0, 55.0)):
-        body = realistic.BodyGeometry(
-            r_barrel=12.0,
-            z_barrel=14.0,
-            r_glass=9.0,
-            rings=(5.0,),
-            z_box=-2.0,
-            w_box=22.0,
-            h_box=19.0,
-            glass_color=(12.0, 8.0, 6.0),
-            ring_color=(ring, ring, ring),
-            box_color=(box, box, box + 2.0),
+        body = _barrel_14(
+            9.0, w_box=22.0, h_box=19.0, ring_color=(ring,) * 3, box_color=(box, box, box + 2.0)
         )
         r = _body_render(body, photometric=realistic.Photometric(blur_sigma=0.8, noise_sigma=2))
         fit = reflection.detect_reflection(r.image, detect_rim(r.image))
@@ -430,17 +439,8 @@ def test_a_narrow_front_ring_is_found_at_its_outer_edge():
     from omnicam.synthetic import realistic
 
     for r_glass in (9.6, 10.0):
-        body = realistic.BodyGeometry(
-            r_barrel=12.0,
-            z_barrel=14.0,
-            r_glass=r_glass,
-            rings=(5.0,),
-            z_box=-2.0,
-            w_box=24.0,
-            h_box=20.0,
-            glass_color=(12.0, 8.0, 6.0),
-            ring_color=(50.0, 50.0, 50.0),
-            box_color=(45.0, 115.0, 50.0),
+        body = _barrel_14(
+            r_glass, w_box=24.0, h_box=20.0, ring_color=(50.0,) * 3, box_color=(45.0, 115.0, 50.0)
         )
         r = _body_render(body, photometric=realistic.Photometric(noise_sigma=2.0))
         fit = reflection.detect_reflection(r.image, detect_rim(r.image))
@@ -476,12 +476,7 @@ def test_a_grey_front_ring_on_a_black_floor_is_found_by_its_fall():
     declining above)."""
     from omnicam.synthetic import realistic
 
-    body = realistic.BodyGeometry(
-        r_barrel=12.0,
-        z_barrel=12.0,
-        r_glass=9.5,
-        rings=(5.0,),
-        z_box=0.0,
+    body = _barrel_12(
         w_box=12.0,
         h_box=12.0,
         glass_color=(12.0, 8.0, 6.0),
