@@ -574,10 +574,75 @@ def _detect(image, rim, center, center_search, max_radius, min_radius, rng, scen
         ok = np.isfinite(band)
         return ok.any() and float(np.mean(band[ok] < dark_max)) >= DARK_INSIDE
 
-    # 3. vote over centres and radii, one vote per (ray, radius bin)
+    # 3. vote over centres within center_search of c0 (steps of 1 % of the rim) and radii
     half = float(center_search) * r_rim
     offs = np.linspace(-half, half, int(np.clip(np.ceil(half / (0.01 * r_rim)) + 1, 9, 31)))
     bw = max(2.0, 0.025 * R_max)
+    seeds = _vote_circles(pts, ri, c0, offs, bw, R_max, R_min, n_rays, dark_inside)
+    fit, first_why, surround, coreless = _try_silhouettes(
+        gray,
+        G,
+        seeds,
+        (far_pts, pts) if len(pts) > len(far_pts) else (pts,),
+        bw,
+        sig,
+        (contrast, dark_max),
+        rng,
+    )
+    if fit is not None:
+        return fit
+    if scene_level is None and surround is not None:
+        try:
+            return _inside_surround(
+                image,
+                rim,
+                c0,
+                center_search,
+                min_radius,
+                rng,
+                fraction,
+                (gray, G, surround, bw, sig),
+            )
+        except _Coreless as err:  # a uniformly dark body in the surround, rather than it
+            coreless = err
+        except EstimationError:
+            pass
+    raise coreless or first_why
+
+
+def _inside_surround(image, rim, c0, center_search, min_radius, rng, fraction, found):
+    """Steps 6-7 of :func:`detect_reflection`: the body inside the dark surround of ``found``
+    (``gray, G, surround, bw, sig`` of the search that found it), or
+    :class:`~.errors.EstimationError` (a :class:`_Coreless` for a uniformly dark body)."""
+    gray, G, surround, bw, sig = found
+    inner = 0.85 * surround.radius / float(min(rim.axes))
+    if not inner > 2.0 * min_radius:
+        raise EstimationError("no camera reflection found: the dark surround is too small")
+    # 6. the body's edges rise against the surround's interior, not against the mirror's
+    # scene; look again inside, once per rise fraction (the body may contrast little with
+    # what is around it inside the surround)
+    for f in RISE_FRACTIONS[RISE_FRACTIONS.index(fraction) :]:
+        try:
+            return _detect(
+                image, rim, c0, center_search, inner, min_radius, rng, surround.interior, f
+            )
+        except _Coreless:
+            break
+        except EstimationError:
+            pass
+    # 7. a body brighter than the surround at its edge (a grey front ring on a dark floor)
+    return _body_in_surround(gray, G, surround, bw, sig, rng)
+
+
+def _vote_circles(pts, ri, c0, offs, bw, R_max, R_min, n_rays, dark_inside):
+    """Step 3 of :func:`detect_reflection`: the round dark silhouettes the rises ``pts`` (on
+    rays ``ri`` of ``n_rays`` from ``c0``) support, outermost first, as up to four ``(centre,
+    radius)`` seeds.
+
+    One vote per (ray, radius bin of ``bw`` px, two bins overlapping) for each centre
+    ``c0 + (ox, oy)`` (``ox``, ``oy`` in ``offs``); a radius counts where at least 40 % of
+    the rays vote and ``dark_inside(radius, centre)``.
+    """
     nb = int(R_max / bw) + 2
     found = {}  # radius bin -> (support, centre): the best centre for each supported radius
     for ox in offs:
@@ -609,41 +674,7 @@ def _detect(image, rim, center, center_search, max_radius, min_radius, rng, scen
             "no camera reflection found: no round dark silhouette around the image centre "
             "(edges on fewer than 40 % of the rays share a circle that is dark inside)"
         )
-    seeds = [(found[j][1], j * bw) for j, _ in circles[:4]]
-    fit, first_why, surround, coreless = _try_silhouettes(
-        gray,
-        G,
-        seeds,
-        (far_pts, pts) if len(pts) > len(far_pts) else (pts,),
-        bw,
-        sig,
-        (contrast, dark_max),
-        rng,
-    )
-    if fit is not None:
-        return fit
-    inner = None if surround is None else 0.85 * surround.radius / r_rim
-    if scene_level is None and inner is not None and inner > 2.0 * min_radius:
-        # 6. the body inside a dark surround: its edges rise against the surround's interior,
-        # not against the mirror's scene; look again inside, once per rise fraction (the body
-        # may contrast little with what is around it inside the surround)
-        for f in RISE_FRACTIONS[RISE_FRACTIONS.index(fraction) :]:
-            try:
-                return _detect(
-                    image, rim, c0, center_search, inner, min_radius, rng, surround.interior, f
-                )
-            except _Coreless:
-                break
-            except EstimationError:
-                pass
-        # 7. a body brighter than the surround at its edge (a grey front ring on a dark floor)
-        try:
-            return _body_in_surround(gray, G, surround, bw, sig, rng)
-        except _Coreless as err:  # a uniformly dark body in the surround, rather than it
-            coreless = err
-        except EstimationError:
-            pass
-    raise coreless or first_why
+    return [(found[j][1], j * bw) for j, _ in circles[:4]]
 
 
 def _body_in_surround(gray, G, surround, bw, sig, rng):
