@@ -2545,6 +2545,12 @@ def main(argv=None):
     if args.worker:
         worker_main(args.worker, args.as_user)
         return 0
+    if signal.getsignal(signal.SIGINT) == signal.SIG_IGN:
+        # started in the background by a non-interactive shell (`cmd &`), SIGINT is ignored,
+        # and an ignored signal stays ignored across exec: every child would then ignore the
+        # Ctrl-C cases (a Python loop of saves ran on, "hang after SIGINT"). A user's terminal
+        # delivers it; a handled signal is reset to the default on exec, as there
+        signal.signal(signal.SIGINT, signal.default_int_handler)
     return Runner(args).main()
 
 
