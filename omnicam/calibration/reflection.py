@@ -381,6 +381,23 @@ def _polar(G, center, radii, angles):
     return out
 
 
+def _dark_inside(G, center, radius, angles, dark_max):
+    """Whether a silhouette is dark inside: :data:`DARK_INSIDE` of the annulus 0.6-0.95 of
+    ``radius`` about ``center`` (along ``angles``) is darker than ``dark_max`` (a dark scene
+    line or ring is dark only along itself)."""
+    band = _polar(G, center, np.linspace(0.6, 0.95, 8) * radius, angles)
+    ok = np.isfinite(band)
+    return bool(ok.any()) and float(np.mean(band[ok] < dark_max)) >= DARK_INSIDE
+
+
+def _core_and_shell(G, center, radius, angles):
+    """Median grey of a silhouette's core (within half its radius) and of its edge band
+    (0.75-0.95 of it): the lens glass is darker than the ring around it."""
+    core = _polar(G, center, np.linspace(0.0, 0.5, 12) * radius, angles)
+    shell = _polar(G, center, np.linspace(0.75, 0.95, 8) * radius, angles)
+    return float(np.nanmedian(core)), float(np.nanmedian(shell))
+
+
 def _rises(prof, dr, min_rise, dark_max, k=3):
     """Per ray, radii of strong dark-to-bright rises: local maxima of the radial derivative
     whose rise over +-k samples exceeds ``min_rise`` with the inner side below ``dark_max``.
@@ -568,11 +585,7 @@ def _detect(image, rim, center, center_search, max_radius, min_radius, rng, scen
     dark_max = dark + 0.6 * contrast
 
     def dark_inside(rho, c):
-        """A silhouette is dark inside: ``DARK_INSIDE`` of the annulus 0.6-0.95 of its radius
-        about its centre ``c`` is dark (a dark scene line or ring is dark only along itself)."""
-        band = _polar(G, c, np.linspace(0.6, 0.95, 8) * rho, ang[::2])
-        ok = np.isfinite(band)
-        return ok.any() and float(np.mean(band[ok] < dark_max)) >= DARK_INSIDE
+        return _dark_inside(G, c, rho, ang[::2], dark_max)
 
     # 3. vote over centres within center_search of c0 (steps of 1 % of the rim) and radii
     half = float(center_search) * r_rim
@@ -726,9 +739,7 @@ def _body_in_surround(gray, G, surround, bw, sig, rng):
         fit = err.fit
     if not fit.radius < r_max:
         raise EstimationError("no camera reflection found: the body fills the surround")
-    core = _polar(G, fit.center, np.linspace(0.0, 0.5, 12) * fit.radius, ang[::4])
-    shell = _polar(G, fit.center, np.linspace(0.75, 0.95, 8) * fit.radius, ang[::4])
-    core_level, shell_level = float(np.nanmedian(core)), float(np.nanmedian(shell))
+    core_level, shell_level = _core_and_shell(G, fit.center, fit.radius, ang[::4])
     margin = max(3.0, 0.05 * contrast)
     if core_level < shell_level - margin:
         return dataclasses.replace(fit, core=True)
@@ -917,10 +928,7 @@ def _refine_silhouette(gray, G, pts, c_est, r_est, bw, sig, levels, rng):
             break
     quality = len(fit.points) / n_rays
     radius = float(np.mean(fit.axes))
-    core = _polar(G, fit.center, np.linspace(0.0, 0.5, 12) * radius, ang[::4])
-    shell = _polar(G, fit.center, np.linspace(0.75, 0.95, 8) * radius, ang[::4])
-    core_level, shell_level = float(np.nanmedian(core)), float(np.nanmedian(shell))
-    band = _polar(G, fit.center, np.linspace(0.6, 0.95, 8) * radius, ang[::2])
+    core_level, shell_level = _core_and_shell(G, fit.center, radius, ang[::4])
     edge_rise = float(np.median(rise_k))
     why = None
     if quality < 0.4:
@@ -929,7 +937,7 @@ def _refine_silhouette(gray, G, pts, c_est, r_est, bw, sig, levels, rng):
         why = f"the silhouette is not round (axes {fit.axes[0]:.1f} and {fit.axes[1]:.1f} px)"
     elif fit.rms > max(0.75, 0.02 * radius):
         why = f"the silhouette's edge is ragged (RMS {fit.rms:.2f} px to an ellipse)"
-    elif not float(np.mean(band[np.isfinite(band)] < dark_max)) >= DARK_INSIDE:
+    elif not _dark_inside(G, fit.center, radius, ang[::2], dark_max):
         # the vote tested its own circle; the refined one may have moved to a dark scene line
         # around the camera (a thin ring is dark only along itself)
         why = "the refined silhouette is not dark inside (a dark line, not a body)"

@@ -266,13 +266,20 @@ def reflection_step(lens, image, rim, K, D, r=None, z=None, cands=None, mirror=N
                 f"lens has {len(px)} point(s) or non-finite values; give at least 8 finite "
                 f"pixels along the outline of the camera's reflection"
             )
-        xn = normalize(px, K, D)
-        if not np.isfinite(xn).all():
-            raise ValueError("some lens outline points cannot be undistorted with D; check D")
+        xn = _outline_normalized(px, K, D)
     note = f"used: {len(px)} outline points"
     if fit is not None and not fit.core:
         note += " (uniformly dark: a posture explains it as the camera's circle)"
     return ReflectionCue(px, xn, fit, sigma, r, z, note)
+
+
+def _outline_normalized(px, K, D):
+    """Undistorted normalised coordinates of outline pixels; ValueError if D cannot undistort
+    some of them."""
+    xn = normalize(px, K, D)
+    if not np.isfinite(xn).all():
+        raise ValueError("some lens outline points cannot be undistorted with D; check D")
+    return xn
 
 
 def _detect_outline(image, rim, where, cands, K, D, mirror, r, z):
@@ -296,9 +303,7 @@ def _detect_outline(image, rim, where, cands, K, D, mirror, r, z):
             failure = failure or err
             continue
         px = np.asarray(fit.points, np.float64)
-        xn = normalize(px, K, D)
-        if not np.isfinite(xn).all():
-            raise ValueError("some lens outline points cannot be undistorted with D; check D")
+        xn = _outline_normalized(px, K, D)
         why = None if fit.core else _coreless_why(fit, xn, cands, K, mirror, r, z)
         if why is None:
             return fit, px, xn, None
