@@ -678,16 +678,27 @@ class Uncertainty:
         )
 
 
-def _correlation_factor(res):
-    """``sqrt((1 + rho1) / (1 - rho1))``: how much the lag-1 correlation ``rho1`` of residuals
+def correlation_factor(res, floor=0.0):
+    """``sqrt((1 + rho) / (1 - rho))``: how much the lag-1 correlation ``rho`` of residuals
     along a contour (in the order given; clipped to [0, 0.9]) inflates a standard deviation
-    computed as if they were independent (``N_eff = N (1 - rho1) / (1 + rho1)``)."""
+    computed as if they were independent (``N_eff = N (1 - rho) / (1 + rho)``).
+
+    The noise is taken as the residuals observed plus an independent part of standard
+    deviation ``floor`` px (the edge-location limit), so ``rho = rho1 m / (m + floor^2)`` with
+    ``rho1`` the residuals' own lag-1 correlation and ``m`` their mean square. Residuals far
+    below the floor (round-off on exact data) then count as independent, whatever order their
+    round-off happens to fall in (which differs between BLAS kernels); residuals far above it
+    keep their own correlation.
+    """
     r = np.asarray(res, np.float64)
     r = r[np.isfinite(r)] - np.mean(r[np.isfinite(r)]) if np.isfinite(r).sum() > 8 else None
     if r is None or not np.any(r):
         return 1.0
-    rho1 = float(np.clip((r[:-1] @ r[1:]) / (r @ r), 0.0, 0.9))
-    return math.sqrt((1.0 + rho1) / (1.0 - rho1))
+    ss = float(r @ r)
+    m = ss / len(r)
+    rho1 = float(np.clip((r[:-1] @ r[1:]) / ss, 0.0, 0.9))
+    rho = rho1 * m / (m + float(floor) ** 2)
+    return math.sqrt((1.0 + rho) / (1.0 - rho))
 
 
 def posture_uncertainty(
@@ -698,7 +709,7 @@ def posture_uncertainty(
     With ``J`` the Jacobian of the residuals (px) with respect to the posture (two axis angles,
     ``tvec``) and the nuisance parameters, each source's rows weighted by ``1 / sigma`` with
     ``sigma`` its observed RMS residual (at least ``floor`` px) times the inflation that the
-    correlation of neighbouring residuals implies (:func:`_correlation_factor`; edge points
+    correlation of neighbouring residuals implies (:func:`correlation_factor`; edge points
     share blur and interpolation), the covariance is ``(J^T J)^-1``; the posture block is
     reported. The rim pins the axis only weakly (a tilt of
     the mirror and a lateral shift keep the ellipse almost unchanged), which the weak direction
@@ -731,7 +742,7 @@ def posture_uncertainty(
     for term, s in zip(terms, sig):
         res = term.residuals(R, t, term.x0())
         n_out = len(res) - (getattr(term, "prior", None) is not None)
-        w.append(np.full(len(res), 1.0 / (s * _correlation_factor(res[:n_out]))))
+        w.append(np.full(len(res), 1.0 / (s * correlation_factor(res[:n_out], floor))))
     w = np.concatenate(w)
     if spec is not None and len(terms) > 1 and terms[-1].prior is not None:
         w[-1] = 1e-3  # the weak pull on z is not a measurement: (almost) no information

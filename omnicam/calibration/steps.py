@@ -381,12 +381,12 @@ def _effective_points(cands, cue, circles, K, mirror):
     """How many independent points the outline is worth under its best candidate.
 
     ``N (1 - rho1) / (1 + rho1)`` with ``rho1`` the lag-1 correlation of that candidate's
-    residuals along the outline (:func:`.refine._correlation_factor`), at most ``N / 2``. A
+    residuals along the outline (:func:`.refine.correlation_factor`), at most ``N / 2``. A
     model that misfits leaves a smooth residual field, worth far fewer points than it has: the
     office photograph with a guessed K fits both postures at 1.40 and 1.52 px, which 598
     independent points would call a 7-sigma gap.
     """
-    from .refine import _correlation_factor
+    from .refine import correlation_factor
     from .reflection import plane_radius
 
     n = len(cue.normalized)
@@ -396,7 +396,7 @@ def _effective_points(cands, cue, circles, K, mirror):
     i = min(finite, key=lambda k: finite[k].rms)
     c, circ = cands.all[i], finite[i]
     rho, g = plane_radius(mirror, c.R, c.tvec, cue.normalized, circ.z, np.linalg.inv(K)[:2, :2])
-    f = _correlation_factor((rho - circ.r) / g)
+    f = correlation_factor((rho - circ.r) / g, SIGMA_FLOOR)
     return min(0.5 * n, n / (f * f))
 
 
@@ -608,7 +608,7 @@ def refinement_step(K, mirror, cand, rim, lines_xn, cue, circle, refine=True):
     """
     from .refine import (
         RimTerm,
-        _correlation_factor,
+        correlation_factor,
         posture_uncertainty,
         refine_posture,
         uncertainty_from_cov,
@@ -629,7 +629,9 @@ def refinement_step(K, mirror, cand, rim, lines_xn, cue, circle, refine=True):
         # the rim's a posteriori variance, inflated by the correlation of neighbouring edge
         # points as in the reported uncertainty (so the test and the uncertainty agree)
         R0 = cv2.Rodrigues(np.asarray(base.rvec, np.float64).reshape(3, 1))[0]
-        f = _correlation_factor(RimTerm(K, mirror, R0, base.tvec, rim_px).residuals(R0, base.tvec))
+        f = correlation_factor(
+            RimTerm(K, mirror, R0, base.tvec, rim_px).residuals(R0, base.tvec), SIGMA_FLOOR
+        )
         var = max(2.0 * base.rim_cost / max(len(rim_px) - 5, 1), SIGMA_FLOOR**2) * f * f
         tries = []
         if spec is not None and cue.r is None and cue.z is None:
