@@ -2,6 +2,7 @@
 misaligned rigs for the calibration tests, and a rig in a white holder for the rim tests."""
 
 import math
+from pathlib import Path
 
 import cv2
 import numpy as np
@@ -9,6 +10,9 @@ import pytest
 
 from omnicam import MisalignedHyperbolicCamera, synthetic
 from omnicam.calibration import chen
+
+#: A real photograph (MIT, shipped with the tests: tests/data/README.md).
+REAL_PHOTO = Path(__file__).resolve().parent / "data" / "office_catadioptric_1920x1080.jpg"
 
 
 def _rigs():

@@ -1,11 +1,9 @@
 """The rim ellipse Q_I (eqs. 20-22): fit to given points, and detection in images."""
 
-import pathlib
-
 import cv2
 import numpy as np
 import pytest
-from conftest import white_holder_render
+from conftest import REAL_PHOTO, white_holder_render
 
 from omnicam import synthetic
 from omnicam.calibration.rim import (
@@ -130,14 +128,6 @@ def test_fit_rim_too_few_points_non_robust():
 
 
 # -- detect_rim on images ------------------------------------------------------------------------
-# the shared data folder next to the repository (see shared/data/real/README.md)
-REAL_PHOTO = (
-    pathlib.Path(__file__).resolve().parents[2]
-    / "shared"
-    / "data"
-    / "real"
-    / "office_catadioptric_1920x1080.jpg"
-)
 
 # A careful manual fit of the real photograph's rim (the outer edge of the bright mirror against
 # the black holder), made before detect_rim was written. How it was made: radial intensity
@@ -332,7 +322,6 @@ def test_detect_rim_any_circular_rim_strongly_oblique_ellipse():
     np.testing.assert_allclose(fit.center, center, atol=0.05)
 
 
-@pytest.mark.skipif(not REAL_PHOTO.exists(), reason="shared real photograph not available")
 def test_detect_rim_real_photo_matches_manual_fit():
     manual = fit_rim(_manual_points(), robust=False)  # the constants are what this gives
     np.testing.assert_allclose(manual.center, MANUAL_CENTER, atol=0.01)
@@ -345,7 +334,6 @@ def test_detect_rim_real_photo_matches_manual_fit():
     assert fit.points[:, 1].min() > 1 and fit.points[:, 1].max() < 1078
 
 
-@pytest.mark.skipif(not REAL_PHOTO.exists(), reason="shared real photograph not available")
 @pytest.mark.parametrize("variant", ["half_size_grey", "cropped_more", "flipped_jpeg_q40"])
 def test_detect_rim_real_photo_variants_match_manual_fit(variant):
     """The same photograph halved, clipped harder (100 px off top and bottom, 300 px off the
