@@ -167,3 +167,55 @@ def test_board_in_a_degraded_render_of_a_furnished_room_is_found_and_an_empty_on
         RIG, PATTERN, SQUARE, None, None, supersample=2, seed=3, room=room, photometric=photo
     )
     assert omnicam.find_pattern(empty, PATTERN, ROUGH) is None
+
+
+# -- no camera first ---------------------------------------------------------------------------
+def test_opencv_detectors_on_the_raw_image_need_no_camera_and_give_the_boards_order():
+    """OpenCV's detectors on the image as it is: the corners the mirror shows mirrored are put
+    back in the board's own order (what a rigid pose explains), up to its 180-degree turn."""
+    from omnicam.calibration.pattern_detect import detect_pattern
+
+    rvec, tvec = _board_at(-20.0, 90.0, 450.0, seed=7)
+    img = boards.render_board(RIG, PATTERN, SQUARE, rvec, tvec, supersample=3, noise=1.0, seed=2)
+    truth = boards.board_corners(RIG, PATTERN, SQUARE, rvec, tvec)
+    found = detect_pattern(img, PATTERN)  # no camera at all
+    assert found is not None and found.method in ("raw", "raw-sb")
+    assert _match(found.corners, truth) < 0.3
+    assert omnicam.find_pattern(img, PATTERN) is not None
+    empty = boards.render_board(RIG, PATTERN, SQUARE, None, None, supersample=2)
+    assert detect_pattern(empty, PATTERN) is None
+
+
+def test_views_are_skipped_without_a_camera_and_unknown_methods_are_refused():
+    from omnicam.calibration.pattern_detect import detect_pattern
+
+    img = boards.render_board(RIG, PATTERN, SQUARE, None, None, supersample=1)
+    assert detect_pattern(img, PATTERN, methods=("views",)) is None
+    with pytest.raises(ValueError, match="methods"):
+        detect_pattern(img, PATTERN, methods=("hough",))
+
+
+def test_calibrate_pattern_from_images_says_how_each_board_was_found():
+    poses = [_board_at(-22.0, az, 500.0, seed=k) for k, az in enumerate(range(0, 360, 60))]
+    images = [
+        boards.render_board(RIG, PATTERN, SQUARE, rv, tv, supersample=2, noise=1.0, seed=k)
+        for k, (rv, tv) in enumerate(poses)
+    ]
+    images.append(boards.render_board(RIG, PATTERN, SQUARE, None, None, supersample=1))
+    with pytest.warns(RuntimeWarning, match="view 6 dropped: no board found"):
+        cam, report = omnicam.calibrate_pattern(
+            images,
+            PATTERN,
+            SQUARE,
+            RIG.mirror,
+            boundary_points=RIG.rim_image_points(360),
+            lens=None,
+        )
+    assert sorted(report.found_by) == list(range(6))  # the empty image: no board, no method
+    assert set(report.found_by.values()) <= {"raw", "raw-sb", "views", "views (fitted camera)"}
+    assert report.dropped == {6: "no board found"}
+    assert report.rms < 0.5
+    assert "found by" in report.table()
+    for i, (rv, tv) in enumerate(poses):
+        truth = boards.board_corners(RIG, PATTERN, SQUARE, rv, tv)
+        assert _match(report.image_points[i], truth) < 0.4

@@ -86,6 +86,9 @@ _N_RIM = 360  # rim points kept for the adjustment
 _LENS_AGREE_PX = 1.0
 #: A relative standard deviation of ``a`` or ``b`` above this: the shape is not determined.
 _SHAPE_WEAK = 0.01
+#: Rounds of detection and adjustment: a board the views of the fitted camera find that the
+#: start's did not is added and the rig fitted again, until no new board is found.
+_DETECT_ROUNDS = 3
 
 
 @dataclasses.dataclass(frozen=True, eq=False)
@@ -128,6 +131,12 @@ class PatternReport:
         RMS outline residual of the camera's reflection, px (NaN when not used).
     lens_note : str
         Whether and how the camera's reflection was used.
+    found_by : dict
+        ``{image index: how its corners were found}``: ``"given"``, one of
+        :data:`.pattern_detect.METHODS` (``"raw"``, ``"raw-sb"``: OpenCV's detectors on the
+        image as it is; ``"views"``: in the start camera's unwarped views) or ``"views (fitted
+        camera)"`` (a later round, in the views of the camera fitted to the boards found
+        before).
     """
 
     rms: float
@@ -146,18 +155,19 @@ class PatternReport:
     start: object
     lens_rms: float = math.nan
     lens_note: str = ""
+    found_by: dict = dataclasses.field(default_factory=dict)
 
     def table(self):
         """The per-view table as text: index, corners, RMS px, distance and elevation of the
         board, or why the view was dropped."""
-        lines = [f"{'view':>5} {'corners':>7} {'rms px':>8} {'dist':>8} {'elev deg':>8}"]
+        lines = [f"{'view':>5} {'corners':>7} {'rms px':>8} {'dist':>8} {'elev deg':>8}  found by"]
         for i in sorted(set(self.view_rms) | set(self.dropped)):
             if i in self.view_rms:
                 t = np.asarray(self.board_poses[i][1])
                 el = math.degrees(math.atan2(t[2], math.hypot(t[0], t[1])))
                 lines.append(
                     f"{i:>5} {self.corners_used[i]:>7} {self.view_rms[i]:>8.3f} "
-                    f"{np.linalg.norm(t):>8.1f} {el:>8.1f}"
+                    f"{np.linalg.norm(t):>8.1f} {el:>8.1f}  {self.found_by.get(i, '-')}"
                 )
             else:
                 lines.append(f"{i:>5} {'-':>7} {'-':>8}   dropped: {self.dropped[i]}")
@@ -894,28 +904,45 @@ def calibrate_pattern(
     rim_fit, rim_seen, rim_image = _rim_step(images, boundary_points, image_size)
     lens_px, lens_note = _reflection_step(lens, images, rim_image, rim_fit)
     cam0 = _start_step(K, mirror, rim_fit, rim_seen, D, image_size, camera_cls)
-    pts, poses, dropped, obj = _corner_step(images, image_points, (cols, rows), square, cam0)
-    adj, sol, used, vr, rim_px, warns = _adjustment_step(
-        cam0,
-        mirror,
-        obj,
-        pts,
-        poses,
-        dropped,
-        rim_seen,
-        free_d,
-        n_d,
-        fit_skew,
-        refine_mirror_shape,
-        camera_cls,
-        lens_px,
-        lens_z,
-        f_scale,
-        drop_outlier_views,
-        outlier_factor,
-        outlier_min_px,
-    )
-    return _report_step(
+    found_by = ["given" if p is not None else None for p in (image_points or [])]
+    if image_points is None:
+        image_points, found_by = _detection_step(images, (cols, rows), cam0)
+    start, shape = cam0, mirror
+    for _round in range(_DETECT_ROUNDS):
+        pts, poses, dropped, obj = _corner_step(image_points, (cols, rows), square, start)
+        adj, sol, used, vr, rim_px, warns = _adjustment_step(
+            start,
+            shape,
+            obj,
+            pts,
+            poses,
+            dropped,
+            rim_seen,
+            free_d,
+            n_d,
+            fit_skew,
+            refine_mirror_shape,
+            camera_cls,
+            lens_px,
+            lens_z,
+            f_scale,
+            drop_outlier_views,
+            outlier_factor,
+            outlier_min_px,
+        )
+        missing = [i for i, p in enumerate(image_points) if p is None and found_by[i] is None]
+        if not images or not missing:
+            break
+        # the fitted camera aims the views better than the start did: look again, and fit
+        # again only if a board is found that was not
+        start = adj.to_gauge(sol.x, image_size)[0]
+        shape = start.mirror
+        new = _redetect(images, missing, (cols, rows), start)
+        if not new:
+            break
+        for i in new:
+            image_points[i], found_by[i] = new[i], "views (fitted camera)"
+    camera, report = _report_step(
         adj,
         sol,
         used,
@@ -932,6 +959,8 @@ def calibrate_pattern(
         refine_mirror_shape,
         lens_note,
     )
+    found = {i: m for i, m in enumerate(found_by) if m is not None}
+    return camera, dataclasses.replace(report, found_by=found)
 
 
 # -- the steps of calibrate_pattern ----------------------------------------------------------
@@ -1142,17 +1171,41 @@ def _start_step(K, mirror, rim_fit, rim_seen, D, image_size, camera_cls):
     return cam0
 
 
-def _corner_step(images, image_points, pattern_size, square, cam0):
-    """3. The corners of every view, checked, and each board's start pose from its rays:
+def _detection_step(images, pattern_size, cam0):
+    """3a. Every image's board: OpenCV's detectors on the raw image, which need no camera, then
+    the views of the start camera on the rest (:func:`.pattern_detect.detect_pattern`).
+    Returns ``(corners or None per image, how each was found or None)``."""
+    from .pattern_detect import detect_pattern
+
+    points, found_by = [], []
+    for im in images:
+        det = detect_pattern(im, pattern_size, None, methods=("raw", "raw-sb"))
+        if det is None:
+            det = detect_pattern(im, pattern_size, cam0, methods=("views",))
+        points.append(None if det is None else det.corners)
+        found_by.append(None if det is None else det.method)
+    return points, found_by
+
+
+def _redetect(images, missing, pattern_size, camera):
+    """3c. ``{index: corners}`` of the boards that the views of ``camera`` find in the images
+    ``missing``."""
+    from .pattern_detect import detect_pattern
+
+    new = {}
+    for i in missing:
+        det = detect_pattern(images[i], pattern_size, camera, methods=("views",))
+        if det is not None:
+            new[i] = det.corners
+    return new
+
+
+def _corner_step(image_points, pattern_size, square, cam0):
+    """3b. The corners of every view, checked, and each board's start pose from its rays:
     ``(pts, poses, dropped, obj)``."""
     cols, rows = pattern_size
     n_corners = cols * rows
-    # 3. the corners
     dropped = {}
-    if image_points is None:
-        from .pattern_detect import find_pattern
-
-        image_points = [find_pattern(im, (cols, rows), cam0) for im in images]
     pts = []
     for i, p in enumerate(image_points):
         if p is None:

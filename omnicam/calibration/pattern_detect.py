@@ -1,18 +1,30 @@
-"""Chessboard corners in omnidirectional images: detect in virtual perspective views, map back.
+"""Chessboard corners in omnidirectional images: OpenCV's detectors first, then unwarped views.
 
-``cv2.findChessboardCorners`` fails on boards that the mirror bends strongly. Given a first
-calibration (even a rough one), :func:`find_pattern` looks at the annulus through virtual
-perspective views (:func:`omnicam.views.init_perspective_maps`, scene at infinity), several yaws
-and pitches covering the band of elevations the mirror sees, where the board's lines are nearly
-straight again. In each view it runs ``cv2.findChessboardCorners`` (fast check first) and refines
-the corners with ``cv2.cornerSubPix``; a detection is accepted only if a homography fits
-the view's corners to the board's grid to :data:`HOMOGRAPHY_RMS_PX` RMS with no corner
-standing out (:data:`HOMOGRAPHY_MAX_PX`): a wrong or partial grid, or one corner pulled off
-by cornerSubPix, does not. The view's corners are mapped back to the source image exactly
-through the view's own remap table: a feature at view pixel ``u`` was sampled from source pixel
-``map(u)``, bilinear in the float tables, whatever the calibration's errors (optionally they are
-refined once more by ``cv2.cornerSubPix`` in the source image, ``refine_in_source``). Of several
-views that see the same board the one with the board farthest from its border is kept.
+:func:`detect_pattern` needs no camera to start. It tries, in order:
+
+1. ``"raw"``: ``cv2.findChessboardCorners`` on the image as it is, refined by
+   ``cv2.cornerSubPix``; then ``"raw-sb"``: ``cv2.findChessboardCornersSB`` (exhaustive,
+   accurate). A board the mirror bends little is found so, as OpenCV finds it for
+   ``cv2.omnidir.calibrate``. The grid is accepted only if no quadrilateral of neighbouring
+   corners folds or degenerates (a wrongly linked grid does). One reflection shows the board
+   mirrored, so the rows OpenCV returns are put back in the board's order;
+2. ``"views"``, given a first calibration (even a rough one): the annulus is looked at through
+   virtual perspective views (:func:`omnicam.views.init_perspective_maps`, scene at
+   infinity), several yaws and pitches covering the band of elevations the mirror sees, where
+   the board's lines are nearly straight again. In each view ``cv2.findChessboardCorners``
+   runs (fast check first) and ``cv2.cornerSubPix`` refines; a detection is accepted only if a
+   homography fits the view's corners to the board's grid to :data:`HOMOGRAPHY_RMS_PX` RMS
+   with no corner standing out (:data:`HOMOGRAPHY_MAX_PX`): a wrong or partial grid, or one
+   corner pulled off by cornerSubPix, does not. The view's corners are mapped back to the
+   source image exactly through the view's own remap table: a feature at view pixel ``u`` was
+   sampled from source pixel ``map(u)``, bilinear in the float tables, whatever the
+   calibration's errors (optionally they are refined once more by ``cv2.cornerSubPix`` in the
+   source image, ``refine_in_source``). Of several views that see the same board the one with
+   the board farthest from its border is kept.
+
+:func:`omnicam.calibrate_pattern` runs the raw detectors on every image, the views from its
+start camera on the rest, and the views again with each better camera until no new board is
+found.
 
 Accuracy (``benchmarks/bench_pattern.py --detect``): on independent renders
 (:mod:`omnicam.synthetic.realistic`'s own tracer) of 1000x1000 of random rigs tilted up to 5 deg
@@ -25,17 +37,31 @@ RMS 0.11 px (median 0.06, 95th percentile 0.20, largest 1.1 px); boards with a c
 gave corners; 0.31 s per image.
 
 Corner order: OpenCV's (row by row); the board's 180-degree ambiguity is resolved so that the
-first row runs left to right in the view whose image-up is the mirror axis.
+first row runs left to right in the view whose image-up is the mirror axis (``"views"``) or,
+in the raw image, counterclockwise about the image of the mirror axis (the camera's principal
+point, or the image centre without a camera).
 """
 
 from __future__ import annotations
 
+import dataclasses
 import math
 
 import cv2
 import numpy as np
 
-__all__ = ["HOMOGRAPHY_MAX_PX", "HOMOGRAPHY_RMS_PX", "detection_views", "find_pattern"]
+__all__ = [
+    "HOMOGRAPHY_MAX_PX",
+    "HOMOGRAPHY_RMS_PX",
+    "METHODS",
+    "PatternDetection",
+    "detect_pattern",
+    "detection_views",
+    "find_pattern",
+]
+
+#: How a board's corners can be found, in the order :func:`detect_pattern` tries them.
+METHODS = ("raw", "raw-sb", "views")
 
 #: Largest RMS (view px) of a view's corners about the board grid's best homography.
 HOMOGRAPHY_RMS_PX = 1.5
@@ -43,6 +69,7 @@ HOMOGRAPHY_RMS_PX = 1.5
 #: rejects the view's detection.
 HOMOGRAPHY_MAX_PX = 1.0
 _FIND_FLAGS = cv2.CALIB_CB_ADAPTIVE_THRESH | cv2.CALIB_CB_NORMALIZE_IMAGE | cv2.CALIB_CB_FAST_CHECK
+_SB_FLAGS = cv2.CALIB_CB_EXHAUSTIVE | cv2.CALIB_CB_ACCURACY | cv2.CALIB_CB_NORMALIZE_IMAGE
 _CACHE = {}
 _CACHE_MAX = 8
 #: Passes of views: 80-degree views first; 120-degree ones for boards too large for those.
@@ -158,8 +185,26 @@ def _gray(image):
     return _gray8(image, 0)
 
 
-def find_pattern(image, pattern_size, camera, refine_in_source=False):
+@dataclasses.dataclass(frozen=True)
+class PatternDetection:
+    """A board found by :func:`detect_pattern`.
+
+    Attributes
+    ----------
+    corners : (N, 1, 2) float32 ndarray
+        Source pixels in OpenCV's order (row by row).
+    method : str
+        How they were found: one of :data:`METHODS`.
+    """
+
+    corners: np.ndarray
+    method: str
+
+
+def find_pattern(image, pattern_size, camera=None, refine_in_source=False):
     """Inner chessboard corners in an image of the rig, or ``None`` if no whole board is found.
+
+    The corners of :func:`detect_pattern` (which also says how they were found).
 
     Parameters
     ----------
@@ -167,30 +212,123 @@ def find_pattern(image, pattern_size, camera, refine_in_source=False):
         Grey or BGR image of the rig (uint8, uint16 or float).
     pattern_size : (int, int)
         Inner corners ``(columns, rows)``, as ``cv2.findChessboardCorners``.
-    camera : MisalignedHyperbolicCamera
+    camera : MisalignedHyperbolicCamera, optional
         A first calibration of the rig (a rough one is enough: it only aims the views; the
-        corners are mapped back through the views' own tables).
+        corners are mapped back through the views' own tables). Without it only OpenCV's
+        detectors on the raw image are tried.
     refine_in_source : bool
-        Refine the mapped-back corners once more by ``cv2.cornerSubPix`` in the source image.
-        Off by default: on the independent renders of the benchmark (blur 0.3-1.2 px, noise,
-        JPEG) it made the corners worse on 29 of 37 boards (RMS 0.17 against 0.14 px over the
-        same 37 detections; 0.81 against 0.36 px worst corner on one board), the source window
-        being a few pixels where the view's is wider.
+        Refine corners found in the views once more by ``cv2.cornerSubPix`` in the source
+        image. Off by default: on the independent renders of ``benchmarks/bench_pattern.py``
+        it made the corners worse (the source window is a few pixels where the view's is
+        wider).
 
     Returns
     -------
     corners : (N, 1, 2) float32 ndarray or None
         In OpenCV's order (row by row), source pixels.
     """
+    found = detect_pattern(image, pattern_size, camera, refine_in_source=refine_in_source)
+    return None if found is None else found.corners
+
+
+def detect_pattern(image, pattern_size, camera=None, refine_in_source=False, methods=METHODS):
+    """The board's corners and how they were found, or ``None``; see the module docstring.
+
+    Parameters
+    ----------
+    image, pattern_size, camera, refine_in_source
+        As for :func:`find_pattern`.
+    methods : sequence of str
+        Which of :data:`METHODS` to try, in that order (``"views"`` needs ``camera``).
+
+    Returns
+    -------
+    PatternDetection or None
+    """
     from .intrinsics import _pattern
 
     cols, rows = _pattern(pattern_size)
+    unknown = [m for m in methods if m not in METHODS]
+    if unknown:
+        raise ValueError(f"methods must be among {METHODS}, got {unknown}")
     gray = _gray(image)
-    if camera.image_size is not None and camera.image_size != (gray.shape[1], gray.shape[0]):
+    if (
+        camera is not None
+        and camera.image_size is not None
+        and camera.image_size != (gray.shape[1], gray.shape[0])
+    ):
         raise ValueError(
             f"image is {gray.shape[1]}x{gray.shape[0]} but camera.image_size is "
             f"{camera.image_size}: use camera.scaled(image_size)"
         )
+    for method in methods:
+        if method == "views":
+            if camera is None:
+                continue
+            corners = _detect_in_views(gray, cols, rows, camera, refine_in_source)
+        else:
+            corners = _detect_raw(gray, cols, rows, sb=method == "raw-sb")
+            if corners is not None:
+                corners = _counterclockwise(corners, cols, _axis_pixel(gray, camera))
+        if corners is not None:
+            return PatternDetection(corners.reshape(-1, 1, 2).astype(np.float32), method)
+    return None
+
+
+def _axis_pixel(gray, camera):
+    """Where the mirror axis is seen, near enough to order a board: the principal point."""
+    if camera is not None:
+        return np.array([camera.K[0, 2], camera.K[1, 2]])
+    return np.array([(gray.shape[1] - 1) / 2.0, (gray.shape[0] - 1) / 2.0])
+
+
+def _counterclockwise(c, cols, centre):
+    """The corners ``c`` (N, 2) in the order whose first row runs counterclockwise (as seen
+    in the image, y down) about ``centre``; OpenCV's 180-degree ambiguity resolved so."""
+    a, b = c[0] - centre, c[cols - 1] - centre
+    # image y points down: counterclockwise on screen is a negative cross product
+    return c[::-1].copy() if a[0] * b[1] - a[1] * b[0] > 0 else c
+
+
+def _detect_raw(gray, cols, rows, sb):
+    """OpenCV's detector on the raw image (``sb``: ``findChessboardCornersSB``), (N, 2) or
+    None when nothing is found or the grid folds."""
+    if sb:
+        found, corners = cv2.findChessboardCornersSB(gray, (cols, rows), flags=_SB_FLAGS)
+        if not found:
+            return None
+    else:
+        found, corners = cv2.findChessboardCorners(gray, (cols, rows), flags=_FIND_FLAGS)
+        if not found:
+            return None
+        half = int(np.clip(0.4 * _spacing(corners.reshape(rows, cols, 2)), 2, 11))
+        crit = (cv2.TERM_CRITERIA_EPS + cv2.TERM_CRITERIA_MAX_ITER, 100, 1e-4)
+        corners = cv2.cornerSubPix(gray, corners, (half, half), (-1, -1), crit)
+    grid = corners.reshape(rows, cols, 2).astype(np.float64)
+    if not _grid_is_regular(grid):
+        return None
+    # the mirror shows the board mirrored: OpenCV's rows of the image are the board's rows in
+    # reverse, so the order that a rigid pose of the board explains has them turned back
+    return grid[::-1].reshape(-1, 2).copy()
+
+
+def _grid_is_regular(grid):
+    """Every quadrilateral of neighbouring corners convex, turning the same way as the others
+    and of an area within 1/16 of the median's: a grid that folds or skips is a wrong grid."""
+    p00, p01, p10, p11 = grid[:-1, :-1], grid[:-1, 1:], grid[1:, :-1], grid[1:, 1:]
+    quad = np.stack([p00, p01, p11, p10], axis=2)  # (rows-1, cols-1, 4, 2), around the cell
+    e = np.roll(quad, -1, axis=2) - quad
+    turn = e[..., 0] * np.roll(e, -1, axis=2)[..., 1] - e[..., 1] * np.roll(e, -1, axis=2)[..., 0]
+    sign = np.sign(np.median(turn))
+    if sign == 0 or not (np.sign(turn) == sign).all():
+        return False
+    area = np.abs(turn.sum(axis=2)) / 4.0  # half the sum of the four turns' areas, halved
+    med = float(np.median(area))
+    return bool(med > 0 and area.min() > med / 16.0 and area.max() < 16.0 * med)
+
+
+def _detect_in_views(gray, cols, rows, camera, refine_in_source):
+    """The corners found through the views of ``camera`` (N, 2), or None."""
     best = None
     for spec in _PASSES:
         best = _detect(gray, cols, rows, detection_views(camera, **spec))
@@ -212,7 +350,7 @@ def find_pattern(image, pattern_size, camera, refine_in_source=False):
         # keep the refinement only where it stays within a pixel of the mapped-back corner
         ok = np.linalg.norm(refined - best, axis=1) < 1.0
         best = np.where(ok[:, None], refined, best)
-    return best.reshape(-1, 1, 2).astype(np.float32)
+    return best
 
 
 def _detect(gray, cols, rows, views):
