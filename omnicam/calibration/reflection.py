@@ -395,7 +395,15 @@ def _core_and_shell(G, center, radius, angles):
     (0.75-0.95 of it): the lens glass is darker than the ring around it."""
     core = _polar(G, center, np.linspace(0.0, 0.5, 12) * radius, angles)
     shell = _polar(G, center, np.linspace(0.75, 0.95, 8) * radius, angles)
-    return float(np.nanmedian(core)), float(np.nanmedian(shell))
+    return _finite_median(core), _finite_median(shell)
+
+
+def _finite_median(values):
+    """Median of the finite values; NaN (and no numpy warning) when there are none, as for a
+    silhouette that lies outside the image."""
+    v = np.asarray(values, np.float64)
+    v = v[np.isfinite(v)]
+    return float(np.median(v)) if v.size else math.nan
 
 
 def _rises(prof, dr, min_rise, dark_max, k=3):
