@@ -396,7 +396,7 @@ class MisalignedHyperbolicCamera:
         images,
         pattern_size,
         square_size,
-        mirror,
+        mirror=None,
         K=None,
         D=None,
         image_size=None,
@@ -405,7 +405,8 @@ class MisalignedHyperbolicCamera:
         dist_model="k1k2p1p2",
         **kw,
     ):
-        """``K``, ``D`` and the posture from chessboards seen through the mirror.
+        """``K``, ``D``, the posture (and, with ``mirror=None``, the mirror) from chessboards
+        seen through the mirror.
 
         Also ``omnicam.calibrate_pattern``. See
         :func:`omnicam.calibration.pattern.calibrate_pattern` (keyword options there).

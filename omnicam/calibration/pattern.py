@@ -131,6 +131,9 @@ class PatternReport:
         RMS outline residual of the camera's reflection, px (NaN when not used).
     lens_note : str
         Whether and how the camera's reflection was used.
+    central : CentralFit or None
+        The central start (:func:`.central.fit_central` of the corners found on the raw
+        images), or None when it could not be made.
     found_by : dict
         ``{image index: how its corners were found}``: ``"given"``, one of
         :data:`.pattern_detect.METHODS` (``"raw"``, ``"raw-sb"``: OpenCV's detectors on the
@@ -156,6 +159,7 @@ class PatternReport:
     lens_rms: float = math.nan
     lens_note: str = ""
     found_by: dict = dataclasses.field(default_factory=dict)
+    central: object = None
 
     def table(self):
         """The per-view table as text: index, corners, RMS px, distance and elevation of the
@@ -798,7 +802,7 @@ def calibrate_pattern(
     images,
     pattern_size,
     square_size,
-    mirror,
+    mirror=None,
     K=None,
     D=None,
     image_size=None,
@@ -806,6 +810,7 @@ def calibrate_pattern(
     refine_mirror_shape=False,
     dist_model="k1k2p1p2",
     *,
+    rim_radius=None,
     boundary_points=None,
     camera_cls=None,
     fit_skew=False,
@@ -829,9 +834,14 @@ def calibrate_pattern(
         Inner corners ``(columns, rows)``, as ``cv2.findChessboardCorners``.
     square_size : float
         Side of a square in the mirror's length unit (mm by convention).
-    mirror : HyperbolicMirror
+    mirror : HyperbolicMirror or None
+        The mirror (a start: only its shape's agreement with the central fit is checked, and
+        with ``refine_mirror_shape`` its ``a, b`` are estimated). ``None``: unknown, its shape
+        from the central fit's ``xi`` and its size from the rim's image at ``rim_radius``
+        (:func:`.central.hyperbolic_start`).
     K : (3, 3) array_like, optional
-        Start of the camera matrix (refined). Default: from the rim (see the module docstring).
+        Start of the camera matrix (refined). Default: from the central fit of the corners
+        (:func:`.central.fit_central`), else from the rim (see the module docstring).
     D : array_like, optional
         Start of the distortion (4 or 5 coefficients); its free coefficients follow
         ``dist_model``.
@@ -851,6 +861,12 @@ def calibrate_pattern(
     dist_model : str
         One of ``"none", "k1", "k1k2", "k1k2p1p2", "k1k2p1p2k3"``: the OpenCV coefficients
         estimated (the others stay at ``D``'s values, or 0).
+    rim_radius : float, optional
+        With ``mirror=None``: the rim's radius (mirror units), which fixes the scale of the
+        mirror and of the camera's position in its frame (default
+        :data:`.central.NOMINAL_RIM_RADIUS`; the report then says the scale is assumed). No
+        view of boards tells the scale apart but through the rig's small non-centrality; the
+        viewing directions, ``K`` and ``D`` do not depend on it, distances do in proportion.
     boundary_points : (M, 2) array_like, optional
         Pixels on the rim (as seen), instead of detecting it in the images.
     camera_cls : type
@@ -903,10 +919,17 @@ def calibrate_pattern(
     )
     rim_fit, rim_seen, rim_image = _rim_step(images, boundary_points, image_size)
     lens_px, lens_note = _reflection_step(lens, images, rim_image, rim_fit)
-    cam0 = _start_step(K, mirror, rim_fit, rim_seen, D, image_size, camera_cls)
     found_by = ["given" if p is not None else None for p in (image_points or [])]
     if image_points is None:
-        image_points, found_by = _detection_step(images, (cols, rows), cam0)
+        image_points, found_by = _raw_detection_step(images, (cols, rows))
+    obj = object_points((cols, rows), square)
+    K, mirror, central, start_warns = _central_step(
+        image_points, obj, image_size, rim_fit, mirror, rim_radius, K
+    )
+    cam0 = _start_step(K, mirror, rim_fit, rim_seen, D, image_size, camera_cls)
+    missing = [i for i, p in enumerate(image_points) if p is None] if images else []
+    for i, corners in _redetect(images, missing, (cols, rows), cam0).items():
+        image_points[i], found_by[i] = corners, "views"
     start, shape = cam0, mirror
     for _round in range(_DETECT_ROUNDS):
         pts, poses, dropped, obj = _corner_step(image_points, (cols, rows), square, start)
@@ -960,7 +983,10 @@ def calibrate_pattern(
         lens_note,
     )
     found = {i: m for i, m in enumerate(found_by) if m is not None}
-    return camera, dataclasses.replace(report, found_by=found)
+    warns_all = tuple(start_warns) + report.warnings
+    for w in start_warns:
+        _warnings.warn(w, RuntimeWarning, stacklevel=2)
+    return camera, dataclasses.replace(report, found_by=found, central=central, warnings=warns_all)
 
 
 # -- the steps of calibrate_pattern ----------------------------------------------------------
@@ -982,9 +1008,9 @@ def _check_arguments(
         raise ValueError(f"square_size must be a positive number, got {square_size!r}") from None
     if not (math.isfinite(square) and square > 0):
         raise ValueError(f"square_size must be a positive number, got {square_size!r}")
-    if not isinstance(mirror, HyperbolicMirror):
+    if mirror is not None and not isinstance(mirror, HyperbolicMirror):
         raise ValueError(  # noqa: TRY004 (ValueError for bad arguments, as everywhere)
-            f"mirror must be a HyperbolicMirror, got {type(mirror).__name__}"
+            f"mirror must be a HyperbolicMirror or None (unknown), got {type(mirror).__name__}"
         )
     if dist_model not in DIST_MODELS:
         raise ValueError(f"dist_model must be one of {sorted(DIST_MODELS)}, got {dist_model!r}")
@@ -1171,24 +1197,57 @@ def _start_step(K, mirror, rim_fit, rim_seen, D, image_size, camera_cls):
     return cam0
 
 
-def _detection_step(images, pattern_size, cam0):
-    """3a. Every image's board: OpenCV's detectors on the raw image, which need no camera, then
-    the views of the start camera on the rest (:func:`.pattern_detect.detect_pattern`).
-    Returns ``(corners or None per image, how each was found or None)``."""
+def _raw_detection_step(images, pattern_size):
+    """2a. Every image's board by OpenCV's detectors on the raw image, which need no camera
+    (:func:`.pattern_detect.detect_pattern`). Returns ``(corners or None per image, how each
+    was found or None)``."""
     from .pattern_detect import detect_pattern
 
     points, found_by = [], []
     for im in images:
         det = detect_pattern(im, pattern_size, None, methods=("raw", "raw-sb"))
-        if det is None:
-            det = detect_pattern(im, pattern_size, cam0, methods=("views",))
         points.append(None if det is None else det.corners)
         found_by.append(None if det is None else det.method)
     return points, found_by
 
 
+def _central_step(image_points, obj, image_size, rim_fit, mirror, rim_radius, K):
+    """2b. Without a mirror, the central start (:mod:`.central`): ``cv2.omnidir.calibrate``
+    of the corners found so far and the hyperbolic rig it describes, at ``rim_radius``.
+    Returns ``(K, mirror, central fit or None, warnings)``; a given mirror is returned as it
+    is, with ``K`` (None: from the rim). The central fit's shape is not used to judge a given
+    mirror: with the pinhole's distortion fixed its ``xi`` is biased on misaligned rigs
+    (``a / b`` 1.22-1.28 on the test rig whose mirror has 0.83), and with it free ``xi``
+    trades with ``k1``."""
+    from .central import NOMINAL_RIM_RADIUS, fit_central, hyperbolic_start
+
+    warns = []
+    if mirror is not None:  # the rim's start (module docstring)
+        return K, mirror, None, warns
+    views = [np.asarray(p, np.float64).reshape(-1, 2) for p in image_points if p is not None]
+    views = [v for v in views if len(v) == len(obj)]
+    try:
+        central = fit_central(views, obj, image_size)
+    except ValueError as e:
+        raise ValueError(
+            f"the rig could not be started without a mirror: {e}; give the mirror "
+            f"(a, b, rim_radius) as a start"
+        ) from None
+    r_px = math.sqrt(float(rim_fit.axes[0] * rim_fit.axes[1]))
+    centre = ((image_size[0] - 1) / 2.0, (image_size[1] - 1) / 2.0)  # as the rim's start
+    R = NOMINAL_RIM_RADIUS if rim_radius is None else float(rim_radius)
+    K_c, mirror = hyperbolic_start(central.K, central.xi, r_px, R, K, centre)
+    if rim_radius is None:
+        warns.append(
+            f"the mirror's scale is assumed (rim_radius = {R:g}, nominal): a, b and the "
+            f"camera's position in the mirror frame scale with it; K, D and the viewing "
+            f"directions do not. Give rim_radius for the true scale"
+        )
+    return K_c, mirror, central, warns
+
+
 def _redetect(images, missing, pattern_size, camera):
-    """3c. ``{index: corners}`` of the boards that the views of ``camera`` find in the images
+    """3a. ``{index: corners}`` of the boards that the views of ``camera`` find in the images
     ``missing``."""
     from .pattern_detect import detect_pattern
 

@@ -63,6 +63,12 @@ def cmd_calibrate(args):
         and os.path.samefile(overlay, args.image)
     ):
         raise CliError(f"overlay {overlay} is the input image")
+    if args.mirror is None:
+        raise CliError(
+            "calibrate: give the mirror: --mirror A B RIM (or calibrate from chessboards "
+            "with --chessboard, which needs no mirror)",
+            2,
+        )
     try:
         mirror = HyperbolicMirror(*args.mirror)
     except ValueError as e:
@@ -243,9 +249,11 @@ def add_parser(sub):
         "--mirror",
         nargs=3,
         type=_positive,
-        required=True,
         metavar=("A", "B", "RIM"),
-        help="hyperboloid parameters a, b and rim radius (mm)",
+        help="hyperboloid parameters a, b and rim radius (mm) of (X^2+Y^2)/a^2 - Z^2/b^2 = -1: "
+        "a across the mirror, b along its axis (data sheets name them either way). Required "
+        "for one image; with --chessboard optional (a start; without it the mirror is "
+        "estimated from the boards)",
     )
     p.add_argument(
         "--intrinsics",

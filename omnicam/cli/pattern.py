@@ -2,7 +2,7 @@
 
 ::
 
-    omnicam calibrate --chessboard 9x6 --square 25 IMAGES... --mirror A B R -o rig.yaml
+    omnicam calibrate --chessboard 9x6 --square 25 IMAGES... [--mirror A B R] -o rig.yaml
                       [--intrinsics K.yaml] [--dist-model M] [--refine-mirror-shape]
                       [--overlay FOLDER] [--overwrite]
 
@@ -69,6 +69,14 @@ def add_arguments(p):
         help="with --chessboard: distortion coefficients to estimate (default k1k2p1p2)",
     )
     p.add_argument(
+        "--rim-radius",
+        type=float,
+        default=None,
+        metavar="R",
+        help="with --chessboard and no --mirror: the rim's radius (mm), which fixes the "
+        "mirror's scale (default 30, nominal; the report says so)",
+    )
+    p.add_argument(
         "--refine-mirror-shape",
         action="store_true",
         help="with --chessboard: also estimate the mirror's a and b (RIM fixes the scale)",
@@ -92,10 +100,14 @@ def cmd_calibrate_pattern(args):
     folder = args.overlay or os.path.join(os.path.dirname(calib), f"{stem}_views")
     if os.path.exists(folder) and not os.path.isdir(folder):
         raise CliError(f"overlay folder {folder} is a file")
-    try:
-        mirror = HyperbolicMirror(*args.mirror)
-    except ValueError as e:
-        raise CliError(f"--mirror: {e}") from None
+    mirror = None
+    if args.mirror is not None:
+        try:
+            mirror = HyperbolicMirror(*args.mirror)
+        except ValueError as e:
+            raise CliError(f"--mirror: {e}") from None
+        if args.rim_radius is not None:
+            raise CliError("calibrate: --rim-radius is for --chessboard without --mirror", 2)
     images = [_read_image(p, cv2.IMREAD_COLOR | cv2.IMREAD_IGNORE_ORIENTATION) for p in args.image]
     size = (images[0].shape[1], images[0].shape[0])
     for path, im in zip(args.image, images):
@@ -125,6 +137,7 @@ def cmd_calibrate_pattern(args):
                 D=D,
                 refine_mirror_shape=args.refine_mirror_shape,
                 dist_model=args.dist_model,
+                rim_radius=args.rim_radius,
             )
         except (ValueError, RuntimeError, np.linalg.LinAlgError) as e:
             raise CliError(f"calibration failed: {_one_line(e)}") from None

@@ -1,0 +1,114 @@
+"""Chessboards alone on a real rig: detection, fit time and 5-fold held-out corner RMS, omnicam
+(no mirror, no K) beside cv2.omnidir.calibrate, in one run.
+
+    python benchmarks/bench_chessboard_real.py FOLDER --pattern 6x7 --square 30 [--glob 'VMR*.jpg']
+        [--heldout ../shared/tools/heldout.py] [--mirror A B R]
+
+FOLDER holds the images (e.g. OCamCalib's public VMRImage0..9.jpg); nothing is committed. The
+held-out test is shared/tools/heldout.py's: calibrate on 4 folds, keep the intrinsics, fit each
+held-out view's pose alone, report its corner RMS.
+"""
+
+import argparse
+import glob
+import importlib.util
+import os
+import statistics
+import sys
+import time
+import warnings
+
+import cv2
+import numpy as np
+
+import omnicam
+from omnicam.calibration.pattern import object_points
+from omnicam.calibration.pattern_detect import detect_pattern
+from omnicam.calibration.rim import detect_rim
+
+
+def _heldout_module(path):
+    spec = importlib.util.spec_from_file_location("heldout", path)
+    mod = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(mod)
+    return mod
+
+
+def main(argv=None):
+    here = os.path.dirname(os.path.abspath(__file__))
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("folder")
+    ap.add_argument("--pattern", default="6x7")
+    ap.add_argument("--square", type=float, default=30.0)
+    ap.add_argument("--glob", default="*.jpg")
+    ap.add_argument("--mirror", type=float, nargs=3, default=None)
+    ap.add_argument(
+        "--heldout", default=os.path.join(here, "..", "..", "shared", "tools", "heldout.py")
+    )
+    a = ap.parse_args(argv)
+    pattern = tuple(int(v) for v in a.pattern.lower().split("x"))
+    paths = sorted(glob.glob(os.path.join(a.folder, a.glob)))
+    if not paths:
+        sys.exit(f"no images matching {a.glob} in {a.folder}")
+    images = [cv2.imread(p) for p in paths]
+    size = (images[0].shape[1], images[0].shape[0])
+    H = _heldout_module(a.heldout)
+    mirror = omnicam.HyperbolicMirror(*a.mirror) if a.mirror else None
+
+    t = time.perf_counter()
+    dets = [detect_pattern(im, pattern) for im in images]
+    t_det = time.perf_counter() - t
+    found = [i for i, d in enumerate(dets) if d is not None]
+    print(f"raw detection: {len(found)} of {len(images)} boards, {t_det:.2f} s in all")
+    corners = [dets[i].corners.reshape(-1, 2).astype(np.float64) for i in found]
+    obj = object_points(pattern, a.square)
+    rim = detect_rim(images[0])
+
+    def fit_omnicam(ids):
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore")
+            pts = [corners[k] for k in ids]
+            return omnicam.calibrate_pattern(
+                None,
+                pattern,
+                a.square,
+                mirror,
+                image_points=pts,
+                boundary_points=rim.points,
+                image_size=size,
+                lens=None,
+            )
+
+    # speed: the same corners, one fit each, in this process
+    times_om, times_cv = [], []
+    for _ in range(3):
+        t = time.perf_counter()
+        H.omnidir_fit(corners, obj, size)
+        times_cv.append(time.perf_counter() - t)
+        t = time.perf_counter()
+        cam, rep = fit_omnicam(range(len(corners)))
+        times_om.append(time.perf_counter() - t)
+    m_cv, m_om = statistics.median(times_cv), statistics.median(times_om)
+    print(
+        f"one fit on {len(corners)} views: cv2.omnidir {m_cv:.3f} s, omnicam {m_om:.2f} s "
+        f"(ratio {m_om / m_cv:.0f}x; medians of 3)"
+    )
+    print(f"omnicam on all views: RMS {rep.rms:.3f} px, fx {cam.K[0, 0]:.1f}, mirror {cam.mirror}")
+
+    folds = H.folds(len(corners), 5)
+    held = {"omnidir": [], "omnicam": []}
+    for f in folds:
+        train = [k for k in range(len(corners)) if k not in f]
+        od = H.omnidir_fit([corners[k] for k in train], obj, size)
+        cam, _ = fit_omnicam(train)
+        oc = H.omnicam_model(cam)
+        for k in f:
+            held["omnidir"].append(H.heldout_rms(od["project"], od["directions"], corners[k], obj))
+            held["omnicam"].append(H.heldout_rms(oc["project"], oc["directions"], corners[k], obj))
+    print("5-fold held-out corner RMS, px (median / max):")
+    for name, v in held.items():
+        print(f"  {name:8s} {np.median(v):.3f} / {np.max(v):.3f}")
+
+
+if __name__ == "__main__":
+    main()
