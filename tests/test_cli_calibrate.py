@@ -317,3 +317,23 @@ def test_intrinsics_as_numbers_instead_of_a_file(tmp_path, capsys):
         ]
     )
     assert code == 2 and "--fx --fy --cx --cy" in capsys.readouterr().err
+
+
+def test_one_image_without_mirror_says_to_give_it_or_use_chessboards(tmp_path, capsys):
+    img = tmp_path / "m.png"
+    cv2.imwrite(str(img), np.zeros((64, 64, 3), np.uint8))
+    k = write_K(tmp_path / "k.yaml", [[50, 0, 31.5], [0, 50, 31.5], [0, 0, 1]])
+    code = main(["calibrate", str(img), "--intrinsics", k, "-o", str(tmp_path / "c.yaml")])
+    assert code == 2
+    line = error_line(capsys.readouterr().err)
+    assert "--mirror" in line and "--chessboard" in line
+    assert not (tmp_path / "c.yaml").exists()
+
+
+def test_rim_radius_is_refused_beside_a_mirror(tmp_path, capsys):
+    img = tmp_path / "m.png"
+    cv2.imwrite(str(img), np.zeros((64, 64, 3), np.uint8))
+    args = ["calibrate", "--chessboard", "6x7", "--square", "30", str(img), *MIRROR]
+    code = main([*args, "--rim-radius", "30", "-o", str(tmp_path / "c.yaml")])
+    assert code == 2
+    assert "--rim-radius" in error_line(capsys.readouterr().err)

@@ -5,7 +5,11 @@ For rigs whose camera cannot be calibrated without the mirror. The pipeline of
 
 1. **the rim** (eqs. 20-22): :func:`.rim.detect_rim` on the first image where it is found (or
    the given ``boundary_points``);
-2. **a start without an initial-value problem**: without ``K``, the focal length from the rim's
+2. **the boards and a start without an initial-value problem**: OpenCV's detectors on every raw
+   image (:func:`.pattern_detect.detect_pattern`); with ``mirror=None`` the central start of
+   :mod:`.central` (``cv2.omnidir.calibrate`` of those corners; ``xi`` gives the mirror's shape,
+   its focal length the pinhole's, the rim's image the mirror's size at ``rim_radius``, which
+   fixes the scale). With a mirror and without ``K``, the focal length from the rim's
    size (an aligned rig images the rim circle of radius ``r`` at depth ``z_rim + c`` with radius
    ``f r / (z_rim + c)`` px) and the principal point at the image centre; the posture from the
    rim by :func:`omnicam.calibration.calibrate` (Chen's method, eqs. 23-42); every board's pose
@@ -25,7 +29,8 @@ For rigs whose camera cannot be calibrated without the mirror. The pipeline of
    board's pose moves only its own view's rows,
    so the columns of all boards are perturbed together (6 groups instead of ``6 n``). A first
    stage holds the principal point and the distortion at the start, a second frees them;
-4. views whose RMS stands out are dropped (or only reported) and the fit is run again;
+4. views whose RMS stands out are dropped (or only reported) and the fit is run again; boards
+   not found yet are looked for in the views of the fitted camera, and found ones fitted again;
 5. a :class:`PatternReport`: RMS overall and per view, poses, standard deviations from
    ``sigma^2 (J^T J)^-1``, warnings.
 
