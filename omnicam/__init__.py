@@ -23,7 +23,7 @@ if os.path.basename(sys.argv[0] if sys.argv else "") in ("omnicam", "omnicam.exe
 from .camera import MisalignedHyperbolicCamera
 from .mirror import HyperbolicMirror
 
-__version__ = "0.1.0"
+__version__ = "0.3.0"
 
 # public name -> module that defines it (loaded lazily, PEP 562)
 _LAZY = {
@@ -33,6 +33,7 @@ _LAZY = {
     "EstimationError": "omnicam.calibration.errors",
     "calibrate_intrinsics": "omnicam.calibration.intrinsics",
     "find_pattern": "omnicam.calibration.pattern_detect",
+    "detect_pattern": "omnicam.calibration.pattern_detect",
     "PatternReport": "omnicam.calibration.pattern",
     "Unwarper": "omnicam.stream",
     "rotation_from_ypr": "omnicam.views",

@@ -11,6 +11,7 @@ import numpy as np
 import pytest
 from conftest import leftovers, make_frame, one_error_line, video_frames, write_video
 
+import omnicam
 from omnicam import synthetic
 from omnicam.cli import main
 from omnicam.io import read_intrinsics
@@ -901,3 +902,13 @@ def test_demo_writes_every_output(tmp_path, capsys):
     assert cv2.imread(str(out / "panorama.png")).shape == (256, 1024, 3)
     assert cv2.imread(str(out / "perspective.png")).shape == (480, 640, 3)
     assert main(["info", str(out / "calibration.yaml")]) == 0
+
+
+def test_python_dash_m_runs_the_command():
+    import subprocess
+
+    out = subprocess.run(
+        [sys.executable, "-m", "omnicam", "--version"], capture_output=True, text=True, timeout=120
+    )
+    assert out.returncode == 0
+    assert omnicam.__version__ in out.stdout + out.stderr
