@@ -927,7 +927,7 @@ def calibrate_pattern(
     found_by = ["given" if p is not None else None for p in (image_points or [])]
     if image_points is None:
         image_points, found_by = _raw_detection_step(images, (cols, rows))
-    obj = object_points((cols, rows), square)
+    obj = object_points((cols, rows), square)  # (_corner_step returns the same)
     K, mirror, central, start_warns = _central_step(
         image_points, obj, image_size, rim_fit, mirror, rim_radius, K
     )

@@ -326,7 +326,7 @@ def _grid_is_regular(grid):
     sign = np.sign(np.median(turn))
     if sign == 0 or not (np.sign(turn) == sign).all():
         return False
-    area = np.abs(turn.sum(axis=2)) / 4.0  # half the sum of the four turns' areas, halved
+    area = np.abs(turn.sum(axis=2)) / 4.0  # the mean turn: a measure of the cell's size
     med = float(np.median(area))
     return bool(med > 0 and area.min() > med / 16.0 and area.max() < 16.0 * med)
 
