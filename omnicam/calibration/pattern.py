@@ -959,8 +959,8 @@ def calibrate_pattern(
             outlier_min_px,
         )
         missing = [i for i, p in enumerate(image_points) if p is None and found_by[i] is None]
-        if not images or not missing:
-            break
+        if not images or not missing or _round == _DETECT_ROUNDS - 1:
+            break  # (a board found after the last fit would be reported but not fitted)
         # the fitted camera aims the views better than the start did: look again, and fit
         # again only if a board is found that was not
         start = adj.to_gauge(sol.x, image_size)[0]

@@ -193,7 +193,8 @@ class PatternDetection:
     Attributes
     ----------
     corners : (N, 1, 2) float32 ndarray
-        Source pixels in OpenCV's order (row by row).
+        Source pixels, row by row; for the raw methods with OpenCV's rows reversed (the module
+        docstring's corner order).
     method : str
         How they were found: one of :data:`METHODS`.
     """
