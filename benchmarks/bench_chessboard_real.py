@@ -22,7 +22,7 @@ import cv2
 import numpy as np
 
 import omnicam
-from omnicam.calibration.pattern import object_points
+from omnicam.calibration.boards import object_points
 from omnicam.calibration.pattern_detect import detect_pattern
 from omnicam.calibration.rim import detect_rim
 
@@ -42,6 +42,8 @@ def main(argv=None):
     ap.add_argument("--square", type=float, default=30.0)
     ap.add_argument("--glob", default="*.jpg")
     ap.add_argument("--mirror", type=float, nargs=3, default=None)
+    ap.add_argument("--dist-model", default="k1k2p1p2")
+    ap.add_argument("--refine-shape", action="store_true", help="refine_mirror_shape=True")
     ap.add_argument(
         "--heldout", default=os.path.join(here, "..", "..", "shared", "tools", "heldout.py")
     )
@@ -77,6 +79,8 @@ def main(argv=None):
                 boundary_points=rim.points,
                 image_size=size,
                 lens=None,
+                refine_mirror_shape=a.refine_shape,
+                dist_model=a.dist_model,
             )
 
     # speed: the same corners, one fit each, in this process

@@ -397,37 +397,18 @@ class MisalignedHyperbolicCamera:
         pattern_size,
         square_size,
         mirror=None,
-        K=None,
-        D=None,
-        image_size=None,
-        image_points=None,
-        refine_mirror_shape=False,
-        dist_model="k1k2p1p2",
         **kw,
     ):
         """``K``, ``D``, the posture (and, with ``mirror=None``, the mirror) from chessboards
         seen through the mirror.
 
         Also ``omnicam.calibrate_pattern``. See
-        :func:`omnicam.calibration.pattern.calibrate_pattern` (keyword options there).
-        Returns ``(camera, report)``.
+        :func:`omnicam.calibration.pattern.calibrate_pattern` (its options, passed on as
+        they are). Returns ``(camera, report)``.
         """
         from .calibration.pattern import calibrate_pattern
 
-        return calibrate_pattern(
-            images,
-            pattern_size,
-            square_size,
-            mirror,
-            K=K,
-            D=D,
-            image_size=image_size,
-            image_points=image_points,
-            refine_mirror_shape=refine_mirror_shape,
-            dist_model=dist_model,
-            camera_cls=cls,
-            **kw,
-        )
+        return calibrate_pattern(images, pattern_size, square_size, mirror, camera_cls=cls, **kw)
 
     def init_panorama_maps(
         self,

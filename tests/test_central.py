@@ -10,7 +10,7 @@ import test_pattern as tp
 import omnicam
 from omnicam import HyperbolicMirror, synthetic
 from omnicam.calibration import central
-from omnicam.calibration.pattern import object_points
+from omnicam.calibration.boards import object_points
 from omnicam.synthetic import boards
 
 MIRRORS = [

@@ -64,7 +64,7 @@ def test_exact_corners_give_K_posture_and_board_poses(exact):
     cam, report = exact
     f = RIG.K[0, 0]
     assert np.abs(cam.K - RIG.K).max() < 1e-6 * f
-    assert np.abs(cam.D).max() < 1e-8  # the rig has no distortion; 4 coefficients were free
+    assert np.abs(cam.D).max() < 1e-8  # the rig has no distortion; k1, k2 were free
     axis, origin = posture_error(cam, RIG)
     assert axis < 1e-6 and origin < 1e-6
     for i, (rvec, tvec) in enumerate(POSES):

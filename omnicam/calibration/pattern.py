@@ -62,16 +62,16 @@ import warnings as _warnings
 
 import cv2
 import numpy as np
+from scipy.optimize import least_squares
 
-from ..gauge import perpendicular_basis
+from .boards import board_pose_from_rays, object_points, rodrigues
+from .heldout import HeldOut, cross_validate
 from .intrinsics import _pattern  # one check of pattern_size (cv2.findChessboardCorners)
 
 __all__ = [
     "DIST_MODELS",
     "PatternReport",
-    "board_pose_from_rays",
     "calibrate_pattern",
-    "object_points",
     "pattern_uncertainty",
 ]
 
@@ -145,6 +145,9 @@ class PatternReport:
         image as it is; ``"views"``: in the start camera's unwarped views) or ``"views (fitted
         camera)"`` (a later round, in the views of the camera fitted to the boards found
         before).
+    heldout : HeldOut or None
+        With ``calibrate_pattern(heldout=k)``, the k-fold held-out corner RMS of the views
+        used (:mod:`.heldout`), ``cv2.omnidir``'s on the same folds beside it.
     """
 
     rms: float
@@ -165,6 +168,7 @@ class PatternReport:
     lens_note: str = ""
     found_by: dict = dataclasses.field(default_factory=dict)
     central: object = None
+    heldout: HeldOut | None = None
 
     def table(self):
         """The per-view table as text: index, corners, RMS px, distance and elevation of the
@@ -216,65 +220,6 @@ class PatternReport:
 
 
 # -- helpers ----------------------------------------------------------------------------------
-def object_points(pattern_size, square_size):
-    """OpenCV's object points of a board: ``(cols * rows, 3)``, ``(i s, j s, 0)`` row by row."""
-    cols, rows = _pattern(pattern_size)
-    obj = np.zeros((rows * cols, 3))
-    obj[:, :2] = np.mgrid[0:cols, 0:rows].T.reshape(-1, 2) * float(square_size)
-    return obj
-
-
-def _rodrigues(rvec):
-    return cv2.Rodrigues(np.asarray(rvec, np.float64).reshape(3, 1))[0]
-
-
-def board_pose_from_rays(origins, directions, obj, viewpoint):
-    """A board's pose ``(rvec_b, tvec_b)`` from its corners' reflected rays (non-central PnP).
-
-    Start: the central approximation from ``viewpoint`` (a virtual pinhole looking along the
-    mean ray, ``cv2.solvePnP`` with IPPE on the rays' normalised coordinates); then the pose
-    that minimises the distances of the board points ``R X_b + t`` to their rays
-    ``P_i + s d_i`` (``scipy.optimize.least_squares``).
-
-    Parameters
-    ----------
-    origins, directions : (N, 3) ndarray
-        Rays in the mirror frame (finite, unit directions).
-    obj : (N, 3) ndarray
-        Object points on the board's ``z = 0`` plane.
-    viewpoint : (3,) ndarray
-
-    Returns
-    -------
-    rvec, tvec : (3,) float64 ndarray
-    rms : float
-        RMS point-to-ray distance (mirror units).
-    """
-    from scipy.optimize import least_squares
-
-    m = directions.mean(axis=0)
-    m /= np.linalg.norm(m)
-    b1, b2 = perpendicular_basis(m)
-    Rv = np.stack([b1, b2, m])  # mirror -> virtual camera
-    dv = directions @ Rv.T
-    xn = (dv[:, :2] / dv[:, 2:3]).reshape(-1, 1, 2)
-    ok, rp, tp = cv2.solvePnP(obj.reshape(-1, 1, 3), xn, np.eye(3), None, flags=cv2.SOLVEPNP_IPPE)
-    if not ok:
-        ok, rp, tp = cv2.solvePnP(obj.reshape(-1, 1, 3), xn, np.eye(3), None)
-    Rb = Rv.T @ _rodrigues(rp.ravel())
-    tb = Rv.T @ tp.ravel() + viewpoint
-
-    def resid(x):
-        X = obj @ _rodrigues(x[:3]).T + x[3:]
-        w = X - origins
-        return (w - directions * np.einsum("ij,ij->i", w, directions)[:, None]).ravel()
-
-    x0 = np.concatenate([cv2.Rodrigues(Rb)[0].ravel(), tb])
-    sol = least_squares(resid, x0, method="lm", xtol=1e-15, ftol=1e-15, gtol=1e-15)
-    r = resid(sol.x)
-    return sol.x[:3].copy(), sol.x[3:].copy(), float(np.sqrt(np.mean(r * r) * 3))
-
-
 def _distort(xn, K, D):
     """OpenCV's distortion with ``D = (k1, k2, p1, p2[, k3])`` then ``K`` (skew included), in
     numpy: the same formula as ``cv2.projectPoints``, without its per-call overhead."""
@@ -301,15 +246,16 @@ def _rim_foot(cam_K, D, R, t, mirror, u, phi):
         return _distort(xn, cam_K, D)
 
     h = 1e-4
+    n = len(phi)
     for _ in range(4):
-        c0, cp, cm = curve(phi), curve(phi + h), curve(phi - h)
+        c0, cp, cm = np.split(curve(np.concatenate([phi, phi + h, phi - h])), [n, 2 * n])
         d1 = (cp - cm) / (2 * h)
         d2 = (cp - 2 * c0 + cm) / (h * h)
         w = c0 - u
         g = np.einsum("ij,ij->i", w, d1)
         gp = np.einsum("ij,ij->i", d1, d1) + np.einsum("ij,ij->i", w, d2)
         phi -= g / gp
-    c0, cp, cm = curve(phi), curve(phi + h), curve(phi - h)
+    c0, cp, cm = np.split(curve(np.concatenate([phi, phi + h, phi - h])), [n, 2 * n])
     tang = cp - cm
     nrm = np.stack([tang[:, 1], -tang[:, 0]], axis=1)
     nrm /= np.linalg.norm(nrm, axis=1, keepdims=True)
@@ -329,7 +275,8 @@ def _normalized(pixels, K, D):
 class _Adjustment:
     """Parameter vector, residuals and Jacobian of the non-central bundle adjustment.
 
-    ``x = [fx, fy, cx, cy, (skew), d_free..., w1, w2, t_x, t_y, t_z, (a, b), boards...]``
+    ``x = [fx, fy, cx, cy, (skew), d_free..., w1, w2, t_x, t_y, t_z, (ln a, ln b), (lens_z),
+    boards...]``
     with ``R = R0 R(w1, w2, 0)``: the mirror frame of the start turned about its own x and y
     axes, so the axis moves with no twist about it (the gauge's smallest rotation would add a
     twist of second order, which turns every board about the axis and bends the valley the
@@ -379,8 +326,8 @@ class _Adjustment:
         g = [K[0, 0], K[1, 1], K[0, 2], K[1, 2]] + ([K[0, 1]] if fit_skew else [])
         g += [self.D0[i] for i in free_d]
         g += [0.0, 0.0, *cam0.tvec]
-        if fit_shape:
-            g += [mirror.a, mirror.b]
+        if fit_shape:  # as logarithms: a, b stay positive wherever a step goes
+            g += [math.log(mirror.a), math.log(mirror.b)]
         if self.fit_lens_z:
             g += [self.lens_z]
         self.n_global = len(g)
@@ -416,12 +363,12 @@ class _Adjustment:
                 D[j] = x[i]
                 i += 1
         w1, w2 = x[i : i + 2]
-        R = self.R0 @ _rodrigues(np.array([w1, w2, 0.0]))
+        R = self.R0 @ rodrigues(np.array([w1, w2, 0.0]))
         tvec = x[i + 2 : i + 5].copy()
         i += 5
         mirror = self.mirror
         if self.fit_shape:
-            mirror = HyperbolicMirror(x[i], x[i + 1], self.mirror.rim_radius)
+            mirror = HyperbolicMirror(math.exp(x[i]), math.exp(x[i + 1]), self.mirror.rim_radius)
             i += 2
         return K, D, R, tvec, mirror
 
@@ -439,7 +386,7 @@ class _Adjustment:
             K, mirror, cv2.Rodrigues(Rg)[0].ravel(), tvec, D=D, image_size=image_size
         )
         poses = [
-            (cv2.Rodrigues(Z @ _rodrigues(b[:3]))[0].ravel(), Z @ b[3:]) for b in self.boards(x)
+            (cv2.Rodrigues(Z @ rodrigues(b[:3]))[0].ravel(), Z @ b[3:]) for b in self.boards(x)
         ]
         return cam, poses
 
@@ -451,7 +398,7 @@ class _Adjustment:
 
         K, D, R, tvec, mirror = self.unpack(x)
         B = self.boards(x)
-        pts = np.concatenate([self.obj @ _rodrigues(b[:3]).T + b[3:] for b in B])
+        pts = np.concatenate([self.obj @ rodrigues(b[:3]).T + b[3:] for b in B])
         # the exact non-central projection of the camera's project(), on the fit's frame
         px = raytrace.project(np.ascontiguousarray(pts), False, K, D, R, tvec, -R.T @ tvec, mirror)
         obs = np.concatenate(self.views)
@@ -516,8 +463,10 @@ class _Adjustment:
                 h[k] = 1e-6 * max(abs(x[0]), 1.0)
             elif name in ("w1", "w2"):
                 h[k] = 1e-7
-            elif name in ("tx", "ty", "tz", "a", "b", "lens_z"):
+            elif name in ("tx", "ty", "tz", "lens_z"):
                 h[k] = 1e-6 * self.mirror.rim_radius
+            elif name in ("a", "b"):  # their logarithms
+                h[k] = 1e-6
             else:
                 h[k] = 1e-7
         B = h[g:].reshape(-1, 6)
@@ -555,18 +504,65 @@ class _Adjustment:
                 J[v * rows : (v + 1) * rows, col] = diff[v * rows : (v + 1) * rows] / (2 * h[col])
         return J
 
-    def solve(self, x0, f_scale=1.0, max_iter=60):
-        """Levenberg-Marquardt on the ``soft_l1``-weighted residuals (IRLS weights
-        ``1 / sqrt(1 + (r / f_scale)^2)``), normal equations scaled by their diagonal.
+    def solve(self, x0, f_scale=1.0, max_nfev=None):
+        """The ``soft_l1`` fit of scale ``f_scale`` px by MINPACK's Levenberg-Marquardt
+        (``scipy.optimize.least_squares(method="lm")``), the global parameters named in
+        ``self.fixed`` held at ``x0``; :meth:`jacobian` gives the derivatives.
 
-        Own loop rather than ``scipy.optimize.least_squares``: its trust-region step takes an
-        SVD of the Jacobian, which a multithreaded BLAS on a busy 2-core machine took 0.6-1.5 s
-        for 2000x85 (20 ms on one thread), more than the whole fit; here the normal equations
-        are formed with ``einsum`` (no BLAS threads) and solved in milliseconds.
-        """
+        MINPACK minimises a plain sum of squares; the robust cost ``sum rho(r^2)``,
+        ``rho(s) = 2 f^2 (sqrt(1 + s / f^2) - 1)``, is one, of the residuals
+        ``z = sign(r) sqrt(rho(r^2))`` (:func:`_robust_residuals`), whose Jacobian is
+        ``dz/dr J``, so the minimum is the robust one exactly. (The trust-region solvers of
+        ``least_squares`` with the ``soft_l1`` loss, with ``jac_sparsity`` or this Jacobian,
+        exact or ``lsmr`` steps, stopped at their 100 evaluations still descending along the
+        valley where ``a, b`` trade against ``f``, where this one converges in a few dozen:
+        ``benchmarks/bench_chessboard_real.py``.)
+
+        Returns the ``OptimizeResult`` with ``x`` the whole parameter vector."""
+        x0 = np.asarray(x0, np.float64)
         free = np.ones(len(x0), bool)
         free[[k for k, n in enumerate(self.names) if n in self.fixed]] = False
-        return levenberg_marquardt(self.residuals, self.jacobian, x0, f_scale, max_iter, free=free)
+
+        def full(xf):
+            x = x0.copy()
+            x[free] = xf
+            return x
+
+        last = {}  # MINPACK asks for the Jacobian where it last evaluated the residuals
+
+        def fun(xf):
+            last["x"], last["z"] = xf.copy(), _robust_residuals(self.residuals(full(xf)), f_scale)
+            return last["z"][0]
+
+        def jac(xf):
+            if "x" not in last or not np.array_equal(last["x"], xf):
+                fun(xf)
+            return self.jacobian(full(xf))[:, free] * last["z"][1][:, None]
+
+        sol = least_squares(
+            fun,
+            x0[free],
+            jac=jac,
+            method="lm",
+            x_scale="jac",
+            max_nfev=max_nfev,
+            xtol=1e-10,
+            ftol=1e-10,
+            gtol=1e-10,
+        )
+        sol.x = full(sol.x)
+        sol.cost = float(sol.cost)
+        return sol
+
+
+def _robust_residuals(r, f_scale):
+    """``z = sign(r) sqrt(rho(r^2))`` for the ``soft_l1`` loss ``rho(s) = 2 f^2 (sqrt(1 +
+    s / f^2) - 1)``, so that ``sum z^2`` is the robust cost, and ``dz/dr``.
+
+    With ``q = sqrt(1 + (r / f)^2)``: ``z = r sqrt(2 / (1 + q))`` (``z ~ r`` for ``|r| << f``,
+    no cancellation) and ``dz/dr = r rho'(r^2) / z = sqrt((1 + q) / 2) / q``."""
+    q = np.sqrt(1.0 + (r / f_scale) ** 2)
+    return r * np.sqrt(2.0 / (1.0 + q)), np.sqrt((1.0 + q) / 2.0) / q
 
 
 def _std_from_jacobian(adj, x, J, row_sigma):
@@ -588,6 +584,8 @@ def _std_from_jacobian(adj, x, J, row_sigma):
         if name in ("w1", "w2", "tx", "ty", "tz"):
             continue
         std[name] = float(math.sqrt(max(var[k], 0.0)))
+        if name in ("a", "b"):  # the parameter is the logarithm
+            std[name] *= math.exp(x[k])
     ip = adj.names.index("w1")
     std["axis_deg"] = math.degrees(math.sqrt(max(var[ip] + var[ip + 1], 0.0)))
 
@@ -662,8 +660,7 @@ def pattern_uncertainty(
     n_d = 0 if not free_d and camera.D is None else (5 if 4 in free_d else 4)
     obj = object_points((cols, rows), square_size)
     views = [
-        camera.project(obj @ _rodrigues(rv).T + np.asarray(tv, np.float64))
-        for rv, tv in board_poses
+        camera.project(obj @ rodrigues(rv).T + np.asarray(tv, np.float64)) for rv, tv in board_poses
     ]
     lens_px = None if lens_points is None else np.asarray(lens_points, np.float64).reshape(-1, 2)
     adj = _Adjustment(
@@ -690,77 +687,6 @@ def pattern_uncertainty(
     if adj.lens_px is not None:
         sig[nc + len(adj.rim_px) :] = float(sigma_lens)
     return _std_from_jacobian(adj, x, J, sig)
-
-
-def _soft_l1(r, f_scale):
-    z = (r / f_scale) ** 2
-    cost = f_scale**2 * float(np.sum(np.sqrt(1.0 + z) - 1.0))  # 0.5 * sum rho, rho = 2(...)
-    return cost, 1.0 / np.sqrt(1.0 + z)
-
-
-@dataclasses.dataclass
-class _Solution:
-    x: np.ndarray
-    cost: float
-    nfev: int
-    success: bool
-    message: str
-
-
-def levenberg_marquardt(fun, jac, x0, f_scale=1.0, max_iter=60, tol=1e-13, free=None, ftol=1e-10):
-    """Minimise ``sum f^2 (sqrt(1 + (r/f)^2) - 1)`` (the ``soft_l1`` loss) by LM with IRLS.
-
-    The normal equations ``(J^T W J + lam diag) dx = -J^T W r`` (``W`` the soft_l1 weights at
-    the current point) are formed without BLAS threads (``einsum``) and solved by
-    ``numpy.linalg.solve`` (85x85 for 12 views). Stops when the scaled step falls below
-    ``tol`` or the relative cost decrease below ``ftol`` (1e-10 of the cost moves the estimate
-    by a few thousandths of its standard deviation even along a flat valley, where the cost
-    keeps decreasing by ever smaller amounts for hundreds of iterations).
-    """
-    x = np.array(x0, np.float64)
-    free = np.ones(len(x), bool) if free is None else np.asarray(free, bool)
-    r = fun(x)
-    nfev = 1
-    cost, w = _soft_l1(r, f_scale)
-    lam = 1e-3
-    message, success = "maximum number of iterations", False
-    for _ in range(max_iter):
-        J = jac(x)[:, free]
-        sw = np.sqrt(w)
-        Jw = J * sw[:, None]
-        A = np.einsum("ij,ik->jk", Jw, Jw)
-        g = np.einsum("ij,i->j", Jw, r * sw)
-        d = np.sqrt(np.diag(A))
-        d[d == 0] = 1.0
-        As = A / np.outer(d, d)
-        gs = g / d
-        improved = False
-        while lam < 1e16:
-            try:
-                step = -np.linalg.solve(As + lam * np.eye(len(d)), gs)
-            except np.linalg.LinAlgError:
-                lam *= 10.0
-                continue
-            xn = x.copy()
-            xn[free] += step / d
-            rn = fun(xn)
-            nfev += 1
-            cn, wn = _soft_l1(rn, f_scale)
-            if cn < cost or (cn == cost and np.max(np.abs(step)) < tol):
-                improved = True
-                break
-            lam *= 10.0
-        if not improved:
-            message, success = "no further decrease of the cost", True
-            break
-        small = np.max(np.abs(step)) < tol * (1.0 + np.max(np.abs(x[free] * d)))
-        flat = cost - cn <= ftol * cost
-        x, r, cost, w = xn, rn, cn, wn
-        lam = max(lam / 10.0, 1e-12)
-        if small or flat:
-            message, success = "converged", True
-            break
-    return _Solution(x=x, cost=cost, nfev=nfev, success=success, message=message)
 
 
 # -- input handling ---------------------------------------------------------------------------
@@ -813,7 +739,7 @@ def calibrate_pattern(
     image_size=None,
     image_points=None,
     refine_mirror_shape=False,
-    dist_model="k1k2p1p2",
+    dist_model="k1k2",
     *,
     rim_radius=None,
     boundary_points=None,
@@ -825,6 +751,7 @@ def calibrate_pattern(
     f_scale=1.0,
     lens="auto",
     lens_z=None,
+    heldout=0,
 ):
     """Calibrate ``K``, ``D`` and the mirror posture from chessboards seen through the mirror.
 
@@ -865,7 +792,11 @@ def calibrate_pattern(
         deviations and warns that they are not determined when either exceeds 1 %.
     dist_model : str
         One of ``"none", "k1", "k1k2", "k1k2p1p2", "k1k2p1p2k3"``: the OpenCV coefficients
-        estimated (the others stay at ``D``'s values, or 0).
+        estimated (the others stay at ``D``'s values, or 0). Default ``"k1k2"``: a decentred
+        lens (``p1, p2``) moves the image as a tilt of the mirror does, which the posture
+        already holds, so the tangential terms mostly trade against it (see the module
+        docstring) and predict held-out views worse
+        (``benchmarks/bench_chessboard_real.py --dist-model``).
     rim_radius : float, optional
         With ``mirror=None``: the rim's radius (mirror units), which fixes the scale of the
         mirror and of the camera's position in its frame (default
@@ -899,6 +830,12 @@ def calibrate_pattern(
         (a tilt trades partly with ``z``: on the benchmark's rig the principal point's bound is
         8.3 px with ``z`` free, 4.9 px with it known, 69 px without the reflection).
 
+    heldout : int
+        With ``k >= 2``, also the ``k``-fold held-out check (:mod:`.heldout`: the rig
+        calibrated on the other folds with the same options, each held-out view's board pose
+        alone fitted; ``cv2.omnidir.calibrate`` on the same folds beside it) in
+        ``report.heldout``; it costs ``k`` more calibrations. 0: not run.
+
     Returns
     -------
     camera : MisalignedHyperbolicCamera
@@ -922,6 +859,7 @@ def calibrate_pattern(
         image_size,
         camera_cls,
     )
+    mirror_given, K_given = mirror, K
     rim_fit, rim_seen, rim_image = _rim_step(images, boundary_points, image_size)
     lens_px, lens_note = _reflection_step(lens, images, rim_image, rim_fit)
     found_by = ["given" if p is not None else None for p in (image_points or [])]
@@ -991,7 +929,28 @@ def calibrate_pattern(
     warns_all = tuple(start_warns) + report.warnings
     for w in start_warns:
         _warnings.warn(w, RuntimeWarning, stacklevel=2)
-    return camera, dataclasses.replace(report, found_by=found, central=central, warnings=warns_all)
+    held = None
+    if heldout:
+        options = dict(
+            K=K_given,
+            D=D,
+            image_size=image_size,
+            refine_mirror_shape=refine_mirror_shape,
+            dist_model=dist_model,
+            rim_radius=rim_radius,
+            boundary_points=rim_seen,
+            camera_cls=camera_cls,
+            fit_skew=fit_skew,
+            drop_outlier_views=False,
+            f_scale=f_scale,
+            lens=lens_px,
+            lens_z=lens_z,
+        )
+        held = _heldout_step(report, mirror_given, (cols, rows), square, options, heldout)
+    report = dataclasses.replace(
+        report, found_by=found, central=central, warnings=warns_all, heldout=held
+    )
+    return camera, report
 
 
 # -- the steps of calibrate_pattern ----------------------------------------------------------
@@ -1297,8 +1256,8 @@ def _corner_step(image_points, pattern_size, square, cam0):
             _warnings.warn(f"view {i} dropped: {dropped[i]}", RuntimeWarning, stacklevel=2)
             continue
         rvec_b, tvec_b, _ = board_pose_from_rays(P, d, obj, viewpoint)
-        n = _rodrigues(rvec_b)[:, 2]
-        centre = obj.mean(axis=0) @ _rodrigues(rvec_b).T + tvec_b - viewpoint
+        n = rodrigues(rvec_b)[:, 2]
+        centre = obj.mean(axis=0) @ rodrigues(rvec_b).T + tvec_b - viewpoint
         if abs(n @ centre) < _EDGE_ON_SIN * np.linalg.norm(centre):
             dropped[i] = "board seen edge-on (its plane passes through the camera)"
             _warnings.warn(f"view {i} dropped: {dropped[i]}", RuntimeWarning, stacklevel=2)
@@ -1373,12 +1332,12 @@ def _adjustment_step(
             # not first wander along the valley where a shift of the principal point (or
             # tangential distortion) trades against a tilt of the mirror
             adj.fixed = {"cx", "cy", "skew", "k1", "k2", "p1", "p2", "k3"}
-            x0 = adj.solve(x0, f_scale=f_scale, max_iter=20).x
+            x0 = adj.solve(x0, f_scale=f_scale, max_nfev=20).x
             adj.fixed = set()
         # with the mirror's shape free the fit follows a long, flat valley (a, b trade against
         # f and the camera's axial position; only the rig's non-centrality tells them apart):
         # on exact corners started 2 % off it needs ~150 iterations to reach the truth
-        return adj, adj.solve(x0, f_scale=f_scale, max_iter=400 if refine_mirror_shape else 60)
+        return adj, adj.solve(x0, f_scale=f_scale, max_nfev=400 if refine_mirror_shape else 100)
 
     adj, sol = adjust(used, [np.concatenate(poses[i]) for i in used])
 
@@ -1411,6 +1370,27 @@ def _adjustment_step(
             warns.append("too few views would remain: the outliers were kept")
 
     return adj, sol, used, vr, rim_px, warns
+
+
+def _heldout_step(report, mirror, pattern_size, square, options, k):
+    """6. The k-fold held-out check of the views used (:func:`.heldout.cross_validate`), the
+    rig on each fold's training views calibrated with the same ``options``, its warnings
+    (said once, for the whole fit) silenced."""
+    views = {
+        i: np.asarray(report.image_points[i], np.float64).reshape(-1, 2) for i in report.view_rms
+    }
+
+    def fit(train):
+        points = [views[i] for i in train]
+        with _warnings.catch_warnings():
+            _warnings.simplefilter("ignore")
+            camera, _ = calibrate_pattern(
+                None, pattern_size, square, mirror, image_points=points, **options
+            )
+        return camera
+
+    obj = object_points(pattern_size, square)
+    return cross_validate(fit, views, obj, options["image_size"], k)
 
 
 def _report_step(
@@ -1449,7 +1429,7 @@ def _report_step(
             f"only {len(used)} views: take 10 or more, spread around the mirror, for a "
             f"reliable K and posture"
         )
-    centres = np.array([obj.mean(axis=0) @ _rodrigues(p[0]).T + p[1] for p in board_poses.values()])
+    centres = np.array([obj.mean(axis=0) @ rodrigues(p[0]).T + p[1] for p in board_poses.values()])
     if _azimuth_gap_deg(centres) > 180.0:
         warns.append(
             "all boards are on one side of the mirror (an azimuth gap over 180 deg): "

@@ -1,0 +1,70 @@
+"""A chessboard's object points and its pose from the rays of its corners."""
+
+from __future__ import annotations
+
+import cv2
+import numpy as np
+from scipy.optimize import least_squares
+
+from ..gauge import perpendicular_basis
+from .intrinsics import _pattern  # one check of pattern_size (cv2.findChessboardCorners)
+
+__all__ = ["board_pose_from_rays", "object_points", "rodrigues"]
+
+
+def object_points(pattern_size, square_size):
+    """OpenCV's object points of a board: ``(cols * rows, 3)``, ``(i s, j s, 0)`` row by row."""
+    cols, rows = _pattern(pattern_size)
+    obj = np.zeros((rows * cols, 3))
+    obj[:, :2] = np.mgrid[0:cols, 0:rows].T.reshape(-1, 2) * float(square_size)
+    return obj
+
+
+def rodrigues(rvec):
+    """The rotation matrix of a Rodrigues vector (``cv2.Rodrigues``)."""
+    return cv2.Rodrigues(np.asarray(rvec, np.float64).reshape(3, 1))[0]
+
+
+def board_pose_from_rays(origins, directions, obj, viewpoint):
+    """A board's pose ``(rvec_b, tvec_b)`` from its corners' reflected rays (non-central PnP).
+
+    Start: the central approximation from ``viewpoint`` (a virtual pinhole looking along the
+    mean ray, ``cv2.solvePnP`` with IPPE on the rays' normalised coordinates); then the pose
+    that minimises the distances of the board points ``R X_b + t`` to their rays
+    ``P_i + s d_i`` (``scipy.optimize.least_squares``).
+
+    Parameters
+    ----------
+    origins, directions : (N, 3) ndarray
+        Rays in the mirror frame (finite, unit directions).
+    obj : (N, 3) ndarray
+        Object points on the board's ``z = 0`` plane.
+    viewpoint : (3,) ndarray
+
+    Returns
+    -------
+    rvec, tvec : (3,) float64 ndarray
+    rms : float
+        RMS point-to-ray distance (mirror units).
+    """
+    m = directions.mean(axis=0)
+    m /= np.linalg.norm(m)
+    b1, b2 = perpendicular_basis(m)
+    Rv = np.stack([b1, b2, m])  # mirror -> virtual camera
+    dv = directions @ Rv.T
+    xn = (dv[:, :2] / dv[:, 2:3]).reshape(-1, 1, 2)
+    ok, rp, tp = cv2.solvePnP(obj.reshape(-1, 1, 3), xn, np.eye(3), None, flags=cv2.SOLVEPNP_IPPE)
+    if not ok:
+        ok, rp, tp = cv2.solvePnP(obj.reshape(-1, 1, 3), xn, np.eye(3), None)
+    Rb = Rv.T @ rodrigues(rp.ravel())
+    tb = Rv.T @ tp.ravel() + viewpoint
+
+    def resid(x):
+        X = obj @ rodrigues(x[:3]).T + x[3:]
+        w = X - origins
+        return (w - directions * np.einsum("ij,ij->i", w, directions)[:, None]).ravel()
+
+    x0 = np.concatenate([cv2.Rodrigues(Rb)[0].ravel(), tb])
+    sol = least_squares(resid, x0, method="lm", xtol=1e-15, ftol=1e-15, gtol=1e-15)
+    r = resid(sol.x)
+    return sol.x[:3].copy(), sol.x[3:].copy(), float(np.sqrt(np.mean(r * r) * 3))
