@@ -295,13 +295,6 @@ def _suffix(path, what="calibration file"):
 
 
 # -- reading ------------------------------------------------------------------------------------
-class _Matrix:
-    """An ``opencv-matrix`` node: ``rows``, ``cols``, ``dt`` and ``data`` as read."""
-
-    def __init__(self, fields):
-        self.fields = fields
-
-
 def _from_node(node, depth=0):
     """A ``cv2.FileNode`` subtree as Python values (dict, list, int, float, str, None).
 

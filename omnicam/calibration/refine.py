@@ -101,9 +101,9 @@ class RefineResult:
         RMS outline residual of the camera's reflection for the kept posture, px (NaN without).
     r, z : float
         The reflection's coaxial circle (NaN without).
-    rim_cost, rim_cost_initial : float
-        ``0.5 * sum(rim residual^2)`` (robust weights) at the kept and at the starting posture:
-        how much the other terms moved the rim (the acceptance test of a cue).
+    rim_cost : float
+        ``0.5 * sum(rim residual^2)`` (robust weights) at the kept posture: against the rim-only
+        fit's, how much the other terms moved the rim (the acceptance test of a cue).
     n_rim : int
         Number of rim rows.
     """
@@ -121,7 +121,6 @@ class RefineResult:
     r: float = math.nan
     z: float = math.nan
     rim_cost: float = math.nan
-    rim_cost_initial: float = math.nan
     n_rim: int = 0
 
 
@@ -634,7 +633,6 @@ def refine_posture(
         r=r_c,
         z=z_c,
         rim_cost=0.5 * float(np.sum(rim.residuals(R, t) ** 2)),
-        rim_cost_initial=0.5 * float(np.sum(rim.residuals(R0, t0) ** 2)),
         n_rim=len(rim_px),
     )
 
