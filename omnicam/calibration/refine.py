@@ -579,7 +579,7 @@ def refine_posture(
     -------
     RefineResult
     """
-    from scipy.optimize import least_squares  # lazy: scipy comes with scikit-image
+    from scipy.optimize import least_squares  # lazy: slow to import; scipy is a direct dependency
 
     K = np.asarray(K, np.float64)
     R0 = cv2.Rodrigues(np.asarray(rvec, np.float64).reshape(3, 1))[0]

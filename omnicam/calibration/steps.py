@@ -37,7 +37,8 @@ CUE_CHI2 = 2.0 * 20.515
 #: Rim and outline residuals are never taken as smaller than this (px): edge location limits.
 SIGMA_FLOOR = 0.02
 #: Above this RMS axis uncertainty (deg) the report warns: an error over 0.1 deg is then
-#: within two standard deviations (issue 8 counts 0.1 deg without a warning as a failure).
+#: within two standard deviations (the stress benchmark, ``benchmarks/bench_stress.py``, counts
+#: an axis error over 0.1 deg without a warning as a silent failure).
 AXIS_WARN_DEG = 0.05
 #: Outline points used in the refinement (evenly subsampled; selection uses all).
 MAX_REFINE_POINTS = 400
