@@ -19,10 +19,9 @@ from concurrent.futures import ThreadPoolExecutor
 
 import numba
 
-#: Cold compile time of everything the demo and a first unwarp use, seconds (benchmarks/
-#: bench_first_run.py on 2 cores under a load of 2-4.6: 13.4-15.1 s wall in 5 runs, median
-#: 13.9 s, on 2026-12-02, against 16.4-17.9 s for the kernels before in the same interleaved
-#: runs), quoted by the first-compile notice.
+#: Cold compile time of everything the demo and a first unwarp use, seconds, rounded up from
+#: what ``benchmarks/bench_first_run.py`` measures on 2 cores (it prints the demo's and the
+#: first unwarp's cold and warm times); quoted by the first-compile notice.
 COMPILE_SECONDS = 15
 
 _state = {"noticed": False, "pool": None}

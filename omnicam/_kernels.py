@@ -323,16 +323,19 @@ def project_points(lo, hi, X, at_infinity, R, t, C, a, b, rim_radius, K, out):
 # front of the camera) is decided per pixel from the interpolated mirror point with a margin,
 # and pixels inside the margin are solved exactly.
 #
-# The phases, run in this order by omnicam.views._build_table; the kernels are those with
-# per-point work, the rest is a few array operations per node or cell in omnicam.views (no
-# kernel to compile or load for them):
-#   views._grid_nodes  output positions of the nodes (and Newton starts of refined grids)
-#   views._grid_checks positions of the check points, the interpolated starts and estimates
-#   solve_view_points  the exact solutions (nodes, check points, pixels left undecided)
-#   views._score_checks interpolation errors and margins at the check points
-#   classify_cells     each cell's class from its nodes and check points
-#   fill_rows          table entries of decided pixels; the others are marked pending
-#   views._store_entries the entries of the pending pixels, solved by solve_view_points
+# The phases, run in this order by omnicam.views._build_table (the first five by
+# views._GridStack, for the coarse grid and then for the refined grids of its failing cells);
+# the kernels are those with per-point work, the rest is a few array operations per node or
+# cell in omnicam.views (no kernel to compile or load for them):
+#   views._grid_nodes    output positions of the nodes (and Newton starts of refined grids)
+#   solve_view_points    the nodes' exact solutions: mirror points, pixels and margins
+#   views._grid_checks   positions of the check points, the interpolated starts and estimates
+#   solve_view_points    the check points' exact solutions and margins, and the estimates'
+#                        interpolation errors
+#   classify_cells       each cell's class from its nodes and check points
+#   fill_rows            table entries of decided pixels; the others are marked pending
+#   solve_view_points    the exact solutions of the pending pixels
+#   views._store_entries their table entries
 # A "grid stack" holds G grids of the same shape and spacing: the coarse grid (G = 1) or the
 # refined grids of the failing coarse cells (G = their number).
 
@@ -373,8 +376,9 @@ VIEW_CLEAR_BOUND = 5e-3  # the same, for a bound of the margin over the cell (_l
 LATTICE_SAFETY = 8.0  # factor on _lattice_bounds' estimate of the bilinear interpolation error
 UNSEEN = -10.0  # omnicam.views.UNSEEN
 #: refinement factor of failing cells: the cubic's error falls as h^4, so halving the node
-#: spacing divides it by 16, which brings every refined cell of issue 12's straddling views
-#: (coarse estimates up to 0.06 px) and of 108 tables over the test rigs within TOLERANCE / 2
+#: spacing divides it by 16, which brings every refined cell of the perspective views that
+#: straddle the mirror's visible band (1024x768, f = 400, looking horizontally; coarse
+#: estimates up to 0.06 px) and of 108 tables over the test rigs within TOLERANCE / 2
 #: (a sub-cell that still fails is solved pixel by pixel); 4 gave the same sub-cell verdicts
 #: for a third more exact solutions at nodes and check points
 FINE = 2

@@ -215,73 +215,88 @@ def _prescan(path, what, json_only=False):
     is refused and why.
     """
     name = shown(path)
+    text = _read_text(path, f"{what} {name}")
+    _check_text(text, f"{what} {name}", json_only)
+    return text
+
+
+def _file_kind(mode):
+    """What a ``st_mode`` that is not a regular file's is, in words."""
+    if stat.S_ISDIR(mode):
+        return "a folder"
+    if stat.S_ISFIFO(mode):
+        return "a FIFO"
+    if stat.S_ISCHR(mode) or stat.S_ISBLK(mode):
+        return "a device"
+    if stat.S_ISSOCK(mode):
+        return "a socket"
+    return "not a file"
+
+
+def _read_text(path, label):
+    """The UTF-8 text of the regular file ``path`` of at most ``MAX_FILE_BYTES``, not empty and
+    without a NUL byte (``label``: the file as messages name it, "calibration file x.yaml")."""
     try:
         st = os.stat(path)
     except FileNotFoundError:
-        raise FileNotFoundError(f"{what} {name} does not exist") from None
+        raise FileNotFoundError(f"{label} does not exist") from None
     except NotADirectoryError:
-        raise FileNotFoundError(
-            f"{what} {name} does not exist (a parent is not a folder)"
-        ) from None
+        raise FileNotFoundError(f"{label} does not exist (a parent is not a folder)") from None
     except OSError as e:
-        raise ValueError(f"{what} {name}: cannot read it ({e.strerror or e})") from None
+        raise ValueError(f"{label}: cannot read it ({e.strerror or e})") from None
     if not stat.S_ISREG(st.st_mode):
-        kind = (
-            "a folder"
-            if stat.S_ISDIR(st.st_mode)
-            else "a FIFO"
-            if stat.S_ISFIFO(st.st_mode)
-            else "a device"
-            if stat.S_ISCHR(st.st_mode) or stat.S_ISBLK(st.st_mode)
-            else "a socket"
-            if stat.S_ISSOCK(st.st_mode)
-            else "not a file"
-        )
-        raise ValueError(f"{what} {name} is not a regular file ({kind})")
+        raise ValueError(f"{label} is not a regular file ({_file_kind(st.st_mode)})")
     if st.st_size > MAX_FILE_BYTES:
         raise ValueError(
-            f"{what} {name}: too large ({st.st_size} bytes; at most {MAX_FILE_BYTES} are read)"
+            f"{label}: too large ({st.st_size} bytes; at most {MAX_FILE_BYTES} are read)"
         )
     try:
         with open(path, "rb") as f:
             data = f.read(MAX_FILE_BYTES + 1)
     except OSError as e:
-        raise ValueError(f"{what} {name}: cannot read it ({e.strerror or e})") from None
+        raise ValueError(f"{label}: cannot read it ({e.strerror or e})") from None
     if len(data) > MAX_FILE_BYTES:
-        raise ValueError(f"{what} {name}: too large (more than {MAX_FILE_BYTES} bytes)")
+        raise ValueError(f"{label}: too large (more than {MAX_FILE_BYTES} bytes)")
     if not data.strip():
-        raise ValueError(f"{what} {name} is empty, not a readable yaml, xml or json file")
+        raise ValueError(f"{label} is empty, not a readable yaml, xml or json file")
     if b"\0" in data:
-        raise ValueError(f"{what} {name}: a binary file, not yaml, xml or json text")
+        raise ValueError(f"{label}: a binary file, not yaml, xml or json text")
     try:
-        text = data.decode("utf-8")
+        return data.decode("utf-8")
     except UnicodeDecodeError as e:
         raise ValueError(
-            f"{what} {name}: not UTF-8 text (byte {e.start}); a corrupt or binary file"
+            f"{label}: not UTF-8 text (byte {e.start}); a corrupt or binary file"
         ) from None
+
+
+def _check_text(text, label, json_only):
+    """``ValueError`` (naming ``label``) for text nested too deeply, and in YAML and XML for
+    base64 blocks, booleans and integers beyond 32 bits, which OpenCV misreads."""
     depth, indent = _nesting(text)
     if depth > MAX_DEPTH or (not json_only and indent > MAX_INDENT):
         raise ValueError(
-            f"{what} {name}: nested too deeply ({max(depth, indent)} levels or "
+            f"{label}: nested too deeply ({max(depth, indent)} levels or "
             f"columns; at most {MAX_DEPTH}); not a file omnicam writes"
         )
-    if not json_only and "$base64$" in text:
-        raise ValueError(f"{what} {name}: base64-encoded data is not supported")
-    if not json_only and not text.lstrip().startswith("{"):
-        m = _BOOLEAN.search(text)
-        if m:
+    if json_only:
+        return
+    if "$base64$" in text:
+        raise ValueError(f"{label}: base64-encoded data is not supported")
+    if text.lstrip().startswith("{"):
+        return
+    m = _BOOLEAN.search(text)
+    if m:
+        raise ValueError(
+            f"{label}: {m.group(1)!r} where a value is expected; OpenCV "
+            f"would read it as the number {int(m.group(1) == 'true')}"
+        )
+    for m in _LONG_INT.finditer(text):
+        if abs(int(m.group())) > 2**31 - 1:
             raise ValueError(
-                f"{what} {name}: {m.group(1)!r} where a value is expected; OpenCV "
-                f"would read it as the number {int(m.group(1) == 'true')}"
+                f"{label}: the integer {m.group()} does not fit in 32 "
+                f"bits (OpenCV would read it wrapped around); write it as a "
+                f"real number such as {m.group()}."
             )
-        for m in _LONG_INT.finditer(text):
-            if abs(int(m.group())) > 2**31 - 1:
-                raise ValueError(
-                    f"{what} {name}: the integer {m.group()} does not fit in 32 "
-                    f"bits (OpenCV would read it wrapped around); write it as a "
-                    f"real number such as {m.group()}."
-                )
-    return text
 
 
 def _suffix(path, what="calibration file"):
@@ -295,13 +310,6 @@ def _suffix(path, what="calibration file"):
 
 
 # -- reading ------------------------------------------------------------------------------------
-class _Matrix:
-    """An ``opencv-matrix`` node: ``rows``, ``cols``, ``dt`` and ``data`` as read."""
-
-    def __init__(self, fields):
-        self.fields = fields
-
-
 def _from_node(node, depth=0):
     """A ``cv2.FileNode`` subtree as Python values (dict, list, int, float, str, None).
 

@@ -133,14 +133,15 @@ def test_reflection_chooses_without_far_lines_and_adds_to_the_far_lines():
     phys = [i for i, c in enumerate(cands) if c.physical]
     true = min(phys, key=lambda i: np.linalg.norm(cands[i].tvec - cam.tvec))
     other = next(i for i in phys if i != true)
-    spec = {"rms": {true: 0.1, other: 0.3}, "n": 100, "sigma": 0.1, "self_px": {}}
-    sel = selection.select_candidate(cands, None, [], (0, 0, -cam.mirror.c), spec)
+    seen = selection.ReflectionEvidence(rms={true: 0.1, other: 0.3}, n=100, sigma=0.1)
+    sel = selection.select_candidate(cands, None, [], (0, 0, -cam.mirror.c), seen)
     assert sel.chosen == true and sel.confidence > 0.99 and not sel.ambiguous
     assert sel.sigma["reflection"] == pytest.approx(math.sqrt(800.0))
     assert sel.scores_per_cue["reflection rms px"] == {true: 0.1, other: 0.3}
     # barely separated (1.5 sigma): chosen, flagged ambiguous, with a warning
-    spec = {"rms": {true: 0.1, other: 0.1 * math.sqrt(1 + 2.25 / 100)}, "n": 100, "sigma": 0.1}
-    sel = selection.select_candidate(cands, None, [], (0, 0, -cam.mirror.c), spec)
+    barely = {true: 0.1, other: 0.1 * math.sqrt(1 + 2.25 / 100)}
+    seen = selection.ReflectionEvidence(rms=barely, n=100, sigma=0.1)
+    sel = selection.select_candidate(cands, None, [], (0, 0, -cam.mirror.c), seen)
     assert sel.chosen == true and sel.ambiguous and sel.warnings
     assert sel.sigma["reflection"] == pytest.approx(1.5)
 
@@ -149,7 +150,7 @@ def test_reflection_chooses_without_far_lines_and_adds_to_the_far_lines():
 
     # with far lines both cues' costs add up; each cue's scores are listed
     lines = synthetic.far_line_pixels(cam, rng=2)
-    sel = selection.select_candidate(cands, make, lines, (0, 0, -cam.mirror.c), spec)
+    sel = selection.select_candidate(cands, make, lines, (0, 0, -cam.mirror.c), seen)
     assert sel.chosen == true and sel.confidence > 0.9 and not sel.ambiguous
     assert set(sel.costs_per_cue) == {"far lines", "reflection"}
     assert all(np.isfinite(sel.candidates[i].score) for i in phys)  # eq. 31 scores kept

@@ -5,19 +5,16 @@ same ellipse as a centre and shape matrix ``S`` (``|S^-1 (p - center)| = 1``). F
 normalised direct fit, RANSAC over five-point conics with Sampson distances, and the
 orthogonal (geometric) refinement used by :func:`omnicam.calibration.rim.fit_rim`.
 
-scikit-image against the hand-written pieces, both in one run of ``python
-benchmarks/bench_ellipse_skimage.py`` (2 shared cores under a load of 8; the sections are the
-script's):
+scikit-image against the hand-written pieces: ``python benchmarks/bench_ellipse_skimage.py``
+measures both in one run and prints the figures (the sections named here are the script's):
 
-- the direct fit is scikit-image's ``measure.EllipseModel`` (:func:`direct_ellipse`): the same
-  accuracy as the hand-written fit it replaced (section 1: true rim to the fit median 0.0369 px,
-  max 0.0700 px for both on 30 clipped noisy rims), the rim and Chen's candidates of a
-  calibration within 1e-9 px and 1e-10 mm (section 5). Its costs: 0.32 against 0.13 ms a fit
-  (the 24-31 fits of a 1080p calibration: 34-39 ms against 12-16 ms), and the first fit in a
-  process imports ``scipy.optimize`` and ``scipy.spatial`` (0.75 s; 7 ms once the refinement
-  has loaded ``scipy.optimize``, so a calibration pays it anyway: section 6);
+- the direct fit is scikit-image's ``measure.EllipseModel`` (:func:`direct_ellipse`): as
+  accurate as the hand-written fit it replaced (section 1), and a calibration's rim and Chen's
+  candidates are the same to round-off (section 5). It is slower per fit (section 5), and the
+  first fit in a process imports ``scipy.optimize`` and ``scipy.spatial``, a cost a calibration
+  pays anyway: its refinement loads ``scipy.optimize``, nearly all of it (section 6);
 - RANSAC, the orthogonal distances and the geometric refinement stay hand-written: each says
-  why with its figure.
+  why.
 """
 
 from __future__ import annotations
@@ -198,9 +195,9 @@ def orthogonal_residuals(pts, center, S, iters=12):
     from the angle of ``S^-1 (p - center)``.
 
     Hand-written rather than ``skimage.measure.EllipseModel.residuals`` (one
-    ``scipy.optimize.leastsq`` per point, unsigned, no feet or normals): the same distances
-    within 2.7e-6 px, 0.58 ms against 271 ms for 3000 points of a 1080p rim (section 3 of
-    ``python benchmarks/bench_ellipse_skimage.py``).
+    ``scipy.optimize.leastsq`` per point, unsigned, no feet or normals): the same distances to
+    far below a pixel, hundreds of times faster on the points of a 1080p rim (section 3 of
+    ``python benchmarks/bench_ellipse_skimage.py`` prints both).
     """
     q = pts - center
     u0 = q @ np.linalg.inv(S).T
@@ -234,10 +231,9 @@ def refine_geometric(pts, center, S, iters=50):
     fixed, ``d r / d theta = -n . d x / d theta`` (the foot moves along the tangent).
 
     scikit-image has no geometric ellipse fit (``EllipseModel`` is the algebraic direct fit).
-    On short arcs the algebraic fit is biased: on 30 % of a rim with 0.5 px noise the true rim
-    is 2.9 px (median RMS; max 8.9) from this fit and 10.0 px (max 17.0) from ``EllipseModel``
-    alone; on half a rim both are within noise of each other, 0.37 and 0.30 px (section 4 of
-    ``python benchmarks/bench_ellipse_skimage.py``).
+    On short arcs the algebraic fit is biased: on a third of a rim the true rim is several times
+    closer to this fit than to ``EllipseModel`` alone; on half a rim both are within noise of
+    each other (section 4 of ``python benchmarks/bench_ellipse_skimage.py`` prints both).
     """
     p = np.array([center[0], center[1], S[0, 0], S[0, 1], S[1, 1]])
 
@@ -322,13 +318,12 @@ def ransac_conic(pts_n, thr_n, rng, max_trials, confidence=0.999, batch=64):
     Hand-written rather than ``skimage.measure.ransac`` (one hypothesis per Python iteration):
     ``batch`` five-point conics are solved and scored per numpy call, on at most 1000 points.
     With the same model and Sampson distance in ``skimage.measure.ransac`` the accuracy is the
-    same on 1080p rims (~3000 rim points; 10-70 % outliers: clutter and holder arms) but the
-    time grows with the outliers: median 4.5 against 2.0 ms at 10 %, 3.2 against 10.4 ms at
-    30 %, 8.9 against 49.1 ms at 50 %, 60 against 626 ms at 70 % (sections 2 and 5 of ``python
-    benchmarks/bench_ellipse_skimage.py``), and the real 1080p photograph's calibration takes
-    0.24 s longer with it (0.6 and 0.85 s in two earlier runs). At 70 % outliers 2000 trials
-    are fewer than 0.999 confidence needs, and either may miss the rim (1 of 30 rigs here, 0 of
-    30 with scikit-image's sampling).
+    same on 1080p rims (clutter and holder arms as outliers) but its time grows much faster
+    with the share of outliers: faster with few, several to ten times slower with
+    many, and the real 1080p photograph's calibration takes longer with it (sections 2 and 5
+    of ``python benchmarks/bench_ellipse_skimage.py`` print the times). With most points
+    outliers ``max_trials`` may be fewer than ``confidence`` needs, and either may miss the
+    rim (section 2 counts the failures).
     """
     n = len(pts_n)
     ph_all = np.concatenate([pts_n, np.ones((n, 1))], axis=1)

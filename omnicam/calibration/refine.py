@@ -47,6 +47,7 @@ from __future__ import annotations
 
 import dataclasses
 import math
+import typing
 
 import cv2
 import numpy as np
@@ -62,6 +63,7 @@ __all__ = [
     "posture_offsets",
     "perturbed_posture",
     "RefineResult",
+    "ReflectionSpec",
     "Uncertainty",
     "RimTerm",
     "FarLineTerm",
@@ -101,9 +103,9 @@ class RefineResult:
         RMS outline residual of the camera's reflection for the kept posture, px (NaN without).
     r, z : float
         The reflection's coaxial circle (NaN without).
-    rim_cost, rim_cost_initial : float
-        ``0.5 * sum(rim residual^2)`` (robust weights) at the kept and at the starting posture:
-        how much the other terms moved the rim (the acceptance test of a cue).
+    rim_cost : float
+        ``0.5 * sum(rim residual^2)`` (robust weights) at the kept posture: against the rim-only
+        fit's, how much the other terms moved the rim (the acceptance test of a cue).
     n_rim : int
         Number of rim rows.
     """
@@ -121,7 +123,6 @@ class RefineResult:
     r: float = math.nan
     z: float = math.nan
     rim_cost: float = math.nan
-    rim_cost_initial: float = math.nan
     n_rim: int = 0
 
 
@@ -505,15 +506,37 @@ class _Problem:
         return np.concatenate(rows)
 
 
+class ReflectionSpec(typing.NamedTuple):
+    """The camera's reflection as a cue of :func:`refine_posture` and
+    :func:`posture_uncertainty` (the arguments of :class:`ReflectionTerm`).
+
+    Attributes
+    ----------
+    xn : (M, 2) array_like
+        Undistorted normalised coordinates of the outline of the camera's reflection.
+    r, z : float
+        The starting coaxial circle (e.g. :func:`.reflection.fit_circle`'s).
+    r_known, z_known : bool
+        Which of ``r``, ``z`` are known (kept fixed); the others are nuisance parameters.
+    """
+
+    xn: object
+    r: float
+    z: float
+    r_known: bool
+    z_known: bool
+
+
 def _reflection_spec(reflection):
-    """``(xn, r0, z0, r_known, z_known)`` or None."""
+    """A checked :class:`ReflectionSpec` (any 5-sequence in its order), or None if the outline
+    is empty or the circle not finite."""
     if reflection is None:
         return None
     xn, r0, z0, r_known, z_known = reflection
     xn = np.ascontiguousarray(np.asarray(xn, np.float64).reshape(-1, 2))
     if len(xn) == 0 or not (np.isfinite(r0) and np.isfinite(z0)):
         return None
-    return xn, float(r0), float(z0), bool(r_known), bool(z_known)
+    return ReflectionSpec(xn, float(r0), float(z0), bool(r_known), bool(z_known))
 
 
 def refine_posture(
@@ -548,16 +571,15 @@ def refine_posture(
     robust : bool
         Huber weights on the rim rows (``k = 2`` robust standard deviations) from the residuals
         of the starting posture; the costs compared to accept the result use the same weights.
-    reflection : tuple, optional
-        ``(xn, r0, z0, r_known, z_known)``: undistorted normalised coordinates of the outline of
-        the camera's reflection, the starting circle (e.g. :func:`.reflection.fit_circle`) and
-        which of ``r``, ``z`` are known (kept fixed).
+    reflection : ReflectionSpec, optional
+        The outline of the camera's reflection, the starting circle and which of its ``r``,
+        ``z`` are known (a plain ``(xn, r, z, r_known, z_known)`` tuple is taken too).
 
     Returns
     -------
     RefineResult
     """
-    from scipy.optimize import least_squares  # lazy: scipy comes with scikit-image
+    from scipy.optimize import least_squares  # lazy: slow to import; scipy is a direct dependency
 
     K = np.asarray(K, np.float64)
     R0 = cv2.Rodrigues(np.asarray(rvec, np.float64).reshape(3, 1))[0]
@@ -634,7 +656,6 @@ def refine_posture(
         r=r_c,
         z=z_c,
         rim_cost=0.5 * float(np.sum(rim.residuals(R, t) ** 2)),
-        rim_cost_initial=0.5 * float(np.sum(rim.residuals(R0, t0) ** 2)),
         n_rim=len(rim_px),
     )
 
@@ -719,7 +740,7 @@ def posture_uncertainty(
     ----------
     rim_sigma : float
         Observed RMS of the rim residuals, px.
-    reflection : tuple, optional
+    reflection : ReflectionSpec, optional
         As for :func:`refine_posture`; joins with ``reflection_sigma`` (its observed RMS, px).
 
     Returns

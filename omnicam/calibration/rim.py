@@ -804,11 +804,3 @@ def _detect_one(gray, coarse, hint, sigma, threshold, rng, absolute=False):
                 f"{fit.axes[0]:.1f}, {fit.axes[1]:.1f} px; check the hint"
             )
     return fit, support
-
-
-# private aliases kept for modules written before the split (calibration.lens)
-_as_gray, _edge_points_along_normals, _hartley = (
-    as_gray,
-    edge_points_along_normals,
-    hartley_normalization,
-)

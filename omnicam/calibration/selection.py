@@ -47,6 +47,7 @@ __all__ = [
     "line_costs",
     "reflection_costs",
     "prediction_limited",
+    "ReflectionEvidence",
     "select_candidate",
 ]
 
@@ -234,25 +235,55 @@ def prediction_limited(costs, pred):
     return out
 
 
+@dataclasses.dataclass(frozen=True, eq=False)
+class ReflectionEvidence:
+    """The camera's reflection fitted under each physical candidate, for :func:`select_candidate`
+    (:func:`.reflection.fit_circle` under each posture; :func:`.steps.selection_step`).
+
+    Attributes
+    ----------
+    rms : dict
+        ``{candidate index: RMS outline residual, px}`` with the circle fitted.
+    n : float
+        The outline's effective number of independent points (:func:`reflection_costs`).
+    sigma : float
+        The measurement's own scatter, px (NaN if unknown).
+    self_px : dict
+        ``{candidate index: px}``: distance of its predicted self-reflection pixel from the
+        detected outline's centre (information only).
+    limit : float
+        The reflection chooses only if the best RMS is within this, px.
+    pred : dict
+        ``{candidate index: (self-reflection pixel, its variance px^2)}`` from each posture's
+        uncertainty (:func:`prediction_limited`; empty: the predictions taken as exact).
+    """
+
+    rms: dict
+    n: float
+    sigma: float
+    self_px: dict = dataclasses.field(default_factory=dict)
+    limit: float = math.inf
+    pred: dict = dataclasses.field(default_factory=dict)
+
+
 def _score_reflection(reflection, phys, scores, costs, warnings):
     """The reflection's scores and costs per physical candidate (:func:`select_candidate`),
     written into ``scores``, ``costs`` and ``warnings``: costs only if some posture explains
-    the outline within ``reflection["limit"]``, else a warning that it fits none."""
-    rms = {i: float(reflection["rms"].get(i, math.inf)) for i in phys}
+    the outline within ``reflection.limit``, else a warning that it fits none."""
+    rms = {i: float(reflection.rms.get(i, math.inf)) for i in phys}
     if not any(np.isfinite(v) for v in rms.values()):
         return
     scores["reflection rms px"] = rms
-    if reflection.get("self_px"):
-        scores["self-reflection px"] = dict(reflection["self_px"])
-    limit = float(reflection.get("limit", math.inf))
+    if reflection.self_px:
+        scores["self-reflection px"] = dict(reflection.self_px)
+    limit = float(reflection.limit)
     if min(rms.values()) <= limit:
         costs["reflection"] = prediction_limited(
-            reflection_costs(rms, reflection["n"], reflection["sigma"]),
-            reflection.get("pred") or {},
+            reflection_costs(rms, reflection.n, reflection.sigma), reflection.pred or {}
         )
         return
     # no posture explains it: it cannot tell them apart either
-    where = reflection.get("self_px") or {}
+    where = reflection.self_px or {}
     off = (
         f"; the camera sees itself {min(where.values()):.0f} px or more from where the "
         f"postures predict"
@@ -264,6 +295,70 @@ def _score_reflection(reflection, phys, scores, costs, warnings):
         f"{min(rms.values()):.2f} px, allowed {limit:.2f}{off}) and was not used to choose: "
         f"check K (the principal point), D and the mirror's a, b and rim_radius"
     )
+
+
+def _score_far_lines(candidates, phys, make_camera, far_lines, warnings):
+    """The far-line score of eq. 31 of each physical candidate (summed over the lines):
+    ``(candidates with the scores set, {index: score})``; rays that miss the mirror are left
+    out with a warning."""
+    scored = list(candidates)
+    line_s = {}
+    for i in phys:
+        cam = make_camera(candidates[i])
+        total = 0.0
+        for j, line in enumerate(far_lines):
+            s, n_used = line_score(cam, line)
+            if n_used < len(line):
+                warnings.append(
+                    f"candidate {i}: {len(line) - n_used} pixel(s) of "
+                    f"far_lines[{j}] miss the mirror and were left out"
+                )
+            total += s
+        scored[i] = candidates[i].with_score(total)
+        line_s[i] = total
+    return scored, line_s
+
+
+def _nearest_lower_focus(candidates, phys, lower_focus):
+    """The fallback without any cue: the physical candidate whose camera centre is nearest the
+    lower focus."""
+    dist = [
+        float(
+            np.linalg.norm(
+                -candidates[i].R.T @ candidates[i].tvec - np.asarray(lower_focus, np.float64)
+            )
+        )
+        for i in phys
+    ]
+    # the two physical postures are mirror images, often at equal distances: a tie (within
+    # 1e-9 relative) goes to the lower index, so rounding in the rim's last digits cannot
+    # flip the fallback between runs or versions
+    near = min(dist) * (1.0 + 1e-9) + 1e-12
+    return next(i for i, d in zip(phys, dist) if d <= near)
+
+
+def _cue_warnings(costs, phys, chosen, confidence, ambiguous):
+    """Warnings of a choice by cues: barely separated, or a cue preferring another posture."""
+    out = []
+    if ambiguous:
+        cues = " and ".join(costs)
+        verb = "separate" if len(costs) > 1 or cues == "far lines" else "separates"
+        out.append(
+            f"the {cues} barely {verb} the physical postures (confidence "
+            f"{confidence:.3f}): the choice may be wrong; give more or longer far "
+            f"lines, far from the image centre"
+        )
+    disagree = [
+        cue
+        for cue, c in costs.items()
+        if min(phys, key=lambda i: (c[i], i)) != chosen and c[chosen] > 4.0
+    ]
+    for cue in disagree:
+        out.append(
+            f"the {cue} prefer another posture than the combined choice (by "
+            f"{math.sqrt(costs[cue][chosen]):.1f} sigma): check that cue"
+        )
+    return out
 
 
 def select_candidate(candidates, make_camera, far_lines, lower_focus, reflection=None):
@@ -278,13 +373,9 @@ def select_candidate(candidates, make_camera, far_lines, lower_focus, reflection
         Validated far-line pixels (may be empty).
     lower_focus : (3,) array_like
         ``(0, 0, -c)``, for the fallback without any cue.
-    reflection : dict, optional
-        ``{"rms": {index: px}, "n": points, "sigma": px, "self_px": {index: px}, "limit": px}``
-        (``n`` the outline's effective number of independent points; optional ``"pred"``:
-        ``{index: (self-reflection pixel, its variance px^2)}`` from each posture's uncertainty,
-        :func:`prediction_limited`):
-        the camera's reflection fitted under each physical candidate
-        (:func:`.reflection.fit_circle`); it chooses only if the best RMS is within ``limit``.
+    reflection : ReflectionEvidence, optional
+        The camera's reflection fitted under each physical candidate; it chooses only if the
+        best RMS is within its ``limit``.
 
     Returns
     -------
@@ -306,20 +397,7 @@ def select_candidate(candidates, make_camera, far_lines, lower_focus, reflection
     scored = list(candidates)
     scores, costs, sigma = {}, {}, {}
     if far_lines and len(phys) > 1:
-        line_s = {}
-        for i in phys:
-            cam = make_camera(candidates[i])
-            total = 0.0
-            for j, line in enumerate(far_lines):
-                s, n_used = line_score(cam, line)
-                if n_used < len(line):
-                    warnings.append(
-                        f"candidate {i}: {len(line) - n_used} pixel(s) of "
-                        f"far_lines[{j}] miss the mirror and were left out"
-                    )
-                total += s
-            scored[i] = candidates[i].with_score(total)
-            line_s[i] = total
+        scored, line_s = _score_far_lines(candidates, phys, make_camera, far_lines, warnings)
         scores["far lines"] = line_s
         costs["far lines"] = line_costs(line_s)
     if reflection is not None and len(phys) > 1:
@@ -327,19 +405,7 @@ def select_candidate(candidates, make_camera, far_lines, lower_focus, reflection
     if len(phys) == 1:
         return Selection(tuple(scored), phys[0], 1.0, False, scores, costs, sigma, tuple(warnings))
     if not costs:
-        dist = [
-            float(
-                np.linalg.norm(
-                    -candidates[i].R.T @ candidates[i].tvec - np.asarray(lower_focus, np.float64)
-                )
-            )
-            for i in phys
-        ]
-        # the two physical postures are mirror images, often at equal distances: a tie (within
-        # 1e-9 relative) goes to the lower index, so rounding in the rim's last digits cannot
-        # flip the fallback between runs or versions
-        near = min(dist) * (1.0 + 1e-9) + 1e-12
-        chosen = next(i for i, d in zip(phys, dist) if d <= near)
+        chosen = _nearest_lower_focus(candidates, phys, lower_focus)
         warnings.append(
             "no far_lines given and no camera reflection used: the choice between "
             "the physical postures is ambiguous (fallback: the camera nearest the "
@@ -360,24 +426,7 @@ def select_candidate(candidates, make_camera, far_lines, lower_focus, reflection
     if "reflection" in costs:
         needed = max(needed, math.tanh(REFLECTION_SIGMA**2 / 4.0))
     ambiguous = confidence < needed
-    if ambiguous:
-        cues = " and ".join(costs)
-        verb = "separate" if len(costs) > 1 or cues == "far lines" else "separates"
-        warnings.append(
-            f"the {cues} barely {verb} the physical postures (confidence "
-            f"{confidence:.3f}): the choice may be wrong; give more or longer far "
-            f"lines, far from the image centre"
-        )
-    disagree = [
-        cue
-        for cue, c in costs.items()
-        if min(phys, key=lambda i: (c[i], i)) != chosen and c[chosen] > 4.0
-    ]
-    for cue in disagree:
-        warnings.append(
-            f"the {cue} prefer another posture than the combined choice (by "
-            f"{math.sqrt(costs[cue][chosen]):.1f} sigma): check that cue"
-        )
+    warnings += _cue_warnings(costs, phys, chosen, confidence, ambiguous)
     return Selection(
         tuple(scored), chosen, confidence, ambiguous, scores, costs, sigma, tuple(warnings)
     )

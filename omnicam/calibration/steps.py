@@ -37,7 +37,8 @@ CUE_CHI2 = 2.0 * 20.515
 #: Rim and outline residuals are never taken as smaller than this (px): edge location limits.
 SIGMA_FLOOR = 0.02
 #: Above this RMS axis uncertainty (deg) the report warns: an error over 0.1 deg is then
-#: within two standard deviations (issue 8 counts 0.1 deg without a warning as a failure).
+#: within two standard deviations (the stress benchmark, ``benchmarks/bench_stress.py``, counts
+#: an axis error over 0.1 deg without a warning as a silent failure).
 AXIS_WARN_DEG = 0.05
 #: Outline points used in the refinement (evenly subsampled; selection uses all).
 MAX_REFINE_POINTS = 400
@@ -441,23 +442,23 @@ def selection_step(cands, cue, lines, mirror, K, D, make_camera, rim=None):
     circles : dict
         ``{index: ReflectionCircle}`` under each physical candidate (empty without the cue).
     """
-    from .selection import select_candidate
+    from .selection import ReflectionEvidence, select_candidate
 
-    circles, spec = {}, None
+    circles, evidence = {}, None
     if cue.used:
         circles, self_px = reflection_circles(cands, cue, K, mirror, D)
-        spec = {
-            "rms": {i: c.rms for i, c in circles.items()},
-            "n": _effective_points(cands, cue, circles, K, mirror),
-            "pred": _predictions(cands, rim, K, mirror, D) if rim is not None else {},
-            "sigma": cue.sigma,
-            "self_px": self_px,
+        evidence = ReflectionEvidence(
+            rms={i: c.rms for i, c in circles.items()},
+            n=_effective_points(cands, cue, circles, K, mirror),
+            pred=_predictions(cands, rim, K, mirror, D) if rim is not None else {},
+            sigma=cue.sigma,
+            self_px=self_px,
             # the reflection must fit some posture: within 5x its own scatter, at least 2 px
             # (the analytic posture is off along the rim's weak direction, which moves the
             # predicted outline by 1-2 px on realistic renders; a wrong K moves it by 5+)
-            "limit": max(2.0, 5.0 * cue.sigma) if np.isfinite(cue.sigma) else 2.0,
-        }
-    sel = select_candidate(cands.all, make_camera, lines, (0.0, 0.0, -mirror.c), spec)
+            limit=max(2.0, 5.0 * cue.sigma) if np.isfinite(cue.sigma) else 2.0,
+        )
+    sel = select_candidate(cands.all, make_camera, lines, (0.0, 0.0, -mirror.c), evidence)
     return sel, circles
 
 
@@ -518,6 +519,8 @@ CUE_SHIFT_CHI2 = 9.21
 def _disagreement(K, mirror, rim_px, base, res, spec):
     """How far the joint fit ``res`` moved from the rim-only fit ``base``, against the rim.
 
+    ``spec`` is the reflection's :class:`.refine.ReflectionSpec` of the joint fit.
+
     Returns
     -------
     H : float
@@ -543,7 +546,7 @@ def _disagreement(K, mirror, rim_px, base, res, spec):
         return u.cov
 
     c_rim = cov(base, None)
-    c_joint = cov(res, (spec[0], res.r, res.z, spec[3], spec[4]))
+    c_joint = cov(res, spec._replace(r=res.r, z=res.z))
     D = posture_offsets(base.rvec, base.tvec, res.rvec, res.tvec)
     d = D[:2]
     shift_deg = math.degrees(float(np.linalg.norm(d)))
@@ -558,29 +561,35 @@ def _disagreement(K, mirror, rim_px, base, res, spec):
     return float(np.sum(q * q / lam)), shift_deg, s * np.outer(D, D)
 
 
-def _cue_verdict(name, res, base, var, own, cap, K, mirror, rim_px, spec):
-    """Whether the joint fit ``res`` of a cue with the rim keeps the rim at its own noise
-    level (:func:`refinement_step`): ``(None, bias_cov)`` if it may join (``bias_cov`` from
-    :func:`_disagreement` for the reflection, else None), ``(why, None)`` if not."""
+def _rim_verdict(res, base, var, own, cap):
+    """Why the joint fit ``res`` of a cue with the rim does not keep the rim at its own noise
+    level or the cue within ``cap`` px (its own RMS ``own``), or None if it does
+    (:func:`refinement_step`)."""
     chi2 = 2.0 * (res.rim_cost - base.rim_cost) / var
-    if name == "reflection":
-        lo, hi = _z_range(mirror, res)
-        if not lo <= res.z <= hi:
-            return (
-                f"the fitted circle lies at z = {res.z:.1f}, not between the camera and the "
-                f"mirror ({lo:.1f} to {hi:.1f})",
-                None,
-            )
     if chi2 > CUE_CHI2:
         return (
             f"joining it raised the rim's RMS from {base.rim_rms:.3f} to {res.rim_rms:.3f} px "
-            f"(chi-square +{chi2:.0f}, allowed {CUE_CHI2:.0f})",
-            None,
+            f"(chi-square +{chi2:.0f}, allowed {CUE_CHI2:.0f})"
         )
     if not own <= cap:
-        return f"its own RMS residual after the joint fit is {own:.2f} px (allowed {cap:.2f})", None
-    if name != "reflection":
-        return None, None
+        return f"its own RMS residual after the joint fit is {own:.2f} px (allowed {cap:.2f})"
+    return None
+
+
+def _reflection_verdict(res, base, var, cap, K, mirror, rim_px, spec):
+    """Whether the reflection's joint fit ``res`` may join: its circle between the camera and
+    the mirror, :func:`_rim_verdict`, and an axis shift the rim allows (:func:`_disagreement`).
+    ``(None, bias_cov)`` if it may, ``(why, None)`` if not."""
+    lo, hi = _z_range(mirror, res)
+    if not lo <= res.z <= hi:
+        return (
+            f"the fitted circle lies at z = {res.z:.1f}, not between the camera and the "
+            f"mirror ({lo:.1f} to {hi:.1f})",
+            None,
+        )
+    why = _rim_verdict(res, base, var, res.reflection_rms, cap)
+    if why is not None:
+        return why, None
     H, shift_deg, bias_cov = _disagreement(K, mirror, rim_px, base, res, spec)
     if H > CUE_SHIFT_CHI2:
         return (
@@ -590,6 +599,88 @@ def _cue_verdict(name, res, base, var, own, cap, K, mirror, rim_px, spec):
             None,
         )
     return None, bias_cov
+
+
+def _rim_variance(K, mirror, base, rim_px):
+    """The rim's a posteriori variance (px^2) at the rim-only fit ``base``: ``2 cost / (N - 5)``,
+    at least ``SIGMA_FLOOR^2``, inflated by the correlation of neighbouring edge points as in
+    the reported uncertainty (so the test and the uncertainty agree)."""
+    from .refine import RimTerm, correlation_factor
+
+    R0 = cv2.Rodrigues(np.asarray(base.rvec, np.float64).reshape(3, 1))[0]
+    f = correlation_factor(
+        RimTerm(K, mirror, R0, base.tvec, rim_px).residuals(R0, base.tvec), SIGMA_FLOOR
+    )
+    return max(2.0 * base.rim_cost / max(len(rim_px) - 5, 1), SIGMA_FLOOR**2) * f * f
+
+
+@dataclasses.dataclass
+class _CueTrials:
+    """What the refinement with cues found (:func:`_refine_with_cues`)."""
+
+    kept: object = None
+    accepted: list = dataclasses.field(default_factory=list)
+    rejected: list = dataclasses.field(default_factory=list)
+    skipped: list = dataclasses.field(default_factory=list)
+    bias_cov: object = None
+
+
+def _refine_with_cues(K, mirror, cand, rim_px, lines_xn, cue, spec):
+    """The rim-only fit, then the reflection (with ``spec``, if its r or z is known), then far
+    lines if the reflection did not join, each kept if its verdict lets it join."""
+    from .refine import refine_posture
+
+    rvec, tvec = cand.rvec, cand.tvec
+    base = refine_posture(K, mirror, rvec, tvec, rim_px)
+    out = _CueTrials(kept=base)
+    var = _rim_variance(K, mirror, base, rim_px)
+    if spec is not None and cue.r is None and cue.z is None:
+        # with r and z both unknown the circle trades its z with the mirror's tilt along a
+        # valley the linear uncertainty does not see (exact outlines + 0.05 px noise, 10
+        # rigs: axis 0.05-0.2 deg -> 0.1-1.3 deg, reported 0.03-0.14): it chose the
+        # candidate; the posture rests on the rim (and far lines)
+        out.skipped.append(
+            (
+                "reflection",
+                "its circle's r and z are both unknown and z trades "
+                "with the tilt; give lens_z or lens_r to refine with it",
+            )
+        )
+    elif spec is not None:
+        res = refine_posture(K, mirror, rvec, tvec, rim_px, reflection=spec, max_nfev=200)
+        cap = max(1.0, 3.0 * cue.sigma) if np.isfinite(cue.sigma) else 1.0
+        why, bias = _reflection_verdict(res, base, var, cap, K, mirror, rim_px, spec)
+        if why is not None:
+            out.rejected.append(("reflection", why))
+        else:
+            out.accepted.append("reflection")
+            out.kept, out.bias_cov = res, bias
+    elif cue.used:
+        out.rejected.append(
+            ("reflection", "its outline does not reach the camera under this posture")
+        )
+    if lines_xn and "reflection" not in out.accepted:
+        res = refine_posture(K, mirror, rvec, tvec, rim_px, lines_xn)
+        why = _rim_verdict(res, base, var, res.line_rms, 3.0)
+        if why is not None:
+            out.rejected.append(("far lines", why))
+        else:
+            out.accepted.append("far lines")
+            out.kept = res
+    return out
+
+
+def _final_circle(K, mirror, R, tvec, cue, trials):
+    """The reflection's circle under the final posture: the joint fit's if the reflection
+    joined, else the best coaxial circle (None without the cue)."""
+    from .reflection import ReflectionCircle, fit_circle
+
+    if not cue.used:
+        return None
+    if "reflection" in trials.accepted:
+        kept = trials.kept
+        return ReflectionCircle(kept.r, kept.z, kept.reflection_rms)
+    return fit_circle(mirror, R, tvec, cue.normalized, np.linalg.inv(K)[:2, :2], r=cue.r, z=cue.z)
 
 
 def refinement_step(K, mirror, cand, rim, lines_xn, cue, circle, refine=True):
@@ -606,87 +697,26 @@ def refinement_step(K, mirror, cand, rim, lines_xn, cue, circle, refine=True):
     ``skipped_cues``); far lines join only when it did not join (they then add nothing
     measurable but time, ``benchmarks/bench_calibrate.py``).
     """
-    from .refine import (
-        RimTerm,
-        correlation_factor,
-        posture_uncertainty,
-        refine_posture,
-        uncertainty_from_cov,
-    )
-    from .reflection import ReflectionCircle, fit_circle
+    from .refine import ReflectionSpec, posture_uncertainty, uncertainty_from_cov
 
-    rvec, tvec = cand.rvec, cand.tvec
     rim_px = rim.points
-    accepted, rejected, skipped, kept = [], [], [], None
-    spec, bias_cov = None, None
+    spec = None
     if cue.used and circle is not None and np.isfinite(circle.rms):
         xn_r = _subsample(cue.normalized, MAX_REFINE_POINTS)
         # an unknown z stays free: it trades with the tilt, and the uncertainty must say so
-        spec = (xn_r, circle.r, circle.z, cue.r is not None, cue.z is not None)
+        spec = ReflectionSpec(xn_r, circle.r, circle.z, cue.r is not None, cue.z is not None)
     if refine:
-        base = refine_posture(K, mirror, rvec, tvec, rim_px)
-        kept = base
-        # the rim's a posteriori variance, inflated by the correlation of neighbouring edge
-        # points as in the reported uncertainty (so the test and the uncertainty agree)
-        R0 = cv2.Rodrigues(np.asarray(base.rvec, np.float64).reshape(3, 1))[0]
-        f = correlation_factor(
-            RimTerm(K, mirror, R0, base.tvec, rim_px).residuals(R0, base.tvec), SIGMA_FLOOR
-        )
-        var = max(2.0 * base.rim_cost / max(len(rim_px) - 5, 1), SIGMA_FLOOR**2) * f * f
-        tries = []
-        if spec is not None and cue.r is None and cue.z is None:
-            # with r and z both unknown the circle trades its z with the mirror's tilt along a
-            # valley the linear uncertainty does not see (exact outlines + 0.05 px noise, 10
-            # rigs: axis 0.05-0.2 deg -> 0.1-1.3 deg, reported 0.03-0.14): it chose the
-            # candidate; the posture rests on the rim (and far lines)
-            skipped.append(
-                (
-                    "reflection",
-                    "its circle's r and z are both unknown and z trades "
-                    "with the tilt; give lens_z or lens_r to refine with it",
-                )
-            )
-        elif spec is not None:
-            tries.append("reflection")
-        elif cue.used:
-            rejected.append(
-                ("reflection", "its outline does not reach the camera under this posture")
-            )
-        if lines_xn:
-            tries.append("far lines")
-        for name in tries:
-            if name == "far lines" and "reflection" in accepted:
-                break
-            if name == "reflection":
-                res = refine_posture(K, mirror, rvec, tvec, rim_px, reflection=spec, max_nfev=200)
-                own, cap = (
-                    res.reflection_rms,
-                    max(1.0, 3.0 * cue.sigma) if np.isfinite(cue.sigma) else 1.0,
-                )
-            else:
-                res = refine_posture(K, mirror, rvec, tvec, rim_px, lines_xn)
-                own, cap = res.line_rms, 3.0
-            why, bias = _cue_verdict(name, res, base, var, own, cap, K, mirror, rim_px, spec)
-            if why is not None:
-                rejected.append((name, why))
-            else:
-                accepted.append(name)
-                kept = res
-                bias_cov = bias if name == "reflection" else bias_cov
-        rvec, tvec = kept.rvec, kept.tvec
+        trials = _refine_with_cues(K, mirror, cand, rim_px, lines_xn, cue, spec)
+        rvec, tvec = trials.kept.rvec, trials.kept.tvec
+    else:
+        trials = _CueTrials()
+        rvec, tvec = cand.rvec, cand.tvec
     # the candidates (chen) and refine_posture (gauge_rotation) already return the gauge
     R = cv2.Rodrigues(np.asarray(rvec, np.float64).reshape(3, 1))[0]
-    final_circle = None
-    if cue.used:
-        if kept is not None and "reflection" in accepted:
-            final_circle = ReflectionCircle(kept.r, kept.z, kept.reflection_rms)
-        else:
-            final_circle = fit_circle(
-                mirror, R, tvec, cue.normalized, np.linalg.inv(K)[:2, :2], r=cue.r, z=cue.z
-            )
-    rim_sigma = kept.rim_rms if kept is not None else rim.fit.rms
+    final_circle = _final_circle(K, mirror, R, tvec, cue, trials)
+    rim_sigma = trials.kept.rim_rms if trials.kept is not None else rim.fit.rms
     known = cue.r is not None or cue.z is not None  # else z trades with the tilt (above)
-    use_refl = "reflection" in accepted or (not refine and spec is not None and known)
+    use_refl = "reflection" in trials.accepted or (not refine and spec is not None and known)
     unc = posture_uncertainty(
         K,
         mirror,
@@ -694,21 +724,22 @@ def refinement_step(K, mirror, cand, rim, lines_xn, cue, circle, refine=True):
         tvec,
         rim_px,
         rim_sigma,
-        (spec[0], final_circle.r, final_circle.z, spec[3], spec[4]) if use_refl else None,
+        spec._replace(r=final_circle.r, z=final_circle.z) if use_refl else None,
         final_circle.rms if use_refl else None,
         floor=1e-9,
     )
+    bias_cov = trials.bias_cov
     if bias_cov is not None and unc.cov is not None and np.any(bias_cov):
         unc = uncertainty_from_cov(unc.cov + bias_cov, tvec)
     return Refinement(
         np.asarray(rvec, np.float64),
         np.asarray(tvec, np.float64),
-        kept,
-        tuple(accepted),
-        tuple(rejected),
+        trials.kept,
+        tuple(trials.accepted),
+        tuple(trials.rejected),
         unc,
         final_circle,
-        tuple(skipped),
+        tuple(trials.skipped),
     )
 
 

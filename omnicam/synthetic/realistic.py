@@ -1,4 +1,4 @@
-"""Renders that look like real rigs: an independent forward renderer for stress tests (issue 8).
+"""Renders that look like real rigs: an independent forward renderer for stress tests.
 
 This module shares **nothing** with the estimator: it does not call :mod:`omnicam.raytrace`,
 :mod:`omnicam._kernels`, the :class:`~omnicam.mirror.HyperbolicMirror` methods, the camera's
@@ -852,7 +852,7 @@ def render_rig(camera, rig=None, supersample=3):
     num = _Numbers(camera)
     rig = Rig() if rig is None else rig
     if isinstance(supersample, bool) or not isinstance(supersample, (int, np.integer)):
-        raise ValueError(f"supersample must be an integer from 1 to 8, got {supersample!r}")  # noqa: TRY004
+        raise ValueError(f"supersample must be an integer from 1 to 8, got {supersample!r}")
     s = int(supersample)
     if not 1 <= s <= 8:
         raise ValueError(f"supersample must be an integer from 1 to 8, got {supersample!r}")
@@ -1409,7 +1409,7 @@ def render_case(case):
     RealisticRender
     """
     if not isinstance(case, StressCase):
-        raise ValueError(f"case must be a StressCase, got {type(case).__name__}")  # noqa: TRY004
+        raise ValueError(f"case must be a StressCase, got {type(case).__name__}")
     camera = case.camera()
     num = _Numbers(camera)
     rng = np.random.default_rng([case.seed, case.index, 1])
