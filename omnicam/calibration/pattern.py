@@ -64,9 +64,11 @@ import cv2
 import numpy as np
 from scipy.optimize import least_squares
 
+from ..raytrace import trace
 from .boards import board_pose_from_rays, object_points, rodrigues
 from .heldout import HeldOut, cross_validate
 from .intrinsics import _pattern  # one check of pattern_size (cv2.findChessboardCorners)
+from .plausibility import check_plausibility
 
 __all__ = [
     "DIST_MODELS",
@@ -145,6 +147,10 @@ class PatternReport:
         image as it is; ``"views"``: in the start camera's unwarped views) or ``"views (fitted
         camera)"`` (a later round, in the views of the camera fitted to the boards found
         before).
+    ray_std_deg : (float, float)
+        Standard deviation of the viewing directions over the mirror's image (deg; median,
+        worst), the parameters' covariance propagated to the rays (what panoramas use): small
+        even when ``a, b`` or ``fx`` are not.
     heldout : HeldOut or None
         With ``calibrate_pattern(heldout=k)``, the k-fold held-out corner RMS of the views
         used (:mod:`.heldout`), ``cv2.omnidir``'s on the same folds beside it.
@@ -169,6 +175,7 @@ class PatternReport:
     found_by: dict = dataclasses.field(default_factory=dict)
     central: object = None
     heldout: HeldOut | None = None
+    ray_std_deg: tuple = (math.nan, math.nan)
 
     def table(self):
         """The per-view table as text: index, corners, RMS px, distance and elevation of the
@@ -565,25 +572,37 @@ def _robust_residuals(r, f_scale):
     return r * np.sqrt(2.0 / (1.0 + q)), np.sqrt((1.0 + q) / 2.0) / q
 
 
-def _std_from_jacobian(adj, x, J, row_sigma):
-    """Standard deviations ``sqrt(diag((J^T W J)^-1))``, ``W = diag(1 / row_sigma^2)`` (the
-    Cramer-Rao bound of independent Gaussian residuals of those sigmas), for the named global
-    parameters of ``adj`` at ``x``, the mirror axis (``axis_deg``, RMS angle) and the camera
-    centre in the mirror frame (``origin``, RMS distance, the 5 posture parameters linearised
-    through ``C = -R^T tvec``, eq. 17)."""
-    n = len(x)
+def _covariance(J, row_sigma):
+    """``(J^T W J)^-1``, ``W = diag(1 / row_sigma^2)`` (the Cramer-Rao bound of independent
+    Gaussian residuals of those sigmas), columns scaled to unit norm; a parameter no residual
+    depends on (a zero column) gets NaN variance instead of a number the regularisation made up.
+    """
+    n = J.shape[1]
     Jw = J / np.asarray(row_sigma, np.float64)[:, None]
     scale = np.linalg.norm(Jw, axis=0)
-    scale[scale == 0] = 1.0
-    Js = Jw / scale
+    live = scale > 0
+    Js = Jw[:, live] / scale[live]
     N = np.einsum("ij,ik->jk", Js, Js)
-    cov = np.linalg.solve(N + 1e-12 * np.eye(n), np.eye(n)) / np.outer(scale, scale)
+    cov = np.full((n, n), math.nan)
+    m = int(live.sum())
+    cov[np.ix_(live, live)] = np.linalg.solve(N + 1e-12 * np.eye(m), np.eye(m)) / np.outer(
+        scale[live], scale[live]
+    )
+    return cov
+
+
+def _std_from_jacobian(adj, x, J, row_sigma):
+    """Standard deviations (:func:`_covariance`) of the named global parameters of ``adj`` at
+    ``x``, the mirror axis (``axis_deg``, RMS angle) and the camera centre in the mirror frame
+    (``origin``, RMS distance, the 5 posture parameters linearised through ``C = -R^T tvec``,
+    eq. 17); and the covariance of the global parameters."""
+    cov = _covariance(J, row_sigma)
     var = np.diag(cov)
     std = {}
     for k, name in enumerate(adj.names):
         if name in ("w1", "w2", "tx", "ty", "tz"):
             continue
-        std[name] = float(math.sqrt(max(var[k], 0.0)))
+        std[name] = float(math.sqrt(max(var[k], 0.0))) if math.isfinite(var[k]) else math.nan
         if name in ("a", "b"):  # the parameter is the logarithm
             std[name] *= math.exp(x[k])
     ip = adj.names.index("w1")
@@ -601,7 +620,41 @@ def _std_from_jacobian(adj, x, J, row_sigma):
         xm[ip + k] -= hk
         G[:, k] = (centre(xp) - centre(xm)) / (2 * hk)
     std["origin"] = float(math.sqrt(max(np.trace(G @ cov[ip : ip + 5, ip : ip + 5] @ G.T), 0.0)))
-    return std
+    g = adj.n_global
+    return std, cov[:g, :g]
+
+
+def ray_uncertainty(adj, x, cov_global, image_size, n=24):
+    """Standard deviation (deg) of the viewing directions over the mirror's image: the rays of
+    an ``n x n`` grid of pixels (those that see the mirror, eqs. 6-19), each linearised in the
+    global parameters (central differences) and propagated through their covariance
+    ``cov_global``. Returns ``(median, max)``; NaN when the covariance is not finite."""
+    w, h = (int(v) for v in image_size)
+    u, v = np.meshgrid(np.linspace(0, w - 1, n), np.linspace(0, h - 1, n))
+    px = np.stack([u.ravel(), v.ravel()], axis=1)
+
+    def rays(xx, pixels):
+        K, D, R, t, mirror = adj.unpack(xx)
+        return trace(pixels, K, D, R, -R.T @ t, mirror)[1]
+
+    px = px[np.isfinite(rays(x, px)).all(axis=1)]
+    live = np.isfinite(np.diag(cov_global))
+    if len(px) == 0 or not live.any():
+        return math.nan, math.nan
+    steps = adj.steps(x)
+    G = np.zeros((len(px), 3, adj.n_global))
+    for k in np.flatnonzero(live):
+        xp, xm = x.copy(), x.copy()
+        xp[k] += steps[k]
+        xm[k] -= steps[k]
+        G[:, :, k] = (rays(xp, px) - rays(xm, px)) / (2 * steps[k])
+    C = cov_global[np.ix_(live, live)]
+    Gl = G[:, :, live]
+    var = np.einsum("nik,kl,nil->n", Gl, C, Gl)
+    deg = np.degrees(np.sqrt(np.maximum(var[np.isfinite(var)], 0.0)))
+    if len(deg) == 0:
+        return math.nan, math.nan
+    return float(np.median(deg)), float(np.max(deg))
 
 
 def pattern_uncertainty(
@@ -686,7 +739,7 @@ def pattern_uncertainty(
     sig[nc : nc + len(adj.rim_px)] = float(sigma_rim)
     if adj.lens_px is not None:
         sig[nc + len(adj.rim_px) :] = float(sigma_lens)
-    return _std_from_jacobian(adj, x, J, sig)
+    return _std_from_jacobian(adj, x, J, sig)[0]
 
 
 # -- input handling ---------------------------------------------------------------------------
@@ -924,6 +977,7 @@ def calibrate_pattern(
         cols * rows,
         refine_mirror_shape,
         lens_note,
+        central,
     )
     found = {i: m for i, m in enumerate(found_by) if m is not None}
     warns_all = tuple(start_warns) + report.warnings
@@ -1179,17 +1233,21 @@ def _central_step(image_points, obj, image_size, rim_fit, mirror, rim_radius, K)
     """2b. Without a mirror, the central start (:mod:`.central`): ``cv2.omnidir.calibrate``
     of the corners found so far and the hyperbolic rig it describes, at ``rim_radius``.
     Returns ``(K, mirror, central fit or None, warnings)``; a given mirror is returned as it
-    is, with ``K`` (None: from the rim). The central fit's shape is not used to judge a given
-    mirror: with the pinhole's distortion fixed its ``xi`` is biased on misaligned rigs
+    is, with ``K`` (None: from the rim), and the central fit only for comparison. The central
+    fit's shape is not used to judge a given mirror: with the pinhole's distortion fixed its ``xi`` is biased on misaligned rigs
     (``a / b`` 1.22-1.28 on the test rig whose mirror has 0.83), and with it free ``xi``
     trades with ``k1``."""
     from .central import NOMINAL_RIM_RADIUS, fit_central, hyperbolic_start
 
     warns = []
-    if mirror is not None:  # the rim's start (module docstring)
-        return K, mirror, None, warns
     views = [np.asarray(p, np.float64).reshape(-1, 2) for p in image_points if p is not None]
     views = [v for v in views if len(v) == len(obj)]
+    if mirror is not None:  # the rim's start (module docstring); the central fit to compare
+        try:
+            central = fit_central(views, obj, image_size)
+        except ValueError:
+            central = None
+        return K, mirror, central, warns
     try:
         central = fit_central(views, obj, image_size)
     except ValueError as e:
@@ -1372,6 +1430,16 @@ def _adjustment_step(
     return adj, sol, used, vr, rim_px, warns
 
 
+def rim_conic(camera):
+    """The conic ``Q_I`` of the rim's image in ideal (undistorted) pixels: the circle
+    ``x^2 + y^2 = r^2`` of the plane ``z = z_rim`` mapped by ``H = K [R_1, R_2, z_rim R_3 + t]``,
+    ``Q_I = H^-T diag(1, 1, -r^2) H^-1``."""
+    R, t, m = camera.R, camera.tvec, camera.mirror
+    H = camera.K @ np.column_stack([R[:, 0], R[:, 1], m.z_rim * R[:, 2] + t])
+    Hi = np.linalg.inv(H)
+    return Hi.T @ np.diag([1.0, 1.0, -(m.rim_radius**2)]) @ Hi
+
+
 def _heldout_step(report, mirror, pattern_size, square, options, k):
     """6. The k-fold held-out check of the views used (:func:`.heldout.cross_validate`), the
     rig on each fold's training views calibrated with the same ``options``, its warnings
@@ -1409,6 +1477,7 @@ def _report_step(
     n_corners,
     refine_mirror_shape,
     lens_note,
+    central,
 ):
     """5. The camera in the gauge and the :class:`PatternReport` with the a posteriori
     standard deviations and the warnings."""
@@ -1418,7 +1487,8 @@ def _report_step(
     r_all = adj.residuals(sol.x)
     m, n = len(r_all), len(sol.x)
     sigma2 = float(r_all @ r_all) / max(m - n, 1)
-    std = _std_from_jacobian(adj, sol.x, adj.jacobian(sol.x), np.full(m, math.sqrt(sigma2)))
+    std, cov = _std_from_jacobian(adj, sol.x, adj.jacobian(sol.x), np.full(m, math.sqrt(sigma2)))
+    ray_deg = ray_uncertainty(adj, sol.x, cov, image_size)
     corner_r = r_all[: len(used) * nv_rows]
     rim_r = r_all[len(used) * nv_rows : len(used) * nv_rows + len(rim_px)]
     lens_r = r_all[len(used) * nv_rows + len(rim_px) :]
@@ -1443,6 +1513,10 @@ def _report_step(
         )
     if not sol.success:
         warns.append(f"the adjustment did not converge: {sol.message}")
+    rays = (
+        f"the viewing directions are known to {ray_deg[0]:.3f} deg (median over the mirror's "
+        f"image, worst {ray_deg[1]:.3f} deg)"
+    )
     if refine_mirror_shape:
         ra = std["a"] / camera.mirror.a
         rb = std["b"] / camera.mirror.b
@@ -1454,15 +1528,29 @@ def _report_step(
             + (
                 ": NOT determined by these data (they trade against the focal length and the "
                 "camera's distance to the mirror, which only the rig's small non-centrality "
-                "tells apart); use the data sheet's values"
+                f"tells apart), but {rays}; use the data sheet's values for distances"
                 if weak
                 else "; they trade against the focal length and the camera's distance to the "
                 "mirror: prefer the data sheet's values when there is one"
             )
         )
+    if std["fx"] > _SHAPE_WEAK * camera.K[0, 0]:
+        warns.append(
+            f"the focal length is weakly determined (fx = {camera.K[0, 0]:.1f} +- "
+            f"{std['fx']:.1f} px: it trades against the mirror's shape and distance), but {rays}"
+        )
+    rms = float(np.sqrt(np.mean(corner_r**2) * 2))
+    if central is not None and rms > 2.0 * central.rms + 0.1:
+        warns.append(
+            f"the corners fit this rig to {rms:.3f} px RMS, far above the "
+            f"central fit's {central.rms:.3f} px: the mirror may not be a hyperboloid (a "
+            f"sphere, a paraboloid, a cone), or the start was far off"
+        )
+    warns.extend(str(w) for w in check_plausibility(camera, rim_conic(camera), image_size))
     image_points_out = [None if p is None else p.reshape(-1, 1, 2).astype(np.float32) for p in pts]
     report = PatternReport(
-        rms=float(np.sqrt(np.mean(corner_r**2) * 2)),
+        rms=rms,
+        ray_std_deg=ray_deg,
         view_rms=vr,
         corners_used={i: n_corners for i in used},
         board_poses=board_poses,
