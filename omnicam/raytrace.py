@@ -75,14 +75,14 @@ def undistort_normalized(pixels, K, D):
     """Pixels -> undistorted normalised coordinates ``(x, y)`` with ``(x, y, 1) ~ X_C``.
 
     ``inv(K)`` is applied here (so skew counts) and OpenCV undoes ``D`` on an identity camera with
-    tight criteria. NaN pixels stay NaN.
+    tight criteria. Pixels that are not finite (NaN, inf) give NaN, silently.
     """
     Kinv = np.linalg.inv(K)
-    xd = pixels @ Kinv[:2, :2].T + Kinv[:2, 2]
-    ok = np.isfinite(xd).all(axis=1)
-    out = np.full_like(xd, np.nan)
+    ok = np.isfinite(pixels).all(axis=1)  # before inv(K): inf * 0 would warn
+    out = np.full(pixels.shape, np.nan)
     if ok.any():
-        src, D = xd[ok].reshape(-1, 1, 2), np.asarray(D, np.float64)
+        xd = pixels[ok] @ Kinv[:2, :2].T + Kinv[:2, 2]
+        src, D = xd.reshape(-1, 1, 2), np.asarray(D, np.float64)
         if hasattr(cv2, "undistortPointsIter"):  # OpenCV 4
             und = cv2.undistortPointsIter(src, np.eye(3), D, None, None, _UNDISTORT_CRITERIA)
         else:  # OpenCV 5 takes the criteria in undistortPoints
