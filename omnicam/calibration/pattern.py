@@ -1234,9 +1234,9 @@ def _central_step(image_points, obj, image_size, rim_fit, mirror, rim_radius, K)
     of the corners found so far and the hyperbolic rig it describes, at ``rim_radius``.
     Returns ``(K, mirror, central fit or None, warnings)``; a given mirror is returned as it
     is, with ``K`` (None: from the rim), and the central fit only for comparison. The central
-    fit's shape is not used to judge a given mirror: with the pinhole's distortion fixed its ``xi`` is biased on misaligned rigs
-    (``a / b`` 1.22-1.28 on the test rig whose mirror has 0.83), and with it free ``xi``
-    trades with ``k1``."""
+    fit's shape is not used to judge a given mirror: with the pinhole's distortion fixed its
+    ``xi`` is biased on misaligned rigs (``a / b`` 1.22-1.28 on the test rig whose mirror has
+    0.83), and with it free ``xi`` trades with ``k1``."""
     from .central import NOMINAL_RIM_RADIUS, fit_central, hyperbolic_start
 
     warns = []
