@@ -271,3 +271,42 @@ def test_mirror_shape_from_noisy_corners_is_within_its_uncertainty_and_reported_
     # at 0.2 px the shape is not determined (a, b trade against f and the axial distance)
     assert report.std["b"] > 0.01 * RIG.mirror.b
     assert any("NOT determined" in w for w in report.warnings)
+
+
+def test_a_rim_that_leaves_corners_outside_is_named():
+    centre = RIG.rim_image_points(720).mean(axis=0)
+    small = centre + 0.5 * (RIG.rim_image_points(720) - centre)  # an inner edge, not the rim
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        _, report = _calibrate(_corners(), rim=small)
+    assert any("lie outside the rim" in w for w in report.warnings)
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        _, report = _calibrate(_corners())
+    assert not any("outside the rim" in w for w in report.warnings)
+
+
+def test_a_detected_rim_that_leaves_corners_outside_is_rejected_and_a_larger_one_taken(
+    monkeypatch,
+):
+    from omnicam.calibration import pattern
+    from omnicam.calibration.rim import fit_rim
+
+    rim = RIG.rim_image_points(720)
+    centre = rim.mean(axis=0)
+    sizes = []
+
+    def detect(image, expected=None, **kw):  # an inner edge first; the rim when asked larger
+        sizes.append(expected)
+        return fit_rim(rim if expected is not None else centre + 0.5 * (rim - centre))
+
+    monkeypatch.setattr(pattern, "detect_rim", detect)
+    images = [np.zeros((SIZE[1], SIZE[0], 3), np.uint8)] * len(POSES)
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        cam, report = omnicam.calibrate_pattern(
+            images, PATTERN, SQUARE, RIG.mirror, image_points=_corners(), lens=None
+        )
+    assert sizes[0] is None and sizes[1][0] > 0.5 * np.ptp(rim[:, 0]) / 2
+    assert any("leaves" in w and "rejected; the rim taken" in w for w in report.warnings)
+    assert posture_error(cam, RIG)[0] < 1e-4

@@ -66,9 +66,12 @@ from scipy.optimize import least_squares
 
 from ..raytrace import trace
 from .boards import board_pose_from_rays, object_points, rodrigues
+from .ellipse import conic_distance
 from .heldout import HeldOut, cross_validate
 from .intrinsics import _pattern  # one check of pattern_size (cv2.findChessboardCorners)
+from .pattern_detect import detect_pattern
 from .plausibility import check_plausibility
+from .rim import detect_rim, fit_rim
 
 __all__ = [
     "DIST_MODELS",
@@ -151,6 +154,8 @@ class PatternReport:
         Standard deviation of the viewing directions over the mirror's image (deg; median,
         worst), the parameters' covariance propagated to the rays (what panoramas use): small
         even when ``a, b`` or ``fx`` are not.
+    names : dict
+        ``{image index: file name}`` of the images given as paths (the table shows them).
     heldout : HeldOut or None
         With ``calibrate_pattern(heldout=k)``, the k-fold held-out corner RMS of the views
         used (:mod:`.heldout`), ``cv2.omnidir``'s on the same folds beside it.
@@ -176,21 +181,29 @@ class PatternReport:
     central: object = None
     heldout: HeldOut | None = None
     ray_std_deg: tuple = (math.nan, math.nan)
+    names: dict = dataclasses.field(default_factory=dict)
 
-    def table(self):
-        """The per-view table as text: index, corners, RMS px, distance and elevation of the
-        board, or why the view was dropped."""
-        lines = [f"{'view':>5} {'corners':>7} {'rms px':>8} {'dist':>8} {'elev deg':>8}  found by"]
-        for i in sorted(set(self.view_rms) | set(self.dropped)):
+    def table(self, names=None):
+        """The per-view table as text: image, corners, RMS px, distance and elevation of the
+        board and how it was found, or why the view was dropped. ``names``: a sequence of the
+        images' names (default :attr:`names`, else the indices)."""
+        names = dict(enumerate(names)) if names is not None else self.names
+        rows = sorted(set(self.view_rms) | set(self.dropped))
+        label = {i: str(names.get(i, i)) for i in rows}
+        wide = max([5] + [len(v) for v in label.values()])
+        lines = [
+            f"{'image':>{wide}} {'corners':>7} {'rms px':>8} {'dist':>8} {'elev deg':>8}  found by"
+        ]
+        for i in rows:
             if i in self.view_rms:
                 t = np.asarray(self.board_poses[i][1])
                 el = math.degrees(math.atan2(t[2], math.hypot(t[0], t[1])))
                 lines.append(
-                    f"{i:>5} {self.corners_used[i]:>7} {self.view_rms[i]:>8.3f} "
+                    f"{label[i]:>{wide}} {self.corners_used[i]:>7} {self.view_rms[i]:>8.3f} "
                     f"{np.linalg.norm(t):>8.1f} {el:>8.1f}  {self.found_by.get(i, '-')}"
                 )
             else:
-                lines.append(f"{i:>5} {'-':>7} {'-':>8}   dropped: {self.dropped[i]}")
+                lines.append(f"{label[i]:>{wide}} {'-':>7} {'-':>8}   dropped: {self.dropped[i]}")
         return "\n".join(lines)
 
     def draw(self, image, index):
@@ -805,6 +818,7 @@ def calibrate_pattern(
     lens="auto",
     lens_z=None,
     heldout=0,
+    progress=None,
 ):
     """Calibrate ``K``, ``D`` and the mirror posture from chessboards seen through the mirror.
 
@@ -888,6 +902,9 @@ def calibrate_pattern(
         calibrated on the other folds with the same options, each held-out view's board pose
         alone fitted; ``cv2.omnidir.calibrate`` on the same folds beside it) in
         ``report.heldout``; it costs ``k`` more calibrations. 0: not run.
+    progress : callable, optional
+        ``progress(index, text)`` hears of each image as its board is looked for (a command
+        line prints it).
 
     Returns
     -------
@@ -913,18 +930,25 @@ def calibrate_pattern(
         camera_cls,
     )
     mirror_given, K_given = mirror, K
-    rim_fit, rim_seen, rim_image = _rim_step(images, boundary_points, image_size)
-    lens_px, lens_note = _reflection_step(lens, images, rim_image, rim_fit)
+    names = {
+        i: os.path.basename(os.fspath(im))
+        for i, im in enumerate(images if images is not None else [])
+        if isinstance(im, (str, os.PathLike))
+    }
     found_by = ["given" if p is not None else None for p in (image_points or [])]
     if image_points is None:
-        image_points, found_by = _raw_detection_step(images, (cols, rows))
+        image_points, found_by = _raw_detection_step(images, (cols, rows), progress)
+    rim_fit, rim_seen, rim_image, rim_warns = _rim_step(
+        images, boundary_points, image_size, image_points
+    )
+    lens_px, lens_note = _reflection_step(lens, images, rim_image, rim_fit)
     obj = object_points((cols, rows), square)  # (_corner_step returns the same)
     K, mirror, central, start_warns = _central_step(
         image_points, obj, image_size, rim_fit, mirror, rim_radius, K
     )
     cam0 = _start_step(K, mirror, rim_fit, rim_seen, D, image_size, camera_cls)
     missing = [i for i, p in enumerate(image_points) if p is None] if images else []
-    for i, corners in _redetect(images, missing, (cols, rows), cam0).items():
+    for i, corners in _redetect(images, missing, (cols, rows), cam0, progress).items():
         image_points[i], found_by[i] = corners, "views"
     start, shape = cam0, mirror
     for _round in range(_DETECT_ROUNDS):
@@ -956,7 +980,7 @@ def calibrate_pattern(
         # again only if a board is found that was not
         start = adj.to_gauge(sol.x, image_size)[0]
         shape = start.mirror
-        new = _redetect(images, missing, (cols, rows), start)
+        new = _redetect(images, missing, (cols, rows), start, progress)
         if not new:
             break
         for i in new:
@@ -980,6 +1004,7 @@ def calibrate_pattern(
         central,
     )
     found = {i: m for i, m in enumerate(found_by) if m is not None}
+    start_warns = rim_warns + start_warns
     warns_all = tuple(start_warns) + report.warnings
     for w in start_warns:
         _warnings.warn(w, RuntimeWarning, stacklevel=2)
@@ -1002,7 +1027,7 @@ def calibrate_pattern(
         )
         held = _heldout_step(report, mirror_given, (cols, rows), square, options, heldout)
     report = dataclasses.replace(
-        report, found_by=found, central=central, warnings=warns_all, heldout=held
+        report, found_by=found, central=central, warnings=warns_all, heldout=held, names=names
     )
     return camera, report
 
@@ -1091,12 +1116,23 @@ def _images_and_size(images, image_points, image_size):
     return images, image_points, image_size
 
 
-def _rim_step(images, boundary_points, image_size):
-    """1. The rim: ``(rim_fit, rim_seen, rim_image)`` from the points or the first image that
-    shows it."""
-    from .rim import detect_rim, fit_rim
+def _corners_outside(rim_fit, corners):
+    """How many of the corners lie outside the rim's ellipse by more than 1 px."""
+    if not corners:
+        return 0
+    return int((conic_distance(rim_fit.conic, np.concatenate(corners)) > 1.0).sum())
 
-    # 1. the rim
+
+def _rim_step(images, boundary_points, image_size, image_points=None):
+    """1. The rim: ``(rim_fit, rim_seen, rim_image, warnings)`` from the points or the first
+    image that shows it. Every corner found must lie inside the mirror: a rim that leaves
+    corners outside (an inner edge of the mirror's image, a reflection) is rejected and a
+    larger one sought (:func:`.rim.detect_rim` with the size the corners need), in that image
+    and the next; the warnings say which was rejected."""
+    corners = [
+        np.asarray(p, np.float64).reshape(-1, 2) for p in image_points or [] if p is not None
+    ]
+    warns = []
     rim_image = 0
     if boundary_points is not None:
         rim_seen = np.asarray(boundary_points, np.float64).reshape(-1, 2)
@@ -1104,15 +1140,43 @@ def _rim_step(images, boundary_points, image_size):
             raise ValueError("boundary_points must be at least 6 finite pixels on the rim")
         rim_fit = fit_rim(rim_seen)
         rim_seen = rim_seen[np.asarray(rim_fit.inliers, bool)]
+        n_out = _corners_outside(rim_fit, corners)
+        if n_out:
+            warns.append(
+                f"{n_out} corner(s) lie outside the rim of the boundary_points given (semi-axes "
+                f"{rim_fit.axes[0]:.1f}, {rim_fit.axes[1]:.1f} px): are they the mirror's rim?"
+            )
     else:
         rim_fit, errors = None, []
         for i, im in enumerate(images):
             try:
-                rim_fit = detect_rim(im)
-                rim_image = i
-                break
+                found = detect_rim(im)
             except ValueError as e:
                 errors.append(f"images[{i}]: {e}")
+                continue
+            n_out = _corners_outside(found, corners)
+            if n_out:
+                need = float(np.max(np.linalg.norm(np.concatenate(corners) - found.center, axis=1)))
+                what = (
+                    f"the rim found in image {i} (centre {found.center[0]:.1f}, "
+                    f"{found.center[1]:.1f}, semi-axes {found.axes[0]:.1f}, {found.axes[1]:.1f} "
+                    f"px) leaves {n_out} corner(s) outside: rejected"
+                )
+                try:
+                    larger = detect_rim(im, expected=(need, 2.0 * need))
+                except ValueError:
+                    larger = None
+                if larger is None or _corners_outside(larger, corners):
+                    errors.append(f"images[{i}]: {what}")
+                    warns.append(what)
+                    continue
+                warns.append(
+                    f"{what}; the rim taken has semi-axes {larger.axes[0]:.1f}, "
+                    f"{larger.axes[1]:.1f} px"
+                )
+                found = larger
+            rim_fit, rim_image = found, i
+            break
         if rim_fit is None:
             raise ValueError(
                 "the mirror rim was not found in any image ("
@@ -1122,7 +1186,7 @@ def _rim_step(images, boundary_points, image_size):
         rim_seen = np.asarray(rim_fit.points, np.float64)
     if image_size is None:
         raise ValueError("image_size (width, height) is needed when no image is given")
-    return rim_fit, rim_seen, rim_image
+    return rim_fit, rim_seen, rim_image, warns
 
 
 def _pooled_reflection(images, rim_image, rim_fit):
@@ -1215,17 +1279,17 @@ def _start_step(K, mirror, rim_fit, rim_seen, D, image_size, camera_cls):
     return cam0
 
 
-def _raw_detection_step(images, pattern_size):
+def _raw_detection_step(images, pattern_size, progress=None):
     """2a. Every image's board by OpenCV's detectors on the raw image, which need no camera
     (:func:`.pattern_detect.detect_pattern`). Returns ``(corners or None per image, how each
-    was found or None)``."""
-    from .pattern_detect import detect_pattern
-
+    was found or None)``; ``progress(index, text)`` hears of each image."""
     points, found_by = [], []
-    for im in images:
+    for k, im in enumerate(images):
         det = detect_pattern(im, pattern_size, None, methods=("raw", "raw-sb"))
         points.append(None if det is None else det.corners)
         found_by.append(None if det is None else det.method)
+        if progress is not None:
+            progress(k, "no board on the raw image" if det is None else f"board ({det.method})")
     return points, found_by
 
 
@@ -1268,16 +1332,16 @@ def _central_step(image_points, obj, image_size, rim_fit, mirror, rim_radius, K)
     return K_c, mirror, central, warns
 
 
-def _redetect(images, missing, pattern_size, camera):
+def _redetect(images, missing, pattern_size, camera, progress=None):
     """3a. ``{index: corners}`` of the boards that the views of ``camera`` find in the images
-    ``missing``."""
-    from .pattern_detect import detect_pattern
-
+    ``missing``; ``progress(index, text)`` hears of each."""
     new = {}
     for i in missing:
         det = detect_pattern(images[i], pattern_size, camera, methods=("views",))
         if det is not None:
             new[i] = det.corners
+        if progress is not None:
+            progress(i, "board (views)" if det is not None else "no board in the views either")
     return new
 
 

@@ -3,17 +3,28 @@
 ::
 
     omnicam calibrate --chessboard 9x6 --square 25 IMAGES... [--mirror A B R] -o rig.yaml
-                      [--intrinsics K.yaml] [--dist-model M] [--refine-mirror-shape]
-                      [--overlay FOLDER] [--overwrite]
+                      [--intrinsics K.yaml | --fx --fy --cx --cy [--dist ...]]
+                      [--corners FILE] [--rim-hint CX,CY,R] [--rim-radius R]
+                      [--dist-model M] [--refine-mirror-shape] [--heldout K]
+                      [--overlay FOLDER] [--overwrite] [--force]
 
-Prints the per-view table and the warnings, writes the calibration file and, for each view, an
-overlay of the detected (green circles) and reprojected (red crosses) corners into FOLDER
-(default: CALIB's stem + ``_views`` next to CALIB).
+Prints a line per image as its board is looked for, the per-view table, the held-out check
+(``--heldout``, 5 folds by default) and the warnings, writes the calibration file and, for each
+view, an overlay of the detected (green circles) and reprojected (red crosses) corners into
+FOLDER (default: CALIB's stem + ``_views`` next to CALIB). Views that cannot determine the rig
+(fewer than 3, or all boards on one side of the mirror) exit 1 without a file (``--force``
+writes it anyway).
+
+``--corners FILE`` gives the corners found by another tool, in OpenCV's order (row by row of
+``COLSxROWS`` inner corners): JSON, an object ``{"image file name": [[x, y], ...] or null}`` or a
+list in the order of IMAGES; or ``.npz``, one ``(N, 2)`` array per image file name (or
+``arr_0``, ``arr_1``... in the order of IMAGES). Images without corners there are searched.
 """
 
 from __future__ import annotations
 
 import argparse
+import json
 import os
 import re
 import warnings
@@ -21,6 +32,11 @@ import warnings
 import cv2
 import numpy as np
 
+from ..calibration.pattern import DIST_MODELS
+from ..calibration.rim import check_hint, detect_rim
+from ..camera import MisalignedHyperbolicCamera, scale_K
+from ..io import SUFFIXES
+from ..mirror import HyperbolicMirror
 from ._common import (
     EXIT_OK,
     CliError,
@@ -46,8 +62,6 @@ def _pattern_size(text):
 
 def add_arguments(p):
     """The chessboard options of ``omnicam calibrate``."""
-    from ..calibration.pattern import DIST_MODELS
-
     p.add_argument(
         "--chessboard",
         type=_pattern_size,
@@ -65,8 +79,23 @@ def add_arguments(p):
     p.add_argument(
         "--dist-model",
         choices=sorted(DIST_MODELS),
-        default="k1k2p1p2",
-        help="with --chessboard: distortion coefficients to estimate (default k1k2p1p2)",
+        default="k1k2",
+        help="with --chessboard: distortion coefficients to estimate (default k1k2; p1, p2 "
+        "trade against the mirror's tilt)",
+    )
+    p.add_argument(
+        "--corners",
+        metavar="FILE",
+        help="with --chessboard: corners per image from another tool (JSON or .npz, OpenCV's "
+        "order; see the docs of omnicam calibrate --chessboard)",
+    )
+    p.add_argument(
+        "--heldout",
+        type=int,
+        default=5,
+        metavar="K",
+        help="with --chessboard: K-fold held-out check of the calibration, cv2.omnidir's beside "
+        "it (default 5; 0 skips it)",
     )
     p.add_argument(
         "--rim-radius",
@@ -83,15 +112,84 @@ def add_arguments(p):
     )
 
 
-def cmd_calibrate_pattern(args):
-    from ..camera import MisalignedHyperbolicCamera, scale_K
-    from ..io import SUFFIXES
-    from ..mirror import HyperbolicMirror
+def read_corners(path, image_paths, n_corners):
+    """Corners per image from another tool's file (module docstring): a list, one ``(N, 2)``
+    float64 array or None per image of ``image_paths``."""
+    names = [os.path.basename(p) for p in image_paths]
+    try:
+        if path.lower().endswith(".npz"):
+            with np.load(path, allow_pickle=False) as z:
+                table = {k: z[k] for k in z.files}
+            if all(re.fullmatch(r"arr_\d+", k) for k in table):
+                table = {names[int(k[4:])]: v for k, v in table.items() if int(k[4:]) < len(names)}
+        else:
+            with open(path, encoding="utf-8") as f:
+                data = json.load(f)
+            table = dict(zip(names, data)) if isinstance(data, list) else data
+            if not isinstance(table, dict):
+                raise ValueError("expected an object {image name: corners} or a list")
+    except FileNotFoundError:
+        raise CliError(f"--corners {path}: no such file") from None
+    except (OSError, ValueError) as e:
+        raise CliError(f"--corners {path}: cannot read it: {_one_line(e)}") from None
+    unknown = sorted(set(table) - set(names))
+    if unknown:
+        raise CliError(
+            f"--corners {path}: {unknown[0]!r} is not one of the IMAGES' names "
+            f"({', '.join(names[:3])}{', ...' if len(names) > 3 else ''})"
+        )
+    out = []
+    for name in names:
+        v = table.get(name)
+        if v is None:
+            out.append(None)
+            continue
+        try:
+            arr = np.asarray(v, np.float64).reshape(-1, 2)
+        except (TypeError, ValueError):
+            raise CliError(
+                f"--corners {path}: the corners of {name} are not (x, y) pairs"
+            ) from None
+        if len(arr) != n_corners or not np.isfinite(arr).all():
+            raise CliError(
+                f"--corners {path}: {name} has {len(arr)} corners (finite: "
+                f"{int(np.isfinite(arr).all(axis=1).sum())}); the board has {n_corners}"
+            )
+        out.append(arr)
+    return out
 
+
+def _start_intrinsics(args, size):
+    """``(K, D)`` starts from --intrinsics or --fx --fy --cx --cy [--dist], or None."""
+    given = [n for n in ("fx", "fy", "cx", "cy") if getattr(args, n) is not None]
+    if args.intrinsics is not None and (given or args.dist is not None):
+        raise CliError("calibrate: give --intrinsics or --fx --fy --cx --cy [--dist], not both", 2)
+    if given and len(given) != 4:
+        raise CliError("calibrate: --fx --fy --cx --cy go together (a start for K)", 2)
+    if args.dist is not None and not given:
+        raise CliError("calibrate: --dist is a start for D with --fx --fy --cx --cy", 2)
+    K = D = None
+    if given:
+        K = np.array([[args.fx, 0.0, args.cx], [0.0, args.fy, args.cy], [0.0, 0.0, 1.0]])
+        D = None if args.dist is None else np.asarray(args.dist, np.float64)
+    elif args.intrinsics:
+        K, D, k_size = read_intrinsics(args.intrinsics)
+        if k_size is not None and k_size != size:
+            _warn(f"intrinsics are for {k_size[0]}x{k_size[1]}: K rescaled to the images")
+            K = scale_K(K, k_size, size)
+    if D is not None and np.size(D) not in (4, 5):
+        _warn("the distortion start: only k1 k2 p1 p2 k3 of D are used")
+        D = np.ravel(D)[:5]
+    return K, D
+
+
+def cmd_calibrate_pattern(args):
     if args.square is None:
         raise CliError("calibrate: --chessboard needs --square (side of a square, mm)", 2)
     if args.far_lines:
         raise CliError("calibrate: --far-lines is not used with --chessboard", 2)
+    if args.heldout < 0 or args.heldout == 1:
+        raise CliError("calibrate: --heldout K needs K >= 2 folds (0 skips the check)", 2)
     calib = args.output
     if os.path.splitext(calib)[1].lower() not in SUFFIXES:
         raise CliError(f"calibration file {calib}: extension must be one of {', '.join(SUFFIXES)}")
@@ -116,15 +214,21 @@ def cmd_calibrate_pattern(args):
                 f"image {path} is {im.shape[1]}x{im.shape[0]}, {args.image[0]} is "
                 f"{size[0]}x{size[1]}: all images must come from the same camera mode"
             )
-    K = D = None
-    if args.intrinsics:
-        K, D, k_size = read_intrinsics(args.intrinsics)
-        if k_size is not None and k_size != size:
-            _warn(f"intrinsics are for {k_size[0]}x{k_size[1]}: K rescaled to the images")
-            K = scale_K(K, k_size, size)
-        if D is not None and np.size(D) not in (4, 5):
-            _warn("--intrinsics: only k1 k2 p1 p2 k3 of D are used as a start")
-            D = np.ravel(D)[:5]
+    K, D = _start_intrinsics(args, size)
+    cols, rows = args.chessboard
+    points = None if args.corners is None else read_corners(args.corners, args.image, cols * rows)
+    boundary = None
+    if args.rim_hint is not None:
+        try:
+            check_hint(args.rim_hint, size)
+            boundary = detect_rim(images[0], hint=args.rim_hint).points
+        except ValueError as e:
+            raise CliError(f"--rim-hint: {_one_line(e)}") from None
+    names = [os.path.basename(p) for p in args.image]
+
+    def progress(i, text):
+        print(f"[{i + 1}/{len(names)}] {names[i]}: {text}", flush=True)
+
     with warnings.catch_warnings(record=True) as caught:
         warnings.simplefilter("always", RuntimeWarning)
         try:
@@ -135,26 +239,41 @@ def cmd_calibrate_pattern(args):
                 mirror,
                 K=K,
                 D=D,
+                image_points=points,
+                boundary_points=boundary,
                 refine_mirror_shape=args.refine_mirror_shape,
                 dist_model=args.dist_model,
                 rim_radius=args.rim_radius,
+                heldout=args.heldout if len(images) >= 4 else 0,
+                progress=progress,
             )
         except (ValueError, RuntimeError, np.linalg.LinAlgError) as e:
             raise CliError(f"calibration failed: {_one_line(e)}") from None
-    print(report.table(), flush=True)
+    print(report.table(names), flush=True)
     print(
         f"RMS {report.rms:.3f} px over {len(report.view_rms)} views; rim RMS "
         f"{report.rim_rms:.3f} px; K fx {camera.K[0, 0]:.2f} fy {camera.K[1, 1]:.2f} "
         f"cx {camera.K[0, 2]:.2f} cy {camera.K[1, 2]:.2f} (std {report.std['fx']:.2f}, "
         f"{report.std['fy']:.2f}, {report.std['cx']:.2f}, {report.std['cy']:.2f}); axis std "
-        f"{report.std['axis_deg']:.3f} deg, origin std {report.std['origin']:.3f} mm",
+        f"{report.std['axis_deg']:.3f} deg, origin std {report.std['origin']:.3f} mm; "
+        f"viewing directions std {report.ray_std_deg[0]:.3f} deg (worst "
+        f"{report.ray_std_deg[1]:.3f})",
         flush=True,
     )
+    if report.heldout is not None:
+        print(report.heldout.summary(), flush=True)
     for w in report.warnings:
         _warn(w)
     for w in caught:
         if not any(str(w.message) == r for r in report.warnings):
             _warn(str(w.message))
+    one_side = [w for w in report.warnings if "all boards are on one side" in w]
+    if one_side and not args.force:
+        raise CliError(
+            "calibration refused: the boards are all on one side of the mirror, so the views "
+            "cannot tell the principal point from the tilt; add views on the other side "
+            "(--force writes the file anyway)"
+        )
     os.makedirs(folder, exist_ok=True)
     for i, path in enumerate(args.image):
         name = os.path.splitext(os.path.basename(path))[0]

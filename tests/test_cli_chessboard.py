@@ -1,0 +1,130 @@
+"""omnicam calibrate --chessboard: progress per image, names in the table, the held-out check,
+corners from other tools, starts for K honoured or refused, views that cannot determine the rig."""
+
+import json
+
+import cv2
+import numpy as np
+import pytest
+
+import omnicam
+from omnicam import synthetic
+from omnicam.cli import main
+from omnicam.synthetic import boards
+
+PATTERN, SQUARE = (7, 5), 60.0
+SIZE = (700, 700)
+RIG = synthetic.misaligned_rig(3.0, 30.0, (1.5, -2.0, 1.9), image_size=SIZE)
+MIRROR = ["--mirror", "23.4", "28.1", "30"]
+
+
+def _render(folder, poses, prefix="board"):
+    paths = []
+    for i, p in enumerate(poses):
+        path = folder / f"{prefix}{i}.png"
+        cv2.imwrite(str(path), boards.render_board(RIG, PATTERN, SQUARE, *p, supersample=2))
+        paths.append(str(path))
+    return paths
+
+
+@pytest.fixture(scope="module")
+def views(tmp_path_factory):
+    folder = tmp_path_factory.mktemp("views")
+    poses = boards.random_board_poses(
+        RIG, 6, PATTERN, SQUARE, distance=(350.0, 700.0), max_tilt_deg=40.0, rng=11
+    )
+    return _render(folder, poses)
+
+
+def _calibrate(paths, out, *extra):
+    args = ["calibrate", "--chessboard", "7x5", "--square", "60", *paths, *MIRROR]
+    return main([*args, "--dist-model", "none", "-o", str(out), *extra])
+
+
+def test_progress_names_and_the_heldout_check_are_printed(views, tmp_path, capsys):
+    assert _calibrate(views, tmp_path / "rig.yaml", "--heldout", "3") == 0
+    out = capsys.readouterr().out
+    assert "[1/6] board0.png: board (raw)" in out
+    assert "board5.png" in out.split("found by")[1]  # the table names the images
+    assert "held-out corner RMS (3-fold" in out and "cv2.omnidir on the same folds" in out
+    assert "viewing directions std" in out
+
+
+def test_corners_from_another_tool_are_used_and_missing_ones_searched(views, tmp_path, capsys):
+    corners = {}
+    for i, path in enumerate(views):
+        found = omnicam.detect_pattern(cv2.imread(path), PATTERN)
+        corners[f"board{i}.png"] = found.corners.reshape(-1, 2).tolist()
+    corners["board2.png"] = None
+    (tmp_path / "c.json").write_text(json.dumps(corners))
+    assert (
+        _calibrate(
+            views, tmp_path / "rig.yaml", "--corners", str(tmp_path / "c.json"), "--heldout", "0"
+        )
+        == 0
+    )
+    table = capsys.readouterr().out.split("found by")[1]
+    rows = {line.split()[0]: line.split()[-1] for line in table.strip().splitlines()[:6]}
+    assert rows["board0.png"] == "given" and rows["board2.png"] != "given"
+
+
+def test_corners_as_npz_in_the_order_of_the_images(views, tmp_path, capsys):
+    arrays = [omnicam.detect_pattern(cv2.imread(p), PATTERN).corners.reshape(-1, 2) for p in views]
+    np.savez(tmp_path / "c.npz", *arrays)
+    assert (
+        _calibrate(
+            views, tmp_path / "rig.yaml", "--corners", str(tmp_path / "c.npz"), "--heldout", "0"
+        )
+        == 0
+    )
+    assert capsys.readouterr().out.count(" given") == 6
+
+
+@pytest.mark.parametrize(
+    "content, words",
+    [
+        ({"board0.png": [[1.0, 2.0]] * 7}, "board0.png has 7 corners"),
+        ({"other.png": None}, "'other.png' is not one of the IMAGES"),
+        ({"board0.png": "x"}, "not (x, y) pairs"),
+    ],
+    ids=["count", "unknown image", "not pairs"],
+)
+def test_a_bad_corners_file_is_one_line_and_writes_nothing(views, tmp_path, capsys, content, words):
+    (tmp_path / "c.json").write_text(json.dumps(content))
+    assert _calibrate(views, tmp_path / "rig.yaml", "--corners", str(tmp_path / "c.json")) == 1
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and words in err[0]
+    assert not (tmp_path / "rig.yaml").exists()
+
+
+def test_starts_for_K_are_honoured_or_refused(views, tmp_path, capsys):
+    assert _calibrate(views, tmp_path / "a.yaml", "--fx", "300") == 2
+    assert "--fx --fy --cx --cy go together" in capsys.readouterr().err
+    assert _calibrate(views, tmp_path / "a.yaml", "--dist", "0", "0", "0", "0") == 2
+    assert "--dist is a start for D" in capsys.readouterr().err
+    assert _calibrate(views, tmp_path / "a.yaml", "--heldout", "1") == 2
+    K = RIG.K
+    start = ["--fx", f"{K[0, 0] * 1.05}", "--fy", f"{K[1, 1] * 1.05}", "--cx", "350", "--cy", "350"]
+    assert _calibrate(views, tmp_path / "b.yaml", *start, "--heldout", "0") == 0
+    cam = omnicam.MisalignedHyperbolicCamera.load(str(tmp_path / "b.yaml"))
+    assert abs(cam.K[0, 0] / K[0, 0] - 1.0) < 0.02
+
+
+def test_boards_all_on_one_side_exit_one_unless_forced(tmp_path, capsys):
+    poses = boards.random_board_poses(
+        RIG,
+        4,
+        PATTERN,
+        SQUARE,
+        distance=(350.0, 600.0),
+        max_tilt_deg=30.0,
+        rng=5,
+        azimuth=(10.0, 80.0),
+    )
+    paths = _render(tmp_path, poses)
+    assert _calibrate(paths, tmp_path / "rig.yaml", "--heldout", "0") == 1
+    err = capsys.readouterr().err
+    assert "all on one side" in err.strip().splitlines()[-1]
+    assert not (tmp_path / "rig.yaml").exists()
+    assert _calibrate(paths, tmp_path / "rig.yaml", "--heldout", "0", "--force") == 0
+    assert (tmp_path / "rig.yaml").exists()
