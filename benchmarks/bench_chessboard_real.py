@@ -22,9 +22,9 @@ import cv2
 import numpy as np
 
 import omnicam
-from omnicam.calibration.boards import object_points
-from omnicam.calibration.pattern_detect import detect_pattern
 from omnicam.calibration.rim import detect_rim
+from omnicam.chessboard.board_pose import object_points
+from omnicam.chessboard.detect import detect_pattern
 
 
 def _heldout_module(path):

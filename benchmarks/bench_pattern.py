@@ -47,9 +47,9 @@ import numpy as np
 
 import omnicam
 from omnicam import synthetic
-from omnicam.calibration.pattern import pattern_uncertainty
 from omnicam.calibration.reflection import detect_reflection, outline_pixels
 from omnicam.calibration.rim import detect_rim
+from omnicam.chessboard.adjustment import pattern_uncertainty
 from omnicam.gauge import posture_error
 from omnicam.raytrace import undistort_normalized
 from omnicam.synthetic import boards
@@ -179,9 +179,9 @@ def pooled_outline(images, rim_fit, truth):
     and the sigma per point that, with independent errors, gives the measured error of the
     pooled outline: sqrt(images) x the RMS over 36 directions of the mean signed radial error
     (the systematic part of the detection error does not average out)."""
-    from omnicam.calibration.pattern import _pooled_reflection
+    from omnicam.chessboard.calibrate import pooled_reflection
 
-    pts, note = _pooled_reflection(images, 0, rim_fit)
+    pts, note = pooled_reflection(images, 0, rim_fit)
     if pts is None:
         return None, math.nan, note
     body = boards.BOARD_BODY

@@ -403,10 +403,10 @@ class MisalignedHyperbolicCamera:
         seen through the mirror.
 
         Also ``omnicam.calibrate_pattern``. See
-        :func:`omnicam.calibration.pattern.calibrate_pattern` (its options, passed on as
+        :func:`omnicam.chessboard.calibrate_pattern` (its options, passed on as
         they are). Returns ``(camera, report)``.
         """
-        from .calibration.pattern import calibrate_pattern
+        from .chessboard.calibrate import calibrate_pattern
 
         return calibrate_pattern(images, pattern_size, square_size, mirror, camera_cls=cls, **kw)
 

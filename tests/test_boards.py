@@ -67,7 +67,7 @@ def test_poses_avoid_the_camera_body():
 
 
 def test_reflection_outline_pooled_over_images_leaves_out_one_that_disagrees():
-    from omnicam.calibration.pattern import _pooled_reflection
+    from omnicam.chessboard.calibrate import pooled_reflection
 
     imgs = [
         boards.render_board(RIG, PATTERN, SQUARE, None, None, supersample=2, seed=s) for s in (1, 2)
@@ -81,6 +81,6 @@ def test_reflection_outline_pooled_over_images_leaves_out_one_that_disagrees():
     h = int(2 * one.radius)
     odd[y - h : y + h, x - h + 3 : x + h + 3] = imgs[1][y - h : y + h, x - h : x + h]
     assert np.linalg.norm(detect_reflection(odd, rim).center - one.center - (3, 0)) < 0.5
-    pts, note = _pooled_reflection([*imgs, odd], 0, rim)
+    pts, note = pooled_reflection([*imgs, odd], 0, rim)
     assert note.startswith("used:") and " in 2 of 3 image(s)" in note
     assert len(pts) == len(one.points) + len(detect_reflection(imgs[1], rim).points)

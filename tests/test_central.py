@@ -1,4 +1,4 @@
-"""The central start (calibration.central): cv2.omnidir's unified model and its hyperbolic rig."""
+"""The central start (chessboard.central): cv2.omnidir's unified model and its hyperbolic rig."""
 
 import math
 import warnings
@@ -9,8 +9,8 @@ import test_pattern as tp
 
 import omnicam
 from omnicam import HyperbolicMirror, synthetic
-from omnicam.calibration import central
-from omnicam.calibration.boards import object_points
+from omnicam.chessboard import central
+from omnicam.chessboard.board_pose import object_points
 from omnicam.synthetic import boards
 
 MIRRORS = [

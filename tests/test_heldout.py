@@ -6,8 +6,8 @@ import pytest
 
 import omnicam
 from omnicam import synthetic
-from omnicam.calibration import heldout
-from omnicam.calibration.boards import object_points
+from omnicam.chessboard import heldout
+from omnicam.chessboard.board_pose import object_points
 from omnicam.synthetic import boards
 
 PATTERN, SQUARE = (7, 5), 60.0

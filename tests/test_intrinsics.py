@@ -5,7 +5,7 @@ import numpy as np
 import pytest
 
 from omnicam import calibrate_intrinsics
-from omnicam.calibration.intrinsics import find_chessboard
+from omnicam.chessboard.intrinsics import find_chessboard
 
 K_TRUE = np.array([[820.0, 0.0, 331.5], [0.0, 815.0, 236.0], [0.0, 0.0, 1.0]])
 SIZE = (640, 480)

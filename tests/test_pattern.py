@@ -211,8 +211,8 @@ def test_the_camera_reflection_with_a_known_plane_pins_the_tilt_against_the_prin
 
 
 def test_information_limit_at_the_truth_matches_the_reported_uncertainty_and_the_cues():
-    from omnicam.calibration.pattern import pattern_uncertainty
     from omnicam.calibration.reflection import outline_pixels
+    from omnicam.chessboard.adjustment import pattern_uncertainty
 
     rim = RIG.rim_image_points(360)  # as many as the adjustment keeps
     lens = outline_pixels(RIG, 10.0, 8.0, 120)[0]
@@ -289,8 +289,8 @@ def test_a_rim_that_leaves_corners_outside_is_named():
 def test_a_detected_rim_that_leaves_corners_outside_is_rejected_and_a_larger_one_taken(
     monkeypatch,
 ):
-    from omnicam.calibration import pattern
     from omnicam.calibration.rim import fit_rim
+    from omnicam.chessboard import calibrate as pattern
 
     rim = RIG.rim_image_points(720)
     centre = rim.mean(axis=0)

@@ -88,9 +88,19 @@ def test_cli_calibrates_from_chessboard_images_without_intrinsics(tmp_path, caps
 
     from omnicam.cli import main
 
-    poses = boards.random_board_poses(
-        RIG, 4, PATTERN, SQUARE, distance=(350.0, 700.0), max_tilt_deg=40.0, rng=11
-    )
+    poses = [  # one board in each quadrant: views on every side of the mirror
+        boards.random_board_poses(
+            RIG,
+            1,
+            PATTERN,
+            SQUARE,
+            distance=(350.0, 700.0),
+            max_tilt_deg=40.0,
+            rng=11 + q,
+            azimuth=(90.0 * q, 90.0 * q + 60.0),
+        )[0]
+        for q in range(4)
+    ]
     paths = []
     for i, p in enumerate(poses):
         path = tmp_path / f"board{i}.png"
@@ -173,7 +183,7 @@ def test_board_in_a_degraded_render_of_a_furnished_room_is_found_and_an_empty_on
 def test_opencv_detectors_on_the_raw_image_need_no_camera_and_give_the_boards_order():
     """OpenCV's detectors on the image as it is: the corners the mirror shows mirrored are put
     back in the board's own order (what a rigid pose explains), up to its 180-degree turn."""
-    from omnicam.calibration.pattern_detect import detect_pattern
+    from omnicam.chessboard.detect import detect_pattern
 
     rvec, tvec = _board_at(-20.0, 90.0, 450.0, seed=7)
     img = boards.render_board(RIG, PATTERN, SQUARE, rvec, tvec, supersample=3, noise=1.0, seed=2)
@@ -187,7 +197,7 @@ def test_opencv_detectors_on_the_raw_image_need_no_camera_and_give_the_boards_or
 
 
 def test_views_are_skipped_without_a_camera_and_unknown_methods_are_refused():
-    from omnicam.calibration.pattern_detect import detect_pattern
+    from omnicam.chessboard.detect import detect_pattern
 
     img = boards.render_board(RIG, PATTERN, SQUARE, None, None, supersample=1)
     assert detect_pattern(img, PATTERN, methods=("views",)) is None

@@ -8,7 +8,7 @@ import math
 import cv2
 import numpy as np
 
-__all__ = ["CalibrationReport"]
+__all__ = ["CalibrationReport", "to_bgr8"]
 
 # BGR colours of the overlay
 _RIM = (0, 200, 0)
@@ -273,7 +273,7 @@ class CalibrationReport:
         -------
         overlay : (H, W, 3) uint8 ndarray
         """
-        canvas = _to_bgr8(image, self.camera.image_size)
+        canvas = to_bgr8(image, self.camera.image_size)
         h, w = canvas.shape[:2]
         scale = max(1.0, min(w, h) / 500.0)
         thick = max(1, int(round(scale)))
@@ -390,7 +390,7 @@ def _legend(canvas, scale, thick, entries):
         )
 
 
-def _to_bgr8(image, image_size):
+def to_bgr8(image, image_size):
     if image is None:
         if image_size is None:
             raise ValueError("draw() needs an image when the camera has no image_size")

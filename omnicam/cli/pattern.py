@@ -32,9 +32,9 @@ import warnings
 import cv2
 import numpy as np
 
-from ..calibration.pattern import DIST_MODELS
 from ..calibration.rim import check_hint, detect_rim
 from ..camera import MisalignedHyperbolicCamera, scale_K
+from ..chessboard import DIST_MODELS
 from ..io import SUFFIXES
 from ..mirror import HyperbolicMirror
 from ._common import (

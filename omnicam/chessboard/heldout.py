@@ -19,7 +19,7 @@ import cv2
 import numpy as np
 from scipy.optimize import least_squares
 
-from .boards import board_pose_from_rays
+from .board_pose import board_pose_from_rays
 
 __all__ = [
     "HeldOut",

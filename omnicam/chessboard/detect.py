@@ -26,15 +26,11 @@
 start camera on the rest, and the views again with each better camera until no new board is
 found.
 
-Accuracy (``benchmarks/bench_pattern.py --detect``): on independent renders
-(:mod:`omnicam.synthetic.realistic`'s own tracer) of 1000x1000 of random rigs tilted up to 5 deg
-and offset up to 5 mm, random rooms, the camera's lens barrel, blur 0.3-1.2 px, sensor noise
-1-4 grey levels, JPEG 75-95 and vignetting, a 9x6 board of 60 mm squares 0.3-1.5 m away and
-wholly visible (corner spacing 6-19 px), 60 renders: found in 57 (95 %; the 3 misses are
-boards 1.4-1.5 m away near the centre of the annulus, corner spacing about 6 px), corner error
-RMS 0.11 px (median 0.06, 95th percentile 0.20, largest 1.1 px); boards with a corner spacing of
-10 px or more: 23 of 23, RMS 0.06 px, largest 0.23 px; none of the 9 renders without a board
-gave corners; 0.31 s per image.
+Accuracy: ``benchmarks/bench_pattern.py --detect`` prints it on independent renders
+(:mod:`omnicam.synthetic.realistic`'s own tracer: random rigs, rooms, lens barrel, blur, noise,
+JPEG, vignetting), and ``benchmarks/bench_chessboard_real.py`` on real images beside
+OCamCalib's own corners: boards with a corner spacing under about 6 px near the centre of the
+annulus are the ones missed.
 
 Corner order: OpenCV's (row by row); the board's 180-degree ambiguity is resolved so that the
 first row runs left to right in the view whose image-up is the mirror axis (``"views"``) or,
@@ -49,6 +45,9 @@ import math
 
 import cv2
 import numpy as np
+
+from ..views import K_from_fov, rotation_from_ypr, visible_elevation_range
+from .intrinsics import check_pattern_size, gray8
 
 __all__ = [
     "HOMOGRAPHY_MAX_PX",
@@ -109,8 +108,6 @@ def detection_views(
     ``CV_32FC1`` tables are bilinear between those nodes (``cv2.resize``), which is also how
     :func:`_bilinear` maps corners back. Cached per camera.
     """
-    from ..views import K_from_fov, rotation_from_ypr, visible_elevation_range
-
     key = (
         _camera_key(camera),
         float(fov_deg),
@@ -181,9 +178,7 @@ def _spacing(grid):
 
 
 def _gray(image):
-    from .intrinsics import _gray8
-
-    return _gray8(image, 0)
+    return gray8(image, 0)
 
 
 @dataclasses.dataclass(frozen=True)
@@ -247,9 +242,7 @@ def detect_pattern(image, pattern_size, camera=None, refine_in_source=False, met
     -------
     PatternDetection or None
     """
-    from .intrinsics import _pattern
-
-    cols, rows = _pattern(pattern_size)
+    cols, rows = check_pattern_size(pattern_size)
     unknown = [m for m in methods if m not in METHODS]
     if unknown:
         raise ValueError(f"methods must be among {METHODS}, got {unknown}")

@@ -7,14 +7,14 @@ import numpy as np
 from scipy.optimize import least_squares
 
 from ..gauge import perpendicular_basis
-from .intrinsics import _pattern  # one check of pattern_size (cv2.findChessboardCorners)
+from .intrinsics import check_pattern_size
 
 __all__ = ["board_pose_from_rays", "object_points", "rodrigues"]
 
 
 def object_points(pattern_size, square_size):
     """OpenCV's object points of a board: ``(cols * rows, 3)``, ``(i s, j s, 0)`` row by row."""
-    cols, rows = _pattern(pattern_size)
+    cols, rows = check_pattern_size(pattern_size)
     obj = np.zeros((rows * cols, 3))
     obj[:, :2] = np.mgrid[0:cols, 0:rows].T.reshape(-1, 2) * float(square_size)
     return obj

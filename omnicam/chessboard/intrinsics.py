@@ -12,12 +12,14 @@ import os
 import cv2
 import numpy as np
 
-__all__ = ["calibrate_intrinsics", "find_chessboard"]
+__all__ = ["calibrate_intrinsics", "check_pattern_size", "find_chessboard", "gray8"]
 
 _FIND_FLAGS = cv2.CALIB_CB_ADAPTIVE_THRESH | cv2.CALIB_CB_NORMALIZE_IMAGE
 
 
-def _pattern(pattern_size):
+def check_pattern_size(pattern_size):
+    """``(columns, rows)`` of inner corners as ``cv2.findChessboardCorners`` takes them, checked
+    (two integers >= 2); ``ValueError`` names what is wrong."""
     try:
         cols, rows = (int(v) for v in pattern_size)
         exact = all(float(v) == int(v) for v in pattern_size)
@@ -33,7 +35,7 @@ def _pattern(pattern_size):
     return cols, rows
 
 
-def _gray8(image, index):
+def gray8(image, index):
     """8-bit grey view of an image (array or file path) for the corner detector."""
     if isinstance(image, (str, os.PathLike)):
         path = os.fspath(image)
@@ -137,7 +139,7 @@ def calibrate_intrinsics(images, pattern_size, square_size, flags=0, min_views=3
         No images, unreadable or malformed images, images of different sizes, a bad
         ``pattern_size`` or ``square_size``, or the board found in fewer than ``min_views`` images.
     """
-    cols, rows = _pattern(pattern_size)
+    cols, rows = check_pattern_size(pattern_size)
     try:
         square = float(square_size)
     except (TypeError, ValueError):
@@ -165,7 +167,7 @@ def calibrate_intrinsics(images, pattern_size, square_size, flags=0, min_views=3
     size = None
     object_points, image_points, missed = [], [], []
     for i, image in enumerate(images):
-        gray = _gray8(image, i)
+        gray = gray8(image, i)
         if size is None:
             size = gray.shape[::-1]
         elif gray.shape[::-1] != size:

@@ -23,6 +23,8 @@ import math
 import cv2
 import numpy as np
 
+from ..mirror import HyperbolicMirror
+
 __all__ = [
     "NOMINAL_RIM_RADIUS",
     "CentralFit",
@@ -169,8 +171,6 @@ def hyperbolic_start(
         The start's principal point instead of the central fit's
         (:func:`pinhole_K_from_unified`).
     """
-    from ..mirror import HyperbolicMirror
-
     alpha, gamma = mirror_shape_from_xi(xi)
     if K is None:
         K = pinhole_K_from_unified(K_unified, xi, principal_point)

@@ -1,0 +1,35 @@
+"""Calibration from chessboards: the camera alone, and the whole rig through the mirror.
+
+- :mod:`.intrinsics`: ``calibrate_intrinsics``, the pinhole ``K, D`` from boards seen without
+  the mirror (``cv2.calibrateCamera``);
+- :mod:`.detect`: ``detect_pattern`` / ``find_pattern``, a board's corners in an image of the
+  mirror (OpenCV's detectors on the raw image, then unwarped views);
+- :mod:`.central`: the central start, ``cv2.omnidir.calibrate`` and the hyperbolic rig it
+  describes;
+- :mod:`.board_pose`: a board's object points and its pose from its corners' rays;
+- :mod:`.adjustment`: the non-central bundle adjustment, its solver and uncertainty;
+- :mod:`.calibrate`: ``calibrate_pattern``, the pipeline as named steps;
+- :mod:`.report`: ``PatternReport``;
+- :mod:`.heldout`: what a calibration predicts on views it did not fit.
+
+It builds on the single-image route (:mod:`omnicam.calibration`: the rim, the camera's
+reflection, Chen's posture, the plausibility checks), never the other way round.
+"""
+
+from .adjustment import DIST_MODELS, pattern_uncertainty
+from .calibrate import calibrate_pattern
+from .detect import detect_pattern, find_pattern
+from .heldout import HeldOut
+from .intrinsics import calibrate_intrinsics
+from .report import PatternReport
+
+__all__ = [
+    "DIST_MODELS",
+    "HeldOut",
+    "PatternReport",
+    "calibrate_intrinsics",
+    "calibrate_pattern",
+    "detect_pattern",
+    "find_pattern",
+    "pattern_uncertainty",
+]

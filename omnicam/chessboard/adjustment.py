@@ -1,0 +1,548 @@
+"""The non-central bundle adjustment of chessboard views: its parameters, residuals, solver and
+uncertainty (beyond the paper).
+
+:class:`BundleAdjustment` holds ``fx, fy, cx, cy`` (skew optional), the free distortion
+coefficients, the 5-DOF posture (two small rotations of the mirror frame about its own x and y
+axes and ``tvec``; the turn about the axis is put in the gauge of docs/conventions.md once, at
+the end), every board's 6-DOF pose and, optionally, the mirror's ``a, b`` (as logarithms;
+``rim_radius`` fixes the scale) and the plane of the camera's reflection. Residuals, in px:
+every corner's reprojection through the exact non-central projection
+(:func:`omnicam.raytrace.project`, what ``camera.project`` runs), every rim point's orthogonal
+distance to the image of the rim circle and, when the camera's own reflection is seen, its
+outline residual (:mod:`omnicam.calibration.reflection`). The robust ``soft_l1`` cost is
+minimised by MINPACK's Levenberg-Marquardt (:meth:`BundleAdjustment.solve`) with a Jacobian
+by central differences that uses the block structure: a board's pose moves only its own
+view's rows, so the columns of all boards are perturbed together (6 groups instead of 6 per
+view).
+
+What the fit knows: :func:`std_from_jacobian` (the parameters), :func:`ray_uncertainty` (the
+viewing directions over the mirror's image, what panoramas use) and
+:func:`pattern_uncertainty` (the information limit: the same at the truth, a Cramer-Rao bound).
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+
+import cv2
+import numpy as np
+from scipy.optimize import least_squares
+
+from .. import raytrace
+from ..calibration.reflection import fit_circle, plane_radius
+from ..calibration.steps import normalize
+from ..gauge import gauge_rotation
+from ..mirror import HyperbolicMirror
+from .board_pose import object_points, rodrigues
+from .intrinsics import check_pattern_size
+
+__all__ = [
+    "DIST_MODELS",
+    "AdjustmentModel",
+    "BundleAdjustment",
+    "covariance",
+    "pattern_uncertainty",
+    "ray_uncertainty",
+    "rim_foot",
+    "robust_residuals",
+    "std_from_jacobian",
+]
+
+
+#: Distortion models: which of OpenCV's ``(k1, k2, p1, p2, k3)`` are estimated.
+DIST_MODELS = {
+    "none": (),
+    "k1": (0,),
+    "k1k2": (0, 1),
+    "k1k2p1p2": (0, 1, 2, 3),
+    "k1k2p1p2k3": (0, 1, 2, 3, 4),
+}
+
+
+def rim_foot(cam_K, D, R, t, mirror, u, phi):
+    """Orthogonal distances of pixels ``u`` to the rim image, with foot parameters ``phi``
+    refined in place by Newton's method. Returns signed distances (px)."""
+    r, z = mirror.rim_radius, mirror.z_rim
+
+    def curve(ph):
+        X = np.stack([r * np.cos(ph), r * np.sin(ph), np.full_like(ph, z)], axis=1) @ R.T + t
+        xn = X[:, :2] / X[:, 2:3]
+        if D is None:
+            return xn @ cam_K[:2, :2].T + cam_K[:2, 2]
+        return raytrace.distort_normalized(xn, cam_K, D)
+
+    h = 1e-4
+    n = len(phi)
+    for _ in range(4):
+        c0, cp, cm = np.split(curve(np.concatenate([phi, phi + h, phi - h])), [n, 2 * n])
+        d1 = (cp - cm) / (2 * h)
+        d2 = (cp - 2 * c0 + cm) / (h * h)
+        w = c0 - u
+        g = np.einsum("ij,ij->i", w, d1)
+        gp = np.einsum("ij,ij->i", d1, d1) + np.einsum("ij,ij->i", w, d2)
+        phi -= g / gp
+    c0, cp, cm = np.split(curve(np.concatenate([phi, phi + h, phi - h])), [n, 2 * n])
+    tang = cp - cm
+    nrm = np.stack([tang[:, 1], -tang[:, 0]], axis=1)
+    nrm /= np.linalg.norm(nrm, axis=1, keepdims=True)
+    return np.einsum("ij,ij->i", u - c0, nrm)
+
+
+@dataclasses.dataclass(frozen=True)
+class AdjustmentModel:
+    """What the bundle adjustment estimates besides the posture and the boards' poses.
+
+    Attributes
+    ----------
+    free_d : tuple of int
+        The free coefficients of ``D = (k1, k2, p1, p2, k3)`` (:data:`DIST_MODELS`).
+    n_d : int
+        Coefficients of ``D`` (0: no distortion, 4 or 5).
+    fit_skew, fit_shape : bool
+        Also the skew ``K[0, 1]``; also the mirror's ``a, b``.
+    camera_cls : type
+        The camera class built from the parameters.
+    lens_px : (M, 2) ndarray or None
+        Outline pixels of the camera's reflection (None: not used).
+    lens_z : float or None
+        Its plane, known (None: a parameter).
+    """
+
+    free_d: tuple
+    n_d: int
+    fit_skew: bool
+    fit_shape: bool
+    camera_cls: type
+    lens_px: np.ndarray | None = None
+    lens_z: float | None = None
+
+
+class BundleAdjustment:
+    """Parameter vector, residuals and Jacobian of the non-central bundle adjustment.
+
+    ``x = [fx, fy, cx, cy, (skew), d_free..., w1, w2, t_x, t_y, t_z, (ln a, ln b), (lens_z),
+    boards...]``
+    with ``R = R0 R(w1, w2, 0)``: the mirror frame of the start turned about its own x and y
+    axes, so the axis moves with no twist about it (the gauge's smallest rotation would add a
+    twist of second order, which turns every board about the axis and bends the valley the
+    fit must follow); ``tvec = t``; 6 numbers per board (``rvec_b, tvec_b``). The gauge of
+    docs/conventions.md is imposed once, on the result (:meth:`to_gauge`).
+    """
+
+    def __init__(self, cam0, mirror, obj, views, rim_px, model):
+        lens_px, lens_z = model.lens_px, model.lens_z
+        free_d, n_d, fit_skew, fit_shape = model.free_d, model.n_d, model.fit_skew, model.fit_shape
+        camera_cls = model.camera_cls
+        self.mirror, self.obj, self.views, self.rim_px = mirror, obj, views, rim_px
+        self.lens_px = lens_px
+        self.lens_z, self.fit_lens_z = lens_z, False
+        if lens_px is not None and lens_z is None:  # its plane: started by a fit, then free
+            Ki = np.linalg.inv(cam0.K)
+            circle = fit_circle(
+                mirror, cam0.R, cam0.tvec, normalize(lens_px, cam0.K, cam0.D), Ki[:2, :2]
+            )
+            self.lens_z = circle.z if math.isfinite(circle.rms) else None
+            if self.lens_z is None:
+                self.lens_px = None
+            else:
+                self.fit_lens_z = True
+        self.free_d, self.n_d, self.fit_skew, self.fit_shape = free_d, n_d, fit_skew, fit_shape
+        self.camera_cls = camera_cls
+        self.R0 = cam0.R.copy()
+        self.D0 = np.zeros(n_d) if cam0.D is None else np.array(cam0.D, np.float64)
+        self.rim_phi = None
+        K = cam0.K
+        g = [K[0, 0], K[1, 1], K[0, 2], K[1, 2]] + ([K[0, 1]] if fit_skew else [])
+        g += [self.D0[i] for i in free_d]
+        g += [0.0, 0.0, *cam0.tvec]
+        if fit_shape:  # as logarithms: a, b stay positive wherever a step goes
+            g += [math.log(mirror.a), math.log(mirror.b)]
+        if self.fit_lens_z:
+            g += [self.lens_z]
+        self.n_global = len(g)
+        self.names = (
+            ["fx", "fy", "cx", "cy"]
+            + (["skew"] if fit_skew else [])
+            + [("k1", "k2", "p1", "p2", "k3")[i] for i in free_d]
+            + ["w1", "w2", "tx", "ty", "tz"]
+            + (["a", "b"] if fit_shape else [])
+            + (["lens_z"] if self.fit_lens_z else [])
+        )
+        self.x0_global = np.array(g, np.float64)
+        self.fixed = set()  # names of global parameters held at their value
+        self.skew0 = K[0, 1]
+        n = len(obj)
+        self.n_rows_view = 2 * n
+
+    def unpack(self, x):
+        i = 0
+        fx, fy, cx, cy = x[0:4]
+        i = 4
+        skew = self.skew0
+        if self.fit_skew:
+            skew = x[i]
+            i += 1
+        K = np.array([[fx, skew, cx], [0.0, fy, cy], [0.0, 0.0, 1.0]])
+        D = None
+        if self.n_d:
+            D = self.D0.copy()
+            for j in self.free_d:
+                D[j] = x[i]
+                i += 1
+        w1, w2 = x[i : i + 2]
+        R = self.R0 @ rodrigues(np.array([w1, w2, 0.0]))
+        tvec = x[i + 2 : i + 5].copy()
+        i += 5
+        mirror = self.mirror
+        if self.fit_shape:
+            mirror = HyperbolicMirror(math.exp(x[i]), math.exp(x[i + 1]), self.mirror.rim_radius)
+            i += 2
+        return K, D, R, tvec, mirror
+
+    def to_gauge(self, x, image_size=None):
+        """The camera in the gauge of docs/conventions.md and the board poses in its mirror frame.
+
+        The fitted ``R`` and the gauge's ``R_g = gauge(R e_z)`` differ by a turn ``Z`` about
+        the mirror axis, ``R = R_g Z``: the gauge's mirror frame holds ``Z X`` for the fit's
+        ``X``, so every board becomes ``(Z R_b, Z t_b)``.
+        """
+        K, D, R, tvec, mirror = self.unpack(x)
+        Rg = gauge_rotation(R[:, 2])
+        Z = Rg.T @ R
+        cam = self.camera_cls(
+            K, mirror, cv2.Rodrigues(Rg)[0].ravel(), tvec, D=D, image_size=image_size
+        )
+        poses = [
+            (cv2.Rodrigues(Z @ rodrigues(b[:3]))[0].ravel(), Z @ b[3:]) for b in self.boards(x)
+        ]
+        return cam, poses
+
+    def boards(self, x):
+        return x[self.n_global :].reshape(-1, 6)
+
+    def corner_residuals(self, x):
+        K, D, R, tvec, mirror = self.unpack(x)
+        B = self.boards(x)
+        pts = np.concatenate([self.obj @ rodrigues(b[:3]).T + b[3:] for b in B])
+        # the exact non-central projection of the camera's project(), on the fit's frame
+        px = raytrace.project(np.ascontiguousarray(pts), False, K, D, R, tvec, -R.T @ tvec, mirror)
+        obs = np.concatenate(self.views)
+        r = px - obs
+        r[~np.isfinite(r)] = 50.0  # a corner the rig cannot see: a large, constant residual
+        return r.ravel()
+
+    def rim_residuals(self, x):
+        K, D, R, tvec, mirror = self.unpack(x)
+        if self.rim_phi is None:  # foot points of the start, by dense sampling
+            ph = np.linspace(0, 2 * np.pi, 3600, endpoint=False)
+            X = (
+                np.stack(
+                    [
+                        mirror.rim_radius * np.cos(ph),
+                        mirror.rim_radius * np.sin(ph),
+                        np.full_like(ph, mirror.z_rim),
+                    ],
+                    axis=1,
+                )
+                @ R.T
+                + tvec
+            )
+            xn = X[:, :2] / X[:, 2:3]
+            c = xn @ K[:2, :2].T + K[:2, 2]
+            j = np.argmin(((self.rim_px[:, None, :] - c[None]) ** 2).sum(-1), axis=1)
+            self.rim_phi = ph[j]
+        phi = self.rim_phi.copy()
+        return rim_foot(K, D, R, tvec, mirror, self.rim_px, phi)
+
+    def lens_residuals(self, x):
+        """The camera's reflection (:mod:`.reflection`): ``(rho(u) - r) / |grad rho|`` px for
+        every outline pixel, ``rho`` the radius at which its reflected ray crosses the plane of
+        the coaxial circle (``z`` known, or the parameter ``lens_z`` started by
+        :func:`.reflection.fit_circle` under the start posture) and ``r`` fitted in closed form
+        at each evaluation."""
+        K, D, R, tvec, mirror = self.unpack(x)
+        Ki = np.linalg.inv(K)
+        xn = normalize(self.lens_px, K, D)
+        z = x[self.names.index("lens_z")] if self.fit_lens_z else self.lens_z
+        rho, g = plane_radius(mirror, R, tvec, xn, z, Ki[:2, :2])
+        ok = np.isfinite(rho) & np.isfinite(g) & (g > 0)
+        r = np.zeros(len(rho))
+        if ok.sum() >= 3:
+            w = 1.0 / g[ok] ** 2
+            r[ok] = (rho[ok] - float((w * rho[ok]).sum() / w.sum())) / g[ok]
+        return r
+
+    def residuals(self, x):
+        parts = [self.corner_residuals(x), self.rim_residuals(x)]
+        if self.lens_px is not None:
+            parts.append(self.lens_residuals(x))
+        return np.concatenate(parts)
+
+    def steps(self, x):
+        h = np.empty_like(x)
+        g = self.n_global
+        for k, name in enumerate(self.names):
+            if name in ("fx", "fy", "cx", "cy", "skew"):
+                h[k] = 1e-6 * max(abs(x[0]), 1.0)
+            elif name in ("w1", "w2"):
+                h[k] = 1e-7
+            elif name in ("tx", "ty", "tz", "lens_z"):
+                h[k] = 1e-6 * self.mirror.rim_radius
+            elif name in ("a", "b"):  # their logarithms
+                h[k] = 1e-6
+            else:
+                h[k] = 1e-7
+        B = h[g:].reshape(-1, 6)
+        B[:, :3] = 1e-7
+        B[:, 3:] = 1e-6 * self.mirror.rim_radius
+        return h
+
+    def jacobian(self, x):
+        """Central differences; the boards' columns in 6 groups (block structure). Columns of
+        parameters held fixed (``self.fixed``) are zero."""
+        h = self.steps(x)
+        g = self.n_global
+        nv = len(self.views)
+        m = (
+            nv * self.n_rows_view
+            + len(self.rim_px)
+            + (0 if self.lens_px is None else len(self.lens_px))
+        )
+        J = np.zeros((m, len(x)))
+        for k in range(g):
+            if self.names[k] in self.fixed:
+                continue
+            xp, xm = x.copy(), x.copy()
+            xp[k] += h[k]
+            xm[k] -= h[k]
+            J[:, k] = (self.residuals(xp) - self.residuals(xm)) / (2 * h[k])
+        rows = self.n_rows_view
+        for k in range(6):
+            xp, xm = x.copy(), x.copy()
+            xp[g + k :: 6] += h[g + k :: 6]
+            xm[g + k :: 6] -= h[g + k :: 6]
+            diff = self.corner_residuals(xp) - self.corner_residuals(xm)
+            for v in range(nv):
+                col = g + 6 * v + k
+                J[v * rows : (v + 1) * rows, col] = diff[v * rows : (v + 1) * rows] / (2 * h[col])
+        return J
+
+    def solve(self, x0, f_scale=1.0, max_nfev=None):
+        """The ``soft_l1`` fit of scale ``f_scale`` px by MINPACK's Levenberg-Marquardt
+        (``scipy.optimize.least_squares(method="lm")``), the global parameters named in
+        ``self.fixed`` held at ``x0``; :meth:`jacobian` gives the derivatives.
+
+        MINPACK minimises a plain sum of squares; the robust cost ``sum rho(r^2)``,
+        ``rho(s) = 2 f^2 (sqrt(1 + s / f^2) - 1)``, is one, of the residuals
+        ``z = sign(r) sqrt(rho(r^2))`` (:func:`robust_residuals`), whose Jacobian is
+        ``dz/dr J``, so the minimum is the robust one exactly. (The trust-region solvers of
+        ``least_squares`` with the ``soft_l1`` loss, with ``jac_sparsity`` or this Jacobian,
+        exact or ``lsmr`` steps, stopped at their 100 evaluations still descending along the
+        valley where ``a, b`` trade against ``f``, where this one converges in a few dozen:
+        ``benchmarks/bench_chessboard_real.py``.)
+
+        Returns the ``OptimizeResult`` with ``x`` the whole parameter vector."""
+        x0 = np.asarray(x0, np.float64)
+        free = np.ones(len(x0), bool)
+        free[[k for k, n in enumerate(self.names) if n in self.fixed]] = False
+
+        def full(xf):
+            x = x0.copy()
+            x[free] = xf
+            return x
+
+        last = {}  # MINPACK asks for the Jacobian where it last evaluated the residuals
+
+        def fun(xf):
+            last["x"], last["z"] = xf.copy(), robust_residuals(self.residuals(full(xf)), f_scale)
+            return last["z"][0]
+
+        def jac(xf):
+            if "x" not in last or not np.array_equal(last["x"], xf):
+                fun(xf)
+            return self.jacobian(full(xf))[:, free] * last["z"][1][:, None]
+
+        sol = least_squares(
+            fun,
+            x0[free],
+            jac=jac,
+            method="lm",
+            x_scale="jac",
+            max_nfev=max_nfev,
+            xtol=1e-10,
+            ftol=1e-10,
+            gtol=1e-10,
+        )
+        sol.x = full(sol.x)
+        sol.cost = float(sol.cost)
+        return sol
+
+
+def robust_residuals(r, f_scale):
+    """``z = sign(r) sqrt(rho(r^2))`` for the ``soft_l1`` loss ``rho(s) = 2 f^2 (sqrt(1 +
+    s / f^2) - 1)``, so that ``sum z^2`` is the robust cost, and ``dz/dr``.
+
+    With ``q = sqrt(1 + (r / f)^2)``: ``z = r sqrt(2 / (1 + q))`` (``z ~ r`` for ``|r| << f``,
+    no cancellation) and ``dz/dr = r rho'(r^2) / z = sqrt((1 + q) / 2) / q``."""
+    q = np.sqrt(1.0 + (r / f_scale) ** 2)
+    return r * np.sqrt(2.0 / (1.0 + q)), np.sqrt((1.0 + q) / 2.0) / q
+
+
+def covariance(J, row_sigma):
+    """``(J^T W J)^-1``, ``W = diag(1 / row_sigma^2)`` (the Cramer-Rao bound of independent
+    Gaussian residuals of those sigmas), columns scaled to unit norm; a parameter no residual
+    depends on (a zero column) gets NaN variance instead of a number the regularisation made up.
+    """
+    n = J.shape[1]
+    Jw = J / np.asarray(row_sigma, np.float64)[:, None]
+    scale = np.linalg.norm(Jw, axis=0)
+    live = scale > 0
+    Js = Jw[:, live] / scale[live]
+    N = np.einsum("ij,ik->jk", Js, Js)
+    cov = np.full((n, n), math.nan)
+    m = int(live.sum())
+    cov[np.ix_(live, live)] = np.linalg.solve(N + 1e-12 * np.eye(m), np.eye(m)) / np.outer(
+        scale[live], scale[live]
+    )
+    return cov
+
+
+def std_from_jacobian(adj, x, J, row_sigma):
+    """Standard deviations (:func:`covariance`) of the named global parameters of ``adj`` at
+    ``x``, the mirror axis (``axis_deg``, RMS angle) and the camera centre in the mirror frame
+    (``origin``, RMS distance, the 5 posture parameters linearised through ``C = -R^T tvec``,
+    eq. 17); and the covariance of the global parameters."""
+    cov = covariance(J, row_sigma)
+    var = np.diag(cov)
+    std = {}
+    for k, name in enumerate(adj.names):
+        if name in ("w1", "w2", "tx", "ty", "tz"):
+            continue
+        std[name] = float(math.sqrt(max(var[k], 0.0))) if math.isfinite(var[k]) else math.nan
+        if name in ("a", "b"):  # the parameter is the logarithm
+            std[name] *= math.exp(x[k])
+    ip = adj.names.index("w1")
+    std["axis_deg"] = math.degrees(math.sqrt(max(var[ip] + var[ip + 1], 0.0)))
+
+    def centre(xx):
+        _, _, R, t, _ = adj.unpack(xx)
+        return -R.T @ t
+
+    G = np.zeros((3, 5))
+    for k in range(5):
+        hk = 1e-7 if k < 2 else 1e-6 * adj.mirror.rim_radius
+        xp, xm = x.copy(), x.copy()
+        xp[ip + k] += hk
+        xm[ip + k] -= hk
+        G[:, k] = (centre(xp) - centre(xm)) / (2 * hk)
+    std["origin"] = float(math.sqrt(max(np.trace(G @ cov[ip : ip + 5, ip : ip + 5] @ G.T), 0.0)))
+    g = adj.n_global
+    return std, cov[:g, :g]
+
+
+def ray_uncertainty(adj, x, cov_global, image_size, n=24):
+    """Standard deviation (deg) of the viewing directions over the mirror's image: the rays of
+    an ``n x n`` grid of pixels (those that see the mirror, eqs. 6-19), each linearised in the
+    global parameters (central differences) and propagated through their covariance
+    ``cov_global``. Returns ``(median, max)``; NaN when the covariance is not finite."""
+    w, h = (int(v) for v in image_size)
+    u, v = np.meshgrid(np.linspace(0, w - 1, n), np.linspace(0, h - 1, n))
+    px = np.stack([u.ravel(), v.ravel()], axis=1)
+
+    def rays(xx, pixels):
+        K, D, R, t, mirror = adj.unpack(xx)
+        return raytrace.trace(pixels, K, D, R, -R.T @ t, mirror)[1]
+
+    px = px[np.isfinite(rays(x, px)).all(axis=1)]
+    live = np.isfinite(np.diag(cov_global))
+    if len(px) == 0 or not live.any():
+        return math.nan, math.nan
+    steps = adj.steps(x)
+    G = np.zeros((len(px), 3, adj.n_global))
+    for k in np.flatnonzero(live):
+        xp, xm = x.copy(), x.copy()
+        xp[k] += steps[k]
+        xm[k] -= steps[k]
+        G[:, :, k] = (rays(xp, px) - rays(xm, px)) / (2 * steps[k])
+    C = cov_global[np.ix_(live, live)]
+    Gl = G[:, :, live]
+    var = np.einsum("nik,kl,nil->n", Gl, C, Gl)
+    deg = np.degrees(np.sqrt(np.maximum(var[np.isfinite(var)], 0.0)))
+    if len(deg) == 0:
+        return math.nan, math.nan
+    return float(np.median(deg)), float(np.max(deg))
+
+
+def pattern_uncertainty(
+    camera,
+    pattern_size,
+    square_size,
+    board_poses,
+    rim_points,
+    sigma_corner,
+    sigma_rim,
+    lens_points=None,
+    lens_z=None,
+    sigma_lens=None,
+    dist_model="k1k2p1p2",
+    refine_mirror_shape=False,
+):
+    """The information limit of :func:`calibrate_pattern`: a posteriori standard deviations of
+    its bundle adjustment evaluated at the truth (a Cramer-Rao bound).
+
+    The Jacobian of the adjustment's residuals (corners, rim and, with ``lens_points``, the
+    camera's reflection) at the true ``camera`` and board poses, every row weighted by its
+    noise (``sigma_corner`` px per corner coordinate, ``sigma_rim`` px per rim point,
+    ``sigma_lens`` px per outline point): ``cov = (J^T W J)^-1``. No estimate can be
+    consistently better than these standard deviations on such data; when they exceed a
+    target, the data, not the solver, are what is missing.
+
+    Parameters
+    ----------
+    camera : MisalignedHyperbolicCamera
+        The truth.
+    pattern_size, square_size
+        As :func:`calibrate_pattern`.
+    board_poses : list of (rvec_b, tvec_b)
+        The true board poses (mirror frame).
+    rim_points : (M, 2) array_like
+        Pixels on the rim (their foot points are taken on the true rim image).
+    sigma_corner, sigma_rim : float
+    lens_points : (L, 2) array_like, optional
+        Outline pixels of the camera's reflection.
+    lens_z : float, optional
+        Its circle's plane, known (None: fitted, as :func:`calibrate_pattern` does).
+    sigma_lens : float, optional
+    dist_model : str
+    refine_mirror_shape : bool
+
+    Returns
+    -------
+    dict
+        The ``std`` of :class:`PatternReport` (``fx, fy, cx, cy``, distortion, ``axis_deg``,
+        ``origin``, ``a, b`` with ``refine_mirror_shape``).
+    """
+    cols, rows = check_pattern_size(pattern_size)
+    if dist_model not in DIST_MODELS:
+        raise ValueError(f"dist_model must be one of {sorted(DIST_MODELS)}, got {dist_model!r}")
+    free_d = DIST_MODELS[dist_model]
+    n_d = 0 if not free_d and camera.D is None else (5 if 4 in free_d else 4)
+    obj = object_points((cols, rows), square_size)
+    views = [
+        camera.project(obj @ rodrigues(rv).T + np.asarray(tv, np.float64)) for rv, tv in board_poses
+    ]
+    lens_px = None if lens_points is None else np.asarray(lens_points, np.float64).reshape(-1, 2)
+    model = AdjustmentModel(free_d, n_d, False, refine_mirror_shape, type(camera), lens_px, lens_z)
+    rim_px = np.asarray(rim_points, np.float64).reshape(-1, 2)
+    adj = BundleAdjustment(camera, camera.mirror, obj, views, rim_px, model)
+    x = np.concatenate(
+        [adj.x0_global] + [np.concatenate([np.ravel(rv), np.ravel(tv)]) for rv, tv in board_poses]
+    )
+    J = adj.jacobian(x)
+    nc = len(views) * adj.n_rows_view
+    sig = np.full(J.shape[0], float(sigma_corner))
+    sig[nc : nc + len(adj.rim_px)] = float(sigma_rim)
+    if adj.lens_px is not None:
+        sig[nc + len(adj.rim_px) :] = float(sigma_lens)
+    return std_from_jacobian(adj, x, J, sig)[0]

@@ -1,0 +1,150 @@
+"""The report of a chessboard calibration: what was fitted, how well, and what it predicts."""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+
+import cv2
+import numpy as np
+
+from ..calibration.report import to_bgr8
+from .heldout import HeldOut
+
+__all__ = ["PatternReport"]
+
+
+@dataclasses.dataclass(frozen=True, eq=False)
+class PatternReport:
+    """Outcome of :func:`calibrate_pattern`.
+
+    Attributes
+    ----------
+    rms : float
+        RMS corner reprojection error over the views used, px.
+    view_rms : dict
+        ``{image index: RMS px}`` of every view used.
+    corners_used : dict
+        ``{image index: number of corners}`` of every view used.
+    board_poses : dict
+        ``{image index: (rvec_b, tvec_b)}``, ``X_mirror = R(rvec_b) X_board + tvec_b``.
+    image_points : list
+        Per input image the ``(N, 1, 2)`` float32 corners detected or given (None if none).
+    reprojected : dict
+        ``{image index: (N, 1, 2) float64}`` corners reprojected by the calibrated camera.
+    rim_points : (M, 2) float64 ndarray
+        The rim points used.
+    rim_rms : float
+        RMS distance of the rim points to the calibrated rim image, px.
+    std : dict
+        Standard deviations (1 sigma, from ``sigma^2 (J^T J)^-1`` with ``sigma^2`` the residual
+        variance): ``fx, fy, cx, cy`` (px), ``skew`` if estimated, ``k1``... of the free
+        distortion coefficients, ``axis_deg`` (RMS angle of the mirror axis), ``origin`` (RMS
+        distance of the camera centre in the mirror frame, mirror units), ``a, b`` with
+        ``refine_mirror_shape``.
+    warnings : tuple of str
+    dropped : dict
+        ``{image index: reason}`` of the views left out.
+    nfev : int
+        Residual evaluations of the last adjustment.
+    camera : MisalignedHyperbolicCamera
+    start : MisalignedHyperbolicCamera
+        The start of the adjustment (K from the rim, posture from Chen's method).
+    lens_rms : float
+        RMS outline residual of the camera's reflection, px (NaN when not used).
+    lens_note : str
+        Whether and how the camera's reflection was used.
+    central : CentralFit or None
+        The central start (:func:`.central.fit_central` of the corners found on the raw
+        images), or None when it could not be made.
+    found_by : dict
+        ``{image index: how its corners were found}``: ``"given"``, one of
+        :data:`.detect.METHODS` (``"raw"``, ``"raw-sb"``: OpenCV's detectors on the
+        image as it is; ``"views"``: in the start camera's unwarped views) or ``"views (fitted
+        camera)"`` (a later round, in the views of the camera fitted to the boards found
+        before).
+    ray_std_deg : (float, float)
+        Standard deviation of the viewing directions over the mirror's image (deg; median,
+        worst), the parameters' covariance propagated to the rays (what panoramas use): small
+        even when ``a, b`` or ``fx`` are not.
+    names : dict
+        ``{image index: file name}`` of the images given as paths (the table shows them).
+    heldout : HeldOut or None
+        With ``calibrate_pattern(heldout=k)``, the k-fold held-out corner RMS of the views
+        used (:mod:`.heldout`), ``cv2.omnidir``'s on the same folds beside it.
+    """
+
+    rms: float
+    view_rms: dict
+    corners_used: dict
+    board_poses: dict
+    image_points: list
+    reprojected: dict
+    rim_points: np.ndarray
+    rim_rms: float
+    std: dict
+    warnings: tuple
+    dropped: dict
+    nfev: int
+    camera: object
+    start: object
+    lens_rms: float = math.nan
+    lens_note: str = ""
+    found_by: dict = dataclasses.field(default_factory=dict)
+    central: object = None
+    heldout: HeldOut | None = None
+    ray_std_deg: tuple = (math.nan, math.nan)
+    names: dict = dataclasses.field(default_factory=dict)
+
+    def table(self, names=None):
+        """The per-view table as text: image, corners, RMS px, distance and elevation of the
+        board and how it was found, or why the view was dropped. ``names``: a sequence of the
+        images' names (default :attr:`names`, else the indices)."""
+        names = dict(enumerate(names)) if names is not None else self.names
+        rows = sorted(set(self.view_rms) | set(self.dropped))
+        label = {i: str(names.get(i, i)) for i in rows}
+        wide = max([5] + [len(v) for v in label.values()])
+        lines = [
+            f"{'image':>{wide}} {'corners':>7} {'rms px':>8} {'dist':>8} {'elev deg':>8}  found by"
+        ]
+        for i in rows:
+            if i in self.view_rms:
+                t = np.asarray(self.board_poses[i][1])
+                el = math.degrees(math.atan2(t[2], math.hypot(t[0], t[1])))
+                lines.append(
+                    f"{label[i]:>{wide}} {self.corners_used[i]:>7} {self.view_rms[i]:>8.3f} "
+                    f"{np.linalg.norm(t):>8.1f} {el:>8.1f}  {self.found_by.get(i, '-')}"
+                )
+            else:
+                lines.append(f"{label[i]:>{wide}} {'-':>7} {'-':>8}   dropped: {self.dropped[i]}")
+        return "\n".join(lines)
+
+    def draw(self, image, index):
+        """BGR overlay of view ``index``: detected corners (green circles) and reprojected ones
+        (red crosses), with the rim (blue)."""
+        img = to_bgr8(image, None).copy()
+        rim = self.camera.rim_image_points(720)
+        if np.isfinite(rim).all():
+            cv2.polylines(
+                img, [np.round(rim * 16).astype(np.int32)], True, (255, 0, 0), 1, cv2.LINE_AA, 4
+            )
+        det = self.image_points[index]
+        if det is not None:
+            for p in np.asarray(det).reshape(-1, 2):
+                cv2.circle(
+                    img,
+                    tuple(int(v) for v in np.round(p * 16)),
+                    4 * 16,
+                    (0, 200, 0),
+                    1,
+                    cv2.LINE_AA,
+                    4,
+                )
+        rep = self.reprojected.get(index)
+        if rep is not None:
+            for p in np.asarray(rep).reshape(-1, 2):
+                if np.isfinite(p).all():
+                    cv2.drawMarker(
+                        img, tuple(round(v) for v in p), (0, 0, 255), cv2.MARKER_CROSS, 6, 1
+                    )
+        return img
