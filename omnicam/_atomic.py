@@ -1,8 +1,9 @@
 """One way to write a file: a temporary file beside it, flushed, checked, then renamed into place.
 
-Every file omnicam writes (calibration, intrinsics and far-line files, images, maps, exports,
-videos) goes through :func:`atomic_output`, so a reader sees either the old file or the complete
-new one, never a half-written one -- also on a full disk, Ctrl-C or a crash mid-write:
+Every file omnicam writes (calibration, intrinsics and far-line files, images, maps, exports)
+goes through :func:`atomic_output`, and videos, written frame by frame, through the same steps
+(:class:`omnicam.stream.VideoOutput`), so a reader sees either the old file or the complete new
+one, never a half-written one -- also on a full disk, Ctrl-C or a crash mid-write:
 
 1. a new, empty temporary file is created next to the target with the same extension (OpenCV
    picks the format from it), named ``.<name>.omnicam-tmp-<pid>-<random><ext>``, created with
@@ -10,8 +11,8 @@ new one, never a half-written one -- also on a full disk, Ctrl-C or a crash mid-
 2. the caller writes it (by name: ``cv2.FileStorage``, ``cv2.imwrite``, ``cv2.VideoWriter``);
 3. it is flushed to the disk (``fsync``), must be non-empty, and ``verify(tmp)`` (reading it
    back) must pass -- ``cv2.FileStorage`` and ``cv2.imwrite`` do not report every failed write;
-4. only then ``os.replace`` puts it in place (``overwrite=False``: a hard link that fails if the
-   target appeared meanwhile) and the folder is flushed.
+4. only then :func:`publish` puts it in place (``os.replace``; ``overwrite=False``: a hard link
+   that fails if the target appeared meanwhile) and the folder is flushed.
 
 Any failure removes the temporary file, leaves the old target untouched and raises
 :class:`OutputError` (a ``ValueError``) naming the file and the cause. Temporary files left by a
@@ -30,6 +31,7 @@ import time
 __all__ = [
     "OutputError",
     "atomic_output",
+    "publish",
     "write_bytes",
     "temp_beside",
     "remove_stale",
@@ -171,22 +173,42 @@ def _remove_quietly(path):
         os.remove(path)
 
 
-def _publish(tmp, path, overwrite):
+def publish(tmp, path, overwrite=True):
+    """Put the finished temporary file ``tmp`` in place as ``path``, durably.
+
+    ``tmp`` (beside ``path``, from :func:`temp_beside`) is flushed to the disk, renamed, and the
+    folder flushed. ``overwrite=True`` replaces ``path`` (``os.replace``); ``overwrite=False``
+    makes a hard link, which fails if ``path`` exists, so a file that appeared meanwhile is never
+    replaced (on a file system without hard links: a check, then ``os.replace``).
+
+    Raises
+    ------
+    OutputError
+        ``overwrite`` is False and ``path`` exists; ``tmp`` is left for the caller to remove.
+    OSError
+        The rename failed (the caller names the file); ``path`` is unchanged.
+    """
+    _fsync(tmp)
     if overwrite:
         os.replace(tmp, path)
-        return
-    try:
-        os.link(tmp, path)  # atomic and exclusive: fails if ``path`` exists
-    except FileExistsError:
-        raise OutputError(f"cannot write {path}: it exists (it appeared while writing)") from None
-    except OSError as e:
-        if e.errno not in (errno.EPERM, errno.ENOTSUP, errno.EOPNOTSUPP, errno.EXDEV):
-            raise
-        if os.path.lexists(path):  # a file system without hard links
-            raise OutputError(f"cannot write {path}: it exists") from None
-        os.replace(tmp, path)
-        return
-    os.remove(tmp)
+    else:
+        try:
+            os.link(tmp, path)  # atomic and exclusive: fails if ``path`` exists
+        except FileExistsError:
+            raise OutputError(
+                f"cannot write {path}: it exists (it appeared while writing)"
+            ) from None
+        except OSError as e:
+            if e.errno not in (errno.EPERM, errno.ENOTSUP, errno.EOPNOTSUPP, errno.EXDEV):
+                raise
+            if os.path.lexists(path):  # a file system without hard links
+                raise OutputError(f"cannot write {path}: it exists") from None
+            os.replace(tmp, path)
+        else:
+            os.remove(tmp)
+    _LIVE.discard(tmp)
+    with contextlib.suppress(OSError):
+        _fsync(os.path.dirname(os.path.abspath(path)), directory=True)
 
 
 @contextlib.contextmanager
@@ -258,11 +280,9 @@ def atomic_output(path, *, what="file", overwrite=True, verify=None, allow_empty
                     f"back; the previous file is unchanged"
                 )
         try:
-            _publish(tmp, path, overwrite)
+            publish(tmp, path, overwrite)
         except OSError as e:
             raise OutputError(f"cannot write {what} {path}: {_describe(e)}") from None
-        with contextlib.suppress(OSError):
-            _fsync(os.path.dirname(os.path.abspath(path)), directory=True)
     finally:
         if tmp is not None:
             _remove_quietly(tmp)

@@ -15,7 +15,8 @@ borderMode=BORDER_CONSTANT, borderValue=0)`` on the float tables (ffmpeg 5.1):
 ``ffmpeg -i src.png -i x.pgm -i y.pgm -lavfi "format=gray,remap" out.png`` (also ``rgb24``) for
 lossless stills, and the video pipeline ``-lavfi "format=yuv444p,remap"``, whose every plane
 equals ``cv2.remap`` of the same plane of the yuv444p source with ffmpeg's black
-``(16, 128, 128)`` as the border value (a lossy codec afterwards is the only difference).
+``(16, 128, 128)`` as the border value (a lossy codec afterwards is the only difference); the
+printed command then converts to ``yuv420p``, which every player takes (:func:`ffmpeg_command`).
 
 The PGM files are binary ``P5`` with ``maxval`` exactly 65535 (two bytes per sample, most
 significant byte first, as the Netpbm format defines 16-bit PGM), which ffmpeg reads as
@@ -197,10 +198,20 @@ def ffmpeg_command(
 
     ``yuv444p`` keeps chroma at full resolution, so every output pixel is one source pixel.
     With ``supersample`` k the maps are k times ``output_size`` and ``scale`` brings it down.
+    A video output (any ``output_name`` that is not an image OpenCV writes, such as ``.png`` or
+    ``out_%04d.png``) ends in ``format=yuv420p``: H.264 in 4:4:4 is refused by browsers and
+    many players. 4:2:0 needs an even width and height, so an odd last column or row is cropped
+    (``crop``), as ``cv2.VideoWriter`` drops it.
     """
     chain = "format=yuv444p,remap"
     if supersample > 1 and output_size is not None:
         chain += f",scale={output_size[0]}:{output_size[1]}:flags=area"
+    if not cv2.haveImageWriter(os.fspath(output_name)):
+        if output_size is None:
+            chain += ",crop=trunc(iw/2)*2:trunc(ih/2)*2"
+        elif output_size[0] % 2 or output_size[1] % 2:
+            chain += f",crop={output_size[0] // 2 * 2}:{output_size[1] // 2 * 2}:0:0"
+        chain += ",format=yuv420p"
     q = shlex.quote
     return (
         f"ffmpeg -i {q(input_name)} -i {q(os.fspath(x_pgm))} -i {q(os.fspath(y_pgm))} "

@@ -3,8 +3,18 @@
 The tables are built once (:mod:`omnicam.views`, paper section 4.1); each frame then costs one
 ``cv2.remap`` per view into a preallocated output, so the per-frame overhead over bare
 ``cv2.remap`` is a few dictionary look-ups. :meth:`Unwarper.stream` reads a ``cv2.VideoCapture``
-source (a file, a camera index or a stream URL), unwarps, writes each view with
-``cv2.VideoWriter`` and yields the frames, so callers can show progress and stop at any time.
+source (:func:`open_capture`: a file, a camera index or a stream URL), unwarps, writes each view
+and yields the frames, so callers can show progress and stop at any time.
+
+Videos are written safely (:class:`VideoOutput`, the one video writer of omnicam, used by
+``omnicam unwarp`` too): frames go to a temporary file beside the output; at the end the file is
+read back and must decode every frame written (a full disk makes ``cv2.VideoWriter`` drop
+frames silently), and only then replaces the output, atomically. A run that stops early (Ctrl-C,
+the caller closing the stream) keeps the frames so far, in the output when there was none, else
+in ``NAME.partial.EXT`` beside it; an error removes them and leaves an earlier output intact.
+The codec is H.264 where the container and the installed OpenCV can write it (browsers play
+it), else the container's usual one (:data:`VIDEO_CODECS`), checked by writing a frame
+(:func:`video_codec`); the stream says which (``VideoStream.fourcc``).
 
 Frame size: the tables map into a source image of one size. An Unwarper built from a camera
 uses ``camera.image_size``, or, with ``frame_size=``, ``camera.scaled(frame_size)`` (the same
@@ -14,15 +24,29 @@ different camera cannot be told from a rescale, so we do not guess.
 
 from __future__ import annotations
 
+import contextlib
 import math
 import os
+from typing import NamedTuple
 
 import cv2
 import numpy as np
 
+from ._atomic import OutputError, publish, sigint_deferred, temp_beside
+from .io import opencv_silenced
 from .views import PanoramaView, PerspectiveView
 
-__all__ = ["Unwarper", "open_capture"]
+__all__ = [
+    "MIN_FREE_BYTES",
+    "VIDEO_CODECS",
+    "Unwarper",
+    "VideoOutput",
+    "VideoStream",
+    "WrittenVideo",
+    "count_frames",
+    "open_capture",
+    "video_codec",
+]
 
 _INTERPOLATIONS = (cv2.INTER_NEAREST, cv2.INTER_LINEAR, cv2.INTER_CUBIC, cv2.INTER_LANCZOS4)
 _BORDERS = (
@@ -65,30 +89,72 @@ def _check_maps(name, maps):
 
 
 def open_capture(source):
-    """A ``cv2.VideoCapture`` that is open, or ``ValueError``.
+    """A ``cv2.VideoCapture`` that is open, or ``ValueError`` naming what could not be opened.
 
     Parameters
     ----------
     source : int, str, os.PathLike or cv2.VideoCapture
-        A camera index, a video file, an image sequence pattern or a stream URL, or a
-        capture that is already open.
+        A camera index, a video file, an image sequence pattern (``img_%04d.png``) or a stream
+        URL (``scheme://...``), or a capture that is already open (or any object with its
+        ``read``, ``get`` and ``isOpened``).
+
+    Returns
+    -------
+    cap : cv2.VideoCapture
+        Open; the caller releases it (a capture passed in is returned as it is).
     """
-    if isinstance(source, cv2.VideoCapture):
-        cap = source
+    if _is_capture(source):
+        cap, what = source, "the capture"
     elif isinstance(source, (int, np.integer)) and not isinstance(source, bool):
-        cap = cv2.VideoCapture(int(source))
+        cap, what = None, f"camera {int(source)}"
+        source = int(source)
     elif isinstance(source, (str, os.PathLike)):
-        src = os.fspath(source)
-        if "://" not in src and "%" not in src and not os.path.exists(src):
-            raise ValueError(f"source {src}: no such file")
-        cap = cv2.VideoCapture(src)
+        source = os.fspath(source)
+        if "://" in source:
+            what = f"stream {source}"
+        elif "%" in source:
+            what = f"image sequence {source}"
+        elif os.path.exists(source):
+            what = f"{source}: not an image or video OpenCV can read"
+        else:
+            raise ValueError(f"source {source}: no such file")
+        cap = None
     else:
         raise ValueError(
             f"source must be a camera index, a path, a URL or a cv2.VideoCapture, got {source!r}"
         )
-    if not cap.isOpened():
-        raise ValueError(f"source {source!r}: cannot be opened by cv2.VideoCapture")
+    try:
+        cap = cv2.VideoCapture(source) if cap is None else cap
+        opened = cap.isOpened()
+    except cv2.error:
+        opened = False
+    if not opened:
+        raise ValueError(f"cannot open {what}")
     return cap
+
+
+def _is_capture(source):
+    """A ``cv2.VideoCapture``, or an object that reads like one (a wrapper, say)."""
+    return isinstance(source, cv2.VideoCapture) or all(
+        callable(getattr(source, m, None)) for m in ("read", "get", "isOpened")
+    )
+
+
+def count_frames(path, limit=None):
+    """Frames OpenCV decodes from the video file ``path`` (it stops counting after ``limit``).
+
+    Returns 0 for a file OpenCV cannot open.
+    """
+    cap = cv2.VideoCapture(os.fspath(path))
+    n = 0
+    try:
+        if not cap.isOpened():
+            return 0
+        while (limit is None or n < limit) and cap.grab():
+            n += 1
+    finally:
+        cap.release()
+    return n
 
 
 def _check_border_value(value):
@@ -308,90 +374,585 @@ class Unwarper:
     __call__ = unwarp
 
     # -- video ----------------------------------------------------------------------------------
-    def stream(self, source, outputs=None, fourcc="mp4v", fps=None, max_frames=None):
-        """Read, unwarp and write frames; a generator yielding ``(index, views)`` per frame.
+    def stream(
+        self,
+        source,
+        outputs=None,
+        fourcc=None,
+        fps=None,
+        max_frames=None,
+        overwrite=True,
+        finalize=None,
+    ) -> VideoStream:
+        """Read, unwarp and write frames; an iterator of ``(index, views)``, one per frame.
+
+        Each output is a :class:`VideoOutput`: its frames go to a temporary file beside it,
+        and only a file from which every frame decodes replaces it, atomically, when the
+        source ends or ``max_frames`` is reached. On an exception (a frame of another size, a
+        full disk, ...) the temporary files are removed and earlier outputs are unchanged. When
+        the run stops early -- ``KeyboardInterrupt`` while reading or writing, or the caller
+        closes the stream (``close()``, ``with``, ``contextlib.closing``, or drops it) -- the
+        frames so far are kept: in the output when there was none, else in
+        ``NAME.partial.EXT`` beside the earlier one, which stays as it was.
 
         Parameters
         ----------
         source : int, str, os.PathLike or cv2.VideoCapture
-            See :func:`open_capture`.
+            See :func:`open_capture`; a capture passed in is not released.
         outputs : dict of str -> path, optional
-            View name -> video file written with ``cv2.VideoWriter`` (opened at the first
-            frame; the container follows the extension).
-        fourcc : str
-            Four-character codec code for the writers.
+            View name -> video file (opened at the first frame; the container follows the
+            extension).
+        fourcc : str, sequence of str or None
+            The codec, or codecs tried in order (:func:`video_codec`); None: H.264 where the
+            container and this OpenCV can (``.mp4``, ``.m4v``, ``.mov``), else mp4v; MJPG for
+            ``.avi`` and ``.mkv`` (:data:`VIDEO_CODECS`). The codec used is in
+            ``fourcc`` of the returned stream.
         fps : float, optional
             Frame rate of the outputs; default the source's, or 30 if it has none.
         max_frames : int, optional
-            Stop after this many frames.
+            Stop after this many frames (a complete run).
+        overwrite : bool
+            Replace existing outputs; False: an existing output is an error.
+        finalize : dict of str -> callable, optional
+            ``finalize[name](tmp)`` on an output's checked temporary file before it is put in
+            place (e.g. to add metadata); see :meth:`VideoOutput.close`.
 
-        Yields
-        ------
-        index : int
-        views : dict of str -> ndarray
-            As :meth:`unwarp` (overwritten by the next frame).
+        Returns
+        -------
+        stream : VideoStream
+            Yields ``(index, views)``, ``views`` as :meth:`unwarp` returns them (overwritten by
+            the next frame). ``stream.fourcc`` names the codec of each output (from the first
+            frame on), ``stream.written`` what was put where (once it has ended or is closed).
 
         Notes
         -----
-        The writers, and the capture if this opened it, are released when the source ends,
-        when the caller stops iterating and closes the generator (``gen.close()``, or
-        ``contextlib.closing``), or on an exception, so the frames written so far stay a valid
-        file. Writing to temporary files and renaming them is the caller's business.
+        The capture, if this opened it, and the writers are released when the source ends,
+        when the stream is closed, or on an exception. Frames are read when iterated: errors
+        about the source or the outputs' files come with the first ``next``.
         """
-        outputs = {} if outputs is None else dict(outputs)
+        outputs, finalize = self._check_outputs(outputs, fourcc, fps, max_frames, finalize)
+        record = _Record()
+        frames = self._frames(record, source, outputs, fourcc, fps, max_frames, overwrite, finalize)
+        return VideoStream(frames, record)
+
+    def _check_outputs(self, outputs, fourcc, fps, max_frames, finalize):
+        """``outputs`` and ``finalize`` as dicts, or ``ValueError`` naming what is wrong."""
+        try:
+            outputs = {} if outputs is None else {str(k): os.fspath(v) for k, v in outputs.items()}
+        except (AttributeError, TypeError):
+            raise ValueError(
+                f"outputs must be a dict of view name -> path, got {outputs!r}"
+            ) from None
         unknown = set(outputs) - set(self._maps)
         if unknown:
             raise ValueError(
                 f"outputs name unknown view(s) {sorted(unknown)}; views are {self.names}"
             )
-        if not (isinstance(fourcc, str) and len(fourcc) == 4):
-            raise ValueError(f"fourcc must be a 4-character code, got {fourcc!r}")
+        if fourcc is not None:
+            _codec_candidates("", fourcc)
         odd = {n: self.view_size(n) for n in outputs if any(v % 2 for v in self.view_size(n))}
         if odd:
             raise ValueError(
                 f"video outputs need an even width and height (cv2.VideoWriter "
                 f"silently drops an odd last row or column); got {odd}"
             )
-        own = not isinstance(source, cv2.VideoCapture)
+        if fps is not None:
+            _check_fps(fps)
+        if max_frames is not None and not (
+            isinstance(max_frames, (int, np.integer)) and max_frames >= 0
+        ):
+            raise ValueError(f"max_frames must be a non-negative integer, got {max_frames!r}")
+        finalize = {} if finalize is None else dict(finalize)
+        if set(finalize) - set(outputs) or not all(map(callable, finalize.values())):
+            raise ValueError("finalize must map names of outputs to callables f(tmp_path)")
+        return outputs, finalize
+
+    def _frames(self, record, source, outputs, fourcc, fps, max_frames, overwrite, finalize):
+        own = not _is_capture(source)
         cap = open_capture(source)
-        writers = {}
+        videos, ending = {}, "failed"
         try:
-            if fps is None:
-                fps = cap.get(cv2.CAP_PROP_FPS)
-                if not (fps and np.isfinite(fps) and fps > 0):
-                    fps = 30.0
-            i = 0
-            while max_frames is None or i < max_frames:
+            fps = _capture_fps(cap) if fps is None else fps
+            index = 0
+            while max_frames is None or index < max_frames:
                 ok, frame = cap.read()
                 if not ok or frame is None:
                     break
                 views = self.unwarp(frame)
-                if outputs and not writers:
+                if outputs and not videos:
                     color = frame.ndim == 3 and frame.shape[2] == 3
-                    for name, path in outputs.items():
-                        w = cv2.VideoWriter(
-                            os.fspath(path),
-                            cv2.VideoWriter_fourcc(*fourcc),
-                            float(fps),
-                            self.view_size(name),
-                            color,
+                    for name, path in outputs.items():  # filled in place: the finally sees them
+                        videos[name] = VideoOutput(
+                            path, self.view_size(name), fps, fourcc, color, overwrite
                         )
-                        writers[name] = w
-                        if not w.isOpened():
-                            raise ValueError(
-                                f"output {os.fspath(path)}: cv2.VideoWriter cannot "
-                                f"write it (fourcc {fourcc!r})"
-                            )
-                for name, w in writers.items():
-                    w.write(views[name])
-                yield i, views
-                i += 1
+                    record.fourcc = {name: v.fourcc for name, v in videos.items()}
+                for name, video in videos.items():
+                    video.write(views[name])
+                record.frames = index + 1
+                yield index, views
+                index += 1
+            ending = "complete"
+        except (KeyboardInterrupt, GeneratorExit):
+            ending = "failed" if record.aborted else "partial"
+            raise
         finally:
             if own:
                 cap.release()
-            for w in writers.values():
-                w.release()
+            record.written = _settle(videos, ending, finalize)
 
     def run(self, source, outputs, **kwargs) -> int:
         """Unwarp a whole source into ``outputs`` (see :meth:`stream`); returns the frame count."""
         return sum(1 for _ in self.stream(source, outputs, **kwargs))
+
+
+def _check_fps(fps):
+    """``fps`` as a positive finite float, or ``ValueError`` naming it."""
+    if not (
+        isinstance(fps, (int, float, np.integer, np.floating))
+        and not isinstance(fps, bool)
+        and 0 < float(fps) < math.inf
+    ):
+        raise ValueError(f"fps must be a positive finite number, got {fps!r}")
+    return float(fps)
+
+
+def _capture_fps(cap):
+    """The capture's frame rate, or 30 when it has none (or an implausible one)."""
+    fps = cap.get(cv2.CAP_PROP_FPS)
+    return float(fps) if math.isfinite(fps) and 0 < fps < 1000 else 30.0
+
+
+def _settle(videos, ending, finalize):
+    """Close the outputs of a stream that ended ``"complete"``, ``"partial"`` or ``"failed"``
+    and put them in place (all checked before any is); returns name -> :class:`WrittenVideo`."""
+    if ending == "failed":
+        for video in videos.values():
+            video.discard()
+        return {}
+    try:
+        for name, video in videos.items():
+            video.close(ending == "complete", finalize.get(name))
+        written = {}
+        for name, video in videos.items():
+            result = video.commit()
+            if result is not None:
+                written[name] = result
+    except BaseException:
+        for video in videos.values():  # those not yet in place
+            video.discard()
+        raise
+    return written
+
+
+class _Record:
+    """What a stream did so far, shared by the generator and its :class:`VideoStream` (which the
+    generator must not reference, so that dropping the stream closes it at once)."""
+
+    def __init__(self):
+        self.frames = 0
+        self.fourcc = {}
+        self.written = {}
+        self.aborted = False
+
+
+class VideoStream:
+    """The frames of :meth:`Unwarper.stream`: an iterator of ``(index, views)``, and its outputs.
+
+    ``close()`` (or the end of a ``with`` block) stops it and keeps the frames so far;
+    ``abort()``, or an exception other than ``KeyboardInterrupt`` leaving a ``with`` block,
+    stops it and removes them (earlier outputs unchanged).
+
+    Attributes
+    ----------
+    frames : int
+        Frames unwarped (and written) so far.
+    fourcc : dict of str -> str
+        The codec of each output (empty before the first frame).
+    written : dict of str -> WrittenVideo
+        Each output's file once the stream has ended or been closed: path, frames, codec, and
+        whether the run was complete. An output of which no frame was kept is absent.
+    """
+
+    def __init__(self, frames, record):
+        self._frames = frames
+        self._record = record
+
+    def __iter__(self):
+        return self
+
+    def __next__(self):
+        return next(self._frames)
+
+    def close(self):
+        """Stop; the frames so far are kept (see :meth:`Unwarper.stream`)."""
+        self._frames.close()
+
+    def abort(self):
+        """Stop; the frames so far are removed and earlier outputs stay as they were."""
+        self._record.aborted = True
+        self._frames.close()
+
+    def __enter__(self):
+        return self
+
+    def __exit__(self, kind, value, traceback):
+        if kind is not None and not issubclass(kind, KeyboardInterrupt):
+            self.abort()
+        else:
+            self.close()
+        return False
+
+    @property
+    def frames(self):
+        """Frames unwarped so far."""
+        return self._record.frames
+
+    @property
+    def fourcc(self):
+        """dict of output name -> the codec it is written with."""
+        return dict(self._record.fourcc)
+
+    @property
+    def written(self):
+        """dict of output name -> :class:`WrittenVideo`, once the stream has ended or closed."""
+        return dict(self._record.written)
+
+
+# -- video files ----------------------------------------------------------------------------------
+#: Codecs tried in order, per container, when no ``fourcc`` is given: H.264 first where the
+#: container takes it (browsers play it), then what every FFmpeg build of OpenCV writes (mp4v:
+#: MPEG-4 Part 2, which many players and no browser play). MJPG is OpenCV's own encoder.
+VIDEO_CODECS = {
+    ".mp4": ("avc1", "H264", "mp4v"),
+    ".m4v": ("avc1", "H264", "mp4v"),
+    ".mov": ("avc1", "H264", "mp4v"),
+    ".avi": ("MJPG",),
+    ".mkv": ("MJPG",),
+}
+#: Codecs for a container :data:`VIDEO_CODECS` does not name.
+OTHER_CODECS = ("avc1", "H264", "mp4v")
+#: H.264's FourCCs (the codec browsers play).
+H264 = ("avc1", "H264", "h264", "X264", "x264", "avc3")
+#: A video write stops before the disk is completely full (bytes free on its file system).
+MIN_FREE_BYTES = 256 * 1024
+#: How often (in frames) a video write looks at the free space.
+FREE_SPACE_EVERY = 16
+
+
+class WrittenVideo(NamedTuple):
+    """A video file a :class:`VideoOutput` put in place."""
+
+    path: str
+    """Where the frames are: the output, or ``NAME.partial.EXT`` beside an earlier output."""
+    frames: int
+    """Frames that decode from it."""
+    fourcc: str
+    """The codec it was written with."""
+    complete: bool
+    """False for the frames so far of a run that stopped early (Ctrl-C, the stream closed)."""
+
+
+def _remove_quietly(path):
+    with contextlib.suppress(OSError):
+        os.remove(path)
+
+
+def _free_bytes(path):
+    try:
+        st = os.statvfs(os.path.dirname(os.path.abspath(path)))
+    except (OSError, AttributeError):
+        return math.inf
+    return st.f_bavail * st.f_frsize
+
+
+def _partial_name(path):
+    """``NAME.partial.EXT`` beside ``path`` (``NAME.partial-1.EXT``, ... if it exists)."""
+    stem, ext = os.path.splitext(path)
+    name = f"{stem}.partial{ext}"
+    k = 1
+    while os.path.lexists(name):
+        name = f"{stem}.partial-{k}{ext}"
+        k += 1
+    return name
+
+
+def _codec_candidates(path, fourcc):
+    if fourcc is None:
+        return VIDEO_CODECS.get(os.path.splitext(path)[1].lower(), OTHER_CODECS)
+    codes = (fourcc,) if isinstance(fourcc, str) else tuple(fourcc)
+    if not codes or not all(isinstance(c, str) and len(c) == 4 for c in codes):
+        raise ValueError(
+            f"fourcc must be a 4-character code, a sequence of them or None, got {fourcc!r}"
+        )
+    return codes
+
+
+def _new_writer(path, fourcc, fps, size, color):
+    """A ``cv2.VideoWriter`` on ``path`` that is open, or None (OpenCV's own lines silenced)."""
+    with opencv_silenced():
+        try:
+            writer = cv2.VideoWriter(path, cv2.VideoWriter_fourcc(*fourcc), fps, size, color)
+            if writer.isOpened():
+                return writer
+            writer.release()
+        except cv2.error:
+            pass
+    return None
+
+
+def _writes_a_frame(path, fourcc, fps, size, color):
+    """Whether OpenCV writes one frame of ``size`` with ``fourcc`` into ``path``'s container
+    that reads back (a writer can open and still write nothing); tried on a temporary file."""
+    with sigint_deferred():
+        probe = temp_beside(path)
+    try:
+        writer = _new_writer(probe, fourcc, fps, size, color)
+        if writer is None:
+            return False
+        frame = np.zeros((size[1], size[0], 3) if color else (size[1], size[0]), np.uint8)
+        with opencv_silenced():
+            writer.write(frame)
+            writer.release()
+            return count_frames(probe, 2) == 1
+    finally:
+        _remove_quietly(probe)
+
+
+def video_codec(path, size, fps=30.0, fourcc=None, color=True):
+    """The codec a video written to ``path`` gets: the first of ``fourcc`` that works here.
+
+    Each candidate is checked by writing one frame of ``size`` into a temporary file of the
+    same container beside ``path`` and reading it back, since a ``cv2.VideoWriter`` can open
+    and still write nothing (H.264, for one, needs an encoder that not every OpenCV build has).
+
+    Parameters
+    ----------
+    path : str or os.PathLike
+        The video to write; its extension picks the container.
+    size : (int, int)
+        ``(width, height)`` of the frames.
+    fps : float
+        Frame rate.
+    fourcc : str, sequence of str or None
+        A codec (``"mp4v"``) or codecs tried in order; None: :data:`VIDEO_CODECS` for the
+        container (H.264, then mp4v, for ``.mp4``, ``.m4v`` and ``.mov``), else
+        :data:`OTHER_CODECS`.
+    color : bool
+        Three-channel (BGR) frames, else single-channel.
+
+    Returns
+    -------
+    fourcc : str
+        The first candidate that writes a frame that reads back.
+
+    Raises
+    ------
+    ValueError
+        ``fourcc`` is malformed, or none of the candidates works (:class:`OutputError` naming
+        them), or the folder of ``path`` does not exist.
+    """
+    path = os.fspath(path)
+    candidates = _codec_candidates(path, fourcc)
+    for code in candidates:
+        if _writes_a_frame(path, code, float(fps), tuple(size), color):
+            return code
+    ext = os.path.splitext(path)[1] or "(no extension)"
+    which = (
+        f"codec {candidates[0]}"
+        if len(candidates) == 1
+        else f"any of the codecs {', '.join(candidates)}"
+    )
+    raise OutputError(
+        f"cannot write video {path}: this OpenCV cannot write {which} into {ext} files "
+        f"(tried by writing a frame); try another codec (fourcc) or container"
+    )
+
+
+class VideoOutput:
+    """One video file, written safely: a ``cv2.VideoWriter`` on a temporary file beside it.
+
+    Frames go to a new temporary file beside ``path`` (same extension, so the same container).
+    :meth:`close` then checks the file -- every frame written must decode from it, since a full
+    disk makes ``cv2.VideoWriter`` drop frames silently -- and :meth:`commit` puts it in place
+    atomically (:func:`omnicam._atomic.publish`). A run that stopped early (``close(complete=
+    False)``, on Ctrl-C) keeps the frames so far: in ``path`` when there was no file there,
+    else in ``NAME.partial.EXT`` beside it, never over an earlier file. :meth:`discard` (or any
+    failure) removes the temporary file and leaves an earlier ``path`` untouched.
+
+    As a context manager: a normal exit closes and commits, ``KeyboardInterrupt`` keeps the
+    frames so far, any other exception discards them.
+
+    Parameters
+    ----------
+    path : str or os.PathLike
+        The video to write.
+    size : (int, int)
+        ``(width, height)`` of the frames; even (``cv2.VideoWriter`` silently drops an odd
+        last row or column).
+    fps : float
+        Frame rate.
+    fourcc : str, sequence of str or None
+        The codec, or codecs tried in order (:func:`video_codec`); None: H.264 where the
+        container and this OpenCV can, else the container's usual codec.
+    color : bool
+        Three-channel (BGR) frames, else single-channel.
+    overwrite : bool
+        Replace an existing ``path`` at :meth:`commit`; False: an existing ``path`` is an
+        error, now and (atomically) at :meth:`commit`.
+
+    Attributes
+    ----------
+    path : str
+    size : (int, int)
+    fourcc : str
+        The codec used (:func:`video_codec`).
+    frames : int
+        Frames written so far.
+    result : WrittenVideo or None
+        What :meth:`commit` put in place (None before, or when nothing was kept).
+
+    Raises
+    ------
+    ValueError
+        A bad size or frame rate; :class:`OutputError` when the file cannot be written (the
+        folder is missing, no codec works, ``path`` exists and ``overwrite`` is False).
+    """
+
+    def __init__(self, path, size, fps, fourcc=None, color=True, overwrite=True):
+        self.path = os.fspath(path)
+        try:
+            self.size = _check_frame_size(size)
+        except ValueError:
+            raise ValueError(
+                f"size must be (width, height), two positive integers, got {size!r}"
+            ) from None
+        if any(v % 2 for v in self.size):
+            raise ValueError(
+                f"video {self.path}: the frames are {self.size[0]}x{self.size[1]}; video needs "
+                f"an even width and height (cv2.VideoWriter drops an odd last row or column)"
+            )
+        fps = _check_fps(fps)
+        if os.path.isdir(self.path):
+            raise OutputError(f"cannot write video {self.path}: it is a folder")
+        if not overwrite and os.path.lexists(self.path):
+            raise OutputError(f"cannot write video {self.path}: it exists")
+        self.overwrite = bool(overwrite)
+        self.fps = float(fps)
+        self.fourcc = video_codec(self.path, self.size, self.fps, fourcc, color)
+        self.frames = 0
+        self.result = None
+        self._complete = None  # set by close()
+        with sigint_deferred():  # no Ctrl-C between creating the file and owning it
+            self.tmp = temp_beside(self.path)
+        self._writer = _new_writer(self.tmp, self.fourcc, self.fps, self.size, color)
+        if self._writer is None:
+            _remove_quietly(self.tmp)
+            raise OutputError(f"cannot write video {self.path} with codec {self.fourcc}")
+
+    def write(self, frame):
+        """Append one frame (``size``, BGR or grey as ``color``).
+
+        Raises
+        ------
+        OutputError
+            Less than :data:`MIN_FREE_BYTES` are left on the disk (looked at every
+            :data:`FREE_SPACE_EVERY` frames); the frames so far stay in the temporary file
+            until :meth:`close` or :meth:`discard`.
+        """
+        self._writer.write(frame)
+        self.frames += 1
+        if self.frames % FREE_SPACE_EVERY == 0 and _free_bytes(self.tmp) < MIN_FREE_BYTES:
+            raise OutputError(
+                f"cannot write video {self.path}: no space left on the device after "
+                f"{self.frames} frames; the previous file is unchanged"
+            )
+
+    def close(self, complete=True, finalize=None):
+        """Finish the file and check it; returns the frames that decode from it.
+
+        Parameters
+        ----------
+        complete : bool
+            The run ended as meant: every frame written must read back, and :meth:`commit`
+            replaces ``path``. False: the frames that read back are kept (:meth:`commit`).
+        finalize : callable, optional
+            ``finalize(tmp)`` on the checked temporary file before it is put in place (to add
+            metadata, say); the file must decode as many frames afterwards.
+
+        Raises
+        ------
+        OutputError
+            Frames are missing or the finalized file does not read back; the temporary file
+            is removed and an earlier ``path`` is unchanged. An exception of ``finalize`` also
+            removes it, and propagates.
+        """
+        try:
+            self._writer.release()
+            got = count_frames(self.tmp, self.frames + 1)
+            if complete and got != self.frames:
+                raise OutputError(
+                    f"cannot write video {self.path}: only {got} of {self.frames} frames can be "
+                    f"read back (is the disk full?); the previous file is unchanged"
+                )
+            if got and finalize is not None:
+                finalize(self.tmp)
+                if count_frames(self.tmp, got + 1) != got:
+                    raise OutputError(
+                        f"cannot write video {self.path}: the finished file does not read "
+                        f"back; the previous file is unchanged"
+                    )
+        except BaseException:
+            self.discard()
+            raise
+        self.frames, self._complete = got, bool(complete)
+        return got
+
+    def commit(self):
+        """Put the closed file in place; returns the :class:`WrittenVideo`, or None.
+
+        A complete file replaces ``path`` (if ``overwrite``). The frames of an incomplete run
+        go to ``path`` when there is no file there, else to ``NAME.partial.EXT``; no frame at
+        all: nothing is kept (None).
+
+        Raises
+        ------
+        OutputError
+            The rename failed, or the target appeared meanwhile where it may not be replaced;
+            the temporary file is removed.
+        """
+        if self._complete is None:
+            raise ValueError(f"video {self.path}: close() it before commit()")
+        if not self._complete and self.frames == 0:
+            self.discard()
+            return None
+        target, replace = self.path, self.overwrite
+        if not self._complete:
+            replace = False
+            if os.path.lexists(target):
+                target = _partial_name(self.path)
+        try:
+            with sigint_deferred():
+                publish(self.tmp, target, replace)
+        except OSError as e:
+            raise OutputError(f"cannot write video {target}: {e.strerror or e}") from None
+        finally:
+            _remove_quietly(self.tmp)
+        self.result = WrittenVideo(target, self.frames, self.fourcc, self._complete)
+        return self.result
+
+    def discard(self):
+        """Stop and remove the temporary file; an earlier ``path`` is unchanged."""
+        with contextlib.suppress(cv2.error):
+            self._writer.release()
+        _remove_quietly(self.tmp)
+
+    def __enter__(self):
+        return self
+
+    def __exit__(self, kind, value, traceback):
+        if kind is not None and not issubclass(kind, KeyboardInterrupt):
+            self.discard()
+            return False
+        self.close(complete=kind is None)
+        self.commit()
+        return False

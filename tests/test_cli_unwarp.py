@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import os
 import re
+import shutil
 import signal
 import subprocess
 import sys
@@ -77,9 +78,9 @@ def test_several_video_views_decode_each_frame_once(data, tmp_path, capsys, monk
     from omnicam.cli import unwarp
 
     reads = []
-    real_open = unwarp._open_capture
+    real_open = unwarp.open_capture
 
-    class Counting:
+    class Counting:  # not a subclass: cv2.VideoCapture's subclasses crash the garbage collector
         def __init__(self, cap):
             self.cap = cap
 
@@ -90,7 +91,7 @@ def test_several_video_views_decode_each_frame_once(data, tmp_path, capsys, monk
         def __getattr__(self, name):
             return getattr(self.cap, name)
 
-    monkeypatch.setattr(unwarp, "_open_capture", lambda s: Counting(real_open(s)))
+    monkeypatch.setattr(unwarp, "open_capture", lambda s: Counting(real_open(s)))
     outs = [tmp_path / "a.avi", tmp_path / "b.mp4", tmp_path / "c.avi"]
     code = main(
         [
@@ -295,6 +296,53 @@ def test_equirect_mp4_carries_spherical_video_metadata(data, tmp_path, capsys):
     assert hidden(tmp_path) == []
 
 
+@pytest.mark.skipif(shutil.which("ffprobe") is None, reason="ffprobe is not installed")
+def test_each_video_output_names_its_codec_in_one_line(data, tmp_path, capsys):
+    from omnicam.stream import H264
+
+    outs = [tmp_path / "a.mp4", tmp_path / "b.avi"]
+    code = main(
+        [
+            "unwarp",
+            str(data["video"]),
+            "-c",
+            str(data["calib"]),
+            "--panorama",
+            "64x16",
+            "-o",
+            str(outs[0]),
+            "--panorama",
+            "32x8",
+            "-o",
+            str(outs[1]),
+        ]
+    )
+    out, err = capsys.readouterr()
+    assert code == 0, err
+    lines = out.splitlines()
+    assert len(lines) == 2
+    probed = [
+        subprocess.run(
+            ["ffprobe", "-v", "error", "-show_entries", "stream=codec_name", "-of", "csv=p=0"]
+            + [str(p)],
+            capture_output=True,
+            text=True,
+            check=True,
+        ).stdout.strip()
+        for p in outs
+    ]
+    assert lines[1] == f"wrote {outs[1]} (10 frames, 32x8, codec MJPG)" and probed[1] == "mjpeg"
+    if probed[0] == "h264":  # an OpenCV with an H.264 encoder
+        assert re.fullmatch(rf"wrote {outs[0]} \(10 frames, 64x16, H\.264 \((\w+)\)\)", lines[0])
+        assert re.search(r"\((\w+)\)\)$", lines[0]).group(1) in H264
+    else:  # mp4v, and why
+        assert probed[0] == "mpeg4"
+        assert lines[0] == (
+            f"wrote {outs[0]} (10 frames, 64x16, codec mp4v: this OpenCV has no H.264 "
+            f"encoder, so browsers will not play it)"
+        )
+
+
 def test_equirect_must_be_two_to_one_on_the_command_line(data, tmp_path, capsys):
     code = main(
         [
@@ -399,13 +447,13 @@ def test_frames_lost_on_write_fail_and_keep_the_old_output(data, tmp_path, capsy
 
 
 def test_full_disk_stops_early_and_keeps_the_old_output(data, tmp_path, capsys, monkeypatch):
-    from omnicam.cli import unwarp
+    from omnicam import stream
 
     out = tmp_path / "out.avi"
     write_video(out, 2, (64, 16))
     before = out.read_bytes()
     long_video = write_video(tmp_path / "long.avi", 40)
-    monkeypatch.setattr(unwarp, "_free_bytes", lambda path: 1000)
+    monkeypatch.setattr(stream, "_free_bytes", lambda path: 1000)
     code = main(
         [
             "unwarp",
@@ -583,10 +631,10 @@ def small_tmpfs(tmp_path):
 def test_a_really_full_disk_never_replaces_the_old_output(
     data, tmp_path, small_tmpfs, capsys, monkeypatch, ext, min_free
 ):
-    from omnicam.cli import unwarp
+    from omnicam import stream
 
     if min_free is not None:
-        monkeypatch.setattr(unwarp, "MIN_FREE_BYTES", min_free)  # only the read-back check
+        monkeypatch.setattr(stream, "MIN_FREE_BYTES", min_free)  # only the read-back check
     src = write_video(tmp_path / "src.avi", 200)
     out = small_tmpfs / f"out.{ext}"
     write_video(out, 20, (128, 32))

@@ -263,3 +263,74 @@ def test_the_printed_command_runs(tmp_path, maps):
     )
     assert r.returncode == 0, r.stderr
     assert cv2.imread(str(tmp_path / "o.png")).shape == (SIZE[1], SIZE[0], 3)
+
+
+def test_the_printed_command_ends_in_yuv420p_for_videos_only():
+    from omnicam.maps_export import ffmpeg_command
+
+    video = ffmpeg_command("x.pgm", "y.pgm", SIZE, 1, output_name="o.mp4")
+    assert '-lavfi "format=yuv444p,remap,format=yuv420p"' in video
+    sampled = ffmpeg_command("x.pgm", "y.pgm", SIZE, 2, output_name="o.mkv")
+    assert sampled.endswith(f'scale={SIZE[0]}:{SIZE[1]}:flags=area,format=yuv420p" o.mkv')
+    for still in ("o.png", "o.jpg", "frames_%04d.png"):
+        assert "yuv420p" not in ffmpeg_command("x.pgm", "y.pgm", SIZE, output_name=still)
+    odd = ffmpeg_command("x.pgm", "y.pgm", (95, 33), output_name="o.mp4")
+    assert '"format=yuv444p,remap,crop=94:32:0:0,format=yuv420p"' in odd
+
+
+def _probe(path):
+    out = subprocess.run(
+        [
+            "ffprobe",
+            "-v",
+            "error",
+            "-select_streams",
+            "v:0",
+            "-show_entries",
+            "stream=codec_name,pix_fmt,width,height",
+            "-of",
+            "default=noprint_wrappers=1",
+            str(path),
+        ],
+        capture_output=True,
+        text=True,
+        check=True,
+        timeout=60,
+    ).stdout
+    return dict(line.split("=", 1) for line in out.split())
+
+
+@pytest.mark.skipif(
+    FFMPEG is None or shutil.which("ffprobe") is None, reason="ffmpeg is not installed"
+)
+@pytest.mark.parametrize("size", [SIZE, (95, 33)], ids=["even", "odd"])
+def test_the_printed_video_command_makes_yuv420p_h264(tmp_path, size):
+    """What browsers and players take: H.264 in 4:2:0 (ffmpeg's default codec for .mp4)."""
+    import shlex
+
+    from omnicam.maps_export import ffmpeg_command
+
+    if (
+        "libx264"
+        not in subprocess.run(
+            [FFMPEG, "-hide_banner", "-encoders"], capture_output=True, text=True, check=False
+        ).stdout
+    ):
+        pytest.skip("this ffmpeg has no libx264")
+    src = tmp_path / "in.png"
+    cv2.imwrite(str(src), np.full((160, 160, 3), 90, np.uint8))
+    maps = RIG.init_panorama_maps(size, elevation_range=(-60.0, 40.0), m1type=cv2.CV_32FC1)
+    px, py = write_ffmpeg_maps(tmp_path / "m", *maps, RIG.image_size)
+    out = tmp_path / "o.mp4"
+    args = shlex.split(ffmpeg_command(px, py, size, input_name=str(src), output_name=str(out)))
+    r = subprocess.run(
+        [args[0], "-v", "error", "-y", *args[1:]],
+        capture_output=True,
+        text=True,
+        timeout=120,
+        check=False,
+    )
+    assert r.returncode == 0, r.stderr
+    info = _probe(out)
+    assert info["codec_name"] == "h264" and info["pix_fmt"] == "yuv420p"
+    assert (int(info["width"]), int(info["height"])) == (size[0] // 2 * 2, size[1] // 2 * 2)

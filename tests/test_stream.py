@@ -1,13 +1,16 @@
 """Unwarper: the views of frames equal bare cv2.remap with the same tables; video in and out."""
 
 import contextlib
+import shutil
+import subprocess
 
 import cv2
 import numpy as np
 import pytest
 
 from omnicam import Unwarper, synthetic
-from omnicam.stream import open_capture
+from omnicam import stream as stream_module
+from omnicam.stream import H264, OutputError, VideoOutput, open_capture, video_codec
 from omnicam.views import UNSEEN, PanoramaView, PerspectiveView
 
 VIEWS = {"pano": PanoramaView((256, 64)), "front": PerspectiveView((96, 72), fov=90.0, yaw=30.0)}
@@ -174,7 +177,7 @@ def test_stream_bad_sources_and_outputs(tmp_path, unwarper):
         next(unwarper.stream(tmp_path / "missing.mp4"))
     junk = tmp_path / "junk.avi"
     junk.write_bytes(b"not a video")
-    with pytest.raises(ValueError, match="source"):
+    with pytest.raises(ValueError, match="cannot open .*junk.avi"):
         next(unwarper.stream(junk))
     with pytest.raises(ValueError, match="unknown view"):
         next(unwarper.stream(junk, {"nope": tmp_path / "o.avi"}))
@@ -212,3 +215,232 @@ def test_perspective_arguments_in_the_wrong_order_say_the_order(cam):
     a = PerspectiveView(K_new=K, size=(40, 30)).maps(cam)  # keywords: one spelling for both
     b = cam.init_perspective_maps(K_new=K, size=(40, 30))
     np.testing.assert_array_equal(a[0], b[0])
+
+
+# -- the safe video writer: temporary file, checked, published atomically ---------------------
+def hidden(folder):
+    """Temporary files (``.NAME.omnicam-tmp-...``) left in ``folder``."""
+    return sorted(p.name for p in folder.iterdir() if p.name.startswith("."))
+
+
+def decoded(path):
+    return stream_module.count_frames(path)
+
+
+def test_stream_writes_a_temporary_file_and_replaces_the_output_only_at_the_end(tmp_path, unwarper):
+    src = tmp_path / "in.avi"
+    write_video(src, frames(5))
+    out = tmp_path / "pano.avi"
+    write_video(out, frames(2, (256, 64)))
+    before = out.read_bytes()
+    s = unwarper.stream(src, {"pano": out}, fourcc="MJPG")
+    for _ in s:
+        assert out.read_bytes() == before  # the earlier output, untouched while writing
+        assert len(hidden(tmp_path)) == 1  # the frames go beside it
+    assert decoded(out) == 5 and hidden(tmp_path) == []
+    assert s.written["pano"] == (str(out), 5, "MJPG", True)
+
+
+@pytest.mark.parametrize("where", ["in the stream", "in the caller's loop"])
+def test_an_exception_keeps_the_earlier_output_and_leaves_no_temporary_file(
+    tmp_path, cam, monkeypatch, where
+):
+    src = tmp_path / "in.avi"
+    write_video(src, frames(6))
+    out = tmp_path / "pano.avi"
+    write_video(out, frames(2, (256, 64)))
+    before = out.read_bytes()
+    u = Unwarper.from_camera(cam, VIEWS)
+    if where == "in the stream":  # after two frames were written, say a frame of another size
+        real, calls = u.unwarp, []
+
+        def failing(frame):
+            calls.append(1)
+            if len(calls) == 3:
+                raise ValueError("a frame of another size")
+            return real(frame)
+
+        monkeypatch.setattr(u, "unwarp", failing)
+    with pytest.raises(ValueError, match="another size"):
+        with u.stream(src, {"pano": out, "front": tmp_path / "front.avi"}) as s:
+            for i, _ in s:
+                if i == 2:
+                    raise ValueError("another size, found by the caller")
+    assert out.read_bytes() == before
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["in.avi", "pano.avi"]
+    assert s.written == {}
+
+
+def test_ctrl_c_keeps_the_frames_so_far_beside_an_earlier_output(tmp_path, cam, monkeypatch):
+    src = tmp_path / "in.avi"
+    write_video(src, frames(6))
+    out, new = tmp_path / "pano.avi", tmp_path / "front.avi"
+    write_video(out, frames(2, (256, 64)))
+    before = out.read_bytes()
+    u = Unwarper.from_camera(cam, VIEWS)
+    real, calls = u.unwarp, []
+
+    def interrupted(frame):
+        calls.append(1)
+        if len(calls) == 4:
+            raise KeyboardInterrupt
+        return real(frame)
+
+    monkeypatch.setattr(u, "unwarp", interrupted)
+    s = u.stream(src, {"pano": out, "front": new}, fourcc="MJPG")
+    with pytest.raises(KeyboardInterrupt):
+        for _ in s:
+            pass
+    assert out.read_bytes() == before
+    partial = tmp_path / "pano.partial.avi"
+    assert decoded(partial) == 3 and decoded(new) == 3  # no earlier front.avi: kept in it
+    assert s.written["pano"] == (str(partial), 3, "MJPG", False)
+    assert s.written["front"] == (str(new), 3, "MJPG", False)
+    assert hidden(tmp_path) == []
+
+
+def test_closing_the_stream_early_keeps_the_frames_and_abort_removes_them(tmp_path, unwarper):
+    src = tmp_path / "in.avi"
+    write_video(src, frames(8))
+    with unwarper.stream(src, {"pano": tmp_path / "kept.avi"}) as s:
+        for i, _ in s:
+            if i == 2:
+                break
+    assert s.written["pano"].complete is False and decoded(tmp_path / "kept.avi") == 3
+    s = unwarper.stream(src, {"pano": tmp_path / "gone.avi"})
+    next(s)
+    s.abort()
+    assert not (tmp_path / "gone.avi").exists() and hidden(tmp_path) == []
+
+
+def test_overwrite_false_refuses_an_existing_output(tmp_path, unwarper):
+    src = tmp_path / "in.avi"
+    write_video(src, frames(2))
+    out = tmp_path / "pano.avi"
+    out.write_bytes(b"mine")
+    with pytest.raises(OutputError, match="exists"):
+        unwarper.run(src, {"pano": out}, overwrite=False)
+    assert out.read_bytes() == b"mine" and hidden(tmp_path) == []
+
+
+class DroppingWriter:
+    """A cv2.VideoWriter that loses every frame after the first ``keep`` (as on a full disk)."""
+
+    keep = 2
+
+    def __init__(self, *args):
+        self.w, self.n = REAL_WRITER(*args), 0
+
+    def isOpened(self):
+        return self.w.isOpened()
+
+    def write(self, frame):
+        self.n += 1
+        if self.n <= self.keep:
+            self.w.write(frame)
+
+    def release(self):
+        self.w.release()
+
+
+REAL_WRITER = cv2.VideoWriter
+
+
+def test_video_output_refuses_a_file_that_lost_frames(tmp_path, monkeypatch):
+    out = tmp_path / "v.avi"
+    out.write_bytes(b"earlier")
+    monkeypatch.setattr(cv2, "VideoWriter", DroppingWriter)
+    with pytest.raises(OutputError, match="only 2 of 5 frames"):
+        with VideoOutput(out, (64, 32), 10.0, "MJPG") as video:
+            for frame in frames(5, (64, 32)):
+                video.write(frame)
+    assert out.read_bytes() == b"earlier" and hidden(tmp_path) == []
+
+
+def test_video_output_refuses_odd_sizes_and_bad_frame_rates(tmp_path):
+    with pytest.raises(ValueError, match="even"):
+        VideoOutput(tmp_path / "v.avi", (63, 32), 10.0)
+    with pytest.raises(ValueError, match="fps"):
+        VideoOutput(tmp_path / "v.avi", (64, 32), float("nan"))
+    assert list(tmp_path.iterdir()) == []
+
+
+# -- the codec: H.264 where this OpenCV writes it, and said ---------------------------------
+def _codec_in_file(path):
+    return subprocess.run(
+        [
+            "ffprobe",
+            "-v",
+            "error",
+            "-select_streams",
+            "v:0",
+            "-show_entries",
+            "stream=codec_name",
+            "-of",
+            "csv=p=0",
+            str(path),
+        ],
+        capture_output=True,
+        text=True,
+        check=True,
+        timeout=60,
+    ).stdout.strip()
+
+
+@pytest.mark.skipif(shutil.which("ffprobe") is None, reason="ffprobe is not installed")
+@pytest.mark.parametrize("ext", [".mp4", ".mov", ".avi"])
+def test_the_codec_the_stream_reports_is_the_one_in_the_file(tmp_path, unwarper, ext):
+    src = tmp_path / "in.avi"
+    write_video(src, frames(3))
+    out = tmp_path / f"pano{ext}"
+    s = unwarper.stream(src, {"pano": out})
+    assert sum(1 for _ in s) == 3
+    fourcc = s.fourcc["pano"]
+    assert s.written["pano"].fourcc == fourcc
+    expected = stream_module.VIDEO_CODECS[ext]
+    assert fourcc in expected
+    if fourcc != expected[0]:  # fell back: the codecs before it really do not write here
+        for code in expected[: expected.index(fourcc)]:
+            with pytest.raises(OutputError, match=code):
+                video_codec(tmp_path / f"probe{ext}", (256, 64), fourcc=code)
+    names = {"mp4v": "mpeg4", "MJPG": "mjpeg", **dict.fromkeys(H264, "h264")}
+    assert _codec_in_file(out) == names[fourcc]
+    assert hidden(tmp_path) == []
+
+
+class OpensButWritesNothing:
+    """A writer for the codec ``"avc1"`` that opens and writes nothing (as some builds do)."""
+
+    def __init__(self, path, fourcc, *args):
+        self.real = (
+            None if fourcc == cv2.VideoWriter_fourcc(*"avc1") else REAL_WRITER(path, fourcc, *args)
+        )
+
+    def isOpened(self):
+        return True if self.real is None else self.real.isOpened()
+
+    def write(self, frame):
+        if self.real is not None:
+            self.real.write(frame)
+
+    def release(self):
+        if self.real is not None:
+            self.real.release()
+
+
+def test_a_codec_that_opens_but_writes_nothing_is_passed_over(tmp_path, monkeypatch):
+    monkeypatch.setattr(cv2, "VideoWriter", OpensButWritesNothing)
+    path = tmp_path / "v.avi"
+    assert video_codec(path, (64, 32), fourcc=("avc1", "MJPG")) == "MJPG"
+    with pytest.raises(OutputError, match="cannot write codec avc1 into .avi"):
+        video_codec(path, (64, 32), fourcc="avc1")
+    assert list(tmp_path.iterdir()) == []
+
+
+def test_a_given_codec_is_used_and_a_bad_one_refused(tmp_path):
+    assert video_codec(tmp_path / "v.avi", (64, 32), fourcc="MJPG") == "MJPG"
+    with pytest.raises(ValueError, match="4-character"):
+        video_codec(tmp_path / "v.avi", (64, 32), fourcc="MJPEG")
+    with pytest.raises(OutputError, match="zzzz"):
+        VideoOutput(tmp_path / "v.avi", (64, 32), 10.0, fourcc="zzzz")
+    assert list(tmp_path.iterdir()) == []

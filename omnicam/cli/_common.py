@@ -12,7 +12,7 @@ import sys
 
 import cv2
 
-from .._atomic import OutputError, atomic_output, temp_beside
+from .._atomic import OutputError, atomic_output
 
 PROG = "omnicam"
 
@@ -182,31 +182,6 @@ def _check_output(path, overwrite, what="output"):
         raise CliError(f"{what} {path}: folder {folder} does not exist")
     if not os.access(folder, os.W_OK | os.X_OK):
         raise CliError(f"{what} {path}: folder {folder} is not writable")
-
-
-def _temp_beside(path):
-    """A new empty temporary file next to ``path`` with the same extension (so the same format)."""
-    try:
-        return temp_beside(path)
-    except OutputError as e:
-        raise CliError(str(e)) from None
-
-
-def _remove_quietly(path):
-    with contextlib.suppress(OSError):
-        os.remove(path)
-
-
-def _publish(tmp, path, overwrite):
-    """Rename the finished temporary file to ``path`` (never replacing a file without overwrite)."""
-    if not overwrite and os.path.lexists(path):
-        _remove_quietly(tmp)
-        raise CliError(f"output {path} appeared while writing; pass --overwrite to replace it")
-    try:
-        os.replace(tmp, path)
-    except OSError as e:
-        _remove_quietly(tmp)
-        raise CliError(f"cannot write {path}: {e.strerror or e}") from None
 
 
 def _write_image(path, image, overwrite=True):

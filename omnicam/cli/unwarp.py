@@ -7,13 +7,14 @@ before the first view belong to the first. Every view has its own ``-o``: an ima
 (``.avi``, ``.mp4``, ``.m4v``, ``.mov``, ``.mkv``) or an image sequence (``out_%04d.png``, frames
 numbered from 0).
 
-Video outputs are never lost (issue 10): frames go to a temporary file beside the output; at
-the end the file is read back and must decode every frame written (a full disk makes
-``cv2.VideoWriter`` drop frames silently), and only then replaces the output. On Ctrl-C the
-run stops after the current frame and keeps the frames so far: in the output itself when there
-was none before (the message says so), else in ``NAME.partial.EXT`` beside it, leaving the
-earlier complete output untouched; exit status 130. A failed write stops with an error and
-leaves any earlier output intact.
+Video outputs are never lost: they are written by :meth:`omnicam.stream.Unwarper.stream`
+(:class:`omnicam.stream.VideoOutput`), to a temporary file beside the output that must decode
+every frame written before it replaces the output. On Ctrl-C the run stops after the current
+frame and keeps the frames so far: in the output itself when there was none before (the message
+says so), else in ``NAME.partial.EXT`` beside it, leaving the earlier complete output untouched;
+exit status 130. A failed write stops with an error and leaves any earlier output intact.
+``.mp4``, ``.m4v`` and ``.mov`` get H.264 where the installed OpenCV writes it, else mp4v;
+the line that names each output says which.
 """
 
 from __future__ import annotations
@@ -32,6 +33,7 @@ import warnings
 import cv2
 
 from .._atomic import OutputError, write_bytes
+from ..stream import H264, VIDEO_CODECS, count_frames, open_capture
 from ._common import (
     EXIT_FAILURE,
     EXIT_INTERRUPTED,
@@ -46,28 +48,14 @@ from ._common import (
     _load_camera,
     _one_line,
     _positive,
-    _publish,
     _read_image,
-    _remove_quietly,
     _size,
-    _temp_beside,
     _warn,
     _write_image,
 )
 
-# Video containers we write, with the codec used unless --fourcc says otherwise. MJPG in AVI is
-# written by OpenCV itself on every build; the others need the FFmpeg backend of the wheels.
-VIDEO_FOURCC = {
-    ".avi": "MJPG",
-    ".mp4": "mp4v",
-    ".m4v": "mp4v",
-    ".mov": "mp4v",
-    ".mkv": "MJPG",
-}
 #: Containers that get the spherical video metadata of an --equirect view.
 SPHERICAL_CONTAINERS = (".mp4", ".m4v", ".mov")
-#: Stop before the disk is completely full (bytes free on the output's file system).
-MIN_FREE_BYTES = 256 * 1024
 
 VIEW_KINDS = ("panorama", "perspective", "equirect")
 VIEW_OPTIONS = ("elevation", "projection", "fov", "yaw", "pitch", "roll", "depth", "output")
@@ -237,14 +225,14 @@ def _output_kind(path, video_input):
             )
         return "sequence"
     if video_input:
-        if ext in VIDEO_FOURCC:
+        if ext in VIDEO_CODECS:
             return "video"
         raise CliError(
             f"output {path}: the input is a video; use a video extension "
-            f"({', '.join(VIDEO_FOURCC)}) or an image sequence (out_%04d.png)"
+            f"({', '.join(VIDEO_CODECS)}) or an image sequence (out_%04d.png)"
         )
     if not cv2.haveImageWriter(path):
-        hint = " (the input is an image)" if ext in VIDEO_FOURCC else ""
+        hint = " (the input is an image)" if ext in VIDEO_CODECS else ""
         raise CliError(f"output {path}: no image writer for extension {ext or '(none)'!r}{hint}")
     return "image"
 
@@ -360,26 +348,18 @@ class Progress:
         self.stream.flush()
 
     def close(self):
-        if self.enabled:
+        if self.enabled and self.width:  # nothing drawn (no frame): nothing to end
             self.update(self.frames, force=True)
             self.stream.write("\n")
             self.stream.flush()
 
 
 def _open_capture(source):
-    target = int(source) if source.isdigit() else source
+    """:func:`omnicam.stream.open_capture` of the command's INPUT (digits: a camera index)."""
     try:
-        cap = cv2.VideoCapture(target)
-        opened = cap.isOpened()
-    except cv2.error:
-        opened = False
-    if not opened:
-        if source.isdigit():
-            raise CliError(f"cannot open camera {source}")
-        if "://" in source:
-            raise CliError(f"cannot open stream {source}")
-        raise CliError(f"cannot open input {source}: not an image or video OpenCV can read")
-    return cap
+        return open_capture(int(source) if source.isdigit() else source)
+    except ValueError as e:
+        raise CliError(_one_line(e)) from None
 
 
 def _frame_size(cap, source):
@@ -394,76 +374,6 @@ def _frame_size(cap, source):
     if not _is_device_or_url(source):
         cap.open(source)
     return frame.shape[1], frame.shape[0]
-
-
-def count_frames(path, limit=None):
-    """Frames OpenCV decodes from a video file (stops after ``limit``)."""
-    cap = cv2.VideoCapture(os.fspath(path))
-    n = 0
-    try:
-        if not cap.isOpened():
-            return 0
-        while (limit is None or n < limit) and cap.grab():
-            n += 1
-    finally:
-        cap.release()
-    return n
-
-
-def _partial_name(output):
-    stem, ext = os.path.splitext(output)
-    name = f"{stem}.partial{ext}"
-    k = 1
-    while os.path.lexists(name):
-        name = f"{stem}.partial-{k}{ext}"
-        k += 1
-    return name
-
-
-class _VideoOut:
-    """One view's video: a ``cv2.VideoWriter`` on a temporary file beside the output."""
-
-    def __init__(self, spec, fourcc, fps, size):
-        self.spec, self.size = spec, size
-        output = spec.output
-        if size[0] % 2 or size[1] % 2:
-            raise CliError(
-                f"video {output}: the view is {size[0]}x{size[1]}; video needs an "
-                f"even width and height (cv2.VideoWriter drops an odd last row or "
-                f"column)"
-            )
-        self.tmp = _temp_beside(output)
-        try:
-            self.writer = cv2.VideoWriter(self.tmp, cv2.VideoWriter_fourcc(*fourcc), fps, size)
-            ok = self.writer.isOpened()
-        except cv2.error:
-            ok = False
-        if not ok:
-            _remove_quietly(self.tmp)
-            raise CliError(
-                f"cannot write video {output} with codec {fourcc}; try --fourcc or "
-                f"another extension"
-            )
-        self.written = 0
-
-    def write(self, image):
-        self.writer.write(image)
-        self.written += 1
-
-    def release(self):
-        self.writer.release()
-
-    def discard(self):
-        self.writer.release()
-        _remove_quietly(self.tmp)
-
-
-def _free_bytes(path):
-    try:
-        st = os.statvfs(os.path.dirname(os.path.abspath(path)))
-    except (OSError, AttributeError):
-        return math.inf
-    return st.f_bavail * st.f_frsize
 
 
 @contextlib.contextmanager
@@ -493,85 +403,78 @@ def _unwarp_video(args, specs, camera):
 
 
 def _unwarp_video_guarded(args, specs, camera, flag):
+    """Unwarp a video input through :meth:`omnicam.stream.Unwarper.stream`, which writes the
+    video outputs safely; image sequences and previews are written here, frame by frame."""
     cap = _open_capture(args.input)
-    outs, how = [], "end"
     try:
         frame_size = _frame_size(cap, args.input)
         count = cap.get(cv2.CAP_PROP_FRAME_COUNT)
         declared = int(count) if math.isfinite(count) and count > 0 else 0  # 0: unknown
-        fps = cap.get(cv2.CAP_PROP_FPS)
-        if not (math.isfinite(fps) and 0 < fps < 1000):
-            fps = 30.0
         unwarper = _unwarper(camera, specs, frame_size)
+        outputs = {str(i): s.output for i, s in enumerate(specs) if s.kind_out == "video"}
+        finalize = {
+            name: _spherical_metadata(specs[int(name)].output)
+            for name in outputs
+            if specs[int(name)].kind == "equirect"
+        }
         try:
-            for i, spec in enumerate(specs):
-                if spec.kind_out == "video":
-                    ext = os.path.splitext(spec.output)[1].lower()
-                    fourcc = args.fourcc or VIDEO_FOURCC[ext]
-                    outs.append(_VideoOut(spec, fourcc, fps, unwarper.view_size(str(i))))
-            written, how = _stream(unwarper, cap, specs, outs, declared, args, flag)
-        except BaseException:
-            for o in outs:
-                o.discard()
-            raise
+            stream = unwarper.stream(
+                cap,
+                outputs,
+                fourcc=args.fourcc,
+                max_frames=args.max_frames,
+                overwrite=args.overwrite,
+                finalize=finalize,
+            )
+        except ValueError as e:
+            raise CliError(_one_line(e)) from None
+        written, how = _stream(stream, specs, declared, args, flag)
     finally:
         cap.release()
-    for o in outs:
-        o.release()
-    return _finish(args, specs, outs, written, how, declared)
+    return _finish(args, specs, stream, written, how, declared)
 
 
-def _stream(unwarper, cap, specs, outs, declared, args, flag):
-    """Unwarp frames until the input ends, ``--max-frames``, Ctrl-C or a full disk.
+def _stream(stream, specs, declared, args, flag):
+    """Run ``stream`` until the input ends, ``--max-frames``, Ctrl-C or a full disk, writing the
+    image sequences and previews of each frame.
 
     Returns ``(frames, how)``, ``how`` one of ``"end"``, ``"truncated"``, ``"interrupted"``.
     """
     total = min(declared or args.max_frames or 0, args.max_frames or declared)
     progress = Progress(total, enabled=not args.quiet)
-    video = {o.spec.output: o for o in outs}
-    written, how = 0, "end"
+    how = "interrupted" if flag["stop"] else "end"  # a Ctrl-C while the tables were built
     try:
-        while args.max_frames is None or written < args.max_frames:
-            if flag["stop"]:
-                how = "interrupted"
-                break
-            ok, frame = cap.read()
-            if not ok or frame is None:
-                break
-            views = unwarper.unwarp(frame)
-            for i, spec in enumerate(specs):
-                image = views[str(i)]
-                if spec.kind_out == "video":
-                    video[spec.output].write(image)
-                else:
-                    _write_view_image(
-                        spec, _sequence_name(spec.output, written), image, args.overwrite
-                    )
-                if args.preview and written % args.preview == 0:
-                    _write_image(_preview_name(spec.output, written), image, True)
-            written += 1
-            progress.update(written)
-            if outs and written % 16 == 0:
-                for o in outs:
-                    if _free_bytes(o.tmp) < MIN_FREE_BYTES:
-                        raise CliError(
-                            f"cannot write video {o.spec.output}: no space left on "
-                            f"the device after {written} frames; the previous file "
-                            f"is unchanged"
-                        )
-        if flag["stop"]:
-            how = "interrupted"
+        with stream:  # an error in the loop removes the videos' frames; Ctrl-C keeps them
+            for index, views in stream if how == "end" else ():
+                _write_frame_images(specs, views, index, args)
+                progress.update(index + 1)
+                if flag["stop"]:
+                    how = "interrupted"
+                    break
     except KeyboardInterrupt:
         how = "interrupted"
+    except OutputError as e:
+        raise CliError(_one_line(e)) from None
     except ValueError as e:  # e.g. a frame of another size than the capture announced
         raise CliError(f"cannot unwarp {args.input}: {_one_line(e)}") from None
     finally:
         progress.close()
+    written = stream.frames
     if written == 0 and how != "interrupted":
         raise CliError(f"cannot read a frame from {args.input}")
     if how == "end" and written < declared and not (args.max_frames and written >= args.max_frames):
         how = "truncated"
     return written, how
+
+
+def _write_frame_images(specs, views, index, args):
+    """The frame's image of each image-sequence view, and the previews due."""
+    for i, spec in enumerate(specs):
+        image = views[str(i)]
+        if spec.kind_out == "sequence":
+            _write_view_image(spec, _sequence_name(spec.output, index), image, args.overwrite)
+        if args.preview and index % args.preview == 0:
+            _write_image(_preview_name(spec.output, index), image, True)
 
 
 def _preview_name(output, index):
@@ -583,91 +486,83 @@ def _preview_name(output, index):
     return f"{stem.rstrip('_.-') or 'view'}.preview_{index:06d}.png"
 
 
-def _finish(args, specs, outs, written, how, declared):
-    """Check every video file, add 360 metadata, and put each where it belongs."""
-    status = EXIT_INTERRUPTED if how == "interrupted" else EXIT_OK
-    try:
-        for o in outs:
-            got = count_frames(o.tmp, o.written + 1)
-            if how != "interrupted" and got != o.written:
-                raise CliError(
-                    f"cannot write video {o.spec.output}: only {got} of {o.written} "
-                    f"frames can be read back (is the disk full?); the previous "
-                    f"file is unchanged"
-                )
-            o.readable = got
-            if o.spec.kind == "equirect" and got:
-                _add_spherical_metadata(o)
-    except BaseException:
-        for o in outs:
-            _remove_quietly(o.tmp)
-        raise
-    for o in outs:
-        output = o.spec.output
-        if how == "interrupted":
-            if o.readable == 0:
-                _remove_quietly(o.tmp)
-                _warn(f"interrupted before a frame of {output} was written: nothing kept")
-                continue
-            if os.path.lexists(output):
-                partial = _partial_name(output)
-                _publish(o.tmp, partial, False)
-                _warn(
-                    f"interrupted: kept the {o.readable} frames written so far in {partial}; "
-                    f"the earlier {output} is unchanged"
-                )
-            else:
-                _publish(o.tmp, output, False)
-                _warn(
-                    f"interrupted: kept the {o.readable} frames written so far in {output} "
-                    f"(there was no earlier output)"
-                )
-            continue
-        _publish(o.tmp, output, args.overwrite)
-        if how == "truncated":
-            _warn(
-                f"input ended after {written} of its {declared} frames (truncated, or a "
-                f"frame it cannot decode); kept them in {output}"
-            )
-        elif not args.quiet:
-            print(f"wrote {output} ({written} frames, {o.size[0]}x{o.size[1]})")
-    for spec in specs:
-        if spec.kind_out == "sequence":
+def _finish(args, specs, stream, written, how, declared):
+    """Say where each output went; the exit status."""
+    for i, spec in enumerate(specs):
+        if spec.kind_out == "video":
+            _say_video(args, spec, stream.written.get(str(i)), how, declared)
+        elif spec.kind_out == "sequence":
             if how == "interrupted":
                 _warn(f"interrupted: kept the {written} frames written so far as {spec.output}")
             elif not args.quiet:
                 print(f"wrote {written} frames as {spec.output}")
-    if how == "interrupted" and not outs and not any(s.kind_out == "sequence" for s in specs):
+    if how == "interrupted" and not any(s.kind_out in ("video", "sequence") for s in specs):
         _warn("interrupted")
-    return status
+    return EXIT_INTERRUPTED if how == "interrupted" else EXIT_OK
 
 
-def _add_spherical_metadata(o):
-    from ..spherical import inject_spherical_mp4
-
-    if os.path.splitext(o.spec.output)[1].lower() not in SPHERICAL_CONTAINERS:
-        _warn(f"{o.spec.output}: spherical video metadata is written into .mp4/.m4v/.mov only")
-        return
-    with open(o.tmp, "rb") as f:
-        data = f.read()
-    try:
-        new = inject_spherical_mp4(data)
-    except ValueError as e:
-        raise CliError(f"cannot add 360 metadata to {o.spec.output}: {e}") from None
-    try:
-        with open(o.tmp, "wb") as f:
-            f.write(new)
-            f.flush()
-            os.fsync(f.fileno())
-    except OSError as e:
-        raise CliError(
-            f"cannot write video {o.spec.output}: {e.strerror or e}; the previous file is unchanged"
-        ) from None
-    if count_frames(o.tmp, o.readable + 1) != o.readable:
-        raise CliError(
-            f"cannot write video {o.spec.output}: the file with 360 metadata does "
-            f"not read back; the previous file is unchanged"
+def _say_video(args, spec, video, how, declared):
+    """One line on a video output: where its frames are, and in which codec."""
+    output = spec.output
+    if video is None:
+        _warn(f"interrupted before a frame of {output} was written: nothing kept")
+    elif how == "interrupted" and video.path != output:
+        _warn(
+            f"interrupted: kept the {video.frames} frames written so far in {video.path}; "
+            f"the earlier {output} is unchanged"
         )
+    elif how == "interrupted":
+        _warn(
+            f"interrupted: kept the {video.frames} frames written so far in {output} "
+            f"(there was no earlier output)"
+        )
+    elif how == "truncated":
+        _warn(
+            f"input ended after {video.frames} of its {declared} frames (truncated, or a "
+            f"frame it cannot decode); kept them in {output}"
+        )
+    elif not args.quiet:
+        print(
+            f"wrote {output} ({video.frames} frames, {spec.size[0]}x{spec.size[1]}, "
+            f"{_codec_text(output, video.fourcc, args.fourcc)})"
+        )
+
+
+def _codec_text(output, fourcc, asked):
+    """The codec of a video, and why, if a browser will not play it, that is so."""
+    if fourcc in H264:
+        return f"H.264 ({fourcc})"
+    ext = os.path.splitext(output)[1].lower()
+    if asked is None and any(c in H264 for c in VIDEO_CODECS.get(ext, ())):
+        return f"codec {fourcc}: this OpenCV has no H.264 encoder, so browsers will not play it"
+    return f"codec {fourcc}"
+
+
+def _spherical_metadata(output):
+    """The ``finalize`` of an equirectangular video: its spherical metadata, in MP4/MOV."""
+
+    def add(tmp):
+        from ..spherical import inject_spherical_mp4
+
+        if os.path.splitext(output)[1].lower() not in SPHERICAL_CONTAINERS:
+            _warn(f"{output}: spherical video metadata is written into .mp4/.m4v/.mov only")
+            return
+        try:
+            with open(tmp, "rb") as f:
+                new = inject_spherical_mp4(f.read())
+        except ValueError as e:
+            raise CliError(f"cannot add 360 metadata to {output}: {e}") from None
+        try:
+            with open(tmp, "wb") as f:
+                f.write(new)
+                f.flush()
+                os.fsync(f.fileno())
+        except OSError as e:
+            raise CliError(
+                f"cannot write video {output}: {e.strerror or e}; the previous file is unchanged"
+            ) from None
+
+    return add
 
 
 def add_parser(sub):
@@ -705,7 +600,8 @@ def add_parser(sub):
         "--fourcc",
         type=_fourcc,
         metavar="CODE",
-        help="video codec FourCC (default MJPG for .avi/.mkv, mp4v for .mp4/.mov)",
+        help="video codec FourCC (default MJPG for .avi/.mkv; for .mp4/.m4v/.mov H.264 "
+        "where this OpenCV writes it, else mp4v)",
     )
     p.add_argument(
         "--preview",
@@ -808,7 +704,7 @@ def add_view_arguments(p, output_help=None):
 # re-exported for callers of the earlier one-view module
 __all__ = [
     "EXIT_FAILURE",
-    "VIDEO_FOURCC",
+    "VIDEO_CODECS",
     "Progress",
     "add_parser",
     "add_view_arguments",
