@@ -134,6 +134,19 @@ def test_recalibrate_keeps_K_D_and_the_mirror_and_refuses_other_ones(rig_and_fra
         rig.recalibrate(cv2.resize(image, (250, 250)))
 
 
+def test_help_says_which_of_a_and_b_is_along_the_axis(capsys):
+    assert main(["calibrate", "--help"]) == 0
+    out = " ".join(capsys.readouterr().out.split())
+    for words in (
+        "(X^2+Y^2)/A^2 - Z^2/B^2 = -1",
+        "B is the semi-axis ALONG the axis",
+        "A is the semi-axis ACROSS it",
+        "--mirror b a RIM",
+        "--from RIG.yaml",
+    ):
+        assert words in out
+
+
 # -- the stated uncertainty against the errors, by tilt ----------------------------------------
 def _rim_only(rig, pts):
     return calibrate(

@@ -303,10 +303,14 @@ def add_parser(sub):
         nargs=3,
         type=_positive,
         metavar=("A", "B", "RIM"),
-        help="hyperboloid parameters a, b and rim radius (mm) of (X^2+Y^2)/a^2 - Z^2/b^2 = -1: "
-        "a across the mirror, b along its axis (data sheets name them either way). Required "
-        "for one image; with --chessboard optional (a start; without it the mirror is "
-        "estimated from the boards)",
+        help="the mirror (mm): A, B and the rim's radius RIM of the hyperboloid "
+        "(X^2+Y^2)/A^2 - Z^2/B^2 = -1 (the paper's eq. 1), Z along the mirror's axis. B is "
+        "the semi-axis ALONG the axis (the mirror's apex is B from the hyperboloid's centre, "
+        "its foci are sqrt(A^2+B^2) from it); A is the semi-axis ACROSS it (the asymptotes "
+        "rise B/A per unit of radius). Data sheets name them either way: one that writes "
+        "Z^2/a^2 - (X^2+Y^2)/b^2 = 1 means --mirror b a RIM. Required for one image (unless "
+        "--from); with --chessboard optional (a start; without it the mirror is estimated "
+        "from the boards)",
     )
     p.add_argument(
         "--from",
