@@ -390,6 +390,65 @@ class MisalignedHyperbolicCamera:
             **options,
         )
 
+    def recalibrate(self, image: np.ndarray | None = None, **options) -> tuple:
+        """The mirror posture alone from one new image, with this rig's ``K``, ``D`` and mirror.
+
+        After a bump: a rig calibrated once (from chessboards, say) and knocked out of line is
+        re-calibrated from one frame of the mirror, without boards, by the single-image method
+        (:func:`omnicam.calibration.calibrate`, paper section 3).
+
+        Parameters
+        ----------
+        image : ndarray, optional
+            A frame of the rig (grey or BGR) of this camera's ``image_size`` (when known); use
+            :meth:`scaled` first for another resolution of the same sensor.
+        **options
+            Passed on to :func:`omnicam.calibration.calibrate`: ``boundary_points``,
+            ``far_lines``, ``refine``, ``lens``, ``lens_r``, ``lens_z``, ``rim_hint``,
+            ``max_tilt_deg``, ``max_offset_mm``, ``check_plausibility``.
+
+        Returns
+        -------
+        camera : same class as this one
+            This rig's ``K``, ``D``, mirror and ``image_size`` with the new posture.
+        report : CalibrationReport
+            Its stated uncertainty (``axis_std_deg``, ``origin_std_mm``) and the confidence of
+            the choice of posture (``confidence``, ``ambiguous``).
+
+        Raises
+        ------
+        ValueError
+            ``options`` naming what this camera fixes (``K``, ``mirror``, ``D``,
+            ``image_size``, ``camera_cls``), or an image of another size; and whatever
+            :func:`omnicam.calibration.calibrate` raises.
+        """
+        from .calibration import calibrate
+
+        fixed = sorted({"K", "mirror", "D", "image_size", "camera_cls"} & set(options))
+        if fixed:
+            raise ValueError(
+                f"recalibrate keeps this camera's K, D, mirror and image_size; do not pass "
+                f"{', '.join(fixed)} (use omnicam.calibrate for other ones)"
+            )
+        if image is not None and self._image_size is not None and np.ndim(image) >= 2:
+            seen = (int(np.shape(image)[1]), int(np.shape(image)[0]))
+            if seen != self._image_size:
+                w, h = self._image_size
+                raise ValueError(
+                    f"image is {seen[0]}x{seen[1]}, the camera was calibrated at {w}x{h}; "
+                    f"for another resolution of the same sensor use "
+                    f"camera.scaled({seen}).recalibrate(image)"
+                )
+        return calibrate(
+            self._K,
+            self._mirror,
+            image=image,
+            D=self._D,
+            image_size=self._image_size,
+            camera_cls=type(self),
+            **options,
+        )
+
     @classmethod
     def calibrate_pattern(
         cls,

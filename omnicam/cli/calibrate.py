@@ -16,6 +16,7 @@ from ._common import (
     CliError,
     _check_output,
     _finite,
+    _load_camera,
     _one_line,
     _positive,
     _read_image,
@@ -33,6 +34,8 @@ def cmd_calibrate(args):
     from ..io import SUFFIXES
     from ..mirror import HyperbolicMirror
 
+    if args.from_rig is not None:
+        _refuse_beside_from(args)
     # chessboards seen through the mirror: K, D and the posture (cli/pattern.py)
     if args.chessboard is not None:
         return pattern.cmd_calibrate_pattern(args)
@@ -41,7 +44,7 @@ def cmd_calibrate(args):
     given = [n for n in ("fx", "fy", "cx", "cy") if getattr(args, n) is not None]
     if args.intrinsics is not None and (given or args.dist is not None):
         raise CliError("calibrate: give --intrinsics or --fx --fy --cx --cy [--dist], not both", 2)
-    if args.intrinsics is None and len(given) != 4:
+    if args.from_rig is None and args.intrinsics is None and len(given) != 4:
         raise CliError(
             "calibrate: give the camera's intrinsics: --intrinsics K.yaml, or all of "
             "--fx --fy --cx --cy [--dist ...] (or use --chessboard)",
@@ -63,20 +66,25 @@ def cmd_calibrate(args):
         and os.path.samefile(overlay, args.image)
     ):
         raise CliError(f"overlay {overlay} is the input image")
-    if args.mirror is None:
-        raise CliError(
-            "calibrate: give the mirror: --mirror A B RIM (or calibrate from chessboards "
-            "with --chessboard, which needs no mirror)",
-            2,
-        )
-    try:
-        mirror = HyperbolicMirror(*args.mirror)
-    except ValueError as e:
-        raise CliError(f"--mirror: {e}") from None
-    if args.intrinsics is not None:
-        K, D, size = read_intrinsics(args.intrinsics)
+    if args.from_rig is not None:  # after a bump: K, D and the mirror of an earlier calibration
+        rig = _load_camera(args.from_rig)
+        K, D, mirror, size = rig.K, rig.D, rig.mirror, rig.image_size
     else:
-        K, D, size = _intrinsics_from_numbers(args)
+        if args.mirror is None:
+            raise CliError(
+                "calibrate: give the mirror: --mirror A B RIM (or calibrate from chessboards "
+                "with --chessboard, which needs no mirror, or take K, D and the mirror of an "
+                "earlier calibration with --from RIG.yaml)",
+                2,
+            )
+        try:
+            mirror = HyperbolicMirror(*args.mirror)
+        except ValueError as e:
+            raise CliError(f"--mirror: {e}") from None
+        if args.intrinsics is not None:
+            K, D, size = read_intrinsics(args.intrinsics)
+        else:
+            K, D, size = _intrinsics_from_numbers(args)
     far_lines = read_far_lines(args.far_lines) if args.far_lines else None
     boundary = read_boundary_points(args.boundary_points) if args.boundary_points else None
     image = _read_image(args.image, cv2.IMREAD_COLOR | cv2.IMREAD_IGNORE_ORIENTATION)
@@ -91,9 +99,10 @@ def cmd_calibrate(args):
         if boundary is not None:
             _warn("--rim-hint is not used with --boundary-points (the rim is fitted to them)")
     if size is not None and size != image_size:
+        source = f"--from {args.from_rig}" if args.from_rig else "intrinsics"
         _warn(
-            f"intrinsics are for {size[0]}x{size[1]}, image is {image_size[0]}x{image_size[1]}: "
-            f"K rescaled"
+            f"{source}: K is for {size[0]}x{size[1]}, image is "
+            f"{image_size[0]}x{image_size[1]}: K rescaled"
         )
         K = scale_K(K, size, image_size)
 
@@ -117,6 +126,8 @@ def cmd_calibrate(args):
     except (ValueError, RuntimeError, NotImplementedError, np.linalg.LinAlgError) as e:
         raise CliError(f"calibration failed: {_one_line(e)}") from None
     print(_report_text(report), flush=True)
+    if args.from_rig is not None:
+        print(_moved_text(camera, rig, args.from_rig, report))
     _write_image(overlay, report.draw(image), args.overwrite)  # to see what went wrong
     implausible = getattr(report, "plausibility", ())
     for w in implausible:
@@ -130,6 +141,48 @@ def cmd_calibrate(args):
     _save_camera(camera, calib, args.overwrite)
     print(f"wrote {calib} and {overlay}")
     return EXIT_OK
+
+
+# the options whose values --from takes from its file (K, D and the mirror)
+_NOT_WITH_FROM = (
+    ("mirror", "--mirror", "the mirror"),
+    ("intrinsics", "--intrinsics", "K and D"),
+    ("fx", "--fx", "K"),
+    ("fy", "--fy", "K"),
+    ("cx", "--cx", "K"),
+    ("cy", "--cy", "K"),
+    ("dist", "--dist", "D"),
+)
+
+
+def _refuse_beside_from(args):
+    """``--from`` gives K, D and the mirror: an option that gives them too is a contradiction."""
+    if args.chessboard is not None:
+        raise CliError(
+            "calibrate: --from is not used with --chessboard (--from re-estimates the posture "
+            "alone from one IMAGE of the mirror; --chessboard calibrates K, D, the mirror and "
+            "the posture from boards)",
+            2,
+        )
+    for field, flag, what in _NOT_WITH_FROM:
+        if getattr(args, field) is not None:
+            raise CliError(
+                f"calibrate: --from {args.from_rig} gives {what}; do not give {flag} with it "
+                f"(to change {what}, calibrate without --from)",
+                2,
+            )
+
+
+def _moved_text(camera, rig, name, report):
+    """One line: how far the new posture is from the earlier one, beside its uncertainty."""
+    from ..gauge import posture_error
+
+    axis, origin = posture_error(camera, rig)
+    return (
+        f"  K, D and the mirror from {name}; the posture differs from its by: mirror axis "
+        f"{axis:.3f} deg (this image's stated uncertainty {report.axis_std_deg:.3g} deg), "
+        f"camera centre {origin:.3f} (stated {report.origin_std_mm:.3g})"
+    )
 
 
 BOUNDARY_FORMAT = (
@@ -250,10 +303,23 @@ def add_parser(sub):
         nargs=3,
         type=_positive,
         metavar=("A", "B", "RIM"),
-        help="hyperboloid parameters a, b and rim radius (mm) of (X^2+Y^2)/a^2 - Z^2/b^2 = -1: "
-        "a across the mirror, b along its axis (data sheets name them either way). Required "
-        "for one image; with --chessboard optional (a start; without it the mirror is "
-        "estimated from the boards)",
+        help="the mirror (mm): A, B and the rim's radius RIM of the hyperboloid "
+        "(X^2+Y^2)/A^2 - Z^2/B^2 = -1 (the paper's eq. 1), Z along the mirror's axis. B is "
+        "the semi-axis ALONG the axis (the mirror's apex is B from the hyperboloid's centre, "
+        "its foci are sqrt(A^2+B^2) from it); A is the semi-axis ACROSS it (the asymptotes "
+        "rise B/A per unit of radius). Data sheets name them either way: one that writes "
+        "Z^2/a^2 - (X^2+Y^2)/b^2 = 1 means --mirror b a RIM. Required for one image (unless "
+        "--from); with --chessboard optional (a start; without it the mirror is estimated "
+        "from the boards)",
+    )
+    p.add_argument(
+        "--from",
+        dest="from_rig",
+        metavar="RIG.yaml",
+        help="after a bump: take K, D and the mirror from an earlier omnicam calibration file "
+        "(e.g. one made with --chessboard) and estimate only the mirror posture from IMAGE; "
+        "prints how far it moved. Not with --mirror, --intrinsics, --fx/--fy/--cx/--cy/--dist "
+        "or --chessboard",
     )
     p.add_argument(
         "--intrinsics",
