@@ -1,32 +1,18 @@
 """omnicam: calibrate and unwarp misaligned hyperbolic-mirror catadioptric cameras.
 
 Public names only; the contract is README.md and ``docs/conventions.md``.
-Modules that pull in scikit-image or build views load on first use, so ``import omnicam``
-stays fast.
+Every name loads its module on first use, so ``import omnicam`` stays fast and has no side
+effect.
 """
 
-import os
-import sys
 from importlib import import_module
-
-if os.path.basename(sys.argv[0] if sys.argv else "") in ("omnicam", "omnicam.exe"):
-    # the console script: Ctrl-C while the libraries load is one line and exit 130 (not a
-    # KeyboardInterrupt traceback); omnicam.cli.main puts Python's own handler back
-    import signal
-
-    def _interrupted_while_loading(signum, frame):
-        os.write(2, b"omnicam: error: interrupted\n")
-        os._exit(130)
-
-    signal.signal(signal.SIGINT, _interrupted_while_loading)
-
-from .camera import MisalignedHyperbolicCamera
-from .mirror import HyperbolicMirror
 
 __version__ = "0.3.0"
 
 # public name -> module that defines it (loaded lazily, PEP 562)
 _LAZY = {
+    "MisalignedHyperbolicCamera": "omnicam.camera",
+    "HyperbolicMirror": "omnicam.mirror",
     "detect_rim": "omnicam.calibration.rim",
     "RimFit": "omnicam.calibration.rim",
     "CalibrationReport": "omnicam.calibration",
@@ -49,18 +35,18 @@ _LAZY = {
     "write_far_lines": "omnicam.io",
 }
 
-# K, D and the posture from chessboards seen through the mirror (builds this camera class)
-calibrate_pattern = MisalignedHyperbolicCamera.calibrate_pattern
-
-__all__ = ["HyperbolicMirror", "MisalignedHyperbolicCamera", "calibrate_pattern", *_LAZY]
+__all__ = ["calibrate_pattern", *_LAZY]
 
 
 def __getattr__(name):
-    module = _LAZY.get(name)
-    if module is None:
-        raise AttributeError(f"module 'omnicam' has no attribute {name!r}")
-    mod = import_module(module)
-    value = mod if name == module.rsplit(".", 1)[-1] else getattr(mod, name)
+    if name == "calibrate_pattern":  # chessboards through the mirror (builds the camera class)
+        value = __getattr__("MisalignedHyperbolicCamera").calibrate_pattern
+    else:
+        module = _LAZY.get(name)
+        if module is None:
+            raise AttributeError(f"module 'omnicam' has no attribute {name!r}")
+        mod = import_module(module)
+        value = mod if name == module.rsplit(".", 1)[-1] else getattr(mod, name)
     globals()[name] = value
     return value
 

@@ -128,3 +128,23 @@ def test_boards_all_on_one_side_exit_one_unless_forced(tmp_path, capsys):
     assert not (tmp_path / "rig.yaml").exists()
     assert _calibrate(paths, tmp_path / "rig.yaml", "--heldout", "0", "--force") == 0
     assert (tmp_path / "rig.yaml").exists()
+
+
+@pytest.mark.parametrize(
+    "option",
+    [
+        ["--square", "30"],
+        ["--corners", "c.json"],
+        ["--heldout", "5"],
+        ["--dist-model", "k1"],
+        ["--rim-radius", "30"],
+        ["--refine-mirror-shape"],
+    ],
+    ids=lambda o: o[0],
+)
+def test_chessboard_options_without_chessboard_are_refused_not_ignored(tmp_path, capsys, option):
+    args = ["calibrate", str(tmp_path / "a.png"), *MIRROR, "--fx", "300", "--fy", "300"]
+    args += ["--cx", "350", "--cy", "350", "-o", str(tmp_path / "r.yaml"), *option]
+    assert main(args) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and f"{option[0]} is an option of --chessboard mode" in err[0]

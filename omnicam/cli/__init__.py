@@ -70,21 +70,6 @@ def build_parser():
 
 def main(argv=None) -> int:
     """Run the ``omnicam`` command line; return the exit status."""
-    import signal
-
-    console = getattr(signal.getsignal(signal.SIGINT), "__name__", "") == (
-        "_interrupted_while_loading"
-    )  # set by omnicam/__init__.py for the console script
-    if console:
-        signal.signal(signal.SIGINT, signal.default_int_handler)  # loaded: Ctrl-C as usual
-    try:
-        return _run(argv)
-    finally:
-        if console:  # done: a Ctrl-C during the interpreter's shutdown changes nothing now
-            signal.signal(signal.SIGINT, signal.SIG_IGN)
-
-
-def _run(argv):
     try:
         with _opencv_quiet():
             args = build_parser().parse_args(argv)

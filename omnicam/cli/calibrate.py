@@ -39,6 +39,7 @@ def cmd_calibrate(args):
     # chessboards seen through the mirror: K, D and the posture (cli/pattern.py)
     if args.chessboard is not None:
         return pattern.cmd_calibrate_pattern(args)
+    pattern.refuse_chessboard_options(args)
     if len(args.image) != 1:
         raise CliError("calibrate: give one IMAGE (several only with --chessboard)", 2)
     given = [n for n in ("fx", "fy", "cx", "cy") if getattr(args, n) is not None]

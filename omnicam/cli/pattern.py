@@ -79,7 +79,7 @@ def add_arguments(p):
     p.add_argument(
         "--dist-model",
         choices=sorted(DIST_MODELS),
-        default="k1k2",
+        default=None,
         help="with --chessboard: distortion coefficients to estimate (default k1k2; p1, p2 "
         "trade against the mirror's tilt)",
     )
@@ -92,7 +92,7 @@ def add_arguments(p):
     p.add_argument(
         "--heldout",
         type=int,
-        default=5,
+        default=None,
         metavar="K",
         help="with --chessboard: K-fold held-out check of the calibration, cv2.omnidir's beside "
         "it (default 5; 0 skips it)",
@@ -110,6 +110,25 @@ def add_arguments(p):
         action="store_true",
         help="with --chessboard: also estimate the mirror's a and b (RIM fixes the scale)",
     )
+
+
+#: The options of chessboard mode alone (refused without --chessboard, never ignored).
+CHESSBOARD_ONLY = (
+    "square",
+    "corners",
+    "heldout",
+    "dist_model",
+    "rim_radius",
+    "refine_mirror_shape",
+)
+
+
+def refuse_chessboard_options(args):
+    """One readable refusal (exit 2) of an option of chessboard mode given without it."""
+    for name in CHESSBOARD_ONLY:
+        if getattr(args, name) not in (None, False):
+            flag = "--" + name.replace("_", "-")
+            raise CliError(f"calibrate: {flag} is an option of --chessboard mode", 2)
 
 
 def read_corners(path, image_paths, n_corners):
@@ -188,6 +207,8 @@ def cmd_calibrate_pattern(args):
         raise CliError("calibrate: --chessboard needs --square (side of a square, mm)", 2)
     if args.far_lines:
         raise CliError("calibrate: --far-lines is not used with --chessboard", 2)
+    args.heldout = 5 if args.heldout is None else args.heldout
+    args.dist_model = args.dist_model or "k1k2"
     if args.heldout < 0 or args.heldout == 1:
         raise CliError("calibrate: --heldout K needs K >= 2 folds (0 skips the check)", 2)
     calib = args.output
