@@ -42,7 +42,7 @@ def main(argv=None):
     ap.add_argument("--square", type=float, default=30.0)
     ap.add_argument("--glob", default="*.jpg")
     ap.add_argument("--mirror", type=float, nargs=3, default=None)
-    ap.add_argument("--dist-model", default="k1k2p1p2")
+    ap.add_argument("--dist-model", default="k1k2")
     ap.add_argument("--refine-shape", action="store_true", help="refine_mirror_shape=True")
     ap.add_argument(
         "--heldout", default=os.path.join(here, "..", "..", "shared", "tools", "heldout.py")

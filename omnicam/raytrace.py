@@ -94,10 +94,25 @@ def undistort_normalized(pixels, K, D):
 
 
 def distort_normalized(xn, K, D):
-    """Undistorted normalised coordinates -> pixels (OpenCV's distortion, then ``K`` with skew)."""
+    """Undistorted normalised coordinates -> pixels (OpenCV's distortion, then ``K`` with skew).
+
+    ``D = (k1, k2, p1, p2[, k3])`` is applied in numpy (the formula of ``cv2.projectPoints``,
+    without its per-call cost, which the chessboard adjustment's rim residuals pay thousands of
+    times); longer models (rational, thin prism, tilt) go through ``cv2.projectPoints``."""
+    D = np.ravel(np.asarray(D, np.float64))
     ok = np.isfinite(xn).all(axis=1)
     out = np.full_like(xn, np.nan)
-    if ok.any():
+    if ok.any() and len(D) in (4, 5):
+        x, y = xn[ok, 0], xn[ok, 1]
+        k1, k2, p1, p2 = D[:4]
+        k3 = D[4] if len(D) == 5 else 0.0
+        r2 = x * x + y * y
+        radial = 1.0 + r2 * (k1 + r2 * (k2 + r2 * k3))
+        xd = x * radial + 2.0 * p1 * x * y + p2 * (r2 + 2.0 * x * x)
+        yd = y * radial + p1 * (r2 + 2.0 * y * y) + 2.0 * p2 * x * y
+        out[ok, 0] = K[0, 0] * xd + K[0, 1] * yd + K[0, 2]
+        out[ok, 1] = K[1, 1] * yd + K[1, 2]
+    elif ok.any():
         obj = np.concatenate([xn[ok], np.ones((int(ok.sum()), 1))], axis=1)
         xd, _ = cv2.projectPoints(
             obj.reshape(-1, 1, 3), np.zeros(3), np.zeros(3), np.eye(3), np.asarray(D, np.float64)
