@@ -34,6 +34,7 @@ __all__ = [
     "publish",
     "write_bytes",
     "temp_beside",
+    "remove_quietly",
     "remove_stale",
     "TEMP_MARK",
 ]
@@ -133,7 +134,7 @@ def temp_beside(path):
             _LIVE.discard(tmp)
             raise OutputError(f"cannot write {path}: {_describe(e)} (in {folder})") from None
         except BaseException:  # Ctrl-C as os.open returns: the name is ours, the file may be
-            _remove_quietly(tmp)
+            remove_quietly(tmp)
             _LIVE.discard(tmp)
             raise
         os.close(fd)
@@ -168,7 +169,8 @@ def _fsync(path, directory=False):
         os.close(fd)
 
 
-def _remove_quietly(path):
+def remove_quietly(path):
+    """Remove ``path`` if it is there; an error is no error here (it is a leftover)."""
     with contextlib.suppress(OSError):
         os.remove(path)
 
@@ -285,14 +287,14 @@ def atomic_output(path, *, what="file", overwrite=True, verify=None, allow_empty
             raise OutputError(f"cannot write {what} {path}: {_describe(e)}") from None
     finally:
         if tmp is not None:
-            _remove_quietly(tmp)
+            remove_quietly(tmp)
             _LIVE.discard(tmp)
 
 
 @atexit.register
 def _remove_live():
     for tmp in list(_LIVE):
-        _remove_quietly(tmp)
+        remove_quietly(tmp)
 
 
 def write_bytes(path, data, *, what="file", overwrite=True, verify=None):

@@ -46,18 +46,17 @@ temporary file back with the same reader: a failure (full disk, read-only folder
 
 from __future__ import annotations
 
-import contextlib
 import json
 import math
 import os
 import re
 import stat
-import sys
 
 import cv2
 import numpy as np
 
 from ._atomic import OutputError, atomic_output, sigint_deferred, write_bytes
+from ._quiet import opencv_silenced
 from ._typing import ArrayLike, FloatArray, PathLike, Size
 from ._validate import validate_D, validate_image_size, validate_K
 from .mirror import HyperbolicMirror
@@ -129,45 +128,6 @@ def _fspath(path, what):
             f"(OpenCV cannot handle it); rename the file"
         ) from None
     return path
-
-
-@contextlib.contextmanager
-def opencv_silenced():
-    """Silence OpenCV's own log and anything its libraries print on stderr (fd 2) meanwhile.
-
-    omnicam reports every failure once, in its own words naming the file; OpenCV's
-    ``[ERROR:0@...]`` lines, libpng's and libjpeg's warnings would only repeat it in noise.
-    fd 2 is process-wide: output of other threads during the call (milliseconds) is dropped
-    too.
-    """
-    logging = getattr(getattr(cv2, "utils", None), "logging", None)
-    previous = None
-    if logging is not None:
-        with contextlib.suppress(Exception):
-            previous = logging.getLogLevel()
-            logging.setLogLevel(logging.LOG_LEVEL_SILENT)
-    saved = None
-    with contextlib.suppress(Exception):
-        sys.stderr.flush()
-    with contextlib.suppress(OSError):
-        devnull = os.open(os.devnull, os.O_WRONLY)
-        try:
-            saved = os.dup(2)
-            os.dup2(devnull, 2)
-        except OSError:
-            saved = None
-        finally:
-            os.close(devnull)
-    try:
-        yield
-    finally:
-        if saved is not None:
-            with contextlib.suppress(OSError):
-                os.dup2(saved, 2)
-            os.close(saved)
-        if previous is not None:
-            with contextlib.suppress(Exception):
-                logging.setLogLevel(previous)
 
 
 def _nesting(text):

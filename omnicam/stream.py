@@ -32,8 +32,8 @@ from typing import NamedTuple
 import cv2
 import numpy as np
 
-from ._atomic import OutputError, publish, sigint_deferred, temp_beside
-from .io import opencv_silenced
+from ._atomic import OutputError, publish, remove_quietly, sigint_deferred, temp_beside
+from ._quiet import opencv_silenced
 from .views import PanoramaView, PerspectiveView
 
 __all__ = [
@@ -652,11 +652,6 @@ class WrittenVideo(NamedTuple):
     """False for the frames so far of a run that stopped early (Ctrl-C, the stream closed)."""
 
 
-def _remove_quietly(path):
-    with contextlib.suppress(OSError):
-        os.remove(path)
-
-
 def _free_bytes(path):
     try:
         st = os.statvfs(os.path.dirname(os.path.abspath(path)))
@@ -715,7 +710,7 @@ def _writes_a_frame(path, fourcc, fps, size, color):
             writer.release()
             return count_frames(probe, 2) == 1
     finally:
-        _remove_quietly(probe)
+        remove_quietly(probe)
 
 
 def video_codec(path, size, fps=30.0, fourcc=None, color=True):
@@ -846,7 +841,7 @@ class VideoOutput:
             self.tmp = temp_beside(self.path)
         self._writer = _new_writer(self.tmp, self.fourcc, self.fps, self.size, color)
         if self._writer is None:
-            _remove_quietly(self.tmp)
+            remove_quietly(self.tmp)
             raise OutputError(f"cannot write video {self.path} with codec {self.fourcc}")
 
     def write(self, frame):
@@ -936,7 +931,7 @@ class VideoOutput:
         except OSError as e:
             raise OutputError(f"cannot write video {target}: {e.strerror or e}") from None
         finally:
-            _remove_quietly(self.tmp)
+            remove_quietly(self.tmp)
         self.result = WrittenVideo(target, self.frames, self.fourcc, self._complete)
         return self.result
 
@@ -944,7 +939,7 @@ class VideoOutput:
         """Stop and remove the temporary file; an earlier ``path`` is unchanged."""
         with contextlib.suppress(cv2.error):
             self._writer.release()
-        _remove_quietly(self.tmp)
+        remove_quietly(self.tmp)
 
     def __enter__(self):
         return self

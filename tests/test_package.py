@@ -22,12 +22,19 @@ def unit(module):
 
 
 def readme_layers():
-    layers = {}
+    """``{unit: layer}`` from the Layout's numbered list (an item may run over several lines)."""
+    layers, current = {}, None
     for line in LAYOUT.splitlines():
         m = re.match(r"(\d+)\. (.*)", line)
         if m:
-            for name in re.findall(r"`([A-Za-z_0-9]+(?:\.py|/))`", m.group(2)):
-                layers.setdefault(name, int(m.group(1)))
+            current, text = int(m.group(1)), m.group(2)
+        elif current is not None and line.startswith("   "):
+            text = line
+        else:
+            current = None
+            continue
+        for name in re.findall(r"`([A-Za-z_0-9]+(?:\.py|/))`", text):
+            layers.setdefault(name, current)
     return layers
 
 

@@ -34,6 +34,7 @@ from __future__ import annotations
 
 import os
 
+from .._quiet import opencv_silenced
 from . import calibrate, demo, export, info, maps, unwarp
 from ._common import (
     EXIT_FAILURE,
@@ -43,7 +44,6 @@ from ._common import (
     CliError,
     _error,
     _one_line,
-    _opencv_quiet,
     _Parser,
 )
 from .unwarp import Progress  # noqa: F401 (public for tests that patch it)
@@ -71,7 +71,7 @@ def build_parser():
 def main(argv=None) -> int:
     """Run the ``omnicam`` command line; return the exit status."""
     try:
-        with _opencv_quiet():
+        with opencv_silenced(keep_messages=True, ffmpeg=True):
             args = build_parser().parse_args(argv)
             return args.func(args) or EXIT_OK
     except CliError as e:

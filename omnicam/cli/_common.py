@@ -3,7 +3,6 @@
 from __future__ import annotations
 
 import argparse
-import contextlib
 import math
 import os
 import re
@@ -84,62 +83,6 @@ def _fourcc(text):
     return text
 
 
-@contextlib.contextmanager
-def _opencv_quiet():
-    """OpenCV's and FFmpeg's own log lines are not for the user: our errors say it in one line.
-
-    FFmpeg takes its level from ``OPENCV_FFMPEG_LOGLEVEL`` when a capture opens (so setting it
-    after ``import cv2`` works; a value the user set is kept). OpenCV's level is restored after.
-    Some lines bypass both (``OpenCV: FFMPEG: tag ... is not found`` from the video writer,
-    libpng's and libjpeg's warnings are plain ``fprintf(stderr)``), so for the whole command
-    file descriptor 2 goes to ``/dev/null`` while ``sys.stderr`` -- omnicam's messages,
-    warnings and tracebacks -- keeps writing to the real stderr through a duplicate of it.
-    """
-    os.environ.setdefault("OPENCV_FFMPEG_LOGLEVEL", "-8")  # AV_LOG_QUIET
-    logging = getattr(getattr(cv2, "utils", None), "logging", None)
-    previous = None
-    if logging is not None:
-        with contextlib.suppress(Exception):
-            previous = logging.getLogLevel()
-            logging.setLogLevel(logging.LOG_LEVEL_SILENT)
-    swapped = saved = None
-    try:
-        fd = sys.stderr.fileno()
-    except (AttributeError, OSError, ValueError):  # captured (pytest capsys, io.StringIO)
-        fd = None
-    with contextlib.suppress(OSError, ValueError):
-        sys.stderr.flush()
-        saved = os.dup(2)
-        devnull = os.open(os.devnull, os.O_WRONLY)
-        try:
-            if fd == 2:  # our own messages keep the real stderr
-                swapped = sys.stderr
-                sys.stderr = open(
-                    os.dup(saved),
-                    "w",
-                    buffering=1,  # noqa: SIM115
-                    encoding=swapped.encoding,
-                    errors="backslashreplace",
-                )
-            os.dup2(devnull, 2)
-        finally:
-            os.close(devnull)
-    try:
-        yield
-    finally:
-        if swapped is not None:
-            with contextlib.suppress(Exception):
-                sys.stderr.close()
-            sys.stderr = swapped
-        if saved is not None:
-            with contextlib.suppress(OSError):
-                os.dup2(saved, 2)
-            os.close(saved)
-        if previous is not None:
-            with contextlib.suppress(Exception):
-                logging.setLogLevel(previous)
-
-
 def _one_line(e, limit=None):
     """``str(e)`` on one line, without terminal colour codes, optionally shortened."""
     text = " ".join(re.sub(r"\x1b\[[0-9;]*m", "", str(e)).split()) or type(e).__name__
@@ -186,7 +129,8 @@ def _check_output(path, overwrite, what="output"):
 
 def _write_image(path, image, overwrite=True):
     """``cv2.imwrite`` through :func:`omnicam._atomic.atomic_output` (checked by reading back)."""
-    from ..io import _fspath, opencv_silenced
+    from .._quiet import opencv_silenced
+    from ..io import _fspath
 
     try:
         path = _fspath(path, "output")
@@ -255,7 +199,8 @@ def _is_image_input(path):
     By name first, so an empty or corrupt ``.png`` is reported as an unreadable image (not
     treated as a video). A name that is not UTF-8 is refused (:class:`CliError`).
     """
-    from ..io import _fspath, opencv_silenced
+    from .._quiet import opencv_silenced
+    from ..io import _fspath
 
     try:  # OpenCV (imread, VideoCapture) crashes with SIGSEGV on such a name
         path = _fspath(path, "input")
@@ -270,7 +215,8 @@ def _is_image_input(path):
 
 def _read_image(path, flags=cv2.IMREAD_UNCHANGED):
     """``cv2.imread`` of a regular file, OpenCV's and libpng's own stderr lines silenced."""
-    from ..io import _fspath, opencv_silenced, shown
+    from .._quiet import opencv_silenced
+    from ..io import _fspath, shown
 
     try:
         path = _fspath(path, "image")

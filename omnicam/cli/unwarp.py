@@ -58,7 +58,6 @@ from ._common import (
 SPHERICAL_CONTAINERS = (".mp4", ".m4v", ".mov")
 
 VIEW_KINDS = ("panorama", "perspective", "equirect")
-VIEW_OPTIONS = ("elevation", "projection", "fov", "yaw", "pitch", "roll", "depth", "output")
 
 
 # -- the command line: views in order -------------------------------------------------------
