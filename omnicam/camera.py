@@ -22,8 +22,8 @@ from __future__ import annotations
 import cv2
 import numpy as np
 
-from . import raytrace
-from ._typing import ArrayLike, FloatArray, Maps, PathLike, Size
+from . import raytrace, views
+from ._typing import ArrayLike, FloatArray, PathLike, Size
 from ._validate import finite_array, validate_D, validate_image_size, validate_K, validate_posture
 from .gauge import canonical_rvec
 from .io import MODEL_NAME
@@ -469,46 +469,9 @@ class MisalignedHyperbolicCamera:
 
         return calibrate_pattern(images, pattern_size, square_size, mirror, camera_cls=cls, **kw)
 
-    def init_panorama_maps(
-        self,
-        size: Size,
-        elevation_range: tuple[float, float] | None = None,
-        projection: str = "cylindrical",
-        R: ArrayLike | None = None,
-        m1type: int = cv2.CV_16SC2,
-        depth: float | None = None,
-        viewpoint: ArrayLike | None = None,
-    ) -> Maps:
-        """``cv2.remap`` tables of a panorama; see :func:`omnicam.views.init_panorama_maps`."""
-        from .views import init_panorama_maps
-
-        return init_panorama_maps(
-            self,
-            size,
-            elevation_range=elevation_range,
-            projection=projection,
-            R=R,
-            m1type=m1type,
-            depth=depth,
-            viewpoint=viewpoint,
-        )
-
-    def init_perspective_maps(
-        self,
-        K_new: ArrayLike,
-        size: Size,
-        R: ArrayLike | None = None,
-        m1type: int = cv2.CV_16SC2,
-        depth: float | None = None,
-        viewpoint: ArrayLike | None = None,
-    ) -> Maps:
-        """``cv2.remap`` tables of a virtual perspective view; see
-        :func:`omnicam.views.init_perspective_maps`."""
-        from .views import init_perspective_maps
-
-        return init_perspective_maps(
-            self, K_new, size, R=R, m1type=m1type, depth=depth, viewpoint=viewpoint
-        )
+    # the view tables take the camera first: the functions are the methods (one signature)
+    init_panorama_maps = views.init_panorama_maps
+    init_perspective_maps = views.init_perspective_maps
 
     def to_omnidir(self, depth: float | None = None) -> tuple:
         """The unified (Mei) model of ``cv2.omnidir`` closest to this rig, and its RMS error.
