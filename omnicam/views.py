@@ -37,7 +37,18 @@ import numbers
 import cv2
 import numpy as np
 
+from . import _kernels
 from ._jit import notice_if_cold, run_chunks
+from ._kernels import (
+    CHECK_CENTRE,
+    CHECK_HORIZONTAL_EDGE,
+    CHECK_VERTICAL_EDGE,
+    FINE,
+    NEWTON_TOL_REL,
+    RigArgs,
+    ViewArgs,
+    cubic_blocks,
+)
 from ._typing import ArrayLike, FloatArray, Maps, Size
 from ._validate import finite_array, float_array, real_number, validate_K
 
@@ -373,7 +384,6 @@ def _reject_sines(camera, depth, viewpoint):
 def _rig_args(camera):
     """:class:`omnicam._kernels.RigArgs` of a camera: float64 C-contiguous writable copies (the
     kernels' one signature; numba types read-only arrays apart)."""
-    from ._kernels import RigArgs
 
     D = camera.D
     dist = np.zeros(14)
@@ -399,7 +409,6 @@ def _rig_args(camera):
 
 def _view_args(camera, kind, A, p0, p1, az_step, depth, viewpoint):
     """:class:`omnicam._kernels.ViewArgs` of a view (see :func:`_table`)."""
-    from ._kernels import NEWTON_TOL_REL, ViewArgs
 
     sin_reject, sin_try = _reject_sines(camera, depth, viewpoint)
     m = camera.mirror
@@ -490,11 +499,10 @@ class _GridStack:
         self.mirror_error = errors[..., 1]
 
     def classify(self, view, size, half_tol, allow_edge):
-        from . import _kernels as k
 
         G, _w, ny1, nx1 = self.pixel_error.shape
         self.cls = np.empty((G, ny1 - 1, nx1 - 1), np.int64)
-        k.classify_cells(
+        _kernels.classify_cells(
             view,
             self.origins,
             self.spacing,
@@ -539,7 +547,6 @@ def _cubic_weights(tv, tu):
 def _node_blocks(NY, NX):
     """``cubic_blocks``' blocks and weights of the Newton starts of a refined grid's nodes:
     node (p, q) is the cubic of the refined coarse cell at ((p - 1) / FINE, (q - 1) / FINE)."""
-    from ._kernels import FINE
 
     blocks = [(p, p + 1, q, q + 1, -p, -q) for p in range(NY) for q in range(NX)]
     weights = [
@@ -556,7 +563,6 @@ def _grid_nodes(origins, spacing, shape, coarse, cells):
     refines, FINE times finer) starts Newton from the ``coarse`` grid's cubic; the coarse grid
     (``cells`` None) has no start (NaN).
     """
-    from ._kernels import cubic_blocks
 
     G = origins.shape[0]
     NY, NX = shape[0] + 3, shape[1] + 3
@@ -582,7 +588,6 @@ def _check_layout(ny, nx):
     point in cells (``(cell column + tu, cell row + tv)``; NaN for the combinations that name
     no edge, never solved).
     """
-    from ._kernels import CHECK_CENTRE, CHECK_HORIZONTAL_EDGE, CHECK_VERTICAL_EDGE
 
     x = np.full((3, ny + 1, nx + 1), np.nan)
     y = np.full((3, ny + 1, nx + 1), np.nan)
@@ -608,7 +613,6 @@ def _grid_checks(origins, spacing, S, P):
     """Check points of a grid stack (:func:`_check_layout`): output positions, Newton starts
     (the cubic of the nodes' mirror points ``S``) and estimates (the cubic of their pixels
     ``P``), (G, 3, ny + 1, nx + 1, 2) each, NaN where no check point is."""
-    from ._kernels import cubic_blocks
 
     G, NY, NX, _two = S.shape
     ny, nx = NY - 3, NX - 3
@@ -633,7 +637,6 @@ def _solve(
     """:func:`omnicam._kernels.solve_view_points` over arrays of positions (..., 2): the mirror
     points, pixels, margins and ok of each, and the errors (..., 2) of check points'
     ``estimates`` (pixel error, mirror error) (None without estimates)."""
-    from . import _kernels as k
 
     shape = positions.shape[:-1]
     n = int(np.prod(shape))
@@ -647,7 +650,7 @@ def _solve(
     else:
         estimates = errors = np.empty((0, 2))
     run_chunks(
-        k.solve_view_points,
+        _kernels.solve_view_points,
         n,
         view,
         rig,
@@ -673,9 +676,8 @@ def _build_table(view, rig, size, step, mode, outputs, stats):
     edge / refined, refined sub-cells left to exact pixels, pixels solved exactly, entries
     written unseen.
     """
-    from . import _kernels as k
 
-    notice_if_cold(k.solve_view_points, k.fill_rows)
+    notice_if_cold(_kernels.solve_view_points, _kernels.fill_rows)
     w, h = size
     ny, nx = (h + step - 1) // step, (w + step - 1) // step
     half_tol = 0.5 * TOLERANCE
@@ -684,15 +686,15 @@ def _build_table(view, rig, size, step, mode, outputs, stats):
     # refine the failing cells on grids FINE times finer (own nodes, checks and classes)
     # C order as every other array the kernels take (np.argwhere's is F: a second signature
     # of each grid kernel, compiled cold and loaded warm)
-    cells = np.ascontiguousarray(np.argwhere(cls == k.CELL_BAD), dtype=np.int64)
+    cells = np.ascontiguousarray(np.argwhere(cls == _kernels.CELL_BAD), dtype=np.int64)
     refined_index = np.full((ny, nx), -1, np.int64)
     refined_index[cells[:, 0], cells[:, 1]] = np.arange(len(cells))
     fine = _GridStack(
         view,
         rig,
         np.ascontiguousarray(cells[:, ::-1] * step, dtype=np.float64),
-        float(step // k.FINE),
-        (k.FINE, k.FINE),
+        float(step // _kernels.FINE),
+        (_kernels.FINE, _kernels.FINE),
         coarse,
         cells,
     )
@@ -701,14 +703,14 @@ def _build_table(view, rig, size, step, mode, outputs, stats):
     # the cubic weights of the node columns per column offset in a cell and in a refined
     # sub-cell, and the panoramas' per-column cos / sin of the azimuth (as _view_direction)
     weights = np.array(_lagrange4(np.arange(step) / step))
-    fine_weights = np.array(_lagrange4(np.arange(step // k.FINE) / (step // k.FINE)))
+    fine_weights = np.array(_lagrange4(np.arange(step // _kernels.FINE) / (step // _kernels.FINE)))
     azimuth = view.az_step * np.arange(w)
     column_cos, column_sin = np.cos(azimuth), np.sin(azimuth)
     pending = np.zeros((h, w), np.bool_)  # bool: numpy's nonzero is ten times faster than on uint8
     row_counts = np.empty((h, 2), np.int64)  # pending and unseen entries per row
     outx, outy, out16, outf16 = outputs
     run_chunks(
-        k.fill_rows,
+        _kernels.fill_rows,
         h,
         view,
         rig,
@@ -745,9 +747,10 @@ def _build_table(view, rig, size, step, mode, outputs, stats):
     stats[0] = n_nodes + f_nodes
     stats[1] = n_checks + f_checks
     stats[2:6] = [
-        np.count_nonzero(cls == c) for c in (k.CELL_SEEN, k.CELL_UNSEEN, k.CELL_EDGE, k.CELL_BAD)
+        np.count_nonzero(cls == c)
+        for c in (_kernels.CELL_SEEN, _kernels.CELL_UNSEEN, _kernels.CELL_EDGE, _kernels.CELL_BAD)
     ]
-    stats[6] = np.count_nonzero(fine_cls == k.CELL_BAD)
+    stats[6] = np.count_nonzero(fine_cls == _kernels.CELL_BAD)
     stats[7] = len(index)
     stats[8] = n_unseen
 

@@ -31,17 +31,14 @@ import dataclasses
 import numpy as np
 
 from .._typing import ArrayLike
+from .._validate import validate_D, validate_image_size, validate_K
+from ..mirror import HyperbolicMirror
+from . import selection, steps
 from .errors import EstimationError
+from .plausibility import assess
+from .report import CalibrationReport
 
 __all__ = ["calibrate", "CalibrationReport", "EstimationError"]
-
-
-def __getattr__(name):
-    if name == "CalibrationReport":  # lazily, so ``import omnicam`` stays light
-        from .report import CalibrationReport
-
-        return CalibrationReport
-    raise AttributeError(f"module 'omnicam.calibration' has no attribute {name!r}")
 
 
 def calibrate(
@@ -128,11 +125,6 @@ def calibrate(
         Valid input but no estimate: no rim ellipse (in the image or among the points) or no
         physically possible posture.
     """
-    from .._validate import validate_D, validate_image_size, validate_K
-    from ..mirror import HyperbolicMirror
-    from . import selection, steps
-    from .report import CalibrationReport
-
     if not isinstance(camera_cls, type):
         raise ValueError(
             "camera_cls must be the camera class to build; call "
@@ -178,8 +170,6 @@ def calibrate(
     camera = camera_cls(K, mirror, ref.rvec, ref.tvec, D=D, image_size=image_size)
     report = CalibrationReport.from_steps(rim, cue, cands, sel, ref, list(warnings), camera, lines)
     if check_plausibility:  # (.plausibility) a second calibration only when suspicious
-        from .plausibility import assess
-
         implausible = assess(
             report,
             image_size,

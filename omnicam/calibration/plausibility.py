@@ -29,6 +29,10 @@ import math
 import cv2
 import numpy as np
 
+from .._validate import validate_D, validate_K
+from ..mirror import HyperbolicMirror
+from .ellipse import axes_angle, ellipse_from_conic
+
 __all__ = [
     "DEFAULT_MAX_ASPECT_DEVIATION",
     "DEFAULT_MAX_OFFSET_MM",
@@ -170,8 +174,6 @@ def expected_rim(
     -------
     ExpectedRim
     """
-    from .._validate import validate_D, validate_K
-
     K = validate_K(K)
     D = validate_D(D)
     max_tilt_deg = _limit(max_tilt_deg, "max_tilt_deg")
@@ -215,8 +217,6 @@ def _rim_geometry(rim):
     Q = np.asarray(rim, np.float64)
     if Q.shape != (3, 3) or not np.isfinite(Q).all():
         raise ValueError("rim must be a RimFit or the (3, 3) rim conic Q_I")
-    from .ellipse import axes_angle, ellipse_from_conic
-
     center, S = ellipse_from_conic(Q)
     return center, np.asarray(axes_angle(S)[0], np.float64)
 
@@ -520,8 +520,6 @@ def assess(
     -------
     list of PlausibilityWarning
     """
-    from ..mirror import HyperbolicMirror
-
     camera = report.camera
     refinement = getattr(report, "refinement", None)
     residuals = {

@@ -34,8 +34,11 @@ import math
 
 import cv2
 import numpy as np
+from scipy.optimize import minimize_scalar
 
+from ..raytrace import distort_normalized
 from .errors import EstimationError
+from .rim import RimFit, fit_rim
 from .robust import mad_sigma
 
 __all__ = [
@@ -140,8 +143,6 @@ def self_reflection_pixel(mirror, R, t, K, D=None):
     Xc = R @ P + t
     xn = Xc[:2] / Xc[2]
     if D is not None:
-        from ..raytrace import distort_normalized
-
         return distort_normalized(xn[None], K, D)[0]  # distorted, then K
     return K[:2, :2] @ xn + K[:2, 2]
 
@@ -226,8 +227,6 @@ def fit_circle(mirror, R, t, xn, Kinv2, r=None, z=None, min_fraction=0.8, h=1e-2
         ``rms`` is the RMS pixel residual; ``inf`` when fewer than ``min_fraction`` of the
         outline's rays reach the plane (the outline cannot be the camera's under this posture).
     """
-    from scipy.optimize import minimize_scalar
-
     n = len(xn)
     rays = [_rays_camera(mirror, R, t, xn)]
     for k in range(2):
@@ -535,8 +534,6 @@ def detect_reflection(
 def _detect(image, rim, center, center_search, max_radius, min_radius, rng, scene_level, fraction):
     """:func:`detect_reflection`; ``scene_level`` (grey) replaces the mirror scene's level when
     looking inside a dark surround."""
-    from .rim import RimFit
-
     if not isinstance(rim, RimFit):
         raise ValueError(
             f"rim must be a RimFit (from detect_rim or fit_rim), got {type(rim).__name__}"
@@ -708,8 +705,6 @@ def _body_in_surround(gray, G, surround, bw, sig, rng):
     the surround's and its interior's; a robust ellipse through them; then steps 4-5 on the
     negated image (the fall is a rise there), the core tested on the image itself.
     """
-    from .rim import fit_rim
-
     c, floor, interior = surround.fit.center, surround.shell, surround.interior
     contrast = interior - floor
     if not (contrast > 10.0 and surround.spread < 0.5 * contrast):
@@ -808,8 +803,6 @@ def _within(fit, outer, tol):
 def _inside(fit, outer, tol):
     """Whether the whole ellipse through ``fit``'s outline points lies within ``tol`` px outside
     ``outer``'s outline (radii about ``outer``'s centre, interpolated over the angle)."""
-    from .rim import fit_rim
-
     try:
         ell = fit_rim(fit.points, robust=False)
     except ValueError:
@@ -880,8 +873,6 @@ class _BrightInside(_Coreless):
 def _refine_silhouette(gray, G, pts, c_est, r_est, bw, sig, levels, rng):
     """Steps 4-5 of :func:`detect_reflection` for one voted circle; ``levels`` is the contrast
     (scene minus dark centre) and the grey below which a pixel is dark."""
-    from .rim import fit_rim
-
     contrast, dark_max = levels
 
     rad = np.hypot(pts[:, 0] - c_est[0], pts[:, 1] - c_est[1])
