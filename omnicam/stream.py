@@ -201,6 +201,10 @@ def _check_frame_size(frame_size):
     return int(w), int(h)
 
 
+#: The dtypes ``cv2.remap`` takes.
+_REMAP_DTYPES = tuple(np.dtype(t) for t in (np.uint8, np.uint16, np.int16, np.float32, np.float64))
+
+
 class Unwarper:
     """Named views' remap tables, applied to frames with ``cv2.remap`` into preallocated outputs.
 
@@ -335,7 +339,7 @@ class Unwarper:
         Parameters
         ----------
         frame : (H, W) or (H, W, C) ndarray
-            A frame of ``source_size`` (any dtype ``cv2.remap`` takes).
+            A frame of ``source_size``, of a dtype ``cv2.remap`` takes (:data:`_REMAP_DTYPES`).
         copy : bool
             Return new arrays (and a new dict) that later calls do not touch.
 
@@ -348,6 +352,12 @@ class Unwarper:
             raise ValueError(
                 f"frame must be a non-empty (H, W) or (H, W, C) image array, "
                 f"got {type(frame).__name__}"
+            )
+        if frame.dtype not in _REMAP_DTYPES:
+            raise ValueError(
+                f"frame has dtype {frame.dtype}, which cv2.remap does not take: give uint8, "
+                f"uint16, int16, float32 or float64 (e.g. frame.astype(np.uint8) * 255 for a "
+                f"bool mask)"
             )
         if self._source_size is not None and (
             frame.shape[1] != self._source_size[0] or frame.shape[0] != self._source_size[1]

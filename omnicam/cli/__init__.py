@@ -32,7 +32,9 @@ traceback of an unexpected error instead of its one-line summary.
 
 from __future__ import annotations
 
+import contextlib
 import os
+import sys
 
 from .._quiet import opencv_silenced
 from . import calibrate, demo, export, info, maps, unwarp
@@ -68,6 +70,10 @@ def build_parser():
     return parser
 
 
+#: Exit status when the reader of stdout went away (128 + SIGPIPE, as the shell reports it).
+EXIT_BROKEN_PIPE = 141
+
+
 def main(argv=None) -> int:
     """Run the ``omnicam`` command line; return the exit status."""
     try:
@@ -82,6 +88,16 @@ def main(argv=None) -> int:
     except KeyboardInterrupt:
         _error("interrupted")
         return EXIT_INTERRUPTED
+    except BrokenPipeError:  # the reader went away (``omnicam info x.yaml | head -1``)
+        with contextlib.suppress(OSError):  # no second error when Python flushes stdout
+            os.dup2(os.open(os.devnull, os.O_WRONLY), sys.stdout.fileno())
+        return EXIT_BROKEN_PIPE
+    except MemoryError:
+        _error(
+            "out of memory: the outputs asked for are too large for this machine; ask for "
+            "smaller ones (--panorama / --perspective WxH, fewer views at once)"
+        )
+        return EXIT_FAILURE
     except Exception as e:  # a bug: still one line, unless asked for the traceback
         if os.environ.get("OMNICAM_DEBUG"):
             raise
@@ -93,6 +109,4 @@ def main(argv=None) -> int:
 
 
 if __name__ == "__main__":
-    import sys
-
     sys.exit(main())

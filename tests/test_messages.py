@@ -1,0 +1,50 @@
+"""Messages that name the thing and what to do (issue: a newcomer's first hour, item 8)."""
+
+import subprocess
+import sys
+
+import numpy as np
+import pytest
+
+from omnicam import synthetic
+from omnicam.stream import Unwarper
+from omnicam.views import PanoramaView
+
+VIEWS = {"pano": PanoramaView((64, 16))}
+
+
+@pytest.fixture(scope="module")
+def unwarper():
+    return Unwarper.from_camera(synthetic.misaligned_rig(), VIEWS)
+
+
+@pytest.mark.parametrize("dtype", [np.bool_, np.int8, np.int32, np.float16, np.complex64])
+def test_a_frame_of_a_dtype_remap_does_not_take_is_a_value_error_naming_it(unwarper, dtype):
+    w, h = unwarper.source_size
+    with pytest.raises(ValueError, match=f"frame has dtype {np.dtype(dtype)}"):
+        unwarper(np.zeros((h, w), dtype))
+
+
+def test_a_reader_that_goes_away_ends_the_command_quietly():
+    info = [sys.executable, "-m", "omnicam", "info", "calib_files/hyperomni_aligned.yaml"]
+    p = subprocess.Popen(info, stdout=subprocess.PIPE, stderr=subprocess.PIPE, cwd=REPO)
+    p.stdout.close()  # as `| head -1` does once it has its line
+    with p.stderr:
+        err = p.stderr.read().decode()
+    assert p.wait() in (0, 141)
+    assert "Error" not in err and "unexpected" not in err, err
+
+
+def test_out_of_memory_is_one_line_with_advice(monkeypatch, capsys):
+    from omnicam import cli
+
+    def huge(args):
+        raise MemoryError
+
+    monkeypatch.setattr(cli.info, "cmd_info", huge)
+    assert cli.main(["info", "calib_files/hyperomni_aligned.yaml"]) == 1
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and "out of memory" in err[0] and "smaller" in err[0]
+
+
+REPO = __file__.rsplit("/tests/", 1)[0]
