@@ -1,4 +1,4 @@
-"""Time and accuracy of calibrate() from a rendered 1000x1000 image (issue 3, item 9).
+"""Time and accuracy of calibrate() from a rendered 1000x1000 image.
 
 Target: the whole calibration (rim detection, the camera's reflection (lens), Chen's method,
 selection, refinement) from one 1000x1000 image in <= 0.5 s on 2 cores (median of several

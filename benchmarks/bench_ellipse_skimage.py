@@ -1,7 +1,7 @@
-"""scikit-image against omnicam's hand-written ellipse pieces on clipped noisy rims (issue 12).
+"""scikit-image against omnicam's hand-written ellipse pieces on clipped noisy rims.
 
-Both methods of each piece run in one process on the same data; times are medians. The figures
-are quoted in omnicam/calibration/ellipse.py.
+Both methods of each piece run in one process on the same data; times are medians.
+omnicam/calibration/ellipse.py states the choice this benchmark supports.
 
 1. Direct fit: ``direct_ellipse`` (now ``skimage.measure.EllipseModel.from_estimate``) against
    the hand-written Halir-Flusser fit it replaced (kept below as ``handwritten_direct``): RMS

@@ -1,6 +1,6 @@
 """Throughput of unproject / project next to cv2.omnidir on the same million points, one run.
 
-Targets (issue 2): unproject >= 3x cv2.omnidir.undistortPoints; the exact non-central project
+Targets: unproject >= 3x cv2.omnidir.undistortPoints; the exact non-central project
 >= 0.5x cv2.omnidir.projectPoints (a closed-form central model). Prints medians and ratios.
 
     python benchmarks/bench_raytrace.py [--n 1000000] [--repeat 7]

@@ -25,11 +25,11 @@ import cv2
 import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "tests"))
-from barrel import render  # noqa: E402
+from barrel import render
 
 from omnicam import (
-    MisalignedHyperbolicCamera,  # noqa: E402
-    synthetic,  # noqa: E402
+    MisalignedHyperbolicCamera,
+    synthetic,
 )
 
 calibrate = MisalignedHyperbolicCamera.calibrate

@@ -1,6 +1,6 @@
 """Rim detection: time and accuracy on rendered images and on the real photograph.
 
-Budget (issue 3): calibrating a 1000x1000 image <= 0.5 s in total on 2 cores, so
+Budget: calibrating a 1000x1000 image <= 0.5 s in total on 2 cores, so
 ``detect_rim`` should stay well under 0.3 s there. Prints the median time of ``--repeat`` runs
 (after one warm-up), the RMS geometric distance of the true rim to the fitted conic (rendered
 images; eqs. 20-22) and, when ``omnicam.calibration.calibrate`` exists, the whole calibration.

@@ -1,4 +1,4 @@
-"""The rim on renders that look real (issue 8, items 5-6): unguided vs guided by K and the mirror.
+"""The rim on renders that look real: unguided vs guided by K and the mirror.
 
 For each stress render of :mod:`omnicam.synthetic.realistic` (holders white, black or metal,
 struts, dark floor, clipped rims, blur, JPEG, ...; the renderer shares nothing with the

@@ -20,8 +20,8 @@ import numpy as np
 
 sys.path.insert(0, os.path.join(os.path.dirname(os.path.abspath(__file__)), ".."))
 
-from omnicam import Unwarper, synthetic  # noqa: E402
-from omnicam.views import PanoramaView, PerspectiveView  # noqa: E402
+from omnicam import Unwarper, synthetic
+from omnicam.views import PanoramaView, PerspectiveView
 
 
 def measure(unwarper, frames, rounds):

@@ -1,4 +1,4 @@
-"""Stress benchmark of calibrate() on renders that look like real rigs (issue 8, Targets).
+"""Stress benchmark of calibrate() on renders that look like real rigs.
 
 Renders ``--n`` cases of :func:`omnicam.synthetic.realistic.stress_cases` (camera body as a lens
 barrel and box, holder ring, struts, dark floor, clipped rim, blur, vignetting, noise, JPEG,
@@ -27,7 +27,7 @@ comes from the residuals actually observed, and column ``err/std`` checks that i
 (a median near 1): where it is, this column is the share of runs in which the cues that were
 used carry enough information for the target at all.
 
-Targets (issue 8): 0 silent failures; with the reflection visible the right candidate in
+Targets: 0 silent failures; with the reflection visible the right candidate in
 >= 99 % without far lines; the axis within 0.05 deg in >= 95 % with the reflection or one far
 line; median(actual axis error / reported axis std) between 0.5 and 2.
 
@@ -121,7 +121,7 @@ def run_one(render, mode):
             lens=lens,
             **extra,
         )
-    except Exception as exc:  # noqa: BLE001 -- every failure is a result here
+    except Exception as exc:
         rec.update(
             status="error", message=f"{type(exc).__name__}: {exc}", time=time.perf_counter() - t0
         )

@@ -2,10 +2,10 @@
 
 Run: ``python benchmarks/bench_views.py [--repeat N]``
 
-* Same output sizes as issue 4: a 1024x768 perspective view and a 2048x512 panorama, our exact
+* The output sizes users ask for: a 1024x768 perspective view and a 2048x512 panorama, our exact
   non-central tables (misaligned 500x500 rig) against OpenCV's closed-form central model
   (``cv2.omnidir``, xi = 1, a 500x500 camera), interleaved in one process; medians and ratios.
-  Also perspective views that straddle an edge of the visible band (issue 12: 1024x768,
+  Also perspective views that straddle an edge of the visible band (1024x768,
   f = 400, looking horizontally, 20 deg up and 10 deg down), where cells near the edge are
   refined and some pixels solved exactly.
 * Accuracy: the float tables against the exact projection at 200 000 random output pixels.
@@ -27,7 +27,7 @@ import numpy as np
 
 sys.path.insert(0, os.path.join(os.path.dirname(os.path.abspath(__file__)), ".."))
 
-from omnicam import K_from_fov, rotation_from_ypr, synthetic, views  # noqa: E402
+from omnicam import K_from_fov, rotation_from_ypr, synthetic, views
 
 PERSP = (1024, 768)
 PANO = (2048, 512)

@@ -326,7 +326,7 @@ def draw_view(view, corners, title, angles_deg):
 
 
 def table_markdown(rows, size, view_size, fov, depth, extra):
-    fmt = lambda v: "-" if math.isnan(v) else f"{v:.1f}"  # noqa: E731
+    fmt = lambda v: "-" if math.isnan(v) else f"{v:.1f}"
     lines = [
         "| Perspective view from | θ1 [deg] | θ2 [deg] | θ3 [deg] | max \\|θ − 90\\| [deg] |",
         "|---|---|---|---|---|",

@@ -271,7 +271,7 @@ def atomic_output(path, *, what="file", overwrite=True, verify=None, allow_empty
         if verify is not None:
             try:
                 ok = verify(tmp)
-            except Exception as e:  # noqa: BLE001 - any failure to read back means a bad write
+            except Exception as e:
                 raise OutputError(
                     f"cannot write {what} {path}: the written file does not read "
                     f"back ({_describe(e)}); the previous file is unchanged"

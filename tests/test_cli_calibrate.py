@@ -269,7 +269,7 @@ def test_help_documents_the_new_options(capsys):
 
 
 def test_intrinsics_as_numbers_instead_of_a_file(tmp_path, capsys):
-    """--fx --fy --cx --cy [--dist] stand for an intrinsics file (issue 11)."""
+    """--fx --fy --cx --cy [--dist] stand for an intrinsics file."""
     from omnicam import synthetic
 
     truth = synthetic.misaligned_rig()

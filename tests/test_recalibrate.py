@@ -1,4 +1,4 @@
-"""After a bump (issue 17, item 8): a rig's ``K``, ``D`` and mirror kept, its posture re-estimated
+"""After a bump: a rig's ``K``, ``D`` and mirror kept, its posture re-estimated
 from one new frame (``MisalignedHyperbolicCamera.recalibrate``, ``omnicam calibrate --from``)."""
 
 from __future__ import annotations
@@ -188,7 +188,7 @@ def test_a_tilted_rigs_stated_uncertainty_is_the_rms_of_its_errors():
 
 @pytest.mark.xfail(
     strict=True,
-    reason="issue 17 item 8: near alignment the rim's image depends on the tilt (with its "
+    reason="near alignment the rim's image depends on the tilt (with its "
     "compensating shift) only to second order, so the first-order uncertainty, evaluated at an "
     "estimate whose tilt the noise pushed away from 0, is too small (about 1.8x here; on "
     "OCamCalib's VMR frames 0.23-1.3 deg stated, 0.85-3.3 deg found); the estimator in "

@@ -13,7 +13,7 @@ import pytest
 
 from omnicam import K_from_fov, MisalignedHyperbolicCamera, rotation_from_ypr, synthetic, views
 
-TOL = 0.01  # px, the accuracy every float table entry keeps (issue 4, item 2)
+TOL = 0.01  # px, the accuracy every float table entry keeps
 
 RIGS = {
     "aligned": synthetic.aligned_rig,
@@ -130,7 +130,7 @@ def test_perspective_table_within_tolerance_of_exact_projection(rig, depth, size
 
 @pytest.mark.parametrize("ypr", [(0.0, 0.0, 0.0), (30.0, 20.0, 0.0), (-60.0, -10.0, 0.0)])
 def test_views_across_the_edge_of_the_band_keep_the_bound(ypr):
-    """Issue 12's straddling views (f = 400 at 1024x768), scaled to 320x240: the band's upper
+    """Views that straddle the band (f = 400 at 1024x768), scaled to 320x240: the band's upper
     edge crosses the view, cells wholly above it are skipped, cells on it are refined."""
     cam = synthetic.misaligned_rig()
     size = (320, 240)
@@ -354,12 +354,12 @@ def test_rim_cells_give_the_entries_of_edge_cells(rig_name):
 def test_m1type_variants_agree(kind):
     cam = synthetic.misaligned_rig()
     if kind == "panorama":
-        make = lambda t: cam.init_panorama_maps((300, 80), m1type=t)  # noqa: E731
+        make = lambda t: cam.init_panorama_maps((300, 80), m1type=t)
     else:
         K = K_from_fov(100.0, (200, 150))
         make = lambda t: cam.init_perspective_maps(
             K, (200, 150), R=rotation_from_ypr(5, 10, 0), m1type=t
-        )  # noqa: E731
+        )
     fx, fy = make(cv2.CV_32FC1)
     assert fx.dtype == np.float32 and fx.shape == (fx.shape[0], fx.shape[1])
     xy, none = make(cv2.CV_32FC2)

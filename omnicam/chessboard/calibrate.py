@@ -379,7 +379,7 @@ def _check_arguments(
     if not (math.isfinite(square) and square > 0):
         raise ValueError(f"square_size must be a positive number, got {square_size!r}")
     if mirror is not None and not isinstance(mirror, HyperbolicMirror):
-        raise ValueError(  # noqa: TRY004 (ValueError for bad arguments, as everywhere)
+        raise ValueError(
             f"mirror must be a HyperbolicMirror or None (unknown), got {type(mirror).__name__}"
         )
     if dist_model not in DIST_MODELS:

@@ -512,7 +512,7 @@ def case_load(ctx, spec, cap):
         if not all(ctx.np.isfinite(x).all() and x.shape[1] == 2 for x in lines):
             return "bad", "far lines not finite (N, 2)"
         return "ok", "read"
-    except Exception as e:  # noqa: BLE001
+    except Exception as e:
         out = _exc_outcome(e, [n for n in names if n])
         if spec.get("missing") and out[0] == "ok" and not isinstance(e, FileNotFoundError):
             return "bad", f"a missing file gave {type(e).__name__}, not FileNotFoundError"
@@ -562,7 +562,7 @@ def case_api(ctx, spec, cap):
     label, names, fn = API_CASES[spec["index"]]
     try:
         result = fn(ctx)
-    except Exception as e:  # noqa: BLE001
+    except Exception as e:
         return _exc_outcome(e, names)
     if (
         isinstance(result, tuple)
@@ -592,7 +592,7 @@ def case_save(ctx, spec, cap):
     if spec.get("loads_first"):  # after a killed writer: the file must be whole
         try:
             om.MisalignedHyperbolicCamera.load(path)
-        except Exception as e:  # noqa: BLE001
+        except Exception as e:
             return "bad", f"the file left by a killed save does not load: {e}"
     try:
         if kind == "camera":
@@ -604,7 +604,7 @@ def case_save(ctx, spec, cap):
         else:
             raise AssertionError(kind)
         failed = None
-    except Exception as e:  # noqa: BLE001
+    except Exception as e:
         failed = e
     left = _temps(folder)
     if left:
@@ -669,7 +669,7 @@ def worker_main(workdir, as_user=None):
     ctx = Ctx(workdir)
     if as_user is not None:  # drop to another user once everything is imported
         import omnicam.cli
-        import omnicam.cli.info  # noqa: F401
+        import omnicam.cli.info
 
         omnicam.MisalignedHyperbolicCamera.load(ctx.setup["calib"]).best_fit_viewpoint()
         os.setegid(as_user)
@@ -681,7 +681,7 @@ def worker_main(workdir, as_user=None):
         with Captured() as cap:
             try:
                 status, detail = KINDS[spec["kind"]](ctx, spec, cap)
-            except Exception as e:  # noqa: BLE001 - a harness path the case did not expect
+            except Exception as e:
                 status = "bad"
                 detail = f"uncaught {type(e).__name__}: {str(e)[:300]} | " + " / ".join(
                     traceback.format_exc().splitlines()[-4:-1]
@@ -2452,7 +2452,7 @@ class Runner:
 
             try:
                 omnicam.MisalignedHyperbolicCamera.load(loads)
-            except Exception as e:  # noqa: BLE001
+            except Exception as e:
                 status, detail = "bad", f"after SIGINT the file does not load: {e}"
         left = _temps(folder)
         if left:
@@ -2494,7 +2494,7 @@ class Runner:
                 n0, s0 = self.n, time.perf_counter()
                 try:
                     step()
-                except Exception:  # noqa: BLE001 - a harness fault: bad, and go on
+                except Exception:
                     self.record(
                         "harness", name, {"status": "bad", "detail": traceback.format_exc()[-600:]}
                     )
