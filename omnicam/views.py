@@ -33,6 +33,7 @@ from __future__ import annotations
 import functools
 import math
 import numbers
+import warnings
 
 import cv2
 import numpy as np
@@ -879,7 +880,8 @@ def init_panorama_maps(
     maps = _table(
         camera, _KIND[projection], Rm.T, p0, p1, az_step, (w, h), depth, vp, m1type, stats=st
     )
-    _warn_if_unseen(camera, st[8] / (w * h), "panorama")
+    # a full-sphere panorama (a 360 video's frame) is black above the band by its format
+    _warn_if_unseen(camera, st[8] / (w * h), "panorama" if hi - lo < 179.0 else "360 panorama")
     return maps
 
 
@@ -967,22 +969,25 @@ def _refuse_swapped(matrix_arg, size_arg, signature):
         raise ValueError(f"got (width, height) first; the order is {signature}")
 
 
-#: A view with more than this fraction of its pixels unseen gives a RuntimeWarning.
-UNSEEN_WARN_FRACTION = 0.5
+#: A view with more than this fraction of its pixels unseen gives a RuntimeWarning: half of a
+#: perspective view or of a full-sphere panorama, a third of a panorama of a band.
+UNSEEN_WARN_FRACTION = {"perspective view": 0.5, "panorama": 1.0 / 3.0, "360 panorama": 0.5}
 
 
 def _warn_if_unseen(camera, frac, what):
-    """RuntimeWarning when most of a view (the fraction ``frac`` of its entries unseen) lies
-    outside the band the mirror sees."""
+    """RuntimeWarning when much of a view (the fraction ``frac`` of its entries unseen) lies
+    outside the band the mirror sees, with the way back into it."""
     frac = float(frac)
-    if frac > UNSEEN_WARN_FRACTION:
-        import warnings
-
+    if frac > UNSEEN_WARN_FRACTION[what]:
         lo, hi = visible_elevation_range(camera)
+        advice = (
+            "narrow its elevation range to that band"
+            if what.endswith("panorama")
+            else "pitch it into that band, or narrow its field of view"
+        )
         warnings.warn(
             f"{what}: {frac:.0%} of its pixels are outside what the mirror sees "
-            f"(visible_elevation_range: {lo:.1f} to {hi:.1f} deg elevation); "
-            f"aim it lower or use a smaller elevation range",
+            f"(visible_elevation_range: {lo:.1f} to {hi:.1f} deg elevation); {advice}",
             RuntimeWarning,
             stacklevel=3,
         )

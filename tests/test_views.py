@@ -242,9 +242,10 @@ def test_panorama_R_rotates_the_panorama_frame():
     cam = synthetic.misaligned_rig()
     R = rotation_from_ypr(0.0, 0.0, 0.0) @ cv2.Rodrigues(np.array([0.1, -0.2, 0.3]))[0]
     size = (128, 32)
-    mapx, mapy = cam.init_panorama_maps(
-        size, elevation_range=(-60.0, 5.0), R=R, m1type=cv2.CV_32FC1
-    )
+    with pytest.warns(RuntimeWarning, match="outside what the mirror sees"):  # tilted: 42 %
+        mapx, mapy = cam.init_panorama_maps(
+            size, elevation_range=(-60.0, 5.0), R=R, m1type=cv2.CV_32FC1
+        )
     ref = exact(cam, panorama_dirs(size, -60.0, 5.0, "cylindrical", R))
     assert_matches_exact(cam, mapx, mapy, ref)
 
@@ -526,3 +527,26 @@ def test_random_rigs_keep_the_bound(seed):
     R = rotation_from_ypr(rng.uniform(-180, 180), rng.uniform(-80, 10), rng.uniform(-30, 30))
     mapx, mapy = cam.init_perspective_maps(K, size, R=R, m1type=cv2.CV_32FC1, depth=depth)
     assert_matches_exact(cam, mapx, mapy, exact(cam, perspective_dirs(K, size, R), depth))
+
+
+@pytest.mark.parametrize(
+    "build, advice",
+    [
+        (
+            lambda cam: cam.init_panorama_maps(
+                (64, 32), elevation_range=(-60.0, 80.0), projection="equirectangular"
+            ),
+            "narrow",
+        ),
+        (
+            lambda cam: cam.init_perspective_maps(
+                views.K_from_fov(60, (64, 48)), (64, 48), R=rotation_from_ypr(pitch=70.0)
+            ),
+            "pitch it into that band",
+        ),
+    ],
+    ids=["panorama a third black", "perspective view above the band"],
+)
+def test_a_view_much_outside_the_band_gets_a_note_with_the_way_back(build, advice):
+    with pytest.warns(RuntimeWarning, match=advice):
+        build(synthetic.misaligned_rig())
