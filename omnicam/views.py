@@ -881,7 +881,7 @@ def init_panorama_maps(
         camera, _KIND[projection], Rm.T, p0, p1, az_step, (w, h), depth, vp, m1type, stats=st
     )
     # a full-sphere panorama (a 360 video's frame) is black above the band by its format
-    _warn_if_unseen(camera, st[8] / (w * h), "panorama" if hi - lo < 179.0 else "360 panorama")
+    _warn_if_unseen(camera, st[8] / (w * h), "panorama" if hi - lo < 170.0 else "360 panorama")
     return maps
 
 
