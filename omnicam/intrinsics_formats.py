@@ -16,12 +16,12 @@ and returns ``None`` for anything else, which ``read_intrinsics`` reads with ``c
 file with an ``xi``), a Kalibr ``omni`` camera and an OCamCalib ``calib_results.txt`` describe
 the whole catadioptric camera as one central model. Their ``K`` is the unified model's, whose
 focal length for a hyperbolic mirror is ``f sqrt(1 - xi^2)``, not the lens's ``f``, and their
-``D`` distorts the unified projection, not the lens (:mod:`omnicam.calibration.central`);
+``D`` distorts the unified projection, not the lens (:mod:`omnicam.chessboard.central`);
 OCamCalib's polynomial has no ``K`` at all. Taken as the lens's ``K`` and ``D`` they would give a
 wrong camera without a word, so they are refused with that reason (:func:`not_pinhole`; the
 ``cv2.omnidir`` files by ``read_intrinsics``, which parses FileStorage files), and the unified
-ones are read by :func:`omnicam.io.read_central_model` as a central model
-(:func:`central_model`), where a chessboard calibration can start.
+ones are read by :func:`omnicam.io.read_central_model` as a central model, where a chessboard
+calibration can start (:func:`read_other_central` reads Kalibr's).
 
 The YAML of ROS and Kalibr is PyYAML's, not OpenCV's: ``cv2.FileStorage`` refuses Kalibr's block
 sequences written at their key's own indentation (``T_cn_cnm1:`` then ``- [...]`` lines, in
@@ -38,13 +38,10 @@ import re
 
 import numpy as np
 
-from ._validate import finite_array, real_number, validate_image_size, validate_K
-
 __all__ = [
     "MAX_BYTES",
     "MAX_NESTING",
     "OCAMCALIB_HEADER",
-    "central_model",
     "not_pinhole",
     "parse_yaml",
     "read_other_central",
@@ -275,36 +272,6 @@ def not_pinhole(what, xi=None):
     )
 
 
-def central_model(K, xi, D=None, image_size=None):
-    """The unified (Mei) model as a dict, validated, in :mod:`omnicam.calibration.central`'s
-    conventions (those of its ``CentralFit``).
-
-    Parameters
-    ----------
-    K : (3, 3) array_like
-        The unified model's camera matrix ``[[gamma_x, s, c_x], [0, gamma_y, c_y], [0, 0, 1]]``.
-    xi : float
-        Non-negative. A hyperbolic mirror's is in ``(0, 1)``, which
-        :func:`omnicam.calibration.central.hyperbolic_start` needs; a fit with distortion can
-        give ``xi >= 1`` on a rig that is not exactly central (``k1`` trades with ``xi``).
-    D : array_like of 4 numbers, or None
-        ``k1, k2, p1, p2`` on the unified model's normalised plane; ``None`` for none.
-    image_size : (int, int) or None
-
-    Returns
-    -------
-    dict
-        ``{"K": (3, 3) float64 ndarray, "xi": float, "D": (4,) float64 ndarray,
-        "image_size": (width, height) or None}``: ``hyperbolic_start(m["K"], m["xi"], ...)``.
-    """
-    return {
-        "K": validate_K(K),
-        "xi": real_number(xi, "xi", lo=0.0, expected="a finite number >= 0"),
-        "D": np.zeros(4) if D is None else finite_array(D, "D", (4,), "4 numbers (k1, k2, p1, p2)"),
-        "image_size": validate_image_size(image_size),
-    }
-
-
 # -- the formats ----------------------------------------------------------------------------------
 def _numbers(value, what, count=None):
     try:
@@ -407,7 +374,7 @@ def _kalibr_omni(doc):
     xi, fu, fv, pu, pv = _numbers(cam.get("intrinsics"), "field 'intrinsics'", 5)
     K = np.array([[fu, 0.0, pu], [0.0, fv, pv], [0.0, 0.0, 1.0]])
     D = _kalibr_distortion(cam, "k1 k2 p1 p2 on the unified projection")
-    return central_model(K, xi, D, _kalibr_size(cam))
+    return K, float(xi), D, _kalibr_size(cam)
 
 
 def _text(path):
@@ -475,8 +442,8 @@ def read_other_intrinsics(path):
 
 
 def read_other_central(path):
-    """The central model (:func:`central_model`) of a Kalibr ``omni`` camchain; ``None`` when
-    the file is not a ROS or Kalibr YAML file.
+    """``(K, xi, D, image_size)`` of a Kalibr ``omni`` camchain (unvalidated; ``D`` ``None``
+    without distortion); ``None`` when the file is not a ROS or Kalibr YAML file.
 
     Raises
     ------

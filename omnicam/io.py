@@ -58,13 +58,8 @@ import numpy as np
 from ._atomic import OutputError, atomic_output, sigint_deferred, write_bytes
 from ._quiet import opencv_silenced
 from ._typing import ArrayLike, FloatArray, PathLike, Size
-from ._validate import validate_D, validate_image_size, validate_K
-from .intrinsics_formats import (
-    central_model,
-    not_pinhole,
-    read_other_central,
-    read_other_intrinsics,
-)
+from ._validate import finite_array, real_number, validate_D, validate_image_size, validate_K
+from .intrinsics_formats import not_pinhole, read_other_central, read_other_intrinsics
 from .mirror import HyperbolicMirror
 
 __all__ = [
@@ -613,9 +608,19 @@ def read_central_model(path: PathLike) -> dict:
     Returns
     -------
     dict
-        ``{"K", "xi", "D", "image_size"}`` as :func:`omnicam.intrinsics_formats.central_model`
-        gives it, in the conventions of :mod:`omnicam.calibration.central`: ``K`` and ``xi``
-        are what :func:`~omnicam.calibration.central.hyperbolic_start` starts from.
+        In the conventions of :mod:`omnicam.chessboard.central` (its ``CentralFit``):
+
+        * ``"K"``: (3, 3) float64, the unified model's camera matrix ``[[gamma_x, s, c_x],
+          [0, gamma_y, c_y], [0, 0, 1]]`` (not the lens's: module notes of
+          :mod:`omnicam.intrinsics_formats`);
+        * ``"xi"``: float, ``>= 0``. A hyperbolic mirror's is in ``(0, 1)``, which
+          :func:`~omnicam.chessboard.central.hyperbolic_start` needs; a fit with distortion
+          can give ``xi >= 1`` on a rig that is not exactly central (``k1`` trades with ``xi``);
+        * ``"D"``: (4,) float64, ``k1, k2, p1, p2`` on the unified model's normalised plane
+          (zeros when the file has none);
+        * ``"image_size"``: ``(width, height)`` or ``None``.
+
+        ``hyperbolic_start(m["K"], m["xi"], rim_px_radius, rim_radius)`` starts from it.
 
     Raises
     ------
@@ -627,19 +632,26 @@ def read_central_model(path: PathLike) -> dict:
     path = _fspath(path, what)
     _prescan(path, what)
     model = read_other_central(path)  # Kalibr camchains
-    if model is not None:
-        return model
-    r = _reading(path, what)
-    if r.node("xi", required=False) is None:
-        raise r.fail("xi", "is missing: not a cv2.omnidir calibration (nor a Kalibr camchain)")
-    K = r.matrix(r.first(K_FIELDS, required=True), (3, 3), allow_list=True)
-    name = r.first(D_FIELDS)
-    D = None if name is None else r.matrix(name, allow_list=True)
-    xi, size = r.number("xi"), r.image_size()
+    if model is None:
+        r = _reading(path, what)
+        if r.node("xi", required=False) is None:
+            raise r.fail("xi", "is missing: not a cv2.omnidir calibration (nor a Kalibr camchain)")
+        K = r.matrix(r.first(K_FIELDS, required=True), (3, 3), allow_list=True)
+        name = r.first(D_FIELDS)
+        D = None if name is None else r.matrix(name, allow_list=True)
+        model = K, r.number("xi"), D, r.image_size()
+    K, xi, D, size = model
     try:
-        return central_model(K, xi, D, size)
+        return {
+            "K": validate_K(K),
+            "xi": real_number(xi, "xi", lo=0.0, expected="a finite number >= 0"),
+            "D": np.zeros(4)
+            if D is None
+            else finite_array(D, "D", (4,), "4 numbers (k1 k2 p1 p2)"),
+            "image_size": validate_image_size(size),
+        }
     except ValueError as e:
-        raise ValueError(f"{what} {r.path}: {e}") from None
+        raise ValueError(f"{what} {shown(path)}: {e}") from None
 
 
 def read_far_lines(path: PathLike) -> list[FloatArray]:

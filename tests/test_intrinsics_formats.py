@@ -7,7 +7,7 @@ import numpy as np
 import pytest
 
 from omnicam import read_intrinsics, synthetic
-from omnicam.calibration.central import hyperbolic_start
+from omnicam.chessboard.central import hyperbolic_start
 from omnicam.cli import main
 from omnicam.export import export
 from omnicam.intrinsics_formats import MAX_NESTING, parse_yaml
@@ -354,7 +354,7 @@ def test_omnicams_own_exports_are_refused_as_intrinsics(tmp_path, fmt):
 
 @pytest.mark.parametrize("fmt", ["omnidir", "kalibr"])
 def test_a_central_export_starts_the_aligned_rig_again(tmp_path, fmt):
-    """read_central_model's dict is what calibration.central starts from: the aligned rig's
+    """read_central_model's dict is what chessboard.central starts from: the aligned rig's
     unified model and rim give back its K and mirror."""
     p = tmp_path / "x.yaml"
     fit = export(ALIGNED, fmt, p)
