@@ -26,6 +26,14 @@ rotation, pass ``det(M) M`` and negate the point coordinates' sign convention it
 camera's z axis (points become ``-X_omni``: the same direction on the unit sphere's opposite
 side, which the unified model does not treat the same way, so prefer ``M``).
 
+**When the cost is large.** :func:`export` warns (``RuntimeWarning``) when the file it writes is
+off by more than :data:`WARN_RMS_PX` (0.5 px) RMS or :data:`WARN_MAX_PX` (1 px) at its worst
+pixel: more than a pixel somewhere in the image, an error a user sees. The warning names the
+central format that fits this camera best (each format's fit measured the same way) and the
+exports that are exact, the remap tables of :mod:`omnicam.maps_export` (``omnicam maps``), which
+use the exact non-central model. OCamCalib's model has no tangential term, so it costs more
+than the unified one on a tilted rig (about 0.9 px RMS against 0.03 px at 3 degrees and 3 mm).
+
 OCamCalib's Scaramuzza model (:func:`fit_ocamcalib`) has its own frame: x along image rows
 (down), y along columns (right), z out of the image, so there too ``det M = -1`` in general
 (``[[0, 1, 0], [1, 0, 0], [0, 0, 1]]`` for the aligned rig).
@@ -34,6 +42,7 @@ OCamCalib's Scaramuzza model (:func:`fit_ocamcalib`) has its own frame: x along 
 from __future__ import annotations
 
 import math
+import warnings
 from dataclasses import dataclass, field
 
 import cv2
@@ -43,6 +52,8 @@ from ._atomic import OutputError, atomic_output, write_bytes
 
 __all__ = [
     "FORMATS",
+    "WARN_MAX_PX",
+    "WARN_RMS_PX",
     "OcamFit",
     "OmnidirFit",
     "export",
@@ -64,6 +75,10 @@ F_OMNI = np.diag([1.0, 1.0, -1.0])
 F_OCAM = np.array([[0.0, 1.0, 0.0], [1.0, 0.0, 0.0], [0.0, 0.0, 1.0]])
 
 FORMATS = ("omnidir", "kalibr", "camodocal", "ocamcalib")
+#: :func:`export` warns when its file's RMS error exceeds this (px) ...
+WARN_RMS_PX = 0.5
+#: ... or its largest error exceeds this (px).
+WARN_MAX_PX = 1.0
 
 
 # -- samples of the exact model -------------------------------------------------------------------
@@ -174,7 +189,9 @@ class OmnidirFit:
         Distance between the exact pixel and the model's pixel of each sampled ray, over every
         integer pixel that sees the mirror (in the frame), not only those fitted.
     n_points : int
-        Pixels in that evaluation.
+        Pixels in that evaluation; ``extra["undefined_points"]`` of them (pixels whose
+        direction is behind the model's projection centre) have no model pixel and are left
+        out of ``rms_px`` and ``max_px`` (:meth:`summary` says so).
     depth : float or None
         The scene the fit is for: ``None`` at infinity, else the sphere of that radius about
         ``origin``.
@@ -190,6 +207,21 @@ class OmnidirFit:
     n_points: int
     depth: float | None = None
     extra: dict = field(default_factory=dict, repr=False)
+
+    def summary(self):
+        """One line: the model, the scene, its errors and over how many pixels."""
+        where = "at infinity" if self.depth is None else f"at {self.depth:g} from the origin"
+        undefined = self.extra.get("undefined_points", 0)
+        over = f"over {self.n_points - undefined} pixels"
+        if undefined:
+            over += (
+                f" (the unified model is undefined at {undefined} more: their directions are "
+                f"behind its projection centre)"
+            )
+        return (
+            f"unified (Mei) model, scene {where}: xi = {self.xi:.6f}, RMS {self.rms_px:.3g} px, "
+            f"max {self.max_px:.3g} px {over}"
+        )
 
     def as_tuple(self):
         """``(K, xi, D, M, origin, rms_px)``, what :meth:`to_omnidir` returns."""
@@ -392,8 +424,11 @@ class OcamFit:
     ``pol`` (cam2world, ``a1 = 0`` as OCamCalib fits it) and ``invpol`` (world2cam), increasing
     powers; ``xc, yc`` the centre as row and column; ``c, d, e`` the affine parameters;
     ``M`` with ``X_ocam = M X_mirror`` (directions). ``world2cam_*`` are pixel errors of
-    world2cam on the exact directions; ``cam2world_*`` are the pixel errors of the exact model
-    projecting the directions cam2world returns.
+    world2cam on the exact directions, over the ``n_points`` pixels that see the mirror;
+    ``cam2world_*`` are the pixel errors of the exact model projecting the directions cam2world
+    returns, over all but ``cam2world_unseen`` of them: pixels next to the rim to which
+    cam2world gives a direction above the mirror's rim (its horizon), which this rig does not
+    see, so no exact pixel compares.
     """
 
     pol: np.ndarray
@@ -409,6 +444,21 @@ class OcamFit:
     cam2world_rms_px: float
     cam2world_max_px: float
     n_points: int
+    cam2world_unseen: int = 0
+
+    def summary(self):
+        """One line: both mappings' errors, and over how many pixels each."""
+        line = (
+            f"world2cam RMS {self.world2cam_rms_px:.3g} px, max {self.world2cam_max_px:.3g} px "
+            f"over {self.n_points} pixels; cam2world RMS {self.cam2world_rms_px:.3g} px, max "
+            f"{self.cam2world_max_px:.3g} px over {self.n_points - self.cam2world_unseen} pixels"
+        )
+        if self.cam2world_unseen:
+            line += (
+                f" (at {self.cam2world_unseen} more, next to the rim, cam2world gives a "
+                f"direction above the mirror's rim, which this rig does not see)"
+            )
+        return line
 
 
 def fit_ocamcalib(camera, n_invpol=12, n_pol=5, max_points=5000, omnidir=None):
@@ -467,7 +517,7 @@ def fit_ocamcalib(camera, n_invpol=12, n_pol=5, max_points=5000, omnidir=None):
     epix, _, ed = sample_pixels(camera, max_points=400000)
     w_rms, w_max, _ = _errors(ocam_world2cam(ed @ M.T, invpol, xc, yc, c, d, e), epix)
     back = ocam_cam2world(epix, pol, xc, yc, c, d, e) @ M  # M orthogonal: M^T x as rows
-    c_rms, c_max, _ = _errors(camera.project_directions(back), epix)
+    c_rms, c_max, c_unseen = _errors(camera.project_directions(back), epix)
     return OcamFit(
         pol=pol,
         invpol=invpol,
@@ -482,19 +532,29 @@ def fit_ocamcalib(camera, n_invpol=12, n_pol=5, max_points=5000, omnidir=None):
         cam2world_rms_px=c_rms,
         cam2world_max_px=c_max,
         n_points=len(epix),
+        cam2world_unseen=c_unseen,
     )
 
 
 # -- writers -------------------------------------------------------------------------------------
 def _fmt(x):
-    return f"{float(x):.17g}"
+    """``x`` as a YAML float that reads back exactly: Python's shortest round-trip ``repr``,
+    always with a point before any exponent (``500.0``, ``1.5e-05`` -> ``1.5e-05``, ``1e-05`` ->
+    ``1.0e-05``), since a YAML 1.1 reader (PyYAML, Kalibr's) takes ``500`` for an integer and
+    ``1e-05`` for a string, and Kalibr's ConfigReader refuses anything but floats."""
+    x = float(x)
+    if not math.isfinite(x):
+        raise ValueError(f"cannot write the non-finite value {x!r}")
+    text = repr(x)
+    mantissa, e, exponent = text.partition("e")
+    if "." not in mantissa:
+        mantissa += ".0"
+    return mantissa + e + exponent
 
 
 def _error_comment(fit, prefix="# "):
-    where = "at infinity" if fit.depth is None else f"at depth {fit.depth:g} from the origin"
     return (
-        f"{prefix}central approximation of a non-central omnicam rig (scene {where}): "
-        f"RMS {fit.rms_px:.3g} px, max {fit.max_px:.3g} px over {fit.n_points} pixels\n"
+        f"{prefix}central approximation of a non-central omnicam rig, {fit.summary()}\n"
         f"{prefix}frame: X_cam = M (X_mirror - origin), M = "
         f"{np.round(fit.M, 12).tolist()}, origin = {np.round(fit.origin, 9).tolist()} "
         f"(det M = {np.linalg.det(fit.M):+.0f})\n"
@@ -603,9 +663,7 @@ def ocamcalib_text(fit, image_size):
         '#image size: "height" and "width"\n\n'
         f"{int(h)} {int(w)}\n\n"
         "#written by omnicam: central approximation of a non-central rig (scene at infinity)"
-        f"\n#world2cam: RMS {fit.world2cam_rms_px:.3g} px, max {fit.world2cam_max_px:.3g} px;"
-        f" cam2world: RMS {fit.cam2world_rms_px:.3g} px, max {fit.cam2world_max_px:.3g} px"
-        f" over {fit.n_points} pixels\n"
+        f"\n#{fit.summary()}\n"
         f"#frame: X_ocam = M X_mirror, M = {np.round(fit.M, 12).tolist()}\n"
     )
 
@@ -665,20 +723,88 @@ def write_ocamcalib(path, camera, fit=None, image_size=None, overwrite=True):
     return fit
 
 
+def _cost(fit):
+    """``(rms_px, max_px)`` of a fit: for OCamCalib the worse of its two mappings."""
+    if isinstance(fit, OcamFit):
+        return (
+            max(fit.world2cam_rms_px, fit.cam2world_rms_px),
+            max(fit.world2cam_max_px, fit.cam2world_max_px),
+        )
+    return fit.rms_px, fit.max_px
+
+
+_NAMES = {
+    "omnidir": "omnidir (cv2.omnidir, with skew)",
+    "kalibr": "kalibr or camodocal (the unified model without skew)",
+    "ocamcalib": "ocamcalib (Scaramuzza's polynomial)",
+}
+
+
+def _cost_warning(camera, fmt, depth, fits):
+    """The warning text when ``fmt``'s fit costs more than the thresholds, else ``None``.
+
+    ``fits`` holds the fits already made, by model (``"omnidir"``, ``"kalibr"`` for the
+    skew-free unified model of Kalibr and camodocal, ``"ocamcalib"``); the other models are
+    fitted here, only when a warning is due, so that it names the best by the same measure."""
+    model = "kalibr" if fmt == "camodocal" else fmt
+    rms, mx = _cost(fits[model])
+    if rms <= WARN_RMS_PX and mx <= WARN_MAX_PX:
+        return None
+    if "omnidir" not in fits:
+        fits["omnidir"] = fit_omnidir(camera, depth=depth)
+    if "kalibr" not in fits:
+        fits["kalibr"] = fit_omnidir(camera, depth=depth, skew=False)
+    if depth is None and "ocamcalib" not in fits:
+        fits["ocamcalib"] = fit_ocamcalib(camera, omnidir=fits["kalibr"])
+    costs = {name: _cost(fit) for name, fit in fits.items()}
+    best = min(costs, key=lambda name: costs[name])
+    b_rms, b_max = costs[best]
+    if best == model:
+        advice = "no central format fits this rig better"
+    else:
+        advice = (
+            f"the central format that fits this camera best is {_NAMES[best]}: RMS "
+            f"{b_rms:.3g} px, max {b_max:.3g} px"
+        )
+    return (
+        f"the {fmt} export is off by RMS {rms:.3g} px, max {mx:.3g} px (omnicam warns above "
+        f"{WARN_RMS_PX:g} px RMS or {WARN_MAX_PX:g} px max): this rig is not central enough "
+        f"for that model; {advice}; exact: the remap tables (omnicam maps --npy, --filestorage "
+        f"or --ffmpeg; omnicam.maps_export), which use the non-central model itself"
+    )
+
+
 def export(camera, fmt, path, depth=None, overwrite=True):
     """Write ``camera``'s central approximation in format ``fmt`` (one of :data:`FORMATS`);
-    returns the fit (:class:`OmnidirFit` or :class:`OcamFit`)."""
+    returns the fit (:class:`OmnidirFit` or :class:`OcamFit`).
+
+    Warns
+    -----
+    RuntimeWarning
+        When the file's error exceeds :data:`WARN_RMS_PX` RMS or :data:`WARN_MAX_PX` at its
+        worst pixel; the message gives it, names the central format that fits this camera
+        best, and the exact exports (module notes). The file is written all the same.
+    """
     if fmt not in FORMATS:
         raise ValueError(f"fmt must be one of {FORMATS}, got {fmt!r}")
+    if depth is not None and fmt == "ocamcalib":
+        raise ValueError("depth: the OCamCalib export is for a scene at infinity only")
     if fmt == "omnidir":
         fit = fit_omnidir(camera, depth=depth)
         write_omnidir(path, fit, camera.image_size, overwrite=overwrite)
-        return fit
-    if depth is not None and fmt == "ocamcalib":
-        raise ValueError("depth: the OCamCalib export is for a scene at infinity only")
-    fit = fit_omnidir(camera, depth=depth, skew=False)
-    if fmt == "kalibr":
-        return write_kalibr(path, camera, fit, overwrite=overwrite)
-    if fmt == "camodocal":
-        return write_camodocal(path, camera, fit, overwrite=overwrite)
-    return write_ocamcalib(path, camera, fit_ocamcalib(camera, omnidir=fit), overwrite=overwrite)
+        fits = {"omnidir": fit}
+    else:
+        unified = fit_omnidir(camera, depth=depth, skew=False)
+        fits = {"kalibr": unified}
+        if fmt == "kalibr":
+            fit = write_kalibr(path, camera, unified, overwrite=overwrite)
+        elif fmt == "camodocal":
+            fit = write_camodocal(path, camera, unified, overwrite=overwrite)
+        else:
+            fit = fits["ocamcalib"] = write_ocamcalib(
+                path, camera, fit_ocamcalib(camera, omnidir=unified), overwrite=overwrite
+            )
+    message = _cost_warning(camera, fmt, depth, fits)
+    if message is not None:
+        warnings.warn(message, RuntimeWarning, stacklevel=2)
+    return fit

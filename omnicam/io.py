@@ -58,13 +58,15 @@ import numpy as np
 from ._atomic import OutputError, atomic_output, sigint_deferred, write_bytes
 from ._quiet import opencv_silenced
 from ._typing import ArrayLike, FloatArray, PathLike, Size
-from ._validate import validate_D, validate_image_size, validate_K
+from ._validate import finite_array, real_number, validate_D, validate_image_size, validate_K
+from .intrinsics_formats import not_pinhole, read_other_central, read_other_intrinsics
 from .mirror import HyperbolicMirror
 
 __all__ = [
     "save_camera",
     "load_camera",
     "read_intrinsics",
+    "read_central_model",
     "write_intrinsics",
     "read_far_lines",
     "write_far_lines",
@@ -564,10 +566,10 @@ def read_intrinsics(path: PathLike) -> tuple[FloatArray, FloatArray | None, Size
     Raises
     ------
     FileNotFoundError, ValueError
-        As :func:`load_camera`, naming the file and the field.
+        As :func:`load_camera`, naming the file and the field; also for the files of central
+        models (``cv2.omnidir``, Kalibr ``omni``, OCamCalib), whose ``K`` and ``D`` are not the
+        lens's: the message says what the file is (:mod:`omnicam.intrinsics_formats`).
     """
-    from .intrinsics_formats import read_other_intrinsics  # ROS camera_info, Kalibr
-
     what = "intrinsics file"
     path = _fspath(path, what)
     _prescan(path, what)  # nothing that could crash a parser reaches one
@@ -579,6 +581,9 @@ def read_intrinsics(path: PathLike) -> tuple[FloatArray, FloatArray | None, Size
             raise ValueError(f"{what} {path}: {e}") from None
         return K, (D if D is not None and np.any(D) else None), size
     r = _reading(path, what)
+    xi = r.node("xi", required=False)
+    if xi is not None:  # cv2.omnidir's: the unified model's K and D, not the lens's
+        raise ValueError(f"{what} {r.path}: {not_pinhole('a cv2.omnidir calibration', xi)}")
     name = r.first(K_FIELDS, required=True)
     K = r.check(name, validate_K, r.matrix(name, (3, 3), allow_list=True))
     name = r.first(D_FIELDS)
@@ -589,6 +594,64 @@ def read_intrinsics(path: PathLike) -> tuple[FloatArray, FloatArray | None, Size
             D = None
     size = r.check("image_size", validate_image_size, r.image_size())
     return K, D, size
+
+
+def read_central_model(path: PathLike) -> dict:
+    """The unified (Mei) model of a ``cv2.omnidir`` calibration or a Kalibr ``omni`` camchain.
+
+    ``cv2.omnidir`` files in any ``cv2.FileStorage`` format: its calibration sample's
+    ``camera_matrix``, ``distortion_coefficients`` and ``xi``, or ``omnicam export --to
+    omnidir``'s ``K``, ``D``, ``xi`` and ``image_size`` (the names of :func:`read_intrinsics`);
+    Kalibr camchains whose first camera is ``omni`` (``intrinsics: [xi, fu, fv, pu, pv]``,
+    ``radtan`` or no distortion, ``resolution``).
+
+    Returns
+    -------
+    dict
+        In the conventions of :mod:`omnicam.chessboard.central` (its ``CentralFit``):
+
+        * ``"K"``: (3, 3) float64, the unified model's camera matrix ``[[gamma_x, s, c_x],
+          [0, gamma_y, c_y], [0, 0, 1]]`` (not the lens's: module notes of
+          :mod:`omnicam.intrinsics_formats`);
+        * ``"xi"``: float, ``>= 0``. A hyperbolic mirror's is in ``(0, 1)``, which
+          :func:`~omnicam.chessboard.central.hyperbolic_start` needs; a fit with distortion
+          can give ``xi >= 1`` on a rig that is not exactly central (``k1`` trades with ``xi``);
+        * ``"D"``: (4,) float64, ``k1, k2, p1, p2`` on the unified model's normalised plane
+          (zeros when the file has none);
+        * ``"image_size"``: ``(width, height)`` or ``None``.
+
+        ``hyperbolic_start(m["K"], m["xi"], rim_px_radius, rim_radius)`` starts from it.
+
+    Raises
+    ------
+    FileNotFoundError, ValueError
+        As :func:`load_camera`; also a file that holds no central model (pinhole
+        intrinsics, an OCamCalib file), the message saying what it is.
+    """
+    what = "central model file"
+    path = _fspath(path, what)
+    _prescan(path, what)
+    model = read_other_central(path)  # Kalibr camchains
+    if model is None:
+        r = _reading(path, what)
+        if r.node("xi", required=False) is None:
+            raise r.fail("xi", "is missing: not a cv2.omnidir calibration (nor a Kalibr camchain)")
+        K = r.matrix(r.first(K_FIELDS, required=True), (3, 3), allow_list=True)
+        name = r.first(D_FIELDS)
+        D = None if name is None else r.matrix(name, allow_list=True)
+        model = K, r.number("xi"), D, r.image_size()
+    K, xi, D, size = model
+    try:
+        return {
+            "K": validate_K(K),
+            "xi": real_number(xi, "xi", lo=0.0, expected="a finite number >= 0"),
+            "D": np.zeros(4)
+            if D is None
+            else finite_array(D, "D", (4,), "4 numbers (k1 k2 p1 p2)"),
+            "image_size": validate_image_size(size),
+        }
+    except ValueError as e:
+        raise ValueError(f"{what} {shown(path)}: {e}") from None
 
 
 def read_far_lines(path: PathLike) -> list[FloatArray]:

@@ -254,3 +254,117 @@ def test_cli_export_writes_the_file_and_prints_its_error(tmp_path, capsys, fmt, 
     assert out.exists() and "RMS" in printed and "max" in printed
     assert main(["export", str(calib), "--to", fmt, "-o", str(out)]) == 1  # exists
     assert "exists" in capsys.readouterr().err
+
+
+# A YAML 1.1 float as PyYAML (so Kalibr) resolves it (yaml/resolver.py's implicit float rule,
+# base 10): a point is required, and an exponent needs its sign. Anything else is an int or a
+# string, which Kalibr's ConfigReader refuses ("invalid focalLength", "invalid principalPoint").
+YAML11_FLOAT = re.compile(r"[-+]?(?:[0-9][0-9_]*)\.[0-9_]*(?:[eE][-+][0-9]+)?")
+YAML11_INT = re.compile(r"[-+]?(?:0|[1-9][0-9_]*)")
+
+
+def _flow_numbers(text, key):
+    return re.search(rf"^\s*{key}: \[(.*)\]$", text, re.MULTILINE).group(1).split(", ")
+
+
+@pytest.mark.parametrize(
+    "value, text",
+    [
+        (500.0, "500.0"),
+        (0.0, "0.0"),
+        (-0.0, "-0.0"),
+        (1e-05, "1.0e-05"),
+        (1.5e-05, "1.5e-05"),
+        (1e16, "1.0e+16"),
+        (-2.5e300, "-2.5e+300"),
+        (0.1, "0.1"),
+        (1 / 3, "0.3333333333333333"),
+    ],
+)
+def test_numbers_are_written_as_yaml_floats_that_read_back_exactly(value, text):
+    from omnicam.export import _fmt
+
+    assert _fmt(value) == text
+    assert YAML11_FLOAT.fullmatch(_fmt(value)) and float(_fmt(value)) == value
+
+
+def test_a_non_finite_number_is_refused_not_written():
+    from omnicam.export import _fmt
+
+    with pytest.raises(ValueError, match="non-finite"):
+        _fmt(math.nan)
+
+
+def test_kalibr_whole_number_intrinsics_are_floats_and_resolution_integers():
+    from omnicam.export import OmnidirFit, kalibr_text
+    from omnicam.intrinsics_formats import parse_yaml
+
+    K = np.array([[500.0, 0.0, 160.0], [0.0, 500.0, 160.0], [0.0, 0.0, 1.0]])
+    fit = OmnidirFit(K, 1.0, np.zeros((1, 4)), F_OMNI, np.zeros(3), 0.0, 0.0, 100)
+    text = kalibr_text(fit, (320, 320))
+    numbers = _flow_numbers(text, "intrinsics") + _flow_numbers(text, "distortion_coeffs")
+    assert numbers == ["1.0", "500.0", "500.0", "160.0", "160.0"] + ["0.0"] * 4
+    assert all(YAML11_FLOAT.fullmatch(t) and not YAML11_INT.fullmatch(t) for t in numbers)
+    assert all(YAML11_INT.fullmatch(t) for t in _flow_numbers(text, "resolution"))
+    cam = parse_yaml(text)["cam0"]
+    assert all(type(v) is float for v in cam["intrinsics"] + cam["distortion_coeffs"])
+    assert all(type(v) is int for v in cam["resolution"])
+
+
+def test_kalibr_file_of_a_fit_has_only_yaml_floats_exact_to_the_bit(tmp_path):
+    path = tmp_path / "camchain.yaml"
+    fit = export(TILTED, "kalibr", path)
+    text = path.read_text()
+    numbers = _flow_numbers(text, "intrinsics") + _flow_numbers(text, "distortion_coeffs")
+    assert all(YAML11_FLOAT.fullmatch(t) for t in numbers)
+    want = [fit.xi, fit.K[0, 0], fit.K[1, 1], fit.K[0, 2], fit.K[1, 2], *np.ravel(fit.D)]
+    assert [float(t) for t in numbers] == want
+
+
+def test_camodocal_numbers_are_floats_too(tmp_path):
+    text = camodocal_text(fit_omnidir(ALIGNED, skew=False), (320, 320))
+    values = re.findall(r"^\s+(?:xi|k1|k2|p1|p2|gamma1|gamma2|u0|v0): (\S+)$", text, re.MULTILINE)
+    assert len(values) == 9 and all(YAML11_FLOAT.fullmatch(t) for t in values)
+
+
+def test_an_export_far_from_the_rig_warns_naming_the_best_format(tmp_path):
+    path = tmp_path / "calib_results.txt"
+    with pytest.warns(RuntimeWarning, match="ocamcalib export is off") as caught:
+        fit = export(TILTED, "ocamcalib", path)
+    assert path.exists()  # written all the same
+    message = str(caught[0].message)
+    rms = max(fit.world2cam_rms_px, fit.cam2world_rms_px)
+    assert rms > 0.5  # the 3 degree, 3 mm rig: Scaramuzza's model has no tangential term
+    assert f"RMS {rms:.3g} px" in message
+    best = fit_omnidir(TILTED)  # what the message names, measured the same way
+    assert best.rms_px < 0.5 and best.max_px < 1.0
+    assert f"best is omnidir (cv2.omnidir, with skew): RMS {best.rms_px:.3g} px" in message
+    assert "remap tables" in message and "omnicam maps" in message
+
+
+@pytest.mark.parametrize("fmt", ["omnidir", "kalibr"])
+def test_an_export_within_a_pixel_does_not_warn(tmp_path, fmt):
+    import warnings
+
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        fit = export(TILTED, fmt, tmp_path / "x.yaml")
+    assert fit.rms_px <= 0.5 and fit.max_px <= 1.0
+
+
+def test_ocamcalib_states_the_pixels_cam2world_sends_above_the_rim():
+    from omnicam.export import ocam_cam2world
+
+    fit = fit_ocamcalib(TILTED)
+    epix, _, _ = sample_pixels(TILTED, max_points=10**6)
+    back = ocam_cam2world(epix, fit.pol, fit.xc, fit.yc, fit.c, fit.d, fit.e) @ fit.M
+    unseen = ~np.isfinite(TILTED.project_directions(back)).all(axis=1)
+    assert fit.cam2world_unseen == unseen.sum() > 0
+    # they are the rim's own pixels: the model's horizon is a little above the mirror's
+    rim = TILTED.rim_image_points(3600)
+    gap = np.linalg.norm(epix[unseen][:, None, :] - rim[None], axis=2).min(axis=1)
+    assert gap.max() < 3.0
+    line = fit.summary()
+    assert f"over {fit.n_points - fit.cam2world_unseen} pixels" in line
+    assert f"at {fit.cam2world_unseen} more, next to the rim" in line
+    assert "above the mirror's rim" in line
