@@ -30,6 +30,7 @@ _LAZY = {
     "synthetic": "omnicam.synthetic",
     "samples": "omnicam.samples",
     "read_intrinsics": "omnicam.io",
+    "read_central_model": "omnicam.io",
     "write_intrinsics": "omnicam.io",
     "read_far_lines": "omnicam.io",
     "write_far_lines": "omnicam.io",

@@ -48,3 +48,28 @@ def test_out_of_memory_is_one_line_with_advice(monkeypatch, capsys):
 
 
 REPO = __file__.rsplit("/tests/", 1)[0]
+
+
+def test_an_export_whose_own_error_is_large_warns_on_one_line_naming_the_better_format(
+    tmp_path, capsys
+):
+    from omnicam.cli import main
+
+    assert (
+        main(
+            [
+                "export",
+                "calib_files/hyperomni_misaligned.yaml",
+                "--to",
+                "ocamcalib",
+                "-o",
+                str(tmp_path / "oc.txt"),
+            ]
+        )
+        == 0
+    )
+    captured = capsys.readouterr()
+    assert captured.out.startswith(f"wrote {tmp_path / 'oc.txt'} (ocamcalib): world2cam RMS")
+    warning = [line for line in captured.err.splitlines() if "warning" in line]
+    assert len(warning) == 1  # the sample misaligned rig: 2.3 px RMS in OCamCalib's model
+    assert "fits this camera best is omnidir" in warning[0] and "omnicam maps" in warning[0]

@@ -12,9 +12,10 @@ exact rig over the pixels that see the mirror (:mod:`omnicam.export`), and the c
 from __future__ import annotations
 
 import os
+import warnings
 
 from .._atomic import OutputError
-from ._common import EXIT_OK, CliError, _check_output, _load_camera, _positive
+from ._common import EXIT_OK, CliError, _check_output, _load_camera, _one_line, _positive, _warn
 
 
 def cmd_export(args):
@@ -30,24 +31,17 @@ def cmd_export(args):
             f"output {args.output}: an omnidir file is a cv2.FileStorage file "
             f"(.yaml, .yml, .xml or .json)"
         )
-    try:
-        fit = export(camera, args.to, args.output, depth=args.depth, overwrite=args.overwrite)
-    except OutputError as e:
-        raise CliError(str(e)) from None
-    except ValueError as e:
-        raise CliError(f"cannot export {args.calibration}: {e}") from None
-    if hasattr(fit, "world2cam_rms_px"):
-        print(
-            f"wrote {args.output} (OCamCalib): world2cam RMS {fit.world2cam_rms_px:.3g} px, "
-            f"max {fit.world2cam_max_px:.3g} px; cam2world RMS {fit.cam2world_rms_px:.3g} px, "
-            f"max {fit.cam2world_max_px:.3g} px over {fit.n_points} pixels"
-        )
-    else:
-        where = "at infinity" if fit.depth is None else f"at {fit.depth:g} mm"
-        print(
-            f"wrote {args.output} ({args.to}, unified model, scene {where}): xi = {fit.xi:.6f}, "
-            f"RMS {fit.rms_px:.3g} px, max {fit.max_px:.3g} px over {fit.n_points} pixels"
-        )
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always", RuntimeWarning)
+        try:
+            fit = export(camera, args.to, args.output, depth=args.depth, overwrite=args.overwrite)
+        except OutputError as e:
+            raise CliError(str(e)) from None
+        except ValueError as e:
+            raise CliError(f"cannot export {args.calibration}: {e}") from None
+    print(f"wrote {args.output} ({args.to}): {fit.summary()}")
+    for w in caught:  # the export's own error is large: one line each, naming the better format
+        _warn(_one_line(w.message))
     return EXIT_OK
 
 
