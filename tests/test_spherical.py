@@ -11,9 +11,9 @@ import numpy as np
 import pytest
 
 from omnicam import synthetic
-from omnicam.spherical import (
+from omnicam.spherical import equirect_view
+from omnicam.spherical_metadata import (
     SPHERICAL_UUID,
-    equirect_view,
     find_boxes,
     inject_spherical_mp4,
     jpeg_with_photosphere_xmp,

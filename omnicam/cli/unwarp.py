@@ -270,7 +270,7 @@ def _sequence_name(pattern, index):
 
 
 def _write_equirect_jpeg(path, image, size, overwrite):
-    from ..spherical import jpeg_with_photosphere_xmp
+    from ..spherical_metadata import jpeg_with_photosphere_xmp
 
     ok, jpg = cv2.imencode(".jpg", image, [cv2.IMWRITE_JPEG_QUALITY, 95])
     if not ok:
@@ -541,7 +541,7 @@ def _spherical_metadata(output):
     """The ``finalize`` of an equirectangular video: its spherical metadata, in MP4/MOV."""
 
     def add(tmp):
-        from ..spherical import inject_spherical_mp4
+        from ..spherical_metadata import inject_spherical_mp4
 
         if os.path.splitext(output)[1].lower() not in SPHERICAL_CONTAINERS:
             _warn(f"{output}: spherical video metadata is written into .mp4/.m4v/.mov only")
