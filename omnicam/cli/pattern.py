@@ -202,7 +202,8 @@ def _start_intrinsics(args, size):
     return K, D
 
 
-def cmd_calibrate_pattern(args):
+def _check_options(args):
+    """The options of chessboard mode, checked; returns the mirror start (or None)."""
     if args.square is None:
         raise CliError("calibrate: --chessboard needs --square (side of a square, mm)", 2)
     if args.far_lines:
@@ -211,6 +212,18 @@ def cmd_calibrate_pattern(args):
     args.dist_model = args.dist_model or "k1k2"
     if args.heldout < 0 or args.heldout == 1:
         raise CliError("calibrate: --heldout K needs K >= 2 folds (0 skips the check)", 2)
+    if args.mirror is None:
+        return None
+    if args.rim_radius is not None:
+        raise CliError("calibrate: --rim-radius is for --chessboard without --mirror", 2)
+    try:
+        return HyperbolicMirror(*args.mirror)
+    except ValueError as e:
+        raise CliError(f"--mirror: {e}") from None
+
+
+def _outputs(args):
+    """``(calibration file, overlay folder)``, checked before any work."""
     calib = args.output
     if os.path.splitext(calib)[1].lower() not in SUFFIXES:
         raise CliError(f"calibration file {calib}: extension must be one of {', '.join(SUFFIXES)}")
@@ -219,32 +232,75 @@ def cmd_calibrate_pattern(args):
     folder = args.overlay or os.path.join(os.path.dirname(calib), f"{stem}_views")
     if os.path.exists(folder) and not os.path.isdir(folder):
         raise CliError(f"overlay folder {folder} is a file")
-    mirror = None
-    if args.mirror is not None:
-        try:
-            mirror = HyperbolicMirror(*args.mirror)
-        except ValueError as e:
-            raise CliError(f"--mirror: {e}") from None
-        if args.rim_radius is not None:
-            raise CliError("calibrate: --rim-radius is for --chessboard without --mirror", 2)
-    images = [_read_image(p, cv2.IMREAD_COLOR | cv2.IMREAD_IGNORE_ORIENTATION) for p in args.image]
+    return calib, folder
+
+
+def _read_views(paths):
+    """The images, all of one size: ``(images, (width, height))``."""
+    images = [_read_image(p, cv2.IMREAD_COLOR | cv2.IMREAD_IGNORE_ORIENTATION) for p in paths]
     size = (images[0].shape[1], images[0].shape[0])
-    for path, im in zip(args.image, images):
+    for path, im in zip(paths, images):
         if (im.shape[1], im.shape[0]) != size:
             raise CliError(
-                f"image {path} is {im.shape[1]}x{im.shape[0]}, {args.image[0]} is "
+                f"image {path} is {im.shape[1]}x{im.shape[0]}, {paths[0]} is "
                 f"{size[0]}x{size[1]}: all images must come from the same camera mode"
             )
+    return images, size
+
+
+def _hinted_rim(args, images, size):
+    """The rim points found with ``--rim-hint`` in the first image, or None without it."""
+    if args.rim_hint is None:
+        return None
+    try:
+        check_hint(args.rim_hint, size)
+        return detect_rim(images[0], hint=args.rim_hint).points
+    except ValueError as e:
+        raise CliError(f"--rim-hint: {_one_line(e)}") from None
+
+
+def _print_report(camera, report, names, caught):
+    """The per-view table, the figures, the held-out check and every warning once."""
+    print(report.table(names), flush=True)
+    print(
+        f"RMS {report.rms:.3f} px over {len(report.view_rms)} views; rim RMS "
+        f"{report.rim_rms:.3f} px; K fx {camera.K[0, 0]:.2f} fy {camera.K[1, 1]:.2f} "
+        f"cx {camera.K[0, 2]:.2f} cy {camera.K[1, 2]:.2f} (std {report.std['fx']:.2f}, "
+        f"{report.std['fy']:.2f}, {report.std['cx']:.2f}, {report.std['cy']:.2f}); axis std "
+        f"{report.std['axis_deg']:.3f} deg, origin std {report.std['origin']:.3f} mm; "
+        f"viewing directions std {report.ray_std_deg[0]:.3f} deg (worst "
+        f"{report.ray_std_deg[1]:.3f})",
+        flush=True,
+    )
+    if report.heldout is not None:
+        print(report.heldout.summary(), flush=True)
+    for w in report.warnings:
+        _warn(w)
+    for w in caught:
+        if not any(str(w.message) == r for r in report.warnings):
+            _warn(str(w.message))
+
+
+def _write_overlays(args, report, images, folder):
+    """One overlay per image (detected and reprojected corners, the rim) into ``folder``."""
+    os.makedirs(folder, exist_ok=True)
+    for i, path in enumerate(args.image):
+        name = os.path.splitext(os.path.basename(path))[0]
+        out = os.path.join(folder, f"{i:03d}_{name}.png")
+        if os.path.lexists(out) and not args.overwrite:
+            raise CliError(f"overlay {out} exists; pass --overwrite to replace it")
+        _write_image(out, report.draw(images[i], i), args.overwrite)
+
+
+def cmd_calibrate_pattern(args):
+    """``omnicam calibrate --chessboard``: the module docstring."""
+    mirror = _check_options(args)
+    calib, folder = _outputs(args)
+    images, size = _read_views(args.image)
     K, D = _start_intrinsics(args, size)
     cols, rows = args.chessboard
     points = None if args.corners is None else read_corners(args.corners, args.image, cols * rows)
-    boundary = None
-    if args.rim_hint is not None:
-        try:
-            check_hint(args.rim_hint, size)
-            boundary = detect_rim(images[0], hint=args.rim_hint).points
-        except ValueError as e:
-            raise CliError(f"--rim-hint: {_one_line(e)}") from None
+    boundary = _hinted_rim(args, images, size)
     names = [os.path.basename(p) for p in args.image]
 
     def progress(i, text):
@@ -270,24 +326,7 @@ def cmd_calibrate_pattern(args):
             )
         except (ValueError, RuntimeError, np.linalg.LinAlgError) as e:
             raise CliError(f"calibration failed: {_one_line(e)}") from None
-    print(report.table(names), flush=True)
-    print(
-        f"RMS {report.rms:.3f} px over {len(report.view_rms)} views; rim RMS "
-        f"{report.rim_rms:.3f} px; K fx {camera.K[0, 0]:.2f} fy {camera.K[1, 1]:.2f} "
-        f"cx {camera.K[0, 2]:.2f} cy {camera.K[1, 2]:.2f} (std {report.std['fx']:.2f}, "
-        f"{report.std['fy']:.2f}, {report.std['cx']:.2f}, {report.std['cy']:.2f}); axis std "
-        f"{report.std['axis_deg']:.3f} deg, origin std {report.std['origin']:.3f} mm; "
-        f"viewing directions std {report.ray_std_deg[0]:.3f} deg (worst "
-        f"{report.ray_std_deg[1]:.3f})",
-        flush=True,
-    )
-    if report.heldout is not None:
-        print(report.heldout.summary(), flush=True)
-    for w in report.warnings:
-        _warn(w)
-    for w in caught:
-        if not any(str(w.message) == r for r in report.warnings):
-            _warn(str(w.message))
+    _print_report(camera, report, names, caught)
     one_side = [w for w in report.warnings if "all boards are on one side" in w]
     if one_side and not args.force:
         raise CliError(
@@ -295,13 +334,7 @@ def cmd_calibrate_pattern(args):
             "cannot tell the principal point from the tilt; add views on the other side "
             "(--force writes the file anyway)"
         )
-    os.makedirs(folder, exist_ok=True)
-    for i, path in enumerate(args.image):
-        name = os.path.splitext(os.path.basename(path))[0]
-        out = os.path.join(folder, f"{i:03d}_{name}.png")
-        if os.path.lexists(out) and not args.overwrite:
-            raise CliError(f"overlay {out} exists; pass --overwrite to replace it")
-        _write_image(out, report.draw(images[i], i), args.overwrite)
+    _write_overlays(args, report, images, folder)
     _save_camera(camera, calib, args.overwrite)
     print(f"wrote {calib} and {len(images)} overlays in {folder}")
     return EXIT_OK
