@@ -86,6 +86,15 @@ _DETECT_ROUNDS = 3
 
 
 # -- input handling ---------------------------------------------------------------------------
+def _names(images):
+    """``{index: file name}`` of the images given as paths."""
+    return {
+        i: os.path.basename(os.fspath(im))
+        for i, im in enumerate(images if images is not None else [])
+        if isinstance(im, (str, os.PathLike))
+    }
+
+
 def _load_image(image, index):
     if isinstance(image, (str, os.PathLike)):
         img = cv2.imread(os.fspath(image), cv2.IMREAD_COLOR | cv2.IMREAD_IGNORE_ORIENTATION)
@@ -257,11 +266,7 @@ def calibrate_pattern(
         camera_cls,
     )
     mirror_given, K_given = mirror, K
-    names = {
-        i: os.path.basename(os.fspath(im))
-        for i, im in enumerate(images if images is not None else [])
-        if isinstance(im, (str, os.PathLike))
-    }
+    names = _names(images)
     found_by = ["given" if p is not None else None for p in (image_points or [])]
     if image_points is None:
         image_points, found_by = _raw_detection_step(images, (cols, rows), progress)
@@ -302,7 +307,7 @@ def calibrate_pattern(
     for w in start_warns:
         _warnings.warn(w, RuntimeWarning, stacklevel=2)
     held = None
-    if heldout:
+    if heldout:  # the same calibration on each fold's views: the same options, these rim points
         options = dict(
             K=K_given,
             D=D,
