@@ -43,7 +43,12 @@ def main(argv=None):
     ap.add_argument("--glob", default="*.jpg")
     ap.add_argument("--mirror", type=float, nargs=3, default=None)
     ap.add_argument("--dist-model", default="k1k2")
-    ap.add_argument("--refine-shape", action="store_true", help="refine_mirror_shape=True")
+    ap.add_argument(
+        "--refine-shape",
+        choices=("auto", "yes", "no"),
+        default="auto",
+        help="refine_mirror_shape: the library's default (auto: with no --mirror), or forced",
+    )
     ap.add_argument(
         "--heldout", default=os.path.join(here, "..", "..", "shared", "tools", "heldout.py")
     )
@@ -79,7 +84,7 @@ def main(argv=None):
                 boundary_points=rim.points,
                 image_size=size,
                 lens=None,
-                refine_mirror_shape=a.refine_shape,
+                refine_mirror_shape={"auto": None, "yes": True, "no": False}[a.refine_shape],
                 dist_model=a.dist_model,
             )
 

@@ -80,3 +80,15 @@ def test_calibrate_pattern_reports_its_heldout_check_better_than_omnidir_here():
     assert sorted(report.heldout.rms) == sorted(report.view_rms)
     assert report.heldout.max < 1e-3  # exact corners: every held-out view predicted
     assert report.heldout.max < min(report.heldout.omnidir.values())
+
+
+def test_a_fold_that_cannot_be_calibrated_is_reported_not_fatal():
+    def fit(train):
+        if 0 not in train:
+            raise ValueError("only 2 usable views")
+        return RIG
+
+    held = heldout.cross_validate(fit, CORNERS, OBJ, SIZE, k=3)
+    assert sorted(held.failed) == [0, 3, 6] and held.failed[0] == "only 2 usable views"
+    assert sorted(held.rms) == [1, 2, 4, 5, 7, 8] and held.max < 1e-6
+    assert "3 view(s) not predicted" in held.summary()

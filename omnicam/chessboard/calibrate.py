@@ -80,6 +80,12 @@ _SHAPE_WEAK = 0.01
 #: Rounds of detection and adjustment: a board the views of the fitted camera find that the
 #: start's did not is added and the rig fitted again, until no new board is found.
 _DETECT_ROUNDS = 3
+#: The central fit's ``xi`` above which the mirror is taken for no hyperboloid (a misaligned
+#: hyperboloid's fit, with the pinhole's distortion fixed, passes 1 by a few per cent at most;
+#: a paraboloid's gives 1.5, a sphere's 2 and more, on the hostile renders' rigs).
+XI_NOT_HYPERBOLIC = 1.1
+#: The hyperbolic start's ``xi`` when the central fit gives 1 to XI_NOT_HYPERBOLIC.
+XI_START_MAX = 0.97
 
 
 # -- helpers ----------------------------------------------------------------------------------
@@ -143,7 +149,7 @@ def calibrate_pattern(
     D=None,
     image_size=None,
     image_points=None,
-    refine_mirror_shape=False,
+    refine_mirror_shape=None,
     dist_model="k1k2",
     *,
     rim_radius=None,
@@ -188,13 +194,15 @@ def calibrate_pattern(
     image_points : sequence of (N, 1, 2) array_like or None, optional
         Corners per image in OpenCV's order (None for an image without a board); skips
         detection.
-    refine_mirror_shape : bool
-        Also estimate the mirror's ``a, b`` (``rim_radius`` fixes the scale). Exact corners
-        started a few per cent off give them back, but the data hardly determine them: ``a, b``
-        trade against the focal length and the camera's distance to the mirror, which only the
-        rig's non-centrality tells apart (:func:`.adjustment.pattern_uncertainty` gives the
-        bound, ``benchmarks/bench_pattern.py`` prints it); the report gives their standard
-        deviations and warns that they are not determined when either exceeds 1 %.
+    refine_mirror_shape : bool or None
+        Also estimate the mirror's ``a, b`` (``rim_radius`` fixes the scale). Default (None):
+        not; with ``mirror=None`` the shape is then the central fit's, held, and the reported
+        standard deviations (of ``K`` and of the rays) are those of the fit with ``a, b``
+        free at the same solution, so what the unknown shape leaves unknown is in them. The
+        data hardly determine ``a, b``: they trade against the focal length and the camera's
+        distance to the mirror, which only the rig's non-centrality tells apart
+        (:func:`.adjustment.pattern_uncertainty` gives the bound, ``benchmarks/bench_pattern.py``
+        prints it); estimating them costs several times the held fit, along that valley.
     dist_model : str
         One of ``"none", "k1", "k1k2", "k1k2p1p2", "k1k2p1p2k3"``: the OpenCV coefficients
         estimated (the others stay at ``D``'s values, or 0). Default ``"k1k2"``: a decentred
@@ -266,6 +274,8 @@ def calibrate_pattern(
         camera_cls,
     )
     mirror_given, K_given = mirror, K
+    if refine_mirror_shape is None:  # held (an unknown one's uncertainty still counted)
+        refine_mirror_shape = False
     names = _names(images)
     found_by = ["given" if p is not None else None for p in (image_points or [])]
     if image_points is None:
@@ -300,7 +310,9 @@ def calibrate_pattern(
             break
         for i in new:
             image_points[i], found_by[i] = new[i], "views (fitted camera)"
-    camera, report = _report_step(fit, corners, cam0, image_size, lens_note, central)
+    camera, report = _report_step(
+        fit, corners, cam0, image_size, lens_note, central, shape_unknown=mirror_given is None
+    )
     found = {i: m for i, m in enumerate(found_by) if m is not None}
     start_warns = rim_warns + start_warns
     warns_all = tuple(start_warns) + report.warnings
@@ -627,23 +639,35 @@ def _central_step(image_points, obj, image_size, rim_fit, mirror, rim_radius, K)
     warns = []
     views = [np.asarray(p, np.float64).reshape(-1, 2) for p in image_points if p is not None]
     views = [v for v in views if len(v) == len(obj)]
-    if mirror is not None:  # the rim's start (module docstring); the central fit to compare
-        try:
-            central = fit_central(views, obj, image_size)
-        except ValueError:
-            central = None
-        return K, mirror, central, warns
     try:
-        central = fit_central(views, obj, image_size)
+        central = fit_central(views, obj, image_size, hyperbolic=False)
     except ValueError as e:
+        if mirror is not None:
+            return K, mirror, None, warns
         raise ValueError(
             f"the rig could not be started without a mirror: {e}; give the mirror "
             f"(a, b, rim_radius) as a start"
         ) from None
+    if mirror is not None:  # the rim's start (module docstring); the central fit to compare
+        return K, mirror, central, warns
+    xi = central.xi
+    if not xi < XI_NOT_HYPERBOLIC:
+        raise ValueError(
+            f"the central fit of the corners gives xi = {xi:.2f}: no hyperboloid does (a "
+            f"hyperboloid has xi < 1, a paraboloid 1, a sphere more); the mirror may not be a "
+            f"hyperboloid, which omnicam does not model. If it is one, give its a, b and "
+            f"rim_radius as a start"
+        )
+    if xi >= 1.0:  # a misaligned hyperboloid's fit can pass 1 a little
+        warns.append(
+            f"the central fit gives xi = {xi:.3f}, at the edge of a hyperboloid's (< 1): the "
+            f"mirror's shape was started from xi = {XI_START_MAX:g}"
+        )
+        xi = XI_START_MAX
     r_px = math.sqrt(float(rim_fit.axes[0] * rim_fit.axes[1]))
     centre = ((image_size[0] - 1) / 2.0, (image_size[1] - 1) / 2.0)  # as the rim's start
     R = NOMINAL_RIM_RADIUS if rim_radius is None else float(rim_radius)
-    K_c, mirror = hyperbolic_start(central.K, central.xi, r_px, R, K, centre)
+    K_c, mirror = hyperbolic_start(central.K, xi, r_px, R, K, centre)
     if rim_radius is None:
         warns.append(
             f"the mirror's scale is assumed (rim_radius = {R:g}, nominal): a, b and the "
@@ -815,9 +839,30 @@ def _heldout_step(report, mirror, pattern_size, square, options, k):
     return cross_validate(fit, views, obj, options["image_size"], k)
 
 
-def _report_step(fit, corners, cam0, image_size, lens_note, central):
+def _shape_free(adj, x, camera, board_poses):
+    """The adjustment ``adj`` at ``x`` again, with the mirror's ``a, b`` free: ``(adj2, x2)``
+    at the same solution (``camera`` and its ``board_poses`` in the gauge), whose covariance
+    holds what an unknown shape leaves unknown."""
+    model = AdjustmentModel(
+        adj.free_d,
+        adj.n_d,
+        adj.fit_skew,
+        True,
+        adj.camera_cls,
+        adj.lens_px,
+        None if adj.fit_lens_z else adj.lens_z,
+    )
+    adj2 = BundleAdjustment(camera, camera.mirror, adj.obj, adj.views, adj.rim_px, model)
+    boards = [np.concatenate([np.ravel(r), np.ravel(t)]) for r, t in board_poses]
+    return adj2, np.concatenate([adj2.x0_global, *boards])
+
+
+def _report_step(fit, corners, cam0, image_size, lens_note, central, shape_unknown=False):
     """5. The camera in the gauge and the :class:`PatternReport` with the a posteriori
-    standard deviations, the plausibility checks and the warnings."""
+    standard deviations, the plausibility checks and the warnings. With ``shape_unknown``
+    and the shape held (``refine_mirror_shape=False``), the standard deviations are those of
+    the fit with ``a, b`` free at the same solution (:func:`_shape_free`): the shape taken
+    from the central fit is not known, and what it leaves unknown must be in them."""
     adj, sol, used, vr, rim_px = fit.adj, fit.sol, fit.used, fit.view_rms, fit.rim_px
     warns = list(fit.warnings)
     obj, pts, dropped = corners.obj, corners.pts, corners.dropped
@@ -828,8 +873,11 @@ def _report_step(fit, corners, cam0, image_size, lens_note, central):
     r_all = adj.residuals(sol.x)
     m, n = len(r_all), len(sol.x)
     sigma2 = float(r_all @ r_all) / max(m - n, 1)
-    std, cov = std_from_jacobian(adj, sol.x, adj.jacobian(sol.x), np.full(m, math.sqrt(sigma2)))
-    ray_deg = ray_uncertainty(adj, sol.x, cov, image_size)
+    held_shape = shape_unknown and not adj.fit_shape
+    adj_u, x_u = _shape_free(adj, sol.x, camera, gauged) if held_shape else (adj, sol.x)
+    sigma = np.full(m, math.sqrt(sigma2))
+    std, cov = std_from_jacobian(adj_u, x_u, adj_u.jacobian(x_u), sigma)
+    ray_deg = ray_uncertainty(adj_u, x_u, cov, image_size)
     corner_r = r_all[: len(used) * nv_rows]
     rim_r = r_all[len(used) * nv_rows : len(used) * nv_rows + len(rim_px)]
     lens_r = r_all[len(used) * nv_rows + len(rim_px) :]
@@ -858,6 +906,13 @@ def _report_step(fit, corners, cam0, image_size, lens_note, central):
         f"the viewing directions are known to {ray_deg[0]:.3f} deg (median over the mirror's "
         f"image, worst {ray_deg[1]:.3f} deg)"
     )
+    if held_shape:
+        warns.append(
+            f"the mirror's shape is the central fit's (a = {camera.mirror.a:.3f} +- "
+            f"{std['a']:.3f}, b = {camera.mirror.b:.3f} +- {std['b']:.3f}), held, and its "
+            f"uncertainty is in the stated ones of K and of the rays; refine_mirror_shape=True "
+            f"(--refine-mirror-shape) estimates it, at several times the cost"
+        )
     if refine_mirror_shape:
         ra = std["a"] / camera.mirror.a
         rb = std["b"] / camera.mirror.b
@@ -881,7 +936,13 @@ def _report_step(fit, corners, cam0, image_size, lens_note, central):
             f"{std['fx']:.1f} px: it trades against the mirror's shape and distance), but {rays}"
         )
     rms = float(np.sqrt(np.mean(corner_r**2) * 2))
-    if central is not None and rms > 2.0 * central.rms + 0.1:
+    if central is not None and central.xi >= XI_NOT_HYPERBOLIC:
+        warns.append(
+            f"the central fit of the corners gives xi = {central.xi:.2f}, which no hyperboloid "
+            f"gives (xi < 1; a paraboloid 1, a sphere more): the mirror may not be a "
+            f"hyperboloid, which omnicam does not model"
+        )
+    elif central is not None and rms > 2.0 * central.rms + 0.1:
         warns.append(
             f"the corners fit this rig to {rms:.3f} px RMS, far above the "
             f"central fit's {central.rms:.3f} px: the mirror may not be a hyperboloid (a "

@@ -63,7 +63,7 @@ class CentralFit:
     views: tuple
 
 
-def fit_central(image_points, obj, image_size, distortion=False):
+def fit_central(image_points, obj, image_size, distortion=False, hyperbolic=True):
     """``cv2.omnidir.calibrate`` of the corners (any of OpenCV's orders; no start needed).
 
     By default with no distortion and no skew: the unified model's ``k1`` trades with ``xi``
@@ -80,6 +80,9 @@ def fit_central(image_points, obj, image_size, distortion=False):
         ``(width, height)``.
     distortion : bool
         Also fit ``k1, k2, p1, p2`` and the skew (``cv2.omnidir``'s defaults).
+    hyperbolic : bool
+        Refuse a fit whose ``xi`` no hyperbolic mirror has (``0 <= xi < 1``); False: any
+        finite fit (a paraboloid gives ``xi = 1``, a sphere more).
 
     Returns
     -------
@@ -106,7 +109,8 @@ def fit_central(image_points, obj, image_size, distortion=False):
         raise ValueError(f"cv2.omnidir.calibrate failed: {msg}") from None
     xi = float(np.ravel(xi)[0])
     K = np.asarray(K, np.float64)
-    if not (np.isfinite(K).all() and 0.0 <= xi < 1.0 and K[0, 0] > 0 and K[1, 1] > 0):
+    shape_ok = 0.0 <= xi < 1.0 if hyperbolic else math.isfinite(xi)
+    if not (np.isfinite(K).all() and shape_ok and K[0, 0] > 0 and K[1, 1] > 0):
         raise ValueError(
             f"cv2.omnidir.calibrate gave no hyperbolic rig (xi = {xi:.3f}, fx = {K[0, 0]:.1f}; "
             f"a hyperbolic mirror has 0 < xi < 1)"

@@ -46,19 +46,24 @@ class HeldOut:
         calibrated on the other folds.
     omnidir : dict
         The same for ``cv2.omnidir.calibrate`` on the same folds (empty if it failed).
+    failed : dict
+        ``{view: why}`` of the views whose fold's training views could not be calibrated.
     """
 
     folds: int
     rms: dict
     omnidir: dict
+    failed: dict = dataclasses.field(default_factory=dict)
 
     @property
     def median(self) -> float:
-        return float(np.median(list(self.rms.values())))
+        """Median of :attr:`rms` (NaN when every fold failed)."""
+        return float(np.median(list(self.rms.values()))) if self.rms else math.nan
 
     @property
     def max(self) -> float:
-        return float(np.max(list(self.rms.values())))
+        """Largest of :attr:`rms` (NaN when every fold failed)."""
+        return float(np.max(list(self.rms.values()))) if self.rms else math.nan
 
     def summary(self) -> str:
         """One line: median and max, and cv2.omnidir's beside them."""
@@ -69,6 +74,11 @@ class HeldOut:
         if self.omnidir:
             v = list(self.omnidir.values())
             line += f"; cv2.omnidir on the same folds {np.median(v):.3f} / {np.max(v):.3f} px"
+        if self.failed:
+            line += (
+                f"; {len(self.failed)} view(s) not predicted: their fold's training views "
+                f"could not be calibrated ({next(iter(self.failed.values()))})"
+            )
         return line
 
 
@@ -199,13 +209,18 @@ def cross_validate(fit: Callable, views: dict, obj, image_size, k: int = 5) -> H
             f"a {k}-fold held-out check needs at least 2 folds and 3 training views per fold; "
             f"there are {len(ids)} views"
         )
-    rms, omni = {}, {}
+    rms, omni, failed = {}, {}, {}
     for fold in fold_of(len(ids), k):
         held = [ids[j] for j in fold]
         train = [i for i in ids if i not in held]
-        project, directions = omnicam_predictor(fit(train))
-        for i in held:
-            rms[i] = heldout_rms(project, directions, views[i], obj)
+        try:
+            project, directions = omnicam_predictor(fit(train))
+        except ValueError as e:  # this fold's views alone cannot determine the rig
+            for i in held:
+                failed[i] = str(e)
+        else:
+            for i in held:
+                rms[i] = heldout_rms(project, directions, views[i], obj)
         try:
             project, directions = omnidir_predictor([views[i] for i in train], obj, image_size)
         except cv2.error:
@@ -214,5 +229,8 @@ def cross_validate(fit: Callable, views: dict, obj, image_size, k: int = 5) -> H
             for i in held:
                 omni[i] = heldout_rms(project, directions, views[i], obj)
     return HeldOut(
-        folds=k, rms=dict(sorted(rms.items())), omnidir=dict(sorted((omni or {}).items()))
+        folds=k,
+        rms=dict(sorted(rms.items())),
+        omnidir=dict(sorted((omni or {}).items())),
+        failed=dict(sorted(failed.items())),
     )
