@@ -302,6 +302,6 @@ def cmd_calibrate_pattern(args):
         if os.path.lexists(out) and not args.overwrite:
             raise CliError(f"overlay {out} exists; pass --overwrite to replace it")
         _write_image(out, report.draw(images[i], i), args.overwrite)
-    _save_camera(camera, calib, args.overwrite)
+    _save_camera(camera, calib, args.overwrite, report, forced=bool(one_side), implausible=one_side)
     print(f"wrote {calib} and {len(images)} overlays in {folder}")
     return EXIT_OK
