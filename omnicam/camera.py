@@ -485,11 +485,20 @@ class MisalignedHyperbolicCamera:
         return fit_omnidir(self, depth=depth).as_tuple()
 
     # -- files ----------------------------------------------------------------------------
-    def save(self, path: PathLike) -> None:
+    def save(self, path: PathLike, verdict=None) -> None:
         """Write the calibration with ``cv2.FileStorage`` (yaml, yml, xml or json), atomically.
 
         The file is written beside ``path``, read back and compared, then renamed into place
-        (:func:`omnicam.io.save_camera`).
+        (:func:`omnicam.io.save_camera`). ``cam.save(path, report)`` also records how far to
+        trust it: the report's confidence, stated uncertainty and warnings (the file's
+        ``verdict``, read by :func:`omnicam.io.read_verdict` and ``omnicam info``).
+
+        Parameters
+        ----------
+        path : str or os.PathLike
+        verdict : CalibrationReport, PatternReport or omnicam.io.Verdict, optional
+            What the calibration's report said (a report is taken as
+            :meth:`omnicam.io.Verdict.from_report` of it); None writes none.
 
         Raises
         ------
@@ -499,7 +508,7 @@ class MisalignedHyperbolicCamera:
         """
         from .io import save_camera
 
-        save_camera(self, path)
+        save_camera(self, path, verdict)
 
     @classmethod
     def load(cls, path: PathLike) -> MisalignedHyperbolicCamera:

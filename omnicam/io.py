@@ -10,6 +10,15 @@ Layout (format_version 1)::
     rvec: !!opencv-matrix 3x1
     tvec: !!opencv-matrix 3x1
     image_size: [width, height]     (absent when unknown)
+    verdict: {...}                  (optional: how far to trust it, see :class:`Verdict`)
+
+The ``verdict`` map (new after omnicam 0.3.0; still ``format_version`` 1: every field of it is
+optional and readers ignore fields they do not know, so older omnicams read these files and
+files without it read as before) records what the calibration's report said when the file was
+written: where ``K`` came from, the confidence of the posture's choice, ``--force``, the stated
+uncertainty, the warnings, and for chessboard calibrations the RMS, the held-out check and the
+viewing directions' uncertainty. Its flags are written as 0 and 1 (YAML's ``true`` is refused
+on reading, below). :func:`read_verdict` reads it.
 
 Reading is defensive, because ``cv2.FileStorage`` (OpenCV 4.x and 5.0) crashes the whole process
 on some inputs. Found by ``tests/fuzz/run.py`` and an outside fuzz run:
@@ -46,6 +55,7 @@ temporary file back with the same reader: a failure (full disk, read-only folder
 
 from __future__ import annotations
 
+import dataclasses
 import json
 import math
 import os
@@ -65,6 +75,8 @@ from .mirror import HyperbolicMirror
 __all__ = [
     "save_camera",
     "load_camera",
+    "Verdict",
+    "read_verdict",
     "read_intrinsics",
     "read_central_model",
     "write_intrinsics",
@@ -549,6 +561,337 @@ def load_camera(path: PathLike, cls: type):
         raise r.fail(str(e).split(" ", 1)[0].rstrip(":,"), str(e)) from None
 
 
+# -- the verdict: how far to trust a calibration --------------------------------------------------
+#: Where a calibration's ``K`` came from (:attr:`Verdict.K_source`).
+K_SOURCES = ("given", "file", "guessed", "chessboard")
+#: How the posture was found (:attr:`Verdict.method`).
+METHODS = ("image", "chessboard")
+_VERDICT_FLOATS = (
+    "confidence",
+    "axis_std_deg",
+    "origin_std_mm",
+    "rim_rms_px",
+    "rms_px",
+    "heldout_median_px",
+    "heldout_max_px",
+)
+_MAX_TEXT = 2000  # characters of one warning or note
+
+
+def _file_text(text, name):
+    """``text`` on one line, as the reader takes it back from every format.
+
+    The pre-scan refuses YAML and XML holding a bare ``true``/``false`` or an integer beyond 32
+    bits, wherever they are (:func:`_check_text`); OpenCV writes the strings ``true`` and
+    ``null`` unquoted, and a string that starts with a quote as if it were quoted already (a
+    file it cannot read back). So such words get backticks, a leading quote one before it, and
+    long integers are grouped (``4_294_967_297``).
+    """
+    if not isinstance(text, str):
+        raise ValueError(f"{name} must be a string, got {type(text).__name__}")
+    text = " ".join(text.split())[:_MAX_TEXT]
+    text = re.sub(r"(^|[:\[,>-][ \t]*)(true|false|null)(?=[ \t]*(?:$|[,\]#<]))", r"\1`\2`", text)
+    if text[:1] in ("'", '"'):
+        text = "`" + text
+    return _LONG_INT.sub(lambda m: f"{int(m.group()):_}", text)
+
+
+@dataclasses.dataclass(frozen=True)
+class Verdict:
+    """How far to trust a calibration: what its report said when the file was written.
+
+    The ``verdict`` map of a calibration file (:func:`save_camera`, :func:`read_verdict`).
+    ``camera.save(path, report)`` records :meth:`from_report` of the report; the command line
+    adds where ``K`` came from and ``--force``. Numbers that do not apply or are unknown are
+    None (never NaN).
+
+    Attributes
+    ----------
+    method : str
+        ``"image"`` (one image of the mirror: the rim, Chen's method, the choice of posture) or
+        ``"chessboard"`` (chessboards seen through the mirror).
+    K_source : str
+        Where ``K`` came from: ``"given"`` (typed or passed in), ``"file"`` (read from
+        :attr:`K_file`), ``"guessed"`` (from the rim and the mirror, as if the rig were
+        aligned) or ``"chessboard"`` (fitted to the boards).
+    K_file : str or None
+        The file ``K`` was read from (``--intrinsics``, ``--from``), as given.
+    K_note : str
+        How ``K`` was made, in words (the guess's recipe and numbers).
+    confidence : float or None
+        The choice among the physical postures, 0 to 1 (``CalibrationReport.confidence``;
+        None for chessboards).
+    ambiguous : bool
+        The choice could not separate the physical postures.
+    forced : bool
+        Written although implausible (``--force``).
+    axis_std_deg, origin_std_mm : float or None
+        The stated RMS uncertainty of the mirror axis (deg) and of the camera centre (the
+        mirror's length unit).
+    rim_rms_px : float or None
+        RMS distance of the rim points to the rim's image, px.
+    rms_px : float or None
+        Chessboards: RMS corner reprojection error, px.
+    heldout_median_px, heldout_max_px : float or None
+        Chessboards: the held-out corner RMS (median and worst view), px.
+    heldout_folds : int or None
+        Chessboards: the folds of the held-out check.
+    ray_std_deg : (float, float) or None
+        Chessboards: the viewing directions' standard deviation over the mirror's image, deg
+        (median, worst).
+    warnings : tuple of str
+        The report's warnings, the implausible findings left out.
+    implausible : tuple of str
+        The implausible findings: what makes ``omnicam calibrate`` refuse without ``--force``.
+    """
+
+    method: str = "image"
+    K_source: str = "given"
+    K_file: str | None = None
+    K_note: str = ""
+    confidence: float | None = None
+    ambiguous: bool = False
+    forced: bool = False
+    axis_std_deg: float | None = None
+    origin_std_mm: float | None = None
+    rim_rms_px: float | None = None
+    rms_px: float | None = None
+    heldout_median_px: float | None = None
+    heldout_max_px: float | None = None
+    heldout_folds: int | None = None
+    ray_std_deg: tuple | None = None
+    warnings: tuple = ()
+    implausible: tuple = ()
+
+    def __post_init__(self):
+        def put(name, value):
+            object.__setattr__(self, name, value)
+
+        if self.method not in METHODS:
+            raise ValueError(f"method must be one of {', '.join(METHODS)}, got {self.method!r}")
+        if self.K_source not in K_SOURCES:
+            raise ValueError(
+                f"K_source must be one of {', '.join(K_SOURCES)}, got {self.K_source!r}"
+            )
+        if self.K_file is not None:
+            put("K_file", _file_text(shown(_fspath(self.K_file, "K_file")), "K_file"))
+        put("K_note", _file_text(self.K_note, "K_note"))
+        for name in ("ambiguous", "forced"):
+            value = getattr(self, name)
+            if value not in (0, 1):  # True, False, 0, 1 (the file's flags)
+                raise ValueError(f"{name} must be 0 or 1 (False or True), got {value!r}")
+            put(name, bool(value))
+        for name in _VERDICT_FLOATS:
+            put(name, _optional_number(getattr(self, name), name))
+        if self.confidence is not None and not 0.0 <= self.confidence <= 1.0:
+            raise ValueError(f"confidence must be within 0..1, got {self.confidence!r}")
+        folds = self.heldout_folds
+        if folds is not None and (
+            not isinstance(folds, (int, np.integer)) or isinstance(folds, bool) or folds < 2
+        ):
+            raise ValueError(f"heldout_folds must be an integer of at least 2, got {folds!r}")
+        put("heldout_folds", None if folds is None else int(folds))
+        ray = self.ray_std_deg
+        if ray is not None:
+            if np.ndim(ray) != 1 or len(ray) != 2:
+                raise ValueError(f"ray_std_deg must be (median, worst), got {ray!r}")
+            ray = tuple(_optional_number(v, "ray_std_deg") for v in ray)
+            put("ray_std_deg", None if None in ray else ray)
+        for name in ("warnings", "implausible"):
+            texts = getattr(self, name)
+            if isinstance(texts, str) or not isinstance(texts, (list, tuple)):
+                raise ValueError(f"{name} must be a sequence of strings")
+            if len(texts) > MAX_VALUES:
+                raise ValueError(f"{name} has more than {MAX_VALUES} entries")
+            put(name, tuple(_file_text(w, name) for w in texts))
+
+    @classmethod
+    def from_report(
+        cls,
+        report,
+        *,
+        K_source: str | None = None,
+        K_file: str | None = None,
+        K_note: str = "",
+        forced: bool = False,
+        implausible=None,
+    ) -> Verdict:
+        """The verdict of a :class:`~omnicam.calibration.CalibrationReport` (one image) or a
+        :class:`~omnicam.chessboard.PatternReport` (chessboards).
+
+        Parameters
+        ----------
+        report : CalibrationReport or PatternReport
+        K_source : str, optional
+            Default ``"given"`` for one image (``calibrate`` takes ``K``), ``"chessboard"`` for
+            chessboards (``K`` is fitted).
+        K_file, K_note, forced
+            As the attributes.
+        implausible : sequence of str, optional
+            The findings that made the result implausible; default the report's
+            ``plausibility`` (one image), none for chessboards. They are left out of
+            ``warnings``.
+
+        Raises
+        ------
+        ValueError
+            ``report`` is not a calibration report, or a bad argument (naming it).
+        """
+        if not hasattr(report, "warnings") or not hasattr(report, "camera"):
+            raise ValueError(
+                f"verdict must be a Verdict or a calibration report (CalibrationReport, "
+                f"PatternReport), got {type(report).__name__}"
+            )
+        if implausible is None:
+            implausible = getattr(report, "plausibility", ())
+        implausible = tuple(str(w) for w in implausible)
+        warnings = tuple(str(w) for w in report.warnings if str(w) not in implausible)
+        common = dict(
+            K_file=K_file,
+            K_note=K_note,
+            forced=forced,
+            rim_rms_px=getattr(report, "rim_rms", None),
+            warnings=warnings,
+            implausible=implausible,
+        )
+        if hasattr(report, "view_rms"):  # chessboards
+            std = getattr(report, "std", {}) or {}
+            held = getattr(report, "heldout", None)
+            return cls(
+                method="chessboard",
+                K_source=K_source or "chessboard",
+                axis_std_deg=std.get("axis_deg"),
+                origin_std_mm=std.get("origin"),
+                rms_px=report.rms,
+                heldout_median_px=None if held is None else held.median,
+                heldout_max_px=None if held is None else held.max,
+                heldout_folds=None if held is None else held.folds,
+                ray_std_deg=tuple(getattr(report, "ray_std_deg", (None, None))),
+                **common,
+            )
+        return cls(
+            method="image",
+            K_source=K_source or "given",
+            confidence=report.confidence,
+            ambiguous=getattr(report, "ambiguous", False),
+            axis_std_deg=getattr(report, "axis_std_deg", None),
+            origin_std_mm=getattr(report, "origin_std_mm", None),
+            **common,
+        )
+
+    def doubts(self) -> tuple[str, ...]:
+        """What makes the calibration doubtful, each a short phrase (empty: no doubt recorded).
+
+        A guessed ``K``, an ambiguous choice of posture, implausible findings (written with
+        ``--force`` or from the library), e.g. ``("with a guessed K", "ambiguous (confidence
+        0.00)")``.
+        """
+        out = []
+        if self.K_source == "guessed":
+            out.append("with a guessed K")
+        if self.ambiguous:
+            c = "" if self.confidence is None else f" (confidence {self.confidence:.2f})"
+            out.append(f"ambiguous{c}")
+        n = len(self.implausible)
+        found = f"{n} implausibility warning{'s' if n != 1 else ''}"
+        if self.forced:
+            out.append(f"forced past {found}" if n else "forced")
+        elif n:
+            out.append(f"with {found}")
+        return tuple(out)
+
+
+def _optional_number(value, name):
+    """``value`` as a finite float, None for None or NaN; ValueError naming ``name``."""
+    if value is None:
+        return None
+    if isinstance(value, bool) or not isinstance(value, (int, float, np.integer, np.floating)):
+        raise ValueError(f"{name} must be a number, got {value!r}")
+    value = float(value)
+    if math.isnan(value):
+        return None
+    if not math.isfinite(value) or value < 0:
+        raise ValueError(f"{name} must be finite and not negative, got {value!r}")
+    return value
+
+
+def read_verdict(path: PathLike) -> Verdict | None:
+    """The :class:`Verdict` recorded in a calibration file, or None when it has none.
+
+    Files written by ``camera.save(path)`` without a verdict, and by omnicam 0.3.0 and
+    before, have none; :meth:`MisalignedHyperbolicCamera.load` reads the camera of every
+    file alike.
+
+    Raises
+    ------
+    FileNotFoundError
+        No file at ``path``.
+    ValueError
+        A malformed verdict (naming the file and the field), or a file refused as
+        :func:`load_camera` refuses it.
+    """
+    return _verdict_of(_reading(path, "calibration file"))
+
+
+def _verdict_of(r):
+    node = r.node("verdict", required=False)
+    if node is None:
+        return None
+    if not isinstance(node, dict):
+        raise r.fail("verdict", "must be a map of named fields")
+    values = {}
+    for field in dataclasses.fields(Verdict):
+        value = node.get(field.name)
+        if value is None:
+            continue
+        name = f"verdict.{field.name}"
+        if field.name in ("warnings", "implausible"):
+            value = [value] if isinstance(value, str) else value  # XML: one item, a scalar
+            if not isinstance(value, list) or not all(isinstance(v, str) for v in value):
+                raise r.fail(name, "must be a sequence of strings")
+        elif field.name == "ray_std_deg":
+            if not (isinstance(value, list) and len(value) == 2 and all(map(_is_number, value))):
+                raise r.fail(name, "must be a sequence of two numbers (median, worst)")
+            value = tuple(value)
+        elif field.name in ("method", "K_source", "K_file", "K_note"):
+            if not isinstance(value, str):
+                raise r.fail(name, "must be a string")
+        elif not _is_number(value) and not isinstance(value, bool):
+            raise r.fail(name, "must be a number")
+        values[field.name] = value
+    try:
+        return Verdict(**values)
+    except ValueError as e:
+        field = str(e).split(" ", 1)[0]
+        raise r.fail(f"verdict.{field}", str(e).split(" ", 1)[1]) from None
+
+
+def _write_verdict(fs, verdict):
+    """The ``verdict`` map of :func:`save_camera` (fields that are None or empty left out)."""
+    fs.startWriteStruct("verdict", cv2.FileNode_MAP)
+    for field in dataclasses.fields(Verdict):
+        value = getattr(verdict, field.name)
+        if value is None or (isinstance(value, (str, tuple)) and not value):
+            continue
+        if field.name in ("warnings", "implausible"):
+            fs.startWriteStruct(field.name, cv2.FileNode_SEQ)
+            for text in value:
+                fs.write("", text)
+            fs.endWriteStruct()
+        elif field.name == "ray_std_deg":
+            fs.startWriteStruct(field.name, cv2.FileNode_SEQ)
+            for v in value:
+                fs.write("", float(v))
+            fs.endWriteStruct()
+        elif isinstance(value, bool) or field.name == "heldout_folds":
+            fs.write(field.name, int(value))
+        elif isinstance(value, float):
+            fs.write(field.name, value)
+        else:
+            fs.write(field.name, str(value))
+    fs.endWriteStruct()
+
+
 def read_intrinsics(path: PathLike) -> tuple[FloatArray, FloatArray | None, Size | None]:
     """Read a pinhole's ``K``, ``D`` and ``image_size`` from a ``cv2.FileStorage`` file.
 
@@ -755,20 +1098,33 @@ def _write_seq(fs, name, values):
     fs.endWriteStruct()
 
 
-def save_camera(camera, path: PathLike) -> None:
-    """Write ``camera`` to ``path`` atomically and verified.
+def save_camera(camera, path: PathLike, verdict=None) -> None:
+    """Write ``camera`` to ``path`` atomically and verified, with its verdict if given.
 
     A temporary file in the same folder is written, flushed, read back and compared with
-    ``camera``, and only then renamed into place (:func:`omnicam._atomic.atomic_output`).
+    ``camera`` (and ``verdict``), and only then renamed into place
+    (:func:`omnicam._atomic.atomic_output`).
+
+    Parameters
+    ----------
+    camera : MisalignedHyperbolicCamera
+    path : str or os.PathLike
+        ``.yaml``, ``.yml``, ``.xml`` or ``.json`` (the format follows the extension).
+    verdict : Verdict or a calibration report, optional
+        Recorded as the file's ``verdict`` map (:class:`Verdict`); a ``CalibrationReport`` or
+        ``PatternReport`` is taken as :meth:`Verdict.from_report` of it. None: no verdict.
 
     Raises
     ------
     ValueError
-        Unknown extension, a name that is not UTF-8, or the file cannot be written (missing or
-        read-only folder, full disk, a folder in the way, ...): the message names the file, the
-        old file at ``path`` is unchanged and no temporary file is left.
+        Unknown extension, a name that is not UTF-8, a ``verdict`` that is neither, or the file
+        cannot be written (missing or read-only folder, full disk, a folder in the way, ...):
+        the message names the file, the old file at ``path`` is unchanged and no temporary file
+        is left.
     """
     cls = type(camera)
+    if verdict is not None and not isinstance(verdict, Verdict):
+        verdict = Verdict.from_report(verdict)
 
     def write(fs):
         fs.write("format_version", FORMAT_VERSION)
@@ -785,9 +1141,11 @@ def save_camera(camera, path: PathLike) -> None:
         fs.write("tvec", np.asarray(camera.tvec).reshape(3, 1))
         if camera.image_size is not None:
             _write_seq(fs, "image_size", camera.image_size)
+        if verdict is not None:
+            _write_verdict(fs, verdict)
 
     def read_back(tmp):
-        return _same_camera(load_camera(tmp, cls), camera)
+        return _same_camera(load_camera(tmp, cls), camera) and read_verdict(tmp) == verdict
 
     _atomic_filestorage(path, "calibration file", write, read_back)
 

@@ -558,6 +558,43 @@ def test_info_prints_mirror_intrinsics_posture_and_viewpoint(data, rig, capsys):
     assert f"{viewpoint[2]:.4f}" in out
 
 
+def test_info_says_when_a_file_records_no_verdict(data, capsys):
+    assert main(["info", str(data["calib"])]) == 0
+    assert "verdict        none recorded" in capsys.readouterr().out
+
+
+def test_info_prints_the_verdict_and_says_what_is_doubtful(rig, tmp_path, capsys):
+    from omnicam.io import Verdict
+
+    calib = tmp_path / "rig.yaml"
+    verdict = Verdict(
+        K_source="file",
+        K_file="K.yaml",
+        confidence=0.0,
+        ambiguous=True,
+        forced=True,
+        axis_std_deg=0.127,
+        origin_std_mm=0.15,
+        warnings=("no far_lines given",),
+        implausible=("the camera centre is 13.0 from the lower focus",),
+    )
+    rig.save(calib, verdict)
+    assert main(["info", str(calib)]) == 0
+    out = capsys.readouterr().out
+    assert (
+        "verdict        DOUBTFUL: calibrated ambiguous (confidence 0.00), forced past 1 "
+        "implausibility warning (from one image of the mirror)"
+    ) in out
+    assert "K from         read from a file: K.yaml" in out
+    assert "posture        chosen with confidence 0.0000 AMBIGUOUS" in out
+    assert "uncertainty    mirror axis 0.127 deg, camera centre 0.15 mm" in out
+    assert "implausible    - the camera centre is 13.0 from the lower focus" in out
+    assert "warning        - no far_lines given" in out
+    rig.save(calib, Verdict(confidence=1.0))
+    assert main(["info", str(calib)]) == 0
+    assert "verdict        no doubt recorded" in capsys.readouterr().out
+
+
 def test_info_of_aligned_rig_has_zero_tilt_offset_and_rms(tmp_path, capsys):
     calib = tmp_path / "aligned.json"
     synthetic.aligned_rig(image_size=(120, 120)).save(calib)

@@ -89,8 +89,11 @@ def test_implausible_result_exits_one_and_writes_no_calibration(scene, tmp_path,
     assert "omnicam: warning: implausible: the rim found has semi-axes" in captured.err
     assert "another resolution" in captured.err
     assert not calib.exists()
-    assert (tmp_path / "calib_overlay.png").is_file()  # to look at what went wrong
-    assert "WARNINGS" in captured.out  # the report is printed too
+    # the overlay shows what went wrong, under a name that does not block the next attempt
+    assert "calib_overlay_refused.png" in err
+    assert (tmp_path / "calib_overlay_refused.png").is_file()
+    assert not (tmp_path / "calib_overlay.png").exists()
+    assert "omnicam mirror posture calibration" in captured.out  # the report is printed too
 
 
 def test_force_writes_an_implausible_calibration_with_the_warnings(scene, tmp_path, capsys):
@@ -337,3 +340,162 @@ def test_rim_radius_is_refused_beside_a_mirror(tmp_path, capsys):
     code = main([*args, "--rim-radius", "30", "-o", str(tmp_path / "c.yaml")])
     assert code == 2
     assert "--rim-radius" in error_line(capsys.readouterr().err)
+
+
+# -- retrying, each warning once (issue 18 item 7) ------------------------------------
+def test_a_refused_attempt_does_not_block_the_next_one(scene, tmp_path, capsys):
+    """Refused: no calibration file, the overlay as calib_overlay_refused.png. The retry with
+    the right K needs no --overwrite; a second refusal replaces the refused overlay."""
+    k2 = write_K(tmp_path / "k2.yaml", scale_K(scene["truth"].K, SIZE, (640, 480)))
+    calib = tmp_path / "calib.yaml"
+    assert run(scene["image"], k2, calib) == 1
+    capsys.readouterr()
+    assert run(scene["image"], k2, calib) == 1  # again: the refused overlay is replaced
+    error_line(capsys.readouterr().err)
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["calib_overlay_refused.png", "k2.yaml"]
+    code = run(scene["image"], scene["k"], calib)
+    captured = capsys.readouterr()
+    assert code == 0, captured.err
+    assert calib.is_file() and (tmp_path / "calib_overlay.png").is_file()
+
+
+def test_each_implausibility_warning_is_printed_once(scene, tmp_path, capsys):
+    """They were in the report's WARNINGS and again on stderr: now on stderr alone (they decide
+    the refusal), the report keeping the others."""
+    k2 = write_K(tmp_path / "k2.yaml", scale_K(scene["truth"].K, SIZE, (640, 480)))
+    assert run(scene["image"], k2, tmp_path / "calib.yaml") == 1
+    captured = capsys.readouterr()
+    both = captured.out + captured.err
+    found = [
+        ln.split("implausible: ", 1)[1] for ln in captured.err.splitlines() if "implausible: " in ln
+    ]
+    assert len(found) >= 2, captured.err
+    for w in found:
+        assert both.count(w) == 1, w
+    assert "no warnings" not in captured.out
+    lines = [ln for ln in both.splitlines() if ln.strip()]
+    assert len(lines) <= 25, both
+
+
+# -- K guessed from the rim and the mirror (issue 18 item 5) -------------------------------------
+def test_guessed_K_images_the_rim_where_it_was_found(scene):
+    """guess_K is the aligned rig's K: expected_rim of it is the rim found (centre and size)."""
+    from omnicam.calibration.plausibility import expected_rim
+    from omnicam.cli.calibrate import guess_K
+
+    truth = synthetic.aligned_rig(image_size=SIZE)
+    rim = fit_rim(truth.rim_image_points(720), robust=False)
+    K = guess_K(rim, truth.mirror)
+    np.testing.assert_allclose(K, truth.K, rtol=1e-6, atol=1e-6)
+    m = synthetic.misaligned_rig(3.0, 30.0, (1.5, -1.0, 1.0), image_size=SIZE)
+    rim = fit_rim(m.rim_image_points(720), robust=False)
+    expected = expected_rim(guess_K(rim, m.mirror), m.mirror)
+    np.testing.assert_allclose(expected.center, rim.center, atol=1e-6)
+    assert expected.radius == pytest.approx(float(np.sqrt(np.prod(rim.axes))), rel=1e-3)
+
+
+def test_guess_k_calibrates_an_aligned_rig_and_the_file_says_it_was_guessed(tmp_path, capsys):
+    truth = synthetic.aligned_rig(image_size=SIZE)
+    image = tmp_path / "aligned.png"
+    cv2.imwrite(str(image), synthetic.render_environment(truth, seed=3))
+    calib = tmp_path / "rig.yaml"
+    code = main(["calibrate", str(image), *MIRROR, "--guess-k", "-o", str(calib), "--force"])
+    captured = capsys.readouterr()
+    assert code == 0, captured.err
+    assert captured.out.startswith("K guessed: fx = fy = ")
+    assert "with a guessed K" in captured.out.splitlines()[-1]
+    cam = MisalignedHyperbolicCamera.load(calib)
+    np.testing.assert_allclose(cam.K, truth.K, atol=0.1)  # measured: within 0.03 px
+    from omnicam.io import read_verdict
+
+    verdict = read_verdict(calib)
+    assert verdict.K_source == "guessed" and "rim's centre" in verdict.K_note
+    assert main(["info", str(calib)]) == 0
+    out = capsys.readouterr().out
+    assert "GUESSED from the rim and the mirror" in out and "with a guessed K" in out
+
+
+@pytest.mark.parametrize(
+    "extra, words",
+    [
+        (["--fx", "400"], "--fx/--fy/--cx/--cy"),
+        (["--intrinsics", "k.yaml"], "--intrinsics"),
+        (["--dist", "0.1", "0", "0", "0"], "--dist"),
+    ],
+)
+def test_guess_k_beside_intrinsics_is_refused(scene, tmp_path, capsys, extra, words):
+    code = main(["calibrate", scene["image"], *MIRROR, "--guess-k", *extra, "-o", "x.yaml"])
+    assert code == 2
+    line = error_line(capsys.readouterr().err)
+    assert "--guess-k" in line and words in line
+
+
+def test_no_intrinsics_offers_the_guess(scene, tmp_path, capsys):
+    code = main(["calibrate", scene["image"], *MIRROR, "-o", str(tmp_path / "x.yaml")])
+    assert code == 2
+    assert "--guess-k" in error_line(capsys.readouterr().err)
+
+
+# -- the verdict travels with the file (issue 18 item 3) -----------------------------------------
+def test_the_file_records_where_K_came_from_and_the_verdict(scene, tmp_path, capsys):
+    from omnicam.io import read_verdict
+
+    calib = tmp_path / "calib.yaml"
+    assert run(scene["image"], scene["k"], calib) == 0
+    capsys.readouterr()
+    v = read_verdict(calib)
+    assert (v.method, v.K_source, v.K_file, v.forced) == ("image", "file", scene["k"], False)
+    assert v.confidence is not None and v.axis_std_deg > 0 and v.origin_std_mm > 0
+    # forced past implausible findings: recorded, and unwarp says it in one line
+    k2 = write_K(tmp_path / "k2.yaml", scale_K(scene["truth"].K, SIZE, (640, 480)))
+    forced = tmp_path / "forced.yaml"
+    assert run(scene["image"], k2, forced, "--force") == 0
+    capsys.readouterr()
+    v = read_verdict(forced)
+    assert v.forced and v.implausible and "another resolution" in " ".join(v.implausible)
+    assert not set(v.implausible) & set(v.warnings)
+    code = main(
+        [
+            "unwarp",
+            scene["image"],
+            "-c",
+            str(forced),
+            "--panorama",
+            "256x64",
+            "-o",
+            str(tmp_path / "p.png"),
+        ]
+    )
+    captured = capsys.readouterr()
+    assert code == 0, captured.err
+    doubt = [ln for ln in captured.err.splitlines() if "forced.yaml: calibrated" in ln]
+    assert len(doubt) == 1 and "forced past" in doubt[0] and "omnicam info" in doubt[0]
+    # a plain calibration: unwarp says nothing about it
+    code = main(
+        [
+            "unwarp",
+            scene["image"],
+            "-c",
+            str(calib),
+            "--panorama",
+            "256x64",
+            "-o",
+            str(tmp_path / "q.png"),
+        ]
+    )
+    assert code == 0 and "calibrated" not in capsys.readouterr().err
+
+
+def test_from_an_earlier_guess_the_K_stays_guessed(tmp_path, capsys):
+    """--from takes K from a file; when that file's K was guessed, the new one is too."""
+    from omnicam.io import read_verdict
+
+    truth = synthetic.aligned_rig(image_size=SIZE)
+    image = tmp_path / "aligned.png"
+    cv2.imwrite(str(image), synthetic.render_environment(truth, seed=3))
+    first, second = tmp_path / "rig.yaml", tmp_path / "again.yaml"
+    assert main(["calibrate", str(image), *MIRROR, "--guess-k", "-o", str(first), "--force"]) == 0
+    assert main(["calibrate", str(image), "--from", str(first), "-o", str(second), "--force"]) == 0
+    capsys.readouterr()
+    v = read_verdict(second)
+    assert v.K_source == "guessed" and v.K_file == str(first)

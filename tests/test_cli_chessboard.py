@@ -8,6 +8,7 @@ import numpy as np
 import pytest
 
 import omnicam
+import omnicam.io
 from omnicam import synthetic
 from omnicam.cli import main
 from omnicam.synthetic import boards
@@ -48,6 +49,19 @@ def test_progress_names_and_the_heldout_check_are_printed(views, tmp_path, capsy
     assert "board5.png" in out.split("found by")[1]  # the table names the images
     assert "held-out corner RMS (3-fold" in out and "cv2.omnidir on the same folds" in out
     assert "viewing directions std" in out
+    # the file keeps what the run printed: RMS, held-out figures, ray uncertainty (issue 18)
+    verdict = omnicam.io.read_verdict(tmp_path / "rig.yaml")
+    assert (verdict.method, verdict.K_source, verdict.forced) == ("chessboard", "chessboard", False)
+    assert f"RMS {verdict.rms_px:.3f} px" in out
+    held = f"median {verdict.heldout_median_px:.3f} px, max {verdict.heldout_max_px:.3f} px"
+    assert held in out and verdict.heldout_folds == 3
+    assert f"viewing directions std {verdict.ray_std_deg[0]:.3f} deg" in out
+    assert f"axis std {verdict.axis_std_deg:.3f} deg" in out
+    assert main(["info", str(tmp_path / "rig.yaml")]) == 0
+    info = capsys.readouterr().out
+    assert "K from         fitted to the chessboards" in info
+    assert f"corner RMS median {held[7:]} (3-fold)" in info
+    assert f"viewing directions std {verdict.ray_std_deg[0]:.3f} deg" in info
 
 
 def test_corners_from_another_tool_are_used_and_missing_ones_searched(views, tmp_path, capsys):
@@ -128,6 +142,9 @@ def test_boards_all_on_one_side_exit_one_unless_forced(tmp_path, capsys):
     assert not (tmp_path / "rig.yaml").exists()
     assert _calibrate(paths, tmp_path / "rig.yaml", "--heldout", "0", "--force") == 0
     assert (tmp_path / "rig.yaml").exists()
+    verdict = omnicam.io.read_verdict(tmp_path / "rig.yaml")  # forced, and why
+    assert verdict.forced and "all boards are on one side" in verdict.implausible[0]
+    assert verdict.doubts() == ("forced past 1 implausibility warning",)
 
 
 @pytest.mark.parametrize(

@@ -365,3 +365,144 @@ def test_image_size_written_as_an_opencv_matrix_is_read(tmp_path):
         fs.write("image_size", np.array([[640], [480]], np.int32))
         fs.release()
         assert read_intrinsics(tmp_path / f"k{ext}")[2] == (640, 480)
+
+
+# -- the verdict: how far to trust a calibration, recorded in the file (issue 18 item 3) ----------
+def _doubtful_verdict():
+    from omnicam.io import Verdict
+
+    return Verdict(
+        K_source="guessed",
+        K_note="fx = fy = 582.6 px, principal point at the rim's centre",
+        confidence=0.0,
+        ambiguous=True,
+        forced=True,
+        axis_std_deg=0.127,
+        origin_std_mm=0.15,
+        rim_rms_px=0.57,
+        warnings=("no far_lines given: the choice is ambiguous",),
+        implausible=("the camera centre is 13.0 from the mirror's lower focus (limit 10)",),
+    )
+
+
+@pytest.mark.parametrize("ext", [".yaml", ".yml", ".xml", ".json"])
+def test_the_verdict_round_trips_in_every_format(tmp_path, ext):
+    from omnicam.io import Verdict, read_verdict
+
+    chessboard = Verdict(
+        method="chessboard",
+        K_source="chessboard",
+        K_file="start.yaml",
+        axis_std_deg=0.02,
+        origin_std_mm=0.03,
+        rms_px=0.21,
+        heldout_median_px=0.3,
+        heldout_max_px=0.45,
+        heldout_folds=5,
+        ray_std_deg=(0.01, 0.04),
+        forced=True,
+        implausible=("all boards are on one side of the mirror",),
+    )
+    for i, verdict in enumerate((_doubtful_verdict(), chessboard)):
+        path = tmp_path / f"c{i}{ext}"
+        RIGS["misaligned"].save(path, verdict)
+        assert read_verdict(path) == verdict
+        assert MisalignedHyperbolicCamera.load(path) == RIGS["misaligned"]  # load: unchanged
+
+
+def test_a_file_without_a_verdict_reads_as_before_and_has_none(tmp_path):
+    from omnicam import samples
+    from omnicam.io import read_verdict
+
+    path = tmp_path / "c.yaml"
+    RIGS["aligned"].save(path)
+    assert "verdict" not in path.read_text()
+    assert read_verdict(path) is None
+    with samples.path("hyperomni_misaligned") as shipped:  # written before verdicts
+        assert read_verdict(shipped) is None
+        MisalignedHyperbolicCamera.load(shipped)
+
+
+def test_a_file_with_a_verdict_keeps_format_version_1_and_reads_unknown_fields(tmp_path):
+    """Compatible: the verdict is an optional map; a later field inside it is ignored."""
+    from omnicam.io import FORMAT_VERSION, read_verdict
+
+    assert FORMAT_VERSION == 1
+    path = tmp_path / "c.yaml"
+    RIGS["misaligned"].save(path, _doubtful_verdict())
+    text = path.read_text()
+    assert "format_version: 1" in text and "ambiguous: 1" in text  # flags as 0/1, not true
+    path.write_text(text.replace("verdict:\n", "verdict:\n   from_the_future: 3\n"))
+    assert read_verdict(path) == _doubtful_verdict()
+
+
+def test_save_with_a_report_records_its_verdict(tmp_path):
+    from omnicam import synthetic
+    from omnicam.io import Verdict, read_verdict
+
+    truth = synthetic.misaligned_rig()
+    cam, report = MisalignedHyperbolicCamera.calibrate(
+        truth.K, truth.mirror, boundary_points=truth.rim_image_points(360)
+    )
+    cam.save(tmp_path / "c.json", report)
+    v = read_verdict(tmp_path / "c.json")
+    assert v == Verdict.from_report(report)
+    assert (v.method, v.K_source, v.forced) == ("image", "given", False)
+    assert v.confidence == report.confidence and v.ambiguous == report.ambiguous
+    assert v.axis_std_deg == report.axis_std_deg and v.origin_std_mm == report.origin_std_mm
+    assert v.warnings == tuple(report.warnings)
+    with pytest.raises(ValueError, match="verdict must be a Verdict or a calibration report"):
+        cam.save(tmp_path / "d.json", {"confidence": 1.0})
+    assert not (tmp_path / "d.json").exists()
+
+
+def test_the_doubts_of_a_verdict_are_short_phrases():
+    from omnicam.io import Verdict
+
+    assert Verdict().doubts() == ()
+    assert _doubtful_verdict().doubts() == (
+        "with a guessed K",
+        "ambiguous (confidence 0.00)",
+        "forced past 1 implausibility warning",
+    )
+    assert Verdict(implausible=("a", "b")).doubts() == ("with 2 implausibility warnings",)
+
+
+def test_warning_texts_that_opencv_or_the_prescan_would_misread_still_round_trip(tmp_path):
+    """OpenCV writes the string 'true' unquoted and a leading quote as if quoted; the pre-scan
+    refuses ': true,' and 10-digit integers anywhere. Such texts are written readably."""
+    from omnicam.io import Verdict, read_verdict
+
+    texts = ["x: true, y", "true", "null", "'quoted'", '"half', "n 12345678901234", "a\nb"]
+    verdict = Verdict(warnings=texts)
+    assert verdict.warnings[0] == "x: `true`, y" and verdict.warnings[-1] == "a b"
+    for ext in (".yaml", ".xml", ".json"):
+        path = tmp_path / f"c{ext}"
+        RIGS["aligned"].save(path, verdict)
+        assert read_verdict(path) == verdict
+
+
+@pytest.mark.parametrize(
+    "edit, field",
+    [
+        (lambda t: t.replace("confidence: 0.", "confidence: 2."), "verdict.confidence"),
+        (lambda t: t.replace("confidence: 0.", "confidence: high"), "verdict.confidence"),
+        (lambda t: t.replace("K_source: guessed", "K_source: magic"), "verdict.K_source"),
+        (lambda t: t.replace("ambiguous: 1", "ambiguous: 7"), "verdict.ambiguous"),
+        (lambda t: t.replace("axis_std_deg: ", "axis_std_deg: -"), "verdict.axis_std_deg"),
+        (lambda t: t.replace("verdict:\n", "verdict: 3\nold:\n"), "verdict"),
+    ],
+)
+def test_a_malformed_verdict_raises_naming_the_file_and_the_field(tmp_path, edit, field):
+    from omnicam.io import read_verdict
+
+    path = tmp_path / "c.yaml"
+    RIGS["aligned"].save(path, _doubtful_verdict())
+    text = path.read_text()
+    new = edit(text)
+    assert new != text
+    path.write_text(new)
+    with pytest.raises(ValueError) as err:
+        read_verdict(path)
+    assert str(path) in str(err.value) and repr(field) in str(err.value), str(err.value)
+    MisalignedHyperbolicCamera.load(path)  # the camera itself still reads

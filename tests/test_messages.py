@@ -27,11 +27,10 @@ def test_a_frame_of_a_dtype_remap_does_not_take_is_a_value_error_naming_it(unwar
 
 def test_a_reader_that_goes_away_ends_the_command_quietly():
     info = [sys.executable, "-m", "omnicam", "info", "calib_files/hyperomni_aligned.yaml"]
-    p = subprocess.Popen(info, stdout=subprocess.PIPE, stderr=subprocess.PIPE, cwd=REPO)
-    p.stdout.close()  # as `| head -1` does once it has its line
-    with p.stderr:
+    with subprocess.Popen(info, stdout=subprocess.PIPE, stderr=subprocess.PIPE, cwd=REPO) as p:
+        p.stdout.close()  # as `| head -1` does once it has its line
         err = p.stderr.read().decode()
-    assert p.wait() in (0, 141)
+        assert p.wait() in (0, 141)
     assert "Error" not in err and "unexpected" not in err, err
 
 

@@ -262,7 +262,9 @@ class CalibrationReport:
         the far-line pixels (yellow), and for each physical candidate the image of the far
         lines it implies (the great circle of the plane of its rays, eq. 31) or, without far
         lines, its horizon (elevation 0): red for the chosen one, blue for the other. Text at
-        the top left gives the choice and the confidence.
+        the top left gives the choice and the confidence; the legend at the bottom left names
+        what is drawn (the curves as far lines or horizons), both on a darkened box so that
+        they read on bright images too.
 
         Parameters
         ----------
@@ -281,12 +283,17 @@ class CalibrationReport:
         f = float(1 << shift)
 
         def poly(pts, colour, closed=False):
+            """Draw the finite runs of ``pts``; whether a point of them is in the image."""
             pts = np.asarray(pts, np.float64).reshape(-1, 2)
             ok = np.isfinite(pts).all(axis=1)
+            seen = ok.copy()
+            seen[ok] = (np.abs(pts[ok] - [(w - 1) / 2, (h - 1) / 2]) <= [w / 2, h / 2]).all(axis=1)
             # split at invisible samples so a curve never jumps across the image
             runs = np.split(np.arange(len(pts)), np.flatnonzero(np.diff(ok.astype(int)) != 0) + 1)
+            visible = False
             for run in runs:
                 if len(run) >= 2 and ok[run[0]]:
+                    visible = visible or bool(seen[run].any())
                     p = np.round(pts[run] * f).astype(np.int32).reshape(-1, 1, 2)
                     cv2.polylines(
                         canvas,
@@ -297,6 +304,7 @@ class CalibrationReport:
                         cv2.LINE_AA,
                         shift,
                     )
+            return visible
 
         for p in self.boundary_points[:: max(1, len(self.boundary_points) // 720)]:
             if np.isfinite(p).all():
@@ -332,6 +340,7 @@ class CalibrationReport:
                     cv2.LINE_AA,
                     shift,
                 )
+        drawn = set()  # the legend names what is drawn, nothing else
         for i in self.physical:
             cand = self.candidates[i]
             cam = (
@@ -341,51 +350,59 @@ class CalibrationReport:
             )
             colour = _CHOSEN if i == self.chosen else _OTHER
             for normal in _curve_normals(cam, self.far_lines):
-                poly(_great_circle_pixels(cam, normal), colour)
+                if poly(_great_circle_pixels(cam, normal), colour):
+                    drawn.add(colour)
         text = f"chosen {self.chosen}  confidence {self.confidence:.3f}"
         if self.warnings:
             text += f"  ({len(self.warnings)} warning(s))"
-        cv2.putText(
-            canvas,
-            text,
-            (int(8 * scale), int(20 * scale)),
-            cv2.FONT_HERSHEY_SIMPLEX,
-            0.5 * scale,
-            (255, 255, 255),
-            thick,
-            cv2.LINE_AA,
-        )
-        _legend(
-            canvas,
-            scale,
-            thick,
-            [
-                (_RIM, "fitted rim"),
-                (_POINTS, "rim and reflection points"),
-                (_LINES, "far-line pixels"),
-                (_CHOSEN, "far lines under the chosen posture"),
-                (_OTHER, "... under the other posture"),
-            ],
-        )
+        _text_box(canvas, [((255, 255, 255), text)], scale, thick, top=True)
+        # without far lines the curves are each posture's horizon (elevation 0)
+        curve = "far lines" if self.far_lines else "horizon"
+        points = "rim and reflection points" if self.lens_points is not None else "rim points"
+        entries = [(_RIM, "fitted rim"), (_POINTS, points)]
+        if self.far_lines:
+            entries.append((_LINES, "far-line pixels"))
+        if _CHOSEN in drawn:
+            entries.append((_CHOSEN, f"{curve} under the chosen posture"))
+        if _OTHER in drawn:
+            entries.append((_OTHER, f"{curve} under the other posture"))
+        _text_box(canvas, entries, scale, thick, top=False, swatch=True)
         return canvas
 
 
-def _legend(canvas, scale, thick, entries):
-    """What each colour of :meth:`CalibrationReport.draw` means, bottom left."""
-    h = canvas.shape[0]
-    step = int(16 * scale)
-    for k, (colour, label) in enumerate(reversed(entries)):
-        y = h - int(8 * scale) - k * step
-        x = int(8 * scale)
-        cv2.rectangle(canvas, (x, y - int(9 * scale)), (x + int(9 * scale), y), colour, -1)
+def _text_box(canvas, entries, scale, thick, top, swatch=False):
+    """Lines of text on a darkened box, readable on any image: top left, or bottom left.
+
+    ``entries`` are ``(colour, text)``; with ``swatch`` each line gets a square of its colour
+    and white text (the legend of :meth:`CalibrationReport.draw`), else the text is in its
+    colour.
+    """
+    h, w = canvas.shape[:2]
+    font, size = cv2.FONT_HERSHEY_SIMPLEX, (0.4 if swatch else 0.5) * scale
+    weight = max(1, thick - 1) if swatch else thick
+    pad, step = int(4 * scale), int(16 * scale)
+    indent = int(14 * scale) if swatch else 0
+    widths = [cv2.getTextSize(t, font, size, weight)[0][0] for _, t in entries]
+    box_w = indent + max(widths) + 2 * pad
+    box_h = step * len(entries) + pad
+    x0 = int(4 * scale)
+    y0 = int(4 * scale) if top else h - int(4 * scale) - box_h
+    x1, y1 = min(w, x0 + box_w), min(h, y0 + box_h)
+    region = canvas[max(0, y0) : y1, max(0, x0) : x1]
+    region[:] = (region.astype(np.float32) * 0.25).astype(np.uint8)  # darkened, not hidden
+    for k, (colour, label) in enumerate(entries):
+        y = y0 + pad + (k + 1) * step - int(4 * scale)
+        x = x0 + pad
+        if swatch:
+            cv2.rectangle(canvas, (x, y - int(9 * scale)), (x + int(9 * scale), y), colour, -1)
         cv2.putText(
             canvas,
             label,
-            (x + int(14 * scale), y),
-            cv2.FONT_HERSHEY_SIMPLEX,
-            0.4 * scale,
-            (255, 255, 255),
-            max(1, thick - 1),
+            (x + indent, y),
+            font,
+            size,
+            (255, 255, 255) if swatch else colour,
+            weight,
             cv2.LINE_AA,
         )
 

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import argparse
+import dataclasses
 import math
 import os
 import re
@@ -99,13 +100,41 @@ def _warn(message):
     print(f"{PROG}: warning: {_one_line(message)}", file=sys.stderr, flush=True)
 
 
-def _load_camera(path):
+def _load_camera(path, say_doubt=False):
+    """The camera of a calibration file; with ``say_doubt``, one warning line when its verdict
+    records a doubt (:func:`doubt_line`)."""
     from ..camera import MisalignedHyperbolicCamera
 
     try:
-        return MisalignedHyperbolicCamera.load(path)
+        camera = MisalignedHyperbolicCamera.load(path)
     except (FileNotFoundError, ValueError) as e:
         raise CliError(_one_line(e)) from None
+    if say_doubt:
+        line = doubt_line(path)
+        if line:
+            _warn(line)
+    return camera
+
+
+def doubt_line(path):
+    """One line on what the calibration file ``path`` records as doubtful, or None.
+
+    E.g. ``rig.yaml: calibrated with a guessed K, ambiguous (confidence 0.00): its views may
+    be skewed ('omnicam info rig.yaml' says why)``; a verdict that cannot be read says so.
+    """
+    from ..io import read_verdict
+
+    try:
+        verdict = read_verdict(path)
+    except (FileNotFoundError, ValueError) as e:
+        return f"{path}: its verdict cannot be read ({_one_line(e)})"
+    doubts = () if verdict is None else verdict.doubts()
+    if not doubts:
+        return None
+    return (
+        f"{path}: calibrated {', '.join(doubts)}: its views may be skewed "
+        f"('omnicam info {path}' says why)"
+    )
 
 
 def _check_output(path, overwrite, what="output"):
@@ -263,16 +292,37 @@ def read_far_lines(path):
         raise CliError(_one_line(e)) from None
 
 
-def _report_text(report):
+def _report_text(report, leave_out=()):
+    """The report's summary; ``leave_out``: warnings the caller prints itself (on stderr), left
+    out of it so that each is printed once."""
+    leave_out = {str(w) for w in leave_out}
+    if leave_out and dataclasses.is_dataclass(report) and hasattr(report, "warnings"):
+        kept = [w for w in report.warnings if str(w) not in leave_out]
+        report = dataclasses.replace(report, warnings=kept)
+        if not kept:  # "no warnings" would be wrong: the caller's follow
+            lines = _report_text(report).splitlines()
+            return "\n".join(lines[:-1] if lines[-1].strip() == "no warnings" else lines)
     summary = getattr(report, "summary", None)
     return str(summary() if callable(summary) else summary if summary is not None else report)
 
 
-def _save_camera(camera, path, overwrite):
+def _save_camera(camera, path, overwrite, report=None, **verdict):
+    """Write the calibration file, with a verdict when ``report`` is given: an
+    :class:`omnicam.io.Verdict`, or a report taken with the keywords of
+    :meth:`~omnicam.io.Verdict.from_report` (``K_source``, ``K_file``, ``K_note``, ``forced``,
+    ``implausible``)."""
+    from ..io import Verdict
+
     if not overwrite and os.path.lexists(path):
         raise CliError(f"calibration file {path} exists; pass --overwrite to replace it")
     try:
-        camera.save(path)
+        if report is None:
+            camera.save(path)
+        else:
+            camera.save(
+                path,
+                report if isinstance(report, Verdict) else Verdict.from_report(report, **verdict),
+            )
     except (ValueError, OSError) as e:
         raise CliError(f"cannot write {path}: {_one_line(e)}") from None
 

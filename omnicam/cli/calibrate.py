@@ -31,11 +31,13 @@ from ._common import (
 
 def cmd_calibrate(args):
     from ..camera import MisalignedHyperbolicCamera, scale_K
-    from ..io import SUFFIXES
+    from ..io import SUFFIXES, Verdict
     from ..mirror import HyperbolicMirror
 
     if args.from_rig is not None:
         _refuse_beside_from(args)
+    if args.guess_k:
+        _refuse_beside_guess(args)
     # chessboards seen through the mirror: K, D and the posture (cli/pattern.py)
     if args.chessboard is not None:
         return pattern.cmd_calibrate_pattern(args)
@@ -45,10 +47,11 @@ def cmd_calibrate(args):
     given = [n for n in ("fx", "fy", "cx", "cy") if getattr(args, n) is not None]
     if args.intrinsics is not None and (given or args.dist is not None):
         raise CliError("calibrate: give --intrinsics or --fx --fy --cx --cy [--dist], not both", 2)
-    if args.from_rig is None and args.intrinsics is None and len(given) != 4:
+    if args.from_rig is None and not args.guess_k and args.intrinsics is None and len(given) != 4:
         raise CliError(
             "calibrate: give the camera's intrinsics: --intrinsics K.yaml, or all of "
-            "--fx --fy --cx --cy [--dist ...] (or use --chessboard)",
+            "--fx --fy --cx --cy [--dist ...], or --guess-k (K from the rim and the mirror, "
+            "as if the rig were aligned: a guess, and the file says so); or use --chessboard",
             2,
         )
     args.image = args.image[0]
@@ -57,19 +60,24 @@ def cmd_calibrate(args):
     if os.path.splitext(calib)[1].lower() not in SUFFIXES:
         raise CliError(f"calibration file {calib}: extension must be one of {', '.join(SUFFIXES)}")
     overlay = args.overlay or _overlay_path(calib)
+    refused_overlay = refused_overlay_path(overlay)
     _check_output(calib, args.overwrite, "calibration file")
     _check_output(overlay, args.overwrite, "overlay")
+    _check_output(refused_overlay, True, "overlay")  # replaced by every refused attempt
     if not cv2.haveImageWriter(overlay):
         raise CliError(f"overlay {overlay}: no image writer for its extension; use .png or .jpg")
-    if (
-        os.path.exists(overlay)
-        and os.path.exists(args.image)
-        and os.path.samefile(overlay, args.image)
-    ):
-        raise CliError(f"overlay {overlay} is the input image")
+    for path in (overlay, refused_overlay):
+        if (
+            os.path.exists(path)
+            and os.path.exists(args.image)
+            and os.path.samefile(path, args.image)
+        ):
+            raise CliError(f"overlay {path} is the input image")
+    k_from = {"K_source": "given"}  # where K came from, for the file's verdict
     if args.from_rig is not None:  # after a bump: K, D and the mirror of an earlier calibration
         rig = _load_camera(args.from_rig)
         K, D, mirror, size = rig.K, rig.D, rig.mirror, rig.image_size
+        k_from = _k_from_rig(args.from_rig)
     else:
         if args.mirror is None:
             raise CliError(
@@ -84,7 +92,8 @@ def cmd_calibrate(args):
             raise CliError(f"--mirror: {e}") from None
         if args.intrinsics is not None:
             K, D, size = read_intrinsics(args.intrinsics)
-        else:
+            k_from = {"K_source": "file", "K_file": args.intrinsics}
+        elif not args.guess_k:
             K, D, size = _intrinsics_from_numbers(args)
     far_lines = read_far_lines(args.far_lines) if args.far_lines else None
     boundary = read_boundary_points(args.boundary_points) if args.boundary_points else None
@@ -99,6 +108,11 @@ def cmd_calibrate(args):
             raise CliError(f"--rim-hint: {_one_line(e)}") from None
         if boundary is not None:
             _warn("--rim-hint is not used with --boundary-points (the rim is fitted to them)")
+    if args.guess_k:
+        K, note = _guess_K_of_image(image, mirror, args.image, args.rim_hint, boundary)
+        D, size = None, None
+        k_from = {"K_source": "guessed", "K_note": note}
+        print(f"K guessed: {note}", flush=True)
     if size is not None and size != image_size:
         source = f"--from {args.from_rig}" if args.from_rig else "intrinsics"
         _warn(
@@ -126,22 +140,121 @@ def cmd_calibrate(args):
         )
     except (ValueError, RuntimeError, NotImplementedError, np.linalg.LinAlgError) as e:
         raise CliError(f"calibration failed: {_one_line(e)}") from None
-    print(_report_text(report), flush=True)
+    # each warning once: the implausible ones on stderr (they decide), the others in the report
+    implausible = [str(w) for w in getattr(report, "plausibility", ())]
+    print(_report_text(report, leave_out=implausible), flush=True)
     if args.from_rig is not None:
         print(_moved_text(camera, rig, args.from_rig, report))
-    _write_image(overlay, report.draw(image), args.overwrite)  # to see what went wrong
-    implausible = getattr(report, "plausibility", ())
     for w in implausible:
         _warn(f"implausible: {w}")
     if implausible and not args.force:
+        # the overlay shows what went wrong; under its own name, so that it never blocks a retry
+        _write_image(refused_overlay, report.draw(image), True)
         raise CliError(
             f"the calibration of {args.image} is implausible ({len(implausible)} warning"
             f"{'s' if len(implausible) > 1 else ''} above); {calib} not written, see "
-            f"{overlay}; fix the inputs, or pass --force to write it anyway"
+            f"{refused_overlay}; fix the inputs, or pass --force to write it anyway"
         )
-    _save_camera(camera, calib, args.overwrite)
-    print(f"wrote {calib} and {overlay}")
+    verdict = Verdict.from_report(report, forced=bool(implausible), **k_from)
+    _write_image(overlay, report.draw(image), args.overwrite)
+    _save_camera(camera, calib, args.overwrite, verdict)
+    doubts = verdict.doubts()
+    print(
+        f"wrote {calib} and {overlay}"
+        + (f" (the file records: calibrated {', '.join(doubts)})" if doubts else "")
+    )
     return EXIT_OK
+
+
+def refused_overlay_path(overlay):
+    """Where a refused calibration's overlay goes: ``rig_overlay.png`` ->
+    ``rig_overlay_refused.png``.
+
+    Not the overlay's own name, so a refused attempt leaves nothing that stops the next one
+    (every refused attempt replaces it; no calibration file goes with it).
+    """
+    stem, ext = os.path.splitext(overlay)
+    return f"{stem}_refused{ext}"
+
+
+def guess_K(rim, mirror):
+    """The ``K`` of the aligned rig that images ``rim`` as found: a guess without intrinsics.
+
+    An aligned rig (the paper's eqs. 2-5: camera at the lower focus, axes parallel) images the
+    rim circle of radius ``rim_radius`` at depth ``z_rim + c`` as a circle of radius
+    ``f rim_radius / (z_rim + c)`` px about the principal point
+    (:func:`omnicam.calibration.plausibility.expected_rim`). So ``f = r (z_rim + c) /
+    rim_radius`` with ``r`` the rim's mean radius (the geometric mean of its semi-axes),
+    square pixels, no skew and the principal point at the rim's centre. The rim's centre moves
+    with the rig's tilt and offset (and the guess takes it for the principal point), and a
+    camera of another pixel aspect sees the rim as an ellipse, which reads as a tilt: the
+    posture found is only as right as the guess.
+
+    Parameters
+    ----------
+    rim : RimFit
+        The rim ellipse in the image (:func:`omnicam.detect_rim`, :func:`.rim.fit_rim`).
+    mirror : HyperbolicMirror
+
+    Returns
+    -------
+    K : (3, 3) float64 ndarray
+    """
+    r = math.sqrt(float(rim.axes[0]) * float(rim.axes[1]))
+    f = r * (mirror.z_rim + mirror.c) / mirror.rim_radius
+    cx, cy = (float(v) for v in rim.center)
+    return np.array([[f, 0.0, cx], [0.0, f, cy], [0.0, 0.0, 1.0]])
+
+
+def _guess_K_of_image(image, mirror, name, hint, boundary):
+    """``(K, note)``: :func:`guess_K` of the rim in ``image`` (or fitted to ``boundary``)."""
+    from ..calibration.rim import detect_rim, fit_rim
+
+    try:
+        rim = fit_rim(boundary) if boundary is not None else detect_rim(image, hint=hint)
+    except ValueError as e:
+        raise CliError(
+            f"--guess-k: no rim to guess K from in {name} ({_one_line(e)}); give --rim-hint "
+            f"CX,CY,R or --boundary-points, or the intrinsics"
+        ) from None
+    K = guess_K(rim, mirror)
+    r = math.sqrt(float(rim.axes[0]) * float(rim.axes[1]))
+    note = (
+        f"fx = fy = {K[0, 0]:.1f} px, principal point ({K[0, 2]:.1f}, {K[1, 2]:.1f}) at the "
+        f"rim's centre; f = {r:.1f} px (the rim's radius) x (z_rim + c) / rim_radius, as if the "
+        f"rig were aligned (the posture is only as right as this guess)"
+    )
+    return K, note
+
+
+def _k_from_rig(path):
+    """Where the K of ``--from RIG`` came from: as its verdict says (a guess stays a guess)."""
+    from ..io import read_verdict
+
+    try:
+        earlier = read_verdict(path)
+    except (FileNotFoundError, ValueError):
+        earlier = None
+    source = "file" if earlier is None or earlier.K_source == "given" else earlier.K_source
+    return {"K_source": source, "K_file": path, "K_note": "" if earlier is None else earlier.K_note}
+
+
+def _refuse_beside_guess(args):
+    """``--guess-k`` makes K: an option that gives K contradicts it."""
+    fx = any(getattr(args, n) is not None for n in ("fx", "fy", "cx", "cy"))
+    for flag, given, why in (
+        ("--chessboard", args.chessboard is not None, "--chessboard fits K to the boards"),
+        ("--intrinsics", args.intrinsics is not None, "it gives K"),
+        ("--fx/--fy/--cx/--cy", fx, "they give K"),
+        ("--dist", args.dist is not None, "the guess has no distortion"),
+        ("--from", args.from_rig is not None, "it gives K"),
+    ):
+        if given:
+            raise CliError(
+                f"calibrate: --guess-k makes K from the rim and the mirror; do not give {flag} "
+                f"with it ({why})",
+                2,
+            )
 
 
 # the options whose values --from takes from its file (K, D and the mirror)
@@ -347,6 +460,15 @@ def add_parser(sub):
         metavar="D",
         help="OpenCV distortion coefficients k1 k2 p1 p2 [k3 ...] (4, 5, 8, 12 or "
         "14 values) with --fx --fy --cx --cy",
+    )
+    p.add_argument(
+        "--guess-k",
+        action="store_true",
+        help="no intrinsics: guess K from the rim and the mirror, as if the rig were aligned "
+        "(f = the rim's radius in px x (z_rim + c) / RIM, square pixels, the principal point "
+        "at the rim's centre); the posture is then only as right as that guess. The "
+        "calibration file records K as guessed, and 'omnicam info' and 'omnicam unwarp' say "
+        "so. Not with --intrinsics, --fx..., --from or --chessboard",
     )
     p.add_argument(
         "--far-lines",

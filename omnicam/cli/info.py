@@ -6,7 +6,7 @@ import math
 
 import numpy as np
 
-from ._common import EXIT_OK, _load_camera
+from ._common import EXIT_OK, _load_camera, _one_line
 
 
 def posture(camera):
@@ -77,8 +77,96 @@ def describe_camera(camera):
     return "\n".join(f"{k:<{width}}  {v}" for k, v in rows)
 
 
+_K_SOURCES = {
+    "given": "given (typed or passed in)",
+    "file": "read from a file",
+    "guessed": "GUESSED from the rim and the mirror",
+    "chessboard": "fitted to the chessboards",
+}
+
+
+def _number(v, fmt, unit=""):
+    return "unknown" if v is None else f"{v:{fmt}}{unit}"
+
+
+def describe_verdict(verdict, width=13):
+    """Multi-line text of a calibration file's verdict (:class:`omnicam.io.Verdict`): what the
+    calibration's report said when the file was written; None gives the line that says none
+    was recorded."""
+    if verdict is None:
+        return (
+            f"{'verdict':<{width}}  none recorded (written without one, e.g. by camera.save(path) "
+            f"or omnicam 0.3.0; camera.save(path, report) records it)"
+        )
+    v = verdict
+    doubts = v.doubts()
+    method = "one image of the mirror" if v.method == "image" else "chessboards"
+    rows = [
+        (
+            "verdict",
+            (f"DOUBTFUL: calibrated {', '.join(doubts)}" if doubts else "no doubt recorded")
+            + f" (from {method})",
+        ),
+        (
+            "K from",
+            _K_SOURCES[v.K_source]
+            + (f": {v.K_file}" if v.K_file else "")
+            + (f"; {v.K_note}" if v.K_note else ""),
+        ),
+    ]
+    if v.method == "image":
+        rows.append(
+            (
+                "posture",
+                f"chosen with confidence {_number(v.confidence, '.4f')}"
+                + (" AMBIGUOUS (the other physical posture fits as well)" if v.ambiguous else ""),
+            )
+        )
+    rows.append(
+        (
+            "uncertainty",
+            f"mirror axis {_number(v.axis_std_deg, '.3g', ' deg')}, camera centre "
+            f"{_number(v.origin_std_mm, '.3g', ' mm')} (RMS, as stated when calibrated)",
+        )
+    )
+    if v.method == "chessboard":
+        fit = f"corner RMS {_number(v.rms_px, '.3f', ' px')}"
+        if v.rim_rms_px is not None:
+            fit += f", rim RMS {v.rim_rms_px:.3f} px"
+        rows.append(("fit", fit))
+        if v.heldout_median_px is not None:
+            rows.append(
+                (
+                    "held-out",
+                    f"corner RMS median {v.heldout_median_px:.3f} px, max "
+                    f"{_number(v.heldout_max_px, '.3f', ' px')} ({v.heldout_folds or '?'}-fold)",
+                )
+            )
+        if v.ray_std_deg is not None:
+            rows.append(
+                (
+                    "rays",
+                    f"viewing directions std {v.ray_std_deg[0]:.3f} deg (worst "
+                    f"{v.ray_std_deg[1]:.3f})",
+                )
+            )
+    elif v.rim_rms_px is not None:
+        rows.append(("fit", f"rim RMS {v.rim_rms_px:.3f} px"))
+    if v.forced:
+        rows.append(("forced", "written with --force although implausible"))
+    rows += [("implausible", f"- {w}") for w in v.implausible]
+    rows += [("warning", f"- {w}") for w in v.warnings]
+    return "\n".join(f"{k:<{width}}  {text}" for k, text in rows)
+
+
 def cmd_info(args):
+    from ..io import read_verdict
+
     camera = _load_camera(args.calibration)
+    try:
+        verdict = describe_verdict(read_verdict(args.calibration))
+    except (FileNotFoundError, ValueError) as e:
+        verdict = f"{'verdict':<13}  cannot be read: {_one_line(e)}"
     print(f"{'calibration':<13}  {args.calibration}")
     print(describe_camera(camera))
     from ..export import fit_omnidir
@@ -92,6 +180,7 @@ def cmd_info(args):
         )
     except (ValueError, np.linalg.LinAlgError) as e:
         print(f"{'omnidir':<13}  no central approximation: {e}")
+    print(verdict)
     return EXIT_OK
 
 
@@ -101,7 +190,10 @@ def add_parser(sub):
         "info",
         help="print a calibration file",
         description="Print the mirror, K, D, the mirror posture, the best-fit "
-        "viewpoint and its RMS distance to the rays.",
+        "viewpoint and its RMS distance to the rays, and the verdict the file records: where "
+        "K came from (given, a file, guessed, chessboards), the confidence of the posture, "
+        "--force, the stated uncertainty and the warnings (chessboards: the RMS, the "
+        "held-out check, the viewing directions' uncertainty).",
     )
     p.add_argument("calibration", metavar="CALIB")
     p.set_defaults(func=cmd_info)

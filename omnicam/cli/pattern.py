@@ -335,6 +335,6 @@ def cmd_calibrate_pattern(args):
             "(--force writes the file anyway)"
         )
     _write_overlays(args, report, images, folder)
-    _save_camera(camera, calib, args.overwrite)
+    _save_camera(camera, calib, args.overwrite, report, forced=bool(one_side), implausible=one_side)
     print(f"wrote {calib} and {len(images)} overlays in {folder}")
     return EXIT_OK

@@ -259,7 +259,7 @@ def cmd_unwarp(args):
             raise CliError(f"output {spec.output} is the input")
         target = _sequence_name(spec.output, 0) if spec.kind_out == "sequence" else spec.output
         _check_output(target, args.overwrite)
-    camera = _load_camera(args.calibration)
+    camera = _load_camera(args.calibration, say_doubt=True)  # one line on a doubtful file
     if not video_input:
         return _unwarp_image(args, specs, camera)
     return _unwarp_video(args, specs, camera)
