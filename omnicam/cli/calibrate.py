@@ -10,6 +10,13 @@ import os
 import cv2
 import numpy as np
 
+from .._validate import validate_D, validate_K
+from ..calibration import calibrate
+from ..calibration.rim import check_hint, detect_rim, fit_rim
+from ..camera import MisalignedHyperbolicCamera, scale_K
+from ..gauge import posture_error
+from ..io import SUFFIXES, Verdict, read_verdict
+from ..mirror import HyperbolicMirror
 from . import pattern
 from ._common import (
     EXIT_OK,
@@ -29,18 +36,12 @@ from ._common import (
 )
 
 
-def cmd_calibrate(args):
-    from ..camera import MisalignedHyperbolicCamera, scale_K
-    from ..io import SUFFIXES, Verdict
-    from ..mirror import HyperbolicMirror
-
+def _check_mode(args):
+    """One IMAGE of the mirror and one source of the intrinsics (the chessboard mode aside)."""
     if args.from_rig is not None:
         _refuse_beside_from(args)
     if args.guess_k:
         _refuse_beside_guess(args)
-    # chessboards seen through the mirror: K, D and the posture (cli/pattern.py)
-    if args.chessboard is not None:
-        return pattern.cmd_calibrate_pattern(args)
     pattern.refuse_chessboard_options(args)
     if len(args.image) != 1:
         raise CliError("calibrate: give one IMAGE (several only with --chessboard)", 2)
@@ -54,8 +55,10 @@ def cmd_calibrate(args):
             "as if the rig were aligned: a guess, and the file says so); or use --chessboard",
             2,
         )
-    args.image = args.image[0]
 
+
+def _outputs(args):
+    """``(calibration file, overlay, refused overlay)``, checked before any work."""
     calib = args.output
     if os.path.splitext(calib)[1].lower() not in SUFFIXES:
         raise CliError(f"calibration file {calib}: extension must be one of {', '.join(SUFFIXES)}")
@@ -73,77 +76,58 @@ def cmd_calibrate(args):
             and os.path.samefile(path, args.image)
         ):
             raise CliError(f"overlay {path} is the input image")
-    k_from = {"K_source": "given"}  # where K came from, for the file's verdict
+    return calib, overlay, refused_overlay
+
+
+def _rig_inputs(args):
+    """``(K, D, mirror, K's image size, where K came from, earlier rig or None)``; with
+    ``--guess-k`` K, D and the size are None (guessed from the image later)."""
     if args.from_rig is not None:  # after a bump: K, D and the mirror of an earlier calibration
         rig = _load_camera(args.from_rig)
-        K, D, mirror, size = rig.K, rig.D, rig.mirror, rig.image_size
-        k_from = _k_from_rig(args.from_rig)
-    else:
-        if args.mirror is None:
-            raise CliError(
-                "calibrate: give the mirror: --mirror A B RIM (or calibrate from chessboards "
-                "with --chessboard, which needs no mirror, or take K, D and the mirror of an "
-                "earlier calibration with --from RIG.yaml)",
-                2,
-            )
-        try:
-            mirror = HyperbolicMirror(*args.mirror)
-        except ValueError as e:
-            raise CliError(f"--mirror: {e}") from None
-        if args.intrinsics is not None:
-            K, D, size = read_intrinsics(args.intrinsics)
-            k_from = {"K_source": "file", "K_file": args.intrinsics}
-        elif not args.guess_k:
-            K, D, size = _intrinsics_from_numbers(args)
+        return rig.K, rig.D, rig.mirror, rig.image_size, _k_from_rig(args.from_rig), rig
+    if args.mirror is None:
+        raise CliError(
+            "calibrate: give the mirror: --mirror A B RIM (or calibrate from chessboards "
+            "with --chessboard, which needs no mirror, or take K, D and the mirror of an "
+            "earlier calibration with --from RIG.yaml)",
+            2,
+        )
+    try:
+        mirror = HyperbolicMirror(*args.mirror)
+    except ValueError as e:
+        raise CliError(f"--mirror: {e}") from None
+    if args.intrinsics is not None:
+        K, D, size = read_intrinsics(args.intrinsics)
+        return K, D, mirror, size, {"K_source": "file", "K_file": args.intrinsics}, None
+    if args.guess_k:
+        return None, None, mirror, None, None, None
+    K, D, size = _intrinsics_from_numbers(args)
+    return K, D, mirror, size, {"K_source": "given"}, None
+
+
+def _image_inputs(args):
+    """``(image, its size, far lines, boundary points)``, the rim hint checked."""
     far_lines = read_far_lines(args.far_lines) if args.far_lines else None
     boundary = read_boundary_points(args.boundary_points) if args.boundary_points else None
     image = _read_image(args.image, cv2.IMREAD_COLOR | cv2.IMREAD_IGNORE_ORIENTATION)
     image_size = (image.shape[1], image.shape[0])
     if args.rim_hint is not None:
-        from ..calibration.rim import check_hint
-
         try:
             check_hint(args.rim_hint, image_size)
         except ValueError as e:
             raise CliError(f"--rim-hint: {_one_line(e)}") from None
         if boundary is not None:
             _warn("--rim-hint is not used with --boundary-points (the rim is fitted to them)")
-    if args.guess_k:
-        K, note = _guess_K_of_image(image, mirror, args.image, args.rim_hint, boundary)
-        D, size = None, None
-        k_from = {"K_source": "guessed", "K_note": note}
-        print(f"K guessed: {note}", flush=True)
-    if size is not None and size != image_size:
-        source = f"--from {args.from_rig}" if args.from_rig else "intrinsics"
-        _warn(
-            f"{source}: K is for {size[0]}x{size[1]}, image is "
-            f"{image_size[0]}x{image_size[1]}: K rescaled"
-        )
-        K = scale_K(K, size, image_size)
+    return image, image_size, far_lines, boundary
 
-    from ..calibration import calibrate
 
-    try:
-        camera, report = calibrate(
-            K,
-            mirror,
-            image=image,
-            boundary_points=boundary,
-            far_lines=far_lines,
-            D=D,
-            image_size=image_size,
-            refine=args.refine,
-            camera_cls=MisalignedHyperbolicCamera,
-            rim_hint=args.rim_hint,
-            max_tilt_deg=args.max_tilt,
-            max_offset_mm=args.max_offset,
-        )
-    except (ValueError, RuntimeError, NotImplementedError, np.linalg.LinAlgError) as e:
-        raise CliError(f"calibration failed: {_one_line(e)}") from None
-    # each warning once: the implausible ones on stderr (they decide), the others in the report
+def _finish(args, camera, report, image, outputs, k_from, rig):
+    """Print the report (each warning once), refuse an implausible result (its overlay under
+    its own name) or write the overlay and the file with its verdict."""
+    calib, overlay, refused_overlay = outputs
     implausible = [str(w) for w in getattr(report, "plausibility", ())]
     print(_report_text(report, leave_out=implausible), flush=True)
-    if args.from_rig is not None:
+    if rig is not None:
         print(_moved_text(camera, rig, args.from_rig, report))
     for w in implausible:
         _warn(f"implausible: {w}")
@@ -164,6 +148,50 @@ def cmd_calibrate(args):
         + (f" (the file records: calibrated {', '.join(doubts)})" if doubts else "")
     )
     return EXIT_OK
+
+
+def cmd_calibrate(args):
+    """``omnicam calibrate``: one image (or, with ``--chessboard``, boards: cli/pattern.py)."""
+    if args.chessboard is not None:
+        if args.from_rig is not None:
+            _refuse_beside_from(args)
+        if args.guess_k:
+            _refuse_beside_guess(args)
+        return pattern.cmd_calibrate_pattern(args)
+    _check_mode(args)
+    args.image = args.image[0]
+    outputs = _outputs(args)
+    K, D, mirror, size, k_from, rig = _rig_inputs(args)
+    image, image_size, far_lines, boundary = _image_inputs(args)
+    if args.guess_k:
+        K, note = _guess_K_of_image(image, mirror, args.image, args.rim_hint, boundary)
+        k_from = {"K_source": "guessed", "K_note": note}
+        print(f"K guessed: {note}", flush=True)
+    if size is not None and size != image_size:
+        source = f"--from {args.from_rig}" if args.from_rig else "intrinsics"
+        _warn(
+            f"{source}: K is for {size[0]}x{size[1]}, image is "
+            f"{image_size[0]}x{image_size[1]}: K rescaled"
+        )
+        K = scale_K(K, size, image_size)
+    try:
+        camera, report = calibrate(
+            K,
+            mirror,
+            image=image,
+            boundary_points=boundary,
+            far_lines=far_lines,
+            D=D,
+            image_size=image_size,
+            refine=args.refine,
+            camera_cls=MisalignedHyperbolicCamera,
+            rim_hint=args.rim_hint,
+            max_tilt_deg=args.max_tilt,
+            max_offset_mm=args.max_offset,
+        )
+    except (ValueError, RuntimeError, NotImplementedError, np.linalg.LinAlgError) as e:
+        raise CliError(f"calibration failed: {_one_line(e)}") from None
+    return _finish(args, camera, report, image, outputs, k_from, rig)
 
 
 def refused_overlay_path(overlay):
@@ -208,8 +236,6 @@ def guess_K(rim, mirror):
 
 def _guess_K_of_image(image, mirror, name, hint, boundary):
     """``(K, note)``: :func:`guess_K` of the rim in ``image`` (or fitted to ``boundary``)."""
-    from ..calibration.rim import detect_rim, fit_rim
-
     try:
         rim = fit_rim(boundary) if boundary is not None else detect_rim(image, hint=hint)
     except ValueError as e:
@@ -229,8 +255,6 @@ def _guess_K_of_image(image, mirror, name, hint, boundary):
 
 def _k_from_rig(path):
     """Where the K of ``--from RIG`` came from: as its verdict says (a guess stays a guess)."""
-    from ..io import read_verdict
-
     try:
         earlier = read_verdict(path)
     except (FileNotFoundError, ValueError):
@@ -289,8 +313,6 @@ def _refuse_beside_from(args):
 
 def _moved_text(camera, rig, name, report):
     """One line: how far the new posture is from the earlier one, beside its uncertainty."""
-    from ..gauge import posture_error
-
     axis, origin = posture_error(camera, rig)
     return (
         f"  K, D and the mirror from {name}; the posture differs from its by: mirror axis "
@@ -384,8 +406,6 @@ def _overlay_path(calib):
 
 def _intrinsics_from_numbers(args):
     """``K, D, None`` from ``--fx --fy --cx --cy [--dist ...]`` (the image gives the size)."""
-    from .._validate import validate_D, validate_K
-
     K = [[args.fx, 0.0, args.cx], [0.0, args.fy, args.cy], [0.0, 0.0, 1.0]]
     try:
         return validate_K(K), validate_D(args.dist), None
