@@ -87,6 +87,9 @@ __all__ = [
     "SUFFIXES",
     "MAX_FILE_BYTES",
     "MAX_DEPTH",
+    "Reader",
+    "file_path",
+    "reading",
 ]
 
 FORMAT_VERSION = 1
@@ -122,7 +125,7 @@ def shown(path):
     return str(path).encode("utf-8", "surrogateescape").decode("utf-8", "backslashreplace")
 
 
-def _fspath(path, what):
+def file_path(path, what):
     """``os.fspath(path)`` as str; a name that is not UTF-8 is refused (it crashes OpenCV)."""
     try:
         path = os.fspath(path)
@@ -370,7 +373,7 @@ def _is_number(v):
     return isinstance(v, (int, float)) and not isinstance(v, bool)
 
 
-class _Reader:
+class Reader:
     """Typed access to the fields of a parsed file, every failure a ValueError naming both."""
 
     def __init__(self, data, path, what):
@@ -516,11 +519,11 @@ class _Reader:
             raise self.fail(field, str(e)) from None
 
 
-def _reading(path, what):
-    """A :class:`_Reader` of the file at ``path``: pre-scanned, parsed, never crashing OpenCV."""
-    path = _fspath(path, what)
+def reading(path, what):
+    """A :class:`Reader` of the file at ``path``: pre-scanned, parsed, never crashing OpenCV."""
+    path = file_path(path, what)
     ext = _suffix(path, what)
-    return _Reader(_parse(_prescan(path, what), path, what, ext), path, what)
+    return Reader(_parse(_prescan(path, what), path, what, ext), path, what)
 
 
 def load_camera(path: PathLike, cls: type):
@@ -538,7 +541,7 @@ def load_camera(path: PathLike, cls: type):
         or inconsistent, naming the file and the field; also a path that is not a regular file,
         a name that is not UTF-8, and files that are too large, binary or nested too deeply.
     """
-    r = _reading(path, "calibration file")
+    r = reading(path, "calibration file")
     version = r.number("format_version")
     if version != FORMAT_VERSION:
         raise r.fail("format_version", f"is {version:g}; this omnicam reads {FORMAT_VERSION}")
@@ -674,7 +677,7 @@ class Verdict:
                 f"K_source must be one of {', '.join(K_SOURCES)}, got {self.K_source!r}"
             )
         if self.K_file is not None:
-            put("K_file", _file_text(shown(_fspath(self.K_file, "K_file")), "K_file"))
+            put("K_file", _file_text(shown(file_path(self.K_file, "K_file")), "K_file"))
         put("K_note", _file_text(self.K_note, "K_note"))
         for name in ("ambiguous", "forced"):
             value = getattr(self, name)
@@ -830,7 +833,7 @@ def read_verdict(path: PathLike) -> Verdict | None:
         A malformed verdict (naming the file and the field), or a file refused as
         :func:`load_camera` refuses it.
     """
-    return _verdict_of(_reading(path, "calibration file"))
+    return _verdict_of(reading(path, "calibration file"))
 
 
 def _verdict_of(r):
@@ -914,7 +917,7 @@ def read_intrinsics(path: PathLike) -> tuple[FloatArray, FloatArray | None, Size
         lens's: the message says what the file is (:mod:`omnicam.intrinsics_formats`).
     """
     what = "intrinsics file"
-    path = _fspath(path, what)
+    path = file_path(path, what)
     _prescan(path, what)  # nothing that could crash a parser reaches one
     other = read_other_intrinsics(path)
     if other is not None:
@@ -923,7 +926,7 @@ def read_intrinsics(path: PathLike) -> tuple[FloatArray, FloatArray | None, Size
         except ValueError as e:
             raise ValueError(f"{what} {path}: {e}") from None
         return K, (D if D is not None and np.any(D) else None), size
-    r = _reading(path, what)
+    r = reading(path, what)
     xi = r.node("xi", required=False)
     if xi is not None:  # cv2.omnidir's: the unified model's K and D, not the lens's
         raise ValueError(f"{what} {r.path}: {not_pinhole('a cv2.omnidir calibration', xi)}")
@@ -972,11 +975,11 @@ def read_central_model(path: PathLike) -> dict:
         intrinsics, an OCamCalib file), the message saying what it is.
     """
     what = "central model file"
-    path = _fspath(path, what)
+    path = file_path(path, what)
     _prescan(path, what)
     model = read_other_central(path)  # Kalibr camchains
     if model is None:
-        r = _reading(path, what)
+        r = reading(path, what)
         if r.node("xi", required=False) is None:
             raise r.fail("xi", "is missing: not a cv2.omnidir calibration (nor a Kalibr camchain)")
         K = r.matrix(r.first(K_FIELDS, required=True), (3, 3), allow_list=True)
@@ -1014,7 +1017,7 @@ def read_far_lines(path: PathLike) -> list[FloatArray]:
         naming the file (and the line).
     """
     what = "far-lines file"
-    path = _fspath(path, what)
+    path = file_path(path, what)
     text = _prescan(path, what, json_only=True)
     name = shown(path)
     try:
@@ -1071,7 +1074,7 @@ def _atomic_filestorage(path, what, write, read_back):
     temporary file (it re-reads it with this module's reader), since ``cv2.FileStorage`` does
     not report a failed write (a full disk leaves an empty or truncated file).
     """
-    path = _fspath(path, what)
+    path = file_path(path, what)
     _suffix(path, what)
 
     with opencv_silenced(), atomic_output(path, what=what, verify=read_back) as tmp:
@@ -1208,7 +1211,7 @@ def write_far_lines(path: PathLike, far_lines: list) -> None:
         it), or the file cannot be written (the old file is unchanged, naming the file).
     """
     what = "far-lines file"
-    path = _fspath(path, what)
+    path = file_path(path, what)
     data = [line.tolist() for line in _far_lines(far_lines, "far_lines")]
 
     def verify(tmp):

@@ -139,10 +139,10 @@ def doubt_line(path):
 
 def _check_output(path, overwrite, what="output"):
     """Refuse an output we must not or cannot write, before doing any work."""
-    from ..io import _fspath
+    from ..io import file_path
 
     try:  # a name that is not UTF-8 would crash OpenCV's writers
-        path = _fspath(path, what)
+        path = file_path(path, what)
     except ValueError as e:
         raise CliError(str(e)) from None
     folder = os.path.dirname(os.path.abspath(path))
@@ -159,10 +159,10 @@ def _check_output(path, overwrite, what="output"):
 def _write_image(path, image, overwrite=True):
     """``cv2.imwrite`` through :func:`omnicam._atomic.atomic_output` (checked by reading back)."""
     from .._quiet import opencv_silenced
-    from ..io import _fspath
+    from ..io import file_path
 
     try:
-        path = _fspath(path, "output")
+        path = file_path(path, "output")
     except ValueError as e:
         raise CliError(str(e)) from None
     if not cv2.haveImageWriter(path):
@@ -229,10 +229,10 @@ def _is_image_input(path):
     treated as a video). A name that is not UTF-8 is refused (:class:`CliError`).
     """
     from .._quiet import opencv_silenced
-    from ..io import _fspath
+    from ..io import file_path
 
     try:  # OpenCV (imread, VideoCapture) crashes with SIGSEGV on such a name
-        path = _fspath(path, "input")
+        path = file_path(path, "input")
     except ValueError as e:
         raise CliError(str(e)) from None
     if os.path.splitext(path)[1].lower() in IMAGE_EXTENSIONS:
@@ -245,10 +245,10 @@ def _is_image_input(path):
 def _read_image(path, flags=cv2.IMREAD_UNCHANGED):
     """``cv2.imread`` of a regular file, OpenCV's and libpng's own stderr lines silenced."""
     from .._quiet import opencv_silenced
-    from ..io import _fspath, shown
+    from ..io import file_path, shown
 
     try:
-        path = _fspath(path, "image")
+        path = file_path(path, "image")
         st = os.stat(path)
     except ValueError as e:
         raise CliError(str(e)) from None

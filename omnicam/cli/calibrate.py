@@ -334,7 +334,7 @@ def read_boundary_points(path):
 
     Returns an ``(N, 2)`` float64 array; every failure is a :class:`CliError` naming the file.
     """
-    from ..io import _reading
+    from ..io import reading
 
     what = "boundary-points file"
     if not os.path.isfile(path):
@@ -366,7 +366,7 @@ def read_boundary_points(path):
         raise CliError(f"{what} {path}: expected a {BOUNDARY_FORMAT}")
     else:
         try:
-            pts = _reading(path, what).matrix("boundary_points")
+            pts = reading(path, what).matrix("boundary_points")
         except (FileNotFoundError, ValueError) as e:
             raise CliError(_one_line(e)) from None
         if pts.ndim == 3 and pts.shape[1:] == (1, 2):

@@ -19,7 +19,7 @@ from ._common import (
     _save_camera,
     _write_image,
 )
-from .info import _vec, posture
+from .info import posture, vector_text
 
 
 def _table_rms(cam_a, cam_b, size):
@@ -61,7 +61,7 @@ def cmd_demo(args):
     tilt, az, offset = posture(truth)
     print(
         f"   axis tilt {tilt:.3f} deg towards {az:.1f} deg, camera offset "
-        f"{_vec(offset, '{:.3f}')} mm from the lower focus"
+        f"{vector_text(offset, '{:.3f}')} mm from the lower focus"
     )
     image = synthetic.render_environment(truth, demo_environment(), supersample=2)
     _write_image(path("mirror.png"), image)
@@ -97,7 +97,8 @@ def cmd_demo(args):
         f"{axis_error:.3f} deg"
     )
     print(
-        f"   camera offset  {_vec(e_offset, '{:.3f}')} mm (true {_vec(offset, '{:.3f}')}); "
+        f"   camera offset  {vector_text(e_offset, '{:.3f}')} mm "
+        f"(true {vector_text(offset, '{:.3f}')}); "
         f"off by {np.linalg.norm(e_offset - offset):.3f} mm"
     )
     print(

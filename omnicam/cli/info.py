@@ -28,7 +28,8 @@ def posture(camera):
     return tilt, azimuth, offset
 
 
-def _vec(v, fmt="{:.4f}"):
+def vector_text(v, fmt="{:.4f}"):
+    """``(x, y, z)`` of a vector, each number as ``fmt``."""
     return "(" + ", ".join(fmt.format(float(x)) for x in np.ravel(v)) + ")"
 
 
@@ -51,21 +52,21 @@ def describe_camera(camera):
             f"fx = {K[0, 0]:.4f}, fy = {K[1, 1]:.4f}, cx = {K[0, 2]:.4f}, cy = {K[1, 2]:.4f}, "
             f"skew = {K[0, 1]:.4g}",
         ),
-        ("D", "none" if camera.D is None else _vec(camera.D, "{:.6g}")),
-        ("rvec", _vec(camera.rvec, "{:.6f}") + "  (mirror -> camera, rad)"),
-        ("tvec", _vec(camera.tvec) + "  (mm)"),
+        ("D", "none" if camera.D is None else vector_text(camera.D, "{:.6g}")),
+        ("rvec", vector_text(camera.rvec, "{:.6f}") + "  (mirror -> camera, rad)"),
+        ("tvec", vector_text(camera.tvec) + "  (mm)"),
         (
             "axis tilt",
             f"{tilt:.4f} deg, towards {az:.2f} deg in the camera's x-y plane",
         ),
         (
             "camera offset",
-            f"{_vec(offset)} mm from the lower focus (mirror frame), "
+            f"{vector_text(offset)} mm from the lower focus (mirror frame), "
             f"|offset| = {np.linalg.norm(offset):.4f} mm",
         ),
         (
             "viewpoint",
-            f"{_vec(viewpoint)} mm, best fit to all mirror rays (mirror frame; "
+            f"{vector_text(viewpoint)} mm, best fit to all mirror rays (mirror frame; "
             f"the outer focus is (0, 0, {m.c:.4f}))",
         ),
         (

@@ -246,11 +246,11 @@ def cmd_unwarp(args):
         if not os.path.isfile(source):
             raise CliError(f"input {source} is not a file")
     video_input = live or not _is_image_input(source)
-    from ..io import _fspath
+    from ..io import file_path
 
     for spec in specs:  # a name that is not UTF-8 crashes OpenCV's writers: refuse it first
         try:
-            _fspath(spec.output, "output")
+            file_path(spec.output, "output")
         except ValueError as e:
             raise CliError(str(e)) from None
     for spec in specs:

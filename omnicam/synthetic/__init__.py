@@ -479,7 +479,8 @@ def _shade_room(room, P, d):
 
 
 # -- rendering --------------------------------------------------------------------------------
-def _check_camera(camera):
+def check_camera(camera):
+    """The camera's image size; ``ValueError`` unless it is a camera with one."""
     if not isinstance(camera, MisalignedHyperbolicCamera):
         raise ValueError(
             f"camera must be a MisalignedHyperbolicCamera, got {type(camera).__name__}"
@@ -520,7 +521,7 @@ def _render(camera, shade, supersample, noise, seed, housing_color, body_radius,
     A pixel is ``sum(mirror samples) / s^2 + (1 - coverage) * housing``, so pixels wholly
     outside the rim keep the housing (or ``background``) value exactly.
     """
-    w, h = _check_camera(camera)
+    w, h = check_camera(camera)
     s = _check_supersample(supersample)
     housing = _bgr(housing_color, "housing_color").astype(np.float32)
     if housing.shape != (3,):
@@ -625,7 +626,7 @@ def render_environment(
     -------
     image : (h, w, 3) uint8 ndarray, BGR
     """
-    _check_camera(camera)
+    check_camera(camera)
     if environment is None:
         environment = make_environment()
     env = np.asarray(environment)
@@ -679,7 +680,7 @@ def render_room(
     -------
     image : (h, w, 3) uint8 ndarray, BGR
     """
-    _check_camera(camera)
+    check_camera(camera)
     room = Room() if room is None else room
     if not isinstance(room, Room):
         raise ValueError(f"room must be a Room, got {type(room).__name__}")

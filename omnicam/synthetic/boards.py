@@ -31,7 +31,7 @@ import math
 import cv2
 import numpy as np
 
-from . import _check_camera
+from . import check_camera
 from . import realistic as _rl
 
 __all__ = [
@@ -162,7 +162,7 @@ def random_board_poses(
     list of ((3,) ndarray, (3,) ndarray)
     """
     cols, rows = _pattern(pattern_size)
-    _check_camera(camera)
+    check_camera(camera)
     rng = np.random.default_rng(rng)
     s = float(square_size)
     centre = np.array([(cols - 1) * s / 2.0, (rows - 1) * s / 2.0, 0.0])
@@ -239,7 +239,7 @@ def render_board(
     -------
     image : (h, w, 3) uint8 ndarray, BGR
     """
-    _check_camera(camera)
+    check_camera(camera)
     cols, rows = _pattern(pattern_size)
     s = float(square_size)
     board = ()
