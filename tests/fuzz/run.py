@@ -1045,11 +1045,17 @@ def _api_cases():
 
         return Unwarper.from_camera(ctx.cam, {"p": PanoramaView((64, 32))}, **kw)
 
-    for v in BAD_IMAGES + ["wrongsize"]:
+    for v in BAD_IMAGES + ["wrongsize", "bool@size", "int32@size", "float16@size", "int8@size"]:
 
         def fn(ctx, v=v):
             u = unwarper(ctx)
-            img = ctx.np.zeros((10, 10, 3), ctx.np.uint8) if v == "wrongsize" else _image(ctx, v)
+            if isinstance(v, str) and v.endswith("@size"):  # the right size, a dtype remap refuses
+                w, h = u.source_size
+                img = ctx.np.zeros((h, w), v.split("@")[0])
+            elif v == "wrongsize":
+                img = ctx.np.zeros((10, 10, 3), ctx.np.uint8)
+            else:
+                img = _image(ctx, v)
             return u.unwarp(img)
 
         add(f"Unwarper.unwarp({v!r})", ["frame", "image"], fn)
