@@ -34,6 +34,32 @@ def _heldout_module(path):
     return mod
 
 
+def _against_ocamcalib(folder, dets):
+    """With OCamCalib's VMRImagePts.mat in the folder (``gridInfo.x{j}``: 2 x N, row 0 the
+    column, 1-based), the distance of each board's corners to OCamCalib's, as a set (the
+    orders of the two tools differ)."""
+    mat = os.path.join(folder, "VMRImagePts.mat")
+    if not os.path.exists(mat):
+        return
+    from scipy.io import loadmat
+
+    grid = loadmat(mat, squeeze_me=False, struct_as_record=False)["gridInfo"][0, 0].x
+    errors = []
+    for j, det in enumerate(dets):  # paths sorted: VMRImage0..9, as gridInfo.x{1..10}
+        if det is None or j >= grid.shape[1]:
+            continue
+        theirs = np.asarray(grid[0, j], np.float64).T - 1.0  # (N, 2), 0-based
+        ours = det.corners.reshape(-1, 2).astype(np.float64)
+        d = np.linalg.norm(ours[:, None, :] - theirs[None], axis=2).min(axis=1)
+        errors.append(d)
+    if errors:
+        e = np.concatenate(errors)
+        print(
+            f"corners against OCamCalib's (VMRImagePts.mat), {len(errors)} boards: median "
+            f"{np.median(e):.3f} px, max {e.max():.3f} px"
+        )
+
+
 def main(argv=None):
     here = os.path.dirname(os.path.abspath(__file__))
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
@@ -67,6 +93,7 @@ def main(argv=None):
     t_det = time.perf_counter() - t
     found = [i for i, d in enumerate(dets) if d is not None]
     print(f"raw detection: {len(found)} of {len(images)} boards, {t_det:.2f} s in all")
+    _against_ocamcalib(a.folder, dets)
     corners = [dets[i].corners.reshape(-1, 2).astype(np.float64) for i in found]
     obj = object_points(pattern, a.square)
     rim = detect_rim(images[0])
