@@ -43,7 +43,7 @@ TEMP_MARK = ".omnicam-tmp-"
 # temporary files of this process not yet renamed or removed: a Ctrl-C can land between creating
 # one and the ``with`` block that owns it (in contextlib's __enter__), where no ``finally`` runs;
 # they are removed at exit
-_LIVE = set()
+_LIVE: set[str] = set()
 STALE_AFTER_S = 60.0  # a temporary file of a process that is gone, or this old, is litter
 
 

@@ -15,7 +15,9 @@
 from __future__ import annotations
 
 import sys
+from collections.abc import Callable
 from concurrent.futures import ThreadPoolExecutor
+from typing import Any
 
 import numba
 
@@ -24,21 +26,25 @@ import numba
 #: first unwarp's cold and warm times); quoted by the first-compile notice.
 COMPILE_SECONDS = 15
 
-_state = {"noticed": False, "pool": None}
+#: ``numba.config``, whose settings it makes from the environment at import (so numba's type
+#: information does not list them)
+_CONFIG: Any = numba.config
+
+_state: dict[str, Any] = {"noticed": False, "pool": None}
 
 
-def _say(text):
+def _say(text: str) -> None:
     print(f"omnicam: {text}", file=sys.stderr, flush=True)
 
 
-def cache_available(probe=None):
+def cache_available(probe: Callable[[], object] | None = None) -> bool:
     """Whether numba finds a writable cache folder for functions of this package.
 
     ``probe`` is the function whose source file decides (numba looks next to it first); the
     default is a function of this module, which lives beside ``omnicam._kernels``.
     """
 
-    def _probe():  # pragma: no cover - never called, only located
+    def _probe() -> int:  # pragma: no cover - never called, only located
         return 0
 
     try:
@@ -50,7 +56,7 @@ def cache_available(probe=None):
     return True
 
 
-def _cache_flag():
+def _cache_flag() -> bool:
     if cache_available():
         return True
     _say(
@@ -63,7 +69,7 @@ def _cache_flag():
 CACHE = _cache_flag()
 
 
-def kernel(func=None, **options):
+def kernel(func: Callable[..., Any] | None = None, **options: Any) -> Any:
     """``numba.njit`` with ``cache`` (when possible) and ``nogil``; ``options`` are passed on."""
     options.setdefault("cache", CACHE)
     options.setdefault("nogil", True)
@@ -75,9 +81,9 @@ def kernel(func=None, **options):
     return numba.njit(**options)(func)
 
 
-def _is_cold(dispatcher):
+def _is_cold(dispatcher: Any) -> bool:
     """Whether calling ``dispatcher`` would compile: no fresh cache index for its function."""
-    if numba.config.DISABLE_JIT or not hasattr(dispatcher, "_cache"):
+    if _CONFIG.DISABLE_JIT or not hasattr(dispatcher, "_cache"):
         return False
     if dispatcher.overloads:
         return False
@@ -87,7 +93,7 @@ def _is_cold(dispatcher):
         return False
 
 
-def notice_if_cold(*dispatchers):
+def notice_if_cold(*dispatchers: Any) -> None:
     """Print the first-compile notice once per process if any of ``dispatchers`` is cold."""
     if _state["noticed"]:
         return
@@ -96,18 +102,24 @@ def notice_if_cold(*dispatchers):
         _say(f"compiling kernels once (about {COMPILE_SECONDS} s); later runs start fast")
 
 
-def n_threads():
+def n_threads() -> int:
     """Threads for kernels: numba's thread count (``NUMBA_NUM_THREADS``, default all cores)."""
-    return max(1, int(numba.config.NUMBA_NUM_THREADS))
+    return max(1, int(_CONFIG.NUMBA_NUM_THREADS))
 
 
-def _pool():
+def _pool() -> ThreadPoolExecutor:
     if _state["pool"] is None:
         _state["pool"] = ThreadPoolExecutor(max_workers=n_threads(), thread_name_prefix="omnicam")
     return _state["pool"]
 
 
-def run_chunks(func, n, *args, min_chunk=256, chunks_per_thread=4):
+def run_chunks(
+    func: Callable[..., object],
+    n: int,
+    *args: Any,
+    min_chunk: int = 256,
+    chunks_per_thread: int = 4,
+) -> None:
     """Call ``func(lo, hi, *args)`` over ``range(n)`` in chunks, on the calling thread and the
     pool's.
 
@@ -118,13 +130,13 @@ def run_chunks(func, n, *args, min_chunk=256, chunks_per_thread=4):
     """
     threads = n_threads()
     n_chunks = min(threads * chunks_per_thread, n // min_chunk) if threads > 1 else 1
-    if n_chunks <= 1 or numba.config.DISABLE_JIT:  # pure Python holds the GIL: no gain
+    if n_chunks <= 1 or _CONFIG.DISABLE_JIT:  # pure Python holds the GIL: no gain
         func(0, n, *args)
         return
     bounds = [n * c // n_chunks for c in range(n_chunks + 1)]
     chunks = iter(range(n_chunks))  # next() on it is atomic under the GIL
 
-    def work():
+    def work() -> None:
         for c in chunks:
             func(bounds[c], bounds[c + 1], *args)
 

@@ -25,8 +25,11 @@ from __future__ import annotations
 
 import math
 import numbers
+from collections.abc import Callable
+from typing import Any
 
 import numpy as np
+import numpy.typing as npt
 
 __all__ = [
     "validate_K",
@@ -61,7 +64,7 @@ _COS, _SIN = (
 MIN_RIM_SPAN = 8  # px: a smaller mirror image holds too few pixels for any use
 
 
-def float_array(value, name, expected):
+def float_array(value: Any, name: str, expected: str) -> npt.NDArray[np.float64]:
     """``value`` as a float64 array; only real numbers (no complex, bool, str, None)."""
     try:
         arr = np.asarray(value)
@@ -80,7 +83,9 @@ def float_array(value, name, expected):
     return arr.astype(np.float64)
 
 
-def finite_array(value, name, shape, expected):
+def finite_array(
+    value: Any, name: str, shape: tuple[int, ...], expected: str
+) -> npt.NDArray[np.float64]:
     arr = float_array(value, name, expected)
     if arr.size != int(np.prod(shape)):
         raise ValueError(f"{name} must be {expected}, got shape {arr.shape}")
@@ -90,7 +95,14 @@ def finite_array(value, name, shape, expected):
     return arr
 
 
-def real_number(value, name, lo=-math.inf, hi=math.inf, expected=None, lo_open=False):
+def real_number(
+    value: Any,
+    name: str,
+    lo: float = -math.inf,
+    hi: float = math.inf,
+    expected: str | None = None,
+    lo_open: bool = False,
+) -> float:
     """``float(value)`` for a real, finite number in ``[lo, hi]`` (``(lo, hi]`` if ``lo_open``)."""
     expected = expected or "a finite number"
     if isinstance(value, np.ndarray) and value.ndim == 0:
@@ -106,7 +118,7 @@ def real_number(value, name, lo=-math.inf, hi=math.inf, expected=None, lo_open=F
     return v
 
 
-def validate_K(K, name="K"):
+def validate_K(K: Any, name: str = "K") -> npt.NDArray[np.float64]:
     """Return ``K`` as a (3, 3) float64 array or raise ``ValueError`` naming ``name``.
 
     ``fx, fy`` must lie in ``FOCAL_RANGE`` px, ``|cx|, |cy|, |skew|`` at most 1e7 px.
@@ -134,7 +146,7 @@ def validate_K(K, name="K"):
     return arr
 
 
-def validate_D(D, name="D"):
+def validate_D(D: Any, name: str = "D") -> npt.NDArray[np.float64] | None:
     """Return ``D`` as a flat float64 array of an OpenCV length, or ``None``."""
     if D is None:
         return None
@@ -155,7 +167,7 @@ def validate_D(D, name="D"):
     return arr
 
 
-def validate_image_size(image_size, name="image_size"):
+def validate_image_size(image_size: Any, name: str = "image_size") -> tuple[int, int] | None:
     """Return ``(width, height)`` as a tuple of positive ints, or ``None``.
 
     At most ``MAX_SIDE`` px per side and ``MAX_PIXELS`` pixels in all.
@@ -186,7 +198,9 @@ def validate_image_size(image_size, name="image_size"):
     return (w, h)
 
 
-def validate_rng(rng, name="rng"):
+def validate_rng(
+    rng: Any, name: str = "rng"
+) -> int | np.random.Generator | np.random.BitGenerator | np.random.SeedSequence | None:
     """A seed for ``numpy.random.default_rng``: None, a non-negative int or a Generator."""
     if rng is None or isinstance(
         rng, (np.random.Generator, np.random.BitGenerator, np.random.SeedSequence)
@@ -199,7 +213,12 @@ def validate_rng(rng, name="rng"):
     )
 
 
-def validate_posture(R, tvec, mirror, rim_points):
+def validate_posture(
+    R: npt.NDArray[np.float64],
+    tvec: npt.NDArray[np.float64],
+    mirror: Any,  # a HyperbolicMirror, which sits above this module
+    rim_points: Callable[[], npt.NDArray[np.float64]],
+) -> None:
     """Refuse a posture no real rig has (``ValueError`` naming ``rvec``/``tvec``).
 
     Parameters

@@ -19,6 +19,9 @@ Model contract (the binding text is ``docs/conventions.md``):
 
 from __future__ import annotations
 
+from collections.abc import Sequence
+from typing import TYPE_CHECKING, Any, ClassVar
+
 import cv2
 import numpy as np
 
@@ -28,6 +31,10 @@ from ._validate import finite_array, validate_D, validate_image_size, validate_K
 from .gauge import canonical_rvec
 from .io import MODEL_NAME
 from .mirror import HyperbolicMirror
+
+if TYPE_CHECKING:  # annotations only: the façade's results
+    from .calibration.report import CalibrationReport
+    from .chessboard.report import PatternReport
 
 __all__ = [
     "MisalignedHyperbolicCamera",
@@ -52,7 +59,7 @@ def scale_K(K: ArrayLike, from_size: Size, to_size: Size) -> FloatArray:
     return S @ np.asarray(K, dtype=np.float64)
 
 
-def _readonly(arr):
+def _readonly(arr: ArrayLike) -> FloatArray:
     arr = np.array(arr, dtype=np.float64)
     arr.flags.writeable = False
     return arr
@@ -119,7 +126,7 @@ class MisalignedHyperbolicCamera:
         self._R = _readonly(R)
         self._C = _readonly(-self._R.T @ self._tvec)  # F_M of eq. 17
         self._image_size = validate_image_size(image_size)
-        self._viewpoint = None
+        self._viewpoint: tuple[FloatArray, float] | None = None
         # a physical rig: camera below the mirror sheet, rim in front, rim image enumerable
         validate_posture(self._R, self._tvec, mirror, lambda: self.rim_image_points(36))
 
@@ -161,9 +168,9 @@ class MisalignedHyperbolicCamera:
             new,
         )
 
-    def replace(self, **changes) -> MisalignedHyperbolicCamera:
+    def replace(self, **changes: Any) -> MisalignedHyperbolicCamera:
         """A copy with some of ``K, mirror, rvec, tvec, D, image_size`` changed."""
-        args = dict(
+        args: dict[str, Any] = dict(
             K=self._K,
             mirror=self._mirror,
             rvec=self._rvec,
@@ -178,29 +185,54 @@ class MisalignedHyperbolicCamera:
         return type(self)(**args)
 
     # -- properties ---------------------------------------------------------------------
-    K = property(lambda self: self._K, doc="(3, 3) camera matrix.")
-    D = property(lambda self: self._D, doc="Distortion coefficients, or None.")
-    mirror = property(lambda self: self._mirror, doc="The HyperbolicMirror.")
-    rvec = property(
-        lambda self: self._rvec, doc="(3,) mirror rotation (mirror -> camera), gauge-fixed."
-    )
-    tvec = property(lambda self: self._tvec, doc="(3,) mirror origin in the camera frame.")
-    R = property(lambda self: self._R, doc="(3, 3) ``cv2.Rodrigues(rvec)``: R of eq. 29.")
-    image_size = property(lambda self: self._image_size, doc="(width, height) or None.")
+    @property
+    def K(self) -> FloatArray:
+        """(3, 3) camera matrix."""
+        return self._K
+
+    @property
+    def D(self) -> FloatArray | None:
+        """Distortion coefficients, or None."""
+        return self._D
+
+    @property
+    def mirror(self) -> HyperbolicMirror:
+        """The HyperbolicMirror."""
+        return self._mirror
+
+    @property
+    def rvec(self) -> FloatArray:
+        """(3,) mirror rotation (mirror -> camera), gauge-fixed."""
+        return self._rvec
+
+    @property
+    def tvec(self) -> FloatArray:
+        """(3,) mirror origin in the camera frame."""
+        return self._tvec
+
+    @property
+    def R(self) -> FloatArray:
+        """(3, 3) ``cv2.Rodrigues(rvec)``: R of eq. 29."""
+        return self._R
+
+    @property
+    def image_size(self) -> Size | None:
+        """(width, height) or None."""
+        return self._image_size
 
     @property
     def camera_center(self) -> FloatArray:
         """(3,) camera centre in the mirror frame, ``-R^T tvec`` (``F_M`` of eq. 17)."""
         return self._C
 
-    def __repr__(self):
+    def __repr__(self) -> str:
         return (
             f"MisalignedHyperbolicCamera(K={self._K.tolist()}, mirror={self._mirror!r}, "
             f"rvec={self._rvec.tolist()}, tvec={self._tvec.tolist()}, "
             f"D={None if self._D is None else self._D.tolist()}, image_size={self._image_size})"
         )
 
-    def __eq__(self, other):
+    def __eq__(self, other: object) -> bool:
         if not isinstance(other, MisalignedHyperbolicCamera):
             return NotImplemented
         same_D = (self._D is None and other._D is None) or (
@@ -216,7 +248,8 @@ class MisalignedHyperbolicCamera:
             )
         )
 
-    __hash__ = None
+    # unhashable (the arrays): Python's way, which mypy types as a method of object's
+    __hash__: ClassVar[None] = None  # type: ignore[assignment]
 
     # -- the model ----------------------------------------------------------------------
     def unproject(self, image_points: ArrayLike) -> tuple[FloatArray, FloatArray]:
@@ -304,7 +337,7 @@ class MisalignedHyperbolicCamera:
             return xn @ self._K[:2, :2].T + self._K[:2, 2]
         return raytrace.distort_normalized(xn, self._K, self._D)
 
-    def mirror_pixels(self):
+    def mirror_pixels(self) -> FloatArray:
         """All integer pixels that see the mirror (inside the rim ellipse, in the frame or not).
 
         Returns
@@ -361,13 +394,13 @@ class MisalignedHyperbolicCamera:
         mirror: HyperbolicMirror,
         image: np.ndarray | None = None,
         boundary_points: ArrayLike | None = None,
-        far_lines: list | None = None,
+        far_lines: Sequence[ArrayLike] | None = None,
         D: ArrayLike | None = None,
         image_size: Size | None = None,
         refine: bool = True,
         lens: str | bool | ArrayLike | None = "auto",
-        **options,
-    ) -> tuple:
+        **options: Any,
+    ) -> tuple[MisalignedHyperbolicCamera, CalibrationReport]:
         """Mirror posture from one image: rim, Chen's method, selection, refinement, checks.
 
         See :func:`omnicam.calibration.calibrate` for ``options`` (``lens_r``, ``lens_z``,
@@ -390,7 +423,9 @@ class MisalignedHyperbolicCamera:
             **options,
         )
 
-    def recalibrate(self, image: np.ndarray | None = None, **options) -> tuple:
+    def recalibrate(
+        self, image: np.ndarray | None = None, **options: Any
+    ) -> tuple[MisalignedHyperbolicCamera, CalibrationReport]:
         """The mirror posture alone from one new image, with this rig's ``K``, ``D`` and mirror.
 
         After a bump: a rig calibrated once (from chessboards, say) and knocked out of line is
@@ -452,12 +487,12 @@ class MisalignedHyperbolicCamera:
     @classmethod
     def calibrate_pattern(
         cls,
-        images,
-        pattern_size,
-        square_size,
-        mirror=None,
-        **kw,
-    ):
+        images: Sequence[np.ndarray | PathLike] | None,
+        pattern_size: tuple[int, int],
+        square_size: float,
+        mirror: HyperbolicMirror | None = None,
+        **kw: Any,
+    ) -> tuple[MisalignedHyperbolicCamera, PatternReport]:
         """``K``, ``D``, the posture (and, with ``mirror=None``, the mirror) from chessboards
         seen through the mirror.
 
@@ -473,7 +508,9 @@ class MisalignedHyperbolicCamera:
     init_panorama_maps = views.init_panorama_maps
     init_perspective_maps = views.init_perspective_maps
 
-    def to_omnidir(self, depth: float | None = None) -> tuple:
+    def to_omnidir(
+        self, depth: float | None = None
+    ) -> tuple[FloatArray, float, FloatArray, FloatArray, FloatArray, float]:
         """The unified (Mei) model of ``cv2.omnidir`` closest to this rig, and its RMS error.
 
         Returns ``(K, xi, D, M, origin, rms_px)`` with ``X_omni = M (X_mirror - origin)``
@@ -485,7 +522,7 @@ class MisalignedHyperbolicCamera:
         return fit_omnidir(self, depth=depth).as_tuple()
 
     # -- files ----------------------------------------------------------------------------
-    def save(self, path: PathLike, verdict=None) -> None:
+    def save(self, path: PathLike, verdict: object = None) -> None:
         """Write the calibration with ``cv2.FileStorage`` (yaml, yml, xml or json), atomically.
 
         The file is written beside ``path``, read back and compared, then renamed into place

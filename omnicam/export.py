@@ -49,6 +49,7 @@ import cv2
 import numpy as np
 
 from ._atomic import OutputError, atomic_output, write_bytes
+from ._typing import FloatArray
 
 __all__ = [
     "FORMATS",
@@ -82,7 +83,7 @@ WARN_MAX_PX = 1.0
 
 
 # -- samples of the exact model -------------------------------------------------------------------
-def sample_pixels(camera, max_points=20000):
+def sample_pixels(camera, max_points=20000) -> tuple[FloatArray, FloatArray, FloatArray]:
     """Integer pixels that see the mirror (in the frame when ``image_size`` is known), evenly
     thinned to at most ``max_points``; returns ``(pixels, origins, directions)`` (mirror frame)."""
     pix = camera.mirror_pixels()
@@ -137,7 +138,7 @@ def _errors(pred, pix):
 
 
 # -- the unified (Mei) model -------------------------------------------------------------------
-def omnidir_project(points, K, xi, D=None):
+def omnidir_project(points, K, xi, D=None) -> FloatArray:
     """``cv2.omnidir.projectPoints(points, 0, 0, K, xi, D)`` in numpy, NaN where undefined.
 
     Parameters
@@ -208,7 +209,7 @@ class OmnidirFit:
     depth: float | None = None
     extra: dict = field(default_factory=dict, repr=False)
 
-    def summary(self):
+    def summary(self) -> str:
         """One line: the model, the scene, its errors and over how many pixels."""
         where = "at infinity" if self.depth is None else f"at {self.depth:g} from the origin"
         undefined = self.extra.get("undefined_points", 0)
@@ -223,11 +224,11 @@ class OmnidirFit:
             f"max {self.max_px:.3g} px {over}"
         )
 
-    def as_tuple(self):
+    def as_tuple(self) -> tuple[FloatArray, float, FloatArray, FloatArray, FloatArray, float]:
         """``(K, xi, D, M, origin, rms_px)``, what :meth:`to_omnidir` returns."""
         return self.K, self.xi, self.D, self.M, self.origin, self.rms_px
 
-    def project(self, points_mirror):
+    def project(self, points_mirror) -> FloatArray:
         """Pixels of mirror-frame points (or, at infinity, directions) through the fitted model
         with ``cv2.omnidir.projectPoints``."""
         X = np.asarray(points_mirror, dtype=np.float64).reshape(-1, 3)
@@ -237,7 +238,7 @@ class OmnidirFit:
         ip, _ = cv2.omnidir.projectPoints(
             Xo, np.zeros(3), np.zeros(3), self.K, float(self.xi), self.D
         )
-        return ip.reshape(-1, 2)
+        return np.asarray(ip, np.float64).reshape(-1, 2)
 
 
 def _omni_unpack(p, skew):
@@ -271,7 +272,7 @@ def _omni_linear_start(Y, pix, xi):
     return cost, (cu[0], cv_[0], cu[1], cu[2], cv_[1])
 
 
-def fit_omnidir(camera, depth=None, skew=True, distortion=True, max_points=20000):
+def fit_omnidir(camera, depth=None, skew=True, distortion=True, max_points=20000) -> OmnidirFit:
     """The unified (Mei) model of ``cv2.omnidir`` closest to the exact rig.
 
     Least squares over a grid of pixels (:func:`sample_pixels`): each pixel's exact ray
@@ -321,8 +322,8 @@ def fit_omnidir(camera, depth=None, skew=True, distortion=True, max_points=20000
     if not distortion:
         free[n_k + 1 : n_k + 5] = False
     # Jacobian columns of cv2.omnidir.projectPoints: om(3), T(3), fx, fy, s, cx, cy, xi, D(4)
-    jcols = ([6, 7, 8, 9, 10] if skew else [6, 7, 9, 10]) + [11, 12, 13, 14, 15, 0, 1, 2]
-    jcols = np.array(jcols)[free]
+    jcols_all = ([6, 7, 8, 9, 10] if skew else [6, 7, 9, 10]) + [11, 12, 13, 14, 15, 0, 1, 2]
+    jcols = np.array(jcols_all)[free]
     Yo = Yf.reshape(1, -1, 3)
     target = pix.reshape(-1)
 
@@ -377,7 +378,7 @@ def fit_omnidir(camera, depth=None, skew=True, distortion=True, max_points=20000
 
 
 # -- OCamCalib's Scaramuzza model --------------------------------------------------------------
-def ocam_world2cam(points, invpol, xc, yc, c, d, e):
+def ocam_world2cam(points, invpol, xc, yc, c, d, e) -> FloatArray:
     """OCamCalib's ``world2cam``: ocam-frame points -> pixels ``(x=column, y=row)``.
 
     ``theta = atan(Z / sqrt(X^2 + Y^2))``, ``rho = sum invpol[i] theta^i``,
@@ -396,7 +397,7 @@ def ocam_world2cam(points, invpol, xc, yc, c, d, e):
     return np.stack([col, row], axis=1)
 
 
-def ocam_cam2world(pixels, pol, xc, yc, c, d, e):
+def ocam_cam2world(pixels, pol, xc, yc, c, d, e) -> FloatArray:
     """OCamCalib's ``cam2world``: pixels ``(column, row)`` -> unit ocam-frame directions."""
     px = np.asarray(pixels, dtype=np.float64).reshape(-1, 2)
     invdet = 1.0 / (c - d * e)
@@ -446,7 +447,7 @@ class OcamFit:
     n_points: int
     cam2world_unseen: int = 0
 
-    def summary(self):
+    def summary(self) -> str:
         """One line: both mappings' errors, and over how many pixels each."""
         line = (
             f"world2cam RMS {self.world2cam_rms_px:.3g} px, max {self.world2cam_max_px:.3g} px "
@@ -461,7 +462,7 @@ class OcamFit:
         return line
 
 
-def fit_ocamcalib(camera, n_invpol=12, n_pol=5, max_points=5000, omnidir=None):
+def fit_ocamcalib(camera, n_invpol=12, n_pol=5, max_points=5000, omnidir=None) -> OcamFit:
     """OCamCalib's Scaramuzza model closest to the exact rig, at infinity.
 
     The world2cam side (centre, affine ``c, d, e``, orientation ``M`` and ``invpol``) is fitted
@@ -561,7 +562,7 @@ def _error_comment(fit, prefix="# "):
     )
 
 
-def write_omnidir(path, fit, image_size=None, overwrite=True):
+def write_omnidir(path, fit, image_size=None, overwrite=True) -> None:
     """``cv2.FileStorage`` file (yaml, yml, xml or json) with ``K``, ``xi``, ``D``, ``M``,
     ``origin``, ``rms_px``, ``max_px``, ``image_size``: what ``cv2.omnidir.*`` takes."""
 
@@ -599,7 +600,7 @@ def write_omnidir(path, fit, image_size=None, overwrite=True):
         fs.release()
 
 
-def kalibr_text(fit, image_size, rostopic="/cam0/image_raw"):
+def kalibr_text(fit, image_size, rostopic="/cam0/image_raw") -> str:
     """Kalibr camchain YAML (``camera_model: omni``, ``distortion_model: radtan``)."""
     if abs(fit.K[0, 1]) > 1e-9:
         raise ValueError("fit: Kalibr's omni model has no skew; fit with skew=False")
@@ -618,7 +619,7 @@ def kalibr_text(fit, image_size, rostopic="/cam0/image_raw"):
     )
 
 
-def camodocal_text(fit, image_size, camera_name="omnicam"):
+def camodocal_text(fit, image_size, camera_name="omnicam") -> str:
     """camodocal's ``MEI`` camera YAML (OpenCV FileStorage syntax, as camodocal reads it)."""
     if abs(fit.K[0, 1]) > 1e-9:
         raise ValueError("fit: camodocal's MEI model has no skew; fit with skew=False")
@@ -640,7 +641,7 @@ def camodocal_text(fit, image_size, camera_name="omnicam"):
     )
 
 
-def ocamcalib_text(fit, image_size):
+def ocamcalib_text(fit, image_size) -> str:
     """OCamCalib's ``calib_results.txt`` (read by ``get_ocam_model`` of ``ocam_functions.cpp``).
 
     Its comment lines are the ones OCamCalib writes (the reader skips them by position); the
@@ -686,7 +687,7 @@ def _image_size(camera, image_size):
     return tuple(int(v) for v in size)
 
 
-def write_kalibr(path, camera, fit=None, image_size=None, overwrite=True):
+def write_kalibr(path, camera, fit=None, image_size=None, overwrite=True) -> OmnidirFit:
     """Kalibr camchain of the best skew-free unified model; returns the fit."""
     fit = fit or fit_omnidir(camera, skew=False)
     write_bytes(
@@ -698,7 +699,7 @@ def write_kalibr(path, camera, fit=None, image_size=None, overwrite=True):
     return fit
 
 
-def write_camodocal(path, camera, fit=None, image_size=None, overwrite=True):
+def write_camodocal(path, camera, fit=None, image_size=None, overwrite=True) -> OmnidirFit:
     """camodocal MEI yaml of the best skew-free unified model; returns the fit."""
     fit = fit or fit_omnidir(camera, skew=False)
     write_bytes(
@@ -711,7 +712,7 @@ def write_camodocal(path, camera, fit=None, image_size=None, overwrite=True):
     return fit
 
 
-def write_ocamcalib(path, camera, fit=None, image_size=None, overwrite=True):
+def write_ocamcalib(path, camera, fit=None, image_size=None, overwrite=True) -> OcamFit:
     """OCamCalib ``calib_results.txt``; returns the :class:`OcamFit`."""
     fit = fit or fit_ocamcalib(camera)
     write_bytes(
@@ -774,7 +775,7 @@ def _cost_warning(camera, fmt, depth, fits):
     )
 
 
-def export(camera, fmt, path, depth=None, overwrite=True):
+def export(camera, fmt, path, depth=None, overwrite=True) -> OmnidirFit | OcamFit:
     """Write ``camera``'s central approximation in format ``fmt`` (one of :data:`FORMATS`);
     returns the fit (:class:`OmnidirFit` or :class:`OcamFit`).
 
@@ -789,6 +790,8 @@ def export(camera, fmt, path, depth=None, overwrite=True):
         raise ValueError(f"fmt must be one of {FORMATS}, got {fmt!r}")
     if depth is not None and fmt == "ocamcalib":
         raise ValueError("depth: the OCamCalib export is for a scene at infinity only")
+    fit: OmnidirFit | OcamFit
+    fits: dict[str, OmnidirFit | OcamFit]
     if fmt == "omnidir":
         fit = fit_omnidir(camera, depth=depth)
         write_omnidir(path, fit, camera.image_size, overwrite=overwrite)

@@ -9,9 +9,15 @@ error metric that tests, benchmarks and examples use.
 from __future__ import annotations
 
 import math
+from typing import Protocol
 
 import cv2
 import numpy as np
+import numpy.typing as npt
+
+# the aliases of omnicam._typing, which shares this module's layer (README, Layout)
+ArrayLike = npt.ArrayLike
+FloatArray = npt.NDArray[np.float64]
 
 __all__ = [
     "canonical_rvec",
@@ -22,7 +28,7 @@ __all__ = [
 ]
 
 
-def canonical_rvec(rvec):
+def canonical_rvec(rvec: ArrayLike) -> FloatArray:
     """The gauge (docs/conventions.md): the smallest rotation taking +z to the mirror axis.
 
     Rotations about the mirror axis are unobservable (5 DOF); this picks the representative.
@@ -31,10 +37,10 @@ def canonical_rvec(rvec):
     if rvec[2] == 0.0 and np.linalg.norm(rvec) < math.pi:
         # already a rotation about an axis in the x-y plane: the representative itself (and
         # returned unchanged, so the gauge is idempotent to the last bit)
-        return rvec.copy()
+        return np.copy(rvec)
     R, _ = cv2.Rodrigues(rvec.reshape(3, 1))
     m = R[:, 2]
-    axis = np.array([-m[1], m[0], 0.0])  # e_z x m
+    axis: FloatArray = np.array([-m[1], m[0], 0.0])  # e_z x m
     s = float(np.linalg.norm(axis))
     angle = math.atan2(s, m[2])
     if s < 1e-300:
@@ -42,7 +48,7 @@ def canonical_rvec(rvec):
     return axis / s * angle
 
 
-def gauge_rotation(axis):
+def gauge_rotation(axis: ArrayLike) -> FloatArray:
     """The smallest rotation taking ``e_z`` to the unit ``axis``: ``R`` of :func:`canonical_rvec`.
 
     Parameters
@@ -61,10 +67,20 @@ def gauge_rotation(axis):
     ang = math.atan2(s, a[2])
     if s < 1e-300:
         return np.eye(3) if a[2] > 0 else np.diag([1.0, -1.0, -1.0])
-    return cv2.Rodrigues((v / s * ang).reshape(3, 1))[0]
+    return np.asarray(cv2.Rodrigues((v / s * ang).reshape(3, 1))[0], np.float64)
 
 
-def posture_error(camera, truth):
+class _Posture(Protocol):
+    """What :func:`posture_error` reads of a camera."""
+
+    @property
+    def R(self) -> ArrayLike: ...
+
+    @property
+    def camera_center(self) -> ArrayLike: ...
+
+
+def posture_error(camera: _Posture, truth: _Posture) -> tuple[float, float]:
     """How far ``camera``'s mirror posture is from ``truth``'s: the one metric of omnicam.
 
     Parameters
@@ -91,7 +107,7 @@ def posture_error(camera, truth):
     return axis, origin
 
 
-def rotate_vector(v, w):
+def rotate_vector(v: FloatArray, w: FloatArray) -> FloatArray:
     """``v`` rotated by the rotation vector ``w`` (Rodrigues' formula), without a matrix.
 
     Parameters
@@ -104,12 +120,12 @@ def rotate_vector(v, w):
     """
     th = float(np.linalg.norm(w))
     if th == 0.0:
-        return v.copy()
+        return np.copy(v)
     k = w / th
     return v * math.cos(th) + np.cross(k, v) * math.sin(th) + k * (k @ v) * (1 - math.cos(th))
 
 
-def perpendicular_basis(v):
+def perpendicular_basis(v: FloatArray) -> tuple[FloatArray, FloatArray]:
     """Two unit vectors perpendicular to ``v`` and to each other, ``(b1, b2)`` with
     ``(v / |v|, b1, b2)`` right-handed: the axes of the two small rotations of a direction.
 

@@ -1101,7 +1101,7 @@ def _write_seq(fs, name, values):
     fs.endWriteStruct()
 
 
-def save_camera(camera, path: PathLike, verdict=None) -> None:
+def save_camera(camera: object, path: PathLike, verdict: object = None) -> None:
     """Write ``camera`` to ``path`` atomically and verified, with its verdict if given.
 
     A temporary file in the same folder is written, flushed, read back and compared with

@@ -31,8 +31,10 @@ import shlex
 
 import cv2
 import numpy as np
+import numpy.typing as npt
 
 from ._atomic import OutputError, atomic_output, write_bytes
+from ._typing import PathLike
 
 __all__ = [
     "UNSEEN_PGM",
@@ -51,7 +53,7 @@ __all__ = [
 UNSEEN_PGM = 65535
 
 
-def float_maps(map1, map2):
+def float_maps(map1, map2) -> tuple[np.ndarray, np.ndarray]:
     """``(map_x, map_y)`` float32 from any ``m1type`` omnicam returns."""
     if map1.ndim == 3 and map1.dtype == np.int16:
         return cv2.convertMaps(map1, map2, cv2.CV_32FC1)
@@ -60,7 +62,7 @@ def float_maps(map1, map2):
     return map1, map2
 
 
-def ffmpeg_maps(map_x, map_y, source_size):
+def ffmpeg_maps(map_x, map_y, source_size) -> tuple[npt.NDArray[np.uint16], npt.NDArray[np.uint16]]:
     """Integer source coordinates for ffmpeg's ``remap``: ``(xmap, ymap)`` uint16.
 
     Parameters
@@ -89,7 +91,7 @@ def ffmpeg_maps(map_x, map_y, source_size):
     return xmap, ymap
 
 
-def pgm_bytes(image):
+def pgm_bytes(image) -> bytes:
     """A 16-bit binary PGM (``P5``, maxval 65535, big-endian) of a uint16 image."""
     image = np.asarray(image)
     if image.ndim != 2 or image.dtype != np.uint16 or image.size == 0:
@@ -100,11 +102,12 @@ def pgm_bytes(image):
     return f"P5\n{w} {h}\n65535\n".encode("ascii") + image.astype(">u2").tobytes()
 
 
-def read_pgm(path):
+def read_pgm(path) -> tuple[npt.NDArray[np.uint16], int]:
     """Read a binary PGM (8 or 16 bit); returns ``(image, maxval)``."""
     with open(path, "rb") as f:
         data = f.read()
-    tokens, pos = [], 0
+    tokens: list[bytes] = []
+    pos = 0
     while len(tokens) < 4:
         while pos < len(data) and data[pos : pos + 1].isspace():
             pos += 1
@@ -127,7 +130,7 @@ def read_pgm(path):
     return np.frombuffer(data[pos:], dtype=dtype).reshape(h, w).astype(np.uint16), maxval
 
 
-def write_pgm(path, image, overwrite=True):
+def write_pgm(path, image, overwrite=True) -> None:
     """Write :func:`pgm_bytes` atomically, checked by reading it back."""
     data = pgm_bytes(image)
 
@@ -138,7 +141,7 @@ def write_pgm(path, image, overwrite=True):
     write_bytes(path, data, what="PGM map", overwrite=overwrite, verify=verify)
 
 
-def write_ffmpeg_maps(prefix, map_x, map_y, source_size, overwrite=True):
+def write_ffmpeg_maps(prefix, map_x, map_y, source_size, overwrite=True) -> tuple[str, str]:
     """``PREFIX_x.pgm`` and ``PREFIX_y.pgm`` for ffmpeg's ``remap``; returns their paths."""
     xmap, ymap = ffmpeg_maps(map_x, map_y, source_size)
     px, py = f"{os.fspath(prefix)}_x.pgm", f"{os.fspath(prefix)}_y.pgm"
@@ -147,7 +150,7 @@ def write_ffmpeg_maps(prefix, map_x, map_y, source_size, overwrite=True):
     return px, py
 
 
-def write_npy_maps(prefix, map_x, map_y, overwrite=True):
+def write_npy_maps(prefix, map_x, map_y, overwrite=True) -> list[str]:
     """``PREFIX_x.npy`` and ``PREFIX_y.npy`` (float32, for ``cv2.remap``); returns the paths."""
     paths = []
     for suffix, arr in (("x", map_x), ("y", map_y)):
@@ -166,7 +169,7 @@ def write_npy_maps(prefix, map_x, map_y, overwrite=True):
     return paths
 
 
-def write_filestorage_maps(path, map_x, map_y, overwrite=True):
+def write_filestorage_maps(path, map_x, map_y, overwrite=True) -> PathLike:
     """``map_x`` and ``map_y`` (float32) in one ``cv2.FileStorage`` file (yaml, xml, json)."""
     map_x = np.ascontiguousarray(map_x, dtype=np.float32)
     map_y = np.ascontiguousarray(map_y, dtype=np.float32)
@@ -193,7 +196,7 @@ def write_filestorage_maps(path, map_x, map_y, overwrite=True):
 
 def ffmpeg_command(
     x_pgm, y_pgm, output_size=None, supersample=1, input_name="in.mp4", output_name="out.mp4"
-):
+) -> str:
     """The ffmpeg command line that applies the maps (``format=yuv444p,remap``), as a string.
 
     ``yuv444p`` keeps chroma at full resolution, so every output pixel is one source pixel.

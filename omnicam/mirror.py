@@ -19,12 +19,13 @@ import numbers
 
 import numpy as np
 
+from ._typing import ArrayLike, FloatArray
 from ._validate import LENGTH_RANGE, real_number
 
 __all__ = ["HyperbolicMirror"]
 
 
-def _positive_finite(name, value):
+def _positive_finite(name: str, value: float) -> float:
     lo, hi = LENGTH_RANGE
     return real_number(
         value, name, lo, hi, expected=f"a positive finite number in [{lo:g}, {hi:g}] (mirror units)"
@@ -59,15 +60,26 @@ class HyperbolicMirror:
 
     __slots__ = ("_a", "_b", "_rim_radius")
 
-    def __init__(self, a, b, rim_radius):
+    def __init__(self, a: float, b: float, rim_radius: float) -> None:
         self._a = _positive_finite("a", a)
         self._b = _positive_finite("b", b)
         self._rim_radius = _positive_finite("rim_radius", rim_radius)
 
     # -- parameters -------------------------------------------------------------------
-    a = property(lambda self: self._a, doc="Hyperboloid parameter a.")
-    b = property(lambda self: self._b, doc="Hyperboloid parameter b.")
-    rim_radius = property(lambda self: self._rim_radius, doc="Radius of the rim circle.")
+    @property
+    def a(self) -> float:
+        """Hyperboloid parameter a."""
+        return self._a
+
+    @property
+    def b(self) -> float:
+        """Hyperboloid parameter b."""
+        return self._b
+
+    @property
+    def rim_radius(self) -> float:
+        """Radius of the rim circle."""
+        return self._rim_radius
 
     @property
     def c(self) -> float:
@@ -79,19 +91,19 @@ class HyperbolicMirror:
         """Height of the rim, ``b * sqrt(1 + rim_radius^2 / a^2)``."""
         return self._b * math.sqrt(1.0 + (self._rim_radius / self._a) ** 2)
 
-    def __eq__(self, other):
+    def __eq__(self, other: object) -> bool:
         if not isinstance(other, HyperbolicMirror):
             return NotImplemented
         return (self._a, self._b, self._rim_radius) == (other._a, other._b, other._rim_radius)
 
-    def __hash__(self):
+    def __hash__(self) -> int:
         return hash((self._a, self._b, self._rim_radius))
 
-    def __repr__(self):
+    def __repr__(self) -> str:
         return f"HyperbolicMirror(a={self._a!r}, b={self._b!r}, rim_radius={self._rim_radius!r})"
 
     # -- geometry ---------------------------------------------------------------------
-    def surface_z(self, X, Y):
+    def surface_z(self, X: ArrayLike, Y: ArrayLike) -> FloatArray:
         """Height of the mirror sheet, ``Z = b * sqrt((X^2 + Y^2) / a^2 + 1)`` (eq. 13).
 
         Parameters
@@ -106,9 +118,10 @@ class HyperbolicMirror:
         """
         X = np.asarray(X, dtype=np.float64)
         Y = np.asarray(Y, dtype=np.float64)
-        return self._b * np.sqrt((X * X + Y * Y) / self._a**2 + 1.0)
+        Z: FloatArray = self._b * np.sqrt((X * X + Y * Y) / self._a**2 + 1.0)
+        return Z
 
-    def normal(self, points):
+    def normal(self, points: ArrayLike) -> FloatArray:
         """Unnormalised surface normal ``N = (f_X, f_Y, -1)`` at points of the sheet (eq. 14).
 
         ``N`` points down and out of the mirror, towards the camera. Eq. 15 needs it normalised
@@ -128,12 +141,13 @@ class HyperbolicMirror:
         k = self._b**2 / (self._a**2 * P[..., 2])
         return np.stack([k * P[..., 0], k * P[..., 1], -np.ones_like(P[..., 2])], axis=-1)
 
-    def unit_normal(self, points):
+    def unit_normal(self, points: ArrayLike) -> FloatArray:
         """Unit normal of eq. 14, pointing out of the mirror (towards the camera)."""
         N = self.normal(points)
-        return N / np.linalg.norm(N, axis=-1, keepdims=True)
+        length: FloatArray = np.linalg.norm(N, axis=-1, keepdims=True)
+        return N / length
 
-    def intersect(self, origins, directions):
+    def intersect(self, origins: ArrayLike, directions: ArrayLike) -> FloatArray:
         """First hit of rays ``F + k V`` with the mirror cap (eqs. 8-12).
 
         The root of ``alpha k^2 + 2 beta k + gamma = 0`` (eqs. 8-11) kept is the smallest ``k > 0``
@@ -182,7 +196,7 @@ class HyperbolicMirror:
         return np.where(ok[..., None], P, np.nan)
 
     @staticmethod
-    def reflect(directions, unit_normals):
+    def reflect(directions: ArrayLike, unit_normals: ArrayLike) -> FloatArray:
         """Reflection law ``V_out = V - 2 n (n, V)`` with a unit normal (eq. 15).
 
         Parameters
@@ -199,9 +213,10 @@ class HyperbolicMirror:
         """
         V = np.asarray(directions, dtype=np.float64)
         n = np.asarray(unit_normals, dtype=np.float64)
-        return V - 2.0 * n * np.einsum("...i,...i->...", n, V)[..., None]
+        nV: FloatArray = np.einsum("...i,...i->...", n, V)
+        return V - 2.0 * n * nV[..., None]
 
-    def rim_points(self, n=360):
+    def rim_points(self, n: int | float = 360) -> FloatArray:
         """``n`` points evenly spaced on the rim circle, ``(n, 3)``, mirror frame.
 
         ``n`` must be an integer in [1, 10**7] (``ValueError`` naming ``n`` otherwise).

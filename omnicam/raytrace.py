@@ -7,11 +7,15 @@ the per-point work runs in the numba kernels of :mod:`omnicam._kernels`.
 
 from __future__ import annotations
 
+from collections.abc import Callable
+
 import cv2
 import numpy as np
 
 from . import _kernels
 from ._jit import notice_if_cold, run_chunks
+from ._typing import ArrayLike, FloatArray
+from .mirror import HyperbolicMirror
 
 __all__ = [
     "as_points",
@@ -26,7 +30,9 @@ __all__ = [
 _UNDISTORT_CRITERIA = (cv2.TERM_CRITERIA_COUNT | cv2.TERM_CRITERIA_EPS, 200, 1e-15)
 
 
-def as_points(points, name, dim):
+def as_points(
+    points: ArrayLike, name: str, dim: int
+) -> tuple[FloatArray, Callable[[FloatArray], FloatArray]]:
     """Validate a point array and return ``(pts, restore)``.
 
     Parameters
@@ -59,19 +65,19 @@ def as_points(points, name, dim):
         raise ValueError(f"{name} must have shape (N, {dim}) or (N, 1, {dim}), got {arr.shape}")
     pts = np.ascontiguousarray(arr.reshape(-1, dim), dtype=np.float64)
 
-    def restore(result):
+    def restore(result: FloatArray) -> FloatArray:
         return result.reshape(-1, 1, result.shape[-1]) if layout == 3 else result
 
     return pts, restore
 
 
-def _f64(x):
+def _f64(x: ArrayLike) -> FloatArray:
     """``x`` as a writable C-contiguous float64 array (a copy only if needed): every kernel call
     has the same argument types, so each kernel compiles and caches one signature."""
     return np.require(x, np.float64, ["C_CONTIGUOUS", "WRITEABLE", "ALIGNED"])
 
 
-def undistort_normalized(pixels, K, D):
+def undistort_normalized(pixels: FloatArray, K: FloatArray, D: ArrayLike) -> FloatArray:
     """Pixels -> undistorted normalised coordinates ``(x, y)`` with ``(x, y, 1) ~ X_C``.
 
     ``inv(K)`` is applied here (so skew counts) and OpenCV undoes ``D`` on an identity camera with
@@ -93,7 +99,7 @@ def undistort_normalized(pixels, K, D):
     return out
 
 
-def distort_normalized(xn, K, D):
+def distort_normalized(xn: FloatArray, K: FloatArray, D: ArrayLike) -> FloatArray:
     """Undistorted normalised coordinates -> pixels (OpenCV's distortion, then ``K`` with skew).
 
     ``D = (k1, k2, p1, p2[, k3])`` is applied in numpy (the formula of ``cv2.projectPoints``,
@@ -122,7 +128,14 @@ def distort_normalized(xn, K, D):
     return out
 
 
-def trace(pixels, K, D, R, C, mirror):
+def trace(
+    pixels: FloatArray,
+    K: FloatArray,
+    D: FloatArray | None,
+    R: FloatArray,
+    C: FloatArray,
+    mirror: HyperbolicMirror,
+) -> tuple[FloatArray, FloatArray]:
     """Reflected rays of pixels (eqs. 6-19): ``(origins, directions)``, each ``(N, 3)``.
 
     Parameters
@@ -170,7 +183,9 @@ def trace(pixels, K, D, R, C, mirror):
     return origins, directions
 
 
-def trace_normalized(xn, R, C, mirror):
+def trace_normalized(
+    xn: ArrayLike, R: ArrayLike, C: ArrayLike, mirror: HyperbolicMirror
+) -> tuple[FloatArray, FloatArray]:
     """Reflected rays of undistorted normalised coordinates, in numpy: the one reference tracer.
 
     The calibration code traces a few hundred points per evaluation under trial postures, where
@@ -202,7 +217,16 @@ def trace_normalized(xn, R, C, mirror):
     return P, mirror.reflect(V, mirror.unit_normal(P))  # eqs. 14-15
 
 
-def project(points, at_infinity, K, D, R, t, C, mirror):
+def project(
+    points: FloatArray,
+    at_infinity: bool,
+    K: FloatArray,
+    D: FloatArray | None,
+    R: FloatArray,
+    t: FloatArray,
+    C: FloatArray,
+    mirror: HyperbolicMirror,
+) -> FloatArray:
     """Exact non-central projection of points (or directions) to pixels, ``(N, 2)``.
 
     For each point the reflection point on the mirror is found by Newton's method on Fermat's

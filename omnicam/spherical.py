@@ -19,7 +19,7 @@ from .views import PanoramaView
 __all__ = ["equirect_view"]
 
 
-def equirect_view(size, depth=None):
+def equirect_view(size, depth=None) -> PanoramaView:
     """A :class:`PanoramaView` of the full sphere in the equirectangular layout above.
 
     Parameters

@@ -39,7 +39,7 @@ SOFTWARE = "omnicam"
 
 
 # -- stills: Photo Sphere XMP ------------------------------------------------------------------
-def photosphere_xmp(full_size, cropped=None):
+def photosphere_xmp(full_size, cropped=None) -> bytes:
     """The GPano XMP packet of an equirectangular image.
 
     Parameters
@@ -75,7 +75,7 @@ def photosphere_xmp(full_size, cropped=None):
     ).encode()
 
 
-def jpeg_with_photosphere_xmp(jpeg, full_size, cropped=None):
+def jpeg_with_photosphere_xmp(jpeg, full_size, cropped=None) -> bytes:
     """The JPEG bytes with an ``APP1`` XMP segment after ``SOI`` (and after ``APP0`` JFIF)."""
     jpeg = bytes(jpeg)
     if jpeg[:2] != b"\xff\xd8":
@@ -90,7 +90,7 @@ def jpeg_with_photosphere_xmp(jpeg, full_size, cropped=None):
     return jpeg[:pos] + segment + jpeg[pos:]
 
 
-def read_jpeg_xmp(jpeg):
+def read_jpeg_xmp(jpeg) -> bytes | None:
     """The XMP packet of a JPEG (bytes), or None: walks the marker segments before SOS."""
     jpeg = bytes(jpeg)
     pos = 2
@@ -107,7 +107,7 @@ def read_jpeg_xmp(jpeg):
 
 
 # -- videos: spherical video metadata v1 and v2 ------------------------------------------------
-def spherical_v1_xml():
+def spherical_v1_xml() -> bytes:
     """RDF/XML of Spherical Video V1 (as spatial-media's ``spherical_metadata`` writes it)."""
     return (
         '<?xml version="1.0"?>'
@@ -178,10 +178,16 @@ class Box:
 
     __slots__ = ("children", "head", "kind", "payload")
 
-    def __init__(self, kind, head=b"", children=None, payload=b""):
+    def __init__(
+        self,
+        kind: bytes,
+        head: bytes = b"",
+        children: list[Box] | None = None,
+        payload: bytes = b"",
+    ) -> None:
         self.kind, self.head, self.children, self.payload = kind, head, children, payload
 
-    def to_bytes(self):
+    def to_bytes(self) -> bytes:
         body = self.head + (
             b"".join(c.to_bytes() for c in self.children)
             if self.children is not None
@@ -191,11 +197,11 @@ class Box:
             return struct.pack(">I", 1) + self.kind + struct.pack(">Q", 16 + len(body)) + body
         return _box(self.kind, body)
 
-    def __repr__(self):
+    def __repr__(self) -> str:
         return f"Box({self.kind!r}, {len(self.children or [])} children)"
 
 
-def parse_boxes(data, start=0, end=None, parent=None):
+def parse_boxes(data, start=0, end=None, parent=None) -> list[Box]:
     """Boxes of ``data[start:end]`` as :class:`Box` trees (containers parsed, others raw)."""
     end = len(data) if end is None else end
     out = []
@@ -228,7 +234,7 @@ def parse_boxes(data, start=0, end=None, parent=None):
     return out
 
 
-def find_boxes(boxes, path):
+def find_boxes(boxes, path) -> list[Box]:
     """All boxes reached by the type path ``[b"moov", b"trak", ...]``."""
     found = [b for b in boxes if b.kind == path[0]]
     if len(path) == 1:
@@ -256,7 +262,7 @@ def _shift_chunk_offsets(boxes, delta):
         co64.payload = p[:8] + offs.astype(">u8").tobytes() + p[8 + 8 * n :]
 
 
-def inject_spherical_mp4(data):
+def inject_spherical_mp4(data) -> bytes:
     """An MP4/MOV (bytes) with Spherical Video V1 and V2 metadata in its video track.
 
     Raises
@@ -273,11 +279,13 @@ def inject_spherical_mp4(data):
         raise ValueError("the MP4 has no video track")
     old_moov = len(next(b for b in boxes if b.kind == b"moov").to_bytes())
     for trak in traks:
+        assert trak.children is not None  # trak is a container (_CONTAINERS), parsed
         trak.children = [
             c for c in trak.children if not (c.kind == b"uuid" and c.payload[:16] == SPHERICAL_UUID)
         ]
         trak.children.append(Box(b"uuid", payload=SPHERICAL_UUID + spherical_v1_xml()))
         for stsd in find_boxes(trak.children, [b"mdia", b"minf", b"stbl", b"stsd"]):
+            assert stsd.children is not None  # so is stsd
             for entry in stsd.children:
                 if entry.kind in _VISUAL_ENTRIES and entry.children is not None:
                     entry.children = [c for c in entry.children if c.kind not in (b"sv3d", b"st3d")]

@@ -27,13 +27,14 @@ from __future__ import annotations
 import contextlib
 import math
 import os
-from typing import NamedTuple
+from typing import Literal, NamedTuple
 
 import cv2
 import numpy as np
 
 from ._atomic import OutputError, publish, remove_quietly, sigint_deferred, temp_beside
 from ._quiet import opencv_silenced
+from ._typing import Maps, Size
 from .views import PanoramaView, PerspectiveView
 
 __all__ = [
@@ -88,7 +89,7 @@ def _check_maps(name, maps):
     return map1, map2
 
 
-def open_capture(source):
+def open_capture(source) -> cv2.VideoCapture:
     """A ``cv2.VideoCapture`` that is open, or ``ValueError`` naming what could not be opened.
 
     Parameters
@@ -140,7 +141,7 @@ def _is_capture(source):
     )
 
 
-def count_frames(path, limit=None):
+def count_frames(path, limit=None) -> int:
     """Frames OpenCV decodes from the video file ``path`` (it stops counting after ``limit``).
 
     Returns 0 for a file OpenCV cannot open.
@@ -266,7 +267,7 @@ class Unwarper:
         self._plan = [(n, m1, m2, m1.shape[:2]) for n, (m1, m2) in self._maps.items()]
 
     @classmethod
-    def from_camera(cls, camera, views, frame_size=None, m1type=cv2.CV_16SC2, **kwargs):
+    def from_camera(cls, camera, views, frame_size=None, m1type=cv2.CV_16SC2, **kwargs) -> Unwarper:
         """Build the tables of ``views`` for ``camera``.
 
         Parameters
@@ -302,21 +303,21 @@ class Unwarper:
 
     # -- properties ---------------------------------------------------------------------------
     @property
-    def names(self):
+    def names(self) -> list[str]:
         """View names, in order."""
         return list(self._maps)
 
     @property
-    def maps(self):
+    def maps(self) -> dict[str, Maps]:
         """dict of name -> (map1, map2)."""
         return dict(self._maps)
 
     @property
-    def source_size(self):
+    def source_size(self) -> Size | None:
         """(width, height) of the frames the tables are for, or None."""
         return self._source_size
 
-    def view_size(self, name):
+    def view_size(self, name) -> Size:
         """(width, height) of view ``name``."""
         h, w = self._maps[name][0].shape[:2]
         return (w, h)
@@ -587,25 +588,25 @@ class VideoStream:
         self._frames = frames
         self._record = record
 
-    def __iter__(self):
+    def __iter__(self) -> VideoStream:
         return self
 
-    def __next__(self):
+    def __next__(self) -> tuple[int, dict[str, np.ndarray]]:
         return next(self._frames)
 
-    def close(self):
+    def close(self) -> None:
         """Stop; the frames so far are kept (see :meth:`Unwarper.stream`)."""
         self._frames.close()
 
-    def abort(self):
+    def abort(self) -> None:
         """Stop; the frames so far are removed and earlier outputs stay as they were."""
         self._record.aborted = True
         self._frames.close()
 
-    def __enter__(self):
+    def __enter__(self) -> VideoStream:
         return self
 
-    def __exit__(self, kind, value, traceback):
+    def __exit__(self, kind, value, traceback) -> Literal[False]:
         if kind is not None and not issubclass(kind, KeyboardInterrupt):
             self.abort()
         else:
@@ -613,17 +614,17 @@ class VideoStream:
         return False
 
     @property
-    def frames(self):
+    def frames(self) -> int:
         """Frames unwarped so far."""
         return self._record.frames
 
     @property
-    def fourcc(self):
+    def fourcc(self) -> dict[str, str]:
         """dict of output name -> the codec it is written with."""
         return dict(self._record.fourcc)
 
     @property
-    def written(self):
+    def written(self) -> dict[str, WrittenVideo]:
         """dict of output name -> :class:`WrittenVideo`, once the stream has ended or closed."""
         return dict(self._record.written)
 
@@ -723,7 +724,7 @@ def _writes_a_frame(path, fourcc, fps, size, color):
         remove_quietly(probe)
 
 
-def video_codec(path, size, fps=30.0, fourcc=None, color=True):
+def video_codec(path, size, fps=30.0, fourcc=None, color=True) -> str:
     """The codec a video written to ``path`` gets: the first of ``fourcc`` that works here.
 
     Each candidate is checked by writing one frame of ``size`` into a temporary file of the
@@ -854,7 +855,7 @@ class VideoOutput:
             remove_quietly(self.tmp)
             raise OutputError(f"cannot write video {self.path} with codec {self.fourcc}")
 
-    def write(self, frame):
+    def write(self, frame) -> None:
         """Append one frame (``size``, BGR or grey as ``color``).
 
         Raises
@@ -872,7 +873,7 @@ class VideoOutput:
                 f"{self.frames} frames; the previous file is unchanged"
             )
 
-    def close(self, complete=True, finalize=None):
+    def close(self, complete=True, finalize=None) -> int:
         """Finish the file and check it; returns the frames that decode from it.
 
         Parameters
@@ -912,7 +913,7 @@ class VideoOutput:
         self.frames, self._complete = got, bool(complete)
         return got
 
-    def commit(self):
+    def commit(self) -> WrittenVideo | None:
         """Put the closed file in place; returns the :class:`WrittenVideo`, or None.
 
         A complete file replaces ``path`` (if ``overwrite``). The frames of an incomplete run
@@ -945,16 +946,16 @@ class VideoOutput:
         self.result = WrittenVideo(target, self.frames, self.fourcc, self._complete)
         return self.result
 
-    def discard(self):
+    def discard(self) -> None:
         """Stop and remove the temporary file; an earlier ``path`` is unchanged."""
         with contextlib.suppress(cv2.error):
             self._writer.release()
         remove_quietly(self.tmp)
 
-    def __enter__(self):
+    def __enter__(self) -> VideoOutput:
         return self
 
-    def __exit__(self, kind, value, traceback):
+    def __exit__(self, kind, value, traceback) -> Literal[False]:
         if kind is not None and not issubclass(kind, KeyboardInterrupt):
             self.discard()
             return False

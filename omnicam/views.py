@@ -34,9 +34,11 @@ import functools
 import math
 import numbers
 import warnings
+from typing import Any, Protocol
 
 import cv2
 import numpy as np
+import numpy.typing as npt
 
 from . import _kernels
 from ._jit import notice_if_cold, run_chunks
@@ -52,6 +54,7 @@ from ._kernels import (
 )
 from ._typing import ArrayLike, FloatArray, Maps, Size
 from ._validate import finite_array, float_array, real_number, validate_K
+from .mirror import HyperbolicMirror
 
 __all__ = [
     "init_panorama_maps",
@@ -83,6 +86,39 @@ R0 = np.array([[0.0, -1.0, 0.0], [0.0, 0.0, -1.0], [1.0, 0.0, 0.0]])
 #: The default band of a cylindrical panorama stops here: its rows are linear in
 #: ``tan(elevation)``, which the nadir (-90 deg) would send to infinity.
 CYLINDRICAL_MIN_ELEVATION = -60.0
+
+
+class CameraLike(Protocol):
+    """What the views read of a camera: a :class:`~omnicam.camera.MisalignedHyperbolicCamera`
+    (duck-typed: the views sit below the camera class and do not import it)."""
+
+    @property
+    def mirror(self) -> HyperbolicMirror: ...
+
+    @property
+    def K(self) -> FloatArray: ...
+
+    @property
+    def D(self) -> FloatArray | None: ...
+
+    @property
+    def R(self) -> FloatArray: ...
+
+    @property
+    def tvec(self) -> FloatArray: ...
+
+    @property
+    def camera_center(self) -> FloatArray: ...
+
+    def best_fit_viewpoint(self) -> tuple[FloatArray, float]: ...
+
+
+#: The four outputs of a table, as :func:`_build_table` writes them: float32 x and y maps
+#: (mode 0), or CV_16SC2's int16 pairs and uint16 fractions (mode 1); the others unused (1x1).
+_Outputs = tuple[
+    npt.NDArray[np.float32], npt.NDArray[np.float32], npt.NDArray[np.int16], npt.NDArray[np.uint16]
+]
+_IntArray = npt.NDArray[np.int64]
 
 
 # -- helpers for view specs ----------------------------------------------------------------------
@@ -158,7 +194,7 @@ def K_from_fov(fov_deg: float, size: Size) -> FloatArray:
 
 
 # -- validation ----------------------------------------------------------------------------------
-def _check_size(size, min_height=1):
+def _check_size(size: Any, min_height: int = 1) -> Size:
     try:
         w, h = size
         if not all(
@@ -181,7 +217,7 @@ def _check_size(size, min_height=1):
     return w, h
 
 
-def _check_camera(camera):
+def _check_camera(camera: object) -> object:
     """A camera (duck-typed: views sit below the camera class and do not import it)."""
     if not all(hasattr(camera, a) for a in ("mirror", "K", "R", "unproject", "rim_image_points")):
         raise ValueError(
@@ -190,7 +226,7 @@ def _check_camera(camera):
     return camera
 
 
-def _check_m1type(m1type):
+def _check_m1type(m1type: object) -> int:
     if (
         isinstance(m1type, bool)
         or not isinstance(m1type, numbers.Integral)
@@ -202,7 +238,7 @@ def _check_m1type(m1type):
     return int(m1type)
 
 
-def _check_rotation(R, name="R"):
+def _check_rotation(R: ArrayLike, name: str = "R") -> FloatArray:
     arr = float_array(R, name, "a 3x3 rotation matrix")
     if arr.shape != (3, 3) or not np.isfinite(arr).all():
         raise ValueError(f"{name} must be a finite 3x3 rotation matrix, got shape {arr.shape}")
@@ -211,7 +247,7 @@ def _check_rotation(R, name="R"):
     return arr
 
 
-def _check_depth(depth):
+def _check_depth(depth: float | None) -> float | None:
     if depth is None:
         return None
     return real_number(
@@ -219,15 +255,20 @@ def _check_depth(depth):
     )
 
 
-def _check_viewpoint(camera, viewpoint, depth):
+def _check_viewpoint(
+    camera: CameraLike | None, viewpoint: ArrayLike | None, depth: float | None
+) -> FloatArray | None:
     if depth is None:
         return None  # directions: the viewpoint plays no part (do not compute the best fit)
     if viewpoint is None:
+        assert camera is not None, "the view specs pass a viewpoint to check, never None"
         return np.asarray(camera.best_fit_viewpoint()[0], dtype=np.float64)
     return finite_array(viewpoint, "viewpoint", (3,), "None or 3 numbers (mirror frame)")
 
 
-def _check_elevation_range(elevation_range, projection):
+def _check_elevation_range(
+    elevation_range: tuple[float, float], projection: str
+) -> tuple[float, float]:
     try:
         lo, hi = (real_number(v, "elevation_range") for v in elevation_range)
     except (TypeError, ValueError):
@@ -251,7 +292,9 @@ def _check_elevation_range(elevation_range, projection):
 
 # -- the band a mirror sees ---------------------------------------------------------------------
 @functools.lru_cache(maxsize=8)
-def _rim_directions_of(mirror, a, b, rim_radius, centre_bytes, n):
+def _rim_directions_of(
+    mirror: HyperbolicMirror, a: float, b: float, rim_radius: float, centre_bytes: bytes, n: int
+) -> FloatArray:
     """Reflected directions of ``n`` rim points (eqs. 14-15 at the rim), mirror frame.
 
     They depend on the mirror and the camera centre only; the last few rigs' are kept (every
@@ -266,7 +309,7 @@ def _rim_directions_of(mirror, a, b, rim_radius, centre_bytes, n):
     return out
 
 
-def _rim_band(camera):
+def _rim_band(camera: CameraLike) -> tuple[float, float, bool]:
     """``(lowest, highest)`` elevation of the rim's reflected directions (degrees,
     :func:`_rim_directions_of`) and whether the nadir is seen (:func:`_nadir_seen`); the last
     few rigs' are kept."""
@@ -276,18 +319,25 @@ def _rim_band(camera):
 
 
 @functools.lru_cache(maxsize=8)
-def _rim_band_of(mirror, a, b, rim_radius, centre_bytes, n=3600):
+def _rim_band_of(
+    mirror: HyperbolicMirror,
+    a: float,
+    b: float,
+    rim_radius: float,
+    centre_bytes: bytes,
+    n: int = 3600,
+) -> tuple[float, float, bool]:
     rim_dirs = _rim_directions_of(mirror, a, b, rim_radius, centre_bytes, n)
     el = _elevation_deg(rim_dirs)
     nadir = bool(_nadir_seen(b, np.frombuffer(centre_bytes, dtype=np.float64), rim_dirs))
     return float(np.min(el)), float(np.max(el)), nadir
 
 
-def _elevation_deg(d):
+def _elevation_deg(d: FloatArray) -> FloatArray:
     return np.degrees(np.arctan2(d[..., 2], np.hypot(d[..., 0], d[..., 1])))
 
 
-def _nadir_seen(b, camera_center, rim_dirs):
+def _nadir_seen(b: float, camera_center: FloatArray, rim_dirs: FloatArray) -> bool:
     """Whether the straight-down direction (0, 0, -1) is among those the mirror shows.
 
     The cap maps one-to-one onto the directions it shows, so these are the region bounded by
@@ -300,10 +350,12 @@ def _nadir_seen(b, camera_center, rim_dirs):
     turns = np.diff(np.append(az, az[0]))
     turns = (turns + np.pi) % (2.0 * np.pi) - np.pi
     winding = int(round(float(turns.sum()) / (2.0 * np.pi)))
-    return abs(winding) == 1 and _elevation_deg(apex_ray) < float(np.min(_elevation_deg(rim_dirs)))
+    return abs(winding) == 1 and float(_elevation_deg(apex_ray)) < float(
+        np.min(_elevation_deg(rim_dirs))
+    )
 
 
-def visible_elevation_range(camera) -> tuple[float, float]:
+def visible_elevation_range(camera: CameraLike) -> tuple[float, float]:
     """The band of elevations the mirror sees, ``(lo, hi)`` in degrees, mirror frame.
 
     ``hi`` is the highest elevation of the rays of the rim (the reflected directions of the rim
@@ -327,7 +379,7 @@ def visible_elevation_range(camera) -> tuple[float, float]:
 CELL_DEGREES = 5.0
 
 
-def _step_for(deg_per_px):
+def _step_for(deg_per_px: float) -> int:
     """Node spacing (pixels, a multiple of 4 in [8, 64]) of cells about CELL_DEGREES wide."""
     n = CELL_DEGREES / max(float(deg_per_px), 1e-9)
     return int(min(64, max(8, 4 * round(n / 4))))
@@ -339,19 +391,19 @@ TOLERANCE = 0.01
 _KIND = {"perspective": 0, "cylindrical": 1, "equirectangular": 2}
 
 
-def _tilt_matrix(tau_x, tau_y):
+def _tilt_matrix(tau_x: float, tau_y: float) -> FloatArray:
     """OpenCV's ``computeTiltProjectionMatrix`` (the tau_x, tau_y of a 14-value ``D``)."""
     cx, sx, cy, sy = math.cos(tau_x), math.sin(tau_x), math.cos(tau_y), math.sin(tau_y)
     rot_x = np.array([[1.0, 0.0, 0.0], [0.0, cx, sx], [0.0, -sx, cx]])
     rot_y = np.array([[cy, 0.0, -sy], [0.0, 1.0, 0.0], [sy, 0.0, cy]])
-    rot_xy = rot_y @ rot_x
+    rot_xy: FloatArray = rot_y @ rot_x
     proj_z = np.array(
         [[rot_xy[2, 2], 0.0, -rot_xy[0, 2]], [0.0, rot_xy[2, 2], -rot_xy[1, 2]], [0.0, 0.0, 1.0]]
     )
     return proj_z @ rot_xy
 
 
-def _cap_radius(camera, viewpoint):
+def _cap_radius(camera: CameraLike, viewpoint: FloatArray) -> float:
     """An upper bound of the distance from ``viewpoint`` to any point of the mirror cap."""
     m = camera.mirror
     r = np.linspace(0.0, m.rim_radius, 33)[:, None]
@@ -362,7 +414,9 @@ def _cap_radius(camera, viewpoint):
     return float(np.linalg.norm(P - viewpoint, axis=1).max()) + m.rim_radius * 0.07
 
 
-def _reject_sines(camera, depth, viewpoint):
+def _reject_sines(
+    camera: CameraLike, depth: float | None, viewpoint: FloatArray | None
+) -> tuple[float, float]:
     """Sines of the elevation above which nothing is seen, and above which nodes are not solved.
 
     At infinity nothing above the highest rim ray is seen (:func:`visible_elevation_range`).
@@ -373,6 +427,7 @@ def _reject_sines(camera, depth, viewpoint):
     hi = _rim_band(camera)[1]
     limit = hi + 0.5  # slack for the rim sampling
     if depth is not None:
+        assert viewpoint is not None, "_check_viewpoint gives a viewpoint with every depth"
         rho = _cap_radius(camera, viewpoint)
         if depth <= rho * 1.001:
             return 2.0, 2.0
@@ -382,7 +437,7 @@ def _reject_sines(camera, depth, viewpoint):
     return math.sin(math.radians(limit)), math.sin(math.radians(min(limit + 30.0, 89.5)))
 
 
-def _rig_args(camera):
+def _rig_args(camera: CameraLike) -> RigArgs:
     """:class:`omnicam._kernels.RigArgs` of a camera: float64 C-contiguous writable copies (the
     kernels' one signature; numba types read-only arrays apart)."""
 
@@ -408,7 +463,16 @@ def _rig_args(camera):
     )
 
 
-def _view_args(camera, kind, A, p0, p1, az_step, depth, viewpoint):
+def _view_args(
+    camera: CameraLike,
+    kind: int,
+    A: FloatArray,
+    p0: float,
+    p1: float,
+    az_step: float,
+    depth: float | None,
+    viewpoint: FloatArray | None,
+) -> ViewArgs:
     """:class:`omnicam._kernels.ViewArgs` of a view (see :func:`_table`)."""
 
     sin_reject, sin_try = _reject_sines(camera, depth, viewpoint)
@@ -428,7 +492,20 @@ def _view_args(camera, kind, A, p0, p1, az_step, depth, viewpoint):
     )
 
 
-def _table(camera, kind, A, p0, p1, az_step, size, depth, viewpoint, m1type, step=None, stats=None):
+def _table(
+    camera: CameraLike,
+    kind: int,
+    A: FloatArray,
+    p0: float,
+    p1: float,
+    az_step: float,
+    size: Size,
+    depth: float | None,
+    viewpoint: FloatArray | None,
+    m1type: int,
+    step: int | None = None,
+    stats: _IntArray | None = None,
+) -> Maps:
     """Build the table of a view (:func:`_build_table`) and return the maps for ``m1type``.
 
     ``kind, A, p0, p1, az_step`` define the output directions
@@ -471,7 +548,7 @@ def _table(camera, kind, A, p0, p1, az_step, size, depth, viewpoint, m1type, ste
     return outx, outy
 
 
-def _arg(x):
+def _arg(x: ArrayLike) -> FloatArray:
     """A writable C-contiguous float64 copy (the kernels' one signature)."""
     return np.array(x, dtype=np.float64, order="C", copy=True)
 
@@ -484,7 +561,16 @@ class _GridStack:
     mirror points, pixels and margins of the nodes; ``cls`` (G, ny, nx) the cells' classes.
     """
 
-    def __init__(self, view, rig, origins, spacing, shape, coarse=None, cells=None):
+    def __init__(
+        self,
+        view: ViewArgs,
+        rig: RigArgs,
+        origins: FloatArray,
+        spacing: float,
+        shape: tuple[int, int],
+        coarse: _GridStack | None = None,
+        cells: _IntArray | None = None,
+    ) -> None:
         ny, nx = shape
         self.origins, self.spacing = origins, spacing
         refined = cells is not None
@@ -496,10 +582,11 @@ class _GridStack:
         _S, _P, self.check_margins, _ok, errors = _solve(
             view, rig, positions, starts, estimates=interpolated, with_mirror_error=refined
         )
+        assert errors is not None, "_solve gives the errors of estimates"
         self.pixel_error = errors[..., 0]
         self.mirror_error = errors[..., 1]
 
-    def classify(self, view, size, half_tol, allow_edge):
+    def classify(self, view: ViewArgs, size: Size, half_tol: float, allow_edge: bool) -> _IntArray:
 
         G, _w, ny1, nx1 = self.pixel_error.shape
         self.cls = np.empty((G, ny1 - 1, nx1 - 1), np.int64)
@@ -519,7 +606,7 @@ class _GridStack:
         )
         return self.cls
 
-    def n_solved(self):
+    def n_solved(self) -> tuple[int, int]:
         """Nodes and check points with a solution."""
         return (
             int(np.count_nonzero(self.node_margins[..., 0] > -np.inf)),
@@ -527,7 +614,7 @@ class _GridStack:
         )
 
 
-def _lagrange4(t):
+def _lagrange4(t: Any) -> tuple[Any, Any, Any, Any]:
     """Cubic Lagrange weights of nodes at -1, 0, 1, 2: the operations of
     :func:`omnicam._kernels._lagrange4` in the same order, so the same bits."""
     return (
@@ -538,14 +625,14 @@ def _lagrange4(t):
     )
 
 
-def _cubic_weights(tv, tu):
+def _cubic_weights(tv: float, tu: float) -> list[np.float64]:
     """Row and column weights of the cell coordinates (tv, tu), a row of ``cubic_blocks``'
     ``weights``."""
     return [*_lagrange4(np.float64(tv)), *_lagrange4(np.float64(tu))]
 
 
 @functools.lru_cache(maxsize=16)
-def _node_blocks(NY, NX):
+def _node_blocks(NY: int, NX: int) -> tuple[_IntArray, FloatArray]:
     """``cubic_blocks``' blocks and weights of the Newton starts of a refined grid's nodes:
     node (p, q) is the cubic of the refined coarse cell at ((p - 1) / FINE, (q - 1) / FINE)."""
 
@@ -556,7 +643,13 @@ def _node_blocks(NY, NX):
     return np.array(blocks, np.int64), np.array(weights)
 
 
-def _grid_nodes(origins, spacing, shape, coarse, cells):
+def _grid_nodes(
+    origins: FloatArray,
+    spacing: float,
+    shape: tuple[int, int],
+    coarse: _GridStack | None,
+    cells: _IntArray | None,
+) -> tuple[FloatArray, FloatArray]:
     """Output positions and Newton starts of the nodes of a grid stack, (G, NY, NX, 2) each.
 
     Grid ``c`` has node (p, q) at output pixel ``origins[c] + ((q - 1) spacing,
@@ -572,13 +665,14 @@ def _grid_nodes(origins, spacing, shape, coarse, cells):
     positions[..., 1] = origins[:, 1, None, None] + ((np.arange(NY) - 1.0) * spacing)[None, :, None]
     starts = np.full((G, NY, NX, 2), np.nan)
     if cells is not None and G:
+        assert coarse is not None, "refined grids start from the coarse one"
         blocks, weights = _node_blocks(NY, NX)
         cubic_blocks(cells, blocks, weights, coarse.S, starts)
     return positions, starts
 
 
 @functools.lru_cache(maxsize=16)
-def _check_layout(ny, nx):
+def _check_layout(ny: int, nx: int) -> tuple[_IntArray, FloatArray, FloatArray, FloatArray]:
     """Where the check points of a grid of ny x nx cells lie, in ``cubic_blocks``' terms.
 
     Check point (which, r, k), rows ``which (ny + 1) + r`` of a (3 (ny + 1), nx + 1) layout:
@@ -610,7 +704,9 @@ def _check_layout(ny, nx):
     return np.array(blocks, np.int64), np.array(weights), x, y
 
 
-def _grid_checks(origins, spacing, S, P):
+def _grid_checks(
+    origins: FloatArray, spacing: float, S: FloatArray, P: FloatArray
+) -> tuple[FloatArray, FloatArray, FloatArray]:
     """Check points of a grid stack (:func:`_check_layout`): output positions, Newton starts
     (the cubic of the nodes' mirror points ``S``) and estimates (the cubic of their pixels
     ``P``), (G, 3, ny + 1, nx + 1, 2) each, NaN where no check point is."""
@@ -633,8 +729,14 @@ def _grid_checks(origins, spacing, S, P):
 
 
 def _solve(
-    view, rig, positions, starts, pixels_only=False, estimates=None, with_mirror_error=False
-):
+    view: ViewArgs,
+    rig: RigArgs,
+    positions: FloatArray,
+    starts: FloatArray,
+    pixels_only: bool = False,
+    estimates: FloatArray | None = None,
+    with_mirror_error: bool = False,
+) -> tuple[FloatArray, FloatArray, FloatArray, npt.NDArray[np.bool_], FloatArray | None]:
     """:func:`omnicam._kernels.solve_view_points` over arrays of positions (..., 2): the mirror
     points, pixels, margins and ok of each, and the errors (..., 2) of check points'
     ``estimates`` (pixel error, mirror error) (None without estimates)."""
@@ -646,10 +748,10 @@ def _solve(
     P = np.empty(shape + (2,))
     margins = np.empty(shape + (3,))
     checks = estimates is not None
-    if checks:
-        errors = np.empty(shape + (2,))
-    else:
+    if estimates is None:
         estimates = errors = np.empty((0, 2))
+    else:
+        errors = np.empty(shape + (2,))
     run_chunks(
         _kernels.solve_view_points,
         n,
@@ -670,7 +772,15 @@ def _solve(
     return S, P, margins, ok, errors if checks else None
 
 
-def _build_table(view, rig, size, step, mode, outputs, stats):
+def _build_table(
+    view: ViewArgs,
+    rig: RigArgs,
+    size: Size,
+    step: int,
+    mode: int,
+    outputs: _Outputs,
+    stats: _IntArray,
+) -> None:
     """The phases of a table (section comment of :mod:`omnicam._kernels`), writing ``outputs``.
 
     ``stats`` (9,) int64 receives: nodes and check points solved, coarse cells seen / unseen /
@@ -756,7 +866,7 @@ def _build_table(view, rig, size, step, mode, outputs, stats):
     stats[8] = n_unseen
 
 
-def _store_entries(index, P, mode, outputs):
+def _store_entries(index: _IntArray, P: FloatArray, mode: int, outputs: _Outputs) -> int:
     """Write the solved entries ``P`` (n, 2) of the pixels ``index`` (flat) into ``outputs``
     as fill_rows' ``_row_store`` does: NaN as ``UNSEEN``, float32 maps (mode 0) or
     cv2.convertMaps' CV_16SC2 fixed point (mode 1: cvRound(x * 32), ties to even, the integer
@@ -778,7 +888,9 @@ def _store_entries(index, P, mode, outputs):
     return int(np.count_nonzero(unseen))
 
 
-def _panorama_params(size, lo, hi, projection):
+def _panorama_params(
+    size: Size, lo: float, hi: float, projection: str
+) -> tuple[float, float, float]:
     w, h = size
     if projection == "cylindrical":
         p0 = math.tan(math.radians(hi))
@@ -791,7 +903,7 @@ def _panorama_params(size, lo, hi, projection):
 
 # -- public API ---------------------------------------------------------------------------------
 def init_panorama_maps(
-    camera,
+    camera: CameraLike,
     size: Size,
     elevation_range: tuple[float, float] | None = None,
     projection: str = "cylindrical",
@@ -886,7 +998,7 @@ def init_panorama_maps(
 
 
 def init_perspective_maps(
-    camera,
+    camera: CameraLike,
     K_new: ArrayLike,
     size: Size,
     R: ArrayLike | None = None,
@@ -948,14 +1060,14 @@ def init_perspective_maps(
     return maps
 
 
-def _is_matrix3(value):
+def _is_matrix3(value: ArrayLike) -> bool:
     try:
         return np.shape(value) == (3, 3)
     except ValueError:  # ragged nesting
         return False
 
 
-def _refuse_swapped(matrix_arg, size_arg, signature):
+def _refuse_swapped(matrix_arg: Any, size_arg: Any, signature: str) -> None:
     """A clear ValueError when a camera matrix stands where the size goes (or vice versa)."""
     try:
         np.ndim(size_arg), np.ndim(matrix_arg)
@@ -974,7 +1086,7 @@ def _refuse_swapped(matrix_arg, size_arg, signature):
 UNSEEN_WARN_FRACTION = {"perspective view": 0.5, "panorama": 1.0 / 3.0, "360 panorama": 0.5}
 
 
-def _warn_if_unseen(camera, frac, what):
+def _warn_if_unseen(camera: CameraLike, frac: float, what: str) -> None:
     """RuntimeWarning when much of a view (the fraction ``frac`` of its entries unseen) lies
     outside the band the mirror sees, with the way back into it."""
     frac = float(frac)
@@ -1009,13 +1121,13 @@ class PanoramaView:
 
     def __init__(
         self,
-        size,
-        elevation_range=None,
-        projection="cylindrical",
-        R=None,
-        depth=None,
-        viewpoint=None,
-    ):
+        size: Size,
+        elevation_range: tuple[float, float] | None = None,
+        projection: str = "cylindrical",
+        R: ArrayLike | None = None,
+        depth: float | None = None,
+        viewpoint: ArrayLike | None = None,
+    ) -> None:
         self.size = _check_size(size, min_height=2)
         if projection not in PROJECTIONS:
             raise ValueError(f"projection must be one of {PROJECTIONS}, got {projection!r}")
@@ -1031,7 +1143,7 @@ class PanoramaView:
             else _check_viewpoint(None, viewpoint, 1.0 if depth is None else depth)
         )
 
-    def maps(self, camera, m1type: int = cv2.CV_16SC2) -> Maps:
+    def maps(self, camera: CameraLike, m1type: int = cv2.CV_16SC2) -> Maps:
         """``(map1, map2)`` of this view for ``camera``."""
         return init_panorama_maps(
             camera,
@@ -1044,7 +1156,7 @@ class PanoramaView:
             self.viewpoint,
         )
 
-    def __repr__(self):
+    def __repr__(self) -> str:
         return (
             f"PanoramaView(size={self.size}, elevation_range={self.elevation_range}, "
             f"projection={self.projection!r}, depth={self.depth})"
@@ -1077,16 +1189,16 @@ class PerspectiveView:
 
     def __init__(
         self,
-        size,
-        fov=90.0,
-        yaw=0.0,
-        pitch=0.0,
-        roll=0.0,
-        K_new=None,
-        R=None,
-        depth=None,
-        viewpoint=None,
-    ):
+        size: Any,
+        fov: Any = 90.0,
+        yaw: Any = 0.0,
+        pitch: float = 0.0,
+        roll: float = 0.0,
+        K_new: ArrayLike | None = None,
+        R: ArrayLike | None = None,
+        depth: float | None = None,
+        viewpoint: ArrayLike | None = None,
+    ) -> None:
         if _is_matrix3(size):  # PerspectiveView(K_new, size, R, ...): init_perspective_maps' order
             if K_new is not None:
                 raise ValueError("K_new given twice: as the first argument and as K_new=")
@@ -1114,11 +1226,11 @@ class PerspectiveView:
             else _check_viewpoint(None, viewpoint, 1.0 if depth is None else depth)
         )
 
-    def maps(self, camera, m1type: int = cv2.CV_16SC2) -> Maps:
+    def maps(self, camera: CameraLike, m1type: int = cv2.CV_16SC2) -> Maps:
         """``(map1, map2)`` of this view for ``camera``."""
         return init_perspective_maps(
             camera, self.K_new, self.size, self.R, m1type, self.depth, self.viewpoint
         )
 
-    def __repr__(self):
+    def __repr__(self) -> str:
         return f"PerspectiveView(size={self.size}, K_new={self.K_new.tolist()}, depth={self.depth})"

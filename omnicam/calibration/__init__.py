@@ -27,6 +27,8 @@ cannot be estimated (no rim, no physical posture); a plain ``ValueError`` means 
 from __future__ import annotations
 
 import dataclasses
+from collections.abc import Sequence
+from typing import Any
 
 import numpy as np
 
@@ -43,10 +45,10 @@ __all__ = ["calibrate", "CalibrationReport", "EstimationError"]
 
 def calibrate(
     K: ArrayLike,
-    mirror,
+    mirror: HyperbolicMirror,
     image: np.ndarray | None = None,
     boundary_points: ArrayLike | None = None,
-    far_lines: list | None = None,
+    far_lines: Sequence[ArrayLike] | None = None,
     D: ArrayLike | None = None,
     image_size: tuple[int, int] | None = None,
     refine: bool = True,
@@ -58,7 +60,7 @@ def calibrate(
     max_tilt_deg: float = 10.0,
     max_offset_mm: float = 10.0,
     check_plausibility: bool = True,
-) -> tuple:
+) -> tuple[Any, CalibrationReport]:
     """Mirror posture from one image: rim ellipse, Chen's method, far-line selection, refinement.
 
     Parameters

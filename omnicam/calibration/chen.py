@@ -38,6 +38,7 @@ import math
 import cv2
 import numpy as np
 
+from .._typing import FloatArray
 from .._validate import validate_K
 from ..gauge import canonical_rvec
 from ..mirror import HyperbolicMirror
@@ -87,16 +88,16 @@ class Candidate:
     m: int
     score: float = math.nan
 
-    def with_score(self, score):
+    def with_score(self, score) -> Candidate:
         """A copy with ``score`` set."""
         return dataclasses.replace(self, score=float(score))
 
     @property
-    def R(self):
+    def R(self) -> np.ndarray:
         """(3, 3) rotation matrix of ``rvec``."""
         return cv2.Rodrigues(np.asarray(self.rvec, np.float64).reshape(3, 1))[0]
 
-    def __repr__(self):
+    def __repr__(self) -> str:
         tag = "physical" if self.physical else "impossible: " + "; ".join(self.reasons)
         return (
             f"Candidate(l={self.l}, m={self.m}, rvec={np.round(self.rvec, 9).tolist()}, "
@@ -105,7 +106,7 @@ class Candidate:
 
 
 # -- the conic ---------------------------------------------------------------------------------
-def normalized_conic(Q_I, K):
+def normalized_conic(Q_I, K) -> FloatArray:
     """The rim cone ``Q_e = K^T Q_I K`` (eq. 24), unit norm, signed for Chen's method.
 
     Parameters
@@ -183,7 +184,7 @@ def _chen_U(delta, l, m, theta=0.0):
     return np.stack([u1, u2, u3], axis=1)
 
 
-def physical_reasons(R, tvec, mirror, rim_centre=None):
+def physical_reasons(R, tvec, mirror, rim_centre=None) -> tuple[str, ...]:
     """Why the posture ``(R, tvec)`` cannot be a real rig (empty tuple if it can).
 
     Tests: the rim in front of the camera; the mirror axis pointing away from the camera (the
@@ -206,7 +207,7 @@ def physical_reasons(R, tvec, mirror, rim_centre=None):
     return tuple(reasons)
 
 
-def chen_candidates(Qe, mirror):
+def chen_candidates(Qe, mirror) -> list[Candidate]:
     """The four mirror postures of Chen's method (eqs. 25-29, 32-42).
 
     Parameters
@@ -276,7 +277,7 @@ def chen_candidates(Qe, mirror):
 
 
 # -- the forward model of the rim ---------------------------------------------------------------
-def rim_cone(R, tvec, mirror):
+def rim_cone(R, tvec, mirror) -> FloatArray:
     """The cone ``Q_n`` of the rim seen from the camera: ``x~^T Q_n x~ = 0`` in normalised
     (undistorted) coordinates ``x~ = (x, y, 1)``.
 
@@ -294,7 +295,7 @@ def rim_cone(R, tvec, mirror):
     return Q / np.linalg.norm(Q)
 
 
-def rim_conic(K, R, tvec, mirror):
+def rim_conic(K, R, tvec, mirror) -> FloatArray:
     """``Q_I = K^-T Q_n K^-1``: the rim ellipse in (undistorted) pixels, unit norm."""
     Ki = np.linalg.inv(np.asarray(K, np.float64))
     Q = Ki.T @ rim_cone(R, tvec, mirror) @ Ki

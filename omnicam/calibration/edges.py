@@ -9,13 +9,15 @@ from __future__ import annotations
 
 import cv2
 import numpy as np
+import numpy.typing as npt
 
+from .._typing import FloatArray
 from .ellipse import axes_angle
 
 __all__ = ["as_gray", "edge_points_along_normals"]
 
 
-def as_gray(image):
+def as_gray(image) -> npt.NDArray[np.float32]:
     """Grey float32 image scaled to about [0, 1]; BGR(A) is converted with OpenCV's weights."""
     if not isinstance(image, np.ndarray):
         raise ValueError(f"image must be a numpy array (grey or BGR), got {type(image).__name__}")
@@ -47,7 +49,7 @@ def as_gray(image):
 
 def edge_points_along_normals(
     G, center, S, half_width, step=0.25, outermost=False, centroid=0.0, absolute=False
-):
+) -> tuple[FloatArray, int]:
     """Subpixel rim points: strongest outward intensity drop along the ellipse normals.
 
     The ellipse is sampled every pixel of arc length; along each outward normal the smoothed

@@ -22,6 +22,9 @@ from __future__ import annotations
 import math
 
 import numpy as np
+import numpy.typing as npt
+
+from .._typing import FloatArray
 
 __all__ = [
     "conic_from_ellipse",
@@ -40,7 +43,7 @@ __all__ = [
 ]
 
 
-def conic_from_ellipse(center, S):
+def conic_from_ellipse(center, S) -> FloatArray:
     """``Q_I`` (eq. 22) of the ellipse ``center + S (cos t, sin t)``, unit norm, interior negative.
 
     ``(x - c)^T S^-2 (x - c) - 1 = 0`` written as ``x~^T Q_I x~ = 0`` (eq. 21).
@@ -56,7 +59,7 @@ def conic_from_ellipse(center, S):
     return Q / np.linalg.norm(Q)
 
 
-def ellipse_from_conic(Q):
+def ellipse_from_conic(Q) -> tuple[FloatArray, FloatArray]:
     """Centre and shape ``S`` (symmetric positive definite) of the real ellipse ``Q_I``.
 
     Raises ``ValueError`` if ``Q`` is not a real, non-degenerate ellipse.
@@ -85,7 +88,7 @@ def ellipse_from_conic(Q):
     return center, 0.5 * (S + S.T)
 
 
-def conic_distance(Q, points):
+def conic_distance(Q, points) -> FloatArray:
     """Signed orthogonal distance of points to the ellipse ``x~^T Q x~ = 0`` (eq. 21), px.
 
     Positive outside. ``Q`` may have any scale and sign; it must be a real ellipse.
@@ -105,14 +108,14 @@ def conic_distance(Q, points):
     return d
 
 
-def axes_angle(S):
+def axes_angle(S) -> tuple[FloatArray, float]:
     w, V = np.linalg.eigh(S)
     major = V[:, 1]
     angle = math.atan2(major[1], major[0]) % math.pi
     return np.array([w[1], w[0]]), angle
 
 
-def hartley_normalization(pts):
+def hartley_normalization(pts) -> FloatArray:
     """Similarity ``N`` moving the centroid to 0 and the mean distance to sqrt(2)."""
     m = pts.mean(axis=0)
     d = np.sqrt(((pts - m) ** 2).sum(axis=1)).mean()
@@ -120,12 +123,12 @@ def hartley_normalization(pts):
     return np.array([[s, 0.0, -s * m[0]], [0.0, s, -s * m[1]], [0.0, 0.0, 1.0]])
 
 
-def coeffs_to_conic(v):
+def coeffs_to_conic(v) -> FloatArray:
     A, B, C, D, E, F = v
     return np.array([[A, B / 2, D / 2], [B / 2, C, E / 2], [D / 2, E / 2, F]])
 
 
-def direct_ellipse(pts):
+def direct_ellipse(pts) -> FloatArray | None:
     """Fitzgibbon's direct least-squares ellipse fit (Halir-Flusser's stable form) as a conic.
 
     scikit-image's ``measure.EllipseModel`` does the fit, the algorithm of the hand-written fit
@@ -176,7 +179,7 @@ def direct_ellipse(pts):
     return conic_from_ellipse(center, R @ np.diag(axes) @ R.T)
 
 
-def is_ellipse(Q):
+def is_ellipse(Q) -> bool:
     A = Q[:2, :2]
     if np.linalg.det(A) <= 0:
         return False
@@ -188,7 +191,7 @@ def is_ellipse(Q):
     return bool(F * A[0, 0] < 0)
 
 
-def orthogonal_residuals(pts, center, S, iters=12):
+def orthogonal_residuals(pts, center, S, iters=12) -> tuple[FloatArray, FloatArray, FloatArray]:
     """Signed orthogonal distances of ``pts`` to ``center + S u(t)``, their feet and outer normals.
 
     The foot parameter ``t`` solves ``(x(t) - p) . x'(t) = 0`` by safeguarded Newton iterations
@@ -224,7 +227,7 @@ def orthogonal_residuals(pts, center, S, iters=12):
     return d, np.stack([c, s], axis=1), normal
 
 
-def refine_geometric(pts, center, S, iters=50):
+def refine_geometric(pts, center, S, iters=50) -> tuple[FloatArray, FloatArray, FloatArray]:
     """Levenberg-Marquardt on the orthogonal distances over (cx, cy, s11, s12, s22).
 
     The symmetric ``S`` parametrisation has no singularity at circles. With the foot parameter
@@ -289,7 +292,7 @@ def refine_geometric(pts, center, S, iters=50):
     return c, Sm, r
 
 
-def conics_through_5(samples):
+def conics_through_5(samples) -> FloatArray:
     """Conics through 5 points each: the null vectors of (B, 5, 6) design matrices."""
     x, y = samples[..., 0], samples[..., 1]
     D = np.stack([x * x, x * y, y * y, x, y, np.ones_like(x)], axis=-1)
@@ -304,7 +307,7 @@ def conics_through_5(samples):
     return Q
 
 
-def sampson_distances(Qs, ph):
+def sampson_distances(Qs, ph) -> FloatArray:
     """Sampson (first-order geometric) distances, (B, N), of homogeneous points ``ph`` (N, 3)."""
     Qp = ph @ Qs  # (B, N, 3); Q symmetric
     alg = (Qp * ph).sum(axis=-1)
@@ -312,7 +315,9 @@ def sampson_distances(Qs, ph):
     return np.abs(alg) / np.maximum(grad, 1e-300)
 
 
-def ransac_conic(pts_n, thr_n, rng, max_trials, confidence=0.999, batch=64):
+def ransac_conic(
+    pts_n, thr_n, rng, max_trials, confidence=0.999, batch=64
+) -> npt.NDArray[np.bool_] | None:
     """Consensus ellipse of normalised points: returns the inlier mask of the best hypothesis.
 
     Hand-written rather than ``skimage.measure.ransac`` (one hypothesis per Python iteration):

@@ -90,14 +90,14 @@ def _limit(value, name):
     return v
 
 
-def tilt_deg(R):
+def tilt_deg(R) -> float:
     """Angle between the mirror axis and the camera's optical axis, degrees (``R``: mirror ->
     camera, so the mirror axis in the camera frame is ``R e_z``)."""
     axis = np.asarray(R, np.float64)[:, 2]
     return math.degrees(math.atan2(math.hypot(axis[0], axis[1]), axis[2]))
 
 
-def focus_offset(camera_center, mirror):
+def focus_offset(camera_center, mirror) -> float:
     """Distance of the camera centre (mirror frame) from the lower focus ``(0, 0, -c)``."""
     return float(np.linalg.norm(np.asarray(camera_center, np.float64) - (0.0, 0.0, -mirror.c)))
 
@@ -152,7 +152,7 @@ def _rim_ellipse(K, D, rim, R, t):
 
 def expected_rim(
     K, mirror, D=None, max_tilt_deg=DEFAULT_MAX_TILT_DEG, max_offset_mm=DEFAULT_MAX_OFFSET_MM
-):
+) -> ExpectedRim:
     """The rim's expected place and size in the image from ``K`` and the mirror.
 
     The aligned rig (eqs. 2-5) sees the rim circle (radius ``rim_radius`` at height ``z_rim``)
@@ -231,7 +231,7 @@ def check_plausibility(
     max_residual_px=DEFAULT_MAX_RESIDUAL_PX,
     max_aspect_deviation=DEFAULT_MAX_ASPECT_DEVIATION,
     residuals=None,
-):
+) -> list[PlausibilityWarning]:
     """Warnings for a calibration no real rig would give; an empty list when it is plausible.
 
     Parameters
@@ -408,7 +408,7 @@ def swapped_mirror_warnings(
     max_offset_mm=DEFAULT_MAX_OFFSET_MM,
     ratio=10.0,
     use_posture=True,
-):
+) -> list[PlausibilityWarning]:
     """Whether the mirror fits clearly better with ``a`` and ``b`` swapped.
 
     The rim alone fits any mirror exactly (Chen's method has as many unknowns as the ellipse),
@@ -485,7 +485,7 @@ def swapped_mirror_warnings(
     return []
 
 
-def cue_costs(report):
+def cue_costs(report) -> dict[str, float]:
     """The costs of the cues besides the rim in a calibration report, for comparing mirrors:
     ``{"far-line score (eq. 31)": score of the chosen candidate, "outline RMS (px)": ...}``
     (NaN when the cue was not used)."""
@@ -505,7 +505,7 @@ def assess(
     max_offset_mm=DEFAULT_MAX_OFFSET_MM,
     max_residual_px=DEFAULT_MAX_RESIDUAL_PX,
     max_aspect_deviation=DEFAULT_MAX_ASPECT_DEVIATION,
-):
+) -> list[PlausibilityWarning]:
     """Every plausibility warning for a finished calibration (what ``calibrate`` runs).
 
     :func:`check_plausibility` on the report's camera and rim, with the residuals of the far

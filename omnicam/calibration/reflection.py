@@ -36,6 +36,7 @@ import cv2
 import numpy as np
 from scipy.optimize import minimize_scalar
 
+from .._typing import FloatArray
 from ..raytrace import distort_normalized
 from .errors import EstimationError
 from .rim import RimFit, fit_rim
@@ -101,7 +102,7 @@ class ReflectionCircle:
     rms: float = math.nan
 
 
-def self_reflection_point(mirror, C, iters=20):
+def self_reflection_point(mirror, C, iters=20) -> FloatArray:
     """The mirror point nearest to ``C`` (mirror frame): where the camera sees itself.
 
     Newton's method on ``f(X, Y) = |P(X, Y) - C|^2`` with ``P = (X, Y, Z(X, Y))`` on the sheet
@@ -131,7 +132,7 @@ def self_reflection_point(mirror, C, iters=20):
     return np.array([q[0], q[1], math.sqrt(b2 * (1.0 + (q @ q) / a2))])
 
 
-def self_reflection_pixel(mirror, R, t, K, D=None):
+def self_reflection_pixel(mirror, R, t, K, D=None) -> FloatArray:
     """The pixel where the camera sees itself under the posture ``(R, t)`` (distorted with ``D``).
 
     Returns
@@ -147,7 +148,7 @@ def self_reflection_pixel(mirror, R, t, K, D=None):
     return K[:2, :2] @ xn + K[:2, 2]
 
 
-def _rays_camera(mirror, R, t, xn):
+def _rays_camera(mirror, R, t, xn) -> tuple[FloatArray, FloatArray]:
     """Reflected rays ``(P_c, V_c)`` in the camera frame of normalised coordinates (eqs. 6-19)."""
     C = -R.T @ t  # F_M (eq. 17)
     V = np.concatenate([xn, np.ones((len(xn), 1))], axis=1) @ R  # V_M = R^T V_C (eq. 16)
@@ -166,7 +167,9 @@ def _radius_in_plane(Pc, Vc, z):
     return np.where(s > 0, rho, np.nan)
 
 
-def plane_radius(mirror, R, t, xn, z, Kinv2=None, h=1e-2):
+def plane_radius(
+    mirror, R, t, xn, z, Kinv2=None, h=1e-2
+) -> FloatArray | tuple[FloatArray, FloatArray]:
     """``rho(u)`` of each pixel's reflected ray in the plane ``z_c = z``, and ``|grad_u rho|``.
 
     Parameters
@@ -212,7 +215,9 @@ def _closed_form_r(rho, g):
     return r, float(np.sqrt(np.mean(res * res)))
 
 
-def fit_circle(mirror, R, t, xn, Kinv2, r=None, z=None, min_fraction=0.8, h=1e-2):
+def fit_circle(
+    mirror, R, t, xn, Kinv2, r=None, z=None, min_fraction=0.8, h=1e-2
+) -> ReflectionCircle:
     """The coaxial circle that best explains an outline under one posture.
 
     ``r`` minimises ``sum(((rho - r) / g)^2)`` in closed form (``g = |grad_u rho|``, central
@@ -262,7 +267,7 @@ def fit_circle(mirror, R, t, xn, Kinv2, r=None, z=None, min_fraction=0.8, h=1e-2
     return ReflectionCircle(r=float(rr), z=z0, rms=float(e))
 
 
-def outline_pixels(camera, r, z, n=90, tol=1e-10):
+def outline_pixels(camera, r, z, n=90, tol=1e-10) -> tuple[FloatArray, FloatArray]:
     """Exact outline of the circle ``(r, z)`` as the camera sees it in the mirror.
 
     Along ``n`` rays (evenly spaced angles) from the self-reflection pixel, the pixel whose
@@ -433,7 +438,7 @@ def detect_reflection(
     min_radius=0.03,
     rng=0,
     allow_coreless=False,
-):
+) -> ReflectionFit:
     """Find the outermost round dark silhouette around the image of the camera centre.
 
     1. Radial profiles from ``center`` (default the rim centre) out to ``max_radius`` times the
@@ -526,6 +531,7 @@ def detect_reflection(
             found = fit
     if found is not None:
         return found
+    assert coreless is not None  # nothing found and nothing raised: a coreless one was
     if allow_coreless:
         return coreless.fit
     raise EstimationError(str(coreless)) from None

@@ -24,7 +24,7 @@ import typing
 import cv2
 import numpy as np
 
-from .._typing import ArrayLike
+from .._typing import ArrayLike, FloatArray
 from .._validate import real_number, validate_rng
 from ..raytrace import as_points
 from .edges import as_gray, edge_points_along_normals
@@ -112,7 +112,7 @@ class RimFit:
             arr.flags.writeable = False
             object.__setattr__(self, name, arr)
 
-    def __repr__(self):
+    def __repr__(self) -> str:
         return (
             f"RimFit(center=({self.center[0]:.3f}, {self.center[1]:.3f}), "
             f"axes=({self.axes[0]:.3f}, {self.axes[1]:.3f}), "
@@ -121,18 +121,18 @@ class RimFit:
         )
 
     @property
-    def shape_matrix(self):
+    def shape_matrix(self) -> FloatArray:
         """(2, 2) symmetric positive definite ``S`` of ``x(t) = center + S (cos t, sin t)``."""
         c, s = math.cos(self.angle), math.sin(self.angle)
         R = np.array([[c, -s], [s, c]])
         return R @ np.diag(self.axes) @ R.T
 
     @property
-    def diameter(self):
+    def diameter(self) -> float:
         """Mean diameter ``axes[0] + axes[1]``, px."""
         return float(self.axes[0] + self.axes[1])
 
-    def distance(self, points):
+    def distance(self, points) -> FloatArray:
         """Signed orthogonal distance of points to the ellipse (positive outside), px.
 
         Parameters
@@ -147,7 +147,7 @@ class RimFit:
         d, _, _ = orthogonal_residuals(pts, self.center, self.shape_matrix)
         return d
 
-    def sample(self, n=360):
+    def sample(self, n=360) -> FloatArray:
         """``n`` points evenly spaced in the ellipse parameter, ``(n, 2)`` float64 (for drawing)."""
         t = np.linspace(0.0, 2.0 * np.pi, int(n), endpoint=False)
         return self.center + np.stack([np.cos(t), np.sin(t)], axis=1) @ self.shape_matrix.T
@@ -651,7 +651,7 @@ def _fits(coarse, expected):
     return 0.95 * expected[0] <= semi[0] and semi[1] <= 1.05 * expected[1]
 
 
-def check_hint(hint, image_size):
+def check_hint(hint, image_size) -> tuple[float, float, float] | None:
     """``hint`` as a ``(cx, cy, r)`` tuple of floats, or ``None``; ``ValueError`` naming it."""
     if hint is None:
         return None

@@ -14,7 +14,7 @@ __all__ = ["MAD_TO_SIGMA", "mad_sigma"]
 MAD_TO_SIGMA = 1.4826  # 1 / Phi^-1(3/4): MAD -> sigma of a normal distribution
 
 
-def mad_sigma(abs_deviations):
+def mad_sigma(abs_deviations) -> float:
     """``1.4826 * median(|d|)`` of absolute deviations (NaN entries ignored); NaN if none."""
     d = np.asarray(abs_deviations, dtype=np.float64)
     if d.size == 0 or np.isnan(d).all():

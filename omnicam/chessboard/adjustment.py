@@ -24,12 +24,14 @@ from __future__ import annotations
 
 import dataclasses
 import math
+from typing import Any
 
 import cv2
 import numpy as np
-from scipy.optimize import least_squares
+from scipy.optimize import OptimizeResult, least_squares
 
 from .. import raytrace
+from .._typing import FloatArray
 from ..calibration.reflection import fit_circle, plane_radius
 from ..calibration.steps import normalize
 from ..gauge import gauge_rotation
@@ -60,7 +62,7 @@ DIST_MODELS = {
 }
 
 
-def rim_foot(cam_K, D, R, t, mirror, u, phi):
+def rim_foot(cam_K, D, R, t, mirror, u, phi) -> FloatArray:
     """Orthogonal distances of pixels ``u`` to the rim image, with foot parameters ``phi``
     refined in place by Newton's method. Returns signed distances (px)."""
     r, z = mirror.rim_radius, mirror.z_rim
@@ -175,7 +177,9 @@ class BundleAdjustment:
         n = len(obj)
         self.n_rows_view = 2 * n
 
-    def unpack(self, x):
+    def unpack(
+        self, x
+    ) -> tuple[FloatArray, FloatArray | None, FloatArray, FloatArray, HyperbolicMirror]:
         i = 0
         fx, fy, cx, cy = x[0:4]
         i = 4
@@ -200,7 +204,7 @@ class BundleAdjustment:
             i += 2
         return K, D, R, tvec, mirror
 
-    def to_gauge(self, x, image_size=None):
+    def to_gauge(self, x, image_size=None) -> tuple[Any, list[tuple[np.ndarray, FloatArray]]]:
         """The camera in the gauge of docs/conventions.md and the board poses in its mirror frame.
 
         The fitted ``R`` and the gauge's ``R_g = gauge(R e_z)`` differ by a turn ``Z`` about
@@ -218,10 +222,10 @@ class BundleAdjustment:
         ]
         return cam, poses
 
-    def boards(self, x):
+    def boards(self, x) -> FloatArray:
         return x[self.n_global :].reshape(-1, 6)
 
-    def corner_residuals(self, x):
+    def corner_residuals(self, x) -> FloatArray:
         K, D, R, tvec, mirror = self.unpack(x)
         B = self.boards(x)
         pts = np.concatenate([self.obj @ rodrigues(b[:3]).T + b[3:] for b in B])
@@ -232,7 +236,7 @@ class BundleAdjustment:
         r[~np.isfinite(r)] = 50.0  # a corner the rig cannot see: a large, constant residual
         return r.ravel()
 
-    def rim_residuals(self, x):
+    def rim_residuals(self, x) -> FloatArray:
         K, D, R, tvec, mirror = self.unpack(x)
         if self.rim_phi is None:  # foot points of the start, by dense sampling
             ph = np.linspace(0, 2 * np.pi, 3600, endpoint=False)
@@ -255,7 +259,7 @@ class BundleAdjustment:
         phi = self.rim_phi.copy()
         return rim_foot(K, D, R, tvec, mirror, self.rim_px, phi)
 
-    def lens_residuals(self, x):
+    def lens_residuals(self, x) -> FloatArray:
         """The camera's reflection (:mod:`.reflection`): ``(rho(u) - r) / |grad rho|`` px for
         every outline pixel, ``rho`` the radius at which its reflected ray crosses the plane of
         the coaxial circle (``z`` known, or the parameter ``lens_z`` started by
@@ -273,13 +277,13 @@ class BundleAdjustment:
             r[ok] = (rho[ok] - float((w * rho[ok]).sum() / w.sum())) / g[ok]
         return r
 
-    def residuals(self, x):
+    def residuals(self, x) -> FloatArray:
         parts = [self.corner_residuals(x), self.rim_residuals(x)]
         if self.lens_px is not None:
             parts.append(self.lens_residuals(x))
         return np.concatenate(parts)
 
-    def steps(self, x):
+    def steps(self, x) -> FloatArray:
         h = np.empty_like(x)
         g = self.n_global
         for k, name in enumerate(self.names):
@@ -298,7 +302,7 @@ class BundleAdjustment:
         B[:, 3:] = 1e-6 * self.mirror.rim_radius
         return h
 
-    def jacobian(self, x):
+    def jacobian(self, x) -> FloatArray:
         """Central differences; the boards' columns in 6 groups (block structure). Columns of
         parameters held fixed (``self.fixed``) are zero."""
         h = self.steps(x)
@@ -328,7 +332,7 @@ class BundleAdjustment:
                 J[v * rows : (v + 1) * rows, col] = diff[v * rows : (v + 1) * rows] / (2 * h[col])
         return J
 
-    def solve(self, x0, f_scale=1.0, max_nfev=None):
+    def solve(self, x0, f_scale=1.0, max_nfev=None) -> OptimizeResult:
         """The ``soft_l1`` fit of scale ``f_scale`` px by MINPACK's Levenberg-Marquardt
         (``scipy.optimize.least_squares(method="lm")``), the global parameters named in
         ``self.fixed`` held at ``x0``; :meth:`jacobian` gives the derivatives.
@@ -379,7 +383,7 @@ class BundleAdjustment:
         return sol
 
 
-def robust_residuals(r, f_scale):
+def robust_residuals(r, f_scale) -> tuple[FloatArray, FloatArray]:
     """``z = sign(r) sqrt(rho(r^2))`` for the ``soft_l1`` loss ``rho(s) = 2 f^2 (sqrt(1 +
     s / f^2) - 1)``, so that ``sum z^2`` is the robust cost, and ``dz/dr``.
 
@@ -389,7 +393,7 @@ def robust_residuals(r, f_scale):
     return r * np.sqrt(2.0 / (1.0 + q)), np.sqrt((1.0 + q) / 2.0) / q
 
 
-def covariance(J, row_sigma):
+def covariance(J, row_sigma) -> FloatArray:
     """``(J^T W J)^-1``, ``W = diag(1 / row_sigma^2)`` (the Cramer-Rao bound of independent
     Gaussian residuals of those sigmas), columns scaled to unit norm; a parameter no residual
     depends on (a zero column) gets NaN variance instead of a number the regularisation made up.
@@ -408,7 +412,7 @@ def covariance(J, row_sigma):
     return cov
 
 
-def std_from_jacobian(adj, x, J, row_sigma):
+def std_from_jacobian(adj, x, J, row_sigma) -> tuple[dict[str, float], FloatArray]:
     """Standard deviations (:func:`covariance`) of the named global parameters of ``adj`` at
     ``x``, the mirror axis (``axis_deg``, RMS angle) and the camera centre in the mirror frame
     (``origin``, RMS distance, the 5 posture parameters linearised through ``C = -R^T tvec``,
@@ -441,7 +445,7 @@ def std_from_jacobian(adj, x, J, row_sigma):
     return std, cov[:g, :g]
 
 
-def ray_uncertainty(adj, x, cov_global, image_size, n=24):
+def ray_uncertainty(adj, x, cov_global, image_size, n=24) -> tuple[float, float]:
     """Standard deviation (deg) of the viewing directions over the mirror's image: the rays of
     an ``n x n`` grid of pixels (those that see the mirror, eqs. 6-19), each linearised in the
     global parameters (central differences) and propagated through their covariance
@@ -487,7 +491,7 @@ def pattern_uncertainty(
     sigma_lens=None,
     dist_model="k1k2p1p2",
     refine_mirror_shape=False,
-):
+) -> dict[str, float]:
     """The information limit of :func:`calibrate_pattern`: a posteriori standard deviations of
     its bundle adjustment evaluated at the truth (a Cramer-Rao bound).
 

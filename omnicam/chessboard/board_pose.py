@@ -6,13 +6,14 @@ import cv2
 import numpy as np
 from scipy.optimize import least_squares
 
+from .._typing import FloatArray
 from ..gauge import perpendicular_basis
 from .intrinsics import check_pattern_size
 
 __all__ = ["board_pose_from_rays", "object_points", "rodrigues"]
 
 
-def object_points(pattern_size, square_size):
+def object_points(pattern_size, square_size) -> FloatArray:
     """OpenCV's object points of a board: ``(cols * rows, 3)``, ``(i s, j s, 0)`` row by row."""
     cols, rows = check_pattern_size(pattern_size)
     obj = np.zeros((rows * cols, 3))
@@ -20,12 +21,14 @@ def object_points(pattern_size, square_size):
     return obj
 
 
-def rodrigues(rvec):
+def rodrigues(rvec) -> np.ndarray:
     """The rotation matrix of a Rodrigues vector (``cv2.Rodrigues``)."""
     return cv2.Rodrigues(np.asarray(rvec, np.float64).reshape(3, 1))[0]
 
 
-def board_pose_from_rays(origins, directions, obj, viewpoint):
+def board_pose_from_rays(
+    origins, directions, obj, viewpoint
+) -> tuple[FloatArray, FloatArray, float]:
     """A board's pose ``(rvec_b, tvec_b)`` from its corners' reflected rays (non-central PnP).
 
     Start: the central approximation from ``viewpoint`` (a virtual pinhole looking along the

@@ -42,10 +42,12 @@ import dataclasses
 import math
 import os
 import warnings as _warnings
+from typing import Any
 
 import cv2
 import numpy as np
 
+from .._typing import FloatArray
 from .._validate import validate_D, validate_image_size, validate_K
 from ..calibration import calibrate
 from ..calibration.ellipse import conic_distance
@@ -164,7 +166,7 @@ def calibrate_pattern(
     lens_z=None,
     heldout=0,
     progress=None,
-):
+) -> tuple[Any, PatternReport]:
     """Calibrate ``K``, ``D`` and the mirror posture from chessboards seen through the mirror.
 
     Parameters
@@ -529,7 +531,7 @@ def _rim_step(images, boundary_points, image_size, image_points=None):
     return rim_fit, rim_seen, rim_image, warns
 
 
-def pooled_reflection(images, rim_image, rim_fit):
+def pooled_reflection(images, rim_image, rim_fit) -> tuple[FloatArray | None, str]:
     """The outline of the camera's reflection detected in every image and pooled.
 
     The rig is rigid, so every image shows the same outline; its detection error is partly
@@ -808,7 +810,7 @@ def _adjustment_step(cam0, mirror, corners, rim_seen, model, f_scale, outliers):
     return AdjustmentStep(adj, sol, used, vr, rim_px, warns)
 
 
-def rim_conic(camera):
+def rim_conic(camera) -> FloatArray:
     """The conic ``Q_I`` of the rim's image in ideal (undistorted) pixels: the circle
     ``x^2 + y^2 = r^2`` of the plane ``z = z_rim`` mapped by ``H = K [R_1, R_2, z_rim R_3 + t]``,
     ``Q_I = H^-T diag(1, 1, -r^2) H^-1``."""

@@ -23,6 +23,7 @@ import math
 import cv2
 import numpy as np
 
+from .._typing import FloatArray
 from ..mirror import HyperbolicMirror
 
 __all__ = [
@@ -63,7 +64,7 @@ class CentralFit:
     views: tuple
 
 
-def fit_central(image_points, obj, image_size, distortion=False, hyperbolic=True):
+def fit_central(image_points, obj, image_size, distortion=False, hyperbolic=True) -> CentralFit:
     """``cv2.omnidir.calibrate`` of the corners (any of OpenCV's orders; no start needed).
 
     By default with no distortion and no skew: the unified model's ``k1`` trades with ``xi``
@@ -101,7 +102,8 @@ def fit_central(image_points, obj, image_size, distortion=False, hyperbolic=True
     flags = 0 if distortion else (o.CALIB_FIX_K1 | o.CALIB_FIX_K2 | o.CALIB_FIX_P1 | o.CALIB_FIX_P2)
     flags |= 0 if distortion else o.CALIB_FIX_SKEW
     try:
-        rms, K, xi, D, _rv, _tv, idx = cv2.omnidir.calibrate(
+        # cv2's stubs make K, xi and D arrays; None (OpenCV's noArray) lets calibrate start them
+        rms, K, xi, D, _rv, _tv, idx = cv2.omnidir.calibrate(  # type: ignore[call-overload]
             op, ip, tuple(int(v) for v in image_size), None, None, None, flags, _CRITERIA
         )
     except cv2.error as e:
@@ -119,7 +121,7 @@ def fit_central(image_points, obj, image_size, distortion=False, hyperbolic=True
     return CentralFit(K, xi, np.asarray(D, np.float64).ravel()[:4], float(rms), views)
 
 
-def pinhole_K_from_unified(K_unified, xi, principal_point=None):
+def pinhole_K_from_unified(K_unified, xi, principal_point=None) -> FloatArray:
     """The pinhole's ``K`` behind a unified model: focal lengths and skew ``/ sqrt(1 - xi^2)``,
     the principal point unchanged or ``principal_point``.
 
@@ -136,7 +138,7 @@ def pinhole_K_from_unified(K_unified, xi, principal_point=None):
     return K
 
 
-def mirror_shape_from_xi(xi):
+def mirror_shape_from_xi(xi) -> tuple[float, float]:
     """``(a / b, c / b)`` of the hyperboloid whose unified model has ``xi`` (0 < xi < 1).
 
     From ``xi = 2c / sqrt(4 c^2 + a^4 / b^2)`` with ``a^2 = c^2 - b^2``: with
@@ -152,7 +154,7 @@ def mirror_shape_from_xi(xi):
 
 def hyperbolic_start(
     K_unified, xi, rim_px_radius, rim_radius=NOMINAL_RIM_RADIUS, K=None, principal_point=None
-):
+) -> tuple[FloatArray, HyperbolicMirror]:
     """The aligned hyperbolic rig a central fit describes: ``(K, HyperbolicMirror)``.
 
     The mirror's shape from ``xi`` (:func:`mirror_shape_from_xi`), ``K`` from the unified

@@ -42,9 +42,11 @@ from __future__ import annotations
 
 import dataclasses
 import math
+from typing import Any
 
 import cv2
 import numpy as np
+import numpy.typing as npt
 
 from ..views import K_from_fov, rotation_from_ypr, visible_elevation_range
 from .intrinsics import check_pattern_size, gray8
@@ -70,10 +72,12 @@ HOMOGRAPHY_MAX_PX = 1.0
 _FIND_FLAGS = cv2.CALIB_CB_ADAPTIVE_THRESH | cv2.CALIB_CB_NORMALIZE_IMAGE | cv2.CALIB_CB_FAST_CHECK
 _RAW_HALF_WINDOW = 5  # cornerSubPix's half window in the raw image, px
 _SB_FLAGS = cv2.CALIB_CB_EXHAUSTIVE | cv2.CALIB_CB_ACCURACY | cv2.CALIB_CB_NORMALIZE_IMAGE
-_CACHE = {}
+#: A virtual view of :func:`detection_views`: ``(yaw, pitch, size, map_x, map_y)``.
+_View = tuple[float, float, tuple[int, int], npt.NDArray[np.float32], npt.NDArray[np.float32]]
+_CACHE: dict[tuple[Any, ...], list[_View]] = {}
 _CACHE_MAX = 8
 #: Passes of views: 80-degree views first; 120-degree ones for boards too large for those.
-_PASSES = (
+_PASSES: tuple[dict[str, Any], ...] = (
     {},
     {"fov_deg": 120.0, "yaw_step_deg": 40.0, "pitches_deg": (-15.0, -50.0), "scale": 0.5},
 )
@@ -93,7 +97,7 @@ def _camera_key(camera):
 
 def detection_views(
     camera, fov_deg=80.0, yaw_step_deg=30.0, pitches_deg=None, scale=0.7, node_step=8
-):
+) -> list[_View]:
     """The virtual views of :func:`find_pattern`: ``[(yaw, pitch, size, map_x, map_y)]``.
 
     Views of ``fov_deg`` (horizontal and vertical), one every ``yaw_step_deg`` of yaw, at the
@@ -198,7 +202,7 @@ class PatternDetection:
     method: str
 
 
-def find_pattern(image, pattern_size, camera=None, refine_in_source=False):
+def find_pattern(image, pattern_size, camera=None, refine_in_source=False) -> np.ndarray | None:
     """Inner chessboard corners in an image of the rig, or ``None`` if no whole board is found.
 
     The corners of :func:`detect_pattern` (which also says how they were found).
@@ -228,7 +232,9 @@ def find_pattern(image, pattern_size, camera=None, refine_in_source=False):
     return None if found is None else found.corners
 
 
-def detect_pattern(image, pattern_size, camera=None, refine_in_source=False, methods=METHODS):
+def detect_pattern(
+    image, pattern_size, camera=None, refine_in_source=False, methods=METHODS
+) -> PatternDetection | None:
     """The board's corners and how they were found, or ``None``; see the module docstring.
 
     Parameters

@@ -153,7 +153,8 @@ def omnidir_predictor(views: Sequence, obj, image_size) -> tuple[Callable, Calla
     op = [obj.reshape(1, -1, 3).astype(np.float64) for _ in views]
     ip = [np.asarray(v, np.float64).reshape(1, -1, 2) for v in views]
     crit = (cv2.TERM_CRITERIA_COUNT + cv2.TERM_CRITERIA_EPS, 200, 1e-8)
-    _, K, xi, D, _, _, _ = cv2.omnidir.calibrate(
+    # cv2's stubs make K, xi and D arrays; None (OpenCV's noArray) lets calibrate start them
+    _, K, xi, D, _, _, _ = cv2.omnidir.calibrate(  # type: ignore[call-overload]
         op, ip, tuple(int(v) for v in image_size), None, None, None, 0, crit
     )
     return unified_predictor(K, float(np.ravel(xi)[0]), D)
@@ -209,7 +210,9 @@ def cross_validate(fit: Callable, views: dict, obj, image_size, k: int = 5) -> H
             f"a {k}-fold held-out check needs at least 2 folds and 3 training views per fold; "
             f"there are {len(ids)} views"
         )
-    rms, omni, failed = {}, {}, {}
+    rms: dict[int, float] = {}
+    omni: dict[int, float] | None = {}
+    failed: dict[int, str] = {}
     for fold in fold_of(len(ids), k):
         held = [ids[j] for j in fold]
         train = [i for i in ids if i not in held]

@@ -12,12 +12,14 @@ import os
 import cv2
 import numpy as np
 
+from .._typing import FloatArray
+
 __all__ = ["calibrate_intrinsics", "check_pattern_size", "find_chessboard", "gray8"]
 
 _FIND_FLAGS = cv2.CALIB_CB_ADAPTIVE_THRESH | cv2.CALIB_CB_NORMALIZE_IMAGE
 
 
-def check_pattern_size(pattern_size):
+def check_pattern_size(pattern_size) -> tuple[int, int]:
     """``(columns, rows)`` of inner corners as ``cv2.findChessboardCorners`` takes them, checked
     (two integers >= 2); ``ValueError`` names what is wrong."""
     try:
@@ -35,7 +37,7 @@ def check_pattern_size(pattern_size):
     return cols, rows
 
 
-def gray8(image, index):
+def gray8(image, index) -> np.ndarray:
     """8-bit grey view of an image (array or file path) for the corner detector."""
     if isinstance(image, (str, os.PathLike)):
         path = os.fspath(image)
@@ -74,7 +76,7 @@ def gray8(image, index):
     return img
 
 
-def find_chessboard(gray, pattern_size):
+def find_chessboard(gray, pattern_size) -> np.ndarray | None:
     """Inner chessboard corners to subpixel precision, or ``None`` if the board is not found.
 
     Parameters
@@ -103,7 +105,9 @@ def find_chessboard(gray, pattern_size):
     return cv2.cornerSubPix(gray, corners, (half, half), (-1, -1), criteria)
 
 
-def calibrate_intrinsics(images, pattern_size, square_size, flags=0, min_views=3):
+def calibrate_intrinsics(
+    images, pattern_size, square_size, flags=0, min_views=3
+) -> tuple[float, FloatArray, FloatArray]:
     """Calibrate the perspective camera from chessboard images taken without the mirror.
 
     Wraps ``cv2.findChessboardCorners`` (adaptive threshold, normalised image),
@@ -187,6 +191,7 @@ def calibrate_intrinsics(images, pattern_size, square_size, flags=0, min_views=3
             f"{len(images)} images, need at least {min_views}: check pattern_size "
             f"(inner corners, not squares) and take more views of the whole board"
         )
+    assert size is not None  # set by the first image (images is not empty)
     rms, K, D, _, _ = cv2.calibrateCamera(
         object_points, image_points, size, None, None, flags=int(flags)
     )

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import dataclasses
 import math
+from typing import Any
 
 import cv2
 import numpy as np
@@ -86,8 +87,9 @@ class PatternReport:
     warnings: tuple
     dropped: dict
     nfev: int
-    camera: object
-    start: object
+    # of the camera class calibrate_pattern was given (this package sits below the camera's)
+    camera: Any
+    start: Any
     lens_rms: float = math.nan
     lens_note: str = ""
     found_by: dict = dataclasses.field(default_factory=dict)
@@ -96,7 +98,7 @@ class PatternReport:
     ray_std_deg: tuple = (math.nan, math.nan)
     names: dict = dataclasses.field(default_factory=dict)
 
-    def table(self, names=None):
+    def table(self, names=None) -> str:
         """The per-view table as text: image, corners, RMS px, distance and elevation of the
         board and how it was found, or why the view was dropped. ``names``: a sequence of the
         images' names (default :attr:`names`, else the indices)."""
@@ -119,7 +121,7 @@ class PatternReport:
                 lines.append(f"{label[i]:>{wide}} {'-':>7} {'-':>8}   dropped: {self.dropped[i]}")
         return "\n".join(lines)
 
-    def draw(self, image, index):
+    def draw(self, image, index) -> np.ndarray:
         """BGR overlay of view ``index``: detected corners (green circles) and reprojected ones
         (red crosses), with the rim (blue)."""
         img = to_bgr8(image, None).copy()
