@@ -620,7 +620,7 @@ def kalibr_text(fit, image_size, rostopic="/cam0/image_raw") -> str:
 
 
 def camodocal_text(fit, image_size, camera_name="omnicam") -> str:
-    """camodocal's ``MEI`` camera YAML (OpenCV FileStorage syntax, as camodocal reads it)."""
+    """Camodocal's ``MEI`` camera YAML (OpenCV FileStorage syntax, as camodocal reads it)."""
     if abs(fit.K[0, 1]) > 1e-9:
         raise ValueError("fit: camodocal's MEI model has no skew; fit with skew=False")
     K, D = fit.K, np.ravel(fit.D)
@@ -700,7 +700,7 @@ def write_kalibr(path, camera, fit=None, image_size=None, overwrite=True) -> Omn
 
 
 def write_camodocal(path, camera, fit=None, image_size=None, overwrite=True) -> OmnidirFit:
-    """camodocal MEI yaml of the best skew-free unified model; returns the fit."""
+    """Camodocal MEI yaml of the best skew-free unified model; returns the fit."""
     fit = fit or fit_omnidir(camera, skew=False)
     write_bytes(
         path,

@@ -119,7 +119,7 @@ _LONG_INT = re.compile(r"(?<![\w.+-])[-+]?\d{10,}(?![\w.])")  # 10+ digits, not 
 
 
 def shown(path):
-    """``path`` as text that can always be printed (undecodable bytes as ``\\xNN``)."""
+    r"""``path`` as text that can always be printed (undecodable bytes as ``\xNN``)."""
     if isinstance(path, bytes):
         return path.decode("utf-8", "backslashreplace")
     return str(path).encode("utf-8", "surrogateescape").decode("utf-8", "backslashreplace")
@@ -380,9 +380,12 @@ class Reader:
         self.data, self.path, self.what = data, shown(path), what
 
     def fail(self, field, what):
+        """Raise the ``ValueError`` that names the file and ``field``."""
         return ValueError(f"{self.what} {self.path}: field {field!r} {what}")
 
     def node(self, field, parent=None, required=True):
+        """The FileStorage node of ``field`` (in ``parent``); missing: None, or an error if
+        ``required``."""
         try:
             value = (parent if parent is not None else self.data).get(field.split(".")[-1])
         except ValueError as e:
@@ -401,6 +404,7 @@ class Reader:
         return None
 
     def number(self, field, parent=None):
+        """The finite number in ``field``."""
         value = self.node(field, parent)
         if not _is_number(value):
             raise self.fail(field, "must be a number")

@@ -309,7 +309,7 @@ class Unwarper:
 
     @property
     def maps(self) -> dict[str, Maps]:
-        """dict of name -> (map1, map2)."""
+        """Dict of name -> (map1, map2)."""
         return dict(self._maps)
 
     @property
@@ -620,12 +620,12 @@ class VideoStream:
 
     @property
     def fourcc(self) -> dict[str, str]:
-        """dict of output name -> the codec it is written with."""
+        """Dict of output name -> the codec it is written with."""
         return dict(self._record.fourcc)
 
     @property
     def written(self) -> dict[str, WrittenVideo]:
-        """dict of output name -> :class:`WrittenVideo`, once the stream has ended or closed."""
+        """Dict of output name -> :class:`WrittenVideo`, once the stream has ended or closed."""
         return dict(self._record.written)
 
 

@@ -440,7 +440,6 @@ def _reject_sines(
 def _rig_args(camera: CameraLike) -> RigArgs:
     """:class:`omnicam._kernels.RigArgs` of a camera: float64 C-contiguous writable copies (the
     kernels' one signature; numba types read-only arrays apart)."""
-
     D = camera.D
     dist = np.zeros(14)
     tilt = np.eye(3)
@@ -474,7 +473,6 @@ def _view_args(
     viewpoint: FloatArray | None,
 ) -> ViewArgs:
     """:class:`omnicam._kernels.ViewArgs` of a view (see :func:`_table`)."""
-
     sin_reject, sin_try = _reject_sines(camera, depth, viewpoint)
     m = camera.mirror
     return ViewArgs(
@@ -635,7 +633,6 @@ def _cubic_weights(tv: float, tu: float) -> list[np.float64]:
 def _node_blocks(NY: int, NX: int) -> tuple[_IntArray, FloatArray]:
     """``cubic_blocks``' blocks and weights of the Newton starts of a refined grid's nodes:
     node (p, q) is the cubic of the refined coarse cell at ((p - 1) / FINE, (q - 1) / FINE)."""
-
     blocks = [(p, p + 1, q, q + 1, -p, -q) for p in range(NY) for q in range(NX)]
     weights = [
         _cubic_weights((p - 1.0) / FINE, (q - 1.0) / FINE) for p in range(NY) for q in range(NX)
@@ -657,7 +654,6 @@ def _grid_nodes(
     refines, FINE times finer) starts Newton from the ``coarse`` grid's cubic; the coarse grid
     (``cells`` None) has no start (NaN).
     """
-
     G = origins.shape[0]
     NY, NX = shape[0] + 3, shape[1] + 3
     positions = np.empty((G, NY, NX, 2))
@@ -683,7 +679,6 @@ def _check_layout(ny: int, nx: int) -> tuple[_IntArray, FloatArray, FloatArray, 
     point in cells (``(cell column + tu, cell row + tv)``; NaN for the combinations that name
     no edge, never solved).
     """
-
     x = np.full((3, ny + 1, nx + 1), np.nan)
     y = np.full((3, ny + 1, nx + 1), np.nan)
     blocks, weights = [], []
@@ -710,7 +705,6 @@ def _grid_checks(
     """Check points of a grid stack (:func:`_check_layout`): output positions, Newton starts
     (the cubic of the nodes' mirror points ``S``) and estimates (the cubic of their pixels
     ``P``), (G, 3, ny + 1, nx + 1, 2) each, NaN where no check point is."""
-
     G, NY, NX, _two = S.shape
     ny, nx = NY - 3, NX - 3
     blocks, weights, x, y = _check_layout(ny, nx)
@@ -740,7 +734,6 @@ def _solve(
     """:func:`omnicam._kernels.solve_view_points` over arrays of positions (..., 2): the mirror
     points, pixels, margins and ok of each, and the errors (..., 2) of check points'
     ``estimates`` (pixel error, mirror error) (None without estimates)."""
-
     shape = positions.shape[:-1]
     n = int(np.prod(shape))
     ok = np.zeros(shape, np.bool_)
@@ -787,7 +780,6 @@ def _build_table(
     edge / refined, refined sub-cells left to exact pixels, pixels solved exactly, entries
     written unseen.
     """
-
     notice_if_cold(_kernels.solve_view_points, _kernels.fill_rows)
     w, h = size
     ny, nx = (h + step - 1) // step, (w + step - 1) // step

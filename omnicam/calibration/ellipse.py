@@ -109,6 +109,7 @@ def conic_distance(Q, points) -> FloatArray:
 
 
 def axes_angle(S) -> tuple[FloatArray, float]:
+    """Semi-axes ``(major, minor)`` and the major axis's angle (rad) of an ellipse's shape ``S``."""
     w, V = np.linalg.eigh(S)
     major = V[:, 1]
     angle = math.atan2(major[1], major[0]) % math.pi
@@ -124,6 +125,8 @@ def hartley_normalization(pts) -> FloatArray:
 
 
 def coeffs_to_conic(v) -> FloatArray:
+    """The symmetric conic matrix ``Q`` of the coefficients ``(A, B, C, D, E, F)`` of ``A x^2 + B x
+    y + C y^2 + D x + E y + F = 0``."""
     A, B, C, D, E, F = v
     return np.array([[A, B / 2, D / 2], [B / 2, C, E / 2], [D / 2, E / 2, F]])
 
@@ -180,6 +183,7 @@ def direct_ellipse(pts) -> FloatArray | None:
 
 
 def is_ellipse(Q) -> bool:
+    """Whether the conic ``Q`` is a real, non-degenerate ellipse."""
     A = Q[:2, :2]
     if np.linalg.det(A) <= 0:
         return False

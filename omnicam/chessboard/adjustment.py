@@ -180,6 +180,7 @@ class BundleAdjustment:
     def unpack(
         self, x
     ) -> tuple[FloatArray, FloatArray | None, FloatArray, FloatArray, HyperbolicMirror]:
+        """``(K, D, R, tvec, mirror)`` of the parameter vector ``x``."""
         i = 0
         fx, fy, cx, cy = x[0:4]
         i = 4
@@ -223,9 +224,12 @@ class BundleAdjustment:
         return cam, poses
 
     def boards(self, x) -> FloatArray:
+        """The boards' poses in ``x``, one ``(rvec_b, tvec_b)`` row of 6 per view."""
         return x[self.n_global :].reshape(-1, 6)
 
     def corner_residuals(self, x) -> FloatArray:
+        """Every corner's reprojection error (px; 50 where the rig cannot see it), through the exact
+        non-central projection."""
         K, D, R, tvec, mirror = self.unpack(x)
         B = self.boards(x)
         pts = np.concatenate([self.obj @ rodrigues(b[:3]).T + b[3:] for b in B])
@@ -237,6 +241,7 @@ class BundleAdjustment:
         return r.ravel()
 
     def rim_residuals(self, x) -> FloatArray:
+        """Every rim point's signed distance (px) to the rim circle's image (:func:`rim_foot`)."""
         K, D, R, tvec, mirror = self.unpack(x)
         if self.rim_phi is None:  # foot points of the start, by dense sampling
             ph = np.linspace(0, 2 * np.pi, 3600, endpoint=False)
@@ -278,12 +283,14 @@ class BundleAdjustment:
         return r
 
     def residuals(self, x) -> FloatArray:
+        """The corner, rim and (when used) outline residuals, px, in that order."""
         parts = [self.corner_residuals(x), self.rim_residuals(x)]
         if self.lens_px is not None:
             parts.append(self.lens_residuals(x))
         return np.concatenate(parts)
 
     def steps(self, x) -> FloatArray:
+        """Central-difference steps of the parameters (:meth:`jacobian`)."""
         h = np.empty_like(x)
         g = self.n_global
         for k, name in enumerate(self.names):

@@ -34,6 +34,7 @@ def _table_rms(cam_a, cam_b, size):
 
 
 def cmd_demo(args):
+    """``omnicam demo``: the module docstring."""
     from .. import synthetic
     from ..camera import MisalignedHyperbolicCamera
     from ..io import write_far_lines, write_intrinsics

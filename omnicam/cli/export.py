@@ -19,6 +19,7 @@ from ._common import EXIT_OK, CliError, _check_output, _load_camera, _one_line, 
 
 
 def cmd_export(args):
+    """``omnicam export``: the module docstring."""
     from ..export import export
 
     _check_output(args.output, args.overwrite)

@@ -161,6 +161,7 @@ def describe_verdict(verdict, width=13):
 
 
 def cmd_info(args):
+    """``omnicam info``: the module docstring."""
     from ..io import read_verdict
 
     camera = _load_camera(args.calibration)

@@ -80,6 +80,7 @@ def _scaled_view(spec, camera, k):
 
 
 def cmd_maps(args):
+    """``omnicam maps``: the module docstring."""
     from ..maps_export import (
         ffmpeg_command,
         float_maps,

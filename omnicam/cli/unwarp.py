@@ -237,6 +237,7 @@ def _output_kind(path, video_input):
 
 
 def cmd_unwarp(args):
+    """``omnicam unwarp``: the module docstring."""
     specs = view_specs(args)
     source = args.input
     live = _is_device_or_url(source) or _is_sequence(source)
@@ -310,7 +311,7 @@ def _unwarp_image(args, specs, camera):
 
 
 class Progress:
-    """A one-line progress bar on stderr (``\\r`` text): frames, percentage, frames per second."""
+    r"""A one-line progress bar on stderr (``\r`` text): frames, percentage, frames per second."""
 
     def __init__(self, total=None, stream=None, enabled=True, interval=0.25):
         self.total = total if total and total > 0 else None
@@ -323,10 +324,12 @@ class Progress:
         self.width = 0
 
     def fps(self):
+        """Frames per second so far."""
         elapsed = time.perf_counter() - self.start
         return self.frames / elapsed if elapsed > 0 else 0.0
 
     def update(self, frames, force=False):
+        """Show ``frames`` done (at most a few times a second unless ``force``)."""
         self.frames = frames
         now = time.perf_counter()
         if not self.enabled or (not force and now - self.last < self.interval):
@@ -347,6 +350,7 @@ class Progress:
         self.stream.flush()
 
     def close(self):
+        """End the bar's line."""
         if self.enabled and self.width:  # nothing drawn (no frame): nothing to end
             self.update(self.frames, force=True)
             self.stream.write("\n")
