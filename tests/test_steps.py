@@ -436,7 +436,7 @@ def test_warnings_step_says_when_a_shape_error_could_have_moved_a_nearly_aligned
         Uncertainty(0.03, 0.03),
     ):
         assert warnings_of(exact, sel, dataclasses.replace(ref, uncertainty=quiet)) == ()
-    assert steps.ALIGNED_CHI2 == 100.0
+    assert steps.ALIGNED_CHI2 == 64.0  # 8 standard deviations
 
 
 def test_warnings_step_passes_on_the_rims_the_selections_and_the_rejected_cues(exact, settled):
