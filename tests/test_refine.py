@@ -265,16 +265,38 @@ def test_correlation_factor_of_independent_or_anticorrelated_residuals_is_one():
     assert refine.correlation_factor([]) == 1.0
 
 
-def test_correlation_factor_clips_rho_at_0_9_and_counts_a_floor_as_independent_noise():
+def test_correlation_factor_sums_the_correlation_over_every_lag():
+    # a moving average of 25 white values: rho_k = 1 - k / 25, tau = 25; the standard deviation
+    # of the mean is 5x sigma / sqrt(N), which lag 1 alone calls sqrt(1.96 / 0.04) = 7
+    rng = np.random.default_rng(3)
+    width, n = 25, 4000
+    kernel = np.ones(width) / math.sqrt(width)
+    x = np.array(
+        [np.convolve(rng.standard_normal(n + width - 1), kernel, "valid") for _ in range(400)]
+    )
+    assert x.mean(axis=1).std() * math.sqrt(n) == pytest.approx(5.0, rel=0.1)
+    assert np.median([refine.correlation_factor(s) for s in x[:50]]) == pytest.approx(5.0, rel=0.1)
+    # a smooth misfit of k periods along the contour is worth about pi k points, whatever N
+    for periods, points in ((6, 720), (12, 720), (6, 360), (20, 2000)):
+        wave = np.sin(np.linspace(0, 2 * math.pi * periods, points, endpoint=False))
+        n_eff = points / refine.correlation_factor(wave) ** 2
+        assert n_eff == pytest.approx(math.pi * periods, rel=0.02)
+
+
+def test_correlation_factor_counts_a_floor_as_independent_noise_and_10_points_at_least():
+    # a floor of the residuals' own RMS halves every rho_k: an AR(1) sequence of rho = 0.5
+    # (tau = 3) then has rho_k = 0.5^(k+1), tau = 1 + 2 * 0.5 = 2
+    rng = np.random.default_rng(4)
+    x = ar1(rng, 0.5, 2000, 50)
+    floors = np.sqrt(np.mean((x - x.mean(axis=1, keepdims=True)) ** 2, axis=1))
+    tau = [refine.correlation_factor(s) ** 2 for s in x]
+    tau_floor = [refine.correlation_factor(s, f) ** 2 for s, f in zip(x, floors)]
+    assert np.median(tau) == pytest.approx(3.0, rel=0.05)
+    assert np.median(tau_floor) == pytest.approx(2.0, rel=0.05)
+    # three periods on 360 points would be worth 3 pi < 10 points: 10 (the posture has 5)
     smooth = np.sin(np.linspace(0, 6 * math.pi, 360))
-    assert refine.correlation_factor(smooth) == pytest.approx(math.sqrt(19.0))
-    # rho = rho1 m / (m + floor^2): a floor of the residuals' own RMS halves rho
-    x = ar1(np.random.default_rng(4), 0.5, 2000)[0]
-    r = x - x.mean()
-    rho1 = float(r[:-1] @ r[1:]) / float(r @ r)
-    floor = math.sqrt(float(r @ r) / len(r))
-    expected = math.sqrt((1 + rho1 / 2) / (1 - rho1 / 2))
-    assert refine.correlation_factor(x, floor) == pytest.approx(expected, rel=1e-12)
+    assert refine.MIN_EFFECTIVE_POINTS == 10
+    assert refine.correlation_factor(smooth) == pytest.approx(math.sqrt(360 / 10))
 
 
 def test_correlation_factor_skips_non_finite_residuals():
@@ -351,6 +373,62 @@ def test_a_known_z_reflection_pins_the_axis_the_rim_leaves_loose():
     assert joint.axis_std_deg < 0.25 * alone.axis_std_deg
     # a reflection without its sigma is not used
     assert refine.posture_uncertainty(*args, (xn, R_C, Z_C, False, True)) == alone
+
+
+# -- profile_uncertainty ------------------------------------------------------------------------
+#: Nearly aligned: the two physical postures of a noisy rim 2-3 deg apart, their midway posture
+#: within the chi-square of the noise
+NEAR = synthetic.misaligned_rig(0.3, 50.0, (0.2, -0.1, 0.0), image_size=(640, 480))
+
+
+def refined_with_twin(cam, noisy):
+    """The rim-only refinement of ``noisy`` from the physical Chen posture nearest the truth,
+    the arguments of ``posture_uncertainty`` at it, and the other physical posture."""
+    from omnicam.calibration import chen
+    from omnicam.calibration.rim import fit_rim
+
+    conic = chen.normalized_conic(fit_rim(noisy).conic, cam.K)
+    own, twin = sorted(
+        (c for c in chen.chen_candidates(conic, cam.mirror) if c.physical),
+        key=lambda c: -float(c.axis @ cam.R[:, 2]),
+    )
+    res = refine.refine_posture(cam.K, cam.mirror, own.rvec, own.tvec, noisy, robust=False)
+    return (cam.K, cam.mirror, res.rvec, res.tvec, noisy, res.rim_rms), (twin.rvec, twin.tvec)
+
+
+def test_profile_uncertainty_is_the_first_order_one_where_the_rim_is_linear_in_the_posture():
+    rim = CAM.rim_image_points(200)
+    noisy = rim + np.random.default_rng(12).normal(size=rim.shape) * 0.05
+    args, twin = refined_with_twin(CAM, noisy)
+    first = refine.posture_uncertainty(*args)
+    u = refine.profile_uncertainty(*args, twin=twin)
+    assert not u.widened and u.first_order_axis_std_deg == first.axis_std_deg
+    assert u.axis_std_deg == first.axis_std_deg and np.array_equal(u.cov, first.cov)
+    # the aligned posture midway to the twin is far outside the region of the noise
+    assert u.aligned_chi2 > 5 * refine.PROFILE_CHI2
+    gap = math.degrees(np.linalg.norm(refine.posture_offsets(*args[2:4], *twin)[:2]))
+    assert u.twin_deg == pytest.approx(gap) and 2.0 < gap < 3.0
+
+
+def test_profile_uncertainty_widens_the_tilt_and_its_compensating_shift_near_alignment():
+    rim = NEAR.rim_image_points(1200)
+    for seed in range(4):
+        noisy = rim + np.random.default_rng(seed).normal(size=rim.shape) * 0.3
+        args, twin = refined_with_twin(NEAR, noisy)
+        first = refine.posture_uncertainty(*args)
+        u = refine.profile_uncertainty(*args, twin=twin)
+        assert u.aligned_chi2 < refine.PROFILE_CHI2  # the postures' regions merge there
+        assert u.widened and u.axis_std_deg > 1.1 * first.axis_std_deg
+        # the axis block scaled, the origin's shift given the tilt as the first order has it
+        scale = (u.axis_std_deg / first.axis_std_deg) ** 2
+        np.testing.assert_allclose(u.cov[:2, :2], scale * first.cov[:2, :2], rtol=1e-9)
+
+        def given_tilt(c):
+            return c[2:, 2:] - c[2:, :2] @ np.linalg.solve(c[:2, :2], c[:2, 2:])
+
+        np.testing.assert_allclose(given_tilt(u.cov), given_tilt(first.cov), atol=1e-9)
+        # without the twin the region spans both postures and the midway one
+        assert refine.profile_uncertainty(*args).axis_std_deg > 2 * u.axis_std_deg
 
 
 # -- Uncertainty, uncertainty_from_cov, the 5 parameters ----------------------------------------

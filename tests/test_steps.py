@@ -415,6 +415,30 @@ def test_warnings_step_says_when_the_uncertainty_covers_the_other_posture(exact,
     )
 
 
+def test_warnings_step_says_when_a_shape_error_could_have_moved_a_nearly_aligned_axis(
+    exact, settled
+):
+    sel, ref = settled
+    # the aligned posture 1 deg away changes the rim by 0.2 px, chi-square +40: a low-order
+    # shape error of that size may have moved the axis there, beyond 2 x 0.03 deg
+    near = Uncertainty(0.03, 0.03, aligned_chi2=40.0, aligned_px=0.2, twin_deg=2.0)
+    (w,) = warnings_of(exact, sel, dataclasses.replace(ref, uncertainty=near))
+    assert w.startswith("the rig is nearly aligned (the camera close to the mirror's axis)")
+    assert "midway between the two physical postures, 1.00 deg from the one returned" in w
+    assert "by only 0.20 px RMS (chi-square +40 with the residuals' correlation)" in w
+    assert "moved the axis by up to 1.00 deg, beyond the stated 0.03 deg" in w
+    assert "lens_z" in w
+    # quiet when the cost rises by more than ALIGNED_CHI2 there, or the aligned posture lies
+    # within twice the stated uncertainty, or is unknown (no twin)
+    for quiet in (
+        dataclasses.replace(near, aligned_chi2=steps.ALIGNED_CHI2 + 1),
+        dataclasses.replace(near, twin_deg=0.12),
+        Uncertainty(0.03, 0.03),
+    ):
+        assert warnings_of(exact, sel, dataclasses.replace(ref, uncertainty=quiet)) == ()
+    assert steps.ALIGNED_CHI2 == 64.0  # 8 standard deviations
+
+
 def test_warnings_step_passes_on_the_rims_the_selections_and_the_rejected_cues(exact, settled):
     sel, ref = settled
     rim = dataclasses.replace(exact["rim"], warnings=("the rim fit is poor",))

@@ -45,8 +45,11 @@ class CalibrationReport:
     refinement : RefineResult or None
         The non-linear refinement (None with ``refine=False``).
     axis_std_deg, origin_std_mm : float
-        A posteriori first-order RMS uncertainty of the axis direction (degrees) and of the
-        origin (length unit): every source's rows weighted by its observed RMS residual.
+        A posteriori RMS uncertainty of the axis direction (degrees) and of the origin (length
+        unit): every source's rows weighted by its observed RMS residual and the correlation
+        of its residuals along the contour; first order where the cost is quadratic in the
+        posture, else widened to the region of the cost itself (near alignment:
+        :func:`.refine.profile_uncertainty`).
     far_lines : list of (N_i, 2) ndarray
         The far-line pixels used.
     lens_points : (M, 2) ndarray or None
@@ -178,6 +181,17 @@ class CalibrationReport:
         """Indices of the physically possible candidates."""
         return [i for i, c in enumerate(self.candidates) if c.physical]
 
+    def _uncertainty_kind(self):
+        """How the stated uncertainty was found, in words."""
+        ref = self.steps.get("refinement")
+        unc = getattr(ref, "uncertainty", None)
+        if unc is None or not unc.widened:
+            return "first order"
+        return (
+            f"from the cost itself, where the first order said "
+            f"{unc.first_order_axis_std_deg:.3g} deg on the axis"
+        )
+
     def summary(self):
         """A readable multi-line summary (what the CLI prints)."""
         cam = self.camera
@@ -190,7 +204,7 @@ class CalibrationReport:
             f"  tvec = [{', '.join(f'{v:.6f}' for v in cam.tvec)}]",
             f"  mirror axis tilt from the optical axis: {tilt:.4f} deg; camera centre in the "
             f"mirror frame: [{', '.join(f'{v:.4f}' for v in cam.camera_center)}]",
-            f"  RMS uncertainty (a posteriori, first order; rim"
+            f"  RMS uncertainty (a posteriori, {self._uncertainty_kind()}; rim"
             f"{''.join(' + ' + c for c in self.accepted_cues)}): axis {self.axis_std_deg:.3g} "
             f"deg, origin {self.origin_std_mm:.3g}; weakest: {self.weak_direction}",
             f"  camera reflection (lens): {self.lens_note}",

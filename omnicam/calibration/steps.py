@@ -40,6 +40,18 @@ SIGMA_FLOOR = 0.02
 #: within two standard deviations (the stress benchmark, ``benchmarks/bench_stress.py``, counts
 #: an axis error over 0.1 deg without a warning as a silent failure).
 AXIS_WARN_DEG = 0.05
+#: Near alignment the report warns when the aligned posture midway between the two physical
+#: postures lies beyond twice the stated axis uncertainty but within 8 standard deviations of
+#: the fit: the cost rises by at most this much there (:class:`.refine.Uncertainty`'s
+#: ``aligned_chi2``, in units of the observed residual variance with its correlation along
+#: the contour). A low-order shape error of the rim's image falls where the posture absorbs
+#: it, so the residuals cannot show it, and real rims have them larger than their residuals
+#: suggest: on OCamCalib's VMR frames the chessboard posture lies at the aligned one, at
+#: chi-square 0-40 from each frame's posture (a pixel aspect of K 0.05 % off moves the axis by
+#: 1.7 deg). The nearly aligned rigs of the stress renders (``benchmarks/bench_stress.py``)
+#: have theirs at 15-65; the quickstart's render at 97, a 1000 px render 3 deg out of line at
+#: 460: the warning says what one frame cannot exclude.
+ALIGNED_CHI2 = 64.0
 #: Outline points used in the refinement (evenly subsampled; selection uses all).
 MAX_REFINE_POINTS = 400
 
@@ -381,8 +393,8 @@ def reflection_circles(cands, cue, K, mirror, D=None):
 def _effective_points(cands, cue, circles, K, mirror):
     """How many independent points the outline is worth under its best candidate.
 
-    ``N (1 - rho1) / (1 + rho1)`` with ``rho1`` the lag-1 correlation of that candidate's
-    residuals along the outline (:func:`.refine.correlation_factor`), at most ``N / 2``. A
+    ``N / tau`` with ``tau`` the integrated autocorrelation time of that candidate's residuals
+    along the outline, over every lag (:func:`.refine.correlation_factor`), at most ``N / 2``. A
     model that misfits leaves a smooth residual field, worth far fewer points than it has: the
     office photograph with a guessed K fits both postures at 1.40 and 1.52 px, which 598
     independent points would call a 7-sigma gap.
@@ -479,7 +491,9 @@ class Refinement:
     skipped_cues : tuple of (str, str)
         ``(cue, why)``: cues not tried in the refinement (not a disagreement).
     uncertainty : Uncertainty
-        A posteriori (:func:`.refine.posture_uncertainty`): rows weighted by their observed RMS.
+        A posteriori (:func:`.refine.profile_uncertainty`): rows weighted by their observed RMS
+        and its correlation; first order, widened to the cost's own region where that reaches
+        farther (near alignment), bounded by the chosen posture's twin.
     circle : ReflectionCircle or None
         The reflection's circle under the final posture (when the cue was given).
     """
@@ -603,8 +617,8 @@ def _reflection_verdict(res, base, var, cap, K, mirror, rim_px, spec):
 
 def _rim_variance(K, mirror, base, rim_px):
     """The rim's a posteriori variance (px^2) at the rim-only fit ``base``: ``2 cost / (N - 5)``,
-    at least ``SIGMA_FLOOR^2``, inflated by the correlation of neighbouring edge points as in
-    the reported uncertainty (so the test and the uncertainty agree)."""
+    at least ``SIGMA_FLOOR^2``, inflated by the correlation of the edge points along the rim as
+    in the reported uncertainty (so the test and the uncertainty agree)."""
     from .refine import RimTerm, correlation_factor
 
     R0 = cv2.Rodrigues(np.asarray(base.rvec, np.float64).reshape(3, 1))[0]
@@ -683,12 +697,26 @@ def _final_circle(K, mirror, R, tvec, cue, trials):
     return fit_circle(mirror, R, tvec, cue.normalized, np.linalg.inv(K)[:2, :2], r=cue.r, z=cue.z)
 
 
+def _twin(K, mirror, cand, rim):
+    """The other physical posture of the rim (Chen's; the one nearest to ``cand`` in axis
+    angle if there are more), as ``(rvec, tvec)``, or None."""
+    others = [
+        c
+        for c in candidates_step(rim, K, mirror).all
+        if c.physical and (c.l, c.m) != (cand.l, cand.m)
+    ]
+    if not others:
+        return None
+    best = max(others, key=lambda c: float(c.axis @ cand.axis))
+    return best.rvec, best.tvec
+
+
 def refinement_step(K, mirror, cand, rim, lines_xn, cue, circle, refine=True):
     """Refine on the rim and every cue that agrees with it; see :class:`Refinement`.
 
     A cue joins only if the joint fit keeps the rim at its own noise level: with ``sigma^2``
     the rim's a posteriori variance alone (``2 cost / (N - 5)``, at least ``SIGMA_FLOOR``^2,
-    inflated by the correlation of neighbouring residuals as the reported uncertainty is), the
+    inflated by the correlation of the residuals as the reported uncertainty is), the
     rim's chi-square may rise by at most ``CUE_CHI2`` (the shift the cue causes must be within
     the rim's own uncertainty ellipsoid), and the cue's own RMS must stay within
     3x its measured scatter (1 px at least for the outline, 3 px for far lines), and the
@@ -697,7 +725,7 @@ def refinement_step(K, mirror, cand, rim, lines_xn, cue, circle, refine=True):
     ``skipped_cues``); far lines join only when it did not join (they then add nothing
     measurable but time, ``benchmarks/bench_calibrate.py``).
     """
-    from .refine import ReflectionSpec, posture_uncertainty, uncertainty_from_cov
+    from .refine import ReflectionSpec, profile_uncertainty
 
     rim_px = rim.points
     spec = None
@@ -717,7 +745,7 @@ def refinement_step(K, mirror, cand, rim, lines_xn, cue, circle, refine=True):
     rim_sigma = trials.kept.rim_rms if trials.kept is not None else rim.fit.rms
     known = cue.r is not None or cue.z is not None  # else z trades with the tilt (above)
     use_refl = "reflection" in trials.accepted or (not refine and spec is not None and known)
-    unc = posture_uncertainty(
+    unc = profile_uncertainty(
         K,
         mirror,
         rvec,
@@ -727,10 +755,11 @@ def refinement_step(K, mirror, cand, rim, lines_xn, cue, circle, refine=True):
         spec._replace(r=final_circle.r, z=final_circle.z) if use_refl else None,
         final_circle.rms if use_refl else None,
         floor=1e-9,
+        twin=_twin(K, mirror, cand, rim),
     )
     bias_cov = trials.bias_cov
     if bias_cov is not None and unc.cov is not None and np.any(bias_cov):
-        unc = uncertainty_from_cov(unc.cov + bias_cov, tvec)
+        unc = unc.with_cov(unc.cov + bias_cov, tvec)
     return Refinement(
         np.asarray(rvec, np.float64),
         np.asarray(tvec, np.float64),
@@ -766,6 +795,19 @@ def warnings_step(rim, cue, selection, refinement, cands):
             f"on the mirror axis and {unc.origin_std:.2f} on the origin, mostly "
             f"{unc.describe()}; improve the boundary points or show the camera's "
             f"reflection"
+        )
+    half = 0.5 * unc.twin_deg
+    if unc.aligned_chi2 <= ALIGNED_CHI2 and half > 2 * unc.axis_std_deg:
+        out.append(
+            f"the rig is nearly aligned (the camera close to the mirror's axis), where the "
+            f"rim's image depends on the tilt only to second order: the aligned posture "
+            f"midway between the two physical postures, {half:.2f} deg from the one returned, "
+            f"changes the rim's image by only {unc.aligned_px:.2f} px RMS (chi-square "
+            f"+{unc.aligned_chi2:.0f} with the residuals' correlation), so a low-order shape "
+            f"error of the rim's image (or a pixel aspect ratio of K a little off) may have "
+            f"moved the axis by up to {half:.2f} deg, beyond the stated "
+            f"{unc.axis_std_deg:.2f} deg; the camera's reflection with its z or r given "
+            f"(lens_z, lens_r) pins the tilt"
         )
     others = [i for i in cands.physical if i != selection.chosen]
     if others and not selection.ambiguous and selection.costs_per_cue:
