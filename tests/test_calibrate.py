@@ -263,12 +263,12 @@ def test_without_far_lines_the_report_warns_of_ambiguity():
 
 def test_image_size_defaults_to_the_image(monkeypatch):
     truth = synthetic.misaligned_rig()
-    from omnicam.calibration import rim
+    from omnicam.calibration import rim, steps
 
     def fake_detect(image, **kwargs):  # hint, expected: unused here
         return rim.fit_rim(truth.rim_image_points(360))
 
-    monkeypatch.setattr(rim, "detect_rim", fake_detect)
+    monkeypatch.setattr(steps, "detect_rim", fake_detect)  # the name the rim step calls
     cam, report = calibrate(truth.K, truth.mirror, image=np.zeros((480, 640), np.uint8))
     assert cam.image_size == (640, 480)
     assert len(report.boundary_points) == 360
@@ -278,12 +278,12 @@ def test_image_size_defaults_to_the_image(monkeypatch):
 def test_image_path_with_distortion_refits_the_undistorted_rim(monkeypatch):
     D = [-0.12, 0.05, 0.001, -0.0015, -0.01]
     truth = synthetic.misaligned_rig(4.0, 100.0, (-2.0, 1.0, 2.0)).replace(D=D)
-    from omnicam.calibration import rim
+    from omnicam.calibration import rim, steps
 
     def fake_detect(image, **kwargs):  # the detector sees the distorted rim
         return rim.fit_rim(truth.rim_image_points(360))
 
-    monkeypatch.setattr(rim, "detect_rim", fake_detect)
+    monkeypatch.setattr(steps, "detect_rim", fake_detect)  # the name the rim step calls
     lines = synthetic.far_line_pixels(truth, rng=8)
     cam, report = calibrate(
         truth.K, truth.mirror, image=np.zeros((500, 500, 3), np.uint8), far_lines=lines, D=D

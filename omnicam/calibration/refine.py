@@ -198,6 +198,7 @@ class RimTerm:
         return len(self.px)
 
     def x0(self):
+        """The term's own parameters at the start (none: the rim has no nuisance parameters)."""
         return np.zeros(0)
 
     def _curve(self, R, t, phi):
@@ -255,6 +256,8 @@ class RimTerm:
         return cx, cy, dy / nn, -dx / nn
 
     def residuals(self, R, t, y=None, weighted=True):
+        """Signed distances (px) of the rim points to the rim's image under ``R, t`` (robust weights
+        applied when ``weighted``)."""
         phi = self._foot_points(R, t, phi=self.phi0)
         cx, cy, nx, ny = self._normals(R, t, phi)
         r = (self.px[:, 0] - cx) * nx + (self.px[:, 1] - cy) * ny
@@ -326,6 +329,8 @@ class FarLineTerm:
         return sum(len(x) for x in self.lines_xn)
 
     def x0(self):
+        """The lines' nuisance parameters at the start: zero offsets from their initial 3-D
+        lines (:meth:`line`)."""
         return np.zeros(self.n_nuisance)
 
     def _init_lines(self, R, t, depth):
@@ -364,6 +369,8 @@ class FarLineTerm:
         self.scale = np.where(g > 0, 1.0 / np.where(g > 0, g, 1.0), 0.0)
 
     def line(self, i, y):
+        """Line ``i`` as ``(point, unit direction)``: its initial line turned by ``y[0:2]`` and
+        moved by ``y[2:4]`` (times its depth) across itself."""
         Qa, e0, f1, f2, depth = self.line0[i]
         e = e0 + y[0] * f1 + y[1] * f2
         e /= np.linalg.norm(e)
@@ -389,6 +396,7 @@ class FarLineTerm:
         return np.where(np.isfinite(r), r, 0.0)
 
     def residuals(self, R, t, y, weighted=True):
+        """Every far-line pixel's distance (px) to the image of its line under ``R, t``."""
         return self._raw(R, t, y, self.lines_xn) * self.scale
 
     def nuisance_jacobian(self, R, t, y, steps):
@@ -403,6 +411,8 @@ class FarLineTerm:
         return J
 
     def jacobian(self, posture, x, y, steps):
+        """Derivatives of the residuals by the posture and by this term's parameters, at ``x`` and
+        ``y``."""
         R, t = posture(x)
         return _posture_fd(self, posture, x, y, steps), self.nuisance_jacobian(
             R, t, y, np.full(len(y), 1e-7)
@@ -435,15 +445,19 @@ class ReflectionTerm:
         return len(self.xn) + (self.prior is not None)
 
     def x0(self):
+        """The circle's ``(r, z)`` at the start, those not known."""
         return np.array([v for v, f in zip((self.r0, self.z0), self.free) if f])
 
     def circle(self, y):
+        """``(r, z)`` of the camera's circle: the known ones and those in ``y``."""
         it = iter(y)
         r = next(it) if self.free[0] else self.r0
         z = next(it) if self.free[1] else self.z0
         return float(r), float(z)
 
     def residuals(self, R, t, y, weighted=True, outline_only=False):
+        """The outline pixels' residuals (px) under ``R, t`` and the circle in ``y``; with
+        ``outline_only`` no prior term."""
         from .reflection import plane_radius
 
         r, z = self.circle(y)
@@ -454,6 +468,7 @@ class ReflectionTerm:
         return np.append(res, (z - self.z0) * self.prior)
 
     def jacobian(self, posture, x, y, steps):
+        """Derivatives of the residuals by the posture and by the circle's parameters."""
         R, t = posture(x)
         Jp = _posture_fd(self, posture, x, y, steps)
         base = self.residuals(R, t, y)

@@ -360,7 +360,9 @@ class ReflectionFit:
         )
 
 
-def _gray(image):
+def to_gray(image):
+    """A float32 grey image on the 0-255 scale of 8 bits (16-bit divided by 257, floats in [0, 1]
+    times 255), BGR(A) by OpenCV's weights; ``ValueError`` for a shape that is no image."""
     img = np.asarray(image)
     if img.ndim == 3 and img.shape[2] == 1:
         img = img[:, :, 0]
@@ -549,7 +551,7 @@ def _detect(image, rim, center, center_search, max_radius, min_radius, rng, scen
             "need 0 < min_radius < max_radius <= 1 and 0 <= center_search <= 0.5 (units of "
             "the rim's semi-axis)"
         )
-    gray = _gray(image)
+    gray = to_gray(image)
     r_rim = float(min(rim.axes))
     c0 = np.asarray(rim.center if center is None else center, np.float64).reshape(2)
     if not np.isfinite(c0).all():

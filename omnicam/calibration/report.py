@@ -422,6 +422,8 @@ def _text_box(canvas, entries, scale, thick, top, swatch=False):
 
 
 def to_bgr8(image, image_size):
+    """An 8-bit BGR copy of ``image`` to draw on (grey, BGRA, 16-bit and float scaled), or a
+    black image of ``image_size`` when ``image`` is None."""
     if image is None:
         if image_size is None:
             raise ValueError("draw() needs an image when the camera has no image_size")

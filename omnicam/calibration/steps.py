@@ -14,7 +14,30 @@ import math
 import cv2
 import numpy as np
 
+from ..raytrace import undistort_normalized
+from . import chen
 from .errors import EstimationError
+from .plausibility import expected_rim
+from .refine import (
+    ReflectionSpec,
+    RimTerm,
+    correlation_factor,
+    perturbed_posture,
+    posture_offsets,
+    posture_uncertainty,
+    profile_uncertainty,
+    refine_posture,
+)
+from .reflection import (
+    ReflectionCircle,
+    detect_reflection,
+    fit_circle,
+    plane_radius,
+    self_reflection_pixel,
+    to_gray,
+)
+from .rim import check_hint, detect_rim, fit_rim
+from .selection import ReflectionEvidence, select_candidate
 
 __all__ = [
     "RimStep",
@@ -73,8 +96,6 @@ def as_pixels(points, name):
 
 def normalize(pixels, K, D):
     """Pixels -> undistorted normalised coordinates (``inv(K)`` with skew, tight undistortion)."""
-    from ..raytrace import undistort_normalized
-
     if D is None:
         Ki = np.linalg.inv(K)
         return pixels @ Ki[:2, :2].T + Ki[:2, 2]
@@ -131,8 +152,6 @@ def rim_step(
     EstimationError
         No ellipse in the image or among the points.
     """
-    from .rim import check_hint, detect_rim, fit_rim
-
     warnings = []
     detected = None
     if boundary_points is not None:
@@ -150,14 +169,10 @@ def rim_step(
                 "points, the image only gave the size"
             )
     else:
-        from .reflection import _gray
-
-        gray = _gray(image)  # bad input (shape) raises ValueError here, before the search
+        gray = to_gray(image)  # bad input (shape) raises ValueError here, before the search
         hint = check_hint(hint, (gray.shape[1], gray.shape[0]))  # bad hint: ValueError
         expected = None
         if mirror is not None:
-            from .plausibility import expected_rim  # the rim size K and the mirror predict
-
             expected = expected_rim(K, mirror, D, max_tilt_deg, max_offset_mm).radius_range
         try:
             detected = detect_rim(image, hint=hint, expected=expected)
@@ -215,6 +230,7 @@ class ReflectionCue:
 
     @property
     def used(self):
+        """Whether the camera's reflection was found and is used."""
         return self.points is not None
 
 
@@ -252,8 +268,6 @@ def reflection_step(lens, image, rim, K, D, r=None, z=None, cands=None, mirror=N
         try:
             where = {}
             if cands is not None and mirror is not None and cands.physical:
-                from .reflection import self_reflection_pixel
-
                 u = np.array(
                     [
                         self_reflection_pixel(mirror, cands.all[i].R, cands.all[i].tvec, K, D)
@@ -306,8 +320,6 @@ def _detect_outline(image, rim, where, cands, K, D, mirror, r, z):
     Returns ``(fit, px, xn, why)``: ``why`` (not ``None``) says why the only silhouette found
     was not taken. Raises :class:`EstimationError` when nothing is found.
     """
-    from .reflection import detect_reflection
-
     rejected, failure = None, None
     for search in (where, {}) if where else ({},):
         try:
@@ -337,8 +349,6 @@ CORELESS_MAX_RMS = 0.5
 
 def _coreless_why(fit, xn, cands, K, mirror, r, z):
     """Why a silhouette without a darker core is not the camera's, or None if it may be."""
-    from .reflection import fit_circle
-
     if cands is None or mirror is None or not cands.physical:
         return "the silhouette has no darker core and no posture to test it against"
     Kinv2 = np.linalg.inv(K)[:2, :2]
@@ -367,8 +377,6 @@ class Candidates:
 
 def candidates_step(rim, K, mirror):
     """Chen's candidates for the rim ellipse; see :class:`Candidates`."""
-    from . import chen
-
     Qe = chen.normalized_conic(rim.fit.conic, K)  # Q_e = K^T Q_I K  (eq. 24)
     cands = tuple(chen.chen_candidates(Qe, mirror))
     return Candidates(cands, tuple(i for i, c in enumerate(cands) if c.physical))
@@ -377,8 +385,6 @@ def candidates_step(rim, K, mirror):
 # -- 4. selection ------------------------------------------------------------------------------
 def reflection_circles(cands, cue, K, mirror, D=None):
     """The best coaxial circle (and the self-reflection pixel) under each physical candidate."""
-    from .reflection import fit_circle, self_reflection_pixel
-
     Kinv2 = np.linalg.inv(K)[:2, :2]
     circles, self_px = {}, {}
     for i in cands.physical:
@@ -399,9 +405,6 @@ def _effective_points(cands, cue, circles, K, mirror):
     office photograph with a guessed K fits both postures at 1.40 and 1.52 px, which 598
     independent points would call a 7-sigma gap.
     """
-    from .refine import correlation_factor
-    from .reflection import plane_radius
-
     n = len(cue.normalized)
     finite = {i: c for i, c in circles.items() if np.isfinite(c.rms)}
     if not finite:
@@ -418,9 +421,6 @@ def _predictions(cands, rim, K, mirror, D):
     image axes) from the uncertainty of its posture given the rim alone
     (:func:`.refine.posture_uncertainty`, propagated by difference quotients): the predicted
     outline is only as sure as the posture."""
-    from .refine import perturbed_posture, posture_uncertainty
-    from .reflection import self_reflection_pixel
-
     dx = np.array([1e-5, 1e-5, 1e-3, 1e-3, 1e-3])  # radians, then the mirror's length unit
     out = {}
     for i in cands.physical:
@@ -454,8 +454,6 @@ def selection_step(cands, cue, lines, mirror, K, D, make_camera, rim=None):
     circles : dict
         ``{index: ReflectionCircle}`` under each physical candidate (empty without the cue).
     """
-    from .selection import ReflectionEvidence, select_candidate
-
     circles, evidence = {}, None
     if cue.used:
         circles, self_px = reflection_circles(cands, cue, K, mirror, D)
@@ -550,7 +548,6 @@ def _disagreement(K, mirror, rim_px, base, res, spec):
         outline the test cannot tell apart from a consistent one adds what it moved beyond
         that, so the reported uncertainty comes from the shift actually observed.
     """
-    from .refine import posture_offsets, posture_uncertainty
 
     def cov(fit, refl):
         sig = fit.reflection_rms if refl is not None else None
@@ -619,8 +616,6 @@ def _rim_variance(K, mirror, base, rim_px):
     """The rim's a posteriori variance (px^2) at the rim-only fit ``base``: ``2 cost / (N - 5)``,
     at least ``SIGMA_FLOOR^2``, inflated by the correlation of the edge points along the rim as
     in the reported uncertainty (so the test and the uncertainty agree)."""
-    from .refine import RimTerm, correlation_factor
-
     R0 = cv2.Rodrigues(np.asarray(base.rvec, np.float64).reshape(3, 1))[0]
     f = correlation_factor(
         RimTerm(K, mirror, R0, base.tvec, rim_px).residuals(R0, base.tvec), SIGMA_FLOOR
@@ -642,8 +637,6 @@ class _CueTrials:
 def _refine_with_cues(K, mirror, cand, rim_px, lines_xn, cue, spec):
     """The rim-only fit, then the reflection (with ``spec``, if its r or z is known), then far
     lines if the reflection did not join, each kept if its verdict lets it join."""
-    from .refine import refine_posture
-
     rvec, tvec = cand.rvec, cand.tvec
     base = refine_posture(K, mirror, rvec, tvec, rim_px)
     out = _CueTrials(kept=base)
@@ -687,8 +680,6 @@ def _refine_with_cues(K, mirror, cand, rim_px, lines_xn, cue, spec):
 def _final_circle(K, mirror, R, tvec, cue, trials):
     """The reflection's circle under the final posture: the joint fit's if the reflection
     joined, else the best coaxial circle (None without the cue)."""
-    from .reflection import ReflectionCircle, fit_circle
-
     if not cue.used:
         return None
     if "reflection" in trials.accepted:
@@ -725,8 +716,6 @@ def refinement_step(K, mirror, cand, rim, lines_xn, cue, circle, refine=True):
     ``skipped_cues``); far lines join only when it did not join (they then add nothing
     measurable but time, ``benchmarks/bench_calibrate.py``).
     """
-    from .refine import ReflectionSpec, profile_uncertainty
-
     rim_px = rim.points
     spec = None
     if cue.used and circle is not None and np.isfinite(circle.rms):
