@@ -12,10 +12,13 @@ import sys
 
 import cv2
 
+from .. import io
 from .._atomic import OutputError, atomic_output
+from .._quiet import opencv_silenced
+from ..camera import MisalignedHyperbolicCamera
+from ..io import Verdict, file_path, read_verdict, shown
 
 PROG = "omnicam"
-
 
 # Exit statuses
 EXIT_OK, EXIT_FAILURE, EXIT_USAGE, EXIT_INTERRUPTED = 0, 1, 2, 130
@@ -103,8 +106,6 @@ def _warn(message):
 def _load_camera(path, say_doubt=False):
     """The camera of a calibration file; with ``say_doubt``, one warning line when its verdict
     records a doubt (:func:`doubt_line`)."""
-    from ..camera import MisalignedHyperbolicCamera
-
     try:
         camera = MisalignedHyperbolicCamera.load(path)
     except (FileNotFoundError, ValueError) as e:
@@ -122,8 +123,6 @@ def doubt_line(path):
     E.g. ``rig.yaml: calibrated with a guessed K, ambiguous (confidence 0.00): its views may
     be skewed ('omnicam info rig.yaml' says why)``; a verdict that cannot be read says so.
     """
-    from ..io import read_verdict
-
     try:
         verdict = read_verdict(path)
     except (FileNotFoundError, ValueError) as e:
@@ -139,8 +138,6 @@ def doubt_line(path):
 
 def _check_output(path, overwrite, what="output"):
     """Refuse an output we must not or cannot write, before doing any work."""
-    from ..io import file_path
-
     try:  # a name that is not UTF-8 would crash OpenCV's writers
         path = file_path(path, what)
     except ValueError as e:
@@ -158,9 +155,6 @@ def _check_output(path, overwrite, what="output"):
 
 def _write_image(path, image, overwrite=True):
     """``cv2.imwrite`` through :func:`omnicam._atomic.atomic_output` (checked by reading back)."""
-    from .._quiet import opencv_silenced
-    from ..io import file_path
-
     try:
         path = file_path(path, "output")
     except ValueError as e:
@@ -228,9 +222,6 @@ def _is_image_input(path):
     By name first, so an empty or corrupt ``.png`` is reported as an unreadable image (not
     treated as a video). A name that is not UTF-8 is refused (:class:`CliError`).
     """
-    from .._quiet import opencv_silenced
-    from ..io import file_path
-
     try:  # OpenCV (imread, VideoCapture) crashes with SIGSEGV on such a name
         path = file_path(path, "input")
     except ValueError as e:
@@ -244,9 +235,6 @@ def _is_image_input(path):
 
 def _read_image(path, flags=cv2.IMREAD_UNCHANGED):
     """``cv2.imread`` of a regular file, OpenCV's and libpng's own stderr lines silenced."""
-    from .._quiet import opencv_silenced
-    from ..io import file_path, shown
-
     try:
         path = file_path(path, "image")
         st = os.stat(path)
@@ -274,20 +262,16 @@ def _read_image(path, flags=cv2.IMREAD_UNCHANGED):
 
 def read_intrinsics(path):
     """:func:`omnicam.io.read_intrinsics` with its errors as one-line CLI errors."""
-    from ..io import read_intrinsics as read
-
     try:
-        return read(path)
+        return io.read_intrinsics(path)
     except (FileNotFoundError, ValueError) as e:
         raise CliError(_one_line(e)) from None
 
 
 def read_far_lines(path):
     """:func:`omnicam.io.read_far_lines` with its errors as one-line CLI errors."""
-    from ..io import read_far_lines as read
-
     try:
-        return read(path)
+        return io.read_far_lines(path)
     except (FileNotFoundError, ValueError) as e:
         raise CliError(_one_line(e)) from None
 
@@ -311,8 +295,6 @@ def _save_camera(camera, path, overwrite, report=None, **verdict):
     :class:`omnicam.io.Verdict`, or a report taken with the keywords of
     :meth:`~omnicam.io.Verdict.from_report` (``K_source``, ``K_file``, ``K_note``, ``forced``,
     ``implausible``)."""
-    from ..io import Verdict
-
     if not overwrite and os.path.lexists(path):
         raise CliError(f"calibration file {path} exists; pass --overwrite to replace it")
     try:

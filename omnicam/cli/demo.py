@@ -9,7 +9,11 @@ import time
 import cv2
 import numpy as np
 
+from .. import synthetic
+from ..camera import MisalignedHyperbolicCamera
+from ..io import write_far_lines, write_intrinsics
 from ..synthetic.demo import DEMO_CLICK_NOISE_PX, demo_environment, demo_far_lines
+from ..views import UNSEEN, K_from_fov, rotation_from_ypr
 from ._common import (
     EXIT_OK,
     CliError,
@@ -24,8 +28,6 @@ from .info import posture, vector_text
 
 def _table_rms(cam_a, cam_b, size):
     """RMS distance (px) between two cameras' float panorama tables where both see the mirror."""
-    from ..views import UNSEEN
-
     a = cam_a.init_panorama_maps(size, m1type=cv2.CV_32FC2)[0]
     b = cam_b.init_panorama_maps(size, m1type=cv2.CV_32FC2)[0]
     ok = (a[..., 0] != UNSEEN) & (b[..., 0] != UNSEEN)
@@ -35,10 +37,6 @@ def _table_rms(cam_a, cam_b, size):
 
 def cmd_demo(args):
     """``omnicam demo``: the module docstring."""
-    from .. import synthetic
-    from ..camera import MisalignedHyperbolicCamera
-    from ..io import write_far_lines, write_intrinsics
-
     t_start = time.perf_counter()
     out = args.output
     if os.path.exists(out) and not os.path.isdir(out):
@@ -107,8 +105,6 @@ def cmd_demo(args):
         f"{_table_rms(camera, truth, (256, 64)):.2f} px, uncalibrated aligned model (eqs. 2-5) "
         f"{_table_rms(baseline, truth, (256, 64)):.2f} px"
     )
-
-    from ..views import K_from_fov, rotation_from_ypr
 
     views = {
         "panorama.png": camera.init_panorama_maps(pano_size),

@@ -14,9 +14,22 @@ views, each with its own ``-o PREFIX``).
 
 from __future__ import annotations
 
+import math
+
 import cv2
+import numpy as np
 
 from .._atomic import OutputError
+from ..camera import scale_K
+from ..maps_export import (
+    ffmpeg_command,
+    float_maps,
+    write_ffmpeg_maps,
+    write_filestorage_maps,
+    write_npy_maps,
+)
+from ..spherical import equirect_view
+from ..views import CYLINDRICAL_MIN_ELEVATION, PanoramaView, visible_elevation_range
 from ._common import EXIT_OK, EXIT_USAGE, CliError, _check_output, _count, _load_camera, _size
 from .unwarp import add_view_arguments, view_specs
 
@@ -25,14 +38,6 @@ def _scaled_view(spec, camera, k):
     """The view of ``spec`` with ``k x k`` output pixels in place of each pixel: the fine pixel
     centres are those of the ``k x k`` blocks of each coarse pixel (same field of view), so
     scaling the result down by ``k`` with area averaging gives the coarse view."""
-    import math
-
-    import numpy as np
-
-    from ..camera import scale_K
-    from ..spherical import equirect_view
-    from ..views import CYLINDRICAL_MIN_ELEVATION, PanoramaView, visible_elevation_range
-
     view = spec.view
     if k == 1:
         return view
@@ -81,14 +86,6 @@ def _scaled_view(spec, camera, k):
 
 def cmd_maps(args):
     """``omnicam maps``: the module docstring."""
-    from ..maps_export import (
-        ffmpeg_command,
-        float_maps,
-        write_ffmpeg_maps,
-        write_filestorage_maps,
-        write_npy_maps,
-    )
-
     if not (args.ffmpeg or args.npy or args.filestorage):
         raise CliError("choose what to write: --ffmpeg, --npy and/or --filestorage EXT", EXIT_USAGE)
     specs = view_specs(args)

@@ -33,7 +33,11 @@ import warnings
 import cv2
 
 from .._atomic import OutputError, write_bytes
-from ..stream import H264, VIDEO_CODECS, count_frames, open_capture
+from ..io import file_path
+from ..spherical import equirect_view
+from ..spherical_metadata import inject_spherical_mp4, jpeg_with_photosphere_xmp
+from ..stream import H264, VIDEO_CODECS, Unwarper, count_frames, open_capture
+from ..views import PanoramaView, PerspectiveView
 from ._common import (
     EXIT_FAILURE,
     EXIT_INTERRUPTED,
@@ -125,9 +129,6 @@ def view_from_spec(spec):
     Options of another kind of view are refused rather than ignored; the view classes check
     the values (sizes, angle ranges, depth), and what they refuse is a usage error too.
     """
-    from ..spherical import equirect_view
-    from ..views import PanoramaView, PerspectiveView
-
     o = spec.options
     allowed = {
         "panorama": ("elevation", "projection", "depth"),
@@ -180,8 +181,6 @@ def _unwarper(camera, specs, frame_size):
     """An :class:`~omnicam.stream.Unwarper` of the views, its tables for frames of
     ``frame_size`` (``camera.scaled`` when the calibration was made at another resolution).
     A view mostly outside what the mirror sees gives a warning line."""
-    from ..stream import Unwarper
-
     size = camera.image_size
     if (
         size is not None
@@ -247,8 +246,6 @@ def cmd_unwarp(args):
         if not os.path.isfile(source):
             raise CliError(f"input {source} is not a file")
     video_input = live or not _is_image_input(source)
-    from ..io import file_path
-
     for spec in specs:  # a name that is not UTF-8 crashes OpenCV's writers: refuse it first
         try:
             file_path(spec.output, "output")
@@ -271,8 +268,6 @@ def _sequence_name(pattern, index):
 
 
 def _write_equirect_jpeg(path, image, size, overwrite):
-    from ..spherical_metadata import jpeg_with_photosphere_xmp
-
     ok, jpg = cv2.imencode(".jpg", image, [cv2.IMWRITE_JPEG_QUALITY, 95])
     if not ok:
         raise CliError(f"cannot encode {path} as JPEG")
@@ -545,8 +540,6 @@ def _spherical_metadata(output):
     """The ``finalize`` of an equirectangular video: its spherical metadata, in MP4/MOV."""
 
     def add(tmp):
-        from ..spherical_metadata import inject_spherical_mp4
-
         if os.path.splitext(output)[1].lower() not in SPHERICAL_CONTAINERS:
             _warn(f"{output}: spherical video metadata is written into .mp4/.m4v/.mov only")
             return
