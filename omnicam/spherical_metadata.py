@@ -262,6 +262,22 @@ def _shift_chunk_offsets(boxes, delta):
         co64.payload = p[:8] + offs.astype(">u8").tobytes() + p[8 + 8 * n :]
 
 
+def _mark_spherical(trak) -> None:
+    """Put V1's ``uuid`` box in a video ``trak`` and V2's ``st3d``/``sv3d`` in its visual
+    sample entries, replacing any already there."""
+    assert trak.children is not None  # trak is a container (_CONTAINERS), parsed
+    trak.children = [
+        c for c in trak.children if not (c.kind == b"uuid" and c.payload[:16] == SPHERICAL_UUID)
+    ]
+    trak.children.append(Box(b"uuid", payload=SPHERICAL_UUID + spherical_v1_xml()))
+    for stsd in find_boxes(trak.children, [b"mdia", b"minf", b"stbl", b"stsd"]):
+        assert stsd.children is not None  # so is stsd
+        for entry in stsd.children:
+            if entry.kind in _VISUAL_ENTRIES and entry.children is not None:
+                entry.children = [c for c in entry.children if c.kind not in (b"sv3d", b"st3d")]
+                entry.children += parse_boxes(_st3d_box() + _sv3d_box())
+
+
 def inject_spherical_mp4(data) -> bytes:
     """An MP4/MOV (bytes) with Spherical Video V1 and V2 metadata in its video track.
 
@@ -279,17 +295,7 @@ def inject_spherical_mp4(data) -> bytes:
         raise ValueError("the MP4 has no video track")
     old_moov = len(next(b for b in boxes if b.kind == b"moov").to_bytes())
     for trak in traks:
-        assert trak.children is not None  # trak is a container (_CONTAINERS), parsed
-        trak.children = [
-            c for c in trak.children if not (c.kind == b"uuid" and c.payload[:16] == SPHERICAL_UUID)
-        ]
-        trak.children.append(Box(b"uuid", payload=SPHERICAL_UUID + spherical_v1_xml()))
-        for stsd in find_boxes(trak.children, [b"mdia", b"minf", b"stbl", b"stsd"]):
-            assert stsd.children is not None  # so is stsd
-            for entry in stsd.children:
-                if entry.kind in _VISUAL_ENTRIES and entry.children is not None:
-                    entry.children = [c for c in entry.children if c.kind not in (b"sv3d", b"st3d")]
-                    entry.children += parse_boxes(_st3d_box() + _sv3d_box())
+        _mark_spherical(trak)
     moov = next(b for b in boxes if b.kind == b"moov")
     delta = len(moov.to_bytes()) - old_moov
     mdat_at = kinds.index(b"mdat") if b"mdat" in kinds else len(kinds)
