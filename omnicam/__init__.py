@@ -31,6 +31,8 @@ _LAZY = {
     "samples": "omnicam.samples",
     "read_intrinsics": "omnicam.io",
     "read_central_model": "omnicam.io",
+    "read_verdict": "omnicam.io",
+    "Verdict": "omnicam.io",
     "write_intrinsics": "omnicam.io",
     "read_far_lines": "omnicam.io",
     "write_far_lines": "omnicam.io",
