@@ -72,3 +72,16 @@ def test_an_export_whose_own_error_is_large_warns_on_one_line_naming_the_better_
     warning = [line for line in captured.err.splitlines() if "warning" in line]
     assert len(warning) == 1  # the sample misaligned rig: 2.3 px RMS in OCamCalib's model
     assert "fits this camera best is omnidir" in warning[0] and "omnicam maps" in warning[0]
+
+
+def test_an_output_under_a_file_says_it_is_a_file_not_a_missing_folder(tmp_path, capsys):
+    from omnicam.cli import main
+
+    (tmp_path / "notes.txt").write_text("x")
+    out = tmp_path / "notes.txt" / "rig.yaml"
+    assert (
+        main(["export", "calib_files/hyperomni_aligned.yaml", "--to", "omnidir", "-o", str(out)])
+        == 1
+    )
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and "notes.txt is a file, not a folder" in err[0], err

@@ -148,6 +148,11 @@ def _check_output(path, overwrite, what="output"):
     if os.path.lexists(path) and not overwrite:
         raise CliError(f"{what} {path} exists; pass --overwrite to replace it")
     if not os.path.isdir(folder):
+        parent = folder
+        while parent and not os.path.exists(parent):
+            parent = os.path.dirname(parent) if os.path.dirname(parent) != parent else ""
+        if parent and not os.path.isdir(parent):
+            raise CliError(f"{what} {path}: {parent} is a file, not a folder")
         raise CliError(f"{what} {path}: folder {folder} does not exist")
     if not os.access(folder, os.W_OK | os.X_OK):
         raise CliError(f"{what} {path}: folder {folder} is not writable")
@@ -175,13 +180,25 @@ def _write_image(path, image, overwrite=True):
             atomic_output(path, what="image", overwrite=overwrite, verify=verify) as tmp,
         ):
             try:
-                ok, detail = cv2.imwrite(tmp, image), "cv2.imwrite failed"
+                ok, detail = cv2.imwrite(tmp, image), None
             except cv2.error as e:
                 ok, detail = False, _cv_message(e)
             if not ok:
-                raise CliError(f"cannot write {path}: {detail}")
+                raise CliError(f"cannot write {path}: {detail or _why_not_written(tmp)}")
     except OutputError as e:
         raise CliError(str(e)) from None
+
+
+def _why_not_written(tmp):
+    """What most likely stopped ``cv2.imwrite`` (it says only False): a full disk, else a
+    format the encoder refused."""
+    try:
+        st = os.statvfs(os.path.dirname(os.path.abspath(tmp)))
+        if st.f_bavail * st.f_frsize < 1 << 20:
+            return "the disk is full (less than 1 MB free); free some space and retry"
+    except (OSError, AttributeError):
+        pass
+    return "OpenCV's encoder refused it (an image type or size this format cannot hold?)"
 
 
 def _cv_message(e):
