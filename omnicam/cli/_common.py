@@ -323,7 +323,9 @@ def _save_camera(camera, path, overwrite, report=None, **verdict):
                 report if isinstance(report, Verdict) else Verdict.from_report(report, **verdict),
             )
     except (ValueError, OSError) as e:
-        raise CliError(f"cannot write {path}: {_one_line(e)}") from None
+        why = _one_line(e)  # the library's message names the file already
+        message = why if why.startswith("cannot write") else f"cannot write {path}: {why}"
+        raise CliError(message) from None
 
 
 def _indent(text, prefix="   "):
