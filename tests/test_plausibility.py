@@ -294,3 +294,17 @@ def test_implausible_choice_with_a_plausible_other_candidate_says_so(scene):
     assert "choice" in [w.kind for w in ws] and "swapped_ab" not in [w.kind for w in ws]
     assert f"candidate {physical[1]}" in str(next(w for w in ws if w.kind == "choice"))
     assert calls == []  # no second calibration with a and b swapped
+
+
+def test_a_mirror_in_metres_is_named_with_the_millimetres_to_give():
+    from omnicam.chessboard.calibrate import rim_conic
+
+    cam = synthetic.misaligned_rig()
+    m = cam.mirror
+    metres = cam.replace(  # the same rig, every length in metres: the same image
+        mirror=HyperbolicMirror(m.a / 1000, m.b / 1000, m.rim_radius / 1000), tvec=cam.tvec / 1000
+    )
+    units = [w for w in check_plausibility(metres, rim_conic(metres)) if w.kind == "units"]
+    assert len(units) == 1 and "in metres?" in str(units[0])
+    assert f"{m.rim_radius:g}" in str(units[0])  # the rim radius to give, in mm
+    assert not [w for w in check_plausibility(cam, rim_conic(cam)) if w.kind == "units"]

@@ -260,7 +260,7 @@ def check_plausibility(
     Returns
     -------
     list of PlausibilityWarning
-        In the order: rim size, intrinsics, principal point, tilt, offset, residuals.
+        In the order: rim size, intrinsics, principal point, units, tilt, offset, residuals.
     """
     max_tilt_deg = _limit(max_tilt_deg, "max_tilt_deg")
     max_offset_mm = _limit(max_offset_mm, "max_offset_mm")
@@ -351,6 +351,20 @@ def check_plausibility(
                 f"of it?) and that the ellipse found is the mirror's rim",
                 d,
                 allowed,
+            )
+        )
+
+    # the mirror's unit: the limits are in millimetres
+    if mirror.rim_radius < 1.0:
+        out.append(
+            PlausibilityWarning(
+                "units",
+                f"the mirror's rim radius is {mirror.rim_radius:g}: in metres? omnicam's "
+                f"lengths and limits (max_offset_mm = {max_offset_mm:g}) are in millimetres; "
+                f"give a, b and the rim radius in mm (e.g. {1000 * mirror.a:g} "
+                f"{1000 * mirror.b:g} {1000 * mirror.rim_radius:g})",
+                mirror.rim_radius,
+                1.0,
             )
         )
 
