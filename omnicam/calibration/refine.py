@@ -814,6 +814,26 @@ def _weighted_problem(K, mirror, R, t, rim_px, rim_sigma, reflection, reflection
     return prob, w
 
 
+def _covariance_at(
+    K, mirror, rvec, tvec, rim_points, rim_sigma, reflection, reflection_sigma, floor
+):
+    """At the posture ``(rvec, tvec)``: the weighted refinement problem, its row weights ``w``,
+    its Jacobian ``J``, ``tvec`` as an array and the inverse of the information
+    ``(J^T W J)^-1`` (None when singular)."""
+    K = np.asarray(K, np.float64)
+    R = cv2.Rodrigues(np.asarray(rvec, np.float64).reshape(3, 1))[0]
+    t = np.asarray(tvec, np.float64)
+    rim_px = np.ascontiguousarray(np.asarray(rim_points, np.float64).reshape(-1, 2))
+    prob, w = _weighted_problem(
+        K, mirror, R, t, rim_px, rim_sigma, reflection, reflection_sigma, floor
+    )
+    J = prob.jacobian(prob.x0()) * w[:, None]
+    try:
+        return prob, w, J, t, np.linalg.inv(J.T @ J)
+    except np.linalg.LinAlgError:
+        return prob, w, J, t, None
+
+
 def posture_uncertainty(
     K, mirror, rvec, tvec, rim_points, rim_sigma, reflection=None, reflection_sigma=None, floor=0.02
 ):
@@ -840,19 +860,12 @@ def posture_uncertainty(
     -------
     Uncertainty
     """
-    K = np.asarray(K, np.float64)
-    R = cv2.Rodrigues(np.asarray(rvec, np.float64).reshape(3, 1))[0]
-    t = np.asarray(tvec, np.float64)
-    rim_px = np.ascontiguousarray(np.asarray(rim_points, np.float64).reshape(-1, 2))
-    prob, w = _weighted_problem(
-        K, mirror, R, t, rim_px, rim_sigma, reflection, reflection_sigma, floor
+    *_, t, full = _covariance_at(
+        K, mirror, rvec, tvec, rim_points, rim_sigma, reflection, reflection_sigma, floor
     )
-    J = prob.jacobian(prob.x0()) * w[:, None]
-    try:
-        cov = np.linalg.inv(J.T @ J)[:_N_POSTURE, :_N_POSTURE]
-    except np.linalg.LinAlgError:
+    if full is None:
         return Uncertainty(math.inf, math.inf)
-    return uncertainty_from_cov(cov, t)
+    return uncertainty_from_cov(full[:_N_POSTURE, :_N_POSTURE], t)
 
 
 #: The stated region of the axis (:func:`profile_uncertainty`): where the profile cost rises
@@ -962,17 +975,10 @@ def profile_uncertainty(
         With ``first_order_axis_std_deg`` and, with a twin, ``aligned_chi2``, ``aligned_px``
         and ``twin_deg``.
     """
-    K = np.asarray(K, np.float64)
-    R = cv2.Rodrigues(np.asarray(rvec, np.float64).reshape(3, 1))[0]
-    t = np.asarray(tvec, np.float64)
-    rim_px = np.ascontiguousarray(np.asarray(rim_points, np.float64).reshape(-1, 2))
-    prob, w = _weighted_problem(
-        K, mirror, R, t, rim_px, rim_sigma, reflection, reflection_sigma, floor
+    prob, w, J, t, full = _covariance_at(
+        K, mirror, rvec, tvec, rim_points, rim_sigma, reflection, reflection_sigma, floor
     )
-    J = prob.jacobian(prob.x0()) * w[:, None]
-    try:
-        full = np.linalg.inv(J.T @ J)
-    except np.linalg.LinAlgError:
+    if full is None:
         return Uncertainty(math.inf, math.inf)
     cov = full[:_N_POSTURE, :_N_POSTURE]
     first = uncertainty_from_cov(cov, t)
