@@ -72,8 +72,6 @@ __all__ = [
 
 #: ``M`` of the aligned rig (see the module notes on handedness).
 F_OMNI = np.diag([1.0, 1.0, -1.0])
-#: OCamCalib's frame (x = rows, y = columns, z out of the image) for the aligned rig.
-F_OCAM = np.array([[0.0, 1.0, 0.0], [1.0, 0.0, 0.0], [0.0, 0.0, 1.0]])
 
 FORMATS = ("omnidir", "kalibr", "camodocal", "ocamcalib")
 #: :func:`export` warns when its file's RMS error exceeds this (px) ...

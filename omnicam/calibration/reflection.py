@@ -324,8 +324,6 @@ class ReflectionFit:
     rms : float
         RMS distance of ``points`` to the ellipse, px: the measurement's own scatter (the
         outline of a coaxial circle is close to, not exactly, an ellipse).
-    center_std : float
-        Standard deviation of ``center`` per coordinate, ``rms * sqrt(2 / N)``, px.
     quality : float
         Fraction of the search rays that gave an inlier edge point, in [0, 1].
     contrast : float
@@ -341,7 +339,6 @@ class ReflectionFit:
     center: np.ndarray
     radius: float
     rms: float
-    center_std: float
     quality: float
     contrast: float
     core: bool = True
@@ -955,13 +952,11 @@ def _refine_silhouette(gray, G, pts, c_est, r_est, bw, sig, levels, rng):
             f"the silhouette has no darker core (grey {core_level:.0f} inside, "
             f"{shell_level:.0f} near its edge): no lens glass, e.g. a dark floor"
         )
-    n = len(fit.points)
     out = ReflectionFit(
         points=fit.points,
         center=fit.center,
         radius=radius,
         rms=float(fit.rms),
-        center_std=float(fit.rms * math.sqrt(2.0 / max(n, 1))),
         quality=float(quality),
         contrast=edge_rise,
         core=why is None,
