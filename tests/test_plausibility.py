@@ -297,14 +297,17 @@ def test_implausible_choice_with_a_plausible_other_candidate_says_so(scene):
 
 
 def test_a_mirror_in_metres_is_named_with_the_millimetres_to_give():
-    from omnicam.chessboard.calibrate import rim_conic
+    from omnicam.calibration.chen import rim_conic
+
+    def conic(c):
+        return rim_conic(c.K, c.R, c.tvec, c.mirror)
 
     cam = synthetic.misaligned_rig()
     m = cam.mirror
     metres = cam.replace(  # the same rig, every length in metres: the same image
         mirror=HyperbolicMirror(m.a / 1000, m.b / 1000, m.rim_radius / 1000), tvec=cam.tvec / 1000
     )
-    units = [w for w in check_plausibility(metres, rim_conic(metres)) if w.kind == "units"]
+    units = [w for w in check_plausibility(metres, conic(metres)) if w.kind == "units"]
     assert len(units) == 1 and "in metres?" in str(units[0])
     assert f"{m.rim_radius:g}" in str(units[0])  # the rim radius to give, in mm
-    assert not [w for w in check_plausibility(cam, rim_conic(cam)) if w.kind == "units"]
+    assert not [w for w in check_plausibility(cam, conic(cam)) if w.kind == "units"]

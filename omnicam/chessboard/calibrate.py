@@ -50,6 +50,7 @@ import numpy as np
 from .._typing import FloatArray
 from .._validate import validate_D, validate_image_size, validate_K
 from ..calibration import calibrate
+from ..calibration.chen import rim_conic
 from ..calibration.ellipse import conic_distance
 from ..calibration.plausibility import check_plausibility
 from ..calibration.reflection import detect_reflection
@@ -69,7 +70,7 @@ from .heldout import cross_validate
 from .intrinsics import check_pattern_size
 from .report import PatternReport
 
-__all__ = ["calibrate_pattern", "pooled_reflection", "rim_conic"]
+__all__ = ["calibrate_pattern", "pooled_reflection"]
 
 _MIN_VIEWS = 3
 _EDGE_ON_SIN = math.sin(math.radians(5.0))  # a board plane within 5 deg of the viewpoint
@@ -810,16 +811,6 @@ def _adjustment_step(cam0, mirror, corners, rim_seen, model, f_scale, outliers):
     return AdjustmentStep(adj, sol, used, vr, rim_px, warns)
 
 
-def rim_conic(camera) -> FloatArray:
-    """The conic ``Q_I`` of the rim's image in ideal (undistorted) pixels: the circle
-    ``x^2 + y^2 = r^2`` of the plane ``z = z_rim`` mapped by ``H = K [R_1, R_2, z_rim R_3 + t]``,
-    ``Q_I = H^-T diag(1, 1, -r^2) H^-1``."""
-    R, t, m = camera.R, camera.tvec, camera.mirror
-    H = camera.K @ np.column_stack([R[:, 0], R[:, 1], m.z_rim * R[:, 2] + t])
-    Hi = np.linalg.inv(H)
-    return Hi.T @ np.diag([1.0, 1.0, -(m.rim_radius**2)]) @ Hi
-
-
 def _heldout_step(report, mirror, pattern_size, square, options, k):
     """6. The k-fold held-out check of the views used (:func:`.heldout.cross_validate`), the
     rig on each fold's training views calibrated with the same ``options``, its warnings
@@ -950,7 +941,12 @@ def _report_step(fit, corners, cam0, image_size, lens_note, central, shape_unkno
             f"central fit's {central.rms:.3f} px: the mirror may not be a hyperboloid (a "
             f"sphere, a paraboloid, a cone), or the start was far off"
         )
-    warns.extend(str(w) for w in check_plausibility(camera, rim_conic(camera), image_size))
+    warns.extend(
+        str(w)
+        for w in check_plausibility(
+            camera, rim_conic(camera.K, camera.R, camera.tvec, camera.mirror), image_size
+        )
+    )
     image_points_out = [None if p is None else p.reshape(-1, 1, 2).astype(np.float32) for p in pts]
     report = PatternReport(
         rms=rms,

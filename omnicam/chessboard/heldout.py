@@ -19,6 +19,7 @@ import cv2
 import numpy as np
 from scipy.optimize import least_squares
 
+from ..raytrace import undistort_normalized
 from .board_pose import board_pose_from_rays
 
 __all__ = [
@@ -129,18 +130,13 @@ def omnicam_predictor(camera) -> tuple[Callable, Callable]:
     return project, directions
 
 
-def _unified_directions(px, K, xi, D, iterations=20):
-    """Unit rays of pixels under Mei's unified model (``cv2.omnidir``'s), radial-tangential
-    ``D = (k1, k2, p1, p2)`` undone by fixed-point iteration."""
-    k1, k2, p1, p2 = np.ravel(D)[:4]
-    y = (px[:, 1] - K[1, 2]) / K[1, 1]
-    x = (px[:, 0] - K[0, 2] - K[0, 1] * y) / K[0, 0]
-    xd, yd = x.copy(), y.copy()
-    for _ in range(iterations):
-        r2 = x * x + y * y
-        radial = 1 + k1 * r2 + k2 * r2 * r2
-        x = (xd - 2 * p1 * x * y - p2 * (r2 + 2 * x * x)) / radial
-        y = (yd - p1 * (r2 + 2 * y * y) - 2 * p2 * x * y) / radial
+def _unified_directions(px, K, xi, D):
+    """Unit rays of pixels under Mei's unified model (``cv2.omnidir``'s): ``K`` and the
+    radial-tangential ``D = (k1, k2, p1, p2)`` undone
+    (:func:`omnicam.raytrace.undistort_normalized`), then the point on the unit sphere that
+    projects there from ``(0, 0, -xi)``."""
+    xy = undistort_normalized(np.ascontiguousarray(px, np.float64), K, np.ravel(D)[:4])
+    x, y = xy[:, 0], xy[:, 1]
     r2 = x * x + y * y
     lam = (xi + np.sqrt(1 + (1 - xi * xi) * r2)) / (r2 + 1)
     X = np.stack([lam * x, lam * y, lam - xi], axis=1)
