@@ -70,7 +70,7 @@ from .heldout import cross_validate
 from .intrinsics import check_pattern_size
 from .report import PatternReport
 
-__all__ = ["calibrate_pattern", "pooled_reflection"]
+__all__ = ["ONE_SIDED", "calibrate_pattern", "pooled_reflection"]
 
 _MIN_VIEWS = 3
 _EDGE_ON_SIN = math.sin(math.radians(5.0))  # a board plane within 5 deg of the viewpoint
@@ -89,6 +89,9 @@ _DETECT_ROUNDS = 3
 XI_NOT_HYPERBOLIC = 1.1
 #: The hyperbolic start's ``xi`` when the central fit gives 1 to XI_NOT_HYPERBOLIC.
 XI_START_MAX = 0.97
+#: The start of the warning that the views cannot tell the principal point from the tilt (the
+#: command line refuses such a calibration unless forced).
+ONE_SIDED = "all boards are on one side of the mirror (an azimuth gap over 180 deg)"
 
 
 # -- helpers ----------------------------------------------------------------------------------
@@ -884,7 +887,7 @@ def _report_step(fit, corners, cam0, image_size, lens_note, central, shape_unkno
     centres = np.array([obj.mean(axis=0) @ rodrigues(p[0]).T + p[1] for p in board_poses.values()])
     if _azimuth_gap_deg(centres) > 180.0:
         warns.append(
-            "all boards are on one side of the mirror (an azimuth gap over 180 deg): "
+            f"{ONE_SIDED}: "
             "add views on the other side, or the principal point and the tilt are "
             "poorly separated"
         )

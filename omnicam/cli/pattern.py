@@ -35,6 +35,7 @@ import numpy as np
 from ..calibration.rim import check_hint, detect_rim
 from ..camera import MisalignedHyperbolicCamera, scale_K
 from ..chessboard import DIST_MODELS
+from ..chessboard.calibrate import ONE_SIDED
 from ..io import SUFFIXES
 from ..mirror import HyperbolicMirror
 from ._common import (
@@ -327,7 +328,7 @@ def cmd_calibrate_pattern(args):
         except (ValueError, RuntimeError, np.linalg.LinAlgError) as e:
             raise CliError(f"calibration failed: {_one_line(e)}") from None
     _print_report(camera, report, names, caught)
-    one_side = [w for w in report.warnings if "all boards are on one side" in w]
+    one_side = [w for w in report.warnings if w.startswith(ONE_SIDED)]
     if one_side and not args.force:
         raise CliError(
             "calibration refused: the boards are all on one side of the mirror, so the views "
