@@ -14,7 +14,7 @@ import pytest
 from conftest import RANDOM_RIGS, RIGS, candidates_of
 
 from omnicam import synthetic
-from omnicam.calibration import refine, reflection
+from omnicam.calibration import refine, reflection, steps
 
 CAM = RIGS["misaligned"]  # tilt 3 deg, offset a few mm
 STEPS = np.array([1e-7, 1e-7, 1e-6, 1e-6, 1e-6])  # radians, then mm
@@ -107,7 +107,10 @@ def test_far_line_residuals_vanish_at_the_truth_and_not_at_the_other_posture():
     for i, (a, b) in enumerate(SEGMENTS):
         Q, e = term.line(i, term.x0()[4 * i : 4 * i + 4])
         u = (np.subtract(b, a)) / np.linalg.norm(np.subtract(b, a))
-        assert np.linalg.norm(np.cross(e, u)) < 1e-8
+        # to round-off of the SVD in the Plucker fit, which the BLAS kernel changes (1.5e-8 rad
+        # with OpenBLAS's Haswell kernel, under 1e-8 with the default): the same 5e-8 as the
+        # point's 1e-3 mm at 20 m
+        assert np.linalg.norm(np.cross(e, u)) < 5e-8
         assert np.linalg.norm(np.cross(Q - a, u)) < 1e-3  # mm, 20 m away
     other = max(
         (c for c in candidates_of(cam) if c.physical),
@@ -182,7 +185,9 @@ def test_a_start_turned_about_the_mirror_axis_comes_back_in_the_gauge():
 def test_far_lines_and_rim_recover_the_posture_and_lines_in_the_planes_of_the_segments():
     _, xn = far_lines(CAM)
     start = start_from(CAM, [3e-4, -2e-4, 0.03, -0.02, 0.04])
-    res = refine.refine_posture(CAM.K, CAM.mirror, *start, CAM.rim_image_points(200), xn)
+    res = refine.refine_posture(
+        CAM.K, CAM.mirror, *start, CAM.rim_image_points(200), xn, max_nfev=steps.LINES_MAX_NFEV
+    )  # the budget calibrate() gives far lines (15, the rim's, stopped short on one BLAS kernel)
     assert res.accepted
     assert np.abs(offsets(CAM, res)).max() < 1e-5  # rad, mm (forward differences)
     assert res.line_rms < 1e-5 and res.rim_rms < 1e-6
