@@ -1,4 +1,4 @@
-"""Subpixel edges in images: grey conversion and edge points sampled along curve normals.
+"""Subpixel edges in images: edge points sampled along curve normals.
 
 Used by the rim detector (:mod:`.rim`) and the camera's-reflection detector: the image gradient
 is sampled along the normals of a predicted ellipse, and each normal's strongest (or outermost)
@@ -9,42 +9,11 @@ from __future__ import annotations
 
 import cv2
 import numpy as np
-import numpy.typing as npt
 
 from .._typing import FloatArray
 from .ellipse import axes_angle
 
-__all__ = ["as_gray", "edge_points_along_normals"]
-
-
-def as_gray(image) -> npt.NDArray[np.float32]:
-    """Grey float32 image scaled to about [0, 1]; BGR(A) is converted with OpenCV's weights."""
-    if not isinstance(image, np.ndarray):
-        raise ValueError(f"image must be a numpy array (grey or BGR), got {type(image).__name__}")
-    if image.ndim == 3 and image.shape[2] == 1:
-        image = image[:, :, 0]
-    if image.ndim not in (2, 3) or (image.ndim == 3 and image.shape[2] not in (3, 4)):
-        raise ValueError(
-            f"image must be grey (H, W) or BGR/BGRA (H, W, 3|4), got shape {image.shape}"
-        )
-    if min(image.shape[:2]) < 32:
-        raise ValueError(
-            f"image is too small to hold a mirror rim: {image.shape[1]}x"
-            f"{image.shape[0]} px (need at least 32x32)"
-        )
-    if image.dtype == np.bool_ or not (
-        np.issubdtype(image.dtype, np.integer) or np.issubdtype(image.dtype, np.floating)
-    ):
-        raise ValueError(f"image must be uint8, uint16 or float, got dtype {image.dtype}")
-    img = image.astype(np.float32, copy=False)
-    if img.ndim == 3:
-        img = cv2.cvtColor(img, cv2.COLOR_BGRA2GRAY if img.shape[2] == 4 else cv2.COLOR_BGR2GRAY)
-    if not np.isfinite(img).all():
-        img = np.nan_to_num(img, nan=0.0, posinf=0.0, neginf=0.0)
-    lo, hi = float(img.min()), float(img.max())
-    if not hi > lo:
-        raise ValueError("no ellipse found: the image is uniform (no mirror rim visible)")
-    return (img - lo) * np.float32(1.0 / (hi - lo))
+__all__ = ["edge_points_along_normals"]
 
 
 def edge_points_along_normals(

@@ -37,6 +37,7 @@ import numpy as np
 from scipy.optimize import minimize_scalar
 
 from .._typing import FloatArray
+from ..images import to_gray
 from ..raytrace import distort_normalized
 from .errors import EstimationError
 from .rim import RimFit, fit_rim
@@ -355,24 +356,6 @@ class ReflectionFit:
             f"{self.radius:.2f} px, points={len(self.points)}, rms={self.rms:.3f} px, "
             f"quality={self.quality:.2f}, contrast={self.contrast:.1f})"
         )
-
-
-def to_gray(image):
-    """A float32 grey image on the 0-255 scale of 8 bits (16-bit divided by 257, floats in [0, 1]
-    times 255), BGR(A) by OpenCV's weights; ``ValueError`` for a shape that is no image."""
-    img = np.asarray(image)
-    if img.ndim == 3 and img.shape[2] == 1:
-        img = img[:, :, 0]
-    if img.ndim == 3 and img.shape[2] in (3, 4):
-        img = cv2.cvtColor(img[:, :, :3].astype(np.float32), cv2.COLOR_BGR2GRAY)
-    if img.ndim != 2:
-        raise ValueError(f"image must be grey (H, W) or BGR(A) (H, W, 3|4), got {img.shape}")
-    g = np.nan_to_num(img.astype(np.float32))
-    if np.asarray(image).dtype == np.uint16:
-        g = g / 257.0
-    elif g.size and float(g.max()) <= 1.0 and np.asarray(image).dtype.kind == "f":
-        g = g * 255.0
-    return g
 
 
 def _polar(G, center, radii, angles):

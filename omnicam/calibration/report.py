@@ -8,7 +8,9 @@ import math
 import cv2
 import numpy as np
 
-__all__ = ["CalibrationReport", "to_bgr8"]
+from ..images import to_bgr8
+
+__all__ = ["CalibrationReport"]
 
 # BGR colours of the overlay
 _RIM = (0, 200, 0)
@@ -289,7 +291,13 @@ class CalibrationReport:
         -------
         overlay : (H, W, 3) uint8 ndarray
         """
-        canvas = to_bgr8(image, self.camera.image_size)
+        if image is not None:
+            canvas = to_bgr8(image)
+        elif self.camera.image_size is None:
+            raise ValueError("draw() needs an image when the camera has no image_size")
+        else:
+            w, h = self.camera.image_size
+            canvas = np.zeros((h, w, 3), np.uint8)
         h, w = canvas.shape[:2]
         scale = max(1.0, min(w, h) / 500.0)
         thick = max(1, int(round(scale)))
@@ -419,29 +427,6 @@ def _text_box(canvas, entries, scale, thick, top, swatch=False):
             weight,
             cv2.LINE_AA,
         )
-
-
-def to_bgr8(image, image_size):
-    """An 8-bit BGR copy of ``image`` to draw on (grey, BGRA, 16-bit and float scaled), or a
-    black image of ``image_size`` when ``image`` is None."""
-    if image is None:
-        if image_size is None:
-            raise ValueError("draw() needs an image when the camera has no image_size")
-        return np.zeros((image_size[1], image_size[0], 3), np.uint8)
-    img = np.asarray(image)
-    if img.ndim == 3 and img.shape[2] == 1:
-        img = img[:, :, 0]
-    if img.ndim not in (2, 3) or (img.ndim == 3 and img.shape[2] not in (3, 4)):
-        raise ValueError(f"image must be grey (H, W) or BGR (H, W, 3), got shape {img.shape}")
-    if img.dtype != np.uint8:
-        x = np.nan_to_num(img.astype(np.float64))
-        hi = 65535.0 if img.dtype == np.uint16 else (1.0 if x.max() <= 1.0 else 255.0)
-        img = np.clip(x / hi * 255.0, 0, 255).astype(np.uint8)
-    if img.ndim == 2:
-        return cv2.cvtColor(img, cv2.COLOR_GRAY2BGR)
-    if img.shape[2] == 4:
-        return cv2.cvtColor(img, cv2.COLOR_BGRA2BGR)
-    return img.copy()
 
 
 def _curve_normals(cam, far_lines):

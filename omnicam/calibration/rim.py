@@ -26,8 +26,9 @@ import numpy as np
 
 from .._typing import ArrayLike, FloatArray
 from .._validate import real_number, validate_rng
+from ..images import to_gray
 from ..raytrace import as_points
-from .edges import as_gray, edge_points_along_normals
+from .edges import edge_points_along_normals
 from .ellipse import (
     axes_angle,
     conic_distance,
@@ -602,7 +603,14 @@ def detect_rim(
         threshold, "threshold", 0.0, 1e4, lo_open=True, expected="a positive number of pixels"
     )
     rng = validate_rng(rng)
-    gray = as_gray(image)
+    gray = to_gray(image, "range")
+    if min(gray.shape) < 32:
+        raise ValueError(
+            f"image is too small to hold a mirror rim: {gray.shape[1]}x{gray.shape[0]} px "
+            f"(need at least 32x32)"
+        )
+    if not gray.max() > 0:
+        raise ValueError("no ellipse found: the image is uniform (no mirror rim visible)")
     if sigma > max(1.0, min(gray.shape) / 8):
         raise ValueError(
             f"sigma must be at most 1/8 of the image's shorter side "

@@ -14,6 +14,7 @@ import math
 import cv2
 import numpy as np
 
+from ..images import to_gray
 from ..raytrace import undistort_normalized
 from . import chen
 from .errors import EstimationError
@@ -34,7 +35,6 @@ from .reflection import (
     fit_circle,
     plane_radius,
     self_reflection_pixel,
-    to_gray,
 )
 from .rim import check_hint, detect_rim, fit_rim
 from .selection import ReflectionEvidence, select_candidate

@@ -55,6 +55,7 @@ from ..calibration.ellipse import conic_distance
 from ..calibration.plausibility import check_plausibility
 from ..calibration.reflection import detect_reflection
 from ..calibration.rim import detect_rim, fit_rim
+from ..images import read_image
 from ..mirror import HyperbolicMirror
 from .adjustment import (
     DIST_MODELS,
@@ -109,10 +110,9 @@ def _names(images):
 
 def _load_image(image, index):
     if isinstance(image, (str, os.PathLike)):
-        img = cv2.imread(os.fspath(image), cv2.IMREAD_COLOR | cv2.IMREAD_IGNORE_ORIENTATION)
-        if img is None:
-            raise ValueError(f"images[{index}]: cannot read image file {os.fspath(image)!r}")
-        return img
+        return read_image(
+            image, cv2.IMREAD_COLOR | cv2.IMREAD_IGNORE_ORIENTATION, f"images[{index}]"
+        )
     if not isinstance(image, np.ndarray) or image.ndim not in (2, 3) or image.size == 0:
         raise ValueError(
             f"images[{index}] must be an image array (H, W) or (H, W, C) or a file "
@@ -263,6 +263,8 @@ def calibrate_pattern(
 
     Raises
     ------
+    FileNotFoundError
+        An image file that does not exist.
     ValueError
         Bad arguments, fewer than 3 usable views, no board found anywhere, all boards seen
         edge-on (coplanar with the camera), corner arrays that do not match ``pattern_size``;

@@ -13,6 +13,7 @@ import cv2
 import numpy as np
 
 from .._typing import FloatArray
+from ..images import check_image, read_image, to_gray
 
 __all__ = ["calibrate_intrinsics", "check_pattern_size", "find_chessboard", "gray8"]
 
@@ -38,42 +39,21 @@ def check_pattern_size(pattern_size) -> tuple[int, int]:
 
 
 def gray8(image, index) -> np.ndarray:
-    """8-bit grey view of an image (array or file path) for the corner detector."""
+    """8-bit grey of an image (array or file path) for OpenCV's corner detectors.
+
+    An 8-bit image as ``cv2.cvtColor`` gives it; one of more bits (or float) stretched from its
+    minimum to its maximum (:func:`omnicam.images.to_gray`, ``"range"``), so that a 12-bit image
+    in a 16-bit file is not nearly black.
+    """
+    name = f"images[{index}]"
     if isinstance(image, (str, os.PathLike)):
-        path = os.fspath(image)
-        img = cv2.imread(path, cv2.IMREAD_UNCHANGED)
-        if img is None:
-            raise ValueError(f"images[{index}]: cannot read image file {path!r}")
-        image = img
-    if not isinstance(image, np.ndarray):
+        image = read_image(image, cv2.IMREAD_UNCHANGED, name)
+    elif not isinstance(image, np.ndarray):
         raise ValueError(
-            f"images[{index}] must be an image array or a file path, got {type(image).__name__}"
+            f"{name} must be an image array or a file path, got {type(image).__name__}"
         )
-    if image.ndim == 3 and image.shape[2] == 1:
-        image = image[:, :, 0]
-    if (
-        image.ndim not in (2, 3)
-        or (image.ndim == 3 and image.shape[2] not in (3, 4))
-        or image.size == 0
-    ):
-        raise ValueError(
-            f"images[{index}] must be grey (H, W) or BGR/BGRA (H, W, 3|4), got shape {image.shape}"
-        )
-    if image.dtype == np.uint8:
-        img = image
-    elif np.issubdtype(image.dtype, np.integer) or np.issubdtype(image.dtype, np.floating):
-        f = np.nan_to_num(image.astype(np.float32))
-        lo, hi = float(f.min()), float(f.max())
-        img = (
-            np.zeros(f.shape, np.uint8)
-            if hi <= lo
-            else np.round((f - lo) * (255.0 / (hi - lo))).astype(np.uint8)
-        )
-    else:
-        raise ValueError(f"images[{index}] must be uint8, uint16 or float, got dtype {image.dtype}")
-    if img.ndim == 3:
-        img = cv2.cvtColor(img, cv2.COLOR_BGRA2GRAY if img.shape[2] == 4 else cv2.COLOR_BGR2GRAY)
-    return img
+    image = check_image(image, name)
+    return to_gray(image, "levels" if image.dtype == np.uint8 else "range", np.uint8, name)
 
 
 def find_chessboard(gray, pattern_size) -> np.ndarray | None:
@@ -139,6 +119,8 @@ def calibrate_intrinsics(
 
     Raises
     ------
+    FileNotFoundError
+        An image file that does not exist.
     ValueError
         No images, unreadable or malformed images, images of different sizes, a bad
         ``pattern_size`` or ``square_size``, or the board found in fewer than ``min_views`` images.

@@ -9,7 +9,7 @@ from typing import Any
 import cv2
 import numpy as np
 
-from ..calibration.report import to_bgr8
+from ..images import to_bgr8
 from .heldout import HeldOut
 
 __all__ = ["PatternReport"]
@@ -124,7 +124,7 @@ class PatternReport:
     def draw(self, image, index) -> np.ndarray:
         """BGR overlay of view ``index``: detected corners (green circles) and reprojected ones
         (red crosses), with the rim (blue)."""
-        img = to_bgr8(image, None).copy()
+        img = to_bgr8(image)
         rim = self.camera.rim_image_points(720)
         if np.isfinite(rim).all():
             cv2.polylines(

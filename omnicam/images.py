@@ -1,0 +1,208 @@
+"""Images as the library takes them: one reader of image files, one grey conversion.
+
+Every function that takes an image accepts a numpy array, grey ``(H, W)`` or ``(H, W, 1)`` or
+BGR / BGRA ``(H, W, 3|4)``, of any integer or float dtype (not bool), as ``cv2.imread`` gives
+them; the detectors that accept a file name read it with :func:`read_image`.
+
+Two scalings serve two kinds of use:
+
+- ``"levels"``: the 0-255 scale of 8 bits, whatever the dtype (16-bit divided by 257, floats
+  in [0, 1] times 255, other values as they are). Thresholds on absolute grey levels (the
+  camera's dark reflection) and drawings use it, and so do OpenCV's corner detectors, which
+  take 8 bits.
+- ``"range"``: the image's own minimum and maximum stretched to [0, 1] (a uniform image is
+  all 0). Edge detectors whose thresholds are relative to the image's contrast (the rim) use
+  it, and so do OpenCV's corner detectors on images of more than 8 bits (a 12-bit image in a
+  16-bit file would be nearly black on the ``"levels"`` scale).
+
+NaN and infinite values are read as 0 in both. Colour is converted with OpenCV's weights
+(``cv2.COLOR_BGR2GRAY``); an alpha channel is ignored.
+"""
+
+from __future__ import annotations
+
+import os
+import stat
+
+import cv2
+import numpy as np
+import numpy.typing as npt
+
+from ._quiet import opencv_silenced
+
+__all__ = ["SCALES", "check_image", "read_image", "to_bgr8", "to_gray"]
+
+SCALES = ("levels", "range")
+
+
+def check_image(image, name="image") -> np.ndarray:
+    """``image`` as an image array: ``(H, W)`` or ``(H, W, 3|4)``, ``(H, W, 1)`` squeezed.
+
+    Parameters
+    ----------
+    image : numpy.ndarray
+        Grey or BGR(A), any integer or float dtype but bool, not empty.
+    name : str
+        How messages name it (``"images[3]"``, say).
+
+    Returns
+    -------
+    numpy.ndarray
+        The same array, or a view of it without the single channel axis.
+
+    Raises
+    ------
+    ValueError
+        Not an array, a shape that is no image, an empty one, or a dtype that holds no grey
+        levels (bool, complex, object, strings).
+    """
+    if not isinstance(image, np.ndarray):
+        raise ValueError(f"{name} must be a numpy array (grey or BGR), got {type(image).__name__}")
+    if image.ndim == 3 and image.shape[2] == 1:
+        image = image[:, :, 0]
+    if image.ndim not in (2, 3) or (image.ndim == 3 and image.shape[2] not in (3, 4)):
+        raise ValueError(
+            f"{name} must be grey (H, W) or BGR/BGRA (H, W, 3|4), got shape {image.shape}"
+        )
+    if image.size == 0:
+        raise ValueError(f"{name} is empty (shape {image.shape})")
+    if image.dtype == np.bool_ or image.dtype.kind not in "uif":
+        raise ValueError(f"{name} must be uint8, uint16 or float, got dtype {image.dtype}")
+    return image
+
+
+def _levels(image: np.ndarray) -> npt.NDArray[np.float32]:
+    """The image on the 0-255 scale of 8 bits, float32, non-finite values as 0."""
+    img = np.nan_to_num(image.astype(np.float32), nan=0.0, posinf=0.0, neginf=0.0)
+    if image.dtype == np.uint16:
+        return img / np.float32(257.0)
+    if image.dtype.kind == "f" and float(img.max()) <= 1.0:
+        return img * np.float32(255.0)
+    return img
+
+
+def _grey_float(image: np.ndarray) -> npt.NDArray[np.float32]:
+    """float32 grey of a checked image (OpenCV's weights), its values as they are."""
+    img = image.astype(np.float32, copy=False)
+    if img.ndim == 3:
+        return np.asarray(cv2.cvtColor(img[:, :, :3], cv2.COLOR_BGR2GRAY), np.float32)
+    return img
+
+
+def to_gray(image, scale="levels", dtype=np.float32, name="image") -> np.ndarray:
+    """The grey image of ``image`` on one of the two scales (see the module's docstring).
+
+    Parameters
+    ----------
+    image : numpy.ndarray
+        Grey or BGR(A) (:func:`check_image`).
+    scale : {"levels", "range"}
+        ``"levels"``: the 0-255 scale of 8 bits; ``"range"``: min..max to 0..1.
+    dtype : numpy.float32 or numpy.uint8
+        ``uint8`` rounds and clips to 0..255 (``"range"``: min..max to 0..255), for OpenCV's
+        detectors; an 8-bit image then comes back on the ``"levels"`` scale as
+        ``cv2.cvtColor`` gives it.
+    name : str
+        How messages name the image.
+
+    Returns
+    -------
+    numpy.ndarray
+        ``(H, W)`` grey of ``dtype``.
+
+    Raises
+    ------
+    ValueError
+        A bad image (:func:`check_image`), or an unknown ``scale`` / ``dtype``.
+    """
+    image = check_image(image, name)
+    if scale not in SCALES:
+        raise ValueError(f"scale must be one of {SCALES}, got {scale!r}")
+    if np.dtype(dtype) not in (np.float32, np.uint8):
+        raise ValueError(f"dtype must be numpy.float32 or numpy.uint8, got {dtype!r}")
+    if np.dtype(dtype) == np.uint8:
+        if image.dtype == np.uint8 and scale == "levels":
+            return image if image.ndim == 2 else cv2.cvtColor(image[:, :, :3], cv2.COLOR_BGR2GRAY)
+        g = to_gray(image, scale, np.float32, name)
+        return np.clip(np.round(g * np.float32(255.0) if scale == "range" else g), 0, 255).astype(
+            np.uint8
+        )
+    if scale == "levels":
+        return _grey_float(_levels(image))
+    g = np.nan_to_num(_grey_float(image), nan=0.0, posinf=0.0, neginf=0.0)
+    lo, hi = float(g.min()), float(g.max())
+    if not hi > lo:
+        return np.zeros_like(g)
+    return (g - lo) * np.float32(1.0 / (hi - lo))
+
+
+def to_bgr8(image, name="image") -> npt.NDArray[np.uint8]:
+    """An 8-bit BGR copy of ``image`` to draw on, on the ``"levels"`` scale.
+
+    Parameters
+    ----------
+    image : numpy.ndarray
+        Grey or BGR(A) (:func:`check_image`).
+    name : str
+        How messages name the image.
+
+    Returns
+    -------
+    numpy.ndarray
+        ``(H, W, 3)`` uint8, a new array.
+    """
+    image = check_image(image, name)
+    if image.dtype != np.uint8:
+        image = np.clip(_levels(image), 0, 255).astype(np.uint8)
+    if image.ndim == 2:
+        return cv2.cvtColor(image, cv2.COLOR_GRAY2BGR)
+    return image[:, :, :3].copy()
+
+
+def read_image(path, flags=cv2.IMREAD_UNCHANGED, name="image") -> np.ndarray:
+    """``cv2.imread`` of a regular file, with a message that says why it cannot be read.
+
+    Parameters
+    ----------
+    path : str or os.PathLike
+        The file.
+    flags : int
+        ``cv2.imread``'s flags.
+    name : str
+        How messages name the file (``"images[3]"``, say) beside its path.
+
+    Returns
+    -------
+    numpy.ndarray
+        The image as ``cv2.imread`` gives it.
+
+    Raises
+    ------
+    FileNotFoundError
+        No such file.
+    ValueError
+        Not a regular file, empty, unreadable (no permission), or not an image OpenCV decodes.
+    """
+    shown = f"{name} {os.fspath(path)!r}" if name != "image" else f"image {os.fspath(path)!r}"
+    try:
+        st = os.stat(path)
+    except FileNotFoundError:
+        raise FileNotFoundError(f"{shown} does not exist") from None
+    except OSError as e:
+        raise ValueError(f"cannot read {shown}: {e.strerror or e}") from None
+    if not stat.S_ISREG(st.st_mode):
+        raise ValueError(f"{shown} is not a regular file")
+    if st.st_size == 0:
+        raise ValueError(f"cannot read {shown}: the file is empty")
+    if not os.access(path, os.R_OK):
+        raise ValueError(f"cannot read {shown}: permission denied")
+    try:
+        with opencv_silenced():
+            image = cv2.imread(os.fspath(path), flags)
+    except cv2.error as e:
+        raise ValueError(f"cannot read {shown}: {e.err or e}") from None
+    if image is None or image.size == 0:
+        raise ValueError(
+            f"cannot read {shown}: not an image format OpenCV reads (or a corrupt file)"
+        )
+    return image
