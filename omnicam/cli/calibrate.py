@@ -268,10 +268,8 @@ def _refuse_beside_guess(args):
     fx = any(getattr(args, n) is not None for n in ("fx", "fy", "cx", "cy"))
     for flag, given, why in (
         ("--chessboard", args.chessboard is not None, "--chessboard fits K to the boards"),
-        ("--intrinsics", args.intrinsics is not None, "it gives K"),
         ("--fx/--fy/--cx/--cy", fx, "they give K"),
         ("--dist", args.dist is not None, "the guess has no distortion"),
-        ("--from", args.from_rig is not None, "it gives K"),
     ):
         if given:
             raise CliError(
@@ -284,7 +282,6 @@ def _refuse_beside_guess(args):
 # the options whose values --from takes from its file (K, D and the mirror)
 _NOT_WITH_FROM = (
     ("mirror", "--mirror", "the mirror"),
-    ("intrinsics", "--intrinsics", "K and D"),
     ("fx", "--fx", "K"),
     ("fy", "--fy", "K"),
     ("cx", "--cx", "K"),
@@ -432,7 +429,8 @@ def add_parser(sub):
         help="image of the mirror (any format cv2.imread reads); with --chessboard, "
         "the images of the board",
     )
-    p.add_argument(
+    mirror = p.add_argument_group("the mirror")
+    mirror.add_argument(
         "--mirror",
         nargs=3,
         type=_positive,
@@ -446,7 +444,13 @@ def add_parser(sub):
         "--from); with --chessboard optional (a start; without it the mirror is estimated "
         "from the boards)",
     )
-    p.add_argument(
+    k = p.add_argument_group(
+        "the camera's intrinsics",
+        "one of --intrinsics, --fx/--fy/--cx/--cy [--dist], --guess-k or --from; with "
+        "--chessboard optional (a start)",
+    )
+    one = k.add_mutually_exclusive_group()
+    one.add_argument(
         "--from",
         dest="from_rig",
         metavar="RIG.yaml",
@@ -455,7 +459,7 @@ def add_parser(sub):
         "prints how far it moved. Not with --mirror, --intrinsics, --fx/--fy/--cx/--cy/--dist "
         "or --chessboard",
     )
-    p.add_argument(
+    one.add_argument(
         "--intrinsics",
         metavar="K.yaml",
         help="cv2.FileStorage file (yaml/yml/xml/json) with the camera matrix 'K' "
@@ -464,24 +468,7 @@ def add_parser(sub):
         "'image_width' and 'image_height'); K is rescaled if image_size differs "
         "from IMAGE's size. An omnicam calibration file also works.",
     )
-    p.add_argument(
-        "--fx",
-        type=_positive,
-        metavar="PX",
-        help="focal length in x, px (with --fy --cx --cy instead of --intrinsics)",
-    )
-    p.add_argument("--fy", type=_positive, metavar="PX", help="focal length in y, px")
-    p.add_argument("--cx", type=_finite, metavar="PX", help="principal point x, px")
-    p.add_argument("--cy", type=_finite, metavar="PX", help="principal point y, px")
-    p.add_argument(
-        "--dist",
-        type=_finite,
-        nargs="+",
-        metavar="D",
-        help="OpenCV distortion coefficients k1 k2 p1 p2 [k3 ...] (4, 5, 8, 12 or "
-        "14 values) with --fx --fy --cx --cy",
-    )
-    p.add_argument(
+    one.add_argument(
         "--guess-k",
         action="store_true",
         help="no intrinsics: guess K from the rim and the mirror, as if the rig were aligned "
@@ -490,13 +477,31 @@ def add_parser(sub):
         "calibration file records K as guessed, and 'omnicam info' and 'omnicam unwarp' say "
         "so. Not with --intrinsics, --fx..., --from or --chessboard",
     )
-    p.add_argument(
+    k.add_argument(
+        "--fx",
+        type=_positive,
+        metavar="PX",
+        help="focal length in x, px (with --fy --cx --cy instead of --intrinsics)",
+    )
+    k.add_argument("--fy", type=_positive, metavar="PX", help="focal length in y, px")
+    k.add_argument("--cx", type=_finite, metavar="PX", help="principal point x, px")
+    k.add_argument("--cy", type=_finite, metavar="PX", help="principal point y, px")
+    k.add_argument(
+        "--dist",
+        type=_finite,
+        nargs="+",
+        metavar="D",
+        help="OpenCV distortion coefficients k1 k2 p1 p2 [k3 ...] (4, 5, 8, 12 or "
+        "14 values) with --fx --fy --cx --cy",
+    )
+    rim = p.add_argument_group("the rim and the choice of posture")
+    rim.add_argument(
         "--far-lines",
         metavar="LINES.json",
         help="JSON list of lines, each a list of [x, y] pixels of a straight scene "
         "line far from the camera; used to pick the right posture candidate",
     )
-    p.add_argument(
+    rim.add_argument(
         "--rim-hint",
         type=_rim_hint,
         metavar="CX,CY,R",
@@ -504,12 +509,13 @@ def add_parser(sub):
         "only within 15%% of R of that circle (use it when the overlay shows another "
         "ellipse, e.g. the holder's outer edge)",
     )
-    p.add_argument(
+    rim.add_argument(
         "--boundary-points",
         metavar="FILE",
         help=f"pixels on the mirror rim instead of detecting it: {BOUNDARY_FORMAT}",
     )
-    p.add_argument(
+    checks = p.add_argument_group("plausibility")
+    checks.add_argument(
         "--max-tilt",
         type=_positive,
         default=10.0,
@@ -517,7 +523,7 @@ def add_parser(sub):
         help="plausibility limit on the angle between the mirror axis and the optical axis "
         "(default %(default)g)",
     )
-    p.add_argument(
+    checks.add_argument(
         "--max-offset",
         type=_positive,
         default=10.0,
@@ -525,13 +531,14 @@ def add_parser(sub):
         help="plausibility limit on the distance of the camera centre from the mirror's "
         "lower focus, in the mirror's unit (default %(default)g)",
     )
-    p.add_argument(
+    checks.add_argument(
         "--force",
         action="store_true",
         help="write the calibration file even when it is implausible (the warnings are "
         "printed either way; without --force an implausible result exits with status 1)",
     )
-    p.add_argument(
+    out = p.add_argument_group("outputs")
+    out.add_argument(
         "-o",
         "--output",
         required=True,
@@ -544,12 +551,12 @@ def add_parser(sub):
         action="store_false",
         help="keep the closed-form posture, skip the refinement",
     )
-    p.add_argument(
+    out.add_argument(
         "--overlay",
         metavar="PATH",
         help="overlay image to write (default: CALIB's stem + '_overlay.png', next to CALIB)",
     )
-    p.add_argument("--overwrite", action="store_true", help="replace existing output files")
+    out.add_argument("--overwrite", action="store_true", help="replace existing output files")
     pattern.add_arguments(p)
     p.set_defaults(func=cmd_calibrate)
     return p

@@ -61,8 +61,11 @@ def _pattern_size(text):
     return int(m.group(1)), int(m.group(2))
 
 
-def add_arguments(p):
-    """The chessboard options of ``omnicam calibrate``."""
+def add_arguments(parser):
+    """The chessboard options of ``omnicam calibrate``, as one group of its ``--help``."""
+    p = parser.add_argument_group(
+        "chessboard mode", "several IMAGES of a chessboard seen through the mirror"
+    )
     p.add_argument(
         "--chessboard",
         type=_pattern_size,
