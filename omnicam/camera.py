@@ -334,7 +334,8 @@ class MisalignedHyperbolicCamera:
         xc = rim @ self._R.T + self._tvec
         xn = xc[:, :2] / xc[:, 2:3]
         if self._D is None:
-            return xn @ self._K[:2, :2].T + self._K[:2, 2]
+            pixels: FloatArray = xn @ self._K[:2, :2].T + self._K[:2, 2]
+            return pixels
         return raytrace.distort_normalized(xn, self._K, self._D)
 
     def mirror_pixels(self) -> FloatArray:

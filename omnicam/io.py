@@ -61,6 +61,8 @@ import math
 import os
 import re
 import stat
+from collections.abc import Callable
+from typing import TypeVar
 
 import cv2
 import numpy as np
@@ -71,6 +73,9 @@ from ._typing import ArrayLike, FloatArray, PathLike, Size
 from ._validate import finite_array, real_number, validate_D, validate_image_size, validate_K
 from .intrinsics_formats import not_pinhole, read_other_central, read_other_intrinsics
 from .mirror import HyperbolicMirror
+
+#: The camera class :func:`load_camera` builds (the caller's own: io never imports it).
+CameraT = TypeVar("CameraT")
 
 __all__ = [
     "save_camera",
@@ -530,7 +535,7 @@ def reading(path, what):
     return Reader(_parse(_prescan(path, what), path, what, ext), path, what)
 
 
-def load_camera(path: PathLike, cls: type):
+def load_camera(path: PathLike, cls: Callable[..., CameraT]) -> CameraT:
     """Read and validate a calibration file; return ``cls(K, mirror, rvec, tvec, D, image_size)``.
 
     ``cls`` is the camera class (:meth:`MisalignedHyperbolicCamera.load` passes itself), so this
