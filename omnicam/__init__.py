@@ -29,13 +29,13 @@ _LAZY = {
     "visible_elevation_range": "omnicam.views",
     "synthetic": "omnicam.synthetic",
     "samples": "omnicam.samples",
-    "read_intrinsics": "omnicam.io",
-    "read_central_model": "omnicam.io",
-    "read_verdict": "omnicam.io",
-    "Verdict": "omnicam.io",
-    "write_intrinsics": "omnicam.io",
-    "read_far_lines": "omnicam.io",
-    "write_far_lines": "omnicam.io",
+    "read_intrinsics": "omnicam.formats.omnicam_files",
+    "read_central_model": "omnicam.formats.omnicam_files",
+    "read_verdict": "omnicam.formats.omnicam_files",
+    "Verdict": "omnicam.formats.omnicam_files",
+    "write_intrinsics": "omnicam.formats.omnicam_files",
+    "read_far_lines": "omnicam.formats.omnicam_files",
+    "write_far_lines": "omnicam.formats.omnicam_files",
 }
 
 __all__ = ["calibrate_pattern", *_LAZY]

@@ -28,8 +28,8 @@ import numpy as np
 from . import raytrace, views
 from ._typing import ArrayLike, FloatArray, PathLike, Size
 from ._validate import finite_array, validate_D, validate_image_size, validate_K, validate_posture
+from .formats.omnicam_files import MODEL_NAME
 from .gauge import canonical_rvec
-from .io import MODEL_NAME
 from .mirror import HyperbolicMirror
 
 if TYPE_CHECKING:  # annotations only: the façade's results
@@ -516,9 +516,9 @@ class MisalignedHyperbolicCamera:
 
         Returns ``(K, xi, D, M, origin, rms_px)`` with ``X_omni = M (X_mirror - origin)``
         (``det M = -1``: the image of a mirror is mirror-reversed); see
-        :func:`omnicam.export.fit_omnidir`, which also gives the maximum error.
+        :func:`omnicam.formats.central_export.fit_omnidir`, which also gives the maximum error.
         """
-        from .export import fit_omnidir
+        from .formats.central_export import fit_omnidir
 
         return fit_omnidir(self, depth=depth).as_tuple()
 
@@ -527,16 +527,16 @@ class MisalignedHyperbolicCamera:
         """Write the calibration with ``cv2.FileStorage`` (yaml, yml, xml or json), atomically.
 
         The file is written beside ``path``, read back and compared, then renamed into place
-        (:func:`omnicam.io.save_camera`). ``cam.save(path, report)`` also records how far to
-        trust it: the report's confidence, stated uncertainty and warnings (the file's
-        ``verdict``, read by :func:`omnicam.io.read_verdict` and ``omnicam info``).
+        (:func:`omnicam.formats.omnicam_files.save_camera`). ``cam.save(path, report)`` also
+        records how far to trust it: the report's confidence, stated uncertainty and warnings
+        (the file's ``verdict``, read by :func:`omnicam.read_verdict` and ``omnicam info``).
 
         Parameters
         ----------
         path : str or os.PathLike
-        verdict : CalibrationReport, PatternReport or omnicam.io.Verdict, optional
+        verdict : CalibrationReport, PatternReport or omnicam.Verdict, optional
             What the calibration's report said (a report is taken as
-            :meth:`omnicam.io.Verdict.from_report` of it); None writes none.
+            :meth:`omnicam.Verdict.from_report` of it); None writes none.
 
         Raises
         ------
@@ -544,7 +544,7 @@ class MisalignedHyperbolicCamera:
             Unknown extension, or the file cannot be written (missing or read-only folder, full
             disk, ...), naming the file; the old file at ``path`` is then unchanged.
         """
-        from .io import save_camera
+        from .formats.omnicam_files import save_camera
 
         save_camera(self, path, verdict)
 
@@ -557,8 +557,9 @@ class MisalignedHyperbolicCamera:
         FileNotFoundError
             No file at ``path``.
         ValueError
-            Anything else (see :func:`omnicam.io.load_camera`), naming the file and the field.
+            Anything else (see :func:`omnicam.formats.omnicam_files.load_camera`), naming the
+            file and the field.
         """
-        from .io import load_camera
+        from .formats.omnicam_files import load_camera
 
         return load_camera(path, cls)

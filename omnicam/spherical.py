@@ -5,7 +5,7 @@ forward (azimuth 0, the mirror's +X) at the centre column, azimuth turning right
 grows (as omnicam's panoramas), latitude of pixel row ``i`` ``90 - 180 (i + 0.5) / H`` degrees
 and longitude of column ``j`` ``360 (j + 0.5) / W - 180`` (pixel centres, as 360 players
 sample). The band the mirror sees sits at its true elevations; the rest is the border colour.
-The metadata that makes players show it as 360 is :mod:`omnicam.spherical_metadata`'s.
+The metadata that makes players show it as 360 is :mod:`omnicam.formats.spherical_metadata`'s.
 """
 
 from __future__ import annotations

@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 
 import omnicam
-import omnicam.io
+import omnicam.formats.omnicam_files
 from omnicam import synthetic
 from omnicam.cli import main
 from omnicam.synthetic import boards
@@ -50,7 +50,7 @@ def test_progress_names_and_the_heldout_check_are_printed(views, tmp_path, capsy
     assert "held-out corner RMS (3-fold" in out and "cv2.omnidir on the same folds" in out
     assert "viewing directions std" in out
     # the file keeps what the run printed: RMS, held-out figures, ray uncertainty (issue 18)
-    verdict = omnicam.io.read_verdict(tmp_path / "rig.yaml")
+    verdict = omnicam.formats.omnicam_files.read_verdict(tmp_path / "rig.yaml")
     assert (verdict.method, verdict.K_source, verdict.forced) == ("chessboard", "chessboard", False)
     assert f"RMS {verdict.rms_px:.3f} px" in out
     held = f"median {verdict.heldout_median_px:.3f} px, max {verdict.heldout_max_px:.3f} px"
@@ -142,7 +142,7 @@ def test_boards_all_on_one_side_exit_one_unless_forced(tmp_path, capsys):
     assert not (tmp_path / "rig.yaml").exists()
     assert _calibrate(paths, tmp_path / "rig.yaml", "--heldout", "0", "--force") == 0
     assert (tmp_path / "rig.yaml").exists()
-    verdict = omnicam.io.read_verdict(tmp_path / "rig.yaml")  # forced, and why
+    verdict = omnicam.formats.omnicam_files.read_verdict(tmp_path / "rig.yaml")  # forced, and why
     assert verdict.forced and "all boards are on one side" in verdict.implausible[0]
     assert verdict.doubts() == ("forced past 1 implausibility warning",)
 

@@ -247,7 +247,7 @@ def test_sequence_output_refuses_to_overwrite_without_overwrite(data, tmp_path, 
 
 # -- 360 -----------------------------------------------------------------------------------
 def test_equirect_jpeg_carries_photo_sphere_xmp(data, tmp_path, capsys):
-    from omnicam.spherical_metadata import read_jpeg_xmp
+    from omnicam.formats.spherical_metadata import read_jpeg_xmp
 
     out = tmp_path / "360.jpg"
     code = main(
@@ -270,7 +270,7 @@ def test_equirect_jpeg_carries_photo_sphere_xmp(data, tmp_path, capsys):
 
 
 def test_equirect_mp4_carries_spherical_video_metadata(data, tmp_path, capsys):
-    from omnicam.spherical_metadata import find_boxes, parse_boxes
+    from omnicam.formats.spherical_metadata import find_boxes, parse_boxes
 
     out = tmp_path / "360.mp4"
     code = main(

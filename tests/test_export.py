@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 
 from omnicam import synthetic
-from omnicam.export import (
+from omnicam.formats.central_export import (
     F_OMNI,
     camodocal_text,
     export,
@@ -122,7 +122,7 @@ def test_tilted_rig_states_its_error_honestly(tilted_fit):
 
 
 def test_kalibr_camchain_reads_back_with_the_fit_and_its_errors(tmp_path):
-    from omnicam.intrinsics_formats import parse_yaml
+    from omnicam.formats.other_tools import parse_yaml
 
     path = tmp_path / "camchain.yaml"
     fit = export(TILTED, "kalibr", path)
@@ -206,7 +206,7 @@ def test_ocamcalib_file_reproduces_the_aligned_rig(tmp_path):
 
 def test_ocamcalib_error_figures_are_measured_on_the_tilted_rig(tmp_path):
     fit = fit_ocamcalib(TILTED)
-    from omnicam.export import ocam_world2cam
+    from omnicam.formats.central_export import ocam_world2cam
 
     epix, _, ed = sample_pixels(TILTED, max_points=10**6)
     err = np.linalg.norm(
@@ -282,22 +282,22 @@ def _flow_numbers(text, key):
     ],
 )
 def test_numbers_are_written_as_yaml_floats_that_read_back_exactly(value, text):
-    from omnicam.export import _fmt
+    from omnicam.formats.central_export import _fmt
 
     assert _fmt(value) == text
     assert YAML11_FLOAT.fullmatch(_fmt(value)) and float(_fmt(value)) == value
 
 
 def test_a_non_finite_number_is_refused_not_written():
-    from omnicam.export import _fmt
+    from omnicam.formats.central_export import _fmt
 
     with pytest.raises(ValueError, match="non-finite"):
         _fmt(math.nan)
 
 
 def test_kalibr_whole_number_intrinsics_are_floats_and_resolution_integers():
-    from omnicam.export import OmnidirFit, kalibr_text
-    from omnicam.intrinsics_formats import parse_yaml
+    from omnicam.formats.central_export import OmnidirFit, kalibr_text
+    from omnicam.formats.other_tools import parse_yaml
 
     K = np.array([[500.0, 0.0, 160.0], [0.0, 500.0, 160.0], [0.0, 0.0, 1.0]])
     fit = OmnidirFit(K, 1.0, np.zeros((1, 4)), F_OMNI, np.zeros(3), 0.0, 0.0, 100)
@@ -353,7 +353,7 @@ def test_an_export_within_a_pixel_does_not_warn(tmp_path, fmt):
 
 
 def test_ocamcalib_states_the_pixels_cam2world_sends_above_the_rim():
-    from omnicam.export import ocam_cam2world
+    from omnicam.formats.central_export import ocam_cam2world
 
     fit = fit_ocamcalib(TILTED)
     epix, _, _ = sample_pixels(TILTED, max_points=10**6)

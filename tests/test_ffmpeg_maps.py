@@ -9,7 +9,7 @@ import pytest
 
 from omnicam import synthetic
 from omnicam.cli import main
-from omnicam.maps_export import (
+from omnicam.formats.maps import (
     UNSEEN_PGM,
     ffmpeg_maps,
     read_pgm,
@@ -246,7 +246,7 @@ def test_supersampled_maps_average_to_the_plain_ones(argv):
 def test_the_printed_command_runs(tmp_path, maps):
     import shlex
 
-    from omnicam.maps_export import ffmpeg_command
+    from omnicam.formats.maps import ffmpeg_command
 
     src = tmp_path / "in.png"
     cv2.imwrite(str(src), np.full((160, 160, 3), 90, np.uint8))
@@ -266,7 +266,7 @@ def test_the_printed_command_runs(tmp_path, maps):
 
 
 def test_the_printed_command_ends_in_yuv420p_for_videos_only():
-    from omnicam.maps_export import ffmpeg_command
+    from omnicam.formats.maps import ffmpeg_command
 
     video = ffmpeg_command("x.pgm", "y.pgm", SIZE, 1, output_name="o.mp4")
     assert '-lavfi "format=yuv444p,remap,format=yuv420p"' in video
@@ -308,7 +308,7 @@ def test_the_printed_video_command_makes_yuv420p_h264(tmp_path, size):
     """What browsers and players take: H.264 in 4:2:0 (ffmpeg's default codec for .mp4)."""
     import shlex
 
-    from omnicam.maps_export import ffmpeg_command
+    from omnicam.formats.maps import ffmpeg_command
 
     if (
         "libx264"

@@ -10,7 +10,7 @@ from test_layers import ROOT, import_graph
 
 README = (ROOT.parent / "README.md").read_text(encoding="utf-8")
 LAYOUT = README.split("## Layout", 1)[1].split("\n## ", 1)[0]
-PACKAGES = ("calibration", "chessboard", "synthetic", "cli")
+PACKAGES = tuple(sorted(p.name for p in ROOT.iterdir() if (p / "__init__.py").is_file()))
 
 
 def unit(module):

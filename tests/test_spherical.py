@@ -11,8 +11,7 @@ import numpy as np
 import pytest
 
 from omnicam import synthetic
-from omnicam.spherical import equirect_view
-from omnicam.spherical_metadata import (
+from omnicam.formats.spherical_metadata import (
     SPHERICAL_UUID,
     find_boxes,
     inject_spherical_mp4,
@@ -20,6 +19,7 @@ from omnicam.spherical_metadata import (
     parse_boxes,
     read_jpeg_xmp,
 )
+from omnicam.spherical import equirect_view
 from omnicam.views import UNSEEN, visible_elevation_range
 
 RIG = synthetic.misaligned_rig(image_size=(160, 160))

@@ -12,11 +12,11 @@ import sys
 
 import cv2
 
-from .. import io
 from .._atomic import OutputError, atomic_output
 from .._quiet import opencv_silenced
 from ..camera import MisalignedHyperbolicCamera
-from ..io import Verdict, file_path, read_verdict, shown
+from ..formats import omnicam_files
+from ..formats.omnicam_files import Verdict, file_path, read_verdict, shown
 
 PROG = "omnicam"
 
@@ -278,17 +278,17 @@ def _read_image(path, flags=cv2.IMREAD_UNCHANGED):
 
 
 def read_intrinsics(path):
-    """:func:`omnicam.io.read_intrinsics` with its errors as one-line CLI errors."""
+    """:func:`omnicam.read_intrinsics` with its errors as one-line CLI errors."""
     try:
-        return io.read_intrinsics(path)
+        return omnicam_files.read_intrinsics(path)
     except (FileNotFoundError, ValueError) as e:
         raise CliError(_one_line(e)) from None
 
 
 def read_far_lines(path):
-    """:func:`omnicam.io.read_far_lines` with its errors as one-line CLI errors."""
+    """:func:`omnicam.read_far_lines` with its errors as one-line CLI errors."""
     try:
-        return io.read_far_lines(path)
+        return omnicam_files.read_far_lines(path)
     except (FileNotFoundError, ValueError) as e:
         raise CliError(_one_line(e)) from None
 
@@ -309,8 +309,8 @@ def _report_text(report, leave_out=()):
 
 def _save_camera(camera, path, overwrite, report=None, **verdict):
     """Write the calibration file, with a verdict when ``report`` is given: an
-    :class:`omnicam.io.Verdict`, or a report taken with the keywords of
-    :meth:`~omnicam.io.Verdict.from_report` (``K_source``, ``K_file``, ``K_note``, ``forced``,
+    :class:`omnicam.Verdict`, or a report taken with the keywords of
+    :meth:`~omnicam.Verdict.from_report` (``K_source``, ``K_file``, ``K_note``, ``forced``,
     ``implausible``)."""
     if not overwrite and os.path.lexists(path):
         raise CliError(f"calibration file {path} exists; pass --overwrite to replace it")

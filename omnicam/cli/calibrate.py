@@ -14,8 +14,8 @@ from .._validate import validate_D, validate_K
 from ..calibration import calibrate
 from ..calibration.rim import check_hint, detect_rim, fit_rim
 from ..camera import MisalignedHyperbolicCamera, scale_K
+from ..formats.omnicam_files import SUFFIXES, Verdict, read_verdict
 from ..gauge import posture_error
-from ..io import SUFFIXES, Verdict, read_verdict
 from ..mirror import HyperbolicMirror
 from . import pattern
 from ._common import (
@@ -331,7 +331,7 @@ def read_boundary_points(path):
 
     Returns an ``(N, 2)`` float64 array; every failure is a :class:`CliError` naming the file.
     """
-    from ..io import reading
+    from ..formats.omnicam_files import reading
 
     what = "boundary-points file"
     if not os.path.isfile(path):

@@ -5,8 +5,8 @@
     omnicam export CALIB --to omnidir|kalibr|camodocal|ocamcalib -o FILE [--depth MM]
 
 A misaligned rig has no single viewpoint; each format gets the central model closest to the
-exact rig over the pixels that see the mirror (:mod:`omnicam.export`), and the command prints
-(and the file records) its RMS and maximum error in pixels.
+exact rig over the pixels that see the mirror (:mod:`omnicam.formats.central_export`), and the
+command prints (and the file records) its RMS and maximum error in pixels.
 """
 
 from __future__ import annotations
@@ -20,7 +20,7 @@ from ._common import EXIT_OK, CliError, _check_output, _load_camera, _one_line, 
 
 def cmd_export(args):
     """``omnicam export``: the module docstring."""
-    from ..export import export
+    from ..formats.central_export import export
 
     _check_output(args.output, args.overwrite)
     camera = _load_camera(args.calibration)

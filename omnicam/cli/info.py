@@ -91,7 +91,7 @@ def _number(v, fmt, unit=""):
 
 
 def describe_verdict(verdict, width=13):
-    """Multi-line text of a calibration file's verdict (:class:`omnicam.io.Verdict`): what the
+    """Multi-line text of a calibration file's verdict (:class:`omnicam.Verdict`): what the
     calibration's report said when the file was written; None gives the line that says none
     was recorded."""
     if verdict is None:
@@ -162,7 +162,7 @@ def describe_verdict(verdict, width=13):
 
 def cmd_info(args):
     """``omnicam info``: the module docstring."""
-    from ..io import read_verdict
+    from ..formats.omnicam_files import read_verdict
 
     camera = _load_camera(args.calibration)
     try:
@@ -171,7 +171,7 @@ def cmd_info(args):
         verdict = f"{'verdict':<13}  cannot be read: {_one_line(e)}"
     print(f"{'calibration':<13}  {args.calibration}")
     print(describe_camera(camera))
-    from ..export import fit_omnidir
+    from ..formats.central_export import fit_omnidir
 
     try:  # the central model that tools without a non-central one can take (omnicam export)
         fit = fit_omnidir(camera)

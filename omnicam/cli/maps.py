@@ -21,7 +21,7 @@ import numpy as np
 
 from .._atomic import OutputError
 from ..camera import scale_K
-from ..maps_export import (
+from ..formats.maps import (
     ffmpeg_command,
     float_maps,
     write_ffmpeg_maps,

@@ -36,7 +36,7 @@ from ..calibration.rim import check_hint, detect_rim
 from ..camera import MisalignedHyperbolicCamera, scale_K
 from ..chessboard import DIST_MODELS
 from ..chessboard.calibrate import ONE_SIDED
-from ..io import SUFFIXES
+from ..formats.omnicam_files import SUFFIXES
 from ..mirror import HyperbolicMirror
 from ._common import (
     EXIT_OK,

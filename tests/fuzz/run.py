@@ -48,7 +48,7 @@ ALLOWED = (ValueError, FileNotFoundError)
 
 
 # ==============================================================================================
-# Files: our own writers (sharing nothing with omnicam.io) and the mutation operators
+# Files: our own writers (sharing nothing with omnicam.formats) and the mutation operators
 # ==============================================================================================
 def _num(v):
     return repr(float(v)) if isinstance(v, float) else str(v)

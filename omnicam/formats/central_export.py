@@ -30,7 +30,7 @@ side, which the unified model does not treat the same way, so prefer ``M``).
 off by more than :data:`WARN_RMS_PX` (0.5 px) RMS or :data:`WARN_MAX_PX` (1 px) at its worst
 pixel: more than a pixel somewhere in the image, an error a user sees. The warning names the
 central format that fits this camera best (each format's fit measured the same way) and the
-exports that are exact, the remap tables of :mod:`omnicam.maps_export` (``omnicam maps``), which
+exports that are exact, the remap tables of :mod:`omnicam.formats.maps` (``omnicam maps``), which
 use the exact non-central model. OCamCalib's model has no tangential term, so it costs more
 than the unified one on a tilted rig (about 0.9 px RMS against 0.03 px at 3 degrees and 3 mm).
 
@@ -48,8 +48,8 @@ from dataclasses import dataclass, field
 import cv2
 import numpy as np
 
-from ._atomic import OutputError, atomic_output, write_bytes
-from ._typing import FloatArray
+from .._atomic import OutputError, atomic_output, write_bytes
+from .._typing import FloatArray
 
 __all__ = [
     "FORMATS",
@@ -769,7 +769,7 @@ def _cost_warning(camera, fmt, depth, fits):
         f"the {fmt} export is off by RMS {rms:.3g} px, max {mx:.3g} px (omnicam warns above "
         f"{WARN_RMS_PX:g} px RMS or {WARN_MAX_PX:g} px max): this rig is not central enough "
         f"for that model; {advice}; exact: the remap tables (omnicam maps --npy, --filestorage "
-        f"or --ffmpeg; omnicam.maps_export), which use the non-central model itself"
+        f"or --ffmpeg; omnicam.formats.maps), which use the non-central model itself"
     )
 
 

@@ -67,12 +67,12 @@ from typing import TypeVar
 import cv2
 import numpy as np
 
-from ._atomic import OutputError, atomic_output, sigint_deferred, write_bytes
-from ._quiet import opencv_silenced
-from ._typing import ArrayLike, FloatArray, PathLike, Size
-from ._validate import finite_array, real_number, validate_D, validate_image_size, validate_K
-from .intrinsics_formats import not_pinhole, read_other_central, read_other_intrinsics
-from .mirror import HyperbolicMirror
+from .._atomic import OutputError, atomic_output, sigint_deferred, write_bytes
+from .._quiet import opencv_silenced
+from .._typing import ArrayLike, FloatArray, PathLike, Size
+from .._validate import finite_array, real_number, validate_D, validate_image_size, validate_K
+from ..mirror import HyperbolicMirror
+from .other_tools import not_pinhole, read_other_central, read_other_intrinsics
 
 #: The camera class :func:`load_camera` builds (the caller's own: io never imports it).
 CameraT = TypeVar("CameraT")
@@ -923,7 +923,7 @@ def read_intrinsics(path: PathLike) -> tuple[FloatArray, FloatArray | None, Size
     FileNotFoundError, ValueError
         As :func:`load_camera`, naming the file and the field; also for the files of central
         models (``cv2.omnidir``, Kalibr ``omni``, OCamCalib), whose ``K`` and ``D`` are not the
-        lens's: the message says what the file is (:mod:`omnicam.intrinsics_formats`).
+        lens's: the message says what the file is (:mod:`omnicam.formats.other_tools`).
     """
     what = "intrinsics file"
     path = file_path(path, what)
@@ -967,7 +967,7 @@ def read_central_model(path: PathLike) -> dict:
 
         * ``"K"``: (3, 3) float64, the unified model's camera matrix ``[[gamma_x, s, c_x],
           [0, gamma_y, c_y], [0, 0, 1]]`` (not the lens's: module notes of
-          :mod:`omnicam.intrinsics_formats`);
+          :mod:`omnicam.formats.other_tools`);
         * ``"xi"``: float, ``>= 0``. A hyperbolic mirror's is in ``(0, 1)``, which
           :func:`~omnicam.chessboard.central.hyperbolic_start` needs; a fit with distortion
           can give ``xi >= 1`` on a rig that is not exactly central (``k1`` trades with ``xi``);

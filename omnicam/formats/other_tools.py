@@ -1,6 +1,6 @@
 """Other tools' camera files: pinhole intrinsics to read, and central models that are not.
 
-:func:`omnicam.io.read_intrinsics` asks :func:`read_other_intrinsics` first; it reads
+:func:`omnicam.read_intrinsics` asks :func:`read_other_intrinsics` first; it reads
 
 * ROS ``camera_info`` YAML (``camera_matrix: {rows, cols, data}``, ``distortion_model``
   ``plumb_bob`` or ``rational_polynomial``, ``distortion_coefficients``, ``image_width``,
@@ -20,7 +20,7 @@ focal length for a hyperbolic mirror is ``f sqrt(1 - xi^2)``, not the lens's ``f
 OCamCalib's polynomial has no ``K`` at all. Taken as the lens's ``K`` and ``D`` they would give a
 wrong camera without a word, so they are refused with that reason (:func:`not_pinhole`; the
 ``cv2.omnidir`` files by ``read_intrinsics``, which parses FileStorage files), and the unified
-ones are read by :func:`omnicam.io.read_central_model` as a central model, where a chessboard
+ones are read by :func:`omnicam.read_central_model` as a central model, where a chessboard
 calibration can start (:func:`read_other_central` reads Kalibr's).
 
 The YAML of ROS and Kalibr is PyYAML's, not OpenCV's: ``cv2.FileStorage`` refuses Kalibr's block
@@ -267,7 +267,7 @@ def not_pinhole(what, xi=None):
         f"{what} (the unified central model{xi_text}), not pinhole intrinsics: its K is the "
         f"unified model's, whose focal length is f sqrt(1 - xi^2) for a hyperbolic mirror, not "
         f"the lens's f, and its D distorts the unified projection, not the lens; give the "
-        f"lens's own K (and D), or read it with omnicam.io.read_central_model as the start of "
+        f"lens's own K (and D), or read it with omnicam.read_central_model as the start of "
         f"a chessboard calibration"
     )
 
@@ -369,7 +369,7 @@ def _kalibr_omni(doc):
         raise ValueError(
             f"field 'camera_model' is {cam.get('camera_model')!r}, not a central model: "
             f"omnicam reads Kalibr's omni cameras as one (a pinhole camchain is read by "
-            f"omnicam.io.read_intrinsics)"
+            f"omnicam.read_intrinsics)"
         )
     xi, fu, fv, pu, pv = _numbers(cam.get("intrinsics"), "field 'intrinsics'", 5)
     K = np.array([[fu, 0.0, pu], [0.0, fv, pv], [0.0, 0.0, 1.0]])
@@ -424,8 +424,8 @@ def read_other_intrinsics(path):
     """``(K, D, image_size)`` from a ROS or Kalibr YAML file; ``None`` when it is neither.
 
     Only :func:`parse_yaml` reads the file (never ``cv2.FileStorage``); call it after
-    :func:`omnicam.io`'s pre-scan. ``image_size`` written as an OpenCV matrix is read by
-    :func:`omnicam.io.read_intrinsics` itself.
+    :mod:`.omnicam_files`' pre-scan. ``image_size`` written as an OpenCV matrix is read by
+    :func:`omnicam.read_intrinsics` itself.
 
     Returns
     -------
@@ -455,7 +455,7 @@ def read_other_central(path):
     def ros(doc):
         raise ValueError(
             "a ROS camera_info: pinhole intrinsics, not a central model (read it with "
-            "omnicam.io.read_intrinsics)"
+            "omnicam.read_intrinsics)"
         )
 
     return _read_other(path, "central model file", ros, _kalibr_omni)

@@ -33,8 +33,8 @@ import cv2
 import numpy as np
 import numpy.typing as npt
 
-from ._atomic import OutputError, atomic_output, write_bytes
-from ._typing import PathLike
+from .._atomic import OutputError, atomic_output, write_bytes
+from .._typing import PathLike
 
 __all__ = [
     "UNSEEN_PGM",
