@@ -94,6 +94,7 @@ def test_implausible_result_exits_one_and_writes_no_calibration(scene, tmp_path,
     assert (tmp_path / "calib_overlay_refused.png").is_file()
     assert not (tmp_path / "calib_overlay.png").exists()
     assert "omnicam mirror posture calibration" in captured.out  # the report is printed too
+    assert "mirror: assumed the hyperboloid a " in captured.out  # one image cannot tell its shape
 
 
 def test_force_writes_an_implausible_calibration_with_the_warnings(scene, tmp_path, capsys):

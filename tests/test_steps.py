@@ -185,7 +185,7 @@ def test_rim_step_raises_estimation_error_when_valid_input_has_no_ellipse():
 @pytest.mark.parametrize(
     "image, hint, match",
     [
-        (np.zeros((50, 50, 2)), None, r"image must be grey \(H, W\) or BGR\(A\)"),
+        (np.zeros((50, 50, 2)), None, r"image must be grey \(H, W\) or BGR/BGRA"),
         (np.zeros((50, 50)), (1, 2), r"hint must be \(cx, cy, r\)"),
         (np.zeros((50, 50)), (25, 25, -3), "hint radius must be positive"),
         (np.zeros((50, 50)), (80, 25, 10), r"hint centre \(80, 25\) is outside the 50x50 image"),

@@ -27,6 +27,7 @@ cannot be estimated (no rim, no physical posture); a plain ``ValueError`` means 
 from __future__ import annotations
 
 import dataclasses
+import math
 from collections.abc import Sequence
 from typing import Any
 
@@ -39,6 +40,7 @@ from . import selection, steps
 from .errors import EstimationError
 from .plausibility import assess
 from .report import CalibrationReport
+from .shape import bowed_far_lines
 
 __all__ = ["calibrate", "CalibrationReport", "EstimationError"]
 
@@ -171,6 +173,9 @@ def calibrate(
     warnings = steps.warnings_step(rim, cue, sel, ref, cands)
     camera = camera_cls(K, mirror, ref.rvec, ref.tvec, D=D, image_size=image_size)
     report = CalibrationReport.from_steps(rim, cue, cands, sel, ref, list(warnings), camera, lines)
+    bowed = bowed_far_lines(getattr(ref.result, "line_rms", math.nan), lines, mirror)
+    if bowed is not None:  # (.shape) the one thing one image tells of the mirror's shape
+        report.warnings.append(bowed)
     if check_plausibility:  # (.plausibility) a second calibration only when suspicious
         implausible = assess(
             report,

@@ -201,6 +201,9 @@ class CalibrationReport:
         tilt = math.degrees(math.atan2(math.hypot(axis[0], axis[1]), axis[2]))
         lines = [
             "omnicam mirror posture calibration",
+            f"  mirror: assumed the hyperboloid a {cam.mirror.a:g}, b {cam.mirror.b:g}, rim "
+            f"{cam.mirror.rim_radius:g} (one image does not tell a paraboloid or a sphere "
+            f"from it; far lines that come out bowed do)",
             f"  rim: {len(self.boundary_points)} boundary points, RMS {self.rim_rms:.4f} px",
             f"  rvec = [{', '.join(f'{v:.9f}' for v in cam.rvec)}]",
             f"  tvec = [{', '.join(f'{v:.6f}' for v in cam.tvec)}]",
