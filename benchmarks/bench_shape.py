@@ -35,18 +35,6 @@ SHAPES = {
 }
 
 
-def far_lines(rig, depth=3000.0):
-    """Three horizontal scene lines ``depth`` away, 0.6 m below the mirror."""
-    out = []
-    for az in (0.0, 2.0, 4.0):
-        d = np.array([math.cos(az), math.sin(az), 0.0])
-        e = np.array([-d[1], d[0], 0.0])
-        X = d * depth + np.outer(np.linspace(-1500, 1500, 40), e) + [0.0, 0.0, -600.0]
-        px = rig.project(X)
-        out.append(px[np.isfinite(px).all(axis=1)])
-    return out
-
-
 def main():
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("--click", type=float, default=0.3, help="click noise, px")
@@ -59,7 +47,7 @@ def main():
             R, t = q.posture(1.0, 30.0 + 60 * seed, [0.5, -0.3, 0.0], C)
             rig = q.rig_filling(mirror, (640, 480), -C, R=R, t=t)
             rim = rig.rim_pixels(360) + rng.normal(0.0, 0.1, (360, 2))
-            lines = [x + rng.normal(0.0, args.click, x.shape) for x in far_lines(rig)]
+            lines = [x + rng.normal(0.0, args.click, x.shape) for x in q.far_line_pixels(rig)]
             _, rep = omnicam.MisalignedHyperbolicCamera.calibrate(
                 boundary_points=rim,
                 K=rig.K,

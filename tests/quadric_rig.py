@@ -347,6 +347,19 @@ def rig_filling(mirror, image_size, camera_z, fill=0.85, k1=0.0, k2=0.0, R=None,
     return Rig(K, float(k1), float(k2), R, np.asarray(t, np.float64), mirror, tuple(image_size))
 
 
+def far_line_pixels(rig, azimuths=(0.0, 2.0, 4.0), depth=3000.0, height=-600.0, n=40):
+    """Pixels of horizontal scene lines, one an azimuth (rad), ``depth`` from the mirror's axis
+    at ``height`` and 3 m long, as ``rig`` sees them (``n`` points each, unseen ones dropped)."""
+    out = []
+    for az in azimuths:
+        d = np.array([math.cos(az), math.sin(az), 0.0])
+        e = np.array([-d[1], d[0], 0.0])
+        X = d * depth + np.outer(np.linspace(-1500.0, 1500.0, n), e) + [0.0, 0.0, height]
+        px = rig.project(X)
+        out.append(px[np.isfinite(px).all(axis=1)])
+    return out
+
+
 # -- boards ------------------------------------------------------------------------------------
 
 

@@ -24,24 +24,12 @@ MIRRORS = {
 }
 
 
-def _far_lines(rig, depth=3000.0):
-    """Three horizontal scene lines 3 m away, 0.6 m below the mirror, as the rig sees them."""
-    out = []
-    for az in (0.0, 2.0, 4.0):
-        d = np.array([math.cos(az), math.sin(az), 0.0])
-        e = np.array([-d[1], d[0], 0.0])
-        X = d * depth + np.outer(np.linspace(-1500, 1500, 40), e) + [0.0, 0.0, -600.0]
-        px = rig.project(X)
-        out.append(px[np.isfinite(px).all(axis=1)])
-    return out
-
-
 def _calibrate(shape, click_px, seed=0):
     rng = np.random.default_rng(seed)
     R, t = q.posture(1.0, 30.0, [0.5, -0.3, 0.0], C)
     rig = q.rig_filling(MIRRORS[shape], (640, 480), -C, R=R, t=t)
     rim = rig.rim_pixels(360) + rng.normal(0.0, 0.1, (360, 2))
-    lines = [x + rng.normal(0.0, click_px, x.shape) for x in _far_lines(rig)]
+    lines = [x + rng.normal(0.0, click_px, x.shape) for x in q.far_line_pixels(rig)]
     _, report = omnicam.MisalignedHyperbolicCamera.calibrate(
         boundary_points=rim,
         K=rig.K,
