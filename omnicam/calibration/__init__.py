@@ -37,7 +37,7 @@ from .._validate import validate_D, validate_image_size, validate_K
 from ..mirror import HyperbolicMirror
 from . import selection, steps
 from .errors import EstimationError
-from .plausibility import assess
+from .plausibility import DEFAULT_MAX_RESIDUAL_PX, assess
 from .report import CalibrationReport
 
 __all__ = ["calibrate", "CalibrationReport", "EstimationError"]
@@ -116,6 +116,9 @@ def calibrate(
     Returns
     -------
     camera : MisalignedHyperbolicCamera
+        With ``camera_reflection = (r, z)``, the circle of the camera's reflection under the
+        returned posture, when the reflection was used and fits it within
+        ``plausibility.DEFAULT_MAX_RESIDUAL_PX`` (3 px RMS); else None.
     report : CalibrationReport
 
     Raises
@@ -169,7 +172,11 @@ def calibrate(
         K, mirror, cands.all[sel.chosen], rim, lines_xn, cue, circles.get(sel.chosen), refine
     )
     warnings = steps.warnings_step(rim, cue, sel, ref, cands)
-    camera = camera_cls(K, mirror, ref.rvec, ref.tvec, D=D, image_size=image_size)
+    # the camera's reflection as detected: default panoramas leave it out
+    body = steps.camera_body(cue, ref, DEFAULT_MAX_RESIDUAL_PX)
+    camera = camera_cls(
+        K, mirror, ref.rvec, ref.tvec, D=D, image_size=image_size, camera_reflection=body
+    )
     report = CalibrationReport.from_steps(rim, cue, cands, sel, ref, list(warnings), camera, lines)
     if check_plausibility:  # (.plausibility) a second calibration only when suspicious
         implausible = assess(

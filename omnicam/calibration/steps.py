@@ -693,6 +693,19 @@ def _final_circle(K, mirror, R, tvec, cue, trials):
     return fit_circle(mirror, R, tvec, cue.normalized, np.linalg.inv(K)[:2, :2], r=cue.r, z=cue.z)
 
 
+def camera_body(cue, refinement, max_rms):
+    """``(r, z)`` of the camera's reflection as detected, for the camera to record
+    (``camera_reflection``), or None: the circle under the final posture when the cue was used
+    and its outline fits it within ``max_rms`` px RMS (a circle that misfits more does not
+    describe the outline the camera saw)."""
+    c = refinement.circle
+    if not cue.used or c is None:
+        return None
+    if not (np.isfinite(c.r) and c.r > 0 and np.isfinite(c.z) and c.rms <= max_rms):
+        return None
+    return float(c.r), float(c.z)
+
+
 def _twin(K, mirror, cand, rim):
     """The other physical posture of the rim (Chen's; the one nearest to ``cand`` in axis
     angle if there are more), as ``(rvec, tvec)``, or None."""
