@@ -37,7 +37,7 @@ from .._validate import validate_D, validate_image_size, validate_K
 from ..mirror import HyperbolicMirror
 from . import selection, steps
 from .errors import EstimationError
-from .plausibility import DEFAULT_MAX_RESIDUAL_PX, assess
+from .plausibility import assess
 from .report import CalibrationReport
 
 __all__ = ["calibrate", "CalibrationReport", "EstimationError"]
@@ -118,7 +118,7 @@ def calibrate(
     camera : MisalignedHyperbolicCamera
         With ``camera_reflection = (r, z)``, the circle of the camera's reflection under the
         returned posture, when the reflection was used and fits it within
-        ``plausibility.DEFAULT_MAX_RESIDUAL_PX`` (3 px RMS); else None.
+        ``steps.BODY_MAX_RMS_PX`` (5 px RMS); else None.
     report : CalibrationReport
 
     Raises
@@ -173,7 +173,7 @@ def calibrate(
     )
     warnings = steps.warnings_step(rim, cue, sel, ref, cands)
     # the camera's reflection as detected: default panoramas leave it out
-    body = steps.camera_body(cue, ref, DEFAULT_MAX_RESIDUAL_PX)
+    body = steps.camera_body(cue, ref)
     camera = camera_cls(
         K, mirror, ref.rvec, ref.tvec, D=D, image_size=image_size, camera_reflection=body
     )
