@@ -437,6 +437,8 @@ def camera_reflection_elevation(
     depth = _check_depth(depth)
     vp = _check_viewpoint(camera, viewpoint, depth)
     margin = real_number(margin_px, "margin_px", 0.0, expected="a number of pixels >= 0")
+    if isinstance(n, bool) or not isinstance(n, numbers.Integral) or n < 8:
+        raise ValueError(f"n must be an integer >= 8 (points along the circle), got {n!r}")
     return _reflection_top(camera, Rm, depth, vp, margin, int(n))
 
 

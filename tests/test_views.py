@@ -677,3 +677,5 @@ def test_the_camera_reflection_elevation_is_that_of_its_exact_outline(body_rig):
     assert near != far and abs(near - far) < 2.0
     with pytest.raises(ValueError, match="margin_px"):
         views.camera_reflection_elevation(truth, margin_px=-1.0)
+    with pytest.raises(ValueError, match="n must be"):
+        views.camera_reflection_elevation(truth, n=2)
