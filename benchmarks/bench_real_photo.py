@@ -18,7 +18,7 @@ import cv2
 import numpy as np
 
 import omnicam
-from omnicam import synthetic
+from omnicam import synthetic, views
 
 HERE = os.path.dirname(os.path.abspath(__file__))
 PHOTO = os.path.join(
@@ -92,10 +92,37 @@ def main():
         if best is None or rep.confidence > best[2].confidence:
             best = (name, cam, rep)
     name, cam, rep = best
+    if rep.lens_points is not None:
+        print(f"\nthe default panorama (2048x512, K: {name}) and the camera's reflection:")
+        for label, c in (
+            ("fixed -60 deg", cam.replace(camera_reflection=None)),
+            ("as detected", cam),
+        ):
+            for projection in views.PROJECTIONS:
+                rows, pixels = lens_share(c, rep.lens_points, (2048, 512), projection)
+                band = views.default_elevation_range(c, projection).describe()
+                print(
+                    f"  {label:<14}{projection:<16}{band}: {rows:.1%} of its rows and "
+                    f"{pixels:.1%} of its pixels inside the detected outline"
+                )
     os.makedirs(os.path.dirname(args.out), exist_ok=True)
     pano = cv2.remap(img, *cam.init_panorama_maps((2048, 512)), cv2.INTER_LINEAR)
     cv2.imwrite(args.out, pano)
     print(f"wrote {args.out} (K: {name}, confidence {rep.confidence:.2f})")
+
+
+def lens_share(cam, outline, size, projection):
+    """Fractions of the default panorama's rows and pixels whose source pixel lies inside the
+    detected outline of the camera's reflection (a polygon of its points by angle)."""
+    c = outline.mean(axis=0)
+    order = np.argsort(np.arctan2(outline[:, 1] - c[1], outline[:, 0] - c[0]))
+    poly = outline[order].astype(np.float32)
+    m1, _ = cam.init_panorama_maps(size, projection=projection, m1type=cv2.CV_32FC2)
+    src = m1.reshape(-1, 2)
+    inside = np.array(
+        [cv2.pointPolygonTest(poly, (float(x), float(y)), False) >= 0 for x, y in src]
+    ).reshape(m1.shape[:2])
+    return float(inside.any(axis=1).mean()), float(inside.mean())
 
 
 if __name__ == "__main__":

@@ -27,6 +27,7 @@ _LAZY = {
     "PanoramaView": "omnicam.views",
     "PerspectiveView": "omnicam.views",
     "visible_elevation_range": "omnicam.views",
+    "default_elevation_range": "omnicam.views",
     "synthetic": "omnicam.synthetic",
     "samples": "omnicam.samples",
     "read_intrinsics": "omnicam.formats.omnicam_files",

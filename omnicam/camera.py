@@ -8,6 +8,9 @@ Model contract (the binding text is ``docs/conventions.md``):
   axis is fixed by the gauge below); ``image_size = (width, height)`` as metadata.
 * **Gauge**: ``rvec`` is always the smallest rotation taking the camera's +z axis to the mirror
   axis, so an aligned rig (``rvec = 0``, ``tvec = (0, 0, c)``) keeps ``rvec = 0``.
+* **The camera's own reflection** (optional): ``camera_reflection``, the circle coaxial with the
+  optical axis (radius ``r`` at axial distance ``z``, camera frame) whose reflection a
+  calibration detected; default panoramas start above it.
 * **Methods**: ``unproject`` (pixel -> reflected ray, eqs. 6-19), ``project`` (scene point ->
   pixel, the exact non-central inverse), ``project_directions`` (points at infinity).
 * **Pixels**: centres at integer coordinates; no clipping to ``image_size``.
@@ -19,8 +22,9 @@ Model contract (the binding text is ``docs/conventions.md``):
 
 from __future__ import annotations
 
+import math
 from collections.abc import Sequence
-from typing import TYPE_CHECKING, Any, ClassVar
+from typing import TYPE_CHECKING, Any, ClassVar, NamedTuple
 
 import cv2
 import numpy as np
@@ -38,6 +42,7 @@ if TYPE_CHECKING:  # annotations only: the façade's results
 
 __all__ = [
     "MisalignedHyperbolicCamera",
+    "CameraReflection",
     "MODEL_NAME",
     "canonical_rvec",
     "scale_K",
@@ -57,6 +62,40 @@ def scale_K(K: ArrayLike, from_size: Size, to_size: Size) -> FloatArray:
     sy = to_size[1] / from_size[1]
     S = np.array([[sx, 0.0, 0.5 * (sx - 1.0)], [0.0, sy, 0.5 * (sy - 1.0)], [0.0, 0.0, 1.0]])
     return S @ np.asarray(K, dtype=np.float64)
+
+
+class CameraReflection(NamedTuple):
+    """The circle of the camera's body whose reflection outlines the camera in the image.
+
+    docs/conventions.md, "The camera's own reflection": the camera and its lens are bodies of
+    revolution about the optical axis, and the outline of their reflection is that of one
+    circle of radius ``r`` at the axial distance ``z`` from the camera centre along the
+    camera's +z axis (towards the mirror), both in the mirror's length unit. A calibration
+    from one image fits it to the outline it detects
+    (:func:`omnicam.calibration.reflection.fit_circle`); only ``r / (2 c - z)`` is well
+    determined for a nearly central rig, which is all its outline depends on.
+    """
+
+    r: float
+    z: float
+
+
+def _camera_reflection(value: Any) -> CameraReflection | None:
+    """``value`` as a :class:`CameraReflection` (None stays None); ValueError naming it."""
+    if value is None:
+        return None
+    try:
+        r, z = (float(v) for v in value)
+    except (TypeError, ValueError):
+        raise ValueError(
+            f"camera_reflection must be None or (r, z), the circle's radius and axial "
+            f"distance, got {value!r}"
+        ) from None
+    if not (math.isfinite(r) and math.isfinite(z) and r > 0):
+        raise ValueError(
+            f"camera_reflection must be (r, z) with r > 0 and both finite, got ({r!r}, {z!r})"
+        )
+    return CameraReflection(r, z)
 
 
 def _readonly(arr: ArrayLike) -> FloatArray:
@@ -86,6 +125,10 @@ class MisalignedHyperbolicCamera:
         OpenCV distortion coefficients (4, 5, 8, 12 or 14 values).
     image_size : (int, int) or None
         ``(width, height)`` of the images, metadata only (needed by :meth:`scaled`).
+    camera_reflection : (float, float) or None
+        ``(r, z)`` of the circle whose reflection outlines the camera in the image
+        (:class:`CameraReflection`), as a calibration detected it; None when unknown. Default
+        panoramas start just above its reflection (:func:`omnicam.views.default_elevation_range`).
 
     Raises
     ------
@@ -97,7 +140,18 @@ class MisalignedHyperbolicCamera:
         front of the camera; a rim image wider than 20000 px.
     """
 
-    __slots__ = ("_K", "_D", "_mirror", "_rvec", "_tvec", "_R", "_C", "_image_size", "_viewpoint")
+    __slots__ = (
+        "_K",
+        "_D",
+        "_mirror",
+        "_rvec",
+        "_tvec",
+        "_R",
+        "_C",
+        "_image_size",
+        "_viewpoint",
+        "_camera_reflection",
+    )
 
     def __init__(
         self,
@@ -107,6 +161,7 @@ class MisalignedHyperbolicCamera:
         tvec: ArrayLike,
         D: ArrayLike | None = None,
         image_size: Size | None = None,
+        camera_reflection: tuple[float, float] | None = None,
     ) -> None:
         if not isinstance(mirror, HyperbolicMirror):
             raise ValueError(f"mirror must be a HyperbolicMirror, got {type(mirror).__name__}")
@@ -126,6 +181,7 @@ class MisalignedHyperbolicCamera:
         self._R = _readonly(R)
         self._C = _readonly(-self._R.T @ self._tvec)  # F_M of eq. 17
         self._image_size = validate_image_size(image_size)
+        self._camera_reflection = _camera_reflection(camera_reflection)
         self._viewpoint: tuple[FloatArray, float] | None = None
         # a physical rig: camera below the mirror sheet, rim in front, rim image enumerable
         validate_posture(self._R, self._tvec, mirror, lambda: self.rim_image_points(36))
@@ -166,10 +222,12 @@ class MisalignedHyperbolicCamera:
             self._tvec,
             self._D,
             new,
+            self._camera_reflection,  # a circle of the body: the same at any resolution
         )
 
     def replace(self, **changes: Any) -> MisalignedHyperbolicCamera:
-        """A copy with some of ``K, mirror, rvec, tvec, D, image_size`` changed."""
+        """A copy with some of ``K, mirror, rvec, tvec, D, image_size, camera_reflection``
+        changed."""
         args: dict[str, Any] = dict(
             K=self._K,
             mirror=self._mirror,
@@ -177,6 +235,7 @@ class MisalignedHyperbolicCamera:
             tvec=self._tvec,
             D=self._D,
             image_size=self._image_size,
+            camera_reflection=self._camera_reflection,
         )
         unknown = set(changes) - set(args)
         if unknown:
@@ -225,11 +284,21 @@ class MisalignedHyperbolicCamera:
         """(3,) camera centre in the mirror frame, ``-R^T tvec`` (``F_M`` of eq. 17)."""
         return self._C
 
+    @property
+    def camera_reflection(self) -> CameraReflection | None:
+        """``(r, z)`` of the circle whose reflection outlines the camera (camera frame, the
+        mirror's length unit; :class:`CameraReflection`), as detected when calibrated; None
+        when unknown."""
+        return self._camera_reflection
+
     def __repr__(self) -> str:
+        body = self._camera_reflection
+        extra = "" if body is None else f", camera_reflection=({body.r!r}, {body.z!r})"
         return (
             f"MisalignedHyperbolicCamera(K={self._K.tolist()}, mirror={self._mirror!r}, "
             f"rvec={self._rvec.tolist()}, tvec={self._tvec.tolist()}, "
-            f"D={None if self._D is None else self._D.tolist()}, image_size={self._image_size})"
+            f"D={None if self._D is None else self._D.tolist()}, image_size={self._image_size}"
+            f"{extra})"
         )
 
     def __eq__(self, other: object) -> bool:
@@ -242,6 +311,7 @@ class MisalignedHyperbolicCamera:
             same_D
             and self._mirror == other._mirror
             and self._image_size == other._image_size
+            and self._camera_reflection == other._camera_reflection
             and all(
                 np.array_equal(getattr(self, n), getattr(other, n))
                 for n in ("_K", "_rvec", "_tvec")

@@ -34,7 +34,7 @@ import functools
 import math
 import numbers
 import warnings
-from typing import Any, Protocol
+from typing import Any, NamedTuple, Protocol
 
 import cv2
 import numpy as np
@@ -62,6 +62,9 @@ __all__ = [
     "rotation_from_ypr",
     "K_from_fov",
     "visible_elevation_range",
+    "default_elevation_range",
+    "camera_reflection_elevation",
+    "DefaultElevationRange",
     "PanoramaView",
     "PerspectiveView",
     "UNSEEN",
@@ -83,9 +86,23 @@ M1TYPES = {cv2.CV_16SC2: "CV_16SC2", cv2.CV_32FC1: "CV_32FC1", cv2.CV_32FC2: "CV
 #: ``R = None`` of a perspective view: looking horizontally at azimuth 0, image-up along +Z.
 R0 = np.array([[0.0, -1.0, 0.0], [0.0, 0.0, -1.0], [1.0, 0.0, 0.0]])
 
-#: The default band of a cylindrical panorama stops here: its rows are linear in
-#: ``tan(elevation)``, which the nadir (-90 deg) would send to infinity.
+#: The default band of a panorama stops here when the camera's reflection is unknown (it leaves
+#: out the camera around the nadir on the default rigs: a lens barrel of 30 mm stays below it),
+#: and a cylindrical one never goes lower: its rows, linear in ``tan(elevation)``, stretch
+#: without bound towards the nadir (-90 deg).
 CYLINDRICAL_MIN_ELEVATION = -60.0
+
+#: Source pixels between the outline of the camera's reflection and the default lower edge of a
+#: panorama (:func:`camera_reflection_elevation`): the blur of the outline's edge and the
+#: scatter of the circle fitted to it (1-2 px on renders and on the office photograph).
+REFLECTION_MARGIN_PX = 2.0
+
+#: Where the default lower edge of a panorama came from (:class:`DefaultElevationRange`).
+LOWER_EDGE_REFLECTION = "the camera's reflection as detected"
+LOWER_EDGE_FIXED = "the fixed default, no camera reflection recorded"
+LOWER_EDGE_FLOOR = "a cylindrical panorama's lowest default, the camera's reflection below it"
+LOWER_EDGE_ABOVE = "the fixed default, the camera's reflection reaching above the band"
+LOWER_EDGE_MIRROR = "what the mirror sees"
 
 
 class CameraLike(Protocol):
@@ -109,6 +126,13 @@ class CameraLike(Protocol):
 
     @property
     def camera_center(self) -> FloatArray: ...
+
+    @property
+    def camera_reflection(self) -> tuple[float, float] | None: ...
+
+    def project(self, object_points: ArrayLike) -> FloatArray: ...
+
+    def unproject(self, image_points: ArrayLike) -> tuple[FloatArray, FloatArray]: ...
 
     def best_fit_viewpoint(self) -> tuple[FloatArray, float]: ...
 
@@ -369,6 +393,177 @@ def visible_elevation_range(camera: CameraLike) -> tuple[float, float]:
     lowest, hi, nadir = _rim_band(camera)
     lo = -90.0 if nadir else lowest
     return lo, hi
+
+
+def camera_reflection_elevation(
+    camera: CameraLike,
+    R: ArrayLike | None = None,
+    depth: float | None = None,
+    viewpoint: ArrayLike | None = None,
+    margin_px: float = REFLECTION_MARGIN_PX,
+    n: int = 360,
+) -> float | None:
+    """The highest elevation at which the camera's own reflection shows, in degrees.
+
+    The reflection is that of the circle ``camera.camera_reflection = (r, z)`` (radius ``r`` at
+    the axial distance ``z`` in the camera frame; docs/conventions.md, "The camera's own
+    reflection"). ``n`` points of it are projected exactly (:meth:`project`: the pixels of its
+    outline), moved ``margin_px`` source pixels outwards (away from the outline's centre) and
+    traced back (:meth:`unproject`). The elevation of each ray is taken as a panorama with the
+    same ``R``, ``depth`` and ``viewpoint`` sees it (:func:`init_panorama_maps`): of its
+    direction for ``depth=None``, else of the point where it meets the sphere of radius
+    ``depth`` about ``viewpoint``. Below the highest of them the panorama may show the camera
+    at some azimuth; above it, at none.
+
+    Parameters
+    ----------
+    camera : MisalignedHyperbolicCamera
+    R, depth, viewpoint
+        As for :func:`init_panorama_maps` (``viewpoint=None``: the best-fit viewpoint).
+    margin_px : float
+        Source pixels beyond the outline (``REFLECTION_MARGIN_PX``).
+    n : int
+        Points along the circle.
+
+    Returns
+    -------
+    float or None
+        None when the camera's reflection is unknown (``camera_reflection`` None), or when
+        part of its outline (with the margin) does not see the mirror or, for a finite
+        ``depth``, its rays do not reach the sphere.
+    """
+    _check_camera(camera)
+    Rm = np.eye(3) if R is None else _check_rotation(R)
+    depth = _check_depth(depth)
+    vp = _check_viewpoint(camera, viewpoint, depth)
+    margin = real_number(margin_px, "margin_px", 0.0, expected="a number of pixels >= 0")
+    if isinstance(n, bool) or not isinstance(n, numbers.Integral) or n < 8:
+        raise ValueError(f"n must be an integer >= 8 (points along the circle), got {n!r}")
+    return _reflection_top(camera, Rm, depth, vp, margin, int(n))
+
+
+def _reflection_top(
+    camera: CameraLike,
+    Rm: FloatArray,
+    depth: float | None,
+    vp: FloatArray | None,
+    margin_px: float,
+    n: int = 360,
+) -> float | None:
+    """:func:`camera_reflection_elevation` of checked arguments."""
+    body = getattr(camera, "camera_reflection", None)
+    if body is None:
+        return None
+    r, z = (float(v) for v in body)
+    t = np.linspace(0.0, 2.0 * np.pi, n, endpoint=False)
+    circle = np.stack([r * np.cos(t), r * np.sin(t), np.full(n, z)], axis=1)  # camera frame
+    X = (circle - np.asarray(camera.tvec)) @ np.asarray(camera.R)  # R^T (X_cam - t): mirror
+    u = np.asarray(camera.project(X), dtype=np.float64)
+    if not np.isfinite(u).all():
+        return None
+    out = u - u.mean(axis=0)
+    out /= np.linalg.norm(out, axis=1, keepdims=True)
+    P, V = camera.unproject(u + margin_px * out)
+    if not np.isfinite(V).all():
+        return None
+    if depth is None:
+        d = V
+    else:
+        assert vp is not None, "_check_viewpoint gives a viewpoint with every depth"
+        w = P - vp  # |w + s V| = depth, the far root (the ray leaves from inside the sphere)
+        b = np.einsum("ij,ij->i", w, V)
+        disc = b * b - (np.einsum("ij,ij->i", w, w) - depth * depth)
+        if np.any(disc < 0.0):
+            return None
+        s = -b + np.sqrt(disc)
+        if np.any(s <= 0.0):
+            return None
+        d = w + s[:, None] * V
+    return float(np.max(_elevation_deg(d @ Rm.T)))  # R d: the panorama's frame
+
+
+class DefaultElevationRange(NamedTuple):
+    """The default band of a panorama (:func:`default_elevation_range`): ``(lo, hi)`` in
+    degrees and, in a short phrase, where ``lo`` came from (one of the ``LOWER_EDGE_*``)."""
+
+    lo: float
+    hi: float
+    lower_edge: str
+
+    def describe(self) -> str:
+        """``"lower edge -38.2 deg: the camera's reflection as detected"``."""
+        return f"lower edge {self.lo:.1f} deg: {self.lower_edge}"
+
+
+def default_elevation_range(
+    camera: CameraLike,
+    projection: str = "cylindrical",
+    R: ArrayLike | None = None,
+    depth: float | None = None,
+    viewpoint: ArrayLike | None = None,
+) -> DefaultElevationRange:
+    """The band a panorama covers when its ``elevation_range`` is None.
+
+    ``hi`` is the top of what the mirror sees (:func:`visible_elevation_range`; at most 89 deg
+    for ``"cylindrical"``). ``lo`` leaves out the camera's own reflection: with the camera's
+    reflection known (``camera.camera_reflection``, as a calibration detected it) it is the
+    highest elevation of its outline, ``REFLECTION_MARGIN_PX`` source pixels outwards, as this
+    panorama sees it (:func:`camera_reflection_elevation`), for ``"cylindrical"`` at least
+    ``CYLINDRICAL_MIN_ELEVATION`` (-60 deg: its rows stretch as ``tan(elevation)``); without
+    it, ``CYLINDRICAL_MIN_ELEVATION``. Never below what the mirror sees.
+
+    Parameters
+    ----------
+    camera : MisalignedHyperbolicCamera
+    projection, R, depth, viewpoint
+        As for :func:`init_panorama_maps`.
+
+    Returns
+    -------
+    DefaultElevationRange
+        ``(lo, hi, lower_edge)``.
+
+    Raises
+    ------
+    ValueError
+        Bad ``projection``, ``R``, ``depth`` or ``viewpoint``, or no usable band (``lo`` not
+        below ``hi``).
+    """
+    _check_camera(camera)
+    if projection not in PROJECTIONS:
+        raise ValueError(f"projection must be one of {PROJECTIONS}, got {projection!r}")
+    Rm = np.eye(3) if R is None else _check_rotation(R)
+    depth = _check_depth(depth)
+    return _default_range(camera, projection, Rm, depth, _check_viewpoint(camera, viewpoint, depth))
+
+
+def _default_range(
+    camera: CameraLike,
+    projection: str,
+    Rm: FloatArray,
+    depth: float | None,
+    vp: FloatArray | None,
+) -> DefaultElevationRange:
+    """:func:`default_elevation_range` of checked arguments."""
+    lo, hi = visible_elevation_range(camera)
+    if projection == "cylindrical":
+        hi = min(hi, 89.0)
+    top = _reflection_top(camera, Rm, depth, vp, REFLECTION_MARGIN_PX)
+    if top is None:  # unknown: -60 deg, as before the camera's reflection was recorded
+        top, why = CYLINDRICAL_MIN_ELEVATION, LOWER_EDGE_FIXED
+    elif top >= hi:
+        top, why = CYLINDRICAL_MIN_ELEVATION, LOWER_EDGE_ABOVE
+    elif projection == "cylindrical" and top < CYLINDRICAL_MIN_ELEVATION:
+        top, why = CYLINDRICAL_MIN_ELEVATION, LOWER_EDGE_FLOOR
+    else:
+        why = LOWER_EDGE_REFLECTION
+    lo, why = (top, why) if top > lo else (lo, LOWER_EDGE_MIRROR)
+    if not (math.isfinite(lo) and math.isfinite(hi) and lo < hi):
+        raise ValueError(
+            f"elevation_range: the band this camera sees, ({lo}, {hi}) deg, "
+            f"is not a usable default for a {projection} panorama; give one"
+        )
+    return DefaultElevationRange(lo, hi, why)
 
 
 # -- the fast path: the phases of omnicam._kernels -----------------------------------------------
@@ -923,9 +1118,10 @@ def init_panorama_maps(
     elevation_range : (float, float) or None
         ``(lo, hi)`` in degrees, ``lo < hi``, inside (-90, 90) for ``"cylindrical"`` and
         [-90, 90] for ``"equirectangular"``. ``None``: the band the mirror sees
-        (:func:`visible_elevation_range`), its lower end raised to
-        ``CYLINDRICAL_MIN_ELEVATION`` (-60 deg), which leaves out the camera's own reflection
-        around the nadir (a lens barrel of 30 mm on the default rigs stays below it).
+        (:func:`visible_elevation_range`) above the camera's own reflection
+        (:func:`default_elevation_range`): above its outline as this panorama sees it when
+        ``camera.camera_reflection`` is known (a calibration that detected it records it),
+        else from ``CYLINDRICAL_MIN_ELEVATION`` (-60 deg). A given range always wins.
     projection : {"cylindrical", "equirectangular"}
     R : (3, 3) array_like or None
         Rotation of the panorama frame (as for perspective views); ``None`` is the identity,
@@ -966,19 +1162,11 @@ def init_panorama_maps(
     m1type = _check_m1type(m1type)
     Rm = np.eye(3) if R is None else _check_rotation(R)
     depth = _check_depth(depth)
-    if elevation_range is None:
-        lo, hi = visible_elevation_range(camera)
-        lo = max(lo, CYLINDRICAL_MIN_ELEVATION)  # below it: the camera's own reflection
-        if projection == "cylindrical":
-            hi = min(hi, 89.0)
-        if not (math.isfinite(lo) and math.isfinite(hi) and lo < hi):
-            raise ValueError(
-                f"elevation_range: the band this camera sees, ({lo}, {hi}) deg, "
-                f"is not a usable default for a {projection} panorama; give one"
-            )
+    vp = _check_viewpoint(camera, viewpoint, depth)
+    if elevation_range is None:  # above the camera's own reflection, else from -60 deg
+        lo, hi, _ = _default_range(camera, projection, Rm, depth, vp)
     else:
         lo, hi = _check_elevation_range(elevation_range, projection)
-    vp = _check_viewpoint(camera, viewpoint, depth)
     p0, p1, az_step = _panorama_params((w, h), lo, hi, projection)
     st = np.zeros(9, np.int64)
     maps = _table(
@@ -1134,6 +1322,13 @@ class PanoramaView:
             if viewpoint is None
             else _check_viewpoint(None, viewpoint, 1.0 if depth is None else depth)
         )
+
+    def default_range(self, camera: CameraLike) -> DefaultElevationRange | None:
+        """The band this view covers for ``camera`` when its ``elevation_range`` is None
+        (:func:`default_elevation_range`), else None (the given range)."""
+        if self.elevation_range is not None:
+            return None
+        return default_elevation_range(camera, self.projection, self.R, self.depth, self.viewpoint)
 
     def maps(self, camera: CameraLike, m1type: int = cv2.CV_16SC2) -> Maps:
         """``(map1, map2)`` of this view for ``camera``."""

@@ -261,6 +261,29 @@ def test_without_far_lines_the_report_warns_of_ambiguity():
     assert any("ambiguous" in w for w in report.warnings)
 
 
+def test_the_camera_records_the_reflection_it_used_and_only_a_circle_that_fits():
+    """camera_reflection is the circle under the returned posture (the report's), None
+    without the cue or when the outline misfits every circle by more than 5 px RMS."""
+    from omnicam.calibration.reflection import outline_pixels
+
+    truth = RIGS[1]
+    rim = truth.rim_image_points(360)
+    outline, centre = outline_pixels(truth, 9.0, 12.0, 90)
+    cam, report = calibrate(truth.K, truth.mirror, boundary_points=rim, lens=outline, lens_z=12.0)
+    assert report.lens_rms < 1e-3 and cam.camera_reflection == (report.lens_r, report.lens_z)
+    assert cam.camera_reflection.r == pytest.approx(9.0, abs=1e-3)
+    assert cam.camera_reflection.z == 12.0
+    cam, report = calibrate(truth.K, truth.mirror, boundary_points=rim, lens=None)
+    assert cam.camera_reflection is None
+    mild = centre + (outline - centre) * [1.5, 0.7]  # a circle fits it at 3.4 px: kept
+    cam, report = calibrate(truth.K, truth.mirror, boundary_points=rim, lens=mild)
+    assert 3.0 < report.lens_rms < 5.0
+    assert cam.camera_reflection == (report.lens_r, report.lens_z)
+    squashed = centre + (outline - centre) * [2.5, 0.4]  # no coaxial circle fits it: 8.4 px
+    cam, report = calibrate(truth.K, truth.mirror, boundary_points=rim, lens=squashed)
+    assert report.lens_used and report.lens_rms > 5.0 and cam.camera_reflection is None
+
+
 def test_image_size_defaults_to_the_image(monkeypatch):
     truth = synthetic.misaligned_rig()
     from omnicam.calibration import rim, steps

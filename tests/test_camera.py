@@ -299,6 +299,18 @@ def test_scaled_camera_sees_the_same_rays_at_scaled_pixels():
         cam.replace(image_size=None).scaled((10, 10))
 
 
+def test_the_camera_reflection_is_kept_by_scaled_and_replace_and_compared():
+    cam = RIGS["distorted"]
+    assert cam.camera_reflection is None
+    body = cam.replace(camera_reflection=(9, 12))
+    assert body.camera_reflection == (9.0, 12.0) and isinstance(body.camera_reflection.r, float)
+    assert body.scaled((1000, 750)).camera_reflection == (9.0, 12.0)  # the body's, any size
+    assert body.replace(D=None).camera_reflection == (9.0, 12.0)
+    assert body.replace(camera_reflection=None) == cam
+    assert body != cam and body != cam.replace(camera_reflection=(9.0, 12.5))
+    assert "camera_reflection=(9.0, 12.0)" in repr(body) and "camera_reflection" not in repr(cam)
+
+
 def test_aligned_constructor_is_the_hyperomni_rig():
     m = synthetic.default_mirror()
     cam = MisalignedHyperbolicCamera.aligned(m, 600.0, 320.0, 240.0)
@@ -330,6 +342,10 @@ def test_bad_K_raises_value_error(K, match):
         (dict(image_size=(0, 10)), "image_size"),
         (dict(image_size=(10.5, 10)), "image_size"),
         (dict(mirror=(1, 2, 3)), "mirror"),
+        (dict(camera_reflection=(0.0, 12.0)), "camera_reflection"),
+        (dict(camera_reflection=(9.0, np.nan)), "camera_reflection"),
+        (dict(camera_reflection=(9.0, 12.0, 1.0)), "camera_reflection"),
+        (dict(camera_reflection=9.0), "camera_reflection"),
     ],
 )
 def test_bad_parameters_raise_value_error(kwargs, match):

@@ -595,6 +595,28 @@ def test_info_prints_the_verdict_and_says_what_is_doubtful(rig, tmp_path, capsys
     assert "verdict        no doubt recorded" in capsys.readouterr().out
 
 
+def test_info_says_the_camera_reflection_and_where_a_panoramas_lower_edge_comes_from(
+    data, rig, tmp_path, capsys
+):
+    from omnicam.views import default_elevation_range
+
+    assert main(["info", str(data["calib"])]) == 0
+    assert (
+        "reflection     none recorded; default panorama: lower edge -60.0 deg: the fixed "
+        "default, no camera reflection recorded\n"
+    ) in capsys.readouterr().out
+    calib = tmp_path / "body.yaml"
+    body = rig.replace(camera_reflection=(22.0, 50.0))  # a wide barrel: it shows up to -45 deg
+    body.save(calib)
+    assert main(["info", str(calib)]) == 0
+    lo = default_elevation_range(body).lo
+    assert -50.0 < lo < -40.0
+    assert (
+        f"reflection     circle r 22.000 mm at z 50.000 mm (camera frame), as detected; "
+        f"default panorama: lower edge {lo:.1f} deg: the camera's reflection as detected\n"
+    ) in capsys.readouterr().out
+
+
 def test_info_of_aligned_rig_has_zero_tilt_offset_and_rms(tmp_path, capsys):
     calib = tmp_path / "aligned.json"
     synthetic.aligned_rig(image_size=(120, 120)).save(calib)

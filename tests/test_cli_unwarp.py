@@ -331,16 +331,47 @@ def test_each_video_output_names_its_codec_in_one_line(data, tmp_path, capsys):
         ).stdout.strip()
         for p in outs
     ]
-    assert lines[1] == f"wrote {outs[1]} (10 frames, 32x8, codec MJPG)" and probed[1] == "mjpeg"
+    edge = "; lower edge -60.0 deg: the fixed default, no camera reflection recorded"
+    assert lines[1] == f"wrote {outs[1]} (10 frames, 32x8, codec MJPG{edge})"
+    assert probed[1] == "mjpeg"
     if probed[0] == "h264":  # an OpenCV with an H.264 encoder
-        assert re.fullmatch(rf"wrote {outs[0]} \(10 frames, 64x16, H\.264 \((\w+)\)\)", lines[0])
-        assert re.search(r"\((\w+)\)\)$", lines[0]).group(1) in H264
+        assert re.fullmatch(
+            rf"wrote {outs[0]} \(10 frames, 64x16, H\.264 \((\w+)\){re.escape(edge)}\)", lines[0]
+        )
+        assert re.search(r"H\.264 \((\w+)\)", lines[0]).group(1) in H264
     else:  # mp4v, and why
         assert probed[0] == "mpeg4"
         assert lines[0] == (
             f"wrote {outs[0]} (10 frames, 64x16, codec mp4v: this OpenCV has no H.264 "
-            f"encoder, so browsers will not play it)"
+            f"encoder, so browsers will not play it{edge})"
         )
+
+
+def test_each_panorama_line_says_where_its_lower_edge_came_from(data, rig, tmp_path, capsys):
+    """A calibration that records the camera's reflection: the default panorama starts above it
+    and its line says so; a given band says nothing."""
+    from omnicam.views import default_elevation_range
+
+    calib = tmp_path / "body.yaml"
+    body = rig.replace(camera_reflection=(22.0, 50.0))  # a wide barrel: it shows up to -45 deg
+    body.save(calib)
+    outs = [tmp_path / "a.png", tmp_path / "b.png", tmp_path / "c_%02d.png"]
+    views = ["--panorama", "64x16", "-o", str(outs[0])]
+    views += ["--panorama", "64x16", "--elevation", "-50", "10", "-o", str(outs[1])]
+    assert main(["unwarp", str(data["image"]), "-c", str(calib), *views]) == 0
+    lo = default_elevation_range(body).lo
+    assert -50.0 < lo < -40.0
+    assert capsys.readouterr().out.splitlines() == [
+        f"wrote {outs[0]} (64x16; lower edge {lo:.1f} deg: the camera's reflection as detected)",
+        f"wrote {outs[1]} (64x16)",
+    ]
+    src = cv2.imread(str(data["image"]))
+    expected = cv2.remap(src, *body.init_panorama_maps((64, 16)), cv2.INTER_LINEAR)
+    np.testing.assert_array_equal(cv2.imread(str(outs[0])), expected)
+    args = ["unwarp", str(data["video"]), "-c", str(calib), "--panorama", "32x8", "-o"]
+    assert main([*args, str(outs[2]), "--max-frames", "2"]) == 0
+    edge = f"lower edge {lo:.1f} deg: the camera's reflection as detected"
+    assert capsys.readouterr().out.splitlines() == [f"wrote 2 frames as {outs[2]} ({edge})"]
 
 
 def test_equirect_must_be_two_to_one_on_the_command_line(data, tmp_path, capsys):

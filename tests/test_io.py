@@ -506,3 +506,66 @@ def test_a_malformed_verdict_raises_naming_the_file_and_the_field(tmp_path, edit
         read_verdict(path)
     assert str(path) in str(err.value) and repr(field) in str(err.value), str(err.value)
     MisalignedHyperbolicCamera.load(path)  # the camera itself still reads
+
+
+# -- the camera's own reflection, recorded in the file (issue 18 item 6) --------------------------
+@pytest.mark.parametrize("ext", [".yaml", ".yml", ".xml", ".json"])
+def test_the_camera_reflection_round_trips_in_every_format(tmp_path, ext):
+    cam = RIGS["distorted"].replace(camera_reflection=(9.25, 12.125))
+    path = tmp_path / f"c{ext}"
+    cam.save(path)
+    assert "camera_reflection" in path.read_text()
+    loaded = MisalignedHyperbolicCamera.load(path)
+    assert loaded == cam and loaded.camera_reflection == (9.25, 12.125)
+    assert loaded.camera_reflection.r == 9.25 and loaded.camera_reflection.z == 12.125
+
+
+def test_a_file_without_the_camera_reflection_reads_as_before_and_has_none(tmp_path):
+    from omnicam import samples
+
+    path = tmp_path / "c.yaml"
+    RIGS["misaligned"].save(path)
+    assert "camera_reflection" not in path.read_text()
+    assert MisalignedHyperbolicCamera.load(path).camera_reflection is None
+    with samples.path("hyperomni_misaligned") as shipped:  # written before the field
+        assert "camera_reflection" not in shipped.read_text()
+        assert MisalignedHyperbolicCamera.load(shipped).camera_reflection is None
+
+
+def test_the_camera_reflection_keeps_format_version_1_and_ignores_unknown_keys(tmp_path):
+    """An optional map (docs/conventions.md, "Compatibility"): a later key inside it is ignored,
+    and a reader that ignores the whole map reads the same camera."""
+    cam = RIGS["misaligned"].replace(camera_reflection=(9.0, 12.0))
+    path = tmp_path / "c.yaml"
+    cam.save(path)
+    text = path.read_text()
+    assert "format_version: 1" in text
+    path.write_text(text.replace("camera_reflection:\n", "camera_reflection:\n   glass: 3.\n"))
+    assert MisalignedHyperbolicCamera.load(path) == cam
+    start = text.index("camera_reflection:")
+    end = text.index("\n", text.index("   z:", start))
+    path.write_text(text[:start] + text[end + 1 :])  # what an older writer left
+    assert MisalignedHyperbolicCamera.load(path) == RIGS["misaligned"]
+
+
+@pytest.mark.parametrize(
+    "edit",
+    [
+        lambda t: t.replace("   r: 9.", "   r: -9."),
+        lambda t: t.replace("   r: 9.", "   r: 0."),
+        lambda t: t.replace("   r: 9.", "   radius: 9."),
+        lambda t: t.replace("   z: 12.", "   z: .nan"),
+        lambda t: t.replace("   z: 12.", "   z: far"),
+        lambda t: t.replace("camera_reflection:\n", "camera_reflection: 3\nold:\n"),
+    ],
+)
+def test_a_malformed_camera_reflection_raises_naming_the_file_and_the_field(tmp_path, edit):
+    path = tmp_path / "c.yaml"
+    RIGS["misaligned"].replace(camera_reflection=(9.0, 12.0)).save(path)
+    text = path.read_text()
+    new = edit(text)
+    assert new != text
+    path.write_text(new)
+    with pytest.raises(ValueError) as err:
+        MisalignedHyperbolicCamera.load(path)
+    assert str(path) in str(err.value) and "camera_reflection" in str(err.value), str(err.value)

@@ -550,3 +550,132 @@ def test_random_rigs_keep_the_bound(seed):
 def test_a_view_much_outside_the_band_gets_a_note_with_the_way_back(build, advice):
     with pytest.warns(RuntimeWarning, match=advice):
         build(synthetic.misaligned_rig())
+
+
+# -- the default lower edge: the camera's own reflection as detected (issue 18 item 6) ----------
+R_BODY, Z_BODY = 22.0, 50.0  # a wide lens barrel close to the mirror: it shows up to -45 deg
+
+
+def true_body_top(truth, r=R_BODY, z=Z_BODY):
+    """The highest elevation of the true outline (by bisection, calibration.reflection)."""
+    from omnicam.calibration.reflection import outline_pixels
+
+    _, V = truth.unproject(outline_pixels(truth, r, z, 720)[0])
+    return float(np.degrees(np.arctan2(V[:, 2], np.hypot(V[:, 0], V[:, 1]))).max())
+
+
+@pytest.fixture(scope="module")
+def body_rig():
+    """A render with a known lens barrel (tests/barrel.py, traced against the solid itself),
+    calibrated from the image alone with the true K and mirror."""
+    from barrel import render
+
+    truth = synthetic.random_misaligned_rig(np.random.default_rng(5), 5.0, 5.0)
+    image = render(truth, r=R_BODY, z=Z_BODY, box=None)
+    cam, report = MisalignedHyperbolicCamera.calibrate(truth.K, truth.mirror, image=image)
+    return truth, cam, report
+
+
+def test_the_calibration_records_the_camera_reflection_it_detected(body_rig):
+    """The recorded circle's outline lies on the true one within the fit's own scatter."""
+    from omnicam.calibration.reflection import outline_pixels, plane_radius
+
+    truth, cam, report = body_rig
+    assert report.lens_used and cam.camera_reflection is not None, report.lens_note
+    assert cam.camera_reflection == (report.lens_r, report.lens_z)
+    out, _ = outline_pixels(cam, *cam.camera_reflection, 180)
+    Ki = np.linalg.inv(truth.K)
+    xn = out @ Ki[:2, :2].T + Ki[:2, 2]
+    rho, g = plane_radius(truth.mirror, truth.R, truth.tvec, xn, Z_BODY, Ki[:2, :2])
+    off = (rho - R_BODY) / g  # px from the true outline
+    assert np.abs(off).max() < max(0.2, 3.0 * report.lens_rms), (off, report.lens_rms)
+
+
+@pytest.mark.parametrize(
+    "projection, depth", [("cylindrical", None), ("equirectangular", None), ("cylindrical", 600.0)]
+)
+def test_the_default_panorama_leaves_out_the_camera_reflection_as_detected(
+    body_rig, projection, depth
+):
+    """No entry of the default panorama sees the barrel (each entry's source pixel traced in
+    the true rig against the solid), and the lower edge lies at most a few rows above the
+    true outline's top (of 96 rows)."""
+    from barrel import hits
+
+    truth, cam, _ = body_rig
+    size = (256, 96)
+    band = views.default_elevation_range(cam, projection, depth=depth)
+    assert band.lower_edge == views.LOWER_EDGE_REFLECTION and band.lo > -60.0
+    assert "the camera's reflection as detected" in band.describe()
+    map1, _ = cam.init_panorama_maps(size, projection=projection, m1type=cv2.CV_32FC2, depth=depth)
+    src = map1.reshape(-1, 2).astype(np.float64)
+    src = src[src[:, 0] != views.UNSEEN]
+    assert len(src) > 0.9 * size[0] * size[1]
+    assert not np.isfinite(hits(truth, src, R_BODY, Z_BODY)).any()
+    top = true_body_top(truth)
+    if projection == "cylindrical":
+        step = (math.tan(math.radians(band.hi)) - math.tan(math.radians(band.lo))) / (size[1] - 1)
+        rows = (math.tan(math.radians(band.lo)) - math.tan(math.radians(top))) / step
+    else:
+        rows = (band.lo - top) / ((band.hi - band.lo) / (size[1] - 1))
+    assert 0.0 < rows <= 5.0, rows
+    below = cam.init_panorama_maps(
+        size, (band.lo - 3.0, band.hi), projection, m1type=cv2.CV_32FC2, depth=depth
+    )[0].reshape(-1, 2)
+    below = below[below[:, 0] != views.UNSEEN].astype(np.float64)
+    assert np.isfinite(hits(truth, below, R_BODY, Z_BODY)).any()  # 3 deg lower: the barrel
+
+
+def test_an_explicit_elevation_range_wins_over_the_camera_reflection(body_rig):
+    _, cam, _ = body_rig
+    bare = cam.replace(camera_reflection=None)
+    for band in ((-80.0, 10.0), (-20.0, 5.0)):
+        with_body = cam.init_panorama_maps((128, 32), band)
+        without = bare.init_panorama_maps((128, 32), band)
+        assert all(np.array_equal(a, b) for a, b in zip(with_body, without))
+    assert not np.array_equal(
+        cam.init_panorama_maps((128, 32))[0], bare.init_panorama_maps((128, 32))[0]
+    )
+    assert views.PanoramaView((128, 32), (-80.0, 10.0)).default_range(cam) is None
+
+
+def test_without_a_camera_reflection_the_default_starts_at_minus_60():
+    cam = synthetic.misaligned_rig()
+    assert cam.camera_reflection is None and views.camera_reflection_elevation(cam) is None
+    lo, hi = views.visible_elevation_range(cam)
+    for projection in views.PROJECTIONS:
+        band = views.default_elevation_range(cam, projection)
+        assert (band.lo, band.hi) == (-60.0, min(hi, 89.0) if projection == "cylindrical" else hi)
+        assert band.lower_edge == views.LOWER_EDGE_FIXED
+        default = cam.init_panorama_maps((128, 32), projection=projection)
+        given = cam.init_panorama_maps((128, 32), (band.lo, band.hi), projection)
+        assert all(np.array_equal(a, b) for a, b in zip(default, given))
+
+
+def test_a_camera_reflection_below_minus_60_leaves_a_cylindrical_panorama_at_minus_60():
+    """A small barrel (radius 9 at 12 mm) shows only below -75 deg: an equirectangular panorama
+    goes down to it; a cylindrical one stops at -60 deg, its rows stretching as tan(el)."""
+    cam = synthetic.misaligned_rig().replace(camera_reflection=(9.0, 12.0))
+    top = true_body_top(cam, 9.0, 12.0)
+    cyl = views.default_elevation_range(cam, "cylindrical")
+    assert (cyl.lo, cyl.lower_edge) == (-60.0, views.LOWER_EDGE_FLOOR) and top < -75.0
+    equi = views.default_elevation_range(cam, "equirectangular")
+    assert equi.lower_edge == views.LOWER_EDGE_REFLECTION and top < equi.lo < top + 3.0
+
+
+def test_the_camera_reflection_elevation_is_that_of_its_exact_outline(body_rig):
+    """Without a margin, the outline's highest elevation as outline_pixels (bisection) gives
+    it; with one, a little higher; at a great depth, close to the direction's."""
+    truth = body_rig[0].replace(camera_reflection=(R_BODY, Z_BODY))
+    top = true_body_top(truth)
+    assert views.camera_reflection_elevation(truth, margin_px=0.0) == pytest.approx(top, abs=0.01)
+    with_margin = views.camera_reflection_elevation(truth)
+    assert top < with_margin < top + 2.0
+    far = views.camera_reflection_elevation(truth, depth=1e7)
+    assert far == pytest.approx(with_margin, abs=1e-3)
+    near = views.camera_reflection_elevation(truth, depth=600.0)
+    assert near != far and abs(near - far) < 2.0
+    with pytest.raises(ValueError, match="margin_px"):
+        views.camera_reflection_elevation(truth, margin_px=-1.0)
+    with pytest.raises(ValueError, match="n must be"):
+        views.camera_reflection_elevation(truth, n=2)

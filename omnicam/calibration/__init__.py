@@ -118,6 +118,9 @@ def calibrate(
     Returns
     -------
     camera : MisalignedHyperbolicCamera
+        With ``camera_reflection = (r, z)``, the circle of the camera's reflection under the
+        returned posture, when the reflection was used and fits it within
+        ``steps.BODY_MAX_RMS_PX`` (5 px RMS); else None.
     report : CalibrationReport
 
     Raises
@@ -171,7 +174,11 @@ def calibrate(
         K, mirror, cands.all[sel.chosen], rim, lines_xn, cue, circles.get(sel.chosen), refine
     )
     warnings = steps.warnings_step(rim, cue, sel, ref, cands)
-    camera = camera_cls(K, mirror, ref.rvec, ref.tvec, D=D, image_size=image_size)
+    # the camera's reflection as detected: default panoramas leave it out
+    body = steps.camera_body(cue, ref)
+    camera = camera_cls(
+        K, mirror, ref.rvec, ref.tvec, D=D, image_size=image_size, camera_reflection=body
+    )
     report = CalibrationReport.from_steps(rim, cue, cands, sel, ref, list(warnings), camera, lines)
     bowed = bowed_far_lines(getattr(ref.result, "line_rms", math.nan), lines, mirror)
     if bowed is not None:  # (.shape) the one thing one image tells of the mirror's shape

@@ -693,6 +693,27 @@ def _final_circle(K, mirror, R, tvec, cue, trials):
     return fit_circle(mirror, R, tvec, cue.normalized, np.linalg.inv(K)[:2, :2], r=cue.r, z=cue.z)
 
 
+#: The camera records the circle of its reflection (``camera_reflection``, from which default
+#: panoramas start) when the outline fits it within this many px RMS. The office photograph's
+#: outline fits at 1.4 px with the rim's aspect as the pixel aspect, at 3.5 px with the K that
+#: ``--guess-k`` guesses (then implausible: forced only), and either circle's reflection, 2 px
+#: further out, leaves none of the detected outline in the default panorama.
+BODY_MAX_RMS_PX = 5.0
+
+
+def camera_body(cue, refinement, max_rms=BODY_MAX_RMS_PX):
+    """``(r, z)`` of the camera's reflection as detected, for the camera to record
+    (``camera_reflection``), or None: the circle under the final posture when the cue was used
+    and its outline fits it within ``max_rms`` px RMS (a circle that misfits more does not
+    describe the outline the camera saw)."""
+    c = refinement.circle
+    if not cue.used or c is None:
+        return None
+    if not (np.isfinite(c.r) and c.r > 0 and np.isfinite(c.z) and c.rms <= max_rms):
+        return None
+    return float(c.r), float(c.z)
+
+
 def _twin(K, mirror, cand, rim):
     """The other physical posture of the rim (Chen's; the one nearest to ``cand`` in axis
     angle if there are more), as ``(rvec, tvec)``, or None."""

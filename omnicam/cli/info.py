@@ -6,6 +6,7 @@ import math
 
 import numpy as np
 
+from ..views import default_elevation_range
 from ._common import EXIT_OK, _load_camera, _one_line
 
 
@@ -33,8 +34,25 @@ def vector_text(v, fmt="{:.4f}"):
     return "(" + ", ".join(fmt.format(float(x)) for x in np.ravel(v)) + ")"
 
 
+def describe_reflection(camera):
+    """One line on the camera's own reflection the file records, and where a default panorama's
+    lower edge comes from (:func:`omnicam.views.default_elevation_range`)."""
+    body = camera.camera_reflection
+    text = (
+        "none recorded"
+        if body is None
+        else f"circle r {body.r:.3f} mm at z {body.z:.3f} mm (camera frame), as detected"
+    )
+    try:
+        band = default_elevation_range(camera).describe()
+    except ValueError as e:
+        band = f"none ({_one_line(e)})"
+    return f"{text}; default panorama: {band}"
+
+
 def describe_camera(camera):
-    """Multi-line text of a calibration: mirror, K, D, posture, best-fit viewpoint."""
+    """Multi-line text of a calibration: mirror, K, D, posture, best-fit viewpoint, the camera's
+    own reflection."""
     m = camera.mirror
     K = camera.K
     tilt, az, offset = posture(camera)
@@ -73,6 +91,7 @@ def describe_camera(camera):
             "viewpoint RMS",
             f"{rms:.4f} mm (RMS distance from the rays; 0 for a central rig)",
         ),
+        ("reflection", describe_reflection(camera)),
     ]
     width = max(len(k) for k, _ in rows)
     return "\n".join(f"{k:<{width}}  {v}" for k, v in rows)
@@ -192,7 +211,9 @@ def add_parser(sub):
         "info",
         help="print a calibration file",
         description="Print the mirror, K, D, the mirror posture, the best-fit "
-        "viewpoint and its RMS distance to the rays, and the verdict the file records: where "
+        "viewpoint and its RMS distance to the rays, the camera's own reflection the file "
+        "records (and where a default panorama's lower edge comes from), and the verdict the "
+        "file records: where "
         "K came from (given, a file, guessed, chessboards), the confidence of the posture, "
         "--force, the stated uncertainty and the warnings (chessboards: the RMS, the "
         "held-out check, the viewing directions' uncertainty).",

@@ -29,7 +29,7 @@ from ..formats.maps import (
     write_npy_maps,
 )
 from ..spherical import equirect_view
-from ..views import CYLINDRICAL_MIN_ELEVATION, PanoramaView, visible_elevation_range
+from ..views import PanoramaView, visible_elevation_range
 from ._common import EXIT_OK, EXIT_USAGE, CliError, _check_output, _count, _load_camera, _size
 from .unwarp import add_view_arguments, view_specs
 
@@ -53,10 +53,10 @@ def _scaled_view(spec, camera, k):
             depth=view.depth,
             viewpoint=view.viewpoint,
         )
-    if view.elevation_range is None:
+    if view.elevation_range is None and view.projection == "cylindrical":
+        lo, hi, _ = view.default_range(camera)  # above the camera's reflection, or -60 deg
+    elif view.elevation_range is None:
         lo, hi = visible_elevation_range(camera)
-        if view.projection == "cylindrical":
-            lo, hi = max(lo, CYLINDRICAL_MIN_ELEVATION), min(hi, 89.0)
     else:
         lo, hi = view.elevation_range
     to_p, from_p = (

@@ -14,7 +14,8 @@ frame and keeps the frames so far: in the output itself when there was none befo
 says so), else in ``NAME.partial.EXT`` beside it, leaving the earlier complete output untouched;
 exit status 130. A failed write stops with an error and leaves any earlier output intact.
 ``.mp4``, ``.m4v`` and ``.mov`` get H.264 where the installed OpenCV writes it, else mp4v;
-the line that names each output says which.
+the line that names each output says which, and for a panorama of the default band where its
+lower edge came from (the camera's reflection as the calibration recorded it, else -60 deg).
 """
 
 from __future__ import annotations
@@ -82,6 +83,7 @@ class ViewSpec:
         self.options = {}
         self.view = None
         self.output = None
+        self.edge = ""  # where a default panorama's lower edge came from (_lower_edge)
 
     def label(self):
         return f"--{self.kind} {self.size[0]}x{self.size[1]}"
@@ -202,7 +204,18 @@ def _unwarper(camera, specs, frame_size):
     for w in caught:
         if issubclass(w.category, RuntimeWarning) and "visible_elevation_range" in str(w.message):
             _warn(str(w.message))
+    if camera.image_size is not None and tuple(camera.image_size) != tuple(frame_size):
+        camera = camera.scaled(frame_size)  # the camera the tables were built for
+    for spec in specs:
+        spec.edge = _lower_edge(camera, spec)
     return unwarper
+
+
+def _lower_edge(camera, spec):
+    """``"; lower edge -38.2 deg: the camera's reflection as detected"`` for a panorama whose
+    band is the default (:func:`omnicam.views.default_elevation_range`), else ``""``."""
+    band = spec.view.default_range(camera) if spec.kind == "panorama" else None
+    return "" if band is None else f"; {band.describe()}"
 
 
 def _is_device_or_url(spec):
@@ -301,7 +314,7 @@ def _unwarp_image(args, specs, camera):
         if spec.kind == "equirect" and os.path.splitext(path)[1].lower() not in (".jpg", ".jpeg"):
             _warn(f"{path}: Photo Sphere metadata is written into .jpg outputs only")
         if not args.quiet:
-            print(f"wrote {path} ({out.shape[1]}x{out.shape[0]})")
+            print(f"wrote {path} ({out.shape[1]}x{out.shape[0]}{spec.edge})")
     return EXIT_OK
 
 
@@ -493,7 +506,8 @@ def _finish(args, specs, stream, written, how, declared):
             if how == "interrupted":
                 _warn(f"interrupted: kept the {written} frames written so far as {spec.output}")
             elif not args.quiet:
-                print(f"wrote {written} frames as {spec.output}")
+                edge = f" ({spec.edge[2:]})" if spec.edge else ""
+                print(f"wrote {written} frames as {spec.output}{edge}")
     if how == "interrupted" and not any(s.kind_out in ("video", "sequence") for s in specs):
         _warn("interrupted")
     return EXIT_INTERRUPTED if how == "interrupted" else EXIT_OK
@@ -522,7 +536,7 @@ def _say_video(args, spec, video, how, declared):
     elif not args.quiet:
         print(
             f"wrote {output} ({video.frames} frames, {spec.size[0]}x{spec.size[1]}, "
-            f"{_codec_text(output, video.fourcc, args.fourcc)})"
+            f"{_codec_text(output, video.fourcc, args.fourcc)}{spec.edge})"
         )
 
 
@@ -642,8 +656,8 @@ def add_view_arguments(p, output_help=None):
         type=_finite,
         metavar=("LO", "HI"),
         action=_InOrder,
-        help="panorama elevation range in degrees (default: what the mirror sees, "
-        "from -60 deg, which leaves out the camera's own reflection)",
+        help="panorama elevation range in degrees (default: what the mirror sees, above the "
+        "camera's own reflection as the calibration recorded it, else from -60 deg)",
     )
     p.add_argument(
         "--projection",

@@ -10,6 +10,7 @@ Layout (format_version 1)::
     rvec: !!opencv-matrix 3x1
     tvec: !!opencv-matrix 3x1
     image_size: [width, height]     (absent when unknown)
+    camera_reflection: {r: 9., z: 12.}  (optional: the circle of the camera's reflection)
     verdict: {...}                  (optional: how far to trust it, see :class:`Verdict`)
 
 The ``verdict`` map (new after omnicam 0.3.0; still ``format_version`` 1: every field of it is
@@ -567,8 +568,16 @@ def load_camera(path: PathLike, cls: Callable[..., CameraT]) -> CameraT:
     rvec = r.matrix("rvec", (3,))
     tvec = r.matrix("tvec", (3,))
     size = r.image_size()
+    body = r.node("camera_reflection", required=False)  # optional: absent in older files
+    extra = {}
+    if body is not None:
+        if not isinstance(body, dict):
+            raise r.fail("camera_reflection", "must be a map with r, z")
+        extra["camera_reflection"] = [r.number(f"camera_reflection.{k}", body) for k in "rz"]
     try:
-        return cls(K, mirror, rvec, tvec, D=None if D is None else D.ravel(), image_size=size)
+        return cls(
+            K, mirror, rvec, tvec, D=None if D is None else D.ravel(), image_size=size, **extra
+        )
     except ValueError as e:
         raise r.fail(str(e).split(" ", 1)[0].rstrip(":,"), str(e)) from None
 
@@ -1153,6 +1162,11 @@ def save_camera(camera: object, path: PathLike, verdict: object = None) -> None:
         fs.write("tvec", np.asarray(camera.tvec).reshape(3, 1))
         if camera.image_size is not None:
             _write_seq(fs, "image_size", camera.image_size)
+        if camera.camera_reflection is not None:
+            fs.startWriteStruct("camera_reflection", cv2.FileNode_MAP)
+            fs.write("r", float(camera.camera_reflection[0]))
+            fs.write("z", float(camera.camera_reflection[1]))
+            fs.endWriteStruct()
         if verdict is not None:
             _write_verdict(fs, verdict)
 
@@ -1173,7 +1187,10 @@ def _same_camera(a, b):
     return (
         a.mirror == b.mirror
         and a.image_size == b.image_size
-        and all(_close(getattr(a, n), getattr(b, n)) for n in ("K", "D", "rvec", "tvec"))
+        and all(
+            _close(getattr(a, n), getattr(b, n))
+            for n in ("K", "D", "rvec", "tvec", "camera_reflection")
+        )
     )
 
 
