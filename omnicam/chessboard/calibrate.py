@@ -63,7 +63,7 @@ from .adjustment import (
     ray_uncertainty,
     std_from_jacobian,
 )
-from .board_pose import board_pose_from_rays, object_points, rodrigues
+from .board_pose import board_pose_from_rays, object_points, rodrigues, start_viewpoint
 from .central import NOMINAL_RIM_RADIUS, fit_central, hyperbolic_start
 from .detect import detect_pattern
 from .heldout import cross_validate
@@ -720,7 +720,7 @@ def _corner_step(image_points, pattern_size, square, cam0):
             f"squares) and that the whole board is seen in the mirror"
         )
     obj = object_points((cols, rows), square)
-    viewpoint, _ = cam0.best_fit_viewpoint()
+    viewpoint = start_viewpoint(cam0)
     poses, edge_on = {}, []
     for i in found:
         P, d = cam0.unproject(pts[i])
