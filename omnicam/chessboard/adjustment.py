@@ -194,6 +194,7 @@ class BundleAdjustment:
         self.R0 = cam0.R.copy()
         self.D0 = np.zeros(n_d) if cam0.D is None else np.array(cam0.D, np.float64)
         self.rim_phi = None
+        self.last = None  # (x, traced(x)...) of the last evaluation
         K = cam0.K
         g = [K[0, 0], K[1, 1], K[0, 2], K[1, 2]] + ([K[0, 1]] if fit_skew else [])
         g += [self.D0[i] for i in free_d]
@@ -332,9 +333,23 @@ class BundleAdjustment:
             r[ok] = (rho[ok] - float((w * rho[ok]).sum() / w.sum())) / g[ok]
         return r
 
+    def traced(self, x) -> tuple[FloatArray, FloatArray, FloatArray, FloatArray]:
+        """``(xn, phi, d, n)`` at ``x``: the corners' normalised coordinates
+        (:meth:`normalized_corners`), the rim points' foot parameters, distances and normals
+        (:func:`rim_foot_normals`); the last ``x``'s are kept, since MINPACK asks for the
+        Jacobian where it last evaluated the residuals."""
+        if self.last is None or not np.array_equal(self.last[0], x):
+            K, D, R, tvec, mirror = self.unpack(x)
+            phi = self.rim_start(K, R, tvec, mirror)
+            d, nrm = rim_foot_normals(K, D, R, tvec, mirror, self.rim_px, phi)
+            self.last = (np.array(x, np.float64), self.normalized_corners(x), phi, d, nrm)
+        return self.last[1:]
+
     def residuals(self, x) -> FloatArray:
         """The corner, rim and (when used) outline residuals, px, in that order."""
-        parts = [self.corner_residuals(x), self.rim_residuals(x)]
+        K, D, _, _, _ = self.unpack(x)
+        xn, _, d, _ = self.traced(x)
+        parts = [self.corners_from_pixels(to_pixels(xn, K, D))[0], d]
         if self.lens_px is not None:
             parts.append(self.lens_residuals(x))
         return np.concatenate(parts)
@@ -359,13 +374,17 @@ class BundleAdjustment:
         B[:, 3:] = 1e-6 * self.mirror.rim_radius
         return h
 
-    def imaged(self, x, phi, normalized=None) -> tuple[FloatArray, FloatArray]:
-        """The corner residuals and the pixels of the rim circle's points at ``phi`` under
-        ``x``; ``normalized``: the normalised coordinates ``(corners, rim)`` already traced
-        (when only ``K`` or ``D`` differ from where they were)."""
+    def imaged(self, x, phi, points, normalized=None) -> tuple[FloatArray, FloatArray]:
+        """The corner residuals of the boards' corners ``points`` (mirror frame) and the pixels
+        of the rim circle's points at ``phi`` under ``x``; ``normalized``: their normalised
+        coordinates ``(corners, rim)`` already traced (when only ``K`` or ``D`` differ from
+        where they were)."""
         K, D, R, tvec, mirror = self.unpack(x)
         if normalized is None:
-            normalized = (self.normalized_corners(x), rim_normalized(R, tvec, mirror, phi))
+            normalized = (
+                self.normalized_corners(x, points),
+                rim_normalized(R, tvec, mirror, phi),
+            )
         n = len(normalized[0])
         px = to_pixels(np.concatenate(normalized), K, D)
         return self.corners_from_pixels(px[:n])[0], px[n:]
@@ -388,10 +407,9 @@ class BundleAdjustment:
         nc, nr = nv * rows, len(self.rim_px)
         J = np.zeros((nc + nr + (0 if self.lens_px is None else len(self.lens_px)), len(x)))
         K, D, R, tvec, mirror = self.unpack(x)
-        xn = self.normalized_corners(x)
-        phi = self.rim_start(K, R, tvec, mirror)
-        _, nrm = rim_foot_normals(K, D, R, tvec, mirror, self.rim_px, phi)
+        xn, phi, _, nrm = self.traced(x)
         xr = rim_normalized(R, tvec, mirror, phi)
+        pts = self.board_points(self.boards(x))  # (the posture's steps do not move them)
         for k in [i for i, name in enumerate(self.names) if name not in self.fixed]:
             xp, xm = x.copy(), x.copy()
             xp[k] += h[k]
@@ -401,8 +419,8 @@ class BundleAdjustment:
             if self.names[k] == "lens_z":  # the corners and the rim do not see its plane
                 continue
             after = self.names[k] in _AFTER_MIRROR
-            cp, rp = self.imaged(xp, phi, (xn, xr) if after else None)
-            cm, rm = self.imaged(xm, phi, (xn, xr) if after else None)
+            cp, rp = self.imaged(xp, phi, pts, (xn, xr) if after else None)
+            cm, rm = self.imaged(xm, phi, pts, (xn, xr) if after else None)
             J[:nc, k] = (cp - cm) / (2 * h[k])
             J[nc : nc + nr, k] = -np.einsum("ij,ij->i", nrm, rp - rm) / (2 * h[k])
         # the boards: 6 groups of steps (+ and -), one trace of all 12 sets of corners
@@ -421,7 +439,7 @@ class BundleAdjustment:
             J[v * rows : (v + 1) * rows, g + 6 * v : g + 6 * v + 6] = diff[:, v].T
         return J
 
-    def solve(self, x0, f_scale=1.0, max_nfev=None) -> OptimizeResult:
+    def solve(self, x0, f_scale=1.0, max_nfev=None, tol=1e-10) -> OptimizeResult:
         """The ``soft_l1`` fit of scale ``f_scale`` px by MINPACK's Levenberg-Marquardt
         (``scipy.optimize.least_squares(method="lm")``), the global parameters named in
         ``self.fixed`` held at ``x0``; :meth:`jacobian` gives the derivatives.
@@ -435,7 +453,8 @@ class BundleAdjustment:
         valley where ``a, b`` trade against ``f``, where this one converges in a few dozen:
         ``benchmarks/bench_chessboard_real.py``.)
 
-        Returns the ``OptimizeResult`` with ``x`` the whole parameter vector."""
+        ``tol`` is MINPACK's ``ftol``, ``xtol`` and ``gtol``. Returns the ``OptimizeResult``
+        with ``x`` the whole parameter vector."""
         x0 = np.asarray(x0, np.float64)
         free = np.ones(len(x0), bool)
         free[[k for k, n in enumerate(self.names) if n in self.fixed]] = False
@@ -463,9 +482,9 @@ class BundleAdjustment:
             method="lm",
             x_scale="jac",
             max_nfev=max_nfev,
-            xtol=1e-10,
-            ftol=1e-10,
-            gtol=1e-10,
+            xtol=tol,
+            ftol=tol,
+            gtol=tol,
         )
         sol.x = full(sol.x)
         sol.cost = float(sol.cost)
