@@ -324,7 +324,7 @@ def test_adjustment_jacobian_is_the_derivative_of_its_residuals():
     rng = np.random.default_rng(4)
     rim = _rim(0.5, 4)[::6]  # off the curve: distances that do not vanish
     model = AdjustmentModel((0, 1), 4, True, True, MisalignedHyperbolicCamera, lens, None)
-    views = _corners(0.3, 4, POSES[:3])
+    views = [v.reshape(-1, 2) for v in _corners(0.3, 4, POSES[:3])]
     adj = BundleAdjustment(RIG, RIG.mirror, object_points(PATTERN, SQUARE), views, rim, model)
     boards_x = [np.concatenate([np.ravel(r), np.ravel(t)]) for r, t in POSES[:3]]
     x = np.concatenate([adj.x0_global, *boards_x])
@@ -340,3 +340,22 @@ def test_adjustment_jacobian_is_the_derivative_of_its_residuals():
         scale = max(np.abs(fd).max(), 1e-9)
         np.testing.assert_allclose(J[:, k], fd, rtol=0, atol=1e-5 * scale, err_msg=str(k))
     assert np.abs(J[2 * len(views[0]) * 3 :, adj.n_global :]).max() == 0  # boards: corners only
+
+
+def test_a_solver_step_to_a_shape_no_mirror_has_costs_instead_of_raising():
+    """With the shape free, a trial step of ln a, ln b out of HyperbolicMirror's range (the
+    wide-angle hostile rig's fit took one to a = 6e6) is a large residual the solver rejects."""
+    from omnicam.chessboard.adjustment import AdjustmentModel, BundleAdjustment
+    from omnicam.chessboard.board_pose import object_points
+
+    model = AdjustmentModel((0, 1), 4, False, True, MisalignedHyperbolicCamera)
+    views = [v.reshape(-1, 2) for v in _corners(0.0, 0, POSES[:3])]
+    adj = BundleAdjustment(RIG, RIG.mirror, object_points(PATTERN, SQUARE), views, _rim(), model)
+    x = np.concatenate(
+        [adj.x0_global, *[np.concatenate([np.ravel(r), np.ravel(t)]) for r, t in POSES[:3]]]
+    )
+    good = adj.residuals(x)
+    assert np.abs(good).max() < 1e-6
+    x[adj.names.index("a")] = math.log(6e6)
+    bad = adj.residuals(x)
+    assert bad.shape == good.shape and np.all(bad == 50.0)

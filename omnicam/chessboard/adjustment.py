@@ -346,8 +346,15 @@ class BundleAdjustment:
         return self.last[1:]
 
     def residuals(self, x) -> FloatArray:
-        """The corner, rim and (when used) outline residuals, px, in that order."""
-        K, D, _, _, _ = self.unpack(x)
+        """The corner, rim and (when used) outline residuals, px, in that order; 50 px each
+        where ``x`` holds a shape no mirror has (a step of the solver to ``a`` or ``b`` out of
+        :class:`~omnicam.mirror.HyperbolicMirror`'s range), as for a corner the rig cannot
+        see."""
+        try:
+            K, D, _, _, _ = self.unpack(x)
+        except ValueError:
+            n = len(self.obs) * 2 + len(self.rim_px)
+            return np.full(n + (0 if self.lens_px is None else len(self.lens_px)), 50.0)
         xn, _, d, _ = self.traced(x)
         parts = [self.corners_from_pixels(to_pixels(xn, K, D))[0], d]
         if self.lens_px is not None:
