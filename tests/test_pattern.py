@@ -310,3 +310,52 @@ def test_a_detected_rim_that_leaves_corners_outside_is_rejected_and_a_larger_one
     assert sizes[0] is None and sizes[1][0] > 0.5 * np.ptp(rim[:, 0]) / 2
     assert any("leaves" in w and "rejected; the rim taken" in w for w in report.warnings)
     assert posture_error(cam, RIG)[0] < 1e-4
+
+
+def test_adjustment_jacobian_is_the_derivative_of_its_residuals():
+    """Each column differenced where its parameter acts (K and D on the traced coordinates, the
+    rim at its fixed foot points, the boards in groups) is the derivative of the residuals."""
+    from omnicam.calibration.reflection import outline_pixels
+    from omnicam.chessboard.adjustment import AdjustmentModel, BundleAdjustment
+    from omnicam.chessboard.board_pose import object_points
+
+    lens = outline_pixels(RIG, 10.0, 8.0, 40)[0]
+    lens = lens[np.isfinite(lens).all(axis=1)]
+    rng = np.random.default_rng(4)
+    rim = _rim(0.5, 4)[::6]  # off the curve: distances that do not vanish
+    model = AdjustmentModel((0, 1), 4, True, True, MisalignedHyperbolicCamera, lens, None)
+    views = [v.reshape(-1, 2) for v in _corners(0.3, 4, POSES[:3])]
+    adj = BundleAdjustment(RIG, RIG.mirror, object_points(PATTERN, SQUARE), views, rim, model)
+    boards_x = [np.concatenate([np.ravel(r), np.ravel(t)]) for r, t in POSES[:3]]
+    x = np.concatenate([adj.x0_global, *boards_x])
+    x[adj.names.index("k1")], x[adj.names.index("k2")] = -0.05, 0.01
+    x[adj.names.index("w1")], x[adj.names.index("tz")] = 2e-3, x[adj.names.index("tz")] + 0.2
+    x[adj.n_global :] += rng.normal(0.0, 1e-3, len(x) - adj.n_global)
+    J = adj.jacobian(x)
+    h = adj.steps(x)
+    for k in range(len(x)):
+        e = np.zeros(len(x))
+        e[k] = h[k]
+        fd = (adj.residuals(x + e) - adj.residuals(x - e)) / (2 * h[k])
+        scale = max(np.abs(fd).max(), 1e-9)
+        np.testing.assert_allclose(J[:, k], fd, rtol=0, atol=1e-5 * scale, err_msg=str(k))
+    assert np.abs(J[2 * len(views[0]) * 3 :, adj.n_global :]).max() == 0  # boards: corners only
+
+
+def test_a_solver_step_to_a_shape_no_mirror_has_costs_instead_of_raising():
+    """With the shape free, a trial step of ln a, ln b out of HyperbolicMirror's range (the
+    wide-angle hostile rig's fit took one to a = 6e6) is a large residual the solver rejects."""
+    from omnicam.chessboard.adjustment import AdjustmentModel, BundleAdjustment
+    from omnicam.chessboard.board_pose import object_points
+
+    model = AdjustmentModel((0, 1), 4, False, True, MisalignedHyperbolicCamera)
+    views = [v.reshape(-1, 2) for v in _corners(0.0, 0, POSES[:3])]
+    adj = BundleAdjustment(RIG, RIG.mirror, object_points(PATTERN, SQUARE), views, _rim(), model)
+    x = np.concatenate(
+        [adj.x0_global, *[np.concatenate([np.ravel(r), np.ravel(t)]) for r, t in POSES[:3]]]
+    )
+    good = adj.residuals(x)
+    assert np.abs(good).max() < 1e-6
+    x[adj.names.index("a")] = math.log(6e6)
+    bad = adj.residuals(x)
+    assert bad.shape == good.shape and np.all(bad == 50.0)

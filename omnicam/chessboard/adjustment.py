@@ -11,9 +11,11 @@ every corner's reprojection through the exact non-central projection
 distance to the image of the rim circle and, when the camera's own reflection is seen, its
 outline residual (:mod:`omnicam.calibration.reflection`). The robust ``soft_l1`` cost is
 minimised by MINPACK's Levenberg-Marquardt (:meth:`BundleAdjustment.solve`) with a Jacobian
-by central differences that uses the block structure: a board's pose moves only its own
+by central differences, each taken where its parameter acts (:meth:`BundleAdjustment.jacobian`):
+``K`` and ``D`` only turn the traced normalised coordinates into pixels again, the rim's
+distances move with the rim image at fixed foot points, and a board's pose moves only its own
 view's rows, so the columns of all boards are perturbed together (6 groups instead of 6 per
-view).
+view, traced in one call).
 
 What the fit knows: :func:`std_from_jacobian` (the parameters), :func:`ray_uncertainty` (the
 viewing directions over the mirror's image, what panoramas use) and
@@ -46,9 +48,13 @@ __all__ = [
     "covariance",
     "pattern_uncertainty",
     "ray_uncertainty",
+    "rim_curve",
     "rim_foot",
+    "rim_foot_normals",
+    "rim_normalized",
     "robust_residuals",
     "std_from_jacobian",
+    "to_pixels",
 ]
 
 
@@ -62,20 +68,47 @@ DIST_MODELS = {
 }
 
 
-def rim_foot(cam_K, D, R, t, mirror, u, phi) -> FloatArray:
-    """Orthogonal distances of pixels ``u`` to the rim image, with foot parameters ``phi``
-    refined in place by Newton's method. Returns signed distances (px)."""
+#: Parameters that act after the mirror (the pinhole and its distortion).
+_AFTER_MIRROR = frozenset(("fx", "fy", "cx", "cy", "skew", "k1", "k2", "p1", "p2", "k3"))
+
+
+def to_pixels(xn, K, D) -> FloatArray:
+    """Undistorted normalised coordinates ``(N, 2)`` -> pixels: ``D``'s distortion (None:
+    none), then ``K`` (eq. 6)."""
+    if D is None:
+        return xn @ K[:2, :2].T + K[:2, 2]
+    return raytrace.distort_normalized(xn, K, D)
+
+
+def rim_normalized(R, t, mirror, phi) -> FloatArray:
+    """Normalised coordinates ``(N, 2)`` of the rim circle's points at angles ``phi`` (rad,
+    about the mirror axis) under the posture ``R, t``."""
     r, z = mirror.rim_radius, mirror.z_rim
+    X = np.stack([r * np.cos(phi), r * np.sin(phi), np.full_like(phi, z)], axis=1) @ R.T + t
+    return X[:, :2] / X[:, 2:3]
 
-    def curve(ph):
-        X = np.stack([r * np.cos(ph), r * np.sin(ph), np.full_like(ph, z)], axis=1) @ R.T + t
-        xn = X[:, :2] / X[:, 2:3]
-        if D is None:
-            return xn @ cam_K[:2, :2].T + cam_K[:2, 2]
-        return raytrace.distort_normalized(xn, cam_K, D)
 
+def rim_curve(K, D, R, t, mirror, phi) -> FloatArray:
+    """Pixels ``(N, 2)`` of the rim circle's points at angles ``phi`` (:func:`rim_normalized`,
+    :func:`to_pixels`)."""
+    return to_pixels(rim_normalized(R, t, mirror, phi), K, D)
+
+
+def rim_foot_normals(cam_K, D, R, t, mirror, u, phi) -> tuple[FloatArray, FloatArray]:
+    """Orthogonal distances of pixels ``u`` to the rim image and the unit normals of the rim
+    image at their foot points, ``(d (N,), n (N, 2))``, ``d = n . (u - c(phi))``; the foot
+    parameters ``phi`` are refined in place by Newton's method.
+
+    At the foot point the curve's tangent is orthogonal to ``u - c``, so a parameter ``p`` of
+    the curve moves the distance by ``-n . dc/dp`` at fixed ``phi`` (the foot's own motion is
+    along the tangent and changes it only to second order): what
+    :meth:`BundleAdjustment.jacobian` uses."""
     h = 1e-4
     n = len(phi)
+
+    def curve(ph):
+        return rim_curve(cam_K, D, R, t, mirror, ph)
+
     for _ in range(4):
         c0, cp, cm = np.split(curve(np.concatenate([phi, phi + h, phi - h])), [n, 2 * n])
         d1 = (cp - cm) / (2 * h)
@@ -88,7 +121,14 @@ def rim_foot(cam_K, D, R, t, mirror, u, phi) -> FloatArray:
     tang = cp - cm
     nrm = np.stack([tang[:, 1], -tang[:, 0]], axis=1)
     nrm /= np.linalg.norm(nrm, axis=1, keepdims=True)
-    return np.einsum("ij,ij->i", u - c0, nrm)
+    return np.einsum("ij,ij->i", u - c0, nrm), nrm
+
+
+def rim_foot(cam_K, D, R, t, mirror, u, phi) -> FloatArray:
+    """Orthogonal distances of pixels ``u`` to the rim image, with foot parameters ``phi``
+    refined in place by Newton's method. Returns signed distances (px)
+    (:func:`rim_foot_normals`)."""
+    return rim_foot_normals(cam_K, D, R, t, mirror, u, phi)[0]
 
 
 @dataclasses.dataclass(frozen=True)
@@ -154,6 +194,7 @@ class BundleAdjustment:
         self.R0 = cam0.R.copy()
         self.D0 = np.zeros(n_d) if cam0.D is None else np.array(cam0.D, np.float64)
         self.rim_phi = None
+        self.last = None  # (x, traced(x)...) of the last evaluation
         K = cam0.K
         g = [K[0, 0], K[1, 1], K[0, 2], K[1, 2]] + ([K[0, 1]] if fit_skew else [])
         g += [self.D0[i] for i in free_d]
@@ -176,6 +217,7 @@ class BundleAdjustment:
         self.skew0 = K[0, 1]
         n = len(obj)
         self.n_rows_view = 2 * n
+        self.obs = np.concatenate(views) if len(views) else np.zeros((0, 2))
 
     def unpack(
         self, x
@@ -227,41 +269,50 @@ class BundleAdjustment:
         """The boards' poses in ``x``, one ``(rvec_b, tvec_b)`` row of 6 per view."""
         return x[self.n_global :].reshape(-1, 6)
 
+    def board_points(self, boards) -> FloatArray:
+        """The corners ``(N, 3)`` of boards ``(V, 6)`` in the mirror frame, view by view."""
+        return np.concatenate([self.obj @ rodrigues(b[:3]).T + b[3:] for b in boards])
+
+    def normalized_corners(self, x, points=None) -> FloatArray:
+        """The undistorted normalised coordinates ``(N, 2)`` of mirror-frame ``points`` (default:
+        every board's corners, :meth:`board_points`) under the posture and mirror of ``x``,
+        through the exact non-central projection (NaN where the rig cannot see it): what
+        ``K`` and ``D`` turn into pixels."""
+        _, _, R, tvec, mirror = self.unpack(x)
+        if points is None:
+            points = self.board_points(self.boards(x))
+        # the exact non-central projection of the camera's project(), on the fit's frame
+        return raytrace.project(
+            np.ascontiguousarray(points), False, np.eye(3), None, R, tvec, -R.T @ tvec, mirror
+        )
+
+    def corners_from_pixels(self, px) -> FloatArray:
+        """The corner residuals (px; 50 where the rig cannot see a corner) of ``S`` sets of
+        projected corners ``px`` (``(S N, 2)``, each set view by view): ``(S, 2 N)``."""
+        r = px.reshape(-1, *self.obs.shape) - self.obs
+        r[~np.isfinite(r)] = 50.0  # a corner the rig cannot see: a large, constant residual
+        return r.reshape(len(r), -1)
+
     def corner_residuals(self, x) -> FloatArray:
         """Every corner's reprojection error (px; 50 where the rig cannot see it), through the exact
         non-central projection."""
-        K, D, R, tvec, mirror = self.unpack(x)
-        B = self.boards(x)
-        pts = np.concatenate([self.obj @ rodrigues(b[:3]).T + b[3:] for b in B])
-        # the exact non-central projection of the camera's project(), on the fit's frame
-        px = raytrace.project(np.ascontiguousarray(pts), False, K, D, R, tvec, -R.T @ tvec, mirror)
-        obs = np.concatenate(self.views)
-        r = px - obs
-        r[~np.isfinite(r)] = 50.0  # a corner the rig cannot see: a large, constant residual
-        return r.ravel()
+        K, D, _, _, _ = self.unpack(x)
+        return self.corners_from_pixels(to_pixels(self.normalized_corners(x), K, D))[0]
+
+    def rim_start(self, K, R, tvec, mirror) -> FloatArray:
+        """The rim points' foot parameters at the start, by dense sampling (kept, and refined
+        at every evaluation by :func:`rim_foot_normals`)."""
+        if self.rim_phi is None:
+            ph = np.linspace(0, 2 * np.pi, 3600, endpoint=False)
+            c = to_pixels(rim_normalized(R, tvec, mirror, ph), K, None)
+            j = np.argmin(((self.rim_px[:, None, :] - c[None]) ** 2).sum(-1), axis=1)
+            self.rim_phi = ph[j]
+        return self.rim_phi.copy()
 
     def rim_residuals(self, x) -> FloatArray:
         """Every rim point's signed distance (px) to the rim circle's image (:func:`rim_foot`)."""
         K, D, R, tvec, mirror = self.unpack(x)
-        if self.rim_phi is None:  # foot points of the start, by dense sampling
-            ph = np.linspace(0, 2 * np.pi, 3600, endpoint=False)
-            X = (
-                np.stack(
-                    [
-                        mirror.rim_radius * np.cos(ph),
-                        mirror.rim_radius * np.sin(ph),
-                        np.full_like(ph, mirror.z_rim),
-                    ],
-                    axis=1,
-                )
-                @ R.T
-                + tvec
-            )
-            xn = X[:, :2] / X[:, 2:3]
-            c = xn @ K[:2, :2].T + K[:2, 2]
-            j = np.argmin(((self.rim_px[:, None, :] - c[None]) ** 2).sum(-1), axis=1)
-            self.rim_phi = ph[j]
-        phi = self.rim_phi.copy()
+        phi = self.rim_start(K, R, tvec, mirror)
         return rim_foot(K, D, R, tvec, mirror, self.rim_px, phi)
 
     def lens_residuals(self, x) -> FloatArray:
@@ -282,9 +333,30 @@ class BundleAdjustment:
             r[ok] = (rho[ok] - float((w * rho[ok]).sum() / w.sum())) / g[ok]
         return r
 
+    def traced(self, x) -> tuple[FloatArray, FloatArray, FloatArray, FloatArray]:
+        """``(xn, phi, d, n)`` at ``x``: the corners' normalised coordinates
+        (:meth:`normalized_corners`), the rim points' foot parameters, distances and normals
+        (:func:`rim_foot_normals`); the last ``x``'s are kept, since MINPACK asks for the
+        Jacobian where it last evaluated the residuals."""
+        if self.last is None or not np.array_equal(self.last[0], x):
+            K, D, R, tvec, mirror = self.unpack(x)
+            phi = self.rim_start(K, R, tvec, mirror)
+            d, nrm = rim_foot_normals(K, D, R, tvec, mirror, self.rim_px, phi)
+            self.last = (np.array(x, np.float64), self.normalized_corners(x), phi, d, nrm)
+        return self.last[1:]
+
     def residuals(self, x) -> FloatArray:
-        """The corner, rim and (when used) outline residuals, px, in that order."""
-        parts = [self.corner_residuals(x), self.rim_residuals(x)]
+        """The corner, rim and (when used) outline residuals, px, in that order; 50 px each
+        where ``x`` holds a shape no mirror has (a step of the solver to ``a`` or ``b`` out of
+        :class:`~omnicam.mirror.HyperbolicMirror`'s range), as for a corner the rig cannot
+        see."""
+        try:
+            K, D, _, _, _ = self.unpack(x)
+        except ValueError:
+            n = len(self.obs) * 2 + len(self.rim_px)
+            return np.full(n + (0 if self.lens_px is None else len(self.lens_px)), 50.0)
+        xn, _, d, _ = self.traced(x)
+        parts = [self.corners_from_pixels(to_pixels(xn, K, D))[0], d]
         if self.lens_px is not None:
             parts.append(self.lens_residuals(x))
         return np.concatenate(parts)
@@ -309,37 +381,72 @@ class BundleAdjustment:
         B[:, 3:] = 1e-6 * self.mirror.rim_radius
         return h
 
+    def imaged(self, x, phi, points, normalized=None) -> tuple[FloatArray, FloatArray]:
+        """The corner residuals of the boards' corners ``points`` (mirror frame) and the pixels
+        of the rim circle's points at ``phi`` under ``x``; ``normalized``: their normalised
+        coordinates ``(corners, rim)`` already traced (when only ``K`` or ``D`` differ from
+        where they were)."""
+        K, D, R, tvec, mirror = self.unpack(x)
+        if normalized is None:
+            normalized = (
+                self.normalized_corners(x, points),
+                rim_normalized(R, tvec, mirror, phi),
+            )
+        n = len(normalized[0])
+        px = to_pixels(np.concatenate(normalized), K, D)
+        return self.corners_from_pixels(px[:n])[0], px[n:]
+
     def jacobian(self, x) -> FloatArray:
-        """Central differences; the boards' columns in 6 groups (block structure). Columns of
-        parameters held fixed (``self.fixed``) are zero."""
+        """Central differences, evaluated where each parameter acts; columns of parameters
+        held fixed (``self.fixed``) are zero.
+
+        - ``K`` and ``D`` act after the mirror: their columns only turn the normalised
+          coordinates of the corners (:meth:`normalized_corners`, traced once) and of the rim
+          into pixels again.
+        - The rim: at the foot points the distance moves by ``-n . dc/dp`` (the rim image's
+          point ``c`` at fixed ``phi``, :func:`rim_foot_normals`), one projection of the rim
+          circle per step instead of a foot search.
+        - The boards: a board's pose moves only its own view's rows, so their columns are
+          perturbed in 6 groups (block structure), all 12 steps traced in one call.
+        """
         h = self.steps(x)
-        g = self.n_global
-        nv = len(self.views)
-        m = (
-            nv * self.n_rows_view
-            + len(self.rim_px)
-            + (0 if self.lens_px is None else len(self.lens_px))
-        )
-        J = np.zeros((m, len(x)))
-        for k in range(g):
-            if self.names[k] in self.fixed:
-                continue
+        g, nv, rows = self.n_global, len(self.views), self.n_rows_view
+        nc, nr = nv * rows, len(self.rim_px)
+        J = np.zeros((nc + nr + (0 if self.lens_px is None else len(self.lens_px)), len(x)))
+        K, D, R, tvec, mirror = self.unpack(x)
+        xn, phi, _, nrm = self.traced(x)
+        xr = rim_normalized(R, tvec, mirror, phi)
+        pts = self.board_points(self.boards(x))  # (the posture's steps do not move them)
+        for k in [i for i, name in enumerate(self.names) if name not in self.fixed]:
             xp, xm = x.copy(), x.copy()
             xp[k] += h[k]
             xm[k] -= h[k]
-            J[:, k] = (self.residuals(xp) - self.residuals(xm)) / (2 * h[k])
-        rows = self.n_rows_view
-        for k in range(6):
-            xp, xm = x.copy(), x.copy()
-            xp[g + k :: 6] += h[g + k :: 6]
-            xm[g + k :: 6] -= h[g + k :: 6]
-            diff = self.corner_residuals(xp) - self.corner_residuals(xm)
-            for v in range(nv):
-                col = g + 6 * v + k
-                J[v * rows : (v + 1) * rows, col] = diff[v * rows : (v + 1) * rows] / (2 * h[col])
+            if self.lens_px is not None:
+                J[nc + nr :, k] = (self.lens_residuals(xp) - self.lens_residuals(xm)) / (2 * h[k])
+            if self.names[k] == "lens_z":  # the corners and the rim do not see its plane
+                continue
+            after = self.names[k] in _AFTER_MIRROR
+            cp, rp = self.imaged(xp, phi, pts, (xn, xr) if after else None)
+            cm, rm = self.imaged(xm, phi, pts, (xn, xr) if after else None)
+            J[:nc, k] = (cp - cm) / (2 * h[k])
+            J[nc : nc + nr, k] = -np.einsum("ij,ij->i", nrm, rp - rm) / (2 * h[k])
+        # the boards: 6 groups of steps (+ and -), one trace of all 12 sets of corners
+        B = self.boards(x)
+        hb = h[g:].reshape(-1, 6)
+        sets = []
+        for j in range(6):
+            for sign in (1.0, -1.0):
+                Bs = B.copy()
+                Bs[:, j] += sign * hb[:, j]
+                sets.append(self.board_points(Bs))
+        px = to_pixels(self.normalized_corners(x, np.concatenate(sets)), K, D)
+        r = self.corners_from_pixels(px).reshape(6, 2, nv, rows)
+        diff = (r[:, 0] - r[:, 1]) / (2 * hb.T[:, :, None])  # (6, views, rows)
+        for v in range(nv):
+            J[v * rows : (v + 1) * rows, g + 6 * v : g + 6 * v + 6] = diff[:, v].T
         return J
 
-    def solve(self, x0, f_scale=1.0, max_nfev=None) -> OptimizeResult:
+    def solve(self, x0, f_scale=1.0, max_nfev=None, tol=1e-10) -> OptimizeResult:
         """The ``soft_l1`` fit of scale ``f_scale`` px by MINPACK's Levenberg-Marquardt
         (``scipy.optimize.least_squares(method="lm")``), the global parameters named in
         ``self.fixed`` held at ``x0``; :meth:`jacobian` gives the derivatives.
@@ -353,7 +460,8 @@ class BundleAdjustment:
         valley where ``a, b`` trade against ``f``, where this one converges in a few dozen:
         ``benchmarks/bench_chessboard_real.py``.)
 
-        Returns the ``OptimizeResult`` with ``x`` the whole parameter vector."""
+        ``tol`` is MINPACK's ``ftol``, ``xtol`` and ``gtol``. Returns the ``OptimizeResult``
+        with ``x`` the whole parameter vector."""
         x0 = np.asarray(x0, np.float64)
         free = np.ones(len(x0), bool)
         free[[k for k, n in enumerate(self.names) if n in self.fixed]] = False
@@ -381,9 +489,9 @@ class BundleAdjustment:
             method="lm",
             x_scale="jac",
             max_nfev=max_nfev,
-            xtol=1e-10,
-            ftol=1e-10,
-            gtol=1e-10,
+            xtol=tol,
+            ftol=tol,
+            gtol=tol,
         )
         sol.x = full(sol.x)
         sol.cost = float(sol.cost)
