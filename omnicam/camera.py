@@ -403,10 +403,7 @@ class MisalignedHyperbolicCamera:
         rim = self._mirror.rim_points(n)
         xc = rim @ self._R.T + self._tvec
         xn = xc[:, :2] / xc[:, 2:3]
-        if self._D is None:
-            pixels: FloatArray = xn @ self._K[:2, :2].T + self._K[:2, 2]
-            return pixels
-        return raytrace.distort_normalized(xn, self._K, self._D)
+        return raytrace.to_pixels(xn, self._K, self._D)
 
     def mirror_pixels(self) -> FloatArray:
         """All integer pixels that see the mirror (inside the rim ellipse, in the frame or not).

@@ -21,6 +21,8 @@ __all__ = [
     "as_points",
     "undistort_normalized",
     "distort_normalized",
+    "normalize",
+    "to_pixels",
     "trace",
     "trace_normalized",
     "project",
@@ -126,6 +128,25 @@ def distort_normalized(xn: FloatArray, K: FloatArray, D: ArrayLike) -> FloatArra
         xd = xd.reshape(-1, 2)
         out[ok] = xd @ K[:2, :2].T + K[:2, 2]
     return out
+
+
+def normalize(pixels: FloatArray, K: FloatArray, D: ArrayLike | None = None) -> FloatArray:
+    """Pixels ``(N, 2)`` -> undistorted normalised coordinates: ``inv(K)`` (with skew), then
+    ``D`` undone (:func:`undistort_normalized`; None: no distortion)."""
+    if D is None:
+        Ki = np.linalg.inv(K)
+        out: FloatArray = pixels @ Ki[:2, :2].T + Ki[:2, 2]
+        return out
+    return undistort_normalized(np.ascontiguousarray(pixels), K, D)
+
+
+def to_pixels(xn: FloatArray, K: FloatArray, D: ArrayLike | None = None) -> FloatArray:
+    """Undistorted normalised coordinates ``(N, 2)`` -> pixels: ``D``'s distortion (None:
+    none), then ``K`` with skew (eq. 6); the inverse of :func:`normalize`."""
+    if D is None:
+        out: FloatArray = xn @ K[:2, :2].T + K[:2, 2]
+        return out
+    return distort_normalized(xn, K, D)
 
 
 def trace(

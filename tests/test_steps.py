@@ -15,6 +15,7 @@ from omnicam.calibration import EstimationError, reflection, steps
 from omnicam.calibration.refine import RefineResult, Uncertainty
 from omnicam.calibration.rim import RimFit
 from omnicam.calibration.selection import Selection
+from omnicam.raytrace import normalize
 
 CAM = RANDOM_RIGS[1]  # 1.5 mm off the axis: the two physical postures are 1.5 deg apart
 R_C, Z_C = 9.0, 12.0  # a circle of the camera's front, as tests/barrel.py's
@@ -85,9 +86,7 @@ def test_normalize_applies_the_inverse_of_K_with_its_skew():
     cam = RIGS["skew"]
     px = np.random.default_rng(0).uniform(0, 500, (50, 2))
     ref = np.linalg.solve(cam.K, np.concatenate([px, np.ones((50, 1))], 1).T).T
-    np.testing.assert_allclose(
-        steps.normalize(px, cam.K, None), ref[:, :2] / ref[:, 2:], atol=1e-15
-    )
+    np.testing.assert_allclose(normalize(px, cam.K, None), ref[:, :2] / ref[:, 2:], atol=1e-15)
 
 
 def test_normalize_undoes_opencvs_distortion():
@@ -100,7 +99,7 @@ def test_normalize_undoes_opencvs_distortion():
         cam.K,
         cam.D,
     )
-    np.testing.assert_allclose(steps.normalize(px.reshape(-1, 2), cam.K, cam.D), xn, atol=1e-12)
+    np.testing.assert_allclose(normalize(px.reshape(-1, 2), cam.K, cam.D), xn, atol=1e-12)
 
 
 # -- 1. rim_step -----------------------------------------------------------------------------------
@@ -202,7 +201,7 @@ def test_reflection_step_takes_outline_pixels(exact):
     out, cue = outline_cue(exact, z=Z_C)
     assert isinstance(cue, steps.ReflectionCue) and cue.used
     np.testing.assert_array_equal(cue.points, out)
-    np.testing.assert_allclose(cue.normalized, steps.normalize(out, CAM.K, None), atol=0)
+    np.testing.assert_allclose(cue.normalized, normalize(out, CAM.K, None), atol=0)
     assert cue.fit is None and math.isnan(cue.sigma)
     assert (cue.r, cue.z) == (None, Z_C)
     assert cue.note == "used: 64 outline points"
@@ -310,7 +309,7 @@ def test_refinement_step_on_the_rim_alone_keeps_the_exact_posture(exact):
 
 
 def test_refinement_step_without_refining_keeps_the_candidate(exact):
-    xn = [steps.normalize(line, CAM.K, None) for line in exact["lines"]]
+    xn = [normalize(line, CAM.K, None) for line in exact["lines"]]
     ref = refinement(exact, xn, refine=False)
     cand = exact["cands"].all[the_truth(exact["cands"])]
     assert ref.result is None and ref.accepted_cues == ref.rejected_cues == ()
@@ -322,7 +321,7 @@ def test_refinement_step_without_refining_keeps_the_candidate(exact):
 def test_refinement_step_lets_far_lines_that_agree_with_the_rim_join(exact):
     noisy_pts = CAM.rim_image_points(360) + np.random.default_rng(3).normal(size=(360, 2)) * 0.1
     noisy = steps.rim_step(CAM.K, None, boundary_points=noisy_pts)
-    xn = [steps.normalize(line, CAM.K, None) for line in exact["lines"]]
+    xn = [normalize(line, CAM.K, None) for line in exact["lines"]]
     ref = refinement(exact, xn, rim=noisy)
     assert ref.accepted_cues == ("far lines",) and ref.rejected_cues == ()
     assert ref.result.line_rms < 3.0 and len(ref.result.lines) == 3
@@ -369,7 +368,7 @@ def settled(exact):
     """Every step on exact data with far lines: nothing to warn about."""
     args = (exact["cands"], exact["no_cue"], exact["lines"], CAM.mirror, CAM.K, None, make_camera)
     sel, _ = steps.selection_step(*args, exact["rim"])
-    xn = [steps.normalize(line, CAM.K, None) for line in exact["lines"]]
+    xn = [normalize(line, CAM.K, None) for line in exact["lines"]]
     ref = steps.refinement_step(
         CAM.K, CAM.mirror, exact["cands"].all[sel.chosen], exact["rim"], xn, exact["no_cue"], None
     )

@@ -36,6 +36,7 @@ import numpy as np
 from .._typing import ArrayLike
 from .._validate import validate_D, validate_image_size, validate_K
 from ..mirror import HyperbolicMirror
+from ..raytrace import normalize, to_pixels
 from . import selection, steps
 from .errors import EstimationError
 from .plausibility import assess
@@ -155,10 +156,10 @@ def calibrate(
     rim = steps.rim_step(
         K, D, image, boundary_points, rim_hint, mirror, max_tilt_deg, max_offset_mm
     )
-    lines_xn = [steps.normalize(line, K, D) for line in lines]
+    lines_xn = [normalize(line, K, D) for line in lines]
     # far-line pixels outside the fitted rim by more than its noise cannot see the mirror
     selection.check_lines_inside_rim(
-        [rim.fit.distance(x @ K[:2, :2].T + K[:2, 2]) for x in lines_xn],
+        [rim.fit.distance(to_pixels(x, K)) for x in lines_xn],
         max(2.0, 3.0 * rim.fit.rms),
     )
     cands = steps.candidates_step(rim, K, mirror)

@@ -31,6 +31,7 @@ import numpy as np
 
 from .._validate import validate_D, validate_K
 from ..mirror import HyperbolicMirror
+from ..raytrace import to_pixels
 from .ellipse import axes_angle, ellipse_from_conic
 
 __all__ = [
@@ -140,7 +141,7 @@ def _rim_ellipse(K, D, rim, R, t):
         return None
     if D is None:
         x = X[:, :2] / X[:, 2:]
-        px = x @ K[:2, :2].T + K[:2, 2]
+        px = to_pixels(x, K)
     else:
         px, _ = cv2.projectPoints(
             X.reshape(-1, 1, 3), np.zeros(3), np.zeros(3), K, np.asarray(D, np.float64)

@@ -15,7 +15,7 @@ import cv2
 import numpy as np
 
 from ..images import to_gray
-from ..raytrace import undistort_normalized
+from ..raytrace import normalize, to_pixels
 from . import chen
 from .errors import EstimationError
 from .plausibility import expected_rim
@@ -51,7 +51,6 @@ __all__ = [
     "refinement_step",
     "warnings_step",
     "as_pixels",
-    "normalize",
 ]
 
 #: A cue joins the refinement only if the rim's chi-square rises by at most this much
@@ -97,14 +96,6 @@ def as_pixels(points, name):
             f"{name} must be an (N, 2) or (N, 1, 2) array of pixels, got shape {arr.shape}"
         )
     return arr
-
-
-def normalize(pixels, K, D):
-    """Pixels -> undistorted normalised coordinates (``inv(K)`` with skew, tight undistortion)."""
-    if D is None:
-        Ki = np.linalg.inv(K)
-        return pixels @ Ki[:2, :2].T + Ki[:2, 2]
-    return undistort_normalized(np.ascontiguousarray(pixels), K, D)
 
 
 # -- 1. rim ------------------------------------------------------------------------------------
@@ -187,7 +178,7 @@ def rim_step(
         fit = detected
     if boundary_points is not None or D is not None:
         xn = normalize(seen, K, D)
-        ideal = xn @ K[:2, :2].T + K[:2, 2]  # undistorted pixels, same K
+        ideal = to_pixels(xn, K)  # undistorted pixels, same K
         if not np.isfinite(ideal).all():
             raise ValueError("some boundary points cannot be undistorted with D; check D")
         try:

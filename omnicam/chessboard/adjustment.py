@@ -35,9 +35,9 @@ from scipy.optimize import OptimizeResult, least_squares
 from .. import raytrace
 from .._typing import FloatArray
 from ..calibration.reflection import fit_circle, plane_radius
-from ..calibration.steps import normalize
 from ..gauge import gauge_rotation
 from ..mirror import HyperbolicMirror
+from ..raytrace import normalize, to_pixels
 from .board_pose import object_points, rodrigues
 from .intrinsics import check_pattern_size
 
@@ -54,7 +54,6 @@ __all__ = [
     "rim_normalized",
     "robust_residuals",
     "std_from_jacobian",
-    "to_pixels",
 ]
 
 
@@ -70,14 +69,6 @@ DIST_MODELS = {
 
 #: Parameters that act after the mirror (the pinhole and its distortion).
 _AFTER_MIRROR = frozenset(("fx", "fy", "cx", "cy", "skew", "k1", "k2", "p1", "p2", "k3"))
-
-
-def to_pixels(xn, K, D) -> FloatArray:
-    """Undistorted normalised coordinates ``(N, 2)`` -> pixels: ``D``'s distortion (None:
-    none), then ``K`` (eq. 6)."""
-    if D is None:
-        return xn @ K[:2, :2].T + K[:2, 2]
-    return raytrace.distort_normalized(xn, K, D)
 
 
 def rim_normalized(R, t, mirror, phi) -> FloatArray:
