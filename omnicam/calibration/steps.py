@@ -173,7 +173,17 @@ def rim_step(
         try:
             detected = detect_rim(image, hint=hint, expected=expected)
         except ValueError as err:  # a valid image without a findable rim
-            raise EstimationError(str(err)) from None
+            why = str(err)
+            if expected is not None and hint is None:  # the size was K's and the mirror's
+                why = (
+                    f"{why if why.endswith(('?', '.')) else why + '.'} The expected size is "
+                    f"what K (fx = {K[0, 0]:.1f}, fy = {K[1, 1]:.1f} px) and the mirror (a = "
+                    f"{mirror.a:g}, b = {mirror.b:g}, rim radius {mirror.rim_radius:g}) "
+                    f"predict for rigs tilted up to {max_tilt_deg:g} deg and offset up to "
+                    f"{max_offset_mm:g}: check fx and the mirror, or give a rim hint "
+                    f"(rim_hint=(cx, cy, r); --rim-hint CX,CY,R on the command line)"
+                )
+            raise EstimationError(why) from None
         seen = np.asarray(detected.points, np.float64)
         fit = detected
     if boundary_points is not None or D is not None:
