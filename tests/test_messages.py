@@ -3,10 +3,11 @@
 import subprocess
 import sys
 
+import cv2
 import numpy as np
 import pytest
 
-from omnicam import synthetic
+from omnicam import MisalignedHyperbolicCamera, read_verdict, synthetic
 from omnicam.stream import Unwarper
 from omnicam.views import PanoramaView
 
@@ -94,3 +95,134 @@ def test_a_calibration_file_that_cannot_be_written_is_said_once(tmp_path, capsys
     with pytest.raises(CliError) as e:
         _save_camera(cam, str(tmp_path / "missing" / "rig.yaml"), True)
     assert str(e.value).count("cannot write") == 1, str(e.value)
+
+
+# -- files: what cv2.FileStorage writes is read; every refusal names the file and the field ----
+def _opencv_json(path, rim_radius=30.0, K=None, confidence=0.5):
+    """A calibration file written by cv2.FileStorage itself (JSON), as a user's script would."""
+    cam = synthetic.misaligned_rig()
+    fs = cv2.FileStorage(str(path), cv2.FILE_STORAGE_WRITE | cv2.FILE_STORAGE_FORMAT_JSON)
+    fs.write("format_version", 1)
+    fs.write("model", "misaligned_hyperbolic")
+    fs.startWriteStruct("mirror", cv2.FILE_NODE_MAP)
+    for name, value in (("a", cam.mirror.a), ("b", cam.mirror.b), ("rim_radius", rim_radius)):
+        fs.write(name, value)
+    fs.endWriteStruct()
+    fs.write("K", cam.K if K is None else K)
+    fs.write("rvec", cam.rvec.reshape(3, 1))
+    fs.write("tvec", cam.tvec.reshape(3, 1))
+    fs.startWriteStruct("verdict", cv2.FILE_NODE_MAP)
+    fs.write("confidence", confidence)
+    fs.endWriteStruct()
+    fs.release()
+    return cam
+
+
+def test_a_json_file_opencv_wrote_with_a_nan_where_nan_means_unknown_is_read(tmp_path):
+    path = tmp_path / "cv.json"
+    cam = _opencv_json(path, confidence=float("nan"))
+    assert ".Nan" in path.read_text()  # OpenCV's spelling, which is not JSON
+    fs = cv2.FileStorage(str(path), cv2.FILE_STORAGE_READ)  # and OpenCV reads it back
+    assert np.isnan(fs.getNode("verdict").getNode("confidence").real())
+    fs.release()
+    assert MisalignedHyperbolicCamera.load(path) == cam.replace(image_size=None)
+    assert read_verdict(path).confidence is None  # NaN: unknown, as the verdict says
+
+
+K_BAD = synthetic.misaligned_rig().K.copy()
+K_BAD[0, 2] = np.inf
+
+
+@pytest.mark.parametrize(
+    "kw, field, token",
+    [
+        ({"rim_radius": float("nan")}, "'mirror.rim_radius'", ".Nan"),
+        ({"rim_radius": float("inf")}, "'mirror.rim_radius'", ".Inf"),
+        ({"K": -K_BAD}, "'K'", "-.Inf"),
+    ],
+)
+def test_a_nan_or_inf_opencv_wrote_in_a_field_that_needs_a_number_names_the_field(
+    tmp_path, kw, field, token
+):
+    path = tmp_path / "cv.json"
+    _opencv_json(path, **kw)
+    assert token in path.read_text()
+    with pytest.raises(ValueError) as e:
+        MisalignedHyperbolicCamera.load(path)
+    message = str(e.value)
+    assert str(path) in message and f"field {field} must be finite" in message, message
+    assert "not valid JSON" not in message
+
+
+def _json_lines(text, field, value):
+    """``text`` (a saved JSON calibration file) with ``field``'s first number replaced."""
+    head, tail = text.split(f'"{field}"', 1)
+    i = next(i for i, ch in enumerate(tail) if ch.isdigit() or ch == "-")
+    j = i + next(k for k, ch in enumerate(tail[i:]) if ch in ",\n ]}")
+    return head + f'"{field}"' + tail[:i] + value + tail[j:]
+
+
+@pytest.mark.parametrize(
+    "ext, edit, words",
+    [
+        (".json", lambda t: _json_lines(t, "format_version", "1" * 5000), "format_version"),
+        (".json", lambda t: _json_lines(t, "data", "9" * 5000), "field 'K'"),
+        (
+            ".yaml",
+            lambda t: t.replace("format_version: 1", "format_version: 1" + "0" * 30),
+            "field 'format_version'",
+        ),
+        (
+            ".json",
+            lambda t: t.replace('"model"', '"deep": ' + "[" * 40 + "]" * 40 + ', "model"'),
+            "field 'deep'",
+        ),
+        (
+            ".yaml",
+            lambda t: t.replace("rvec:", "deep: " + "[" * 40 + "]" * 40 + "\nrvec:"),
+            "field 'deep'",
+        ),
+        (
+            ".xml",
+            lambda t: t.replace("<rvec", "<deep>" + "<a>" * 40 + "</a>" * 40 + "</deep>\n<rvec"),
+            "field 'deep'",
+        ),
+        (".json", lambda t: t.replace('"rows": 3,', '"rows": 3', 1), "field 'K'"),
+    ],
+    ids=[
+        "json-int-5000-digits",
+        "json-int-in-K",
+        "yaml-int",
+        "json-deep",
+        "yaml-deep",
+        "xml-deep",
+        "json-syntax",
+    ],
+)
+def test_a_refused_file_names_the_file_the_line_and_the_field(tmp_path, ext, edit, words):
+    path = tmp_path / f"c{ext}"
+    synthetic.misaligned_rig().save(path)
+    text = path.read_text()
+    new = edit(text)
+    assert new != text
+    path.write_text(new)
+    with pytest.raises(ValueError) as e:
+        MisalignedHyperbolicCamera.load(path)
+    message = str(e.value)
+    assert str(path) in message and words in message and "line " in message, message
+    assert len(message) < 400 and "\n" not in message  # one line, never thousands of digits
+
+
+@pytest.mark.parametrize("ext", [".yaml", ".xml", ".json"])
+def test_text_that_is_not_utf8_names_the_line_the_byte_and_the_field(tmp_path, ext):
+    path = tmp_path / f"c{ext}"
+    synthetic.misaligned_rig().save(path)
+    data = path.read_bytes()
+    at = data.index(b"misaligned_hyperbolic") + 3
+    path.write_bytes(data[:at] + b"\xe9" + data[at:])  # latin-1, say
+    with pytest.raises(ValueError) as e:
+        MisalignedHyperbolicCamera.load(path)
+    line = data[:at].count(b"\n") + 1
+    message = str(e.value)
+    assert f"not UTF-8 text at line {line}, field 'model' (byte {at})" in message, message
+    assert str(path) in message and "save it as UTF-8" in message
