@@ -2,14 +2,16 @@
 
 import subprocess
 import sys
+import warnings
 
 import cv2
 import numpy as np
 import pytest
 
 from omnicam import MisalignedHyperbolicCamera, read_verdict, synthetic
+from omnicam.camera import scale_K
 from omnicam.stream import Unwarper
-from omnicam.views import PanoramaView
+from omnicam.views import PanoramaView, PerspectiveView, rotation_from_ypr
 
 VIEWS = {"pano": PanoramaView((64, 16))}
 
@@ -226,3 +228,72 @@ def test_text_that_is_not_utf8_names_the_line_the_byte_and_the_field(tmp_path, e
     message = str(e.value)
     assert f"not UTF-8 text at line {line}, field 'model' (byte {at})" in message, message
     assert str(path) in message and "save it as UTF-8" in message
+
+
+# -- complex numbers: refused by name, never cut to their real part ---------------------------
+def _complex(value):
+    return np.asarray(value, dtype=float).astype(complex)  # imaginary parts 0: numpy would cut
+
+
+def _calibrate(**kw):
+    cam = synthetic.misaligned_rig()
+    args = dict(
+        K=cam.K,
+        mirror=cam.mirror,
+        boundary_points=cam.rim_image_points(60),
+        image_size=cam.image_size,
+        refine=False,
+    )
+    args.update(kw)
+    return MisalignedHyperbolicCamera.calibrate(**args)
+
+
+_CAM = synthetic.misaligned_rig()
+_P3 = np.array([[10.0, 5.0, 30.0], [0.0, 2.0, 31.0]])
+COMPLEX_CASES = {
+    "calibrate(boundary_points)": (
+        "boundary_points",
+        lambda: _calibrate(boundary_points=_complex(_CAM.rim_image_points(60))),
+    ),
+    "calibrate(rim_hint)": (
+        "rim_hint",
+        lambda: _calibrate(
+            boundary_points=None,
+            image=np.zeros((64, 64), np.uint8),
+            image_size=None,
+            rim_hint=_complex([32, 32, 20]),
+        ),
+    ),
+    "calibrate(K)": ("K", lambda: _calibrate(K=_complex(_CAM.K))),
+    "calibrate(D)": ("D", lambda: _calibrate(D=_complex([0.0] * 5))),
+    "calibrate(far_lines)": (
+        r"far_lines\[0\]",
+        lambda: _calibrate(far_lines=[_complex(np.ones((4, 2)))]),
+    ),
+    "calibrate(max_tilt_deg)": ("max_tilt_deg", lambda: _calibrate(max_tilt_deg=np.complex128(10))),
+    "Camera(tvec)": ("tvec", lambda: _CAM.replace(tvec=_complex(_CAM.tvec))),
+    "mirror.normal": ("points", lambda: _CAM.mirror.normal(_complex(_P3))),
+    "mirror.intersect": ("origins", lambda: _CAM.mirror.intersect(_complex(_P3), _P3)),
+    "mirror.reflect": ("unit_normals", lambda: _CAM.mirror.reflect(_P3, _complex(_P3))),
+    "mirror.surface_z": ("X", lambda: _CAM.mirror.surface_z(_complex([1.0]), [2.0])),
+    "rotation_from_ypr": ("yaw", lambda: rotation_from_ypr(yaw=np.complex128(10))),
+    "PerspectiveView(fov)": ("fov_deg", lambda: PerspectiveView((32, 16), fov=np.complex128(60))),
+    "scale_K": ("K", lambda: scale_K(_complex(_CAM.K), (500, 500), (250, 250))),
+}
+
+
+@pytest.mark.parametrize("case", list(COMPLEX_CASES))
+def test_complex_numbers_are_refused_naming_the_argument_not_cut_with_a_warning(case):
+    name, call = COMPLEX_CASES[case]
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")  # a ComplexWarning would fail here, not pass
+        with pytest.raises(ValueError, match=rf"^{name} must be .*complex"):
+            call()
+
+
+def test_the_mirror_reads_real_arrays_as_before():
+    m = _CAM.mirror
+    assert np.array_equal(m.normal(_P3), m.normal(_P3.tolist()))
+    assert m.normal(_P3.astype(np.float32)).dtype == np.float64
+    with pytest.raises(ValueError, match="points must be .*real numbers"):
+        m.normal(np.ones((2, 3), bool))
