@@ -1,5 +1,6 @@
 """Messages that name the thing and what to do (issue: a newcomer's first hour, item 8)."""
 
+import os
 import subprocess
 import sys
 import warnings
@@ -50,6 +51,7 @@ def test_out_of_memory_is_one_line_with_advice(monkeypatch, capsys):
 
 
 REPO = __file__.rsplit("/tests/", 1)[0]
+CALIB = os.path.join(REPO, "calib_files", "hyperomni_misaligned.yaml")
 
 
 def test_an_export_whose_own_error_is_large_warns_on_one_line_naming_the_better_format(
@@ -297,3 +299,142 @@ def test_the_mirror_reads_real_arrays_as_before():
     assert m.normal(_P3.astype(np.float32)).dtype == np.float64
     with pytest.raises(ValueError, match="points must be .*real numbers"):
         m.normal(np.ones((2, 3), bool))
+
+
+# -- images and videos: the message says what the file is ---------------------------------------
+@pytest.fixture(scope="module")
+def jpeg():
+    image = synthetic.render_environment(synthetic.misaligned_rig(), supersample=1, seed=1)
+    ok, data = cv2.imencode(".jpg", image)
+    assert ok
+    return data.tobytes()
+
+
+INPUTS = {  # name -> (file name, bytes, words of the one error line)
+    "text as .txt": ("notes.txt", b"a note\nanother\n", "input {p} is a text file, not an image"),
+    "text as .png": ("notes.png", b"a note\n", "cannot read image {p}: it is a text file"),
+    "16-byte mp4": (
+        "clip.mp4",
+        bytes(range(16)),
+        "input {p} is not a video OpenCV can open (16 bytes)",
+    ),
+    "corrupt png": (
+        "p.png",
+        b"\x89PNG\r\n\x1a\n" + bytes(100),
+        "cannot read image {p}: a PNG image OpenCV cannot decode (108 bytes)",
+    ),
+    "truncated jpeg": (
+        "half.jpg",
+        lambda jpeg: jpeg[: len(jpeg) // 2],
+        "cannot read image {p}: a truncated JPEG",
+    ),
+}
+
+
+@pytest.mark.parametrize("case", list(INPUTS))
+@pytest.mark.parametrize("out", ["o.png", "o.avi"])
+def test_unwarp_names_what_an_unusable_input_is(tmp_path, capsys, jpeg, case, out):
+    from omnicam.cli import main
+
+    name, data, words = INPUTS[case]
+    path = tmp_path / name
+    path.write_bytes(data(jpeg) if callable(data) else data)
+    if out == "o.avi" and not name.endswith((".txt", ".mp4")):
+        out = "o.png"  # an image input refuses a video output first: not this test's matter
+    argv = ["unwarp", str(path), "-c", CALIB, "--panorama", "64x16", "-o", str(tmp_path / out)]
+    assert main(argv) == 1
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and words.format(p=path) in err[0], err
+    assert not (tmp_path / out).exists()
+
+
+@pytest.mark.parametrize("name, what", [("in.png", "image"), ("in.mp4", "input")])
+def test_an_unreadable_input_is_permission_denied_not_an_unknown_format(
+    tmp_path, capsys, monkeypatch, name, what
+):
+    from omnicam.cli import _common, main
+
+    path = tmp_path / name
+    path.write_bytes(b"\x89PNG\r\n\x1a\n" + bytes(100) if what == "image" else bytes(range(16)))
+
+    def denied(file, *args, **kwargs):  # what open() does without read permission (as root
+        if os.fspath(file) == str(path):  # chmod 000 is no obstacle, so it is simulated)
+            raise PermissionError(13, "Permission denied", str(path))
+        return open(file, *args, **kwargs)
+
+    monkeypatch.setattr(_common, "open", denied, raising=False)
+    argv = ["unwarp", str(path), "-c", CALIB, "--panorama", "64x16", "-o", str(tmp_path / "o.png")]
+    assert main(argv) == 1
+    err = capsys.readouterr().err.strip().splitlines()
+    assert err == [f"omnicam: error: cannot read {what} {path}: permission denied"], err
+
+
+def test_a_truncated_jpeg_is_refused_and_one_with_data_after_its_end_is_read(tmp_path, jpeg):
+    from omnicam.images import read_image
+
+    whole = tmp_path / "whole.jpg"
+    whole.write_bytes(jpeg)
+    tail = tmp_path / "motion.jpg"  # as phones append a video after the picture
+    tail.write_bytes(jpeg + bytes(range(256)) * 8)
+    assert np.array_equal(read_image(tail), read_image(whole))
+    for cut in (len(jpeg) // 10, len(jpeg) // 2, len(jpeg) - 2):
+        part = tmp_path / f"cut{cut}.jpg"
+        part.write_bytes(jpeg[:cut])
+        assert cv2.imread(str(part)) is not None  # OpenCV itself says nothing
+        with pytest.raises(ValueError, match=f"cut{cut}.jpg.*a truncated JPEG \\({cut} bytes"):
+            read_image(part)
+
+
+def _intrinsics(tmp_path):
+    from omnicam import write_intrinsics
+
+    cam = synthetic.misaligned_rig()
+    path = tmp_path / "k.yaml"
+    write_intrinsics(path, cam.K, None, cam.image_size)
+    return str(path)
+
+
+@pytest.mark.parametrize(
+    "image, words",
+    [
+        (np.full((100, 800, 3), 90, np.uint8), "calibration of {p} failed: no ellipse found"),
+        (np.full((800, 100, 3), 90, np.uint8), "calibration of {p} failed: no ellipse found"),
+    ],
+    ids=["8x-wide", "8x-tall"],
+)
+def test_calibrate_names_the_image_and_an_aspect_ratio_no_mirror_frame_has(
+    tmp_path, capsys, image, words
+):
+    from omnicam.cli import main
+
+    path = tmp_path / "strip.png"
+    cv2.imwrite(str(path), image)
+    argv = ["calibrate", str(path), "--mirror", "23.4", "28.1", "30"]
+    argv += ["--intrinsics", _intrinsics(tmp_path), "-o", str(tmp_path / "c.yaml")]
+    assert main(argv) == 1
+    err = [ln for ln in capsys.readouterr().err.splitlines() if "error" in ln]
+    h, w = image.shape[:2]
+    assert len(err) == 1 and words.format(p=path) in err[0], err
+    assert f"the image is {w}x{h} (8.0:1), no camera's frame of a mirror" in err[0]
+
+
+def test_calibrate_refuses_a_truncated_jpeg_by_name(tmp_path, capsys, jpeg):
+    from omnicam.cli import main
+
+    path = tmp_path / "half.jpg"
+    path.write_bytes(jpeg[: len(jpeg) // 2])
+    argv = ["calibrate", str(path), "--mirror", "23.4", "28.1", "30"]
+    argv += ["--intrinsics", _intrinsics(tmp_path), "-o", str(tmp_path / "c.yaml")]
+    assert main(argv) == 1
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and f"cannot read image {path}: a truncated JPEG" in err[0], err
+    assert not (tmp_path / "c.yaml").exists()
+
+
+def test_a_video_opencv_cannot_open_is_named_with_its_size(tmp_path):
+    from omnicam.stream import open_capture
+
+    path = tmp_path / "clip.mp4"
+    path.write_bytes(bytes(16))
+    with pytest.raises(ValueError, match=r"clip.mp4: not a video OpenCV can open \(16 bytes\)"):
+        open_capture(str(path))
