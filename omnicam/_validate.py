@@ -38,6 +38,7 @@ __all__ = [
     "finite_array",
     "float_array",
     "real_number",
+    "refuse_complex",
     "validate_rng",
     "validate_posture",
     "D_LENGTHS",
@@ -64,8 +65,12 @@ _COS, _SIN = (
 MIN_RIM_SPAN = 8  # px: a smaller mirror image holds too few pixels for any use
 
 
-def float_array(value: Any, name: str, expected: str) -> npt.NDArray[np.float64]:
-    """``value`` as a float64 array; only real numbers (no complex, bool, str, None)."""
+def float_array(value: Any, name: str, expected: str, copy: bool = True) -> npt.NDArray[np.float64]:
+    """``value`` as a float64 array; only real numbers (no complex, bool, str, None).
+
+    With ``copy=False`` a float64 array is returned as it is (no copy), for the arithmetic of
+    the numpy reference code on arrays it makes itself.
+    """
     try:
         arr = np.asarray(value)
     except (TypeError, ValueError, OverflowError):
@@ -78,9 +83,21 @@ def float_array(value: Any, name: str, expected: str) -> npt.NDArray[np.float64]
             arr = np.array([float(v) for v in items], dtype=np.float64).reshape(arr.shape)
         except OverflowError:
             raise ValueError(f"{name} must be finite, got {value!r}") from None
+    if arr.dtype.kind == "c":  # astype would keep the real part, with only a ComplexWarning
+        raise ValueError(
+            f"{name} must be {expected} (real numbers), got complex numbers "
+            f"(dtype {arr.dtype}, shape {arr.shape})"
+        )
     if arr.dtype.kind not in "iuf":
         raise ValueError(f"{name} must be {expected} (real numbers), got {value!r}")
-    return arr.astype(np.float64)
+    return arr.astype(np.float64, copy=copy)
+
+
+def refuse_complex(value: Any, name: str, expected: str) -> None:
+    """``ValueError`` naming ``name`` for a complex value, numpy's complex scalars and arrays
+    included (``float()`` of them keeps the real part, with only a ``ComplexWarning``)."""
+    if isinstance(value, complex) or np.iscomplexobj(value):
+        raise ValueError(f"{name} must be {expected}, got {value!r} (a complex number)")
 
 
 def finite_array(

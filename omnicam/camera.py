@@ -31,7 +31,14 @@ import numpy as np
 
 from . import raytrace, views
 from ._typing import ArrayLike, FloatArray, PathLike, Size
-from ._validate import finite_array, validate_D, validate_image_size, validate_K, validate_posture
+from ._validate import (
+    finite_array,
+    float_array,
+    validate_D,
+    validate_image_size,
+    validate_K,
+    validate_posture,
+)
 from .formats.omnicam_files import MODEL_NAME
 from .gauge import canonical_rvec
 from .mirror import HyperbolicMirror
@@ -61,7 +68,7 @@ def scale_K(K: ArrayLike, from_size: Size, to_size: Size) -> FloatArray:
     sx = to_size[0] / from_size[0]
     sy = to_size[1] / from_size[1]
     S = np.array([[sx, 0.0, 0.5 * (sx - 1.0)], [0.0, sy, 0.5 * (sy - 1.0)], [0.0, 0.0, 1.0]])
-    return S @ np.asarray(K, dtype=np.float64)
+    return S @ float_array(K, "K", "a 3x3 camera matrix")
 
 
 class CameraReflection(NamedTuple):

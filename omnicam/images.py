@@ -30,7 +30,15 @@ import numpy.typing as npt
 
 from ._quiet import opencv_silenced
 
-__all__ = ["SCALES", "check_image", "read_image", "to_bgr8", "to_gray"]
+__all__ = [
+    "SCALES",
+    "check_image",
+    "file_kind",
+    "image_problem",
+    "read_image",
+    "to_bgr8",
+    "to_gray",
+]
 
 SCALES = ("levels", "range")
 
@@ -201,8 +209,85 @@ def read_image(path, flags=cv2.IMREAD_UNCHANGED, name="image") -> np.ndarray:
             image = cv2.imread(os.fspath(path), flags)
     except cv2.error as e:
         raise ValueError(f"cannot read {shown}: {e.err or e}") from None
-    if image is None or image.size == 0:
-        raise ValueError(
-            f"cannot read {shown}: not an image format OpenCV reads (or a corrupt file)"
-        )
+    problem = image_problem(path, image, flags)
+    if problem:
+        raise ValueError(f"cannot read {shown}: {problem}")
     return image
+
+
+# the first bytes of the files given for an image or a video: (offset, bytes, what it is)
+_SIGNATURES = (
+    (0, b"\x89PNG\r\n\x1a\n", "a PNG image"),
+    (0, b"\xff\xd8\xff", "a JPEG image"),
+    (0, b"II*\0", "a TIFF image"),
+    (0, b"MM\0*", "a TIFF image"),
+    (0, b"GIF8", "a GIF image"),
+    (8, b"WEBP", "a WebP image"),
+    (4, b"ftypavif", "an AVIF image"),
+    (4, b"ftypheic", "a HEIC image"),
+    (8, b"AVI ", "an AVI video"),
+    (4, b"ftyp", "an MP4 or QuickTime video"),
+    (0, b"\x1a\x45\xdf\xa3", "a Matroska or WebM video"),
+    (0, b"BM", "a BMP image"),
+)
+_TEXT_CONTROLS = set(range(32)) - {9, 10, 12, 13}  # bytes that no text file holds
+
+
+def file_kind(path) -> str | None:
+    """What the file at ``path`` is by its first bytes, in words: ``"a text file"``,
+    ``"a PNG image"``, ``"an MP4 or QuickTime video"``, ...; None if they tell nothing.
+
+    Raises ``OSError`` (``PermissionError``, ...) if the file cannot be read.
+    """
+    with open(path, "rb") as f:
+        head = f.read(4096)
+    if head and not _TEXT_CONTROLS.intersection(head):
+        try:
+            head.decode("utf-8")
+            return "a text file"
+        except UnicodeDecodeError as e:
+            if e.start >= len(head) - 3 and len(head) == 4096:  # a character cut at the end
+                return "a text file"
+    for offset, magic, what in _SIGNATURES:
+        if head[offset : offset + len(magic)] == magic:
+            return what
+    return None
+
+
+def image_problem(path, image, flags=cv2.IMREAD_UNCHANGED) -> str | None:
+    """Why ``cv2.imread(path, flags)``, which gave ``image``, did not read the file whole, in
+    words; None when it did.
+
+    ``cv2.imread`` decodes a JPEG cut short (an interrupted copy or download) in part and fills
+    the rest with grey, without a word: such a file lacks the end marker ``FF D9`` after its
+    data and ``cv2.imdecode`` of its bytes gives nothing (data appended after a complete
+    JPEG, as phones append a video, leaves it readable). When ``imread`` gave nothing, the file's
+    first bytes say what it is (text, a video, an image format it could not decode).
+    """
+    size = os.stat(path).st_size
+    kind = file_kind(path)
+    if image is None or image.size == 0:
+        if kind == "a text file":
+            return "it is a text file, not an image"
+        if kind is not None and kind.endswith("image"):
+            return (
+                f"{kind} OpenCV cannot decode ({size} bytes): truncated, corrupt or in a "
+                f"variant this OpenCV build lacks"
+            )
+        if kind is not None:
+            return f"it is {kind}, not an image"
+        return f"not an image format OpenCV reads ({size} bytes)"
+    if kind != "a JPEG image":
+        return None
+    with open(path, "rb") as f:
+        data = f.read()
+    if data.rstrip(b"\0").endswith(b"\xff\xd9"):
+        return None
+    with opencv_silenced():
+        whole = cv2.imdecode(np.frombuffer(data, np.uint8), flags)
+    if whole is not None:
+        return None
+    return (
+        f"a truncated JPEG ({size} bytes, without its end marker FF D9): OpenCV decodes only "
+        f"its first part and fills the rest with grey; copy or export it again"
+    )

@@ -20,7 +20,7 @@ import numbers
 import numpy as np
 
 from ._typing import ArrayLike, FloatArray
-from ._validate import LENGTH_RANGE, real_number
+from ._validate import LENGTH_RANGE, float_array, real_number
 
 __all__ = ["HyperbolicMirror"]
 
@@ -116,8 +116,8 @@ class HyperbolicMirror:
         Z : ndarray
             Height of the sheet ``Z > 0`` above ``(X, Y)``; defined beyond the rim too.
         """
-        X = np.asarray(X, dtype=np.float64)
-        Y = np.asarray(Y, dtype=np.float64)
+        X = float_array(X, "X", "mirror-frame coordinates", copy=False)
+        Y = float_array(Y, "Y", "mirror-frame coordinates", copy=False)
         Z: FloatArray = self._b * np.sqrt((X * X + Y * Y) / self._a**2 + 1.0)
         return Z
 
@@ -136,7 +136,7 @@ class HyperbolicMirror:
         -------
         N : (..., 3) ndarray
         """
-        P = np.asarray(points, dtype=np.float64)
+        P = float_array(points, "points", "(..., 3) mirror-frame points", copy=False)
         # f = b sqrt(1 + (X^2+Y^2)/a^2)  =>  f_X = b^2 X / (a^2 f)   (eqs. 13-14)
         k = self._b**2 / (self._a**2 * P[..., 2])
         return np.stack([k * P[..., 0], k * P[..., 1], -np.ones_like(P[..., 2])], axis=-1)
@@ -166,8 +166,8 @@ class HyperbolicMirror:
         points : (..., 3) ndarray
             The hit ``P_M``; NaN where the ray misses the mirror cap.
         """
-        F = np.asarray(origins, dtype=np.float64)
-        V = np.asarray(directions, dtype=np.float64)
+        F = float_array(origins, "origins", "(..., 3) mirror-frame points", copy=False)
+        V = float_array(directions, "directions", "(..., 3) directions", copy=False)
         F, V = np.broadcast_arrays(F, V)
         ia2, ib2 = 1.0 / self._a**2, 1.0 / self._b**2
         # eqs. 9-11
@@ -211,8 +211,8 @@ class HyperbolicMirror:
         V_out : (..., 3) ndarray
             Reflected directions, with the length of ``directions``.
         """
-        V = np.asarray(directions, dtype=np.float64)
-        n = np.asarray(unit_normals, dtype=np.float64)
+        V = float_array(directions, "directions", "(..., 3) directions", copy=False)
+        n = float_array(unit_normals, "unit_normals", "(..., 3) unit normals", copy=False)
         nV: FloatArray = np.einsum("...i,...i->...", n, V)
         return V - 2.0 * n * nV[..., None]
 

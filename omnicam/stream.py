@@ -116,7 +116,10 @@ def open_capture(source) -> cv2.VideoCapture:
         elif "%" in source:
             what = f"image sequence {source}"
         elif os.path.exists(source):
-            what = f"{source}: not an image or video OpenCV can read"
+            size = os.stat(source).st_size if os.path.isfile(source) else None
+            what = f"{source}: not a video OpenCV can open" + (
+                f" ({size} bytes)" if size is not None else ""
+            )
         else:
             raise ValueError(f"source {source}: no such file")
         cap = None
@@ -125,7 +128,9 @@ def open_capture(source) -> cv2.VideoCapture:
             f"source must be a camera index, a path, a URL or a cv2.VideoCapture, got {source!r}"
         )
     try:
-        cap = cv2.VideoCapture(source) if cap is None else cap
+        if cap is None:
+            with opencv_silenced(ffmpeg=True):  # FFmpeg's "moov atom not found" and the like
+                cap = cv2.VideoCapture(source)
         opened = cap.isOpened()
     except cv2.error:
         opened = False

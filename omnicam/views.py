@@ -53,7 +53,7 @@ from ._kernels import (
     cubic_blocks,
 )
 from ._typing import ArrayLike, FloatArray, Maps, Size
-from ._validate import finite_array, float_array, real_number, validate_K
+from ._validate import finite_array, float_array, real_number, refuse_complex, validate_K
 from .mirror import HyperbolicMirror
 
 __all__ = [
@@ -170,6 +170,7 @@ def rotation_from_ypr(yaw: float = 0.0, pitch: float = 0.0, roll: float = 0.0) -
     """
     vals = []
     for name, v in (("yaw", yaw), ("pitch", pitch), ("roll", roll)):
+        refuse_complex(v, name, "a finite number of degrees")
         try:
             v = float(v)
         except (TypeError, ValueError, OverflowError):
@@ -205,6 +206,7 @@ def K_from_fov(fov_deg: float, size: Size) -> FloatArray:
     K : (3, 3) float64 ndarray
     """
     w, h = _check_size(size)
+    refuse_complex(fov_deg, "fov_deg", "a number of degrees in (0, 180)")
     try:
         fov = float(fov_deg)
     except (TypeError, ValueError, OverflowError):

@@ -86,7 +86,7 @@ def test_read_image_says_why_it_cannot(tmp_path):
     with pytest.raises(ValueError, match="empty"):
         read_image(tmp_path / "empty.png")
     (tmp_path / "notes.png").write_text("not an image")
-    with pytest.raises(ValueError, match=r"images\[1\] .*notes.png.*not an image format"):
+    with pytest.raises(ValueError, match=r"images\[1\] .*notes.png.*a text file, not an image"):
         read_image(tmp_path / "notes.png", name="images[1]")
 
 

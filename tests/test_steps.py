@@ -72,10 +72,15 @@ def test_as_pixels_takes_both_opencv_layouts_and_lists():
         ),
         (np.zeros((4, 2, 1)), r"got shape \(4, 2, 1\)"),
         (np.zeros(6), r"got shape \(6,\)"),
-        ([["a", "b"]], r"pts must be an \(N, 2\) or \(N, 1, 2\) array of pixels$"),
+        (
+            [["a", "b"]],
+            r"pts must be an \(N, 2\) or \(N, 1, 2\) array of pixels \(real numbers\), "
+            r"got \[\['a', 'b'\]\]$",
+        ),
+        (np.ones((4, 2), complex), r"pts must be .* got complex numbers \(dtype complex128"),
         ([[1, 2], [3]], "pts must be"),
     ],
-    ids=["3 columns", "(N, 2, 1)", "flat", "strings", "ragged"],
+    ids=["3 columns", "(N, 2, 1)", "flat", "strings", "complex", "ragged"],
 )
 def test_as_pixels_names_the_argument_of_a_bad_array(bad, match):
     with pytest.raises(ValueError, match=match):

@@ -14,6 +14,7 @@ import math
 import cv2
 import numpy as np
 
+from .._validate import float_array
 from ..images import to_gray
 from ..raytrace import normalize, to_pixels
 from . import chen
@@ -85,10 +86,7 @@ MAX_REFINE_POINTS = 400
 
 def as_pixels(points, name):
     """``(N, 2)`` float64 pixels from ``(N, 2)`` / ``(N, 1, 2)``; ``ValueError`` naming ``name``."""
-    try:
-        arr = np.asarray(points, dtype=np.float64)
-    except (TypeError, ValueError):
-        raise ValueError(f"{name} must be an (N, 2) or (N, 1, 2) array of pixels") from None
+    arr = float_array(points, name, "an (N, 2) or (N, 1, 2) array of pixels")
     if arr.ndim == 3 and arr.shape[1:] == (1, 2):
         arr = arr.reshape(-1, 2)
     if arr.ndim != 2 or arr.shape[1] != 2:
@@ -166,6 +164,8 @@ def rim_step(
             )
     else:
         gray = to_gray(image)  # bad input (shape) raises ValueError here, before the search
+        if hint is not None:  # real numbers (rim.check_hint would cut complex ones)
+            float_array(hint, "rim_hint", "(cx, cy, r): the rim's rough centre and radius in px")
         hint = check_hint(hint, (gray.shape[1], gray.shape[0]))  # bad hint: ValueError
         expected = None
         if mirror is not None:

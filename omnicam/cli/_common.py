@@ -17,6 +17,7 @@ from .._quiet import opencv_silenced
 from ..camera import MisalignedHyperbolicCamera
 from ..formats import omnicam_files
 from ..formats.omnicam_files import Verdict, file_path, read_verdict, shown
+from ..images import file_kind, image_problem
 
 PROG = "omnicam"
 
@@ -251,7 +252,8 @@ def _is_image_input(path):
 
 
 def _read_image(path, flags=cv2.IMREAD_UNCHANGED):
-    """``cv2.imread`` of a regular file, OpenCV's and libpng's own stderr lines silenced."""
+    """``cv2.imread`` of a regular file, OpenCV's and libpng's own stderr lines silenced; a
+    file it cannot read, or reads only in part (a truncated JPEG), is named with what it is."""
     try:
         path = file_path(path, "image")
         st = os.stat(path)
@@ -265,16 +267,50 @@ def _read_image(path, flags=cv2.IMREAD_UNCHANGED):
         raise CliError(f"image {shown(path)} is not a regular file")
     if st.st_size == 0:
         raise CliError(f"cannot read image {shown(path)}: the file is empty")
+    _check_readable(path, "image")
     try:
         with opencv_silenced():
             image = cv2.imread(path, flags)
     except cv2.error as e:
         raise CliError(f"cannot read image {shown(path)}: {_cv_message(e)}") from None
-    if image is None or image.size == 0:
-        raise CliError(
-            f"cannot read image {shown(path)}: not an image format OpenCV reads (or a corrupt file)"
-        )
+    problem = image_problem(path, image, flags)
+    if problem:
+        raise CliError(f"cannot read image {shown(path)}: {problem}")
     return image
+
+
+def _check_readable(path, what):
+    """A :class:`CliError` "cannot read {what} X: permission denied" (or the system's reason)
+    if the file cannot be opened: OpenCV would only say it is no image or video it reads."""
+    try:
+        with open(path, "rb"):
+            pass
+    except PermissionError:
+        raise CliError(f"cannot read {what} {shown(path)}: permission denied") from None
+    except OSError as e:
+        raise CliError(f"cannot read {what} {shown(path)}: {e.strerror or e}") from None
+
+
+def _check_video_input(path):
+    """Refuse, naming what it is, an input that is no image and that OpenCV cannot open as a
+    video (a text file, a broken or empty video), before any output is checked or written."""
+    _check_readable(path, "input")
+    kind = file_kind(path)
+    if kind == "a text file":
+        raise CliError(f"input {shown(path)} is a text file, not an image or a video")
+    with opencv_silenced(ffmpeg=True):
+        try:
+            cap = cv2.VideoCapture(path)
+            opened = cap.isOpened()
+            cap.release()
+        except cv2.error:
+            opened = False
+    if not opened:
+        size = os.stat(path).st_size
+        raise CliError(
+            f"input {shown(path)} is not a video OpenCV can open ({size} bytes"
+            + (f", {kind} by its first bytes)" if kind else ")")
+        )
 
 
 def read_intrinsics(path):

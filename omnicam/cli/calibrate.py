@@ -138,6 +138,7 @@ def _finish(args, camera, report, image, outputs, k_from, rig):
             f"the calibration of {args.image} is implausible ({len(implausible)} warning"
             f"{'s' if len(implausible) > 1 else ''} above); {calib} not written, see "
             f"{refused_overlay}; fix the inputs, or pass --force to write it anyway"
+            + aspect_note((image.shape[1], image.shape[0]))
         )
     verdict = Verdict.from_report(report, forced=bool(implausible), **k_from)
     _write_image(overlay, report.draw(image), args.overwrite)
@@ -190,8 +191,30 @@ def cmd_calibrate(args):
             max_offset_mm=args.max_offset,
         )
     except (ValueError, RuntimeError, NotImplementedError, np.linalg.LinAlgError) as e:
-        raise CliError(f"calibration failed: {_one_line(e)}") from None
+        raise CliError(
+            f"calibration of {args.image} failed: {_one_line(e)}{aspect_note(image_size)}"
+        ) from None
     return _finish(args, camera, report, image, outputs, k_from, rig)
+
+
+#: Wider (or taller) than any camera's frame of a mirror: 16:9 is 1.78, cinema's 2.39, two
+#: fisheyes side by side 2.
+MAX_FRAME_ASPECT = 3.0
+
+
+def aspect_note(image_size):
+    """``"; the image is 4000x500 (8.0:1), ..."`` for an image too wide or too tall to be a
+    camera's frame of a mirror (whose image is round), else ``""``."""
+    w, h = image_size
+    ratio = max(w, h) / min(w, h)
+    if ratio <= MAX_FRAME_ASPECT:
+        return ""
+    side = min(w, h)
+    return (
+        f"; the image is {w}x{h} ({ratio:.1f}:1), no camera's frame of a mirror: the mirror's "
+        f"round image would fill at most {side}x{side} px of it (a panorama already unwarped, "
+        f"or a crop?); give the camera's own image"
+    )
 
 
 def refused_overlay_path(overlay):
@@ -242,6 +265,7 @@ def _guess_K_of_image(image, mirror, name, hint, boundary):
         raise CliError(
             f"--guess-k: no rim to guess K from in {name} ({_one_line(e)}); give --rim-hint "
             f"CX,CY,R or --boundary-points, or the intrinsics"
+            + aspect_note((image.shape[1], image.shape[0]))
         ) from None
     K = guess_K(rim, mirror)
     r = math.sqrt(float(rim.axes[0]) * float(rim.axes[1]))

@@ -46,6 +46,7 @@ from ._common import (
     EXIT_USAGE,
     CliError,
     _check_output,
+    _check_video_input,
     _count,
     _finite,
     _fourcc,
@@ -259,6 +260,8 @@ def cmd_unwarp(args):
         if not os.path.isfile(source):
             raise CliError(f"input {source} is not a file")
     video_input = live or not _is_image_input(source)
+    if video_input and not live:
+        _check_video_input(source)  # a text file or a broken video: say what it is
     for spec in specs:  # a name that is not UTF-8 crashes OpenCV's writers: refuse it first
         try:
             file_path(spec.output, "output")

@@ -154,11 +154,14 @@ def file_path(path, what):
 
 
 def _nesting(text):
-    """Deepest nesting of ``[``/``{`` outside strings, of XML elements, and YAML indentation."""
+    """``(depth, indent, where)``: the deepest nesting of ``[``/``{`` outside strings and of XML
+    elements, the widest YAML indentation, and the offsets in ``text`` where the nesting first
+    goes beyond ``MAX_DEPTH`` and the indentation beyond ``MAX_INDENT`` (None if never)."""
     depth = deepest = 0
     quote = None
     escaped = False
-    for ch in text:  # brackets outside double- or single-quoted strings
+    beyond = []  # offsets where the nesting passes MAX_DEPTH
+    for i, ch in enumerate(text):  # brackets outside double- or single-quoted strings
         if quote:
             if escaped:
                 escaped = False
@@ -170,25 +173,73 @@ def _nesting(text):
             quote = ch
         elif ch in "[{":
             depth += 1
-            deepest = max(deepest, depth)
+            if depth > deepest:
+                deepest = depth
+                if depth == MAX_DEPTH + 1:
+                    beyond.append(i)
         elif ch in "]}":
             depth -= 1
     elements = 0
     if "<" in text:
         depth = 0
-        for m in re.finditer(
-            r"<(/?)[A-Za-z_:][^<>]*?(/?)>", re.sub(r"<!--.*?-->", "", text, flags=re.DOTALL)
-        ):
+        for m in re.finditer(r"<(/?)[A-Za-z_:][^<>]*?(/?)>|<!--.*?-->", text, flags=re.DOTALL):
+            if m.group().startswith("<!--"):
+                continue
             if m.group(1):
                 depth -= 1
             elif not m.group(2):
                 depth += 1
                 elements = max(elements, depth)
-    indent = 0
-    for line in text.splitlines():
-        m = re.match(r"[ \t]*(?:-[ \t]+)*", line)
-        indent = max(indent, m.end())
-    return max(deepest, elements), indent
+                if depth == MAX_DEPTH + 1:
+                    beyond.append(m.start())
+    indent = offset = 0
+    indent_at = None
+    for line in text.splitlines(keepends=True):
+        width = re.match(r"[ \t]*(?:-[ \t]+)*", line).end()
+        if width > MAX_INDENT >= indent:
+            indent_at = offset + width
+        indent = max(indent, width)
+        offset += len(line)
+    return max(deepest, elements), indent, (min(beyond, default=None), indent_at)
+
+
+_JSON_TOKEN = re.compile(r'"(?:[^"\\]|\\.)*"|[\[\]{}:]')
+_TOP_KEY = {  # a top-level field's line, as cv2.FileStorage writes them (at column 0)
+    "yaml": re.compile(r"(?m)^([A-Za-z_][\w.-]*)[ \t]*:"),
+    "xml": re.compile(r"(?m)^<([A-Za-z_][\w.-]*)(?=[\s/>])"),
+}
+
+
+def _field_at(text, pos):
+    """The top-level field of the document ``text`` that holds offset ``pos``, or None.
+
+    JSON: the last key at depth 1 before ``pos``; YAML and XML: the last field that starts a
+    line before it (``cv2.FileStorage`` writes nested ones indented).
+    """
+    head = text[:pos]
+    if head.lstrip().startswith("{"):
+        depth, key, last = 0, None, None
+        for m in _JSON_TOKEN.finditer(head):
+            tok = m.group()
+            if tok in "[{":
+                depth += 1
+            elif tok in "]}":
+                depth -= 1
+            elif tok == ":":
+                key = last if depth == 1 and last is not None else key
+            else:
+                last = tok[1:-1] if depth == 1 else None
+        return key
+    fmt = "xml" if head.lstrip().startswith("<") else "yaml"
+    names = [n for n in _TOP_KEY[fmt].findall(head) if n not in ("opencv_storage", "xml")]
+    return names[-1] if names else None
+
+
+def _where(text, pos):
+    """``"line 14, field 'K'"``: where offset ``pos`` of ``text`` lies, for a message."""
+    field = _field_at(text, pos)
+    line = text.count("\n", 0, pos) + 1
+    return f"line {line}" + (f", field {field!r}" if field else "")
 
 
 def _prescan(path, what, json_only=False):
@@ -247,19 +298,23 @@ def _read_text(path, label):
     try:
         return data.decode("utf-8")
     except UnicodeDecodeError as e:
+        head = data[: e.start].decode("utf-8")  # the text before the first bad byte
         raise ValueError(
-            f"{label}: not UTF-8 text (byte {e.start}); a corrupt or binary file"
+            f"{label}: not UTF-8 text at {_where(head, len(head))} (byte {e.start}); a "
+            f"corrupt or binary file, or text in another encoding: save it as UTF-8"
         ) from None
 
 
 def _check_text(text, label, json_only):
     """``ValueError`` (naming ``label``) for text nested too deeply, and in YAML and XML for
     base64 blocks, booleans and integers beyond 32 bits, which OpenCV misreads."""
-    depth, indent = _nesting(text)
+    depth, indent, (depth_at, indent_at) = _nesting(text)
     if depth > MAX_DEPTH or (not json_only and indent > MAX_INDENT):
+        at = depth_at if depth > MAX_DEPTH else indent_at
         raise ValueError(
-            f"{label}: nested too deeply ({max(depth, indent)} levels or "
-            f"columns; at most {MAX_DEPTH}); not a file omnicam writes"
+            f"{label}: nested too deeply at {_where(text, at)} ({max(depth, indent)} levels or "
+            f"columns; at most {MAX_DEPTH} levels, {MAX_INDENT} columns); not a file omnicam "
+            f"writes"
         )
     if json_only:
         return
@@ -270,15 +325,17 @@ def _check_text(text, label, json_only):
     m = _BOOLEAN.search(text)
     if m:
         raise ValueError(
-            f"{label}: {m.group(1)!r} where a value is expected; OpenCV "
-            f"would read it as the number {int(m.group(1) == 'true')}"
+            f"{label}: {m.group(1)!r} where a value is expected ({_where(text, m.start(1))}); "
+            f"OpenCV would read it as the number {int(m.group(1) == 'true')}"
         )
     for m in _LONG_INT.finditer(text):
-        if abs(int(m.group())) > 2**31 - 1:
+        digits = m.group().lstrip("+-")
+        if len(digits) > 10 or abs(int(m.group())) > 2**31 - 1:
+            number = m.group() if len(digits) <= 20 else f"of {len(digits)} digits"
             raise ValueError(
-                f"{label}: the integer {m.group()} does not fit in 32 "
-                f"bits (OpenCV would read it wrapped around); write it as a "
-                f"real number such as {m.group()}."
+                f"{label}: the integer {number} ({_where(text, m.start())}) does not fit in 32 "
+                f"bits (OpenCV would read it wrapped around); write it as a real number"
+                + (f" such as {m.group()}." if len(digits) <= 20 else "")
             )
 
 
@@ -339,18 +396,53 @@ class _Fields:
                 raise ValueError(f"is malformed ({str(e).splitlines()[-1]})") from None
 
 
+# what cv2.FileStorage writes for NaN and the infinities in JSON (.Nan, .Inf, -.Inf) and reads
+# back in any case and sign; and strings, left as they are
+_OPENCV_NONFINITE = re.compile(
+    r'"(?:[^"\\]|\\.)*"|(?<![\w.])([+-]?)\.(nan|inf)(?!\w)', re.IGNORECASE
+)
+
+
+def _json_loads(text, label, invalid="not valid JSON"):
+    """The JSON document ``text`` as ``json.loads`` reads it, also with the non-finite numbers
+    ``cv2.FileStorage`` writes (``.Nan``, ``.Inf``, ``-.Inf``: a NaN is refused later, naming
+    its field); a ``ValueError`` naming ``label``, the line and the field otherwise (``invalid``
+    says what a syntax error makes of the file)."""
+
+    def standard(m):
+        if m.group(2) is None:
+            return m.group()
+        if m.group(2).lower() == "nan":
+            return "NaN"
+        return "-Infinity" if m.group(1) == "-" else "Infinity"
+
+    text = _OPENCV_NONFINITE.sub(standard, text)  # no line changes: the lines stay right
+    try:
+        return json.loads(text)
+    except RecursionError:
+        raise ValueError(f"{label}: nested too deeply") from None
+    except json.JSONDecodeError as e:
+        raise ValueError(
+            f"{label}: {invalid} at {_where(text, e.pos)} (column {e.colno}): {e.msg}"
+        ) from None
+    except ValueError as e:  # an integer beyond Python's limit of digits (4300)
+        runs = re.findall(r"\d+", text)
+        huge = max(runs, key=len) if runs else ""
+        if "digits" not in str(e) or not huge:
+            raise ValueError(f"{label}: {invalid} ({e})") from None
+        raise ValueError(
+            f"{label}: an integer of {len(huge)} digits at {_where(text, text.index(huge))}, "
+            f"larger than any value omnicam reads"
+        ) from None
+
+
 def _parse(text, path, what, ext):
     """The fields of the document ``text``: a dict (JSON) or :class:`_Fields` (YAML, XML)."""
     name = shown(path)
     if ext == ".json" or text.lstrip().startswith("{"):
-        try:
-            data = json.loads(text)
-        except RecursionError:
-            raise ValueError(f"{what} {name}: nested too deeply") from None
-        except ValueError as e:
-            raise ValueError(
-                f"{what} {name}: not a readable OpenCV FileStorage file (not valid JSON: {e})"
-            ) from None
+        data = _json_loads(
+            text, f"{what} {name}", "not a readable OpenCV FileStorage file, not valid JSON"
+        )
         if not isinstance(data, dict):
             raise ValueError(f"{what} {name}: expected a map of named fields at the top level")
         return data
@@ -1038,12 +1130,7 @@ def read_far_lines(path: PathLike) -> list[FloatArray]:
     path = file_path(path, what)
     text = _prescan(path, what, json_only=True)
     name = shown(path)
-    try:
-        data = json.loads(text)
-    except RecursionError:
-        raise ValueError(f"{what} {name}: nested too deeply") from None
-    except ValueError as e:
-        raise ValueError(f"{what} {name}: not valid JSON ({e})") from None
+    data = _json_loads(text, f"{what} {name}")
     try:
         return _far_lines(data, "lines")
     except ValueError as e:

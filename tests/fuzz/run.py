@@ -514,6 +514,11 @@ def case_load(ctx, spec, cap):
         return "ok", "read"
     except Exception as e:
         out = _exc_outcome(e, [n for n in names if n])
+        if spec.get("must_load"):
+            return "bad", f"refused a file OpenCV reads ({spec.get('desc')}): {str(e)[:200]}"
+        missing = [w for w in spec.get("must_name", ()) if w not in str(e)]
+        if out[0] == "ok" and missing:
+            return "bad", f"the message does not name {missing}: {str(e)[:200]}"
         if spec.get("missing") and out[0] == "ok" and not isinstance(e, FileNotFoundError):
             return "bad", f"a missing file gave {type(e).__name__}, not FileNotFoundError"
         if spec.get("not_regular") and "not a regular file" not in str(e):
@@ -1142,7 +1147,91 @@ def _api_cases():
                 ["path", str(v), "file"],
                 lambda ctx, fname=fname, v=v: getattr(ctx.omnicam, fname)(v),
             )
+    _complex_cases(add)
     return cases
+
+
+def _complex_cases(add):
+    """Issue 18 item 8: complex values whose imaginary part is 0, which numpy's casts and
+    ``float()`` would cut to their real part with only a ComplexWarning (stderr: bad)."""
+
+    def cplx(np, value):
+        return np.asarray(value, dtype=float).astype(complex)
+
+    def cal(ctx, **kw):
+        c = ctx.cam
+        args = dict(
+            K=c.K,
+            mirror=c.mirror,
+            boundary_points=c.rim_image_points(60),
+            image_size=c.image_size,
+            refine=False,
+        )
+        args.update(kw)
+        return ctx.omnicam.MisalignedHyperbolicCamera.calibrate(**args)
+
+    p3 = [[10.0, 5.0, 30.0], [0.0, 2.0, 31.0]]
+    for label, names, fn in (
+        (
+            "calibrate(boundary_points)",
+            ["boundary_points"],
+            lambda ctx: cal(ctx, boundary_points=cplx(ctx.np, ctx.cam.rim_image_points(60))),
+        ),
+        (
+            "calibrate(rim_hint)",
+            ["rim_hint"],
+            lambda ctx: cal(
+                ctx,
+                boundary_points=None,
+                image=ctx.np.zeros((64, 64), ctx.np.uint8),
+                image_size=None,
+                rim_hint=cplx(ctx.np, [32, 32, 20]),
+            ),
+        ),
+        (
+            "calibrate(max_tilt_deg)",
+            ["max_tilt_deg"],
+            lambda ctx: cal(ctx, max_tilt_deg=ctx.np.complex128(10)),
+        ),
+        ("mirror.normal", ["points"], lambda ctx: ctx.cam.mirror.normal(cplx(ctx.np, p3))),
+        (
+            "mirror.intersect",
+            ["origins"],
+            lambda ctx: ctx.cam.mirror.intersect(cplx(ctx.np, p3), p3),
+        ),
+        (
+            "mirror.reflect",
+            ["directions"],
+            lambda ctx: ctx.cam.mirror.reflect(cplx(ctx.np, p3), p3),
+        ),
+        (
+            "mirror.surface_z",
+            ["X"],
+            lambda ctx: ctx.cam.mirror.surface_z(cplx(ctx.np, [1.0]), [2.0]),
+        ),
+        (
+            "rotation_from_ypr",
+            ["yaw"],
+            lambda ctx: __import__("omnicam.views").views.rotation_from_ypr(
+                yaw=ctx.np.complex128(10)
+            ),
+        ),
+        (
+            "K_from_fov",
+            ["fov_deg"],
+            lambda ctx: __import__("omnicam.views").views.K_from_fov(
+                ctx.np.complex128(60), (64, 32)
+            ),
+        ),
+        (
+            "scale_K",
+            ["K"],
+            lambda ctx: __import__("omnicam.camera").camera.scale_K(
+                cplx(ctx.np, ctx.cam.K), (500, 500), (250, 250)
+            ),
+        ),
+    ):
+        add(f"item8: complex {label}", names, fn)
 
 
 API_CASES = _api_cases()
@@ -1547,6 +1636,156 @@ class Runner:
                 "special files",
                 f"corrupt json in one process #{i} ({desc})",
                 {"kind": "load", "what": "calibration", "path": p},
+            )
+
+    def messages(self):
+        """Issue 18 item 8: messages that name the thing (the file, the field, the line, what
+        a file is) and what to do; each case names the words its message must hold."""
+        import cv2
+        import numpy as np
+
+        d = os.path.dirname(self.path("item8", "x"))
+        cam = self.cam
+        cat = "messages (issue 18 item 8)"
+
+        def opencv_json(name, rim_radius=30.0, K=None, confidence=0.5):
+            p = os.path.join(d, name)
+            fs = cv2.FileStorage(p, cv2.FILE_STORAGE_WRITE | cv2.FILE_STORAGE_FORMAT_JSON)
+            fs.write("format_version", 1)
+            fs.write("model", "misaligned_hyperbolic")
+            fs.startWriteStruct("mirror", cv2.FILE_NODE_MAP)
+            for k, v in (("a", cam.mirror.a), ("b", cam.mirror.b), ("rim_radius", rim_radius)):
+                fs.write(k, v)
+            fs.endWriteStruct()
+            fs.write("K", cam.K if K is None else K)
+            fs.write("rvec", cam.rvec.reshape(3, 1))
+            fs.write("tvec", cam.tvec.reshape(3, 1))
+            fs.startWriteStruct("verdict", cv2.FILE_NODE_MAP)
+            fs.write("confidence", confidence)
+            fs.endWriteStruct()
+            fs.release()
+            return p
+
+        K_inf = cam.K.copy()
+        K_inf[0, 2] = -np.inf
+        good = render(base_fields(cam), "json")
+        yaml = render(base_fields(cam), "yaml")
+        files = [  # (path, description, extra spec)
+            (
+                opencv_json("nan_verdict.json", confidence=float("nan")),
+                ".Nan in the verdict",
+                {"must_load": True},
+            ),
+            (
+                opencv_json("nan_mirror.json", rim_radius=float("nan")),
+                ".Nan in mirror",
+                {"refuse": True, "must_name": ["'mirror.rim_radius'", "finite"]},
+            ),
+            (
+                opencv_json("inf_mirror.json", rim_radius=float("inf")),
+                ".Inf in mirror",
+                {"refuse": True, "must_name": ["'mirror.rim_radius'", "finite"]},
+            ),
+            (
+                opencv_json("inf_K.json", K=K_inf),
+                "-.Inf in K",
+                {"refuse": True, "must_name": ["'K'", "finite"]},
+            ),
+        ]
+        texts = {
+            "bigint.json": (
+                good.replace('"format_version": 1', '"format_version": ' + "7" * 5000),
+                ["format_version", "line 2", "5000 digits"],
+            ),
+            "deepfield.json": (
+                good.replace('"model"', '"deep": ' + "[" * 40 + "]" * 40 + ', "model"'),
+                ["'deep'", "line 3", "nested too deeply"],
+            ),
+            "deepfield.yaml": (
+                yaml.replace("rvec:", "deep: " + "[" * 40 + "]" * 40 + "\nrvec:"),
+                ["'deep'", "nested too deeply"],
+            ),
+            "bigint.yaml": (
+                yaml.replace("format_version: 1", "format_version: 4294967297"),
+                ["'format_version'", "32 bits"],
+            ),
+            "syntax.json": (good.replace('"rows": 3,', '"rows": 3', 1), ["'K'", "line "]),
+        }
+        for name, (text, words) in texts.items():
+            p = os.path.join(d, name)
+            with open(p, "w") as f:
+                f.write(text)
+            files.append((p, name, {"refuse": True, "must_name": words}))
+        data = good.encode()
+        at = data.index(b"misaligned_hyperbolic") + 3
+        p = os.path.join(d, "latin1.json")
+        with open(p, "wb") as f:
+            f.write(data[:at] + b"\xe9" + data[at:])
+        line = data[:at].count(b"\n") + 1
+        files.append(
+            (p, "latin-1 in model", {"must_name": [f"line {line}", "'model'", f"byte {at}"]})
+        )
+        for path, desc, extra in files:
+            self.run(
+                cat,
+                f"load {desc}",
+                {"kind": "load", "what": "calibration", "path": path, "desc": desc, **extra},
+            )
+        for i, (label, _, _) in enumerate(API_CASES):
+            if label.startswith("item8:"):
+                self.run(cat, label, {"kind": "api", "index": i}, timeout=60)
+        # images and videos: what the file is
+        image = cv2.imread(self.image)
+        ok, jpg = cv2.imencode(".jpg", image)
+        jpg = jpg.tobytes()
+        media = {
+            "notes.txt": (b"calibration notes\nrig 3\n", ["notes.txt", "a text file"]),
+            "notes.png": (b"calibration notes\n", ["notes.png", "a text file"]),
+            "broken.mp4": (
+                os.urandom(16),
+                ["broken.mp4", "not a video OpenCV can open (16 bytes)"],
+            ),
+            "half.jpg": (jpg[: len(jpg) // 2], ["half.jpg", "truncated JPEG"]),
+            "cut.jpg": (jpg[:-2], ["cut.jpg", "truncated JPEG"]),
+        }
+        out = self.path("item8out", "o.png")
+        k = self.path("good", "k.yaml")
+        for name, (content, words) in media.items():
+            p = os.path.join(d, name)
+            with open(p, "wb") as f:
+                f.write(content)
+            argv = ["unwarp", p, "-c", self.calib, "--panorama", "128x32", "-o", out, "--overwrite"]
+            self.run(
+                cat, f"unwarp {name}", {"kind": "cli", "argv": argv, "rc": (1,), "must_name": words}
+            )
+        strips = {"wide.png": (500, 4000), "tall.png": (4000, 500)}
+        for name, shape in strips.items():
+            p = os.path.join(d, name)
+            cv2.imwrite(p, cv2.resize(image, shape[::-1]))
+        for name, words in (
+            ("half.jpg", ["half.jpg", "truncated JPEG"]),
+            ("wide.png", ["wide.png", "4000x500 (8.0:1)"]),
+            ("tall.png", ["tall.png", "500x4000 (8.0:1)"]),
+        ):
+            argv = [
+                "calibrate",
+                os.path.join(d, name),
+                "--mirror",
+                "23.4",
+                "28.1",
+                "30",
+                "--intrinsics",
+                k,
+                "-o",
+                self.path("item8out", "c.yaml"),
+                "--overwrite",
+                "--no-refine",
+            ]
+            self.run(
+                cat,
+                f"calibrate {name}",
+                {"kind": "cli", "argv": argv, "rc": (1,), "must_name": words},
+                timeout=180,
             )
 
     def api(self, limit=None):
@@ -2267,6 +2506,35 @@ class Runner:
                 {"kind": "cli", "argv": ["info", os.path.join(d, "secret.yaml")]},
                 worker=worker,
             )
+            outdir = os.path.join(d, "out")  # writable, so that only the input is refused
+            os.makedirs(outdir, exist_ok=True)
+            os.chmod(outdir, 0o777)
+            for name, src in (("secret.png", self.image), ("secret.avi", self.video)):
+                p = os.path.join(d, name)
+                shutil.copy(src, p)
+                os.chmod(p, 0o000)
+                argv = [
+                    "unwarp",
+                    p,
+                    "-c",
+                    self.calib,
+                    "--panorama",
+                    "64x16",
+                    "-o",
+                    os.path.join(outdir, "o" + os.path.splitext(name)[1]),
+                    "--overwrite",
+                ]
+                self.run(
+                    "permissions (user nobody)",
+                    f"omnicam unwarp unreadable {name}",
+                    {
+                        "kind": "cli",
+                        "argv": argv,
+                        "rc": (1,),
+                        "must_name": [name, "permission denied"],
+                    },
+                    worker=worker,
+                )
         finally:
             worker.close()
 
@@ -2483,6 +2751,7 @@ class Runner:
                 ("intrinsics", lambda: self.intrinsics_mutants(20 if q else 120)),
                 ("far lines", lambda: self.far_line_mutants(20 if q else 80)),
                 ("special files", self.special_files),
+                ("messages", self.messages),
                 ("api", lambda: self.api(80 if q else None)),
                 ("cli", lambda: self.cli_args(25 if q else 150)),
                 ("media", lambda: self.media(6 if q else 60, 2 if q else 20)),
