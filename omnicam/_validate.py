@@ -25,6 +25,8 @@ from __future__ import annotations
 
 import math
 import numbers
+import os
+import stat
 from collections.abc import Callable
 from typing import Any
 
@@ -41,6 +43,10 @@ __all__ = [
     "refuse_complex",
     "validate_rng",
     "validate_posture",
+    "shown",
+    "file_path",
+    "file_kind_of_mode",
+    "regular_file",
     "D_LENGTHS",
     "FOCAL_RANGE",
     "LENGTH_RANGE",
@@ -287,3 +293,76 @@ def validate_posture(
             f"K, tvec: the rim's image must span at least {MIN_RIM_SPAN} px, got "
             f"{np.round(span, 3).tolist()} px (a scale mistake?)"
         )
+
+
+# -- files ------------------------------------------------------------------------------------
+def shown(path):
+    r"""``path`` as text that can always be printed (undecodable bytes as ``\xNN``)."""
+    if isinstance(path, bytes):
+        return path.decode("utf-8", "backslashreplace")
+    return str(path).encode("utf-8", "surrogateescape").decode("utf-8", "backslashreplace")
+
+
+def file_path(path, what):
+    """``os.fspath(path)`` as str; a name that is not UTF-8 is refused (it crashes OpenCV)."""
+    try:
+        path = os.fspath(path)
+    except TypeError:
+        raise ValueError(
+            f"{what} path must be a file name (str or os.PathLike), got {path!r}"
+        ) from None
+    if isinstance(path, bytes):
+        path = os.fsdecode(path)
+    if "\0" in path:
+        raise ValueError(f"{what} {shown(path)}: the name contains a NUL character")
+    try:
+        path.encode("utf-8")
+    except UnicodeEncodeError:
+        raise ValueError(
+            f"{what} {shown(path)}: the file name is not valid UTF-8 "
+            f"(OpenCV cannot handle it); rename the file"
+        ) from None
+    return path
+
+
+def file_kind_of_mode(mode) -> str:
+    """What a ``st_mode`` that is not a regular file's is, in words."""
+    if stat.S_ISDIR(mode):
+        return "a folder"
+    if stat.S_ISFIFO(mode):
+        return "a FIFO"
+    if stat.S_ISCHR(mode) or stat.S_ISBLK(mode):
+        return "a device"
+    if stat.S_ISSOCK(mode):
+        return "a socket"
+    return "not a file"
+
+
+def regular_file(path, label) -> os.stat_result:
+    """``os.stat(path)`` of a regular file, else the error that says what is there.
+
+    Parameters
+    ----------
+    path : str
+        The file (:func:`file_path`).
+    label : str
+        The file as messages name it ("calibration file x.yaml", "image a.png").
+
+    Raises
+    ------
+    FileNotFoundError
+        Nothing at ``path`` (or a parent that is not a folder).
+    ValueError
+        Something else there (a folder, FIFO, device, socket), or ``stat`` refused (its reason).
+    """
+    try:
+        st = os.stat(path)
+    except FileNotFoundError:
+        raise FileNotFoundError(f"{label} does not exist") from None
+    except NotADirectoryError:
+        raise FileNotFoundError(f"{label} does not exist (a parent is not a folder)") from None
+    except OSError as e:
+        raise ValueError(f"cannot read {label}: {e.strerror or e}") from None
+    if not stat.S_ISREG(st.st_mode):
+        raise ValueError(f"{label} is not a regular file ({file_kind_of_mode(st.st_mode)})")
+    return st

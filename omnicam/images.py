@@ -22,13 +22,13 @@ NaN and infinite values are read as 0 in both. Colour is converted with OpenCV's
 from __future__ import annotations
 
 import os
-import stat
 
 import cv2
 import numpy as np
 import numpy.typing as npt
 
 from ._quiet import opencv_silenced
+from ._validate import file_path, regular_file, shown
 
 __all__ = [
     "SCALES",
@@ -177,7 +177,7 @@ def read_image(path, flags=cv2.IMREAD_UNCHANGED, name="image") -> np.ndarray:
     flags : int
         ``cv2.imread``'s flags.
     name : str
-        How messages name the file (``"images[3]"``, say) beside its path.
+        How messages name the file beside its path (``"image"``, ``"images[3]"``).
 
     Returns
     -------
@@ -189,29 +189,29 @@ def read_image(path, flags=cv2.IMREAD_UNCHANGED, name="image") -> np.ndarray:
     FileNotFoundError
         No such file.
     ValueError
-        Not a regular file, empty, unreadable (no permission), or not an image OpenCV decodes.
+        A name that is not UTF-8, not a regular file, empty, unreadable (no permission), or not
+        an image OpenCV decodes (in full: a JPEG cut short is refused).
     """
-    shown = f"{name} {os.fspath(path)!r}" if name != "image" else f"image {os.fspath(path)!r}"
-    try:
-        st = os.stat(path)
-    except FileNotFoundError:
-        raise FileNotFoundError(f"{shown} does not exist") from None
-    except OSError as e:
-        raise ValueError(f"cannot read {shown}: {e.strerror or e}") from None
-    if not stat.S_ISREG(st.st_mode):
-        raise ValueError(f"{shown} is not a regular file")
+    path = file_path(path, name)
+    label = f"{name} {shown(path)}"
+    st = regular_file(path, label)
     if st.st_size == 0:
-        raise ValueError(f"cannot read {shown}: the file is empty")
-    if not os.access(path, os.R_OK):
-        raise ValueError(f"cannot read {shown}: permission denied")
+        raise ValueError(f"cannot read {label}: the file is empty")
+    try:  # OpenCV would only say that it is no image it reads
+        with open(path, "rb"):
+            pass
+    except PermissionError:
+        raise ValueError(f"cannot read {label}: permission denied") from None
+    except OSError as e:
+        raise ValueError(f"cannot read {label}: {e.strerror or e}") from None
     try:
         with opencv_silenced():
-            image = cv2.imread(os.fspath(path), flags)
+            image = cv2.imread(path, flags)
     except cv2.error as e:
-        raise ValueError(f"cannot read {shown}: {e.err or e}") from None
+        raise ValueError(f"cannot read {label}: {e.err or e}") from None
     problem = image_problem(path, image, flags)
     if problem:
-        raise ValueError(f"cannot read {shown}: {problem}")
+        raise ValueError(f"cannot read {label}: {problem}")
     return image
 
 

@@ -186,7 +186,7 @@ def test_calibrate_intrinsics_bad_input_raises_value_error(images, pattern, squa
 
 
 def test_calibrate_intrinsics_names_a_missing_image_file():
-    with pytest.raises(FileNotFoundError, match=r"images\[0\] '/nonexistent/board.png' does not"):
+    with pytest.raises(FileNotFoundError, match=r"images\[0\] /nonexistent/board.png does not"):
         calibrate_intrinsics(["/nonexistent/board.png"], PATTERN, SQUARE)
 
 

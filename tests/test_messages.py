@@ -352,6 +352,7 @@ def test_unwarp_names_what_an_unusable_input_is(tmp_path, capsys, jpeg, case, ou
 def test_an_unreadable_input_is_permission_denied_not_an_unknown_format(
     tmp_path, capsys, monkeypatch, name, what
 ):
+    from omnicam import images
     from omnicam.cli import _common, main
 
     path = tmp_path / name
@@ -362,7 +363,8 @@ def test_an_unreadable_input_is_permission_denied_not_an_unknown_format(
             raise PermissionError(13, "Permission denied", str(path))
         return open(file, *args, **kwargs)
 
-    monkeypatch.setattr(_common, "open", denied, raising=False)
+    for module in (_common, images):  # the CLI opens a video, omnicam.images an image
+        monkeypatch.setattr(module, "open", denied, raising=False)
     argv = ["unwarp", str(path), "-c", CALIB, "--panorama", "64x16", "-o", str(tmp_path / "o.png")]
     assert main(argv) == 1
     err = capsys.readouterr().err.strip().splitlines()

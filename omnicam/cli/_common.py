@@ -7,17 +7,17 @@ import dataclasses
 import math
 import os
 import re
-import stat
 import sys
 
 import cv2
 
 from .._atomic import OutputError, atomic_output
 from .._quiet import opencv_silenced
+from .._validate import file_path, shown
 from ..camera import MisalignedHyperbolicCamera
 from ..formats import omnicam_files
-from ..formats.omnicam_files import Verdict, file_path, read_verdict, shown
-from ..images import file_kind, image_problem
+from ..formats.omnicam_files import Verdict, read_verdict
+from ..images import file_kind, read_image
 
 PROG = "omnicam"
 
@@ -252,31 +252,11 @@ def _is_image_input(path):
 
 
 def _read_image(path, flags=cv2.IMREAD_UNCHANGED):
-    """``cv2.imread`` of a regular file, OpenCV's and libpng's own stderr lines silenced; a
-    file it cannot read, or reads only in part (a truncated JPEG), is named with what it is."""
+    """:func:`omnicam.images.read_image` with its errors as one-line CLI errors."""
     try:
-        path = file_path(path, "image")
-        st = os.stat(path)
-    except ValueError as e:
+        return read_image(path, flags)
+    except (FileNotFoundError, ValueError) as e:
         raise CliError(str(e)) from None
-    except FileNotFoundError:
-        raise CliError(f"image {shown(path)} does not exist") from None
-    except OSError as e:
-        raise CliError(f"cannot read image {shown(path)}: {e.strerror or e}") from None
-    if not stat.S_ISREG(st.st_mode):
-        raise CliError(f"image {shown(path)} is not a regular file")
-    if st.st_size == 0:
-        raise CliError(f"cannot read image {shown(path)}: the file is empty")
-    _check_readable(path, "image")
-    try:
-        with opencv_silenced():
-            image = cv2.imread(path, flags)
-    except cv2.error as e:
-        raise CliError(f"cannot read image {shown(path)}: {_cv_message(e)}") from None
-    problem = image_problem(path, image, flags)
-    if problem:
-        raise CliError(f"cannot read image {shown(path)}: {problem}")
-    return image
 
 
 def _check_readable(path, what):

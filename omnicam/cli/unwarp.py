@@ -34,7 +34,7 @@ import warnings
 import cv2
 
 from .._atomic import OutputError, write_bytes
-from ..formats.omnicam_files import file_path
+from .._validate import file_path
 from ..formats.spherical_metadata import inject_spherical_mp4, jpeg_with_photosphere_xmp
 from ..spherical import equirect_view
 from ..stream import H264, VIDEO_CODECS, Unwarper, count_frames, open_capture

@@ -61,7 +61,6 @@ import json
 import math
 import os
 import re
-import stat
 from collections.abc import Callable
 from typing import TypeVar
 
@@ -71,7 +70,16 @@ import numpy as np
 from .._atomic import OutputError, atomic_output, sigint_deferred, write_bytes
 from .._quiet import opencv_silenced
 from .._typing import ArrayLike, FloatArray, PathLike, Size
-from .._validate import finite_array, real_number, validate_D, validate_image_size, validate_K
+from .._validate import (
+    file_path,
+    finite_array,
+    real_number,
+    regular_file,
+    shown,
+    validate_D,
+    validate_image_size,
+    validate_K,
+)
 from ..mirror import HyperbolicMirror
 from .other_tools import not_pinhole, read_other_central, read_other_intrinsics
 
@@ -122,35 +130,6 @@ _DT_RANGES = {
 _MAX_MATRIX_VALUES = MAX_VALUES
 _BOOLEAN = re.compile(r"(?m)(?:^|[:\[,>-])[ \t]*(true|false)[ \t]*(?=$|[,\]#<])")
 _LONG_INT = re.compile(r"(?<![\w.+-])[-+]?\d{10,}(?![\w.])")  # 10+ digits, not part of a real
-
-
-def shown(path):
-    r"""``path`` as text that can always be printed (undecodable bytes as ``\xNN``)."""
-    if isinstance(path, bytes):
-        return path.decode("utf-8", "backslashreplace")
-    return str(path).encode("utf-8", "surrogateescape").decode("utf-8", "backslashreplace")
-
-
-def file_path(path, what):
-    """``os.fspath(path)`` as str; a name that is not UTF-8 is refused (it crashes OpenCV)."""
-    try:
-        path = os.fspath(path)
-    except TypeError:
-        raise ValueError(
-            f"{what} path must be a file name (str or os.PathLike), got {path!r}"
-        ) from None
-    if isinstance(path, bytes):
-        path = os.fsdecode(path)
-    if "\0" in path:
-        raise ValueError(f"{what} {shown(path)}: the name contains a NUL character")
-    try:
-        path.encode("utf-8")
-    except UnicodeEncodeError:
-        raise ValueError(
-            f"{what} {shown(path)}: the file name is not valid UTF-8 "
-            f"(OpenCV cannot handle it); rename the file"
-        ) from None
-    return path
 
 
 def _nesting(text):
@@ -254,32 +233,10 @@ def _prescan(path, what, json_only=False):
     return text
 
 
-def _file_kind(mode):
-    """What a ``st_mode`` that is not a regular file's is, in words."""
-    if stat.S_ISDIR(mode):
-        return "a folder"
-    if stat.S_ISFIFO(mode):
-        return "a FIFO"
-    if stat.S_ISCHR(mode) or stat.S_ISBLK(mode):
-        return "a device"
-    if stat.S_ISSOCK(mode):
-        return "a socket"
-    return "not a file"
-
-
 def _read_text(path, label):
     """The UTF-8 text of the regular file ``path`` of at most ``MAX_FILE_BYTES``, not empty and
     without a NUL byte (``label``: the file as messages name it, "calibration file x.yaml")."""
-    try:
-        st = os.stat(path)
-    except FileNotFoundError:
-        raise FileNotFoundError(f"{label} does not exist") from None
-    except NotADirectoryError:
-        raise FileNotFoundError(f"{label} does not exist (a parent is not a folder)") from None
-    except OSError as e:
-        raise ValueError(f"{label}: cannot read it ({e.strerror or e})") from None
-    if not stat.S_ISREG(st.st_mode):
-        raise ValueError(f"{label} is not a regular file ({_file_kind(st.st_mode)})")
+    st = regular_file(path, label)
     if st.st_size > MAX_FILE_BYTES:
         raise ValueError(
             f"{label}: too large ({st.st_size} bytes; at most {MAX_FILE_BYTES} are read)"
