@@ -47,6 +47,7 @@ __all__ = [
     "file_path",
     "file_kind_of_mode",
     "regular_file",
+    "check_readable",
     "D_LENGTHS",
     "FOCAL_RANGE",
     "LENGTH_RANGE",
@@ -366,3 +367,15 @@ def regular_file(path, label) -> os.stat_result:
     if not stat.S_ISREG(st.st_mode):
         raise ValueError(f"{label} is not a regular file ({file_kind_of_mode(st.st_mode)})")
     return st
+
+
+def check_readable(path, label) -> None:
+    """``ValueError`` "cannot read {label}: permission denied" (or the system's reason) when
+    ``path`` cannot be opened for reading: OpenCV would only say it is no image or video."""
+    try:
+        with open(path, "rb"):
+            pass
+    except PermissionError:
+        raise ValueError(f"cannot read {label}: permission denied") from None
+    except OSError as e:
+        raise ValueError(f"cannot read {label}: {e.strerror or e}") from None

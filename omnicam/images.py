@@ -28,7 +28,7 @@ import numpy as np
 import numpy.typing as npt
 
 from ._quiet import opencv_silenced
-from ._validate import file_path, regular_file, shown
+from ._validate import check_readable, file_path, regular_file, shown
 
 __all__ = [
     "SCALES",
@@ -197,13 +197,7 @@ def read_image(path, flags=cv2.IMREAD_UNCHANGED, name="image") -> np.ndarray:
     st = regular_file(path, label)
     if st.st_size == 0:
         raise ValueError(f"cannot read {label}: the file is empty")
-    try:  # OpenCV would only say that it is no image it reads
-        with open(path, "rb"):
-            pass
-    except PermissionError:
-        raise ValueError(f"cannot read {label}: permission denied") from None
-    except OSError as e:
-        raise ValueError(f"cannot read {label}: {e.strerror or e}") from None
+    check_readable(path, label)
     try:
         with opencv_silenced():
             image = cv2.imread(path, flags)

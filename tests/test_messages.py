@@ -352,8 +352,8 @@ def test_unwarp_names_what_an_unusable_input_is(tmp_path, capsys, jpeg, case, ou
 def test_an_unreadable_input_is_permission_denied_not_an_unknown_format(
     tmp_path, capsys, monkeypatch, name, what
 ):
-    from omnicam import images
-    from omnicam.cli import _common, main
+    from omnicam import _validate
+    from omnicam.cli import main
 
     path = tmp_path / name
     path.write_bytes(b"\x89PNG\r\n\x1a\n" + bytes(100) if what == "image" else bytes(range(16)))
@@ -363,8 +363,7 @@ def test_an_unreadable_input_is_permission_denied_not_an_unknown_format(
             raise PermissionError(13, "Permission denied", str(path))
         return open(file, *args, **kwargs)
 
-    for module in (_common, images):  # the CLI opens a video, omnicam.images an image
-        monkeypatch.setattr(module, "open", denied, raising=False)
+    monkeypatch.setattr(_validate, "open", denied, raising=False)
     argv = ["unwarp", str(path), "-c", CALIB, "--panorama", "64x16", "-o", str(tmp_path / "o.png")]
     assert main(argv) == 1
     err = capsys.readouterr().err.strip().splitlines()

@@ -13,7 +13,7 @@ import cv2
 
 from .._atomic import OutputError, atomic_output
 from .._quiet import opencv_silenced
-from .._validate import file_path, shown
+from .._validate import check_readable, file_path, shown
 from ..camera import MisalignedHyperbolicCamera
 from ..formats import omnicam_files
 from ..formats.omnicam_files import Verdict, read_verdict
@@ -259,22 +259,13 @@ def _read_image(path, flags=cv2.IMREAD_UNCHANGED):
         raise CliError(str(e)) from None
 
 
-def _check_readable(path, what):
-    """A :class:`CliError` "cannot read {what} X: permission denied" (or the system's reason)
-    if the file cannot be opened: OpenCV would only say it is no image or video it reads."""
-    try:
-        with open(path, "rb"):
-            pass
-    except PermissionError:
-        raise CliError(f"cannot read {what} {shown(path)}: permission denied") from None
-    except OSError as e:
-        raise CliError(f"cannot read {what} {shown(path)}: {e.strerror or e}") from None
-
-
 def _check_video_input(path):
     """Refuse, naming what it is, an input that is no image and that OpenCV cannot open as a
     video (a text file, a broken or empty video), before any output is checked or written."""
-    _check_readable(path, "input")
+    try:
+        check_readable(path, f"input {shown(path)}")
+    except ValueError as e:
+        raise CliError(str(e)) from None
     kind = file_kind(path)
     if kind == "a text file":
         raise CliError(f"input {shown(path)} is a text file, not an image or a video")
