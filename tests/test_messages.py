@@ -439,3 +439,22 @@ def test_a_video_opencv_cannot_open_is_named_with_its_size(tmp_path):
     path.write_bytes(bytes(16))
     with pytest.raises(ValueError, match=r"clip.mp4: not a video OpenCV can open \(16 bytes\)"):
         open_capture(str(path))
+
+
+def test_complex_rim_points_and_hints_are_refused_by_name():
+    from omnicam import calibrate_pattern, detect_rim
+
+    image = np.random.default_rng(0).integers(0, 255, (64, 64), dtype=np.uint8)
+    with pytest.raises(ValueError, match="hint .*complex"):
+        detect_rim(image, hint=(32 + 1j, 32, 20))
+    rim = np.c_[np.cos(np.arange(12)), np.sin(np.arange(12))] * 20 + 32 + 0.5j
+    with pytest.raises(ValueError, match="boundary_points .*complex"):
+        calibrate_pattern(
+            None,
+            (6, 7),
+            30.0,
+            image_points=[np.zeros((42, 2))] * 3,
+            boundary_points=rim,
+            image_size=(64, 64),
+            K=np.array([[50.0, 0, 32], [0, 50, 32], [0, 0, 1]]),
+        )

@@ -25,7 +25,7 @@ import cv2
 import numpy as np
 
 from .._typing import ArrayLike, FloatArray
-from .._validate import real_number, validate_rng
+from .._validate import real_number, refuse_complex, validate_rng
 from ..images import to_gray
 from ..raytrace import as_points
 from .edges import edge_points_along_normals
@@ -855,6 +855,7 @@ def check_hint(hint, image_size) -> tuple[float, float, float] | None:
     """``hint`` as a ``(cx, cy, r)`` tuple of floats, or ``None``; ``ValueError`` naming it."""
     if hint is None:
         return None
+    refuse_complex(hint, "hint", "(cx, cy, r): the rim's rough centre and radius in px")
     try:
         cx, cy, r = (float(v) for v in np.asarray(hint, dtype=np.float64).reshape(-1))
     except (TypeError, ValueError):

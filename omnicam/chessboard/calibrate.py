@@ -48,7 +48,7 @@ import cv2
 import numpy as np
 
 from .._typing import FloatArray
-from .._validate import validate_D, validate_image_size, validate_K
+from .._validate import float_array, validate_D, validate_image_size, validate_K
 from ..calibration import calibrate
 from ..calibration.chen import rim_conic
 from ..calibration.ellipse import conic_distance
@@ -485,7 +485,9 @@ def _rim_step(images, boundary_points, image_size, image_points=None):
     warns = []
     rim_image = 0
     if boundary_points is not None:
-        rim_seen = np.asarray(boundary_points, np.float64).reshape(-1, 2)
+        rim_seen = float_array(
+            boundary_points, "boundary_points", "pixels on the rim, (M, 2)"
+        ).reshape(-1, 2)
         if len(rim_seen) < 6 or not np.isfinite(rim_seen).all():
             raise ValueError("boundary_points must be at least 6 finite pixels on the rim")
         rim_fit = fit_rim(rim_seen)
