@@ -283,11 +283,11 @@ def test_parse_yaml_reads_what_pyyaml_reads(text, value):
 @pytest.mark.parametrize(
     "text, message",
     [
-        ("a: 1\n  b: 2\n", "indentation"),
-        ("a: 1\n- 2\n", "unexpected text"),
-        ("a: [1, 2}\n", "where .]. closes"),
-        ("camera_matrix: {rows: 3]\n", "where .}. closes"),
-        ("a: [1] x\n", "after a flow value"),
+        ("a: 1\n  b: 2\n", "at line 2, column 4"),
+        ("a: 1\n- 2\n", "at line 2, column 1"),
+        ("a: [1, 2}\n", "expected ',' or ']'.* at line 1"),
+        ("camera_matrix: {rows: 3]\n", "expected ',' or '}'.* at line 1"),
+        ("a: [1] x\n", "at line 1, column 8"),
         ("a: " + "[" * (MAX_NESTING + 2) + "]" * (MAX_NESTING + 2) + "\n", "nested too deeply"),
         (
             "".join(" " * i + f"k{i}:\n" for i in range(MAX_NESTING + 2)) + " " * 99 + "v: 1\n",

@@ -25,9 +25,8 @@ calibration can start (:func:`read_other_central` reads Kalibr's).
 
 The YAML of ROS and Kalibr is PyYAML's, not OpenCV's: ``cv2.FileStorage`` refuses Kalibr's block
 sequences written at their key's own indentation (``T_cn_cnm1:`` then ``- [...]`` lines, in
-every chain of two cameras or with an IMU), so :func:`parse_yaml` reads the subset those tools
-write: block mappings and sequences, flow lists and maps (over several lines too), plain and
-quoted scalars, tags, comments. Not anchors, aliases, multi-line plain scalars or block scalars.
+every chain of two cameras or with an IMU), so :func:`parse_yaml` reads them with PyYAML's safe
+loader (the files are pre-scanned for size first, :data:`MAX_BYTES`).
 """
 
 from __future__ import annotations
@@ -37,6 +36,7 @@ import os
 import re
 
 import numpy as np
+import yaml
 
 __all__ = [
     "MAX_BYTES",
@@ -50,205 +50,72 @@ __all__ = [
 
 #: Intrinsics files are small; anything larger is not one of these formats.
 MAX_BYTES = 1 << 20
-#: Deepest nesting :func:`parse_yaml` reads (blocks and flow collections).
+#: Deepest nesting :func:`parse_yaml` reads (maps and lists).
 MAX_NESTING = 64
 #: The first line of OCamCalib's ``calib_results.txt``, as its toolbox writes it.
 OCAMCALIB_HEADER = "#polynomial coefficients for the DIRECT mapping function"
 
 
-# -- the YAML subset of ROS and Kalibr ------------------------------------------------------------
-_TAG = re.compile(r"^!!?[\w.:-]+\s*")  # tags such as !!opencv-matrix, !!float
-_KEY = re.compile(r"((?:\"[^\"]*\")|(?:'[^']*')|[^:#{}\[\],'\"][^:]*?)\s*:(?:\s+|$)(.*)$")
-_FLOW_KEY = re.compile(r"\s*([^:,{}\[\]]+?)\s*:\s*")
-_FLOW_SCALAR = re.compile(r"[^,\]}]*")
+# -- the YAML of ROS and Kalibr -------------------------------------------------------------------
+class _Loader(yaml.SafeLoader):
+    """PyYAML's safe loader, with two differences for these files: a tag it does not know
+    (``!!opencv-matrix``) reads as the plain map, list or scalar it tags, and a number written
+    without a dot (``1e-05``, as C++ writers give it) is a float, as in YAML 1.2."""
 
 
-def _strip_comment(line):
-    out, quote = [], None
-    for i, ch in enumerate(line):
-        if quote:
-            if ch == quote:
-                quote = None
-        elif ch in "'\"":
-            quote = ch
-        elif ch == "#" and (i == 0 or line[i - 1] in " \t"):
-            break
-        out.append(ch)
-    return "".join(out).rstrip()
+def _untagged(loader, suffix, node):
+    if isinstance(node, yaml.MappingNode):
+        return loader.construct_mapping(node, deep=True)
+    if isinstance(node, yaml.SequenceNode):
+        return loader.construct_sequence(node, deep=True)
+    return loader.construct_scalar(node)
 
 
-def _open_brackets(text):
-    return text.count("[") + text.count("{") - text.count("]") - text.count("}")
+_Loader.add_multi_constructor("", _untagged)
+_Loader.add_implicit_resolver(
+    "tag:yaml.org,2002:float",
+    re.compile(r"^[-+]?(?:[0-9][0-9_]*(?:\.[0-9_]*)?|\.[0-9_]+)[eE][-+]?[0-9]+$"),
+    list("-+0123456789."),
+)
 
 
-def _logical_lines(text):
-    """``(indent, content)`` lines, comments and directives dropped, flow values joined."""
-    out = []
-    pending = None
-    for raw in text.splitlines():
-        line = _strip_comment(raw.replace("\t", "    "))
-        if pending is not None:
-            pending[1] += " " + line.strip()
-            if _open_brackets(pending[1]) <= 0:
-                out.append(tuple(pending))
-                pending = None
-            continue
-        if not line.strip() or line.startswith("%") or line.strip() in ("---", "..."):
-            continue
-        indent = len(line) - len(line.lstrip(" "))
-        content = line.strip()
-        if _open_brackets(content) > 0:
-            pending = [indent, content]
-            continue
-        out.append((indent, content))
-    if pending is not None:
-        raise ValueError("unclosed [ or {")
-    return out
-
-
-def _scalar(text):
-    t = _TAG.sub("", text.strip())
-    if len(t) >= 2 and t[0] == t[-1] and t[0] in "'\"":
-        return t[1:-1]
-    low = t.lower()
-    if low in ("", "~", "null"):
-        return None
-    if low in ("true", "false"):
-        return low == "true"
-    if re.fullmatch(r"[-+]?\d+", t):
-        return int(t)
-    try:
-        return float(t)
-    except ValueError:
-        return t
-
-
-def _skip(text, pos, chars):
-    while pos < len(text) and text[pos] in chars:
-        pos += 1
-    return pos
-
-
-def _flow_items(text, pos, close, depth):
-    """The items of ``[...]`` (``close="]"``) or ``{...}`` after the opening bracket."""
-    items = [] if close == "]" else {}
-    while True:
-        pos = _skip(text, pos, " \t,")
-        if pos >= len(text):
-            raise ValueError(f"unclosed {'[' if close == ']' else '{'}")
-        if text[pos] == close:
-            return items, pos + 1
-        if text[pos] in "]}":  # the other closing bracket: no value there, so no progress
-            raise ValueError(f"{text[pos]!r} where {close!r} closes")
-        if close == "]":
-            value, pos = _flow_value(text, pos, depth + 1)
-            items.append(value)
-            continue
-        m = _FLOW_KEY.match(text, pos)
-        if not m:
-            raise ValueError("malformed {...}")
-        items[m.group(1)], pos = _flow_value(text, m.end(), depth + 1)
-
-
-def _flow_value(text, pos, depth=0):
-    """The flow value at ``text[pos:]`` (a list, a map or a scalar) and the position after it."""
-    if depth > MAX_NESTING:
-        raise ValueError("nested too deeply")
-    pos = _skip(text, pos, " \t")
-    if pos < len(text) and text[pos] in "[{":
-        return _flow_items(text, pos + 1, "]" if text[pos] == "[" else "}", depth)
-    end = _FLOW_SCALAR.match(text, pos).end()
-    return _scalar(text[pos:end]), end
-
-
-def _value_text(text):
-    """An inline value: a flow collection or a scalar."""
-    text = _TAG.sub("", text.strip())
-    if not text.startswith(("[", "{")):
-        return _scalar(text)
-    value, pos = _flow_value(text, 0)
-    if text[pos:].strip():
-        raise ValueError(f"unexpected text after a flow value: {text[pos:].strip()[:20]!r}")
-    return value
-
-
-def _is_item(content):
-    return content == "-" or content.startswith("- ")
-
-
-def _node(lines, i, depth):
-    """The block node starting at ``lines[i]``, at that line's indentation: a sequence, a
-    mapping or one inline value; returns ``(value, index of the next line)``."""
-    if depth > MAX_NESTING:
-        raise ValueError("nested too deeply")
-    content = lines[i][1]
-    if _is_item(content):
-        return _sequence(lines, i, depth)
-    if _KEY.match(content) and not content.startswith(("[", "{")):
-        return _mapping(lines, i, depth)
-    return _value_text(content), i + 1
-
-
-def _check_end(lines, i, indent):
-    if i < len(lines) and lines[i][0] > indent:
-        raise ValueError(f"unexpected indentation at {lines[i][1][:40]!r}")
-
-
-def _sequence(lines, i, depth):
-    indent, out = lines[i][0], []
-    while i < len(lines) and lines[i][0] == indent and _is_item(lines[i][1]):
-        rest = lines[i][1][1:].lstrip()
-        if rest:  # the item starts on the dash's line, at the column where its text does
-            lines[i] = (indent + len(lines[i][1]) - len(rest), rest)
-            value, i = _node(lines, i, depth + 1)
-        elif i + 1 < len(lines) and lines[i + 1][0] > indent:
-            value, i = _node(lines, i + 1, depth + 1)
-        else:
-            value, i = None, i + 1
-        out.append(value)
-    _check_end(lines, i, indent)
-    return out, i
-
-
-def _mapping(lines, i, depth):
-    indent, out = lines[i][0], {}
-    while i < len(lines) and lines[i][0] == indent and not _is_item(lines[i][1]):
-        m = _KEY.match(lines[i][1])
-        if not m:
-            raise ValueError(f"expected 'key: value', got {lines[i][1][:40]!r}")
-        key, rest = m.group(1).strip("'\""), _TAG.sub("", m.group(2).strip())
-        i += 1
-        below = i < len(lines) and (
-            lines[i][0] > indent or (lines[i][0] == indent and _is_item(lines[i][1]))
-        )  # a nested block, or a sequence at the key's own indentation (PyYAML's style)
-        if rest:
-            out[key] = _value_text(rest)
-        elif below:
-            out[key], i = _node(lines, i, depth + 1)
-        else:
-            out[key] = None
-    _check_end(lines, i, indent)
-    return out, i
+def _depth(node) -> int:
+    """How deeply ``node`` nests (a scalar: 0), walked without recursion."""
+    deepest, stack = 0, [(node, 0)]
+    while stack:
+        n, d = stack.pop()
+        deepest = max(deepest, d)
+        if isinstance(n, yaml.SequenceNode):
+            stack.extend((c, d + 1) for c in n.value)
+        elif isinstance(n, yaml.MappingNode):
+            stack.extend((v, d + 1) for _, v in n.value)
+    return deepest
 
 
 def parse_yaml(text):
-    """The mappings, sequences and scalars of a block-style YAML document (see module notes).
-
-    Integers, reals, ``true``/``false`` and ``null``/``~`` are read as Python values, anything
-    else as a string; duplicate keys keep the last value.
+    """The document of YAML ``text`` as Python values (PyYAML's safe loader, :class:`_Loader`).
 
     Raises
     ------
     ValueError
-        Text outside the subset this reads, or nested deeper than :data:`MAX_NESTING`.
+        Text that is not YAML (naming the line and column), or nested deeper than
+        :data:`MAX_NESTING`.
     """
-    lines = _logical_lines(text)
-    if not lines:
+    try:
+        node = yaml.compose(text, Loader=_Loader)
+    except yaml.MarkedYAMLError as e:
+        mark = e.problem_mark or e.context_mark
+        where = "" if mark is None else f" at line {mark.line + 1}, column {mark.column + 1}"
+        raise ValueError(f"{e.problem or e.context}{where}") from None
+    except yaml.YAMLError as e:
+        raise ValueError(str(e).splitlines()[0]) from None
+    except RecursionError:
+        raise ValueError(f"nested too deeply (more than {MAX_NESTING} levels)") from None
+    if node is None:
         return {}
-    value, i = _node(lines, 0, 0)
-    if i != len(lines):
-        raise ValueError(f"unexpected text at {lines[i][1][:40]!r}")
-    return value
+    if _depth(node) > MAX_NESTING:
+        raise ValueError(f"nested too deeply (more than {MAX_NESTING} levels)")
+    return _Loader(text).construct_document(node)
 
 
 # -- central models -------------------------------------------------------------------------------
