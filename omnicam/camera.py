@@ -39,7 +39,8 @@ from ._validate import (
     validate_K,
     validate_posture,
 )
-from .formats.omnicam_files import MODEL_NAME
+from .formats.central_export import fit_omnidir
+from .formats.omnicam_files import MODEL_NAME, load_camera, save_camera
 from .gauge import canonical_rvec
 from .mirror import HyperbolicMirror
 
@@ -592,8 +593,6 @@ class MisalignedHyperbolicCamera:
         (``det M = -1``: the image of a mirror is mirror-reversed); see
         :func:`omnicam.formats.central_export.fit_omnidir`, which also gives the maximum error.
         """
-        from .formats.central_export import fit_omnidir
-
         return fit_omnidir(self, depth=depth).as_tuple()
 
     # -- files ----------------------------------------------------------------------------
@@ -618,8 +617,6 @@ class MisalignedHyperbolicCamera:
             Unknown extension, or the file cannot be written (missing or read-only folder, full
             disk, ...), naming the file; the old file at ``path`` is then unchanged.
         """
-        from .formats.omnicam_files import save_camera
-
         save_camera(self, path, verdict)
 
     @classmethod
@@ -634,6 +631,4 @@ class MisalignedHyperbolicCamera:
             Anything else (see :func:`omnicam.formats.omnicam_files.load_camera`), naming the
             file and the field.
         """
-        from .formats.omnicam_files import load_camera
-
         return load_camera(path, cls)

@@ -55,12 +55,14 @@ import typing
 
 import cv2
 import numpy as np
+from scipy.optimize import least_squares
 
 from ..gauge import (
     gauge_rotation,  # re-exported: refine.gauge_rotation
     perpendicular_basis,
 )
 from ..gauge import rotate_vector as _rotate
+from .reflection import plane_radius
 from .robust import mad_sigma
 
 __all__ = [
@@ -429,8 +431,6 @@ class ReflectionTerm:
     name = "reflection"
 
     def __init__(self, K, mirror, R0, t0, xn, r0, z0, r_known=False, z_known=False):
-        from .reflection import plane_radius
-
         self.mirror = mirror
         self.xn = xn
         self.r0, self.z0 = float(r0), float(z0)
@@ -458,8 +458,6 @@ class ReflectionTerm:
     def residuals(self, R, t, y, weighted=True, outline_only=False):
         """The outline pixels' residuals (px) under ``R, t`` and the circle in ``y``; with
         ``outline_only`` no prior term."""
-        from .reflection import plane_radius
-
         r, z = self.circle(y)
         res = (plane_radius(self.mirror, R, t, self.xn, z) - r) * self.scale
         res = np.where(np.isfinite(res), res, 0.0)
@@ -600,8 +598,6 @@ def refine_posture(
     -------
     RefineResult
     """
-    from scipy.optimize import least_squares  # lazy: slow to import; scipy is a direct dependency
-
     K = np.asarray(K, np.float64)
     R0 = cv2.Rodrigues(np.asarray(rvec, np.float64).reshape(3, 1))[0]
     t0 = np.asarray(tvec, np.float64)

@@ -14,7 +14,7 @@ from .._validate import validate_D, validate_K
 from ..calibration import calibrate
 from ..calibration.rim import check_hint, detect_rim, fit_rim
 from ..camera import MisalignedHyperbolicCamera, scale_K
-from ..formats.omnicam_files import SUFFIXES, Verdict, read_verdict
+from ..formats.omnicam_files import SUFFIXES, Verdict, read_verdict, reading
 from ..gauge import posture_error
 from ..mirror import HyperbolicMirror
 from . import pattern
@@ -355,8 +355,6 @@ def read_boundary_points(path):
 
     Returns an ``(N, 2)`` float64 array; every failure is a :class:`CliError` naming the file.
     """
-    from ..formats.omnicam_files import reading
-
     what = "boundary-points file"
     if not os.path.isfile(path):
         raise CliError(

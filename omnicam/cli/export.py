@@ -15,13 +15,12 @@ import os
 import warnings
 
 from .._atomic import OutputError
+from ..formats.central_export import export
 from ._common import EXIT_OK, CliError, _check_output, _load_camera, _one_line, _positive, _warn
 
 
 def cmd_export(args):
     """``omnicam export``: the module docstring."""
-    from ..formats.central_export import export
-
     _check_output(args.output, args.overwrite)
     camera = _load_camera(args.calibration)
     if args.to in ("kalibr", "camodocal", "ocamcalib") and camera.image_size is None:

@@ -6,6 +6,8 @@ import math
 
 import numpy as np
 
+from ..formats.central_export import fit_omnidir
+from ..formats.omnicam_files import read_verdict
 from ..views import default_elevation_range
 from ._common import EXIT_OK, _load_camera, _one_line
 
@@ -181,8 +183,6 @@ def describe_verdict(verdict, width=13):
 
 def cmd_info(args):
     """``omnicam info``: the module docstring."""
-    from ..formats.omnicam_files import read_verdict
-
     camera = _load_camera(args.calibration)
     try:
         verdict = describe_verdict(read_verdict(args.calibration))
@@ -190,8 +190,6 @@ def cmd_info(args):
         verdict = f"{'verdict':<13}  cannot be read: {_one_line(e)}"
     print(f"{'calibration':<13}  {args.calibration}")
     print(describe_camera(camera))
-    from ..formats.central_export import fit_omnidir
-
     try:  # the central model that tools without a non-central one can take (omnicam export)
         fit = fit_omnidir(camera)
         print(
