@@ -26,6 +26,8 @@ import contextlib
 import errno
 import os
 import secrets
+import signal
+import threading
 import time
 
 __all__ = [
@@ -145,9 +147,6 @@ def temp_beside(path):
 @contextlib.contextmanager
 def sigint_deferred():
     """Hold SIGINT back (POSIX, main thread) for the body; a Ctrl-C then arrives right after."""
-    import signal
-    import threading
-
     block = (
         hasattr(signal, "pthread_sigmask") and threading.current_thread() is threading.main_thread()
     )

@@ -36,6 +36,7 @@ import contextlib
 import os
 import sys
 
+from .. import __version__
 from .._quiet import opencv_silenced
 from . import calibrate, demo, export, info, maps, unwarp
 from ._common import (
@@ -60,8 +61,6 @@ def build_parser():
         prog=PROG,
         description="Calibrate and unwarp misaligned hyperbolic-mirror catadioptric cameras.",
     )
-    from .. import __version__
-
     parser.add_argument("--version", action="version", version=f"%(prog)s {__version__}")
     sub = parser.add_subparsers(dest="command", metavar="COMMAND", required=True)
 
