@@ -20,7 +20,8 @@ For rigs whose camera cannot be calibrated without the mirror, and whose mirror 
 5. **the non-central bundle adjustment** (:mod:`.adjustment`) in two stages (the principal
    point and the distortion held at the start, then freed); views whose RMS stands out are
    dropped (or only reported) and the fit is run again; boards still missing are looked for in
-   the views of the fitted camera, and the rig fitted again when one is found;
+   the views of the fitted camera, and the rig fitted again when one is found; a shape held
+   from the central fit is checked, and estimated when the corners reject it;
 6. a :class:`.report.PatternReport`: RMS overall and per view, poses, standard deviations of
    the parameters and of the viewing directions, the single-image route's plausibility checks,
    warnings and, with ``heldout=k``, the k-fold held-out check (:mod:`.heldout`).
@@ -62,6 +63,7 @@ from .adjustment import (
     AdjustmentModel,
     BundleAdjustment,
     ray_uncertainty,
+    robust_residuals,
     std_from_jacobian,
 )
 from .board_pose import board_pose_from_rays, object_points, rodrigues, start_viewpoint
@@ -92,6 +94,12 @@ _STAGE1_TOL = 1e-6
 XI_NOT_HYPERBOLIC = 1.1
 #: The hyperbolic start's ``xi`` when the central fit gives 1 to XI_NOT_HYPERBOLIC.
 XI_START_MAX = 0.97
+#: Evaluations of the short refinement with the shape free that checks a held shape.
+_SHAPE_CHECK_NFEV = 10
+#: The held shape is rejected when freeing ``a, b`` lowers the cost by more than this times
+#: the residual variance: chi-square with 2 degrees of freedom exceeds ``-2 ln p`` with
+#: probability ``p = 0.001``.
+SHAPE_REJECT_CHI2 = -2.0 * math.log(1e-3)
 #: The start of the warning that the views cannot tell the principal point from the tilt (the
 #: command line refuses such a calibration unless forced).
 ONE_SIDED = "all boards are on one side of the mirror (an azimuth gap over 180 deg)"
@@ -206,7 +214,10 @@ def calibrate_pattern(
         Also estimate the mirror's ``a, b`` (``rim_radius`` fixes the scale). Default (None):
         not; with ``mirror=None`` the shape is then the central fit's, held, and the reported
         standard deviations (of ``K`` and of the rays) are those of the fit with ``a, b``
-        free at the same solution, so what the unknown shape leaves unknown is in them. The
+        free at the same solution, so what the unknown shape leaves unknown is in them;
+        unless the corners reject the held shape (a short refinement with ``a, b`` free
+        lowers the cost beyond chance, :data:`SHAPE_REJECT_CHI2`): then they are estimated,
+        and a warning says so. The
         data hardly determine ``a, b``: they trade against the focal length and the camera's
         distance to the mirror, which only the rig's non-centrality tells apart
         (:func:`.adjustment.pattern_uncertainty` gives the bound, ``benchmarks/bench_pattern.py``
@@ -320,6 +331,7 @@ def calibrate_pattern(
             break
         for i in new:
             image_points[i], found_by[i] = new[i], "views (fitted camera)"
+    fit = _shape_check_step(fit, image_size, f_scale, mirror_given, refine_mirror_shape)
     camera, report = _report_step(
         fit, corners, cam0, image_size, lens_note, central, shape_unknown=mirror_given is None
     )
@@ -789,11 +801,7 @@ def _adjustment_step(cam0, mirror, corners, rim_seen, model, f_scale, outliers):
 
     adj, sol = adjust(used, [np.concatenate(poses[i]) for i in used])
 
-    def view_rms(sol, ids):
-        r = adj.corner_residuals(sol.x).reshape(len(ids), -1)
-        return {i: float(np.sqrt(np.mean(r[k] ** 2) * 2)) for k, i in enumerate(ids)}
-
-    vr = view_rms(sol, used)
+    vr = _view_rms(adj, sol.x, used)
     med = float(np.median(list(vr.values())))
     limit = max(outliers.factor * med, outliers.min_px)
     standing_out = [i for i in used if vr[i] > limit]
@@ -813,11 +821,51 @@ def _adjustment_step(cam0, mirror, corners, rim_seen, model, f_scale, outliers):
                 dropped[i] = f"RMS {vr[i]:.2f} px stands out (median {med:.3f} px)"
             used = [used[k] for k in keep]
             adj, sol = adjust(used, [B[k] for k in keep], sol.x[: adj.n_global])
-            vr = view_rms(sol, used)
+            vr = _view_rms(adj, sol.x, used)
         elif outliers.drop:
             warns.append("too few views would remain: the outliers were kept")
 
     return AdjustmentStep(adj, sol, used, vr, rim_px, warns)
+
+
+def _view_rms(adj, x, ids):
+    """``{view index: corner RMS, px}`` of the views ``ids`` of ``adj`` at ``x``."""
+    r = adj.corner_residuals(x).reshape(len(ids), -1)
+    return {i: float(np.sqrt(np.mean(r[k] ** 2) * 2)) for k, i in enumerate(ids)}
+
+
+def _shape_check_step(fit, image_size, f_scale, mirror_given, refine_mirror_shape):
+    """4b. With no mirror given and its shape held (not ``refine_mirror_shape``), the held
+    shape checked: a short refinement with ``a, b`` free, started at the held
+    solution (:func:`_shape_free`). A likelihood-ratio test: when it lowers the robust cost by
+    more than :data:`SHAPE_REJECT_CHI2` times the residual variance, the corners reject the
+    central fit's shape (on a wide-angle rig the rays are then off by several times their
+    stated uncertainty, which a shape held at a biased value does not contain), and the fit
+    with ``a, b`` free is carried on to convergence and returned instead, with a warning;
+    otherwise ``fit`` as it is."""
+    if mirror_given is not None or refine_mirror_shape:
+        return fit
+    adj, sol = fit.adj, fit.sol
+    camera, gauged = adj.to_gauge(sol.x, image_size)
+    adj2, x2 = _shape_free(adj, sol.x, camera, gauged)
+    z = robust_residuals(adj2.residuals(x2), f_scale)[0]
+    cost = float(z @ z)
+    sigma2 = cost / max(len(z) - len(sol.x), 1)
+    short = adj2.solve(x2, f_scale=f_scale, max_nfev=_SHAPE_CHECK_NFEV)
+    chi2 = (cost - 2.0 * short.cost) / sigma2
+    if not chi2 > SHAPE_REJECT_CHI2:
+        return fit
+    sol2 = adj2.solve(short.x, f_scale=f_scale, max_nfev=400)
+    ratio = camera.mirror.a / camera.mirror.b
+    msg = (
+        f"the central fit's mirror shape (a / b = {ratio:.3f}) is rejected by the corners: "
+        f"freeing a, b lowers the cost by {chi2:.0f} times the residual variance (above "
+        f"{SHAPE_REJECT_CHI2:.1f}, chi-square with 2 degrees of freedom at p = 0.001), so a, b "
+        f"were estimated"
+    )
+    _warnings.warn(msg, RuntimeWarning, stacklevel=2)
+    vr = _view_rms(adj2, sol2.x, fit.used)
+    return AdjustmentStep(adj2, sol2, fit.used, vr, fit.rim_px, [*fit.warnings, msg])
 
 
 def _heldout_step(report, mirror, pattern_size, square, options, k):
