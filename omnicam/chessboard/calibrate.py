@@ -11,7 +11,8 @@ For rigs whose camera cannot be calibrated without the mirror, and whose mirror 
 3. **a start without an initial-value problem**: with ``mirror=None`` the central start of
    :mod:`.central` (``cv2.omnidir.calibrate`` of the corners; ``xi`` gives the mirror's shape,
    its focal length the pinhole's, the rim's image the mirror's size at ``rim_radius``, which
-   fixes the scale). With a mirror and without ``K``, the focal length from the rim's size (an
+   fixes the scale; the fit with ``k1, k2`` free instead when it fits far better, a
+   wide-angle lens). With a mirror and without ``K``, the focal length from the rim's size (an
    aligned rig images the rim circle of radius ``r`` at depth ``z_rim + c`` with radius
    ``f r / (z_rim + c)`` px) and the principal point at the image centre; the posture from the
    rim by :func:`omnicam.calibration.calibrate` (Chen's method, eqs. 23-42); every board's pose
@@ -67,7 +68,7 @@ from .adjustment import (
     std_from_jacobian,
 )
 from .board_pose import board_pose_from_rays, object_points, rodrigues, start_viewpoint
-from .central import NOMINAL_RIM_RADIUS, fit_central, hyperbolic_start
+from .central import NOMINAL_RIM_RADIUS, fit_central, hyperbolic_start, pinhole_D_from_unified
 from .detect import detect_pattern
 from .heldout import cross_validate
 from .intrinsics import check_pattern_size
@@ -94,6 +95,12 @@ _STAGE1_TOL = 1e-6
 XI_NOT_HYPERBOLIC = 1.1
 #: The hyperbolic start's ``xi`` when the central fit gives 1 to XI_NOT_HYPERBOLIC.
 XI_START_MAX = 0.97
+#: The central fit with ``k1, k2`` free starts the rig when its RMS is below this times the
+#: distortion-free fit's: a wide-angle lens's distortion, which the latter takes into its
+#: aspect and ``xi`` (fx / fy 1.41 and 0.28 of its RMS on the hostile renders' rig with
+#: ``k1 = -0.27``), not the trade of ``k1`` with ``xi`` that lowers the RMS a little on any
+#: misaligned rig (0.97-1.02 of it on the hostile renders' unknown mirrors, 1.00 on VMR).
+RADIAL_START_GAIN = 0.5
 #: Evaluations of the short refinement with the shape free that checks a held shape.
 _SHAPE_CHECK_NFEV = 10
 #: The held shape is rejected when freeing ``a, b`` lowers the cost by more than this times
@@ -306,10 +313,10 @@ def calibrate_pattern(
     )
     lens_px, lens_note = _reflection_step(lens, images, rim_image, rim_fit)
     obj = object_points((cols, rows), square)  # (_corner_step returns the same)
-    K, mirror, central, start_warns = _central_step(
-        image_points, obj, image_size, rim_fit, mirror, rim_radius, K
+    K, mirror, central, start_warns, D_start = _central_step(
+        image_points, obj, image_size, rim_fit, mirror, rim_radius, K, (D, free_d, n_d)
     )
-    cam0 = _start_step(K, mirror, rim_fit, rim_seen, D, image_size, camera_cls)
+    cam0 = _start_step(K, mirror, rim_fit, rim_seen, D_start, image_size, camera_cls)
     missing = [i for i, p in enumerate(image_points) if p is None] if images else []
     for i, corners in _redetect(images, missing, (cols, rows), cam0, progress).items():
         image_points[i], found_by[i] = corners, "views"
@@ -650,14 +657,20 @@ def _raw_detection_step(images, pattern_size, progress=None):
     return points, found_by
 
 
-def _central_step(image_points, obj, image_size, rim_fit, mirror, rim_radius, K):
+def _central_step(image_points, obj, image_size, rim_fit, mirror, rim_radius, K, dist):
     """2b. Without a mirror, the central start (:mod:`.central`): ``cv2.omnidir.calibrate``
     of the corners found so far and the hyperbolic rig it describes, at ``rim_radius``.
-    Returns ``(K, mirror, central fit or None, warnings)``; a given mirror is returned as it
-    is, with ``K`` (None: from the rim), and the central fit only for comparison. The central
-    fit's shape is not used to judge a given mirror: with the pinhole's distortion fixed its
-    ``xi`` is biased on misaligned rigs (``a / b`` 1.22-1.28 on the test rig whose mirror has
-    0.83), and with it free ``xi`` trades with ``k1``."""
+    Returns ``(K, mirror, central fit or None, warnings, start D)``; a given mirror is
+    returned as it is, with ``K`` (None: from the rim) and the given ``D``, and the central
+    fit only for comparison. ``dist`` is ``(D, free_d, n_d)``, the start distortion given and
+    the adjustment's: without a ``D`` and with ``k1, k2`` free the fit with ``k1, k2`` free is
+    tried too and starts the rig (``D`` by :func:`.central.pinhole_D_from_unified`, padded to
+    ``n_d``) when its RMS is below :data:`RADIAL_START_GAIN` times the distortion-free fit's:
+    a wide-angle lens's ``k1``, which the fit without it takes into its aspect and so into
+    Chen's start posture (:func:`_radial_choice`). The central fit's shape is not used to
+    judge a given mirror: with the pinhole's distortion fixed its ``xi`` is biased on
+    misaligned rigs (``a / b`` 1.22-1.28 on the test rig whose mirror has 0.83), and with it
+    free ``xi`` trades with ``k1``."""
     warns = []
     views = [np.asarray(p, np.float64).reshape(-1, 2) for p in image_points if p is not None]
     views = [v for v in views if len(v) == len(obj)]
@@ -665,13 +678,14 @@ def _central_step(image_points, obj, image_size, rim_fit, mirror, rim_radius, K)
         central = fit_central(views, obj, image_size, hyperbolic=False)
     except ValueError as e:
         if mirror is not None:
-            return K, mirror, None, warns
+            return K, mirror, None, warns, dist[0]
         raise ValueError(
             f"the rig could not be started without a mirror: {e}; give the mirror "
             f"(a, b, rim_radius) as a start"
         ) from None
     if mirror is not None:  # the rim's start (module docstring); the central fit to compare
-        return K, mirror, central, warns
+        return K, mirror, central, warns, dist[0]
+    central, D_c = _radial_choice(central, views, obj, image_size, dist)
     xi = central.xi
     if not xi < XI_NOT_HYPERBOLIC:
         raise ValueError(
@@ -696,7 +710,25 @@ def _central_step(image_points, obj, image_size, rim_fit, mirror, rim_radius, K)
             f"camera's position in the mirror frame scale with it; K, D and the viewing "
             f"directions do not. Give rim_radius for the true scale"
         )
-    return K_c, mirror, central, warns
+    return K_c, mirror, central, warns, D_c
+
+
+def _radial_choice(central, views, obj, image_size, dist):
+    """The central start: ``(central fit, start D)``, the fit with ``k1, k2`` free where it
+    fits far better (:data:`RADIAL_START_GAIN`), describes a hyperboloid, and no ``D`` is
+    given and ``k1, k2`` are free (``dist = (D, free_d, n_d)``); else ``D`` as given."""
+    D, free_d, n_d = dist
+    if D is not None or not {0, 1} <= set(free_d):
+        return central, D
+    try:
+        radial = fit_central(views, obj, image_size, hyperbolic=True, radial=True)
+    except ValueError:
+        return central, D
+    if not (radial.rms < RADIAL_START_GAIN * central.rms and 0.0 < radial.xi):
+        return central, D
+    D_start = np.zeros(n_d)
+    D_start[:4] = pinhole_D_from_unified(radial.D, radial.xi)
+    return radial, D_start
 
 
 def _redetect(images, missing, pattern_size, camera, progress=None):
