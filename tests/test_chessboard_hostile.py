@@ -315,6 +315,14 @@ def test_wide_angle_rig_is_started_with_k1_k2_and_its_held_shape_rejected():
     assert fit.warned("is rejected by the corners") and fit.warned("a, b were estimated")
 
 
+def test_wide_angle_rig_whose_distortion_free_central_fit_fails_is_started_with_k1_k2():
+    """Seed 5: cv2.omnidir without distortion gives fx < 0 (refused), with k1, k2 free a fit."""
+    rig = _hyperbolic(18.0, 6.0, 100.0, size=WIDE_SIZE, k1=-0.27, k2=0.06, f=180.0)
+    fit = Fit(rig, SMALL_PATTERN, 30.0, (300.0, 1500.0), seed=5)
+    assert fit.report.central.D[0] < 0
+    _assert_rays_within_their_uncertainty(fit)
+
+
 def test_wide_angle_calibration_is_right_or_says_it_is_not():
     fit = _wide_fit()
     assert _rays_within_their_uncertainty(fit) or _says_it_is_wrong(fit)

@@ -101,6 +101,10 @@ XI_START_MAX = 0.97
 #: ``k1 = -0.27``), not the trade of ``k1`` with ``xi`` that lowers the RMS a little on any
 #: misaligned rig (0.97-1.02 of it on the hostile renders' unknown mirrors, 1.00 on VMR).
 RADIAL_START_GAIN = 0.5
+#: A central fit with ``k1, k2`` free whose RMS (px) is above this fits nothing (on the hostile
+#: renders' wide-angle rig cv2.omnidir gives 0.24-0.31 px or 1e9 and more): it starts the rig
+#: only below it, when the fit without distortion failed.
+CENTRAL_RMS_MAX = 5.0
 #: Evaluations of the short refinement with the shape free that checks a held shape.
 _SHAPE_CHECK_NFEV = 10
 #: The held shape is rejected when freeing ``a, b`` lowers the cost by more than this times
@@ -665,27 +669,28 @@ def _central_step(image_points, obj, image_size, rim_fit, mirror, rim_radius, K,
     fit only for comparison. ``dist`` is ``(D, free_d, n_d)``, the start distortion given and
     the adjustment's: without a ``D`` and with ``k1, k2`` free the fit with ``k1, k2`` free is
     tried too and starts the rig (``D`` by :func:`.central.pinhole_D_from_unified`, padded to
-    ``n_d``) when its RMS is below :data:`RADIAL_START_GAIN` times the distortion-free fit's:
-    a wide-angle lens's ``k1``, which the fit without it takes into its aspect and so into
-    Chen's start posture (:func:`_radial_choice`). The central fit's shape is not used to
-    judge a given mirror: with the pinhole's distortion fixed its ``xi`` is biased on
-    misaligned rigs (``a / b`` 1.22-1.28 on the test rig whose mirror has 0.83), and with it
-    free ``xi`` trades with ``k1``."""
+    ``n_d``) when its RMS is below :data:`RADIAL_START_GAIN` times the distortion-free fit's,
+    or when that one fails: a wide-angle lens's ``k1``, which the fit without it takes into
+    its aspect and so into Chen's start posture (:func:`_radial_choice`). The central fit's
+    shape is not used to judge a given mirror: with the pinhole's distortion fixed its ``xi``
+    is biased on misaligned rigs (``a / b`` 1.22-1.28 on the test rig whose mirror has
+    0.83), and with it free ``xi`` trades with ``k1``."""
     warns = []
     views = [np.asarray(p, np.float64).reshape(-1, 2) for p in image_points if p is not None]
     views = [v for v in views if len(v) == len(obj)]
+    central, error = None, ""
     try:
         central = fit_central(views, obj, image_size, hyperbolic=False)
     except ValueError as e:
-        if mirror is not None:
-            return K, mirror, None, warns, dist[0]
-        raise ValueError(
-            f"the rig could not be started without a mirror: {e}; give the mirror "
-            f"(a, b, rim_radius) as a start"
-        ) from None
+        error = str(e)
     if mirror is not None:  # the rim's start (module docstring); the central fit to compare
         return K, mirror, central, warns, dist[0]
     central, D_c = _radial_choice(central, views, obj, image_size, dist)
+    if central is None:
+        raise ValueError(
+            f"the rig could not be started without a mirror: {error}; give the mirror "
+            f"(a, b, rim_radius) as a start"
+        )
     xi = central.xi
     if not xi < XI_NOT_HYPERBOLIC:
         raise ValueError(
@@ -715,8 +720,10 @@ def _central_step(image_points, obj, image_size, rim_fit, mirror, rim_radius, K,
 
 def _radial_choice(central, views, obj, image_size, dist):
     """The central start: ``(central fit, start D)``, the fit with ``k1, k2`` free where it
-    fits far better (:data:`RADIAL_START_GAIN`), describes a hyperboloid, and no ``D`` is
-    given and ``k1, k2`` are free (``dist = (D, free_d, n_d)``); else ``D`` as given."""
+    describes a hyperboloid and fits far better (:data:`RADIAL_START_GAIN`) than the
+    distortion-free fit ``central``, or fits at all (:data:`CENTRAL_RMS_MAX`) where that one
+    failed (None), no ``D`` is given and ``k1, k2`` are free (``dist = (D, free_d, n_d)``);
+    else ``central`` and ``D`` as given."""
     D, free_d, n_d = dist
     if D is not None or not {0, 1} <= set(free_d):
         return central, D
@@ -724,7 +731,8 @@ def _radial_choice(central, views, obj, image_size, dist):
         radial = fit_central(views, obj, image_size, hyperbolic=True, radial=True)
     except ValueError:
         return central, D
-    if not (radial.rms < RADIAL_START_GAIN * central.rms and 0.0 < radial.xi):
+    bound = CENTRAL_RMS_MAX if central is None else RADIAL_START_GAIN * central.rms
+    if not (radial.rms < bound and 0.0 < radial.xi):
         return central, D
     D_start = np.zeros(n_d)
     D_start[:4] = pinhole_D_from_unified(radial.D, radial.xi)
