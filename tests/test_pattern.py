@@ -9,6 +9,7 @@ import pytest
 
 import omnicam
 from omnicam import MisalignedHyperbolicCamera, synthetic
+from omnicam.chessboard.central import pinhole_D_from_unified, pinhole_K_from_unified
 from omnicam.gauge import posture_error
 from omnicam.synthetic import boards
 
@@ -359,3 +360,22 @@ def test_a_solver_step_to_a_shape_no_mirror_has_costs_instead_of_raising():
     x[adj.names.index("a")] = math.log(6e6)
     bad = adj.residuals(x)
     assert bad.shape == good.shape and np.all(bad == 50.0)
+
+
+def test_pinhole_distortion_behind_a_unified_models_is_the_same_image():
+    """cv2.omnidir's unified model with radial ``D`` and the pinhole behind it (focal length
+    ``/ sqrt(1 - xi^2)``, :func:`pinhole_D_from_unified`'s ``D``) map every point to the same
+    pixel, each by OpenCV's own projection."""
+    xi, D_u = 0.57, np.array([-0.16, 0.02, 0.0, 0.0])
+    K_u = np.array([[140.0, 0.0, 640.0], [0.0, 139.0, 540.0], [0.0, 0.0, 1.0]])
+    X = np.random.default_rng(4).normal([0.0, 0.0, 1.0], 0.6, (200, 3))
+    X = X[X[:, 2] > 0.3]
+    ref, _ = cv2.omnidir.projectPoints(
+        X.reshape(1, -1, 3), np.zeros(3), np.zeros(3), K_u, xi, D_u.reshape(1, 4)
+    )
+    unified = X[:, :2] / (X[:, 2:] + xi * np.linalg.norm(X, axis=1, keepdims=True))
+    s = math.sqrt(1.0 - xi * xi)  # the pinhole's normalised plane is the unified one's times s
+    Xp = np.column_stack([s * unified, np.ones(len(unified))])
+    K_p = pinhole_K_from_unified(K_u, xi)
+    px, _ = cv2.projectPoints(Xp, np.zeros(3), np.zeros(3), K_p, pinhole_D_from_unified(D_u, xi))
+    assert np.abs(px.reshape(-1, 2) - ref.reshape(-1, 2)).max() < 1e-9

@@ -11,7 +11,8 @@ For rigs whose camera cannot be calibrated without the mirror, and whose mirror 
 3. **a start without an initial-value problem**: with ``mirror=None`` the central start of
    :mod:`.central` (``cv2.omnidir.calibrate`` of the corners; ``xi`` gives the mirror's shape,
    its focal length the pinhole's, the rim's image the mirror's size at ``rim_radius``, which
-   fixes the scale). With a mirror and without ``K``, the focal length from the rim's size (an
+   fixes the scale; the fit with ``k1, k2`` free instead when it fits far better, a
+   wide-angle lens). With a mirror and without ``K``, the focal length from the rim's size (an
    aligned rig images the rim circle of radius ``r`` at depth ``z_rim + c`` with radius
    ``f r / (z_rim + c)`` px) and the principal point at the image centre; the posture from the
    rim by :func:`omnicam.calibration.calibrate` (Chen's method, eqs. 23-42); every board's pose
@@ -20,7 +21,8 @@ For rigs whose camera cannot be calibrated without the mirror, and whose mirror 
 5. **the non-central bundle adjustment** (:mod:`.adjustment`) in two stages (the principal
    point and the distortion held at the start, then freed); views whose RMS stands out are
    dropped (or only reported) and the fit is run again; boards still missing are looked for in
-   the views of the fitted camera, and the rig fitted again when one is found;
+   the views of the fitted camera, and the rig fitted again when one is found; a shape held
+   from the central fit is checked, and estimated when the corners reject it;
 6. a :class:`.report.PatternReport`: RMS overall and per view, poses, standard deviations of
    the parameters and of the viewing directions, the single-image route's plausibility checks,
    warnings and, with ``heldout=k``, the k-fold held-out check (:mod:`.heldout`).
@@ -62,10 +64,11 @@ from .adjustment import (
     AdjustmentModel,
     BundleAdjustment,
     ray_uncertainty,
+    robust_residuals,
     std_from_jacobian,
 )
 from .board_pose import board_pose_from_rays, object_points, rodrigues, start_viewpoint
-from .central import NOMINAL_RIM_RADIUS, fit_central, hyperbolic_start
+from .central import NOMINAL_RIM_RADIUS, fit_central, hyperbolic_start, pinhole_D_from_unified
 from .detect import detect_pattern
 from .heldout import cross_validate
 from .intrinsics import check_pattern_size
@@ -92,6 +95,21 @@ _STAGE1_TOL = 1e-6
 XI_NOT_HYPERBOLIC = 1.1
 #: The hyperbolic start's ``xi`` when the central fit gives 1 to XI_NOT_HYPERBOLIC.
 XI_START_MAX = 0.97
+#: The central fit with ``k1, k2`` free starts the rig when its RMS is below this times the
+#: distortion-free fit's: a wide-angle lens's distortion, which the latter takes into its
+#: aspect and ``xi``, not the trade of ``k1`` with ``xi`` that lowers the RMS a little on any
+#: misaligned rig (``benchmarks/bench_chessboard_hostile.py`` prints both fits' RMS).
+RADIAL_START_GAIN = 0.5
+#: A central fit with ``k1, k2`` free whose RMS (px) is above this fits nothing (cv2.omnidir
+#: may return one of 1e9 px): it starts the rig only below it, when the fit without
+#: distortion failed.
+CENTRAL_RMS_MAX = 5.0
+#: Evaluations of the short refinement with the shape free that checks a held shape.
+_SHAPE_CHECK_NFEV = 10
+#: The held shape is rejected when freeing ``a, b`` lowers the cost by more than this times
+#: the residual variance: chi-square with 2 degrees of freedom exceeds ``-2 ln p`` with
+#: probability ``p = 0.001``.
+SHAPE_REJECT_CHI2 = -2.0 * math.log(1e-3)
 #: The start of the warning that the views cannot tell the principal point from the tilt (the
 #: command line refuses such a calibration unless forced).
 ONE_SIDED = "all boards are on one side of the mirror (an azimuth gap over 180 deg)"
@@ -206,7 +224,10 @@ def calibrate_pattern(
         Also estimate the mirror's ``a, b`` (``rim_radius`` fixes the scale). Default (None):
         not; with ``mirror=None`` the shape is then the central fit's, held, and the reported
         standard deviations (of ``K`` and of the rays) are those of the fit with ``a, b``
-        free at the same solution, so what the unknown shape leaves unknown is in them. The
+        free at the same solution, so what the unknown shape leaves unknown is in them;
+        unless the corners reject the held shape (a short refinement with ``a, b`` free
+        lowers the cost beyond chance, :data:`SHAPE_REJECT_CHI2`): then they are estimated,
+        and a warning says so. The
         data hardly determine ``a, b``: they trade against the focal length and the camera's
         distance to the mirror, which only the rig's non-centrality tells apart
         (:func:`.adjustment.pattern_uncertainty` gives the bound, ``benchmarks/bench_pattern.py``
@@ -295,10 +316,10 @@ def calibrate_pattern(
     )
     lens_px, lens_note = _reflection_step(lens, images, rim_image, rim_fit)
     obj = object_points((cols, rows), square)  # (_corner_step returns the same)
-    K, mirror, central, start_warns = _central_step(
-        image_points, obj, image_size, rim_fit, mirror, rim_radius, K
+    K, mirror, central, start_warns, D_start = _central_step(
+        image_points, obj, image_size, rim_fit, mirror, rim_radius, K, (D, free_d, n_d)
     )
-    cam0 = _start_step(K, mirror, rim_fit, rim_seen, D, image_size, camera_cls)
+    cam0 = _start_step(K, mirror, rim_fit, rim_seen, D_start, image_size, camera_cls)
     missing = [i for i, p in enumerate(image_points) if p is None] if images else []
     for i, corners in _redetect(images, missing, (cols, rows), cam0, progress).items():
         image_points[i], found_by[i] = corners, "views"
@@ -320,6 +341,7 @@ def calibrate_pattern(
             break
         for i in new:
             image_points[i], found_by[i] = new[i], "views (fitted camera)"
+    fit = _shape_check_step(fit, image_size, f_scale, mirror_given, refine_mirror_shape)
     camera, report = _report_step(
         fit, corners, cam0, image_size, lens_note, central, shape_unknown=mirror_given is None
     )
@@ -640,28 +662,36 @@ def _raw_detection_step(images, pattern_size, progress=None):
     return points, found_by
 
 
-def _central_step(image_points, obj, image_size, rim_fit, mirror, rim_radius, K):
+def _central_step(image_points, obj, image_size, rim_fit, mirror, rim_radius, K, dist):
     """2b. Without a mirror, the central start (:mod:`.central`): ``cv2.omnidir.calibrate``
     of the corners found so far and the hyperbolic rig it describes, at ``rim_radius``.
-    Returns ``(K, mirror, central fit or None, warnings)``; a given mirror is returned as it
-    is, with ``K`` (None: from the rim), and the central fit only for comparison. The central
-    fit's shape is not used to judge a given mirror: with the pinhole's distortion fixed its
-    ``xi`` is biased on misaligned rigs (``a / b`` 1.22-1.28 on the test rig whose mirror has
+    Returns ``(K, mirror, central fit or None, warnings, start D)``; a given mirror is
+    returned as it is, with ``K`` (None: from the rim) and the given ``D``, and the central
+    fit only for comparison. ``dist`` is ``(D, free_d, n_d)``, the start distortion given and
+    the adjustment's: without a ``D`` and with ``k1, k2`` free the fit with ``k1, k2`` free is
+    tried too and starts the rig (``D`` by :func:`.central.pinhole_D_from_unified`, padded to
+    ``n_d``) when its RMS is below :data:`RADIAL_START_GAIN` times the distortion-free fit's,
+    or when that one fails: a wide-angle lens's ``k1``, which the fit without it takes into
+    its aspect and so into Chen's start posture (:func:`_radial_choice`). The central fit's
+    shape is not used to judge a given mirror: with the pinhole's distortion fixed its ``xi``
+    is biased on misaligned rigs (``a / b`` 1.22-1.28 on the test rig whose mirror has
     0.83), and with it free ``xi`` trades with ``k1``."""
     warns = []
     views = [np.asarray(p, np.float64).reshape(-1, 2) for p in image_points if p is not None]
     views = [v for v in views if len(v) == len(obj)]
+    central, error = None, ""
     try:
         central = fit_central(views, obj, image_size, hyperbolic=False)
     except ValueError as e:
-        if mirror is not None:
-            return K, mirror, None, warns
-        raise ValueError(
-            f"the rig could not be started without a mirror: {e}; give the mirror "
-            f"(a, b, rim_radius) as a start"
-        ) from None
+        error = str(e)
     if mirror is not None:  # the rim's start (module docstring); the central fit to compare
-        return K, mirror, central, warns
+        return K, mirror, central, warns, dist[0]
+    central, D_c = _radial_choice(central, views, obj, image_size, dist)
+    if central is None:
+        raise ValueError(
+            f"the rig could not be started without a mirror: {error}; give the mirror "
+            f"(a, b, rim_radius) as a start"
+        )
     xi = central.xi
     if not xi < XI_NOT_HYPERBOLIC:
         raise ValueError(
@@ -686,7 +716,28 @@ def _central_step(image_points, obj, image_size, rim_fit, mirror, rim_radius, K)
             f"camera's position in the mirror frame scale with it; K, D and the viewing "
             f"directions do not. Give rim_radius for the true scale"
         )
-    return K_c, mirror, central, warns
+    return K_c, mirror, central, warns, D_c
+
+
+def _radial_choice(central, views, obj, image_size, dist):
+    """The central start: ``(central fit, start D)``, the fit with ``k1, k2`` free where it
+    describes a hyperboloid and fits far better (:data:`RADIAL_START_GAIN`) than the
+    distortion-free fit ``central``, or fits at all (:data:`CENTRAL_RMS_MAX`) where that one
+    failed (None), no ``D`` is given and ``k1, k2`` are free (``dist = (D, free_d, n_d)``);
+    else ``central`` and ``D`` as given."""
+    D, free_d, n_d = dist
+    if D is not None or not {0, 1} <= set(free_d):
+        return central, D
+    try:
+        radial = fit_central(views, obj, image_size, hyperbolic=True, radial=True)
+    except ValueError:
+        return central, D
+    bound = CENTRAL_RMS_MAX if central is None else RADIAL_START_GAIN * central.rms
+    if not (radial.rms < bound and 0.0 < radial.xi):
+        return central, D
+    D_start = np.zeros(n_d)
+    D_start[:4] = pinhole_D_from_unified(radial.D, radial.xi)
+    return radial, D_start
 
 
 def _redetect(images, missing, pattern_size, camera, progress=None):
@@ -791,11 +842,7 @@ def _adjustment_step(cam0, mirror, corners, rim_seen, model, f_scale, outliers):
 
     adj, sol = adjust(used, [np.concatenate(poses[i]) for i in used])
 
-    def view_rms(sol, ids):
-        r = adj.corner_residuals(sol.x).reshape(len(ids), -1)
-        return {i: float(np.sqrt(np.mean(r[k] ** 2) * 2)) for k, i in enumerate(ids)}
-
-    vr = view_rms(sol, used)
+    vr = _view_rms(adj, sol.x, used)
     med = float(np.median(list(vr.values())))
     limit = max(outliers.factor * med, outliers.min_px)
     standing_out = [i for i in used if vr[i] > limit]
@@ -815,11 +862,51 @@ def _adjustment_step(cam0, mirror, corners, rim_seen, model, f_scale, outliers):
                 dropped[i] = f"RMS {vr[i]:.2f} px stands out (median {med:.3f} px)"
             used = [used[k] for k in keep]
             adj, sol = adjust(used, [B[k] for k in keep], sol.x[: adj.n_global])
-            vr = view_rms(sol, used)
+            vr = _view_rms(adj, sol.x, used)
         elif outliers.drop:
             warns.append("too few views would remain: the outliers were kept")
 
     return AdjustmentStep(adj, sol, used, vr, rim_px, warns)
+
+
+def _view_rms(adj, x, ids):
+    """``{view index: corner RMS, px}`` of the views ``ids`` of ``adj`` at ``x``."""
+    r = adj.corner_residuals(x).reshape(len(ids), -1)
+    return {i: float(np.sqrt(np.mean(r[k] ** 2) * 2)) for k, i in enumerate(ids)}
+
+
+def _shape_check_step(fit, image_size, f_scale, mirror_given, refine_mirror_shape):
+    """4b. With no mirror given and its shape held (not ``refine_mirror_shape``), the held
+    shape checked: a short refinement with ``a, b`` free, started at the held
+    solution (:func:`_shape_free`). A likelihood-ratio test: when it lowers the robust cost by
+    more than :data:`SHAPE_REJECT_CHI2` times the residual variance, the corners reject the
+    central fit's shape (on a wide-angle rig the rays are then off by several times their
+    stated uncertainty, which a shape held at a biased value does not contain), and the fit
+    with ``a, b`` free is carried on to convergence and returned instead, with a warning;
+    otherwise ``fit`` as it is."""
+    if mirror_given is not None or refine_mirror_shape:
+        return fit
+    adj, sol = fit.adj, fit.sol
+    camera, gauged = adj.to_gauge(sol.x, image_size)
+    adj2, x2 = _shape_free(adj, sol.x, camera, gauged)
+    z = robust_residuals(adj2.residuals(x2), f_scale)[0]
+    cost = float(z @ z)
+    sigma2 = cost / max(len(z) - len(sol.x), 1)
+    short = adj2.solve(x2, f_scale=f_scale, max_nfev=_SHAPE_CHECK_NFEV)
+    chi2 = (cost - 2.0 * short.cost) / sigma2
+    if not chi2 > SHAPE_REJECT_CHI2:
+        return fit
+    sol2 = adj2.solve(short.x, f_scale=f_scale, max_nfev=400)
+    ratio = camera.mirror.a / camera.mirror.b
+    msg = (
+        f"the central fit's mirror shape (a / b = {ratio:.3f}) is rejected by the corners: "
+        f"freeing a, b lowers the cost by {chi2:.0f} times the residual variance (above "
+        f"{SHAPE_REJECT_CHI2:.1f}, chi-square with 2 degrees of freedom at p = 0.001), so a, b "
+        f"were estimated"
+    )
+    _warnings.warn(msg, RuntimeWarning, stacklevel=2)
+    vr = _view_rms(adj2, sol2.x, fit.used)
+    return AdjustmentStep(adj2, sol2, fit.used, vr, fit.rim_px, [*fit.warnings, msg])
 
 
 def _heldout_step(report, mirror, pattern_size, square, options, k):

@@ -32,6 +32,7 @@ __all__ = [
     "fit_central",
     "hyperbolic_start",
     "mirror_shape_from_xi",
+    "pinhole_D_from_unified",
     "pinhole_K_from_unified",
 ]
 
@@ -64,7 +65,9 @@ class CentralFit:
     views: tuple
 
 
-def fit_central(image_points, obj, image_size, distortion=False, hyperbolic=True) -> CentralFit:
+def fit_central(
+    image_points, obj, image_size, distortion=False, hyperbolic=True, radial=False
+) -> CentralFit:
     """``cv2.omnidir.calibrate`` of the corners (any of OpenCV's orders; no start needed).
 
     By default with no distortion and no skew: the unified model's ``k1`` trades with ``xi``
@@ -81,6 +84,9 @@ def fit_central(image_points, obj, image_size, distortion=False, hyperbolic=True
         ``(width, height)``.
     distortion : bool
         Also fit ``k1, k2, p1, p2`` and the skew (``cv2.omnidir``'s defaults).
+    radial : bool
+        Fit ``k1, k2`` only (``p1, p2`` and the skew held at 0): the radial distortion of a
+        wide-angle lens, which a fit without distortion takes into ``K``'s aspect and ``xi``.
     hyperbolic : bool
         Refuse a fit whose ``xi`` no hyperbolic mirror has (``0 <= xi < 1``); False: any
         finite fit (a paraboloid gives ``xi = 1``, a sphere more).
@@ -101,6 +107,8 @@ def fit_central(image_points, obj, image_size, distortion=False, hyperbolic=True
     o = cv2.omnidir
     flags = 0 if distortion else (o.CALIB_FIX_K1 | o.CALIB_FIX_K2 | o.CALIB_FIX_P1 | o.CALIB_FIX_P2)
     flags |= 0 if distortion else o.CALIB_FIX_SKEW
+    if radial and not distortion:
+        flags = o.CALIB_FIX_P1 | o.CALIB_FIX_P2 | o.CALIB_FIX_SKEW
     try:
         # cv2's stubs make K, xi and D arrays; None (OpenCV's noArray) lets calibrate start them
         rms, K, xi, D, _rv, _tv, idx = cv2.omnidir.calibrate(  # type: ignore[call-overload]
@@ -136,6 +144,19 @@ def pinhole_K_from_unified(K_unified, xi, principal_point=None) -> FloatArray:
     if principal_point is not None:
         K[0, 2], K[1, 2] = (float(v) for v in principal_point)
     return K
+
+
+def pinhole_D_from_unified(D_unified, xi) -> FloatArray:
+    """The pinhole's radial distortion ``(k1, k2, 0, 0)`` behind a unified model's ``D``.
+
+    The unified model distorts its normalised plane, which is the pinhole's scaled by
+    ``1 / sqrt(1 - xi^2)`` (the ratio of the focal lengths, :func:`pinhole_K_from_unified`):
+    with ``s^2 = 1 - xi^2``, ``r_unified = r / s``, so ``k1 = k1_unified / s^2`` and
+    ``k2 = k2_unified / s^4``. The tangential terms are not carried over.
+    """
+    D = np.ravel(np.asarray(D_unified, np.float64))
+    s2 = max(1.0 - float(xi) ** 2, 1e-12)
+    return np.array([D[0] / s2, D[1] / (s2 * s2), 0.0, 0.0])
 
 
 def mirror_shape_from_xi(xi) -> tuple[float, float]:
