@@ -93,11 +93,11 @@ def test_an_output_under_a_file_says_it_is_a_file_not_a_missing_folder(tmp_path,
 
 
 def test_a_calibration_file_that_cannot_be_written_is_said_once(tmp_path, capsys):
-    from omnicam.cli._common import CliError, _save_camera
+    from omnicam.cli._common import CliError, save_calibration
 
     cam = synthetic.misaligned_rig()
     with pytest.raises(CliError) as e:
-        _save_camera(cam, str(tmp_path / "missing" / "rig.yaml"), True)
+        save_calibration(cam, str(tmp_path / "missing" / "rig.yaml"), True)
     assert str(e.value).count("cannot write") == 1, str(e.value)
 
 

@@ -45,9 +45,9 @@ from ._common import (
     EXIT_OK,
     PROG,
     CliError,
-    _error,
-    _one_line,
     _Parser,
+    one_line,
+    print_error,
 )
 from .unwarp import Progress  # noqa: F401 (public for tests that patch it)
 
@@ -80,19 +80,19 @@ def main(argv=None) -> int:
             args = build_parser().parse_args(argv)
             return args.func(args) or EXIT_OK
     except CliError as e:
-        _error(str(e))
+        print_error(str(e))
         return e.status
     except SystemExit as e:  # --help, --version
         return e.code if isinstance(e.code, int) else EXIT_OK
     except KeyboardInterrupt:
-        _error("interrupted")
+        print_error("interrupted")
         return EXIT_INTERRUPTED
     except BrokenPipeError:  # the reader went away (``omnicam info x.yaml | head -1``)
         with contextlib.suppress(OSError):  # no second error when Python flushes stdout
             os.dup2(os.open(os.devnull, os.O_WRONLY), sys.stdout.fileno())
         return EXIT_BROKEN_PIPE
     except MemoryError:
-        _error(
+        print_error(
             "out of memory: the outputs asked for are too large for this machine; ask for "
             "smaller ones (--panorama / --perspective WxH, fewer views at once)"
         )
@@ -100,8 +100,8 @@ def main(argv=None) -> int:
     except Exception as e:  # a bug: still one line, unless asked for the traceback
         if os.environ.get("OMNICAM_DEBUG"):
             raise
-        _error(
-            f"unexpected {type(e).__name__}: {_one_line(e, 300)} "
+        print_error(
+            f"unexpected {type(e).__name__}: {one_line(e, 300)} "
             f"(set OMNICAM_DEBUG=1 for the traceback)"
         )
         return EXIT_FAILURE

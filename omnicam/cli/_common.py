@@ -44,7 +44,7 @@ class _Parser(argparse.ArgumentParser):
         )
 
 
-def _size(text):
+def size_arg(text):
     """``WxH`` -> ``(W, H)`` positive ints."""
     m = re.fullmatch(r"\s*(\d+)\s*[xX]\s*(\d+)\s*", text)
     if not m:
@@ -55,7 +55,7 @@ def _size(text):
     return w, h
 
 
-def _finite(text):
+def finite_arg(text):
     try:
         value = float(text)
     except ValueError:
@@ -65,14 +65,14 @@ def _finite(text):
     return value
 
 
-def _positive(text):
-    value = _finite(text)
+def positive_arg(text):
+    value = finite_arg(text)
     if value <= 0:
         raise argparse.ArgumentTypeError(f"expected a positive number, got {text!r}")
     return value
 
 
-def _count(text):
+def count_arg(text):
     try:
         value = int(text)
     except ValueError:
@@ -82,13 +82,13 @@ def _count(text):
     return value
 
 
-def _fourcc(text):
+def fourcc_arg(text):
     if len(text) != 4:
         raise argparse.ArgumentTypeError(f"a FourCC has 4 characters, got {text!r}")
     return text
 
 
-def _one_line(e, limit=None):
+def one_line(e, limit=None):
     """``str(e)`` on one line, without terminal colour codes, optionally shortened."""
     text = " ".join(re.sub(r"\x1b\[[0-9;]*m", "", str(e)).split()) or type(e).__name__
     if limit and len(text) > limit:
@@ -96,25 +96,25 @@ def _one_line(e, limit=None):
     return text
 
 
-def _error(message):
-    print(f"{PROG}: error: {_one_line(message)}", file=sys.stderr, flush=True)
+def print_error(message):
+    print(f"{PROG}: error: {one_line(message)}", file=sys.stderr, flush=True)
 
 
-def _warn(message):
-    print(f"{PROG}: warning: {_one_line(message)}", file=sys.stderr, flush=True)
+def warn_user(message):
+    print(f"{PROG}: warning: {one_line(message)}", file=sys.stderr, flush=True)
 
 
-def _load_camera(path, say_doubt=False):
+def load_calibration(path, say_doubt=False):
     """The camera of a calibration file; with ``say_doubt``, one warning line when its verdict
     records a doubt (:func:`doubt_line`)."""
     try:
         camera = MisalignedHyperbolicCamera.load(path)
     except (FileNotFoundError, ValueError) as e:
-        raise CliError(_one_line(e)) from None
+        raise CliError(one_line(e)) from None
     if say_doubt:
         line = doubt_line(path)
         if line:
-            _warn(line)
+            warn_user(line)
     return camera
 
 
@@ -127,7 +127,7 @@ def doubt_line(path):
     try:
         verdict = read_verdict(path)
     except (FileNotFoundError, ValueError) as e:
-        return f"{path}: its verdict cannot be read ({_one_line(e)})"
+        return f"{path}: its verdict cannot be read ({one_line(e)})"
     doubts = () if verdict is None else verdict.doubts()
     if not doubts:
         return None
@@ -137,7 +137,7 @@ def doubt_line(path):
     )
 
 
-def _check_output(path, overwrite, what="output"):
+def check_output(path, overwrite, what="output"):
     """Refuse an output we must not or cannot write, before doing any work."""
     try:  # a name that is not UTF-8 would crash OpenCV's writers
         path = file_path(path, what)
@@ -159,7 +159,7 @@ def _check_output(path, overwrite, what="output"):
         raise CliError(f"{what} {path}: folder {folder} is not writable")
 
 
-def _write_image(path, image, overwrite=True):
+def write_image_file(path, image, overwrite=True):
     """``cv2.imwrite`` through :func:`omnicam._atomic.atomic_output` (checked by reading back)."""
     try:
         path = file_path(path, "output")
@@ -234,7 +234,7 @@ IMAGE_EXTENSIONS = (
 )
 
 
-def _is_image_input(path):
+def is_image_input(path):
     """An input to read as one image: an image extension, or content OpenCV recognises.
 
     By name first, so an empty or corrupt ``.png`` is reported as an unreadable image (not
@@ -251,7 +251,7 @@ def _is_image_input(path):
         return cv2.haveImageReader(path)
 
 
-def _read_image(path, flags=cv2.IMREAD_UNCHANGED):
+def read_image_file(path, flags=cv2.IMREAD_UNCHANGED):
     """:func:`omnicam.images.read_image` with its errors as one-line CLI errors."""
     try:
         return read_image(path, flags)
@@ -259,7 +259,7 @@ def _read_image(path, flags=cv2.IMREAD_UNCHANGED):
         raise CliError(str(e)) from None
 
 
-def _check_video_input(path):
+def check_video_input(path):
     """Refuse, naming what it is, an input that is no image and that OpenCV cannot open as a
     video (a text file, a broken or empty video), before any output is checked or written."""
     try:
@@ -289,7 +289,7 @@ def read_intrinsics(path):
     try:
         return omnicam_files.read_intrinsics(path)
     except (FileNotFoundError, ValueError) as e:
-        raise CliError(_one_line(e)) from None
+        raise CliError(one_line(e)) from None
 
 
 def read_far_lines(path):
@@ -297,10 +297,10 @@ def read_far_lines(path):
     try:
         return omnicam_files.read_far_lines(path)
     except (FileNotFoundError, ValueError) as e:
-        raise CliError(_one_line(e)) from None
+        raise CliError(one_line(e)) from None
 
 
-def _report_text(report, leave_out=()):
+def report_text(report, leave_out=()):
     """The report's summary; ``leave_out``: warnings the caller prints itself (on stderr), left
     out of it so that each is printed once."""
     leave_out = {str(w) for w in leave_out}
@@ -308,13 +308,13 @@ def _report_text(report, leave_out=()):
         kept = [w for w in report.warnings if str(w) not in leave_out]
         report = dataclasses.replace(report, warnings=kept)
         if not kept:  # "no warnings" would be wrong: the caller's follow
-            lines = _report_text(report).splitlines()
+            lines = report_text(report).splitlines()
             return "\n".join(lines[:-1] if lines[-1].strip() == "no warnings" else lines)
     summary = getattr(report, "summary", None)
     return str(summary() if callable(summary) else summary if summary is not None else report)
 
 
-def _save_camera(camera, path, overwrite, report=None, **verdict):
+def save_calibration(camera, path, overwrite, report=None, **verdict):
     """Write the calibration file, with a verdict when ``report`` is given: an
     :class:`omnicam.Verdict`, or a report taken with the keywords of
     :meth:`~omnicam.Verdict.from_report` (``K_source``, ``K_file``, ``K_note``, ``forced``,
@@ -330,10 +330,10 @@ def _save_camera(camera, path, overwrite, report=None, **verdict):
                 report if isinstance(report, Verdict) else Verdict.from_report(report, **verdict),
             )
     except (ValueError, OSError) as e:
-        why = _one_line(e)  # the library's message names the file already
+        why = one_line(e)  # the library's message names the file already
         message = why if why.startswith("cannot write") else f"cannot write {path}: {why}"
         raise CliError(message) from None
 
 
-def _indent(text, prefix="   "):
+def indent_lines(text, prefix="   "):
     return "\n".join(prefix + line for line in text.splitlines())

@@ -21,18 +21,18 @@ from . import pattern
 from ._common import (
     EXIT_OK,
     CliError,
-    _check_output,
-    _finite,
-    _load_camera,
-    _one_line,
-    _positive,
-    _read_image,
-    _report_text,
-    _save_camera,
-    _warn,
-    _write_image,
+    check_output,
+    finite_arg,
+    load_calibration,
+    one_line,
+    positive_arg,
     read_far_lines,
+    read_image_file,
     read_intrinsics,
+    report_text,
+    save_calibration,
+    warn_user,
+    write_image_file,
 )
 
 
@@ -64,9 +64,9 @@ def _outputs(args):
         raise CliError(f"calibration file {calib}: extension must be one of {', '.join(SUFFIXES)}")
     overlay = args.overlay or _overlay_path(calib)
     refused_overlay = refused_overlay_path(overlay)
-    _check_output(calib, args.overwrite, "calibration file")
-    _check_output(overlay, args.overwrite, "overlay")
-    _check_output(refused_overlay, True, "overlay")  # replaced by every refused attempt
+    check_output(calib, args.overwrite, "calibration file")
+    check_output(overlay, args.overwrite, "overlay")
+    check_output(refused_overlay, True, "overlay")  # replaced by every refused attempt
     if not cv2.haveImageWriter(overlay):
         raise CliError(f"overlay {overlay}: no image writer for its extension; use .png or .jpg")
     for path in (overlay, refused_overlay):
@@ -83,7 +83,7 @@ def _rig_inputs(args):
     """``(K, D, mirror, K's image size, where K came from, earlier rig or None)``; with
     ``--guess-k`` K, D and the size are None (guessed from the image later)."""
     if args.from_rig is not None:  # after a bump: K, D and the mirror of an earlier calibration
-        rig = _load_camera(args.from_rig)
+        rig = load_calibration(args.from_rig)
         return rig.K, rig.D, rig.mirror, rig.image_size, _k_from_rig(args.from_rig), rig
     if args.mirror is None:
         raise CliError(
@@ -109,15 +109,15 @@ def _image_inputs(args):
     """``(image, its size, far lines, boundary points)``, the rim hint checked."""
     far_lines = read_far_lines(args.far_lines) if args.far_lines else None
     boundary = read_boundary_points(args.boundary_points) if args.boundary_points else None
-    image = _read_image(args.image, cv2.IMREAD_COLOR | cv2.IMREAD_IGNORE_ORIENTATION)
+    image = read_image_file(args.image, cv2.IMREAD_COLOR | cv2.IMREAD_IGNORE_ORIENTATION)
     image_size = (image.shape[1], image.shape[0])
     if args.rim_hint is not None:
         try:
             check_hint(args.rim_hint, image_size)
         except ValueError as e:
-            raise CliError(f"--rim-hint: {_one_line(e)}") from None
+            raise CliError(f"--rim-hint: {one_line(e)}") from None
         if boundary is not None:
-            _warn("--rim-hint is not used with --boundary-points (the rim is fitted to them)")
+            warn_user("--rim-hint is not used with --boundary-points (the rim is fitted to them)")
     return image, image_size, far_lines, boundary
 
 
@@ -126,14 +126,14 @@ def _finish(args, camera, report, image, outputs, k_from, rig):
     its own name) or write the overlay and the file with its verdict."""
     calib, overlay, refused_overlay = outputs
     implausible = [str(w) for w in getattr(report, "plausibility", ())]
-    print(_report_text(report, leave_out=implausible), flush=True)
+    print(report_text(report, leave_out=implausible), flush=True)
     if rig is not None:
         print(_moved_text(camera, rig, args.from_rig, report))
     for w in implausible:
-        _warn(f"implausible: {w}")
+        warn_user(f"implausible: {w}")
     if implausible and not args.force:
         # the overlay shows what went wrong; under its own name, so that it never blocks a retry
-        _write_image(refused_overlay, report.draw(image), True)
+        write_image_file(refused_overlay, report.draw(image), True)
         raise CliError(
             f"the calibration of {args.image} is implausible ({len(implausible)} warning"
             f"{'s' if len(implausible) > 1 else ''} above); {calib} not written, see "
@@ -141,8 +141,8 @@ def _finish(args, camera, report, image, outputs, k_from, rig):
             + aspect_note((image.shape[1], image.shape[0]))
         )
     verdict = Verdict.from_report(report, forced=bool(implausible), **k_from)
-    _write_image(overlay, report.draw(image), args.overwrite)
-    _save_camera(camera, calib, args.overwrite, verdict)
+    write_image_file(overlay, report.draw(image), args.overwrite)
+    save_calibration(camera, calib, args.overwrite, verdict)
     doubts = verdict.doubts()
     print(
         f"wrote {calib} and {overlay}"
@@ -170,7 +170,7 @@ def cmd_calibrate(args):
         print(f"K guessed: {note}", flush=True)
     if size is not None and size != image_size:
         source = f"--from {args.from_rig}" if args.from_rig else "intrinsics"
-        _warn(
+        warn_user(
             f"{source}: K is for {size[0]}x{size[1]}, image is "
             f"{image_size[0]}x{image_size[1]}: K rescaled"
         )
@@ -192,7 +192,7 @@ def cmd_calibrate(args):
         )
     except (ValueError, RuntimeError, NotImplementedError, np.linalg.LinAlgError) as e:
         raise CliError(
-            f"calibration of {args.image} failed: {_one_line(e)}{aspect_note(image_size)}"
+            f"calibration of {args.image} failed: {one_line(e)}{aspect_note(image_size)}"
         ) from None
     return _finish(args, camera, report, image, outputs, k_from, rig)
 
@@ -263,7 +263,7 @@ def _guess_K_of_image(image, mirror, name, hint, boundary):
         rim = fit_rim(boundary) if boundary is not None else detect_rim(image, hint=hint)
     except ValueError as e:
         raise CliError(
-            f"--guess-k: no rim to guess K from in {name} ({_one_line(e)}); give --rim-hint "
+            f"--guess-k: no rim to guess K from in {name} ({one_line(e)}); give --rim-hint "
             f"CX,CY,R or --boundary-points, or the intrinsics"
             + aspect_note((image.shape[1], image.shape[0]))
         ) from None
@@ -387,7 +387,7 @@ def read_boundary_points(path):
         try:
             pts = reading(path, what).matrix("boundary_points")
         except (FileNotFoundError, ValueError) as e:
-            raise CliError(_one_line(e)) from None
+            raise CliError(one_line(e)) from None
         if pts.ndim == 3 and pts.shape[1:] == (1, 2):
             pts = pts.reshape(-1, 2)
         if pts.ndim != 2 or pts.shape[1] != 2:
@@ -429,7 +429,7 @@ def _intrinsics_from_numbers(args):
     try:
         return validate_K(K), validate_D(args.dist), None
     except ValueError as e:
-        raise CliError(f"--fx --fy --cx --cy --dist: {_one_line(e)}") from None
+        raise CliError(f"--fx --fy --cx --cy --dist: {one_line(e)}") from None
 
 
 def add_parser(sub):
@@ -455,7 +455,7 @@ def add_parser(sub):
     mirror.add_argument(
         "--mirror",
         nargs=3,
-        type=_positive,
+        type=positive_arg,
         metavar=("A", "B", "RIM"),
         help="the mirror (mm): A, B and the rim's radius RIM of the hyperboloid "
         "(X^2+Y^2)/A^2 - Z^2/B^2 = -1 (the paper's eq. 1), Z along the mirror's axis. B is "
@@ -501,16 +501,16 @@ def add_parser(sub):
     )
     k.add_argument(
         "--fx",
-        type=_positive,
+        type=positive_arg,
         metavar="PX",
         help="focal length in x, px (with --fy --cx --cy instead of --intrinsics)",
     )
-    k.add_argument("--fy", type=_positive, metavar="PX", help="focal length in y, px")
-    k.add_argument("--cx", type=_finite, metavar="PX", help="principal point x, px")
-    k.add_argument("--cy", type=_finite, metavar="PX", help="principal point y, px")
+    k.add_argument("--fy", type=positive_arg, metavar="PX", help="focal length in y, px")
+    k.add_argument("--cx", type=finite_arg, metavar="PX", help="principal point x, px")
+    k.add_argument("--cy", type=finite_arg, metavar="PX", help="principal point y, px")
     k.add_argument(
         "--dist",
-        type=_finite,
+        type=finite_arg,
         nargs="+",
         metavar="D",
         help="OpenCV distortion coefficients k1 k2 p1 p2 [k3 ...] (4, 5, 8, 12 or "
@@ -539,7 +539,7 @@ def add_parser(sub):
     checks = p.add_argument_group("plausibility")
     checks.add_argument(
         "--max-tilt",
-        type=_positive,
+        type=positive_arg,
         default=10.0,
         metavar="DEG",
         help="plausibility limit on the angle between the mirror axis and the optical axis "
@@ -547,7 +547,7 @@ def add_parser(sub):
     )
     checks.add_argument(
         "--max-offset",
-        type=_positive,
+        type=positive_arg,
         default=10.0,
         metavar="MM",
         help="plausibility limit on the distance of the camera centre from the mirror's "

@@ -17,11 +17,11 @@ from ..views import UNSEEN, K_from_fov, rotation_from_ypr
 from ._common import (
     EXIT_OK,
     CliError,
-    _indent,
-    _one_line,
-    _report_text,
-    _save_camera,
-    _write_image,
+    indent_lines,
+    one_line,
+    report_text,
+    save_calibration,
+    write_image_file,
 )
 from .info import posture, vector_text
 
@@ -63,7 +63,7 @@ def cmd_demo(args):
         f"{vector_text(offset, '{:.3f}')} mm from the lower focus"
     )
     image = synthetic.render_environment(truth, demo_environment(), supersample=2)
-    _write_image(path("mirror.png"), image)
+    write_image_file(path("mirror.png"), image)
     write_intrinsics(path("intrinsics.yaml"), truth.K, image_size=truth.image_size)
     lines = demo_far_lines(truth)
     write_far_lines(path("far_lines.json"), [np.round(line, 2) for line in lines])
@@ -79,10 +79,10 @@ def cmd_demo(args):
             truth.K, m, image=image, far_lines=lines, image_size=truth.image_size
         )
     except (ValueError, RuntimeError, NotImplementedError, np.linalg.LinAlgError) as e:
-        raise CliError(f"demo: calibration failed: {_one_line(e)}") from None
-    print(_indent(_report_text(report)))
-    _write_image(path("overlay.png"), report.draw(image))
-    _save_camera(camera, path("calibration.yaml"), overwrite=True)
+        raise CliError(f"demo: calibration failed: {one_line(e)}") from None
+    print(indent_lines(report_text(report)))
+    write_image_file(path("overlay.png"), report.draw(image))
+    save_calibration(camera, path("calibration.yaml"), overwrite=True)
 
     e_tilt, e_az, e_offset = posture(camera)
     axis_error = math.degrees(math.acos(float(np.clip(camera.R[:, 2] @ truth.R[:, 2], -1, 1))))
@@ -116,7 +116,7 @@ def cmd_demo(args):
         ),
     }
     for name, (map1, map2) in views.items():
-        _write_image(path(name), cv2.remap(image, map1, map2, cv2.INTER_LINEAR))
+        write_image_file(path(name), cv2.remap(image, map1, map2, cv2.INTER_LINEAR))
     print(f"5. wrote {', '.join(['calibration.yaml', 'overlay.png', *views])} in {out}")
     print(f"   try: omnicam info {path('calibration.yaml')}")
     print(

@@ -16,13 +16,21 @@ import warnings
 
 from .._atomic import OutputError
 from ..formats.central_export import export
-from ._common import EXIT_OK, CliError, _check_output, _load_camera, _one_line, _positive, _warn
+from ._common import (
+    EXIT_OK,
+    CliError,
+    check_output,
+    load_calibration,
+    one_line,
+    positive_arg,
+    warn_user,
+)
 
 
 def cmd_export(args):
     """``omnicam export``: the module docstring."""
-    _check_output(args.output, args.overwrite)
-    camera = _load_camera(args.calibration)
+    check_output(args.output, args.overwrite)
+    camera = load_calibration(args.calibration)
     if args.to in ("kalibr", "camodocal", "ocamcalib") and camera.image_size is None:
         raise CliError(f"{args.to} files need the image size; {args.calibration} has none")
     ext = os.path.splitext(args.output)[1].lower()
@@ -41,7 +49,7 @@ def cmd_export(args):
             raise CliError(f"cannot export {args.calibration}: {e}") from None
     print(f"wrote {args.output} ({args.to}): {fit.summary()}")
     for w in caught:  # the export's own error is large: one line each, naming the better format
-        _warn(_one_line(w.message))
+        warn_user(one_line(w.message))
     return EXIT_OK
 
 
@@ -64,7 +72,7 @@ def add_parser(sub):
     p.add_argument("-o", "--output", required=True, metavar="FILE", help="file to write")
     p.add_argument(
         "--depth",
-        type=_positive,
+        type=positive_arg,
         metavar="MM",
         help="fit for a scene at this distance from the best-fit viewpoint "
         "(default: at infinity; not for ocamcalib)",

@@ -9,7 +9,7 @@ import numpy as np
 from ..formats.central_export import fit_omnidir
 from ..formats.omnicam_files import read_verdict
 from ..views import default_elevation_range
-from ._common import EXIT_OK, _load_camera, _one_line
+from ._common import EXIT_OK, load_calibration, one_line
 
 
 def posture(camera):
@@ -48,7 +48,7 @@ def describe_reflection(camera):
     try:
         band = default_elevation_range(camera).describe()
     except ValueError as e:
-        band = f"none ({_one_line(e)})"
+        band = f"none ({one_line(e)})"
     return f"{text}; default panorama: {band}"
 
 
@@ -183,11 +183,11 @@ def describe_verdict(verdict, width=13):
 
 def cmd_info(args):
     """``omnicam info``: the module docstring."""
-    camera = _load_camera(args.calibration)
+    camera = load_calibration(args.calibration)
     try:
         verdict = describe_verdict(read_verdict(args.calibration))
     except (FileNotFoundError, ValueError) as e:
-        verdict = f"{'verdict':<13}  cannot be read: {_one_line(e)}"
+        verdict = f"{'verdict':<13}  cannot be read: {one_line(e)}"
     print(f"{'calibration':<13}  {args.calibration}")
     print(describe_camera(camera))
     try:  # the central model that tools without a non-central one can take (omnicam export)

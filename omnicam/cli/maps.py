@@ -30,7 +30,15 @@ from ..formats.maps import (
 )
 from ..spherical import equirect_view
 from ..views import PanoramaView, visible_elevation_range
-from ._common import EXIT_OK, EXIT_USAGE, CliError, _check_output, _count, _load_camera, _size
+from ._common import (
+    EXIT_OK,
+    EXIT_USAGE,
+    CliError,
+    check_output,
+    count_arg,
+    load_calibration,
+    size_arg,
+)
 from .unwarp import add_view_arguments, view_specs
 
 
@@ -89,7 +97,7 @@ def cmd_maps(args):
     if not (args.ffmpeg or args.npy or args.filestorage):
         raise CliError("choose what to write: --ffmpeg, --npy and/or --filestorage EXT", EXIT_USAGE)
     specs = view_specs(args)
-    camera = _load_camera(args.calibration)
+    camera = load_calibration(args.calibration)
     if args.frame_size is not None:
         if camera.image_size is None:
             raise CliError(f"--frame-size: the calibration {args.calibration} has no image size")
@@ -108,7 +116,7 @@ def cmd_maps(args):
         if args.filestorage:
             targets.append(f"{prefix}.{args.filestorage}")
         for t in targets:
-            _check_output(t, args.overwrite)
+            check_output(t, args.overwrite)
         try:
             view = _scaled_view(spec, camera, k) if args.ffmpeg else spec.view
             mx, my = float_maps(*view.maps(camera, cv2.CV_32FC1))
@@ -161,13 +169,13 @@ def add_parser(sub):
     )
     p.add_argument(
         "--supersample",
-        type=_count,
+        type=count_arg,
         metavar="K",
         help="--ffmpeg: maps at K times the size; ffmpeg scales the result down",
     )
     p.add_argument(
         "--frame-size",
-        type=_size,
+        type=size_arg,
         metavar="WxH",
         help="size of the frames to unwarp (default: the calibration's)",
     )

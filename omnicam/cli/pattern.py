@@ -41,14 +41,14 @@ from ..mirror import HyperbolicMirror
 from ._common import (
     EXIT_OK,
     CliError,
-    _check_output,
-    _one_line,
-    _positive,
-    _read_image,
-    _save_camera,
-    _warn,
-    _write_image,
+    check_output,
+    one_line,
+    positive_arg,
+    read_image_file,
     read_intrinsics,
+    save_calibration,
+    warn_user,
+    write_image_file,
 )
 
 
@@ -76,7 +76,7 @@ def add_arguments(parser):
     )
     p.add_argument(
         "--square",
-        type=_positive,
+        type=positive_arg,
         metavar="MM",
         help="with --chessboard: side of a square, in the mirror's unit (mm)",
     )
@@ -154,7 +154,7 @@ def read_corners(path, image_paths, n_corners):
     except FileNotFoundError:
         raise CliError(f"--corners {path}: no such file") from None
     except (OSError, ValueError) as e:
-        raise CliError(f"--corners {path}: cannot read it: {_one_line(e)}") from None
+        raise CliError(f"--corners {path}: cannot read it: {one_line(e)}") from None
     unknown = sorted(set(table) - set(names))
     if unknown:
         raise CliError(
@@ -198,10 +198,10 @@ def _start_intrinsics(args, size):
     elif args.intrinsics:
         K, D, k_size = read_intrinsics(args.intrinsics)
         if k_size is not None and k_size != size:
-            _warn(f"intrinsics are for {k_size[0]}x{k_size[1]}: K rescaled to the images")
+            warn_user(f"intrinsics are for {k_size[0]}x{k_size[1]}: K rescaled to the images")
             K = scale_K(K, k_size, size)
     if D is not None and np.size(D) not in (4, 5):
-        _warn("the distortion start: only k1 k2 p1 p2 k3 of D are used")
+        warn_user("the distortion start: only k1 k2 p1 p2 k3 of D are used")
         D = np.ravel(D)[:5]
     return K, D
 
@@ -231,7 +231,7 @@ def _outputs(args):
     calib = args.output
     if os.path.splitext(calib)[1].lower() not in SUFFIXES:
         raise CliError(f"calibration file {calib}: extension must be one of {', '.join(SUFFIXES)}")
-    _check_output(calib, args.overwrite, "calibration file")
+    check_output(calib, args.overwrite, "calibration file")
     stem = os.path.splitext(os.path.basename(calib))[0]
     folder = args.overlay or os.path.join(os.path.dirname(calib), f"{stem}_views")
     if os.path.exists(folder) and not os.path.isdir(folder):
@@ -241,7 +241,7 @@ def _outputs(args):
 
 def _read_views(paths):
     """The images, all of one size: ``(images, (width, height))``."""
-    images = [_read_image(p, cv2.IMREAD_COLOR | cv2.IMREAD_IGNORE_ORIENTATION) for p in paths]
+    images = [read_image_file(p, cv2.IMREAD_COLOR | cv2.IMREAD_IGNORE_ORIENTATION) for p in paths]
     size = (images[0].shape[1], images[0].shape[0])
     for path, im in zip(paths, images):
         if (im.shape[1], im.shape[0]) != size:
@@ -260,7 +260,7 @@ def _hinted_rim(args, images, size):
         check_hint(args.rim_hint, size)
         return detect_rim(images[0], hint=args.rim_hint).points
     except ValueError as e:
-        raise CliError(f"--rim-hint: {_one_line(e)}") from None
+        raise CliError(f"--rim-hint: {one_line(e)}") from None
 
 
 def _print_report(camera, report, names, caught):
@@ -279,10 +279,10 @@ def _print_report(camera, report, names, caught):
     if report.heldout is not None:
         print(report.heldout.summary(), flush=True)
     for w in report.warnings:
-        _warn(w)
+        warn_user(w)
     for w in caught:
         if not any(str(w.message) == r for r in report.warnings):
-            _warn(str(w.message))
+            warn_user(str(w.message))
 
 
 def _write_overlays(args, report, images, folder):
@@ -293,7 +293,7 @@ def _write_overlays(args, report, images, folder):
         out = os.path.join(folder, f"{i:03d}_{name}.png")
         if os.path.lexists(out) and not args.overwrite:
             raise CliError(f"overlay {out} exists; pass --overwrite to replace it")
-        _write_image(out, report.draw(images[i], i), args.overwrite)
+        write_image_file(out, report.draw(images[i], i), args.overwrite)
 
 
 def cmd_calibrate_pattern(args):
@@ -329,7 +329,7 @@ def cmd_calibrate_pattern(args):
                 progress=progress,
             )
         except (ValueError, RuntimeError, np.linalg.LinAlgError) as e:
-            raise CliError(f"calibration failed: {_one_line(e)}") from None
+            raise CliError(f"calibration failed: {one_line(e)}") from None
     _print_report(camera, report, names, caught)
     one_side = [w for w in report.warnings if w.startswith(ONE_SIDED)]
     if one_side and not args.force:
@@ -339,6 +339,8 @@ def cmd_calibrate_pattern(args):
             "(--force writes the file anyway)"
         )
     _write_overlays(args, report, images, folder)
-    _save_camera(camera, calib, args.overwrite, report, forced=bool(one_side), implausible=one_side)
+    save_calibration(
+        camera, calib, args.overwrite, report, forced=bool(one_side), implausible=one_side
+    )
     print(f"wrote {calib} and {len(images)} overlays in {folder}")
     return EXIT_OK

@@ -45,19 +45,19 @@ from ._common import (
     EXIT_OK,
     EXIT_USAGE,
     CliError,
-    _check_output,
-    _check_video_input,
-    _count,
-    _finite,
-    _fourcc,
-    _is_image_input,
-    _load_camera,
-    _one_line,
-    _positive,
-    _read_image,
-    _size,
-    _warn,
-    _write_image,
+    check_output,
+    check_video_input,
+    count_arg,
+    finite_arg,
+    fourcc_arg,
+    is_image_input,
+    load_calibration,
+    one_line,
+    positive_arg,
+    read_image_file,
+    size_arg,
+    warn_user,
+    write_image_file,
 )
 
 #: Containers that get the spherical video metadata of an --equirect view.
@@ -172,7 +172,7 @@ def view_from_spec(spec):
             depth=o.get("depth"),
         )
     except ValueError as e:
-        raise CliError(f"{spec.flag}: {_one_line(e)}", EXIT_USAGE) from None
+        raise CliError(f"{spec.flag}: {one_line(e)}", EXIT_USAGE) from None
 
 
 def view_from_args(args):
@@ -190,7 +190,7 @@ def _unwarper(camera, specs, frame_size):
         and size != tuple(frame_size)
         and abs(frame_size[0] * size[1] - frame_size[1] * size[0]) > 0.01 * size[0] * size[1]
     ):
-        _warn(
+        warn_user(
             f"frames are {frame_size[0]}x{frame_size[1]} but the calibration is for "
             f"{size[0]}x{size[1]}, another aspect ratio: assuming the same sensor "
             f"rescaled (not a crop)"
@@ -201,10 +201,10 @@ def _unwarper(camera, specs, frame_size):
             warnings.simplefilter("always", RuntimeWarning)
             unwarper = Unwarper.from_camera(camera, views, frame_size=frame_size)
     except ValueError as e:
-        raise CliError(f"cannot build the view: {_one_line(e)}") from None
+        raise CliError(f"cannot build the view: {one_line(e)}") from None
     for w in caught:
         if issubclass(w.category, RuntimeWarning) and "visible_elevation_range" in str(w.message):
-            _warn(str(w.message))
+            warn_user(str(w.message))
     if camera.image_size is not None and tuple(camera.image_size) != tuple(frame_size):
         camera = camera.scaled(frame_size)  # the camera the tables were built for
     for spec in specs:
@@ -259,9 +259,9 @@ def cmd_unwarp(args):
             raise CliError(f"input {source} does not exist")
         if not os.path.isfile(source):
             raise CliError(f"input {source} is not a file")
-    video_input = live or not _is_image_input(source)
+    video_input = live or not is_image_input(source)
     if video_input and not live:
-        _check_video_input(source)  # a text file or a broken video: say what it is
+        check_video_input(source)  # a text file or a broken video: say what it is
     for spec in specs:  # a name that is not UTF-8 crashes OpenCV's writers: refuse it first
         try:
             file_path(spec.output, "output")
@@ -272,8 +272,8 @@ def cmd_unwarp(args):
         if not live and os.path.exists(spec.output) and os.path.samefile(source, spec.output):
             raise CliError(f"output {spec.output} is the input")
         target = _sequence_name(spec.output, 0) if spec.kind_out == "sequence" else spec.output
-        _check_output(target, args.overwrite)
-    camera = _load_camera(args.calibration, say_doubt=True)  # one line on a doubtful file
+        check_output(target, args.overwrite)
+    camera = load_calibration(args.calibration, say_doubt=True)  # one line on a doubtful file
     if not video_input:
         return _unwarp_image(args, specs, camera)
     return _unwarp_video(args, specs, camera)
@@ -304,18 +304,18 @@ def _write_view_image(spec, path, image, overwrite):
     if spec.kind == "equirect" and is_jpeg:
         _write_equirect_jpeg(path, image, spec.size, overwrite)
     else:
-        _write_image(path, image, overwrite)
+        write_image_file(path, image, overwrite)
 
 
 def _unwarp_image(args, specs, camera):
-    image = _read_image(args.input)
+    image = read_image_file(args.input)
     views = _unwarper(camera, specs, (image.shape[1], image.shape[0])).unwarp(image)
     for i, spec in enumerate(specs):
         out = views[str(i)]
         path = _sequence_name(spec.output, 0) if spec.kind_out == "sequence" else spec.output
         _write_view_image(spec, path, out, args.overwrite)
         if spec.kind == "equirect" and os.path.splitext(path)[1].lower() not in (".jpg", ".jpeg"):
-            _warn(f"{path}: Photo Sphere metadata is written into .jpg outputs only")
+            warn_user(f"{path}: Photo Sphere metadata is written into .jpg outputs only")
         if not args.quiet:
             print(f"wrote {path} ({out.shape[1]}x{out.shape[0]}{spec.edge})")
     return EXIT_OK
@@ -373,7 +373,7 @@ def _open_capture(source):
     try:
         return open_capture(int(source) if source.isdigit() else source)
     except ValueError as e:
-        raise CliError(_one_line(e)) from None
+        raise CliError(one_line(e)) from None
 
 
 def _frame_size(cap, source):
@@ -441,7 +441,7 @@ def _unwarp_video_guarded(args, specs, camera, flag):
                 finalize=finalize,
             )
         except ValueError as e:
-            raise CliError(_one_line(e)) from None
+            raise CliError(one_line(e)) from None
         written, how = _stream(stream, specs, declared, args, flag)
     finally:
         cap.release()
@@ -468,9 +468,9 @@ def _stream(stream, specs, declared, args, flag):
     except KeyboardInterrupt:
         how = "interrupted"
     except OutputError as e:
-        raise CliError(_one_line(e)) from None
+        raise CliError(one_line(e)) from None
     except ValueError as e:  # e.g. a frame of another size than the capture announced
-        raise CliError(f"cannot unwarp {args.input}: {_one_line(e)}") from None
+        raise CliError(f"cannot unwarp {args.input}: {one_line(e)}") from None
     finally:
         progress.close()
     written = stream.frames
@@ -488,7 +488,7 @@ def _write_frame_images(specs, views, index, args):
         if spec.kind_out == "sequence":
             _write_view_image(spec, _sequence_name(spec.output, index), image, args.overwrite)
         if args.preview and index % args.preview == 0:
-            _write_image(_preview_name(spec.output, index), image, True)
+            write_image_file(_preview_name(spec.output, index), image, True)
 
 
 def _preview_name(output, index):
@@ -507,12 +507,12 @@ def _finish(args, specs, stream, written, how, declared):
             _say_video(args, spec, stream.written.get(str(i)), how, declared)
         elif spec.kind_out == "sequence":
             if how == "interrupted":
-                _warn(f"interrupted: kept the {written} frames written so far as {spec.output}")
+                warn_user(f"interrupted: kept the {written} frames written so far as {spec.output}")
             elif not args.quiet:
                 edge = f" ({spec.edge[2:]})" if spec.edge else ""
                 print(f"wrote {written} frames as {spec.output}{edge}")
     if how == "interrupted" and not any(s.kind_out in ("video", "sequence") for s in specs):
-        _warn("interrupted")
+        warn_user("interrupted")
     return EXIT_INTERRUPTED if how == "interrupted" else EXIT_OK
 
 
@@ -520,19 +520,19 @@ def _say_video(args, spec, video, how, declared):
     """One line on a video output: where its frames are, and in which codec."""
     output = spec.output
     if video is None:
-        _warn(f"interrupted before a frame of {output} was written: nothing kept")
+        warn_user(f"interrupted before a frame of {output} was written: nothing kept")
     elif how == "interrupted" and video.path != output:
-        _warn(
+        warn_user(
             f"interrupted: kept the {video.frames} frames written so far in {video.path}; "
             f"the earlier {output} is unchanged"
         )
     elif how == "interrupted":
-        _warn(
+        warn_user(
             f"interrupted: kept the {video.frames} frames written so far in {output} "
             f"(there was no earlier output)"
         )
     elif how == "truncated":
-        _warn(
+        warn_user(
             f"input ended after {video.frames} of its {declared} frames (truncated, or a "
             f"frame it cannot decode); kept them in {output}"
         )
@@ -558,7 +558,7 @@ def _spherical_metadata(output):
 
     def add(tmp):
         if os.path.splitext(output)[1].lower() not in SPHERICAL_CONTAINERS:
-            _warn(f"{output}: spherical video metadata is written into .mp4/.m4v/.mov only")
+            warn_user(f"{output}: spherical video metadata is written into .mp4/.m4v/.mov only")
             return
         try:
             with open(tmp, "rb") as f:
@@ -605,20 +605,20 @@ def add_parser(sub):
     p.add_argument("--overwrite", action="store_true", help="replace outputs that exist")
     p.add_argument(
         "--max-frames",
-        type=_count,
+        type=count_arg,
         metavar="N",
         help="video: stop after N frames (useful with a camera)",
     )
     p.add_argument(
         "--fourcc",
-        type=_fourcc,
+        type=fourcc_arg,
         metavar="CODE",
         help="video codec FourCC (default MJPG for .avi/.mkv; for .mp4/.m4v/.mov H.264 "
         "where this OpenCV writes it, else mp4v)",
     )
     p.add_argument(
         "--preview",
-        type=_count,
+        type=count_arg,
         metavar="N",
         help="video: also write every N-th frame of each view as OUTPUT.preview_FRAME.png",
     )
@@ -632,21 +632,21 @@ def add_view_arguments(p, output_help=None):
     belong to a view, ``-o`` included), recorded in order (:func:`view_specs`)."""
     p.add_argument(
         "--panorama",
-        type=_size,
+        type=size_arg,
         metavar="WxH",
         action=_InOrder,
         help="a panorama of this size (starts a view)",
     )
     p.add_argument(
         "--perspective",
-        type=_size,
+        type=size_arg,
         metavar="WxH",
         action=_InOrder,
         help="a virtual perspective view of this size, needs --fov (starts a view)",
     )
     p.add_argument(
         "--equirect",
-        type=_size,
+        type=size_arg,
         metavar="WxH",
         action=_InOrder,
         help="a 2:1 equirectangular 360 image of the full sphere, forward at the "
@@ -656,7 +656,7 @@ def add_view_arguments(p, output_help=None):
     p.add_argument(
         "--elevation",
         nargs=2,
-        type=_finite,
+        type=finite_arg,
         metavar=("LO", "HI"),
         action=_InOrder,
         help="panorama elevation range in degrees (default: what the mirror sees, above the "
@@ -670,35 +670,35 @@ def add_view_arguments(p, output_help=None):
     )
     p.add_argument(
         "--fov",
-        type=_finite,
+        type=finite_arg,
         metavar="DEG",
         action=_InOrder,
         help="horizontal field of view of the perspective view, degrees",
     )
     p.add_argument(
         "--yaw",
-        type=_finite,
+        type=finite_arg,
         metavar="Y",
         action=_InOrder,
         help="perspective view: turn right by Y degrees (default 0)",
     )
     p.add_argument(
         "--pitch",
-        type=_finite,
+        type=finite_arg,
         metavar="P",
         action=_InOrder,
         help="perspective view: look up by P degrees (default 0)",
     )
     p.add_argument(
         "--roll",
-        type=_finite,
+        type=finite_arg,
         metavar="R",
         action=_InOrder,
         help="perspective view: turn the image clockwise by R degrees (default 0)",
     )
     p.add_argument(
         "--depth",
-        type=_positive,
+        type=positive_arg,
         metavar="MM",
         action=_InOrder,
         help="map the scene at this distance from the best-fit viewpoint (default: at infinity)",
