@@ -94,7 +94,8 @@ CYLINDRICAL_MIN_ELEVATION = -60.0
 
 #: Source pixels between the outline of the camera's reflection and the default lower edge of a
 #: panorama (:func:`camera_reflection_elevation`): the blur of the outline's edge and the
-#: scatter of the circle fitted to it (1-2 px on renders and on the office photograph).
+#: scatter of the circle fitted to it (``benchmarks/bench_real_photo.py`` prints the panorama's
+#: rows between the two).
 REFLECTION_MARGIN_PX = 2.0
 
 #: Where the default lower edge of a panorama came from (:class:`DefaultElevationRange`).

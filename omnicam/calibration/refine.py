@@ -758,8 +758,8 @@ def correlation_factor(res, floor=0.0):
 
     Edge points share blur and interpolation, and a misfit of the model or of the edge detector
     leaves a smooth residual field whose correlation lasts for a hundred points and more (the
-    rims of OCamCalib's VMR frames: 0.75-0.9 at lag 1, still 0.2-0.6 at lag 20), which lag 1
-    alone does not see. The sum is Geyer's initial monotone sequence estimator (the sums
+    rims of real photographs stay correlated over tens of lags), which lag 1 alone does not
+    see. The sum is Geyer's initial monotone sequence estimator (the sums
     ``rho_2j + rho_2j+1`` of neighbouring lags, taken while positive and made non-increasing;
     ``(1 + rho) / (1 - rho)`` for an AR(1) sequence), and ``N_eff`` is at least
     ``MIN_EFFECTIVE_POINTS``.
@@ -947,8 +947,8 @@ def profile_uncertainty(
     mirror's axis) the rim's image depends on the tilt, with its compensating shift, only to
     second order (the two physical postures of a rim merge there), so the noise pushes the
     estimated tilt away from the aligned posture, where the Jacobian is larger than at the
-    truth, and the first-order uncertainty is too small (about half the errors on renders; on
-    OCamCalib's VMR frames 0.23-1.3 deg against 0.85-3.3 deg). Here the region of the two
+    truth, and the first-order uncertainty is too small (``benchmarks/bench_calibrate.py`` and
+    ``bench_stress.py`` print stated against found). Here the region of the two
     axis angles where the profile cost (every other parameter fitted; rows weighted as for
     :func:`posture_uncertainty`, by the residuals observed) rises by at most ``PROFILE_CHI2``
     is found, on this posture's side of its ``twin`` (the bisector between them: beyond it

@@ -407,9 +407,9 @@ def _effective_points(cands, cue, circles, K, mirror):
 
     ``N / tau`` with ``tau`` the integrated autocorrelation time of that candidate's residuals
     along the outline, over every lag (:func:`.refine.correlation_factor`), at most ``N / 2``. A
-    model that misfits leaves a smooth residual field, worth far fewer points than it has: the
-    office photograph with a guessed K fits both postures at 1.40 and 1.52 px, which 598
-    independent points would call a 7-sigma gap.
+    model that misfits leaves a smooth residual field, worth far fewer points than it has:
+    counted as independent, a small gap between two postures' fits on a real photograph with a
+    guessed K would read as many sigma.
     """
     n = len(cue.normalized)
     finite = {i: c for i, c in circles.items() if np.isfinite(c.rms)}
@@ -695,10 +695,9 @@ def _final_circle(K, mirror, R, tvec, cue, trials):
 
 
 #: The camera records the circle of its reflection (``camera_reflection``, from which default
-#: panoramas start) when the outline fits it within this many px RMS. The office photograph's
-#: outline fits at 1.4 px with the rim's aspect as the pixel aspect, at 3.5 px with the K that
-#: ``--guess-k`` guesses (then implausible: forced only), and either circle's reflection, 2 px
-#: further out, leaves none of the detected outline in the default panorama.
+#: panoramas start) when the outline fits it within this many px RMS: looser than the
+#: plausibility checks' 3 px, because a guessed K fits a real outline worse and its circle
+#: still leaves the lens out of the default panorama (``benchmarks/bench_real_photo.py``).
 BODY_MAX_RMS_PX = 5.0
 
 

@@ -830,8 +830,8 @@ def _adjustment_step(cam0, mirror, corners, rim_seen, model, f_scale, outliers):
             # stage 1: principal point, skew and distortion held at the start, so the fit does
             # not first wander along the valley where a shift of the principal point (or
             # tangential distortion) trades against a tilt of the mirror; only a start for
-            # stage 2, which converges to 1e-10 on its own: to 1e-6 (on VMR the last 9 of its
-            # 19 evaluations lowered the cost by 2.5e-7 of it)
+            # stage 2, which converges to 1e-10 on its own: to 1e-6 (its last evaluations
+            # lower the cost by fractions of a millionth)
             adj.fixed = {"cx", "cy", "skew", "k1", "k2", "p1", "p2", "k3"}
             x0 = adj.solve(x0, f_scale=f_scale, max_nfev=20, tol=_STAGE1_TOL).x
             adj.fixed = set()
