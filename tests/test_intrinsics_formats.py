@@ -446,3 +446,11 @@ def test_a_mismatched_bracket_in_a_ros_file_is_an_error_not_a_hang(tmp_path):
     p.write_text(ROS.replace("data: [582.5, 0, 319.5, 0, 580.25, 239.75, 0, 0, 1]", "data: [1, 2}"))
     with pytest.raises(ValueError, match=r"camera_info\.yaml: not YAML omnicam can read"):
         read_intrinsics(p)
+
+
+def test_parse_yaml_refuses_aliases_at_once():
+    bomb = "a: &a [x, x, x, x, x, x, x, x, x]\n" + "".join(
+        f"{c}: &{c} [{', '.join(['*' + p] * 9)}]\n" for p, c in zip("abcdefgh", "bcdefghi")
+    )
+    with pytest.raises(ValueError, match="aliases"):
+        parse_yaml(bomb)

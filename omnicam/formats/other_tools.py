@@ -80,10 +80,15 @@ _Loader.add_implicit_resolver(
 
 
 def _depth(node) -> int:
-    """How deeply ``node`` nests (a scalar: 0), walked without recursion."""
-    deepest, stack = 0, [(node, 0)]
+    """How deeply ``node`` nests (a scalar: 0), walked without recursion; ``ValueError`` for a
+    node met twice (an alias: ROS and Kalibr write none, and a few nested aliases would make
+    this walk, and any reader that copies them, exponentially long)."""
+    deepest, stack, seen = 0, [(node, 0)], set()
     while stack:
         n, d = stack.pop()
+        if id(n) in seen:
+            raise ValueError("anchors and aliases (&name, *name) are not read")
+        seen.add(id(n))
         deepest = max(deepest, d)
         if isinstance(n, yaml.SequenceNode):
             stack.extend((c, d + 1) for c in n.value)
