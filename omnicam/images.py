@@ -273,10 +273,12 @@ def image_problem(path, image, flags=cv2.IMREAD_UNCHANGED) -> str | None:
         return f"not an image format OpenCV reads ({size} bytes)"
     if kind != "a JPEG image":
         return None
-    with open(path, "rb") as f:
+    with open(path, "rb") as f:  # the end alone first: a whole JPEG is not read twice
+        f.seek(max(0, size - 4096))
+        if f.read().rstrip(b"\0").endswith(b"\xff\xd9"):
+            return None
+        f.seek(0)
         data = f.read()
-    if data.rstrip(b"\0").endswith(b"\xff\xd9"):
-        return None
     with opencv_silenced():
         whole = cv2.imdecode(np.frombuffer(data, np.uint8), flags)
     if whole is not None:

@@ -65,6 +65,15 @@ _RING_STEPS = 10  # and the strongest 10 steps along each ray vote
 _RING_RMS = 0.5  # a rim found so fits within half the RMS that step 3 of detect_rim allows
 
 
+_MIN_SUPPORT = 0.3  # a rim is found along at least 30 % of its in-frame length
+
+
+def _rms_limit(fit) -> float:
+    """The largest RMS (px) of a rim's edge points about its ellipse: 1.5 px or 0.5 % of its
+    major semi-axis, whichever is larger (step 3 of :func:`detect_rim`)."""
+    return max(1.5, 0.005 * float(fit.axes[0]))
+
+
 class _Rejected(ValueError):
     """An elliptic boundary that is not a rim (too short or too rough): ``fit`` and ``support``
     (the fraction of its in-frame length found) say what was found."""
@@ -740,7 +749,7 @@ def _next_boundary(gray, seed, expected, sigma, threshold, rng, prior):
     )
     if not _of_size(fit, expected):
         raise ValueError("the boundary found inside or outside is not of the expected size")
-    if fit.rms > _RING_RMS * max(1.5, 0.005 * fit.axes[0]):  # a second look: no compromise
+    if fit.rms > _RING_RMS * _rms_limit(fit):  # a second look: no compromise
         raise ValueError("the boundary found inside or outside fits too loosely")
     return fit
 
@@ -801,7 +810,7 @@ def _rings(gray, seed, expected, sigma, n_steps=_RING_STEPS):
     for j in np.argsort(votes, axis=None)[::-1][: 50 * _N_TRIES]:
         e_i, k_i = divmod(int(j), n_k)
         share = float(votes[e_i, k_i])
-        if share < 0.3 or len(out) == _N_TRIES:
+        if share < _MIN_SUPPORT or len(out) == _N_TRIES:
             break
         radius = lo - 1.0 + k_i
         if all(abs(radius - o.px_radius) > 4.0 for o in out):  # one per ring
@@ -831,17 +840,17 @@ def _not_found_message(errors, expected):
         f"no ellipse found: the best elliptic boundary has a diameter of {f.diameter:.1f} px "
         f"(semi-axes {f.axes[0]:.1f} and {f.axes[1]:.1f} px), centre ({f.center[0]:.1f}, "
         f"{f.center[1]:.1f}) px and {f.rms:.2f} px RMS along {100 * e.support:.0f} % of its "
-        f"visible length (a rim needs <= {max(1.5, 0.005 * f.axes[0]):.2f} px RMS along >= "
+        f"visible length (a rim needs <= {_rms_limit(f):.2f} px RMS along >= "
         f"30 %), and {want}; is the whole mirror in view, differing from its holder and in "
         f"focus?"
     )
 
 
-def _fits(S, expected, slack=0.05):
-    """Whether the semi-axes of an ellipse of shape ``S`` lie in the ``expected`` range, with a
-    relative ``slack``."""
+def _fits(S, expected):
+    """Whether the semi-axes of an ellipse of shape ``S`` lie in the ``expected`` range (5 %
+    slack)."""
     semi = np.linalg.eigvalsh(S)
-    return (1.0 - slack) * expected[0] <= semi[0] and semi[1] <= (1.0 + slack) * expected[1]
+    return 0.95 * expected[0] <= semi[0] and semi[1] <= 1.05 * expected[1]
 
 
 def _of_size(fit, expected, ratio=1.0):
@@ -991,11 +1000,11 @@ def _detect_one(gray, coarse, hint, sigma, threshold, rng, absolute=False):
         center, S = fit.center, fit.shape_matrix
     # a rim is a long, clean ellipse: most normals in the frame find it, and it fits tightly
     support = fit.inliers.sum() / max(n_tried, 1)
-    if support < 0.3 or fit.rms > max(1.5, 0.005 * fit.axes[0]):
+    if support < _MIN_SUPPORT or fit.rms > _rms_limit(fit):
         raise _Rejected(
             f"no ellipse found: the best elliptic boundary is supported along "
             f"{100 * support:.0f} % of its visible length with {fit.rms:.2f} px RMS "
-            f"(a rim needs >= 30 % and <= {max(1.5, 0.005 * fit.axes[0]):.2f} px); is "
+            f"(a rim needs >= 30 % and <= {_rms_limit(fit):.2f} px); is "
             f"the whole mirror in view, differing from its holder and in focus?",
             fit,
             support,
