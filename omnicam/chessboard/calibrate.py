@@ -668,7 +668,7 @@ def _central_step(image_points, obj, image_size, rim_fit, mirror, rim_radius, K,
     Returns ``(K, mirror, central fit or None, warnings, start D)``; a given mirror is
     returned as it is, with ``K`` (None: from the rim) and the given ``D``, and the central
     fit only for comparison. ``dist`` is ``(D, free_d, n_d)``, the start distortion given and
-    the adjustment's: without a ``D`` and with ``k1, k2`` free the fit with ``k1, k2`` free is
+    the adjustment's: without a ``D`` and with ``k1, k2`` free a fit with distortion free is
     tried too and starts the rig (``D`` by :func:`.central.pinhole_D_from_unified`, padded to
     ``n_d``) when its RMS is below :data:`RADIAL_START_GAIN` times the distortion-free fit's,
     or when that one fails: a wide-angle lens's ``k1``, which the fit without it takes into
@@ -724,16 +724,26 @@ def _radial_choice(central, views, obj, image_size, dist):
     describes a hyperboloid and fits far better (:data:`RADIAL_START_GAIN`) than the
     distortion-free fit ``central``, or fits at all (:data:`CENTRAL_RMS_MAX`) where that one
     failed (None), no ``D`` is given and ``k1, k2`` are free (``dist = (D, free_d, n_d)``);
-    else ``central`` and ``D`` as given."""
+    else ``central`` and ``D`` as given. Where OpenCV's fit with ``k1, k2`` free fails
+    itself (an error, a negative focal length, an RMS above :data:`CENTRAL_RMS_MAX`: on a
+    wide-angle lens it does, on 2 of 8 renders of ``benchmarks/bench_chessboard_hostile.py
+    --wide-seeds 8``), the fit with its whole distortion free takes its place under the same
+    conditions (its ``k1, k2`` start the rig; its tangential terms and skew, which absorb a
+    tilted mirror on any misaligned rig, do not)."""
     D, free_d, n_d = dist
     if D is not None or not {0, 1} <= set(free_d):
         return central, D
     try:
-        radial = fit_central(views, obj, image_size, hyperbolic=True, radial=True)
+        radial = fit_central(views, obj, image_size, hyperbolic=False, radial=True)
     except ValueError:
-        return central, D
+        radial = None
+    if radial is None or not radial.rms < CENTRAL_RMS_MAX:  # OpenCV's fit failed: free all of D
+        try:
+            radial = fit_central(views, obj, image_size, hyperbolic=True, distortion=True)
+        except ValueError:
+            return central, D
     bound = CENTRAL_RMS_MAX if central is None else RADIAL_START_GAIN * central.rms
-    if not (radial.rms < bound and 0.0 < radial.xi):
+    if not (radial.rms < bound and 0.0 < radial.xi < 1.0):
         return central, D
     D_start = np.zeros(n_d)
     D_start[:4] = pinhole_D_from_unified(radial.D, radial.xi)
