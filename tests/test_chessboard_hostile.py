@@ -332,6 +332,16 @@ def test_wide_angle_rig_whose_k1_k2_central_fit_fails_is_started_with_its_whole_
     _assert_rays_within_their_uncertainty(fit)
 
 
+def test_wide_angle_rejected_shape_is_estimated_from_the_start_where_that_fits_better():
+    """Seed 4, no distortion: the held shape is rejected, and the fit with a, b free carried on
+    from the held solution ends in a minimum of its own (rays 6 times their stated uncertainty
+    off); the same fit from the start camera ends lower, and right."""
+    rig = _hyperbolic(18.0, 6.0, 100.0, size=WIDE_SIZE, f=180.0)
+    fit = Fit(rig, SMALL_PATTERN, 30.0, (300.0, 1500.0), seed=4)
+    assert fit.warned("is rejected by the corners")
+    _assert_rays_within_their_uncertainty(fit)
+
+
 def test_wide_angle_calibration_is_right_or_says_it_is_not():
     fit = _wide_fit()
     assert _rays_within_their_uncertainty(fit) or _says_it_is_wrong(fit)

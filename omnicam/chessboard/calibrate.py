@@ -341,7 +341,15 @@ def calibrate_pattern(
             break
         for i in new:
             image_points[i], found_by[i] = new[i], "views (fitted camera)"
-    fit = _shape_check_step(fit, image_size, f_scale, mirror_given, refine_mirror_shape)
+
+    def shape_free_from_start():
+        start_corners = _corner_step(image_points, (cols, rows), square, cam0)
+        free = dataclasses.replace(model, fit_shape=True)
+        step = _adjustment_step(cam0, mirror, start_corners, rim_seen, free, f_scale, outliers)
+        return step, start_corners
+
+    if mirror_given is None and not refine_mirror_shape:
+        fit, corners = _shape_check_step(fit, corners, image_size, f_scale, shape_free_from_start)
     camera, report = _report_step(
         fit, corners, cam0, image_size, lens_note, central, shape_unknown=mirror_given is None
     )
@@ -885,17 +893,19 @@ def _view_rms(adj, x, ids):
     return {i: float(np.sqrt(np.mean(r[k] ** 2) * 2)) for k, i in enumerate(ids)}
 
 
-def _shape_check_step(fit, image_size, f_scale, mirror_given, refine_mirror_shape):
-    """4b. With no mirror given and its shape held (not ``refine_mirror_shape``), the held
-    shape checked: a short refinement with ``a, b`` free, started at the held
-    solution (:func:`_shape_free`). A likelihood-ratio test: when it lowers the robust cost by
-    more than :data:`SHAPE_REJECT_CHI2` times the residual variance, the corners reject the
-    central fit's shape (on a wide-angle rig the rays are then off by several times their
-    stated uncertainty, which a shape held at a biased value does not contain), and the fit
-    with ``a, b`` free is carried on to convergence and returned instead, with a warning;
-    otherwise ``fit`` as it is."""
-    if mirror_given is not None or refine_mirror_shape:
-        return fit
+def _shape_check_step(fit, corners, image_size, f_scale, from_start):
+    """4b. A shape held from the central fit checked: a short refinement with ``a, b`` free,
+    started at the held solution (:func:`_shape_free`). A likelihood-ratio test: when it
+    lowers the robust cost by more than :data:`SHAPE_REJECT_CHI2` times the residual
+    variance, the corners reject the central fit's shape (on a wide-angle rig the rays are
+    then off by several times their stated uncertainty, which a shape held at a biased value
+    does not contain), and ``a, b`` are estimated, with a warning: the fit with them free
+    carried on from the held solution, and ``from_start()``, the adjustment with them free
+    from the start camera (``(AdjustmentStep, CornerStep)``), whichever ends at the lower
+    mean robust cost. The held solution lies in the valley the wrong shape made, and can
+    lead to a minimum of its own (one of 8 wide-angle renders of
+    ``benchmarks/bench_chessboard_hostile.py --wide-seeds 8``, its rays 6 times their stated
+    uncertainty off). Returns ``(fit, corners)``, as given when the held shape stands."""
     adj, sol = fit.adj, fit.sol
     camera, gauged = adj.to_gauge(sol.x, image_size)
     adj2, x2 = _shape_free(adj, sol.x, camera, gauged)
@@ -905,8 +915,7 @@ def _shape_check_step(fit, image_size, f_scale, mirror_given, refine_mirror_shap
     short = adj2.solve(x2, f_scale=f_scale, max_nfev=_SHAPE_CHECK_NFEV)
     chi2 = (cost - 2.0 * short.cost) / sigma2
     if not chi2 > SHAPE_REJECT_CHI2:
-        return fit
-    sol2 = adj2.solve(short.x, f_scale=f_scale, max_nfev=400)
+        return fit, corners
     ratio = camera.mirror.a / camera.mirror.b
     msg = (
         f"the central fit's mirror shape (a / b = {ratio:.3f}) is rejected by the corners: "
@@ -915,8 +924,25 @@ def _shape_check_step(fit, image_size, f_scale, mirror_given, refine_mirror_shap
         f"were estimated"
     )
     _warnings.warn(msg, RuntimeWarning, stacklevel=2)
+    sol2 = adj2.solve(short.x, f_scale=f_scale, max_nfev=400)
     vr = _view_rms(adj2, sol2.x, fit.used)
-    return AdjustmentStep(adj2, sol2, fit.used, vr, fit.rim_px, [*fit.warnings, msg])
+    held = AdjustmentStep(adj2, sol2, fit.used, vr, fit.rim_px, [*fit.warnings, msg])
+    with _warnings.catch_warnings(record=True) as caught:  # said only if it is taken
+        _warnings.simplefilter("always")
+        try:
+            alt, alt_corners = from_start()
+        except ValueError:
+            return held, corners
+    if not _mean_cost(alt.sol) < _mean_cost(sol2):
+        return held, corners
+    for w in caught:
+        _warnings.warn(w.message, w.category, stacklevel=2)
+    return dataclasses.replace(alt, warnings=[*alt.warnings, msg]), alt_corners
+
+
+def _mean_cost(sol) -> float:
+    """The robust cost per residual of a solution (fits of different views compared)."""
+    return 2.0 * float(sol.cost) / max(len(sol.fun), 1)
 
 
 def _heldout_step(report, mirror, pattern_size, square, options, k):
