@@ -895,25 +895,31 @@ def _view_rms(adj, x, ids):
 
 def _shape_check_step(fit, corners, image_size, f_scale, from_start):
     """4b. A shape held from the central fit checked: a short refinement with ``a, b`` free,
-    started at the held solution (:func:`_shape_free`). A likelihood-ratio test: when it
-    lowers the robust cost by more than :data:`SHAPE_REJECT_CHI2` times the residual
-    variance, the corners reject the central fit's shape (on a wide-angle rig the rays are
-    then off by several times their stated uncertainty, which a shape held at a biased value
-    does not contain), and ``a, b`` are estimated, with a warning: the fit with them free
-    carried on from the held solution, and ``from_start()``, the adjustment with them free
-    from the start camera (``(AdjustmentStep, CornerStep)``), whichever ends at the lower
-    mean robust cost. The held solution lies in the valley the wrong shape made, and can
-    lead to a minimum of its own (one of 8 wide-angle renders of
-    ``benchmarks/bench_chessboard_hostile.py --wide-seeds 8``, its rays 6 times their stated
-    uncertainty off). Returns ``(fit, corners)``, as given when the held shape stands."""
+    started at the held solution (:func:`_shape_free`). A likelihood-ratio test: when it lowers
+    the corners' and the rim's robust cost (the camera's reflection, whose misfit is the coaxial
+    circle's model error more than noise, left out) by more than :data:`SHAPE_REJECT_CHI2` times
+    the residual variance, the corners reject the central fit's shape (on a wide-angle rig the
+    rays are then off by several times their stated uncertainty, which a shape held at a biased
+    value does not contain), and ``a, b`` are estimated, with a warning: the fit with them free
+    carried on from the held solution, and ``from_start()``, the adjustment with them free from
+    the start camera (``(AdjustmentStep, CornerStep)``), whichever ends at the lower mean robust
+    cost. The held solution lies in the valley the wrong shape made, and can lead to a minimum
+    of its own (one of 8 wide-angle renders of ``benchmarks/bench_chessboard_hostile.py
+    --wide-seeds 8``, its rays 6 times their stated uncertainty off). Returns ``(fit,
+    corners)``, as given when the held shape stands."""
     adj, sol = fit.adj, fit.sol
     camera, gauged = adj.to_gauge(sol.x, image_size)
     adj2, x2 = _shape_free(adj, sol.x, camera, gauged)
-    z = robust_residuals(adj2.residuals(x2), f_scale)[0]
-    cost = float(z @ z)
-    sigma2 = cost / max(len(z) - len(sol.x), 1)
+    n_boards = len(adj2.residuals(x2)) - (0 if adj2.lens_px is None else len(adj2.lens_px))
+
+    def boards_cost(x):  # the corners' and the rim's robust cost, the outline's left out
+        z = robust_residuals(adj2.residuals(x), f_scale)[0][:n_boards]
+        return float(z @ z)
+
+    cost = boards_cost(x2)
+    sigma2 = cost / max(n_boards - len(sol.x), 1)
     short = adj2.solve(x2, f_scale=f_scale, max_nfev=_SHAPE_CHECK_NFEV)
-    chi2 = (cost - 2.0 * short.cost) / sigma2
+    chi2 = (cost - boards_cost(short.x)) / sigma2
     if not chi2 > SHAPE_REJECT_CHI2:
         return fit, corners
     ratio = camera.mirror.a / camera.mirror.b
