@@ -261,15 +261,16 @@ def calibrate_pattern(
         axis): ``"auto"`` detects its outline in every image and pools the detections that
         agree (and goes on without it if there is none); an array gives the outline pixels;
         ``None`` does not use it. Its residuals join the adjustment, ``r`` fitted in closed
-        form.
+        form, only with ``lens_z`` given: without it ``"auto"`` leaves it out (the report's
+        ``lens_note`` says so) and an array is refused.
     lens_z : float, optional
         The circle's known axial distance from the camera centre (the front edge of the lens
         barrel, mirror length unit). With it the reflection separates a tilt of the mirror
         from a shift of the principal point, which corners and rim alone determine only
-        through second-order perspective (see the report's ``std``); without it ``z`` is a
-        parameter of the adjustment (``std["lens_z"]``), started by
-        :func:`omnicam.calibration.reflection.fit_circle` under the start posture, and the
-        reflection helps less (a tilt trades partly with ``z``).
+        through second-order perspective (see the report's ``std``). With ``z`` unknown the
+        outline trades against the tilt, and one a little off the optical axis (a real
+        barrel's, a housing's) biases the posture by more than its stated uncertainty without
+        raising the residuals, so it is not used.
     heldout : int
         With ``k >= 2``, also the ``k``-fold held-out check (:mod:`.heldout`: the rig
         calibrated on the other folds with the same options, each held-out view's board pose
@@ -314,7 +315,7 @@ def calibrate_pattern(
     rim_fit, rim_seen, rim_image, rim_warns = _rim_step(
         images, boundary_points, image_size, image_points
     )
-    lens_px, lens_note = _reflection_step(lens, images, rim_image, rim_fit)
+    lens_px, lens_note = _reflection_step(lens, images, rim_image, rim_fit, lens_z)
     obj = object_points((cols, rows), square)  # (_corner_step returns the same)
     K, mirror, central, start_warns, D_start = _central_step(
         image_points, obj, image_size, rim_fit, mirror, rim_radius, K, (D, free_d, n_d)
@@ -604,8 +605,18 @@ def pooled_reflection(images, rim_image, rim_fit) -> tuple[FloatArray | None, st
     )
 
 
-def _reflection_step(lens, images, rim_image, rim_fit):
-    """The camera's own reflection: ``(outline pixels or None, note)``."""
+#: Why the camera's reflection joins the adjustment only with its plane known.
+LENS_PLANE_UNKNOWN = (
+    "not used: its plane is unknown (give lens_z, the front edge's distance from the camera "
+    "centre, to use it); with z free it trades against the mirror's tilt, and an outline off "
+    "the optical axis biases the posture without a trace in the residuals"
+)
+
+
+def _reflection_step(lens, images, rim_image, rim_fit, lens_z):
+    """The camera's own reflection: ``(outline pixels or None, note)``, the outline only with
+    its plane ``lens_z`` known (:data:`LENS_PLANE_UNKNOWN`; the renders of an outline off the
+    axis in ``tests/test_chessboard_hostile.py`` show what a free plane did)."""
     # the camera's own reflection (its outline pins the tilt against the principal point)
     lens_px, lens_note = None, "not used (lens=None)"
     if isinstance(lens, str):
@@ -613,11 +624,19 @@ def _reflection_step(lens, images, rim_image, rim_fit):
             raise ValueError(
                 f"lens must be 'auto', None or an (M, 2) array of outline pixels, got {lens!r}"
             )
-        if not images:
+        if lens_z is None:
+            lens_note = LENS_PLANE_UNKNOWN
+        elif not images:
             lens_note = "not used: no image (give lens=outline pixels to use it)"
         else:
             lens_px, lens_note = pooled_reflection(images, rim_image, rim_fit)
     elif lens is not None and lens is not False:
+        if lens_z is None:
+            raise ValueError(
+                "lens outline pixels need lens_z, the circle's distance from the camera "
+                "centre along the optical axis: with it unknown the outline trades against the "
+                "mirror's tilt (give lens_z, or lens=None)"
+            )
         lens_px = np.asarray(lens, np.float64).reshape(-1, 2)
         if len(lens_px) < 8 or not np.isfinite(lens_px).all():
             raise ValueError(
