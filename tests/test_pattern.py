@@ -362,6 +362,31 @@ def test_a_solver_step_to_a_shape_no_mirror_has_costs_instead_of_raising():
     assert bad.shape == good.shape and np.all(bad == 50.0)
 
 
+def test_outline_pixels_whose_rays_miss_the_lens_plane_cost_instead_of_fitting_perfectly():
+    """The camera's reflection with its plane where no reflected ray reaches (a free ``z`` on
+    an unknown-mirror render was moved there from a start behind the camera): every outline
+    pixel costs as a corner the rig cannot see, not a residual of 0."""
+    from omnicam.calibration.reflection import outline_pixels
+    from omnicam.chessboard.adjustment import AdjustmentModel, BundleAdjustment
+    from omnicam.chessboard.board_pose import object_points
+
+    lens = outline_pixels(RIG, 10.0, 8.0, 40)[0]
+    lens = lens[np.isfinite(lens).all(axis=1)]
+    views = [v.reshape(-1, 2) for v in _corners(0.0, 0, POSES[:3])]
+    x_boards = [np.concatenate([np.ravel(r), np.ravel(t)]) for r, t in POSES[:3]]
+    for z, fits in ((8.0, True), (1e6, False)):
+        model = AdjustmentModel((0, 1), 4, False, False, MisalignedHyperbolicCamera, lens, z)
+        adj = BundleAdjustment(
+            RIG, RIG.mirror, object_points(PATTERN, SQUARE), views, _rim(), model
+        )
+        r = adj.lens_residuals(np.concatenate([adj.x0_global, *x_boards]))
+        assert len(r) == len(lens)
+        if fits:
+            assert np.abs(r).max() < 1e-3
+        else:
+            assert np.all(r == 50.0)
+
+
 def test_pinhole_distortion_behind_a_unified_models_is_the_same_image():
     """cv2.omnidir's unified model with radial ``D`` and the pinhole behind it (focal length
     ``/ sqrt(1 - xi^2)``, :func:`pinhole_D_from_unified`'s ``D``) map every point to the same

@@ -307,19 +307,19 @@ class BundleAdjustment:
         return rim_foot(K, D, R, tvec, mirror, self.rim_px, phi)
 
     def lens_residuals(self, x) -> FloatArray:
-        """The camera's reflection (:mod:`.reflection`): ``(rho(u) - r) / |grad rho|`` px for
-        every outline pixel, ``rho`` the radius at which its reflected ray crosses the plane of
-        the coaxial circle (``z`` known, or the parameter ``lens_z`` started by
-        :func:`.reflection.fit_circle` under the start posture) and ``r`` fitted in closed form
-        at each evaluation."""
+        """The camera's reflection (:mod:`.reflection`): ``(rho(u) - r) / |grad rho|`` px for every
+        outline pixel (50 where its reflected ray does not cross the plane), ``rho`` the radius
+        at which its reflected ray crosses the plane of the coaxial circle (``z`` known, or the
+        parameter ``lens_z`` started by :func:`.reflection.fit_circle` under the start posture)
+        and ``r`` fitted in closed form at each evaluation."""
         K, D, R, tvec, mirror = self.unpack(x)
         Ki = np.linalg.inv(K)
         xn = normalize(self.lens_px, K, D)
         z = x[self.names.index("lens_z")] if self.fit_lens_z else self.lens_z
         rho, g = plane_radius(mirror, R, tvec, xn, z, Ki[:2, :2])
         ok = np.isfinite(rho) & np.isfinite(g) & (g > 0)
-        r = np.zeros(len(rho))
-        if ok.sum() >= 3:
+        r = np.full(len(rho), 50.0)  # an outline pixel whose ray misses the plane: as a corner
+        if ok.sum() >= 3:  # the rig cannot see (not 0, a perfect fit the solver would seek)
             w = 1.0 / g[ok] ** 2
             r[ok] = (rho[ok] - float((w * rho[ok]).sum() / w.sum())) / g[ok]
         return r
