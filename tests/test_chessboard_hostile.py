@@ -351,8 +351,8 @@ def test_wide_angle_rig_whose_distortion_free_central_fit_fails_is_started_with_
 
 
 def test_wide_angle_rig_whose_k1_k2_central_fit_fails_is_started_with_its_whole_distortion():
-    """Seed 0: cv2.omnidir with k1, k2 free fails too (RMS above the bound), with its whole
-    distortion free it fits; its k1, k2 start the rig, which ends right."""
+    """Seed 0: cv2.omnidir with k1, k2 free fails too (fx < 0), with its whole distortion free
+    it fits; its k1, k2 start the rig, which ends right."""
     rig = _hyperbolic(18.0, 6.0, 100.0, size=WIDE_SIZE, k1=-0.27, k2=0.06, f=180.0)
     fit = Fit(rig, SMALL_PATTERN, 30.0, (300.0, 1500.0), seed=0)
     assert fit.report.central.D[0] < 0

@@ -929,7 +929,7 @@ def _shape_check_step(fit, corners, image_size, f_scale, from_start):
     adj, sol = fit.adj, fit.sol
     camera, gauged = adj.to_gauge(sol.x, image_size)
     adj2, x2 = _shape_free(adj, sol.x, camera, gauged)
-    n_boards = len(adj2.residuals(x2)) - (0 if adj2.lens_px is None else len(adj2.lens_px))
+    n_boards = adj2.obs.size + len(adj2.rim_px)  # the corners' and the rim's rows come first
 
     def boards_cost(x):  # the corners' and the rim's robust cost, the outline's left out
         z = robust_residuals(adj2.residuals(x), f_scale)[0][:n_boards]
