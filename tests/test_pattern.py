@@ -227,12 +227,16 @@ def test_information_limit_at_the_truth_matches_the_reported_uncertainty_and_the
     _, report = _calibrate(_corners(noise=0.2, seed=5), rim=_rim(0.2, 5), dist_model="none")
     for k in ("fx", "cx", "cy", "axis_deg", "origin"):
         assert 0.5 < report.std[k] / none[k] < 2.0, k
+    # and so do the rays' (median and worst over the mirror's image)
+    for got, bound_deg in zip(report.ray_std_deg, (none["ray_deg_median"], none["ray_deg_max"])):
+        assert 0.5 < got / bound_deg < 2.0
     # each cue can only add information: a known plane more than a fitted one, and free
     # tangential distortion takes some away
     free = bound(dist_model="none", lens_points=lens, sigma_lens=0.1)
     known = bound(dist_model="none", lens_points=lens, lens_z=8.0, sigma_lens=0.1)
     assert known["cx"] < free["cx"] < none["cx"]
     assert known["axis_deg"] < free["axis_deg"] < none["axis_deg"]
+    assert known["ray_deg_median"] < free["ray_deg_median"] < none["ray_deg_median"]
     assert "lens_z" in free and "lens_z" not in known
     assert bound(dist_model="k1k2p1p2")["cx"] > 2.0 * none["cx"]
 

@@ -631,7 +631,10 @@ def pattern_uncertainty(
     -------
     dict
         The ``std`` of :class:`PatternReport` (``fx, fy, cx, cy``, distortion, ``axis_deg``,
-        ``origin``, ``a, b`` with ``refine_mirror_shape``).
+        ``origin``, ``a, b`` with ``refine_mirror_shape``), and the bound of the viewing
+        directions over the mirror's image (the report's ``ray_std_deg``, by
+        :func:`ray_uncertainty`): ``ray_deg_median`` and ``ray_deg_max`` (NaN without the
+        camera's ``image_size``).
     """
     cols, rows = check_pattern_size(pattern_size)
     if dist_model not in DIST_MODELS:
@@ -655,4 +658,10 @@ def pattern_uncertainty(
     sig[nc : nc + len(adj.rim_px)] = float(sigma_rim)
     if adj.lens_px is not None:
         sig[nc + len(adj.rim_px) :] = float(sigma_lens)
-    return std_from_jacobian(adj, x, J, sig)[0]
+    std, cov = std_from_jacobian(adj, x, J, sig)
+    std["ray_deg_median"], std["ray_deg_max"] = (
+        (math.nan, math.nan)
+        if camera.image_size is None
+        else ray_uncertainty(adj, x, cov, camera.image_size)
+    )
+    return std
