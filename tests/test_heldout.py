@@ -1,5 +1,7 @@
 """The held-out check: what a chessboard calibration predicts on views it did not fit."""
 
+import warnings
+
 import cv2
 import numpy as np
 import pytest
@@ -48,6 +50,18 @@ def test_the_unified_model_predicts_its_own_projections_exactly():
     # and cv2.omnidir.calibrate fitted to them predicts them to a small fraction of a pixel
     project, directions = heldout.omnidir_predictor(views, OBJ, SIZE)
     assert heldout.heldout_rms(project, directions, views[2], OBJ) < 0.2
+
+
+def test_pixels_past_the_unified_models_horizon_have_no_direction_and_raise_no_warning():
+    """With ``xi > 1`` no point of the sphere projects beyond ``r^2 = 1 / (xi^2 - 1)``: NaN
+    there, as the NaN rules say, not numpy's "invalid value" warning."""
+    K = np.array([[100.0, 0.0, 200.0], [0.0, 100.0, 200.0], [0.0, 0.0, 1.0]])
+    _, directions = heldout.unified_predictor(K, 1.5, np.zeros(4))
+    px = np.array([[200.0, 200.0], [200.0 + 100.0 * 0.8, 200.0], [200.0 + 100.0 * 0.9, 200.0]])
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        d = directions(px)[1]
+    assert np.isfinite(d[:2]).all() and np.isnan(d[2]).all()  # horizon at r = 0.894
 
 
 def test_cross_validation_of_the_truth_is_exact_and_omnidir_errs_on_a_misaligned_rig():

@@ -134,11 +134,13 @@ def _unified_directions(px, K, xi, D):
     """Unit rays of pixels under Mei's unified model (``cv2.omnidir``'s): ``K`` and the
     radial-tangential ``D = (k1, k2, p1, p2)`` undone
     (:func:`omnicam.raytrace.undistort_normalized`), then the point on the unit sphere that
-    projects there from ``(0, 0, -xi)``."""
+    projects there from ``(0, 0, -xi)``; NaN where no point does (with ``xi > 1``, past the
+    model's horizon ``r^2 > 1 / (xi^2 - 1)``)."""
     xy = undistort_normalized(np.ascontiguousarray(px, np.float64), K, np.ravel(D)[:4])
     x, y = xy[:, 0], xy[:, 1]
     r2 = x * x + y * y
-    lam = (xi + np.sqrt(1 + (1 - xi * xi) * r2)) / (r2 + 1)
+    with np.errstate(invalid="ignore"):  # NaN past the horizon, as the docstring says
+        lam = (xi + np.sqrt(1 + (1 - xi * xi) * r2)) / (r2 + 1)
     X = np.stack([lam * x, lam * y, lam - xi], axis=1)
     return X / np.linalg.norm(X, axis=1, keepdims=True)
 
