@@ -500,3 +500,25 @@ def test_from_an_earlier_guess_the_K_stays_guessed(tmp_path, capsys):
     capsys.readouterr()
     v = read_verdict(second)
     assert v.K_source == "guessed" and v.K_file == str(first)
+
+
+def test_the_reflections_circle_given_is_honoured(tmp_path, capsys):
+    """--lens-z and --lens-r reach the calibration: the file records the circle given (the
+    barrel's front edge of tests/barrel.py, r = 9 at z = 12), and the tilt it pins is right."""
+    import barrel
+
+    rng = np.random.default_rng(5)
+    truth = synthetic.random_misaligned_rig(rng, 5.0, 5.0)
+    image = tmp_path / "barrel.png"
+    cv2.imwrite(str(image), barrel.render(truth))
+    m = truth.mirror
+    k = write_K(tmp_path / "k.yaml", truth.K, truth.image_size)
+    mirror = ["--mirror", f"{m.a!r}", f"{m.b!r}", f"{m.rim_radius!r}"]
+    args = ["calibrate", str(image), *mirror, "--intrinsics", k, "--lens-z", "12", "--lens-r", "9"]
+    code = main([*args, "-o", str(tmp_path / "c.yaml")])
+    assert code == 0, capsys.readouterr().err
+    cam = MisalignedHyperbolicCamera.load(tmp_path / "c.yaml")
+    assert cam.camera_reflection == (9.0, 12.0)
+    assert axis_error_deg(cam, truth) < 0.15
+    assert main(["calibrate", str(image), "--lens-r", "0", "-o", "x.yaml"]) == 2
+    assert "expected a positive number" in capsys.readouterr().err

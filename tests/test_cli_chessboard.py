@@ -11,6 +11,7 @@ import omnicam
 import omnicam.formats.omnicam_files
 from omnicam import synthetic
 from omnicam.cli import main
+from omnicam.gauge import posture_error
 from omnicam.synthetic import boards
 
 PATTERN, SQUARE = (7, 5), 60.0
@@ -165,3 +166,22 @@ def test_chessboard_options_without_chessboard_are_refused_not_ignored(tmp_path,
     assert main(args) == 2
     err = capsys.readouterr().err.strip().splitlines()
     assert len(err) == 1 and f"{option[0]} is an option of --chessboard mode" in err[0]
+
+
+def test_the_reflections_plane_is_honoured_and_its_radius_refused(views, tmp_path, capsys):
+    """The boards' renders show the lens barrel's front circle (r, z) = (15, 25): with
+    --lens-z its outline joins the fit, without it the run says why it does not; --lens-r is
+    for one image (chessboard mode fits the radius)."""
+    assert _calibrate(views, tmp_path / "a.yaml", "--heldout", "0") == 0
+    assert "camera's reflection: not used: its plane is unknown" in capsys.readouterr().out
+    assert _calibrate(views, tmp_path / "b.yaml", "--heldout", "0", "--lens-z", "25") == 0
+    assert "camera's reflection: used: " in capsys.readouterr().out
+    without, with_plane = (
+        omnicam.formats.omnicam_files.read_verdict(tmp_path / f"{n}.yaml") for n in "ab"
+    )
+    assert with_plane.axis_std_deg < 0.5 * without.axis_std_deg  # it pins the tilt
+    cam = omnicam.MisalignedHyperbolicCamera.load(str(tmp_path / "b.yaml"))
+    assert posture_error(cam, RIG)[0] < 3.0 * with_plane.axis_std_deg
+    assert _calibrate(views, tmp_path / "c.yaml", "--lens-r", "15", "--lens-z", "25") == 2
+    assert "--lens-r is for one image" in capsys.readouterr().err
+    assert not (tmp_path / "c.yaml").exists()

@@ -607,9 +607,10 @@ def pooled_reflection(images, rim_image, rim_fit) -> tuple[FloatArray | None, st
 
 #: Why the camera's reflection joins the adjustment only with its plane known.
 LENS_PLANE_UNKNOWN = (
-    "not used: its plane is unknown (give lens_z, the front edge's distance from the camera "
-    "centre, to use it); with z free it trades against the mirror's tilt, and an outline off "
-    "the optical axis biases the posture without a trace in the residuals"
+    "not used: its plane is unknown (give lens_z, or --lens-z on the command line: the front "
+    "edge's distance from the camera centre, to use it); with z free it trades against the "
+    "mirror's tilt, and an outline off the optical axis biases the posture without a trace in "
+    "the residuals"
 )
 
 

@@ -189,6 +189,8 @@ def cmd_calibrate(args):
             rim_hint=args.rim_hint,
             max_tilt_deg=args.max_tilt,
             max_offset_mm=args.max_offset,
+            lens_r=args.lens_r,
+            lens_z=args.lens_z,
         )
     except (ValueError, RuntimeError, NotImplementedError, np.linalg.LinAlgError) as e:
         raise CliError(
@@ -535,6 +537,27 @@ def add_parser(sub):
         "--boundary-points",
         metavar="FILE",
         help=f"pixels on the mirror rim instead of detecting it: {BOUNDARY_FORMAT}",
+    )
+    lens = p.add_argument_group(
+        "the camera's reflection",
+        "the outline of the lens barrel's front edge, a circle coaxial with the optical axis, "
+        "seen in the mirror; with its plane known it pins the mirror's tilt",
+    )
+    lens.add_argument(
+        "--lens-z",
+        type=finite_arg,
+        metavar="MM",
+        help="the circle's distance from the camera centre along the optical axis, towards "
+        "the mirror (mm; about the lens's front edge). One image: fitted when not given. "
+        "With --chessboard the reflection is used only with it (with the plane unknown the "
+        "outline trades against the tilt)",
+    )
+    lens.add_argument(
+        "--lens-r",
+        type=positive_arg,
+        metavar="MM",
+        help="the circle's radius (mm); one image only: fitted when not given (--chessboard "
+        "fits it from the outline)",
     )
     checks = p.add_argument_group("plausibility")
     checks.add_argument(

@@ -212,6 +212,12 @@ def _check_options(args):
         raise CliError("calibrate: --chessboard needs --square (side of a square, mm)", 2)
     if args.far_lines:
         raise CliError("calibrate: --far-lines is not used with --chessboard", 2)
+    if args.lens_r is not None:
+        raise CliError(
+            "calibrate: --lens-r is for one image; --chessboard fits the reflection's radius "
+            "from its outline (give --lens-z, its plane)",
+            2,
+        )
     args.heldout = 5 if args.heldout is None else args.heldout
     args.dist_model = args.dist_model or "k1k2"
     if args.heldout < 0 or args.heldout == 1:
@@ -276,6 +282,8 @@ def _print_report(camera, report, names, caught):
         f"{report.ray_std_deg[1]:.3f})",
         flush=True,
     )
+    if report.lens_note:
+        print(f"camera's reflection: {report.lens_note}", flush=True)
     if report.heldout is not None:
         print(report.heldout.summary(), flush=True)
     for w in report.warnings:
@@ -325,6 +333,7 @@ def cmd_calibrate_pattern(args):
                 refine_mirror_shape=args.refine_mirror_shape,
                 dist_model=args.dist_model,
                 rim_radius=args.rim_radius,
+                lens_z=args.lens_z,
                 heldout=args.heldout if len(images) >= 4 else 0,
                 progress=progress,
             )
