@@ -499,31 +499,37 @@ def robust_residuals(r, f_scale) -> tuple[FloatArray, FloatArray]:
     return r * np.sqrt(2.0 / (1.0 + q)), np.sqrt((1.0 + q) / 2.0) / q
 
 
-def covariance(J, row_sigma) -> FloatArray:
-    """``(J^T W J)^-1``, ``W = diag(1 / row_sigma^2)`` (the Cramer-Rao bound of independent
-    Gaussian residuals of those sigmas), columns scaled to unit norm; a parameter no residual
-    depends on (a zero column) gets NaN variance instead of a number the regularisation made up.
-    """
+def covariance(J, row_sigma, unweighted=False) -> FloatArray:
+    """The covariance of the least-squares estimate from residuals with Jacobian ``J`` and
+    independent noise of ``row_sigma`` per row. Weighted by ``1 / row_sigma^2`` (the default):
+    ``(J^T W J)^-1``, the Cramer-Rao bound. ``unweighted``: of the fit that weighs every row
+    alike (the adjustment's), ``A^-1 (J^T S J) A^-1`` with ``A = J^T J``, ``S =
+    diag(row_sigma^2)`` (the sandwich; the bound's when all sigmas are equal). Columns scaled
+    to unit norm; a parameter no residual depends on (a zero column) gets NaN variance instead
+    of a number the regularisation made up."""
     n = J.shape[1]
-    Jw = J / np.asarray(row_sigma, np.float64)[:, None]
+    sig = np.asarray(row_sigma, np.float64)
+    Jw = J if unweighted else J / sig[:, None]
     scale = np.linalg.norm(Jw, axis=0)
     live = scale > 0
     Js = Jw[:, live] / scale[live]
-    N = np.einsum("ij,ik->jk", Js, Js)
-    cov = np.full((n, n), math.nan)
     m = int(live.sum())
-    cov[np.ix_(live, live)] = np.linalg.solve(N + 1e-12 * np.eye(m), np.eye(m)) / np.outer(
-        scale[live], scale[live]
-    )
+    Ainv = np.linalg.solve(np.einsum("ij,ik->jk", Js, Js) + 1e-12 * np.eye(m), np.eye(m))
+    if unweighted:
+        Ainv = Ainv @ np.einsum("ij,i,ik->jk", Js, sig * sig, Js) @ Ainv
+    cov = np.full((n, n), math.nan)
+    cov[np.ix_(live, live)] = Ainv / np.outer(scale[live], scale[live])
     return cov
 
 
-def std_from_jacobian(adj, x, J, row_sigma) -> tuple[dict[str, float], FloatArray]:
-    """Standard deviations (:func:`covariance`) of the named global parameters of ``adj`` at
-    ``x``, the mirror axis (``axis_deg``, RMS angle) and the camera centre in the mirror frame
-    (``origin``, RMS distance, the 5 posture parameters linearised through ``C = -R^T tvec``,
-    eq. 17); and the covariance of the global parameters."""
-    cov = covariance(J, row_sigma)
+def std_from_jacobian(
+    adj, x, J, row_sigma, unweighted=False
+) -> tuple[dict[str, float], FloatArray]:
+    """Standard deviations (:func:`covariance`, ``unweighted`` as there) of the named global
+    parameters of ``adj`` at ``x``, the mirror axis (``axis_deg``, RMS angle) and the camera
+    centre in the mirror frame (``origin``, RMS distance, the 5 posture parameters linearised
+    through ``C = -R^T tvec``, eq. 17); and the covariance of the global parameters."""
+    cov = covariance(J, row_sigma, unweighted)
     var = np.diag(cov)
     std = {}
     for k, name in enumerate(adj.names):

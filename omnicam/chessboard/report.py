@@ -38,8 +38,9 @@ class PatternReport:
     rim_rms : float
         RMS distance of the rim points to the calibrated rim image, px.
     std : dict
-        Standard deviations (1 sigma, from ``sigma^2 (J^T J)^-1`` with ``sigma^2`` the residual
-        variance): ``fx, fy, cx, cy`` (px), ``skew`` if estimated, ``k1``... of the free
+        Standard deviations (1 sigma, from ``(J^T J)^-1 J^T S J (J^T J)^-1``, ``S`` each row's
+        variance estimated from the residuals of its group: the corners, the rim, the
+        outline): ``fx, fy, cx, cy`` (px), ``skew`` if estimated, ``k1``... of the free
         distortion coefficients, ``axis_deg`` (RMS angle of the mirror axis), ``origin`` (RMS
         distance of the camera centre in the mirror frame, mirror units), ``a, b`` with
         ``refine_mirror_shape``.
