@@ -520,5 +520,5 @@ def test_the_reflections_circle_given_is_honoured(tmp_path, capsys):
     cam = MisalignedHyperbolicCamera.load(tmp_path / "c.yaml")
     assert cam.camera_reflection == (9.0, 12.0)
     assert axis_error_deg(cam, truth) < 0.15
-    assert main(["calibrate", str(image), "--lens-r", "0", "-o", "x.yaml"]) == 2
+    assert main(["calibrate", str(image), "--lens-r", "0", "-o", str(tmp_path / "x.yaml")]) == 2
     assert "expected a positive number" in capsys.readouterr().err
