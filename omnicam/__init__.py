@@ -11,7 +11,13 @@ __version__ = "0.3.0"
 
 # public name -> module that defines it (loaded lazily, PEP 562)
 _LAZY = {
-    "MisalignedHyperbolicCamera": "omnicam.camera",
+    "MisalignedHyperbolicCamera": "omnicam.hyperbolic_camera",
+    "MisalignedCatadioptricCamera": "omnicam.camera",
+    "calibrate": "omnicam.calibration",
+    "recalibrate": "omnicam.calibration",
+    "calibrate_pattern": "omnicam.chessboard.calibrate",
+    "load_camera": "omnicam.formats.omnicam_files",
+    "save_camera": "omnicam.formats.omnicam_files",
     "HyperbolicMirror": "omnicam.mirror",
     "detect_rim": "omnicam.calibration.rim",
     "RimFit": "omnicam.calibration.rim",
@@ -39,18 +45,15 @@ _LAZY = {
     "write_far_lines": "omnicam.formats.omnicam_files",
 }
 
-__all__ = ["calibrate_pattern", *_LAZY]
+__all__ = list(_LAZY)
 
 
 def __getattr__(name):
-    if name == "calibrate_pattern":  # chessboards through the mirror (builds the camera class)
-        value = __getattr__("MisalignedHyperbolicCamera").calibrate_pattern
-    else:
-        module = _LAZY.get(name)
-        if module is None:
-            raise AttributeError(f"module 'omnicam' has no attribute {name!r}")
-        mod = import_module(module)
-        value = mod if name == module.rsplit(".", 1)[-1] else getattr(mod, name)
+    module = _LAZY.get(name)
+    if module is None:
+        raise AttributeError(f"module 'omnicam' has no attribute {name!r}")
+    mod = import_module(module)
+    value = mod if name == module.rsplit(".", 1)[-1] else getattr(mod, name)
     globals()[name] = value
     return value
 

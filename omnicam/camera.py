@@ -1,4 +1,10 @@
-"""The misaligned hyperbolic catadioptric camera: a thin, validated, immutable value object.
+"""The misaligned catadioptric camera: the model alone, a thin, validated, immutable value object.
+
+This module sits at the bottom of the house: ray tracing, the mirror, the gauge and validation
+are under it; the views, the calibration routes and the file formats import it and return it.
+Its entry points for users (``calibrate``, ``load``, ``save``, ...) are on the design's class,
+:class:`omnicam.MisalignedHyperbolicCamera` (:mod:`omnicam.hyperbolic_camera`), as thin calls of
+the module-level functions ``omnicam.calibrate``, ``omnicam.calibrate_pattern``, ...
 
 Model contract (the binding text is ``docs/conventions.md``):
 
@@ -23,14 +29,13 @@ Model contract (the binding text is ``docs/conventions.md``):
 from __future__ import annotations
 
 import math
-from collections.abc import Sequence
-from typing import TYPE_CHECKING, Any, ClassVar, NamedTuple
+from typing import Any, ClassVar, NamedTuple
 
 import cv2
 import numpy as np
 
-from . import raytrace, views
-from ._typing import ArrayLike, FloatArray, PathLike, Size
+from . import raytrace
+from ._typing import ArrayLike, FloatArray, Size
 from ._validate import (
     finite_array,
     float_array,
@@ -39,19 +44,12 @@ from ._validate import (
     validate_K,
     validate_posture,
 )
-from .formats.central_export import fit_omnidir
-from .formats.omnicam_files import MODEL_NAME, load_camera, save_camera
 from .gauge import canonical_rvec
 from .mirror import HyperbolicMirror
 
-if TYPE_CHECKING:  # annotations only: the façade's results
-    from .calibration.report import CalibrationReport
-    from .chessboard.report import PatternReport
-
 __all__ = [
-    "MisalignedHyperbolicCamera",
+    "MisalignedCatadioptricCamera",
     "CameraReflection",
-    "MODEL_NAME",
     "canonical_rvec",
     "scale_K",
     "validate_D",
@@ -112,8 +110,8 @@ def _readonly(arr: ArrayLike) -> FloatArray:
     return arr
 
 
-class MisalignedHyperbolicCamera:
-    """A perspective camera looking at a hyperboloidal mirror in any 5-DOF posture.
+class MisalignedCatadioptricCamera:
+    """A perspective camera looking at a mirror of revolution in any 5-DOF posture.
 
     Functional model (paper section 2.2): a pixel ``x`` gives the camera ray
     ``V_C = K^-1 x~`` (eq. 6, after undoing ``D``), in the mirror frame ``V_M = R^T V_C`` from
@@ -203,7 +201,7 @@ class MisalignedHyperbolicCamera:
         x_c: float,
         y_c: float,
         image_size: Size | None = None,
-    ) -> MisalignedHyperbolicCamera:
+    ) -> MisalignedCatadioptricCamera:
         """The paper's aligned HyperOmni rig (eqs. 2-5), the "uncalibrated" baseline.
 
         Camera at the lower focus with axes parallel to the mirror's: ``rvec = 0``,
@@ -212,7 +210,7 @@ class MisalignedHyperbolicCamera:
         K = np.array([[f_C, 0.0, x_c], [0.0, f_C, y_c], [0.0, 0.0, 1.0]], dtype=np.float64)
         return cls(K, mirror, np.zeros(3), np.array([0.0, 0.0, mirror.c]), image_size=image_size)
 
-    def scaled(self, image_size: Size) -> MisalignedHyperbolicCamera:
+    def scaled(self, image_size: Size) -> MisalignedCatadioptricCamera:
         """The same rig imaged at another resolution of the same sensor.
 
         ``K`` is scaled by ``sx = w'/w``, ``sy = h'/h`` about pixel centres at integer
@@ -233,7 +231,7 @@ class MisalignedHyperbolicCamera:
             self._camera_reflection,  # a circle of the body: the same at any resolution
         )
 
-    def replace(self, **changes: Any) -> MisalignedHyperbolicCamera:
+    def replace(self, **changes: Any) -> MisalignedCatadioptricCamera:
         """A copy with some of ``K, mirror, rvec, tvec, D, image_size, camera_reflection``
         changed."""
         args: dict[str, Any] = dict(
@@ -303,14 +301,14 @@ class MisalignedHyperbolicCamera:
         body = self._camera_reflection
         extra = "" if body is None else f", camera_reflection=({body.r!r}, {body.z!r})"
         return (
-            f"MisalignedHyperbolicCamera(K={self._K.tolist()}, mirror={self._mirror!r}, "
+            f"MisalignedCatadioptricCamera(K={self._K.tolist()}, mirror={self._mirror!r}, "
             f"rvec={self._rvec.tolist()}, tvec={self._tvec.tolist()}, "
             f"D={None if self._D is None else self._D.tolist()}, image_size={self._image_size}"
             f"{extra})"
         )
 
     def __eq__(self, other: object) -> bool:
-        if not isinstance(other, MisalignedHyperbolicCamera):
+        if not isinstance(other, MisalignedCatadioptricCamera):
             return NotImplemented
         same_D = (self._D is None and other._D is None) or (
             self._D is not None and other._D is not None and np.array_equal(self._D, other._D)
@@ -461,174 +459,3 @@ class MisalignedHyperbolicCamera:
             p.flags.writeable = False
             self._viewpoint = (p, rms)
         return self._viewpoint
-
-    # -- calibration and views (implemented in omnicam.calibration and omnicam.views) ----
-    @classmethod
-    def calibrate(
-        cls,
-        K: ArrayLike,
-        mirror: HyperbolicMirror,
-        image: np.ndarray | None = None,
-        boundary_points: ArrayLike | None = None,
-        far_lines: Sequence[ArrayLike] | None = None,
-        D: ArrayLike | None = None,
-        image_size: Size | None = None,
-        refine: bool = True,
-        lens: str | bool | ArrayLike | None = "auto",
-        **options: Any,
-    ) -> tuple[MisalignedHyperbolicCamera, CalibrationReport]:
-        """Mirror posture from one image: rim, Chen's method, selection, refinement, checks.
-
-        See :func:`omnicam.calibration.calibrate` for ``options`` (``lens_r``, ``lens_z``,
-        ``rim_hint``, ``max_tilt_deg``, ``max_offset_mm``, ``check_plausibility``). Returns
-        ``(camera, report)`` with a camera of this class.
-        """
-        from .calibration import calibrate
-
-        return calibrate(
-            K,
-            mirror,
-            image=image,
-            boundary_points=boundary_points,
-            far_lines=far_lines,
-            D=D,
-            image_size=image_size,
-            refine=refine,
-            camera_cls=cls,
-            lens=lens,
-            **options,
-        )
-
-    def recalibrate(
-        self, image: np.ndarray | None = None, **options: Any
-    ) -> tuple[MisalignedHyperbolicCamera, CalibrationReport]:
-        """The mirror posture alone from one new image, with this rig's ``K``, ``D`` and mirror.
-
-        After a bump: a rig calibrated once (from chessboards, say) and knocked out of line is
-        re-calibrated from one frame of the mirror, without boards, by the single-image method
-        (:func:`omnicam.calibration.calibrate`, paper section 3).
-
-        Parameters
-        ----------
-        image : ndarray, optional
-            A frame of the rig (grey or BGR) of this camera's ``image_size`` (when known); use
-            :meth:`scaled` first for another resolution of the same sensor.
-        **options
-            Passed on to :func:`omnicam.calibration.calibrate`: ``boundary_points``,
-            ``far_lines``, ``refine``, ``lens``, ``lens_r``, ``lens_z``, ``rim_hint``,
-            ``max_tilt_deg``, ``max_offset_mm``, ``check_plausibility``.
-
-        Returns
-        -------
-        camera : same class as this one
-            This rig's ``K``, ``D``, mirror and ``image_size`` with the new posture.
-        report : CalibrationReport
-            Its stated uncertainty (``axis_std_deg``, ``origin_std_mm``) and the confidence of
-            the choice of posture (``confidence``, ``ambiguous``).
-
-        Raises
-        ------
-        ValueError
-            ``options`` naming what this camera fixes (``K``, ``mirror``, ``D``,
-            ``image_size``, ``camera_cls``), or an image of another size; and whatever
-            :func:`omnicam.calibration.calibrate` raises.
-        """
-        from .calibration import calibrate
-
-        fixed = sorted({"K", "mirror", "D", "image_size", "camera_cls"} & set(options))
-        if fixed:
-            raise ValueError(
-                f"recalibrate keeps this camera's K, D, mirror and image_size; do not pass "
-                f"{', '.join(fixed)} (use omnicam.calibrate for other ones)"
-            )
-        if image is not None and self._image_size is not None and np.ndim(image) >= 2:
-            seen = (int(np.shape(image)[1]), int(np.shape(image)[0]))
-            if seen != self._image_size:
-                w, h = self._image_size
-                raise ValueError(
-                    f"image is {seen[0]}x{seen[1]}, the camera was calibrated at {w}x{h}; "
-                    f"for another resolution of the same sensor use "
-                    f"camera.scaled({seen}).recalibrate(image)"
-                )
-        return calibrate(
-            self._K,
-            self._mirror,
-            image=image,
-            D=self._D,
-            image_size=self._image_size,
-            camera_cls=type(self),
-            **options,
-        )
-
-    @classmethod
-    def calibrate_pattern(
-        cls,
-        images: Sequence[np.ndarray | PathLike] | None,
-        pattern_size: tuple[int, int],
-        square_size: float,
-        mirror: HyperbolicMirror | None = None,
-        **kw: Any,
-    ) -> tuple[MisalignedHyperbolicCamera, PatternReport]:
-        """``K``, ``D``, the posture (and, with ``mirror=None``, the mirror) from chessboards
-        seen through the mirror.
-
-        Also ``omnicam.calibrate_pattern``. See
-        :func:`omnicam.chessboard.calibrate_pattern` (its options, passed on as
-        they are). Returns ``(camera, report)``.
-        """
-        from .chessboard.calibrate import calibrate_pattern
-
-        return calibrate_pattern(images, pattern_size, square_size, mirror, camera_cls=cls, **kw)
-
-    # the view tables take the camera first: the functions are the methods (one signature)
-    init_panorama_maps = views.init_panorama_maps
-    init_perspective_maps = views.init_perspective_maps
-
-    def to_omnidir(
-        self, depth: float | None = None
-    ) -> tuple[FloatArray, float, FloatArray, FloatArray, FloatArray, float]:
-        """The unified (Mei) model of ``cv2.omnidir`` closest to this rig, and its RMS error.
-
-        Returns ``(K, xi, D, M, origin, rms_px)`` with ``X_omni = M (X_mirror - origin)``
-        (``det M = -1``: the image of a mirror is mirror-reversed); see
-        :func:`omnicam.formats.central_export.fit_omnidir`, which also gives the maximum error.
-        """
-        return fit_omnidir(self, depth=depth).as_tuple()
-
-    # -- files ----------------------------------------------------------------------------
-    def save(self, path: PathLike, verdict: object = None) -> None:
-        """Write the calibration with ``cv2.FileStorage`` (yaml, yml, xml or json), atomically.
-
-        The file is written beside ``path``, read back and compared, then renamed into place
-        (:func:`omnicam.formats.omnicam_files.save_camera`). ``cam.save(path, report)`` also
-        records how far to trust it: the report's confidence, stated uncertainty and warnings
-        (the file's ``verdict``, read by :func:`omnicam.read_verdict` and ``omnicam info``).
-
-        Parameters
-        ----------
-        path : str or os.PathLike
-        verdict : CalibrationReport, PatternReport or omnicam.Verdict, optional
-            What the calibration's report said (a report is taken as
-            :meth:`omnicam.Verdict.from_report` of it); None writes none.
-
-        Raises
-        ------
-        ValueError
-            Unknown extension, or the file cannot be written (missing or read-only folder, full
-            disk, ...), naming the file; the old file at ``path`` is then unchanged.
-        """
-        save_camera(self, path, verdict)
-
-    @classmethod
-    def load(cls, path: PathLike) -> MisalignedHyperbolicCamera:
-        """Read a calibration file written by :meth:`save`, validating every field.
-
-        Raises
-        ------
-        FileNotFoundError
-            No file at ``path``.
-        ValueError
-            Anything else (see :func:`omnicam.formats.omnicam_files.load_camera`), naming the
-            file and the field.
-        """
-        return load_camera(path, cls)

@@ -9,7 +9,7 @@ from contextlib import AbstractContextManager
 from importlib import resources
 from pathlib import Path
 
-from .camera import MisalignedHyperbolicCamera
+from .hyperbolic_camera import MisalignedHyperbolicCamera
 
 __all__ = ["names", "path", "load"]
 

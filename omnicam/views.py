@@ -34,7 +34,7 @@ import functools
 import math
 import numbers
 import warnings
-from typing import Any, NamedTuple, Protocol
+from typing import Any, NamedTuple
 
 import cv2
 import numpy as np
@@ -54,6 +54,7 @@ from ._kernels import (
 )
 from ._typing import ArrayLike, FloatArray, Maps, Size
 from ._validate import finite_array, float_array, real_number, refuse_complex, validate_K
+from .camera import MisalignedCatadioptricCamera
 from .mirror import HyperbolicMirror
 
 __all__ = [
@@ -104,38 +105,6 @@ LOWER_EDGE_FIXED = "the fixed default, no camera reflection recorded"
 LOWER_EDGE_FLOOR = "a cylindrical panorama's lowest default, the camera's reflection below it"
 LOWER_EDGE_ABOVE = "the fixed default, the camera's reflection reaching above the band"
 LOWER_EDGE_MIRROR = "what the mirror sees"
-
-
-class CameraLike(Protocol):
-    """What the views read of a camera: a :class:`~omnicam.camera.MisalignedHyperbolicCamera`
-    (duck-typed: the views sit below the camera class and do not import it)."""
-
-    @property
-    def mirror(self) -> HyperbolicMirror: ...
-
-    @property
-    def K(self) -> FloatArray: ...
-
-    @property
-    def D(self) -> FloatArray | None: ...
-
-    @property
-    def R(self) -> FloatArray: ...
-
-    @property
-    def tvec(self) -> FloatArray: ...
-
-    @property
-    def camera_center(self) -> FloatArray: ...
-
-    @property
-    def camera_reflection(self) -> tuple[float, float] | None: ...
-
-    def project(self, object_points: ArrayLike) -> FloatArray: ...
-
-    def unproject(self, image_points: ArrayLike) -> tuple[FloatArray, FloatArray]: ...
-
-    def best_fit_viewpoint(self) -> tuple[FloatArray, float]: ...
 
 
 #: The four outputs of a table, as :func:`_build_table` writes them: float32 x and y maps
@@ -283,7 +252,7 @@ def _check_depth(depth: float | None) -> float | None:
 
 
 def _check_viewpoint(
-    camera: CameraLike | None, viewpoint: ArrayLike | None, depth: float | None
+    camera: MisalignedCatadioptricCamera | None, viewpoint: ArrayLike | None, depth: float | None
 ) -> FloatArray | None:
     if depth is None:
         return None  # directions: the viewpoint plays no part (do not compute the best fit)
@@ -336,7 +305,7 @@ def _rim_directions_of(
     return out
 
 
-def _rim_band(camera: CameraLike) -> tuple[float, float, bool]:
+def _rim_band(camera: MisalignedCatadioptricCamera) -> tuple[float, float, bool]:
     """``(lowest, highest)`` elevation of the rim's reflected directions (degrees,
     :func:`_rim_directions_of`) and whether the nadir is seen (:func:`_nadir_seen`); the last
     few rigs' are kept."""
@@ -382,7 +351,7 @@ def _nadir_seen(b: float, camera_center: FloatArray, rim_dirs: FloatArray) -> bo
     )
 
 
-def visible_elevation_range(camera: CameraLike) -> tuple[float, float]:
+def visible_elevation_range(camera: MisalignedCatadioptricCamera) -> tuple[float, float]:
     """The band of elevations the mirror sees, ``(lo, hi)`` in degrees, mirror frame.
 
     ``hi`` is the highest elevation of the rays of the rim (the reflected directions of the rim
@@ -399,7 +368,7 @@ def visible_elevation_range(camera: CameraLike) -> tuple[float, float]:
 
 
 def camera_reflection_elevation(
-    camera: CameraLike,
+    camera: MisalignedCatadioptricCamera,
     R: ArrayLike | None = None,
     depth: float | None = None,
     viewpoint: ArrayLike | None = None,
@@ -446,7 +415,7 @@ def camera_reflection_elevation(
 
 
 def _reflection_top(
-    camera: CameraLike,
+    camera: MisalignedCatadioptricCamera,
     Rm: FloatArray,
     depth: float | None,
     vp: FloatArray | None,
@@ -499,7 +468,7 @@ class DefaultElevationRange(NamedTuple):
 
 
 def default_elevation_range(
-    camera: CameraLike,
+    camera: MisalignedCatadioptricCamera,
     projection: str = "cylindrical",
     R: ArrayLike | None = None,
     depth: float | None = None,
@@ -541,7 +510,7 @@ def default_elevation_range(
 
 
 def _default_range(
-    camera: CameraLike,
+    camera: MisalignedCatadioptricCamera,
     projection: str,
     Rm: FloatArray,
     depth: float | None,
@@ -601,7 +570,7 @@ def _tilt_matrix(tau_x: float, tau_y: float) -> FloatArray:
     return proj_z @ rot_xy
 
 
-def _cap_radius(camera: CameraLike, viewpoint: FloatArray) -> float:
+def _cap_radius(camera: MisalignedCatadioptricCamera, viewpoint: FloatArray) -> float:
     """An upper bound of the distance from ``viewpoint`` to any point of the mirror cap."""
     m = camera.mirror
     r = np.linspace(0.0, m.rim_radius, 33)[:, None]
@@ -613,7 +582,7 @@ def _cap_radius(camera: CameraLike, viewpoint: FloatArray) -> float:
 
 
 def _reject_sines(
-    camera: CameraLike, depth: float | None, viewpoint: FloatArray | None
+    camera: MisalignedCatadioptricCamera, depth: float | None, viewpoint: FloatArray | None
 ) -> tuple[float, float]:
     """Sines of the elevation above which nothing is seen, and above which nodes are not solved.
 
@@ -635,7 +604,7 @@ def _reject_sines(
     return math.sin(math.radians(limit)), math.sin(math.radians(min(limit + 30.0, 89.5)))
 
 
-def _rig_args(camera: CameraLike) -> RigArgs:
+def _rig_args(camera: MisalignedCatadioptricCamera) -> RigArgs:
     """:class:`omnicam._kernels.RigArgs` of a camera: float64 C-contiguous writable copies (the
     kernels' one signature; numba types read-only arrays apart)."""
     D = camera.D
@@ -661,7 +630,7 @@ def _rig_args(camera: CameraLike) -> RigArgs:
 
 
 def _view_args(
-    camera: CameraLike,
+    camera: MisalignedCatadioptricCamera,
     kind: int,
     A: FloatArray,
     p0: float,
@@ -689,7 +658,7 @@ def _view_args(
 
 
 def _table(
-    camera: CameraLike,
+    camera: MisalignedCatadioptricCamera,
     kind: int,
     A: FloatArray,
     p0: float,
@@ -1093,7 +1062,7 @@ def _panorama_params(
 
 # -- public API ---------------------------------------------------------------------------------
 def init_panorama_maps(
-    camera: CameraLike,
+    camera: MisalignedCatadioptricCamera,
     size: Size,
     elevation_range: tuple[float, float] | None = None,
     projection: str = "cylindrical",
@@ -1181,7 +1150,7 @@ def init_panorama_maps(
 
 
 def init_perspective_maps(
-    camera: CameraLike,
+    camera: MisalignedCatadioptricCamera,
     K_new: ArrayLike,
     size: Size,
     R: ArrayLike | None = None,
@@ -1269,7 +1238,7 @@ def _refuse_swapped(matrix_arg: Any, size_arg: Any, signature: str) -> None:
 UNSEEN_WARN_FRACTION = {"perspective view": 0.5, "panorama": 1.0 / 3.0, "360 panorama": 0.5}
 
 
-def _warn_if_unseen(camera: CameraLike, frac: float, what: str) -> None:
+def _warn_if_unseen(camera: MisalignedCatadioptricCamera, frac: float, what: str) -> None:
     """RuntimeWarning when much of a view (the fraction ``frac`` of its entries unseen) lies
     outside the band the mirror sees, with the way back into it."""
     frac = float(frac)
@@ -1326,14 +1295,14 @@ class PanoramaView:
             else _check_viewpoint(None, viewpoint, 1.0 if depth is None else depth)
         )
 
-    def default_range(self, camera: CameraLike) -> DefaultElevationRange | None:
+    def default_range(self, camera: MisalignedCatadioptricCamera) -> DefaultElevationRange | None:
         """The band this view covers for ``camera`` when its ``elevation_range`` is None
         (:func:`default_elevation_range`), else None (the given range)."""
         if self.elevation_range is not None:
             return None
         return default_elevation_range(camera, self.projection, self.R, self.depth, self.viewpoint)
 
-    def maps(self, camera: CameraLike, m1type: int = cv2.CV_16SC2) -> Maps:
+    def maps(self, camera: MisalignedCatadioptricCamera, m1type: int = cv2.CV_16SC2) -> Maps:
         """``(map1, map2)`` of this view for ``camera``."""
         return init_panorama_maps(
             camera,
@@ -1416,7 +1385,7 @@ class PerspectiveView:
             else _check_viewpoint(None, viewpoint, 1.0 if depth is None else depth)
         )
 
-    def maps(self, camera: CameraLike, m1type: int = cv2.CV_16SC2) -> Maps:
+    def maps(self, camera: MisalignedCatadioptricCamera, m1type: int = cv2.CV_16SC2) -> Maps:
         """``(map1, map2)`` of this view for ``camera``."""
         return init_perspective_maps(
             camera, self.K_new, self.size, self.R, m1type, self.depth, self.viewpoint

@@ -154,7 +154,6 @@ def _rim_only(rig, pts):
         rig.mirror,
         boundary_points=pts,
         image_size=rig.image_size,
-        camera_cls=MisalignedHyperbolicCamera,
         lens=False,
         check_plausibility=False,
     )

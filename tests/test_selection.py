@@ -10,13 +10,17 @@ from conftest import candidates_of
 
 from omnicam import synthetic
 from omnicam.calibration import EstimationError, selection
+from omnicam.calibration.steps import candidate_cameras
+
+
+def _cameras(cam, cands):
+    """The rig under each physical candidate, as calibrate's selection step builds them."""
+    return candidate_cameras(cands, cam.K, cam.D, cam.mirror)
 
 
 def _select(cam, lines):
-    def make(c):
-        return cam.replace(rvec=c.rvec, tvec=c.tvec)
-
-    sel = selection.select_candidate(candidates_of(cam), make, lines, (0.0, 0.0, -cam.mirror.c))
+    cands = candidates_of(cam)
+    sel = selection.select_candidate(cands, _cameras(cam, cands), lines, (0.0, 0.0, -cam.mirror.c))
     return list(sel.candidates), sel.chosen, sel.confidence, list(sel.warnings)
 
 
@@ -145,12 +149,11 @@ def test_reflection_chooses_without_far_lines_and_adds_to_the_far_lines():
     assert sel.chosen == true and sel.ambiguous and sel.warnings
     assert sel.sigma["reflection"] == pytest.approx(1.5)
 
-    def make(c):
-        return cam.replace(rvec=c.rvec, tvec=c.tvec)
-
     # with far lines both cues' costs add up; each cue's scores are listed
     lines = synthetic.far_line_pixels(cam, rng=2)
-    sel = selection.select_candidate(cands, make, lines, (0, 0, -cam.mirror.c), seen)
+    sel = selection.select_candidate(
+        cands, _cameras(cam, cands), lines, (0, 0, -cam.mirror.c), seen
+    )
     assert sel.chosen == true and sel.confidence > 0.9 and not sel.ambiguous
     assert set(sel.costs_per_cue) == {"far lines", "reflection"}
     assert all(np.isfinite(sel.candidates[i].score) for i in phys)  # eq. 31 scores kept

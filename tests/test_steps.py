@@ -21,10 +21,6 @@ CAM = RANDOM_RIGS[1]  # 1.5 mm off the axis: the two physical postures are 1.5 d
 R_C, Z_C = 9.0, 12.0  # a circle of the camera's front, as tests/barrel.py's
 
 
-def make_camera(c):
-    return CAM.replace(rvec=c.rvec, tvec=c.tvec)
-
-
 def pinhole_rim(cam, n):
     """The rim circle imaged by the pinhole ``K`` alone (no distortion): undistorted pixels."""
     X = cam.mirror.rim_points(n) @ cam.R.T + cam.tvec
@@ -266,7 +262,7 @@ def test_candidates_step_gives_chens_four_postures_two_physical(exact):
 
 # -- 4. selection_step -----------------------------------------------------------------------------
 def test_selection_step_chooses_the_truth_by_far_lines(exact):
-    args = (exact["cands"], exact["no_cue"], exact["lines"], CAM.mirror, CAM.K, None, make_camera)
+    args = (exact["cands"], exact["no_cue"], exact["lines"], CAM.mirror, CAM.K, None)
     sel, circles = steps.selection_step(*args, exact["rim"])
     assert isinstance(sel, Selection) and circles == {}
     assert sel.chosen == the_truth(exact["cands"]) and not sel.ambiguous
@@ -277,7 +273,7 @@ def test_selection_step_chooses_the_truth_by_far_lines(exact):
 def test_selection_step_chooses_the_truth_by_the_reflection_and_fits_its_circles(exact):
     _, cue = outline_cue(exact, z=Z_C)
     sel, circles = steps.selection_step(
-        exact["cands"], cue, [], CAM.mirror, CAM.K, None, make_camera, exact["rim"]
+        exact["cands"], cue, [], CAM.mirror, CAM.K, None, exact["rim"]
     )
     true = the_truth(exact["cands"])
     assert sel.chosen == true and not sel.ambiguous
@@ -289,7 +285,7 @@ def test_selection_step_chooses_the_truth_by_the_reflection_and_fits_its_circles
 
 
 def test_selection_step_without_cues_warns_that_the_choice_is_ambiguous(exact):
-    args = (exact["cands"], exact["no_cue"], [], CAM.mirror, CAM.K, None, make_camera)
+    args = (exact["cands"], exact["no_cue"], [], CAM.mirror, CAM.K, None)
     sel, circles = steps.selection_step(*args)
     assert circles == {} and sel.confidence == 0.0 and sel.ambiguous
     assert len(sel.warnings) == 1 and "ambiguous" in sel.warnings[0]
@@ -335,7 +331,7 @@ def test_refinement_step_lets_far_lines_that_agree_with_the_rim_join(exact):
 def test_refinement_step_refines_with_a_known_z_reflection(exact):
     _, cue = outline_cue(exact, z=Z_C)
     _, circles = steps.selection_step(
-        exact["cands"], cue, [], CAM.mirror, CAM.K, None, make_camera, exact["rim"]
+        exact["cands"], cue, [], CAM.mirror, CAM.K, None, exact["rim"]
     )
     ref = refinement(exact, cue=cue, circle=circles[the_truth(exact["cands"])])
     assert ref.accepted_cues == ("reflection",) and ref.rejected_cues == ()
@@ -346,7 +342,7 @@ def test_refinement_step_refines_with_a_known_z_reflection(exact):
 def test_refinement_step_skips_a_reflection_whose_r_and_z_are_both_unknown(exact):
     _, cue = outline_cue(exact)
     _, circles = steps.selection_step(
-        exact["cands"], cue, [], CAM.mirror, CAM.K, None, make_camera, exact["rim"]
+        exact["cands"], cue, [], CAM.mirror, CAM.K, None, exact["rim"]
     )
     ref = refinement(exact, cue=cue, circle=circles[the_truth(exact["cands"])])
     assert ref.accepted_cues == () and ref.rejected_cues == ()
@@ -358,7 +354,7 @@ def test_refinement_step_skips_a_reflection_whose_r_and_z_are_both_unknown(exact
 def test_refinement_step_leaves_out_a_reflection_that_disagrees_with_the_rim(exact):
     _, cue = outline_cue(exact, z=20.0)  # the circle really is at z = 12
     _, circles = steps.selection_step(
-        exact["cands"], cue, [], CAM.mirror, CAM.K, None, make_camera, exact["rim"]
+        exact["cands"], cue, [], CAM.mirror, CAM.K, None, exact["rim"]
     )
     ref = refinement(exact, cue=cue, circle=circles[the_truth(exact["cands"])])
     assert ref.accepted_cues == ()
@@ -371,7 +367,7 @@ def test_refinement_step_leaves_out_a_reflection_that_disagrees_with_the_rim(exa
 @pytest.fixture(scope="module")
 def settled(exact):
     """Every step on exact data with far lines: nothing to warn about."""
-    args = (exact["cands"], exact["no_cue"], exact["lines"], CAM.mirror, CAM.K, None, make_camera)
+    args = (exact["cands"], exact["no_cue"], exact["lines"], CAM.mirror, CAM.K, None)
     sel, _ = steps.selection_step(*args, exact["rim"])
     xn = [normalize(line, CAM.K, None) for line in exact["lines"]]
     ref = steps.refinement_step(

@@ -35,6 +35,7 @@ import numpy as np
 
 from .._typing import ArrayLike
 from .._validate import validate_D, validate_image_size, validate_K
+from ..camera import MisalignedCatadioptricCamera
 from ..mirror import HyperbolicMirror
 from ..raytrace import normalize, to_pixels
 from . import selection, steps
@@ -43,7 +44,7 @@ from .plausibility import assess
 from .report import CalibrationReport
 from .shape import bowed_far_lines
 
-__all__ = ["calibrate", "CalibrationReport", "EstimationError"]
+__all__ = ["calibrate", "recalibrate", "CalibrationReport", "EstimationError"]
 
 
 def calibrate(
@@ -55,7 +56,6 @@ def calibrate(
     D: ArrayLike | None = None,
     image_size: tuple[int, int] | None = None,
     refine: bool = True,
-    camera_cls: type | None = None,
     lens: str | bool | ArrayLike | None = "auto",
     lens_r: float | None = None,
     lens_z: float | None = None,
@@ -63,7 +63,7 @@ def calibrate(
     max_tilt_deg: float = 10.0,
     max_offset_mm: float = 10.0,
     check_plausibility: bool = True,
-) -> tuple[Any, CalibrationReport]:
+) -> tuple[MisalignedCatadioptricCamera, CalibrationReport]:
     """Mirror posture from one image: rim ellipse, Chen's method, far-line selection, refinement.
 
     Parameters
@@ -88,10 +88,6 @@ def calibrate(
         ``(width, height)``; defaults to the image's size.
     refine : bool
         Refine the chosen posture non-linearly (kept only if it lowers the cost).
-    camera_cls : type
-        The camera class to build: :meth:`omnicam.MisalignedHyperbolicCamera.calibrate` (the
-        entry point for users) passes itself. This package sits below the camera in the
-        layers and never imports it.
     lens : "auto", None, False or (M, 2) / (M, 1, 2) array_like
         The camera's own reflection, modelled as a circle coaxial with the optical axis
         (:mod:`.reflection`). ``"auto"`` detects the outermost round dark silhouette around the
@@ -118,7 +114,7 @@ def calibrate(
 
     Returns
     -------
-    camera : MisalignedHyperbolicCamera
+    camera : MisalignedCatadioptricCamera
         With ``camera_reflection = (r, z)``, the circle of the camera's reflection under the
         returned posture, when the reflection was used and fits it within
         ``steps.BODY_MAX_RMS_PX`` (5 px RMS); else None.
@@ -133,11 +129,6 @@ def calibrate(
         Valid input but no estimate: no rim ellipse (in the image or among the points) or no
         physically possible posture.
     """
-    if not isinstance(camera_cls, type):
-        raise ValueError(
-            "camera_cls must be the camera class to build; call "
-            "omnicam.MisalignedHyperbolicCamera.calibrate(...)"
-        )
     K = validate_K(K)
     D = validate_D(D)
     if not isinstance(mirror, HyperbolicMirror):
@@ -167,17 +158,14 @@ def calibrate(
         lens, image, rim.detected or rim.fit, K, D, lens_r, lens_z, cands, mirror
     )
 
-    def make_camera(c):
-        return camera_cls(K, mirror, c.rvec, c.tvec, D=D, image_size=image_size)
-
-    sel, circles = steps.selection_step(cands, cue, lines, mirror, K, D, make_camera, rim)
+    sel, circles = steps.selection_step(cands, cue, lines, mirror, K, D, rim)
     ref = steps.refinement_step(
         K, mirror, cands.all[sel.chosen], rim, lines_xn, cue, circles.get(sel.chosen), refine
     )
     warnings = steps.warnings_step(rim, cue, sel, ref, cands)
     # the camera's reflection as detected: default panoramas leave it out
     body = steps.camera_body(cue, ref)
-    camera = camera_cls(
+    camera = MisalignedCatadioptricCamera(
         K, mirror, ref.rvec, ref.tvec, D=D, image_size=image_size, camera_reflection=body
     )
     report = CalibrationReport.from_steps(rim, cue, cands, sel, ref, list(warnings), camera, lines)
@@ -196,7 +184,6 @@ def calibrate(
                 D=D,
                 image_size=image_size,
                 refine=refine,
-                camera_cls=camera_cls,
                 lens=cue.points if cue.used else False,
                 lens_r=lens_r,
                 lens_z=lens_z,
@@ -208,3 +195,56 @@ def calibrate(
         report.warnings.extend(str(w) for w in implausible)
         report = dataclasses.replace(report, plausibility=tuple(implausible))
     return camera, report
+
+
+def recalibrate(
+    camera: MisalignedCatadioptricCamera, image: np.ndarray | None = None, **options: Any
+) -> tuple[MisalignedCatadioptricCamera, CalibrationReport]:
+    """The mirror posture alone from one new image, with ``camera``'s ``K``, ``D`` and mirror.
+
+    After a bump: a rig calibrated once (from chessboards, say) and knocked out of line is
+    re-calibrated from one frame of the mirror, without boards, by the single-image method
+    (:func:`calibrate`, paper section 3).
+
+    Parameters
+    ----------
+    camera : MisalignedCatadioptricCamera
+        The rig as calibrated before: its ``K``, ``D``, mirror and ``image_size`` are kept.
+    image : ndarray, optional
+        A frame of the rig (grey or BGR) of the camera's ``image_size`` (when known); use
+        ``camera.scaled(size)`` first for another resolution of the same sensor.
+    **options
+        Passed on to :func:`calibrate`: ``boundary_points``, ``far_lines``, ``refine``,
+        ``lens``, ``lens_r``, ``lens_z``, ``rim_hint``, ``max_tilt_deg``, ``max_offset_mm``,
+        ``check_plausibility``.
+
+    Returns
+    -------
+    camera : MisalignedCatadioptricCamera
+        The rig's ``K``, ``D``, mirror and ``image_size`` with the new posture.
+    report : CalibrationReport
+        Its stated uncertainty (``axis_std_deg``, ``origin_std_mm``) and the confidence of
+        the choice of posture (``confidence``, ``ambiguous``).
+
+    Raises
+    ------
+    ValueError
+        ``options`` naming what the camera fixes (``K``, ``mirror``, ``D``, ``image_size``),
+        or an image of another size; and whatever :func:`calibrate` raises.
+    """
+    fixed = sorted({"K", "mirror", "D", "image_size"} & set(options))
+    if fixed:
+        raise ValueError(
+            f"recalibrate keeps this camera's K, D, mirror and image_size; do not pass "
+            f"{', '.join(fixed)} (use omnicam.calibrate for other ones)"
+        )
+    size = camera.image_size
+    if image is not None and size is not None and np.ndim(image) >= 2:
+        seen = (int(np.shape(image)[1]), int(np.shape(image)[0]))
+        if seen != size:
+            raise ValueError(
+                f"image is {seen[0]}x{seen[1]}, the camera was calibrated at "
+                f"{size[0]}x{size[1]}; for another resolution of the same sensor use "
+                f"camera.scaled({seen}).recalibrate(image)"
+            )
+    return calibrate(camera.K, camera.mirror, image=image, D=camera.D, image_size=size, **options)

@@ -297,14 +297,14 @@ def _score_reflection(reflection, phys, scores, costs, warnings):
     )
 
 
-def _score_far_lines(candidates, phys, make_camera, far_lines, warnings):
+def _score_far_lines(candidates, phys, cameras, far_lines, warnings):
     """The far-line score of eq. 31 of each physical candidate (summed over the lines):
     ``(candidates with the scores set, {index: score})``; rays that miss the mirror are left
     out with a warning."""
     scored = list(candidates)
     line_s = {}
     for i in phys:
-        cam = make_camera(candidates[i])
+        cam = cameras[i]
         total = 0.0
         for j, line in enumerate(far_lines):
             s, n_used = line_score(cam, line)
@@ -361,14 +361,15 @@ def _cue_warnings(costs, phys, chosen, confidence, ambiguous):
     return out
 
 
-def select_candidate(candidates, make_camera, far_lines, lower_focus, reflection=None):
+def select_candidate(candidates, cameras, far_lines, lower_focus, reflection=None):
     """Score the physical candidates by every cue given and choose one (section 3.2).
 
     Parameters
     ----------
     candidates : sequence of Candidate
-    make_camera : callable
-        ``make_camera(candidate) -> camera`` with ``unproject`` (used for far lines).
+    cameras : sequence of MisalignedCatadioptricCamera or None
+        ``cameras[i]``, the rig under candidate ``i`` (used for far lines; None at the
+        candidates that are not physical). Unused without far lines, where it may be None.
     far_lines : list of (N_i, 2) ndarray
         Validated far-line pixels (may be empty).
     lower_focus : (3,) array_like
@@ -397,7 +398,7 @@ def select_candidate(candidates, make_camera, far_lines, lower_focus, reflection
     scored = list(candidates)
     scores, costs, sigma = {}, {}, {}
     if far_lines and len(phys) > 1:
-        scored, line_s = _score_far_lines(candidates, phys, make_camera, far_lines, warnings)
+        scored, line_s = _score_far_lines(candidates, phys, cameras, far_lines, warnings)
         scores["far lines"] = line_s
         costs["far lines"] = line_costs(line_s)
     if reflection is not None and len(phys) > 1:

@@ -15,6 +15,7 @@ import cv2
 import numpy as np
 
 from .._validate import float_array
+from ..camera import MisalignedCatadioptricCamera
 from ..images import to_gray
 from ..raytrace import normalize, to_pixels
 from . import chen
@@ -447,7 +448,17 @@ def _predictions(cands, rim, K, mirror, D):
     return out
 
 
-def selection_step(cands, cue, lines, mirror, K, D, make_camera, rim=None):
+def candidate_cameras(candidates, K, D, mirror, image_size=None):
+    """The rig under each physical candidate posture (None at the others)."""
+    return [
+        MisalignedCatadioptricCamera(K, mirror, c.rvec, c.tvec, D=D, image_size=image_size)
+        if c.physical
+        else None
+        for c in candidates
+    ]
+
+
+def selection_step(cands, cue, lines, mirror, K, D, rim=None):
     """Score every physical candidate by every cue and choose (:func:`.selection.select_candidate`).
 
     With ``rim`` the outline's scores allow for the uncertainty of each posture's prediction
@@ -474,7 +485,8 @@ def selection_step(cands, cue, lines, mirror, K, D, make_camera, rim=None):
             # predicted outline by 1-2 px on realistic renders; a wrong K moves it by 5+)
             limit=max(2.0, 5.0 * cue.sigma) if np.isfinite(cue.sigma) else 2.0,
         )
-    sel = select_candidate(cands.all, make_camera, lines, (0.0, 0.0, -mirror.c), evidence)
+    cameras = candidate_cameras(cands.all, K, D, mirror) if lines else None
+    sel = select_candidate(cands.all, cameras, lines, (0.0, 0.0, -mirror.c), evidence)
     return sel, circles
 
 

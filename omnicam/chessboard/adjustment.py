@@ -35,6 +35,7 @@ from scipy.optimize import OptimizeResult, least_squares
 from .. import raytrace
 from .._typing import FloatArray
 from ..calibration.reflection import fit_circle, plane_radius
+from ..camera import MisalignedCatadioptricCamera
 from ..gauge import gauge_rotation
 from ..mirror import HyperbolicMirror
 from ..raytrace import normalize, to_pixels
@@ -134,8 +135,6 @@ class AdjustmentModel:
         Coefficients of ``D`` (0: no distortion, 4 or 5).
     fit_skew, fit_shape : bool
         Also the skew ``K[0, 1]``; also the mirror's ``a, b``.
-    camera_cls : type
-        The camera class built from the parameters.
     lens_px : (M, 2) ndarray or None
         Outline pixels of the camera's reflection (None: not used).
     lens_z : float or None
@@ -146,7 +145,6 @@ class AdjustmentModel:
     n_d: int
     fit_skew: bool
     fit_shape: bool
-    camera_cls: type
     lens_px: np.ndarray | None = None
     lens_z: float | None = None
 
@@ -166,7 +164,6 @@ class BundleAdjustment:
     def __init__(self, cam0, mirror, obj, views, rim_px, model):
         lens_px, lens_z = model.lens_px, model.lens_z
         free_d, n_d, fit_skew, fit_shape = model.free_d, model.n_d, model.fit_skew, model.fit_shape
-        camera_cls = model.camera_cls
         self.mirror, self.obj, self.views, self.rim_px = mirror, obj, views, rim_px
         self.lens_px = lens_px
         self.lens_z, self.fit_lens_z = lens_z, False
@@ -181,7 +178,6 @@ class BundleAdjustment:
             else:
                 self.fit_lens_z = True
         self.free_d, self.n_d, self.fit_skew, self.fit_shape = free_d, n_d, fit_skew, fit_shape
-        self.camera_cls = camera_cls
         self.R0 = cam0.R.copy()
         self.D0 = np.zeros(n_d) if cam0.D is None else np.array(cam0.D, np.float64)
         self.rim_phi = None
@@ -248,7 +244,7 @@ class BundleAdjustment:
         K, D, R, tvec, mirror = self.unpack(x)
         Rg = gauge_rotation(R[:, 2])
         Z = Rg.T @ R
-        cam = self.camera_cls(
+        cam = MisalignedCatadioptricCamera(
             K, mirror, cv2.Rodrigues(Rg)[0].ravel(), tvec, D=D, image_size=image_size
         )
         poses = [
@@ -616,7 +612,7 @@ def pattern_uncertainty(
 
     Parameters
     ----------
-    camera : MisalignedHyperbolicCamera
+    camera : MisalignedCatadioptricCamera
         The truth.
     pattern_size, square_size
         As :func:`calibrate_pattern`.
@@ -652,7 +648,7 @@ def pattern_uncertainty(
         camera.project(obj @ rodrigues(rv).T + np.asarray(tv, np.float64)) for rv, tv in board_poses
     ]
     lens_px = None if lens_points is None else np.asarray(lens_points, np.float64).reshape(-1, 2)
-    model = AdjustmentModel(free_d, n_d, False, refine_mirror_shape, type(camera), lens_px, lens_z)
+    model = AdjustmentModel(free_d, n_d, False, refine_mirror_shape, lens_px, lens_z)
     rim_px = np.asarray(rim_points, np.float64).reshape(-1, 2)
     adj = BundleAdjustment(camera, camera.mirror, obj, views, rim_px, model)
     x = np.concatenate(

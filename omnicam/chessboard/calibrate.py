@@ -44,7 +44,6 @@ import dataclasses
 import math
 import os
 import warnings as _warnings
-from typing import Any
 
 import cv2
 import numpy as np
@@ -57,6 +56,7 @@ from ..calibration.ellipse import conic_distance
 from ..calibration.plausibility import check_plausibility
 from ..calibration.reflection import detect_reflection
 from ..calibration.rim import detect_rim, fit_rim
+from ..camera import MisalignedCatadioptricCamera
 from ..images import read_image
 from ..mirror import HyperbolicMirror
 from .adjustment import (
@@ -180,7 +180,6 @@ def calibrate_pattern(
     *,
     rim_radius=None,
     boundary_points=None,
-    camera_cls=None,
     fit_skew=False,
     drop_outlier_views=True,
     outlier_factor=3.0,
@@ -190,7 +189,7 @@ def calibrate_pattern(
     lens_z=None,
     heldout=0,
     progress=None,
-) -> tuple[Any, PatternReport]:
+) -> tuple[MisalignedCatadioptricCamera, PatternReport]:
     """Calibrate ``K``, ``D`` and the mirror posture from chessboards seen through the mirror.
 
     Parameters
@@ -247,8 +246,6 @@ def calibrate_pattern(
         viewing directions, ``K`` and ``D`` do not depend on it, distances do in proportion.
     boundary_points : (M, 2) array_like, optional
         Pixels on the rim (as seen), instead of detecting it in the images.
-    camera_cls : type
-        The camera class to build (``MisalignedHyperbolicCamera``; its classmethod passes it).
     fit_skew : bool
         Also estimate the skew ``K[0, 1]``.
     drop_outlier_views : bool
@@ -303,7 +300,6 @@ def calibrate_pattern(
         dist_model,
         image_points,
         image_size,
-        camera_cls,
     )
     mirror_given, K_given = mirror, K
     if refine_mirror_shape is None:  # held (an unknown one's uncertainty still counted)
@@ -320,11 +316,11 @@ def calibrate_pattern(
     K, mirror, central, start_warns, D_start = _central_step(
         image_points, obj, image_size, rim_fit, mirror, rim_radius, K, (D, free_d, n_d)
     )
-    cam0 = _start_step(K, mirror, rim_fit, rim_seen, D_start, image_size, camera_cls)
+    cam0 = _start_step(K, mirror, rim_fit, rim_seen, D_start, image_size)
     missing = [i for i, p in enumerate(image_points) if p is None] if images else []
     for i, corners in _redetect(images, missing, (cols, rows), cam0, progress).items():
         image_points[i], found_by[i] = corners, "views"
-    model = AdjustmentModel(free_d, n_d, fit_skew, refine_mirror_shape, camera_cls, lens_px, lens_z)
+    model = AdjustmentModel(free_d, n_d, fit_skew, refine_mirror_shape, lens_px, lens_z)
     outliers = _Outliers(drop_outlier_views, outlier_factor, outlier_min_px)
     start, shape = cam0, mirror
     for _round in range(_DETECT_ROUNDS):
@@ -369,7 +365,6 @@ def calibrate_pattern(
             dist_model=dist_model,
             rim_radius=rim_radius,
             boundary_points=rim_seen,
-            camera_cls=camera_cls,
             fit_skew=fit_skew,
             drop_outlier_views=False,
             f_scale=f_scale,
@@ -421,14 +416,10 @@ class AdjustmentStep:
 
 # -- the steps of calibrate_pattern ----------------------------------------------------------
 def _check_arguments(
-    images, pattern_size, square_size, mirror, D, dist_model, image_points, image_size, camera_cls
+    images, pattern_size, square_size, mirror, D, dist_model, image_points, image_size
 ):
     """Validated arguments: ``(cols, rows, square, D, free_d, n_d, images, image_points,
     image_size)``; ``ValueError`` naming what to change."""
-    if camera_cls is None:
-        raise ValueError(
-            "camera_cls is required (omnicam.calibrate_pattern passes the camera class)"
-        )
     cols, rows = check_pattern_size(pattern_size)
     try:
         square = float(square_size)
@@ -649,7 +640,7 @@ def _reflection_step(lens, images, rim_image, rim_fit, lens_z):
     return lens_px, lens_note
 
 
-def _start_step(K, mirror, rim_fit, rim_seen, D, image_size, camera_cls):
+def _start_step(K, mirror, rim_fit, rim_seen, D, image_size):
     """2. The start: ``K`` from the rim's size unless given, the posture by Chen's method."""
     # 2. the start: K from the rim, posture by Chen's method
     if K is None:
@@ -667,7 +658,6 @@ def _start_step(K, mirror, rim_fit, rim_seen, D, image_size, camera_cls):
             D=D,
             image_size=image_size,
             refine=True,
-            camera_cls=camera_cls,
             lens=None,
         )
     except ValueError as e:
@@ -1001,7 +991,6 @@ def _shape_free(adj, x, camera, board_poses):
         adj.n_d,
         adj.fit_skew,
         True,
-        adj.camera_cls,
         adj.lens_px,
         None if adj.fit_lens_z else adj.lens_z,
     )

@@ -14,9 +14,9 @@ import cv2
 from .._atomic import OutputError, atomic_output
 from .._quiet import opencv_silenced
 from .._validate import check_readable, file_path, shown
-from ..camera import MisalignedHyperbolicCamera
 from ..formats import omnicam_files
 from ..formats.omnicam_files import Verdict, read_verdict
+from ..hyperbolic_camera import MisalignedHyperbolicCamera
 from ..images import file_kind, read_image
 
 PROG = "omnicam"
@@ -323,9 +323,10 @@ def save_calibration(camera, path, overwrite, report=None, **verdict):
         raise CliError(f"calibration file {path} exists; pass --overwrite to replace it")
     try:
         if report is None:
-            camera.save(path)
+            omnicam_files.save_camera(camera, path)
         else:
-            camera.save(
+            omnicam_files.save_camera(
+                camera,
                 path,
                 report if isinstance(report, Verdict) else Verdict.from_report(report, **verdict),
             )

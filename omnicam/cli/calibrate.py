@@ -13,7 +13,7 @@ import numpy as np
 from .._validate import validate_D, validate_K
 from ..calibration import calibrate
 from ..calibration.rim import check_hint, detect_rim, fit_rim
-from ..camera import MisalignedHyperbolicCamera, scale_K
+from ..camera import scale_K
 from ..formats.omnicam_files import SUFFIXES, Verdict, read_verdict, reading
 from ..gauge import posture_error
 from ..mirror import HyperbolicMirror
@@ -185,7 +185,6 @@ def cmd_calibrate(args):
             D=D,
             image_size=image_size,
             refine=args.refine,
-            camera_cls=MisalignedHyperbolicCamera,
             rim_hint=args.rim_hint,
             max_tilt_deg=args.max_tilt,
             max_offset_mm=args.max_offset,

@@ -10,8 +10,8 @@ import cv2
 import numpy as np
 
 from .. import synthetic
-from ..camera import MisalignedHyperbolicCamera
 from ..formats.omnicam_files import write_far_lines, write_intrinsics
+from ..hyperbolic_camera import MisalignedHyperbolicCamera
 from ..synthetic.demo import DEMO_CLICK_NOISE_PX, demo_environment, demo_far_lines
 from ..views import UNSEEN, K_from_fov, rotation_from_ypr
 from ._common import (

@@ -33,10 +33,11 @@ import cv2
 import numpy as np
 
 from ..calibration.rim import check_hint, detect_rim
-from ..camera import MisalignedHyperbolicCamera, scale_K
+from ..camera import scale_K
 from ..chessboard import DIST_MODELS
 from ..chessboard.calibrate import ONE_SIDED
 from ..formats.omnicam_files import SUFFIXES
+from ..hyperbolic_camera import MisalignedHyperbolicCamera
 from ..mirror import HyperbolicMirror
 from ._common import (
     EXIT_OK,

@@ -61,8 +61,6 @@ import json
 import math
 import os
 import re
-from collections.abc import Callable
-from typing import TypeVar
 
 import cv2
 import numpy as np
@@ -80,11 +78,9 @@ from .._validate import (
     validate_image_size,
     validate_K,
 )
+from ..camera import MisalignedCatadioptricCamera
 from ..mirror import HyperbolicMirror
 from .other_tools import not_pinhole, read_other_central, read_other_intrinsics
-
-#: The camera class :func:`load_camera` builds (the caller's own: io never imports it).
-CameraT = TypeVar("CameraT")
 
 __all__ = [
     "save_camera",
@@ -585,11 +581,10 @@ def reading(path, what):
     return Reader(_parse(_prescan(path, what), path, what, ext), path, what)
 
 
-def load_camera(path: PathLike, cls: Callable[..., CameraT]) -> CameraT:
-    """Read and validate a calibration file; return ``cls(K, mirror, rvec, tvec, D, image_size)``.
+def load_camera(path: PathLike) -> MisalignedCatadioptricCamera:
+    """Read and validate a calibration file written by :func:`save_camera`.
 
-    ``cls`` is the camera class (:meth:`MisalignedHyperbolicCamera.load` passes itself), so this
-    module stays below the camera in the layers and never imports it.
+    :meth:`omnicam.MisalignedHyperbolicCamera.load` is this, as the design's class.
 
     Raises
     ------
@@ -618,14 +613,20 @@ def load_camera(path: PathLike, cls: Callable[..., CameraT]) -> CameraT:
     tvec = r.matrix("tvec", (3,))
     size = r.image_size()
     body = r.node("camera_reflection", required=False)  # optional: absent in older files
-    extra = {}
+    reflection = None
     if body is not None:
         if not isinstance(body, dict):
             raise r.fail("camera_reflection", "must be a map with r, z")
-        extra["camera_reflection"] = [r.number(f"camera_reflection.{k}", body) for k in "rz"]
+        reflection = (r.number("camera_reflection.r", body), r.number("camera_reflection.z", body))
     try:
-        return cls(
-            K, mirror, rvec, tvec, D=None if D is None else D.ravel(), image_size=size, **extra
+        return MisalignedCatadioptricCamera(
+            K,
+            mirror,
+            rvec,
+            tvec,
+            D=None if D is None else D.ravel(),
+            image_size=size,
+            camera_reflection=reflection,
         )
     except ValueError as e:
         raise r.fail(str(e).split(" ", 1)[0].rstrip(":,"), str(e)) from None
@@ -1163,7 +1164,9 @@ def _write_seq(fs, name, values):
     fs.endWriteStruct()
 
 
-def save_camera(camera: object, path: PathLike, verdict: object = None) -> None:
+def save_camera(
+    camera: MisalignedCatadioptricCamera, path: PathLike, verdict: object = None
+) -> None:
     """Write ``camera`` to ``path`` atomically and verified, with its verdict if given.
 
     A temporary file in the same folder is written, flushed, read back and compared with
@@ -1172,7 +1175,7 @@ def save_camera(camera: object, path: PathLike, verdict: object = None) -> None:
 
     Parameters
     ----------
-    camera : MisalignedHyperbolicCamera
+    camera : MisalignedCatadioptricCamera
     path : str or os.PathLike
         ``.yaml``, ``.yml``, ``.xml`` or ``.json`` (the format follows the extension).
     verdict : Verdict or a calibration report, optional
@@ -1187,7 +1190,6 @@ def save_camera(camera: object, path: PathLike, verdict: object = None) -> None:
         the message names the file, the old file at ``path`` is unchanged and no temporary file
         is left.
     """
-    cls = type(camera)
     if verdict is not None and not isinstance(verdict, Verdict):
         verdict = Verdict.from_report(verdict)
 
@@ -1215,7 +1217,7 @@ def save_camera(camera: object, path: PathLike, verdict: object = None) -> None:
             _write_verdict(fs, verdict)
 
     def read_back(tmp):
-        return _same_camera(load_camera(tmp, cls), camera) and read_verdict(tmp) == verdict
+        return _same_camera(load_camera(tmp), camera) and read_verdict(tmp) == verdict
 
     _atomic_filestorage(path, "calibration file", write, read_back)
 

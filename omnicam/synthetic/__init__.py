@@ -36,7 +36,8 @@ import math
 import cv2
 import numpy as np
 
-from ..camera import MisalignedHyperbolicCamera
+from ..camera import MisalignedCatadioptricCamera
+from ..hyperbolic_camera import MisalignedHyperbolicCamera
 from ..mirror import HyperbolicMirror
 
 __all__ = [
@@ -481,9 +482,10 @@ def _shade_room(room, P, d):
 # -- rendering --------------------------------------------------------------------------------
 def check_camera(camera):
     """The camera's image size; ``ValueError`` unless it is a camera with one."""
-    if not isinstance(camera, MisalignedHyperbolicCamera):
+    if not isinstance(camera, MisalignedCatadioptricCamera):
         raise ValueError(
-            f"camera must be a MisalignedHyperbolicCamera, got {type(camera).__name__}"
+            f"camera must be a MisalignedHyperbolicCamera (or MisalignedCatadioptricCamera), "
+            f"got {type(camera).__name__}"
         )
     if camera.image_size is None:
         raise ValueError("camera has no image_size; construct it with image_size=(width, height)")

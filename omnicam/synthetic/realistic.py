@@ -1214,7 +1214,7 @@ class StressCase:
 
     def camera(self):
         """The truth :class:`~omnicam.camera.MisalignedHyperbolicCamera`."""
-        from ..camera import MisalignedHyperbolicCamera
+        from ..hyperbolic_camera import MisalignedHyperbolicCamera
         from . import default_mirror
 
         mirror = default_mirror()
