@@ -2,7 +2,7 @@
 
 Every ``import`` statement of every module under ``omnicam/`` is an edge, wherever it stands in
 the file; a package edge points at its ``__init__``. The graph must have no strongly connected
-component with more than one module (the layers of the README's Layout section).
+component with more than one module (the layers of docs/architecture.md, "Layout").
 """
 
 import ast

@@ -1,5 +1,5 @@
-"""The README's Layout is the package: every module has its row, and the layers it lists are
-the way the imports run (every import counted, function-level ones included)."""
+"""The Layout of docs/architecture.md is the package: every module has its row, and the layers
+it lists are the way the imports run (every import counted, function-level ones included)."""
 
 import re
 import subprocess
@@ -8,8 +8,8 @@ from pathlib import Path
 
 from test_layers import ROOT, import_graph
 
-README = (ROOT.parent / "README.md").read_text(encoding="utf-8")
-LAYOUT = README.split("## Layout", 1)[1].split("\n## ", 1)[0]
+ARCHITECTURE = (ROOT.parent / "docs" / "architecture.md").read_text(encoding="utf-8")
+LAYOUT = ARCHITECTURE.split("## Layout", 1)[1].split("\n## ", 1)[0]
 PACKAGES = tuple(sorted(p.name for p in ROOT.iterdir() if (p / "__init__.py").is_file()))
 
 
@@ -43,14 +43,16 @@ def test_every_import_runs_down_the_readmes_layers():
     layers["__init__.py"] = 0  # the package's face: it imports nothing until a name is used
     graph = import_graph()
     units = {unit(m) for m in graph} - {"__init__.py"}
-    assert units <= set(layers), f"not in the README's layers: {sorted(units - set(layers))}"
+    assert units <= set(layers), (
+        f"not in the layers of docs/architecture.md: {sorted(units - set(layers))}"
+    )
     upward = [
         (a, b)
         for a, targets in graph.items()
         for b in targets
         if unit(a) != "__init__.py" and unit(a) != unit(b) and layers[unit(b)] >= layers[unit(a)]
     ]
-    assert not upward, f"imports that do not run down the README's layers: {upward}"
+    assert not upward, f"imports that do not run down the layers of docs/architecture.md: {upward}"
 
 
 def test_every_module_has_its_row_in_the_layout_table():
@@ -74,9 +76,11 @@ def test_every_module_has_its_row_in_the_layout_table():
             continue
         if not any(rel == c or rel.startswith(c + "/") for c in covered):
             missing.append(rel)
-    assert not missing, f"modules without a row in the README's Layout: {missing}"
+    assert not missing, f"modules without a row in the Layout of docs/architecture.md: {missing}"
     for c in covered:
-        assert (ROOT.parent / c).exists(), f"the README's Layout names {c}, which does not exist"
+        assert (ROOT.parent / c).exists(), (
+            f"the Layout of docs/architecture.md names {c}, which does not exist"
+        )
 
 
 def test_importing_omnicam_has_no_side_effect():
