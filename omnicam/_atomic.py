@@ -2,7 +2,7 @@
 
 Every file omnicam writes (calibration, intrinsics and far-line files, images, maps, exports)
 goes through :func:`atomic_output`, and videos, written frame by frame, through the same steps
-(:class:`omnicam.stream.VideoOutput`), so a reader sees either the old file or the complete new
+(:class:`omnicam.video.VideoOutput`), so a reader sees either the old file or the complete new
 one, never a half-written one -- also on a full disk, Ctrl-C or a crash mid-write:
 
 1. a new, empty temporary file is created next to the target with the same extension (OpenCV

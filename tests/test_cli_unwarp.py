@@ -298,7 +298,7 @@ def test_equirect_mp4_carries_spherical_video_metadata(data, tmp_path, capsys):
 
 @pytest.mark.skipif(shutil.which("ffprobe") is None, reason="ffprobe is not installed")
 def test_each_video_output_names_its_codec_in_one_line(data, tmp_path, capsys):
-    from omnicam.stream import H264
+    from omnicam.video import H264
 
     outs = [tmp_path / "a.mp4", tmp_path / "b.avi"]
     code = main(
@@ -478,13 +478,13 @@ def test_frames_lost_on_write_fail_and_keep_the_old_output(data, tmp_path, capsy
 
 
 def test_full_disk_stops_early_and_keeps_the_old_output(data, tmp_path, capsys, monkeypatch):
-    from omnicam import stream
+    from omnicam import video
 
     out = tmp_path / "out.avi"
     write_video(out, 2, (64, 16))
     before = out.read_bytes()
     long_video = write_video(tmp_path / "long.avi", 40)
-    monkeypatch.setattr(stream, "_free_bytes", lambda path: 1000)
+    monkeypatch.setattr(video, "_free_bytes", lambda path: 1000)
     code = main(
         [
             "unwarp",
@@ -662,10 +662,10 @@ def small_tmpfs(tmp_path):
 def test_a_really_full_disk_never_replaces_the_old_output(
     data, tmp_path, small_tmpfs, capsys, monkeypatch, ext, min_free
 ):
-    from omnicam import stream
+    from omnicam import video
 
     if min_free is not None:
-        monkeypatch.setattr(stream, "MIN_FREE_BYTES", min_free)  # only the read-back check
+        monkeypatch.setattr(video, "MIN_FREE_BYTES", min_free)  # only the read-back check
     src = write_video(tmp_path / "src.avi", 200)
     out = small_tmpfs / f"out.{ext}"
     write_video(out, 20, (128, 32))

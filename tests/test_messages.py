@@ -433,7 +433,7 @@ def test_calibrate_refuses_a_truncated_jpeg_by_name(tmp_path, capsys, jpeg):
 
 
 def test_a_video_opencv_cannot_open_is_named_with_its_size(tmp_path):
-    from omnicam.stream import open_capture
+    from omnicam.video import open_capture
 
     path = tmp_path / "clip.mp4"
     path.write_bytes(bytes(16))

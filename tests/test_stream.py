@@ -9,8 +9,8 @@ import numpy as np
 import pytest
 
 from omnicam import Unwarper, synthetic
-from omnicam import stream as stream_module
-from omnicam.stream import H264, OutputError, VideoOutput, open_capture, video_codec
+from omnicam import video as video_module
+from omnicam.video import H264, OutputError, VideoOutput, open_capture, video_codec
 from omnicam.views import UNSEEN, PanoramaView, PerspectiveView
 
 VIEWS = {"pano": PanoramaView((256, 64)), "front": PerspectiveView((96, 72), fov=90.0, yaw=30.0)}
@@ -224,7 +224,7 @@ def hidden(folder):
 
 
 def decoded(path):
-    return stream_module.count_frames(path)
+    return video_module.count_frames(path)
 
 
 def test_stream_writes_a_temporary_file_and_replaces_the_output_only_at_the_end(tmp_path, unwarper):
@@ -397,7 +397,7 @@ def test_the_codec_the_stream_reports_is_the_one_in_the_file(tmp_path, unwarper,
     assert sum(1 for _ in s) == 3
     fourcc = s.fourcc["pano"]
     assert s.written["pano"].fourcc == fourcc
-    expected = stream_module.VIDEO_CODECS[ext]
+    expected = video_module.VIDEO_CODECS[ext]
     assert fourcc in expected
     if fourcc != expected[0]:  # fell back: the codecs before it really do not write here
         for code in expected[: expected.index(fourcc)]:

@@ -8,7 +8,7 @@ before the first view belong to the first. Every view has its own ``-o``: an ima
 numbered from 0).
 
 Video outputs are never lost: they are written by :meth:`omnicam.stream.Unwarper.stream`
-(:class:`omnicam.stream.VideoOutput`), to a temporary file beside the output that must decode
+(:class:`omnicam.video.VideoOutput`), to a temporary file beside the output that must decode
 every frame written before it replaces the output. On Ctrl-C the run stops after the current
 frame and keeps the frames so far: in the output itself when there was none before (the message
 says so), else in ``NAME.partial.EXT`` beside it, leaving the earlier complete output untouched;
@@ -37,7 +37,8 @@ from .._atomic import OutputError, write_bytes
 from .._validate import file_path
 from ..formats.spherical_metadata import inject_spherical_mp4, jpeg_with_photosphere_xmp
 from ..spherical import equirect_view
-from ..stream import H264, VIDEO_CODECS, Unwarper, count_frames, open_capture
+from ..stream import Unwarper
+from ..video import H264, VIDEO_CODECS, count_frames, open_capture
 from ..views import PanoramaView, PerspectiveView
 from ._common import (
     EXIT_FAILURE,
@@ -369,7 +370,7 @@ class Progress:
 
 
 def _open_capture(source):
-    """:func:`omnicam.stream.open_capture` of the command's INPUT (digits: a camera index)."""
+    """:func:`omnicam.video.open_capture` of the command's INPUT (digits: a camera index)."""
     try:
         return open_capture(int(source) if source.isdigit() else source)
     except ValueError as e:
