@@ -336,9 +336,10 @@ class Unwarper:
             extension).
         fourcc : str, sequence of str or None
             The codec, or codecs tried in order (:func:`video_codec`); None: H.264 where the
-            container and this OpenCV can (``.mp4``, ``.m4v``, ``.mov``), else mp4v; MJPG for
-            ``.avi`` and ``.mkv`` (:data:`VIDEO_CODECS`). The codec used is in
-            ``fourcc`` of the returned stream.
+            container and this OpenCV can (``.mp4``, ``.m4v``, ``.mov``), else mp4v; VP9, else
+            VP8, for ``.webm``; MJPG for ``.avi`` and ``.mkv`` (:data:`VIDEO_CODECS`). The codec
+            used is in ``fourcc`` of the returned stream (:func:`omnicam.video.fell_back`: one
+            browsers do not play although the container has one they do).
         fps : float, optional
             Frame rate of the outputs; default the source's, or 30 if it has none.
         max_frames : int, optional

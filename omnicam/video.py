@@ -33,12 +33,15 @@ __all__ = [
     "MIN_FREE_BYTES",
     "OTHER_CODECS",
     "VIDEO_CODECS",
+    "WEB_CODECS",
     "OutputError",
     "VideoOutput",
     "WrittenVideo",
     "count_frames",
+    "fell_back",
     "open_capture",
     "video_codec",
+    "web_codec",
 ]
 
 
@@ -163,24 +166,45 @@ def check_fps(fps):
 
 # -- codecs ---------------------------------------------------------------------------------------
 
-#: Codecs tried in order, per container, when no ``fourcc`` is given: H.264 first where the
-#: container takes it (browsers play it), then what every FFmpeg build of OpenCV writes (mp4v:
-#: MPEG-4 Part 2, which many players and no browser play). MJPG is OpenCV's own encoder.
+#: Codecs tried in order, per container, when no ``fourcc`` is given: first what browsers play
+#: (H.264 in MP4 and MOV, VP9 then VP8 in WebM), where this OpenCV writes it; then, in MP4 and
+#: MOV, mp4v (MPEG-4 Part 2), which every FFmpeg build of OpenCV writes and many players, but no
+#: browser, play (:func:`fell_back` tells). The FFmpeg inside the opencv-python wheels has no
+#: H.264 encoder; it has VP9 and VP8. VP9 encodes several times slower than VP8 (``"VP80"``).
+#: MJPG is OpenCV's own encoder.
 VIDEO_CODECS = {
-    ".mp4": ("avc1", "H264", "mp4v"),
-    ".m4v": ("avc1", "H264", "mp4v"),
-    ".mov": ("avc1", "H264", "mp4v"),
+    ".mp4": ("avc1", "H264", "X264", "mp4v"),
+    ".m4v": ("avc1", "H264", "X264", "mp4v"),
+    ".mov": ("avc1", "H264", "X264", "mp4v"),
+    ".webm": ("VP90", "VP80"),
     ".avi": ("MJPG",),
     ".mkv": ("MJPG",),
 }
 #: Codecs for a container :data:`VIDEO_CODECS` does not name.
-OTHER_CODECS = ("avc1", "H264", "mp4v")
+OTHER_CODECS = ("avc1", "H264", "X264", "mp4v")
 #: H.264's FourCCs (the codec browsers play).
 H264 = ("avc1", "H264", "h264", "X264", "x264", "avc3")
+#: The codecs browsers play, by name, and their FourCCs.
+WEB_CODECS = {"H.264": H264, "VP9": ("VP90", "vp09"), "VP8": ("VP80", "vp08")}
 #: A video write stops before the disk is completely full (bytes free on its file system).
 MIN_FREE_BYTES = 256 * 1024
 #: How often (in frames) a video write looks at the free space.
 FREE_SPACE_EVERY = 16
+
+
+def web_codec(fourcc) -> str | None:
+    """The name of the codec ``fourcc`` if browsers play it (``"H.264"``, ``"VP9"``, ``"VP8"``),
+    else None."""
+    return next((name for name, codes in WEB_CODECS.items() if fourcc in codes), None)
+
+
+def fell_back(path, fourcc) -> bool:
+    """Whether ``fourcc``, the codec :func:`video_codec` chose for ``path`` by default, is a
+    fallback browsers do not play: the container's first choice is a codec they play, and this
+    OpenCV wrote none of those."""
+    ext = os.path.splitext(os.fspath(path))[1].lower()
+    first = VIDEO_CODECS.get(ext, OTHER_CODECS)[0]
+    return web_codec(first) is not None and web_codec(fourcc) is None
 
 
 class WrittenVideo(NamedTuple):
@@ -255,8 +279,8 @@ def video_codec(path, size, fps=30.0, fourcc=None, color=True) -> str:
         Frame rate.
     fourcc : str, sequence of str or None
         A codec (``"mp4v"``) or codecs tried in order; None: :data:`VIDEO_CODECS` for the
-        container (H.264, then mp4v, for ``.mp4``, ``.m4v`` and ``.mov``), else
-        :data:`OTHER_CODECS`.
+        container (H.264, then mp4v, for ``.mp4``, ``.m4v`` and ``.mov``; VP9, then VP8, for
+        ``.webm``), else :data:`OTHER_CODECS`.
     color : bool
         Three-channel (BGR) frames, else single-channel.
 
