@@ -36,6 +36,7 @@ from .video import (
     VideoOutput,
     WrittenVideo,
     capture_fps,
+    check_even_size,
     check_fps,
     check_frame_size,
     codec_candidates,
@@ -383,12 +384,8 @@ class Unwarper:
             )
         if fourcc is not None:
             codec_candidates("", fourcc)
-        odd = {n: self.view_size(n) for n in outputs if any(v % 2 for v in self.view_size(n))}
-        if odd:
-            raise ValueError(
-                f"video outputs need an even width and height (cv2.VideoWriter "
-                f"silently drops an odd last row or column); got {odd}"
-            )
+        for name, path in outputs.items():
+            check_even_size(path, self.view_size(name))
         if fps is not None:
             check_fps(fps)
         if max_frames is not None and not (

@@ -153,6 +153,19 @@ def check_frame_size(frame_size):
     return int(w), int(h)
 
 
+def check_even_size(path, size):
+    """``ValueError`` naming the video ``path``, its frame ``size`` and an even size to give
+    instead, unless ``(width, height)`` are both even (``cv2.VideoWriter`` silently drops an odd
+    last row or column)."""
+    w, h = size
+    if w % 2 or h % 2:
+        raise ValueError(
+            f"cannot write video {os.fspath(path)} at {w}x{h}: a video needs an even width "
+            f"and height (OpenCV drops an odd last row or column); give {w + w % 2}x{h + h % 2} "
+            f"(or another even size)"
+        )
+
+
 def check_fps(fps):
     """``fps`` as a positive finite float, or ``ValueError`` naming it."""
     if not (
@@ -392,11 +405,7 @@ class VideoOutput:
             raise ValueError(
                 f"size must be (width, height), two positive integers, got {size!r}"
             ) from None
-        if any(v % 2 for v in self.size):
-            raise ValueError(
-                f"video {self.path}: the frames are {self.size[0]}x{self.size[1]}; video needs "
-                f"an even width and height (cv2.VideoWriter drops an odd last row or column)"
-            )
+        check_even_size(self.path, self.size)
         fps = check_fps(fps)
         if os.path.isdir(self.path):
             raise OutputError(f"cannot write video {self.path}: it is a folder")

@@ -432,6 +432,24 @@ def test_calibrate_refuses_a_truncated_jpeg_by_name(tmp_path, capsys, jpeg):
     assert not (tmp_path / "c.yaml").exists()
 
 
+def test_an_odd_sized_video_output_names_the_file_its_size_and_an_even_one(tmp_path, capsys):
+    from omnicam.cli import main
+
+    src = tmp_path / "in.avi"
+    writer = cv2.VideoWriter(str(src), cv2.VideoWriter_fourcc(*"MJPG"), 10.0, (64, 64))
+    for _ in range(2):
+        writer.write(np.zeros((64, 64, 3), np.uint8))
+    writer.release()
+    out = tmp_path / "o.mp4"
+    argv = ["unwarp", str(src), "-c", CALIB, "--panorama", "63x16", "-o", str(out), "--quiet"]
+    assert main(argv) == 1
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1, err
+    assert f"cannot write video {out} at 63x16" in err[0] and "give 64x16" in err[0], err
+    assert "'0'" not in err[0]  # the view's internal key means nothing to the user
+    assert sorted(os.listdir(tmp_path)) == ["in.avi"]
+
+
 def test_a_video_opencv_cannot_open_is_named_with_its_size(tmp_path):
     from omnicam.video import open_capture
 

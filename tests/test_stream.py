@@ -189,8 +189,13 @@ def test_stream_bad_sources_and_outputs(tmp_path, unwarper):
 def test_stream_refuses_odd_sized_video_outputs(tmp_path):
     cam = synthetic.aligned_rig((64, 64))
     unwarper = Unwarper.from_camera(cam, {"pano": PanoramaView((33, 8))})
-    with pytest.raises(ValueError, match="even"):
-        next(unwarper.stream(0, outputs={"pano": tmp_path / "p.avi"}))
+    out = tmp_path / "p.avi"
+    with pytest.raises(ValueError) as e:
+        next(unwarper.stream(0, outputs={"pano": out}))
+    assert str(e.value) == (
+        f"cannot write video {out} at 33x8: a video needs an even width and height (OpenCV "
+        f"drops an odd last row or column); give 34x8 (or another even size)"
+    )
 
 
 def test_perspective_view_and_maps_take_k_new_size_r_in_one_order(cam):
@@ -359,8 +364,8 @@ def test_video_output_refuses_a_file_that_lost_frames(tmp_path, monkeypatch):
 
 
 def test_video_output_refuses_odd_sizes_and_bad_frame_rates(tmp_path):
-    with pytest.raises(ValueError, match="even"):
-        VideoOutput(tmp_path / "v.avi", (63, 32), 10.0)
+    with pytest.raises(ValueError, match=r"v\.avi at 63x31: .*even.*give 64x32"):
+        VideoOutput(tmp_path / "v.avi", (63, 31), 10.0)
     with pytest.raises(ValueError, match="fps"):
         VideoOutput(tmp_path / "v.avi", (64, 32), float("nan"))
     assert list(tmp_path.iterdir()) == []
