@@ -318,6 +318,12 @@ INPUTS = {  # name -> (file name, bytes, words of the one error line)
         bytes(range(16)),
         "input {p} is not a video OpenCV can open (16 bytes)",
     ),
+    "16-byte mp4 header": (  # OpenCV's HEIF reader claims it: it is still no image
+        "head.mp4",
+        b"\0\0\0\x18ftypisom" + bytes(4),
+        "input {p} is an MP4 or QuickTime video OpenCV cannot open (16 bytes): truncated or "
+        "corrupt",
+    ),
     "corrupt png": (
         "p.png",
         b"\x89PNG\r\n\x1a\n" + bytes(100),
