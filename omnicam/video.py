@@ -46,8 +46,6 @@ __all__ = [
 
 
 # -- reading --------------------------------------------------------------------------------------
-
-
 def open_capture(source) -> cv2.VideoCapture:
     """A ``cv2.VideoCapture`` that is open, or ``ValueError`` naming what could not be opened.
 
@@ -129,8 +127,6 @@ def capture_fps(cap):
 
 
 # -- arguments ------------------------------------------------------------------------------------
-
-
 def check_frame_size(frame_size):
     """``frame_size`` as ``(width, height)`` positive ints, or ``ValueError`` naming it."""
     try:
@@ -178,7 +174,6 @@ def check_fps(fps):
 
 
 # -- codecs ---------------------------------------------------------------------------------------
-
 #: Codecs tried in order, per container, when no ``fourcc`` is given: first what browsers play
 #: (H.264 in MP4 and MOV, VP9 then VP8 in WebM), where this OpenCV writes it; then, in MP4 and
 #: MOV, mp4v (MPEG-4 Part 2), which every FFmpeg build of OpenCV writes and many players, but no
@@ -199,10 +194,6 @@ OTHER_CODECS = ("avc1", "H264", "X264", "mp4v")
 H264 = ("avc1", "H264", "h264", "X264", "x264", "avc3")
 #: The codecs browsers play, by name, and their FourCCs.
 WEB_CODECS = {"H.264": H264, "VP9": ("VP90", "vp09"), "VP8": ("VP80", "vp08")}
-#: A video write stops before the disk is completely full (bytes free on its file system).
-MIN_FREE_BYTES = 256 * 1024
-#: How often (in frames) a video write looks at the free space.
-FREE_SPACE_EVERY = 16
 
 
 def web_codec(fourcc) -> str | None:
@@ -220,20 +211,9 @@ def fell_back(path, fourcc) -> bool:
     return web_codec(first) is not None and web_codec(fourcc) is None
 
 
-class WrittenVideo(NamedTuple):
-    """A video file a :class:`VideoOutput` put in place."""
-
-    path: str
-    """Where the frames are: the output, or ``NAME.partial.EXT`` beside an earlier output."""
-    frames: int
-    """Frames that decode from it."""
-    fourcc: str
-    """The codec it was written with."""
-    complete: bool
-    """False for the frames so far of a run that stopped early (Ctrl-C, the stream closed)."""
-
-
 def codec_candidates(path, fourcc):
+    """The codecs to try for ``path``: ``fourcc`` as a tuple, or, for None, the container's
+    (:data:`VIDEO_CODECS`); ``ValueError`` for a malformed ``fourcc``."""
     if fourcc is None:
         return VIDEO_CODECS.get(os.path.splitext(path)[1].lower(), OTHER_CODECS)
     codes = (fourcc,) if isinstance(fourcc, str) else tuple(fourcc)
@@ -326,6 +306,23 @@ def video_codec(path, size, fps=30.0, fourcc=None, color=True) -> str:
 
 
 # -- writing --------------------------------------------------------------------------------------
+#: A video write stops before the disk is completely full (bytes free on its file system).
+MIN_FREE_BYTES = 256 * 1024
+#: How often (in frames) a video write looks at the free space.
+FREE_SPACE_EVERY = 16
+
+
+class WrittenVideo(NamedTuple):
+    """A video file a :class:`VideoOutput` put in place."""
+
+    path: str
+    """Where the frames are: the output, or ``NAME.partial.EXT`` beside an earlier output."""
+    frames: int
+    """Frames that decode from it."""
+    fourcc: str
+    """The codec it was written with."""
+    complete: bool
+    """False for the frames so far of a run that stopped early (Ctrl-C, the stream closed)."""
 
 
 def _free_bytes(path):
