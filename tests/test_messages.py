@@ -438,8 +438,15 @@ def test_calibrate_refuses_a_truncated_jpeg_by_name(tmp_path, capsys, jpeg):
     assert not (tmp_path / "c.yaml").exists()
 
 
-def test_an_odd_sized_video_output_names_the_file_its_size_and_an_even_one(tmp_path, capsys):
-    from omnicam.cli import main
+def test_an_odd_sized_video_output_names_the_file_its_size_and_an_even_one(
+    tmp_path, capsys, monkeypatch
+):
+    from omnicam.cli import main, unwarp
+
+    def no_tables(*args, **kwargs):
+        raise AssertionError("the size is refused before the tables are built")
+
+    monkeypatch.setattr(unwarp.Unwarper, "from_camera", no_tables)
 
     src = tmp_path / "in.avi"
     writer = cv2.VideoWriter(str(src), cv2.VideoWriter_fourcc(*"MJPG"), 10.0, (64, 64))

@@ -40,7 +40,14 @@ from .._validate import file_path
 from ..formats.spherical_metadata import inject_spherical_mp4, jpeg_with_photosphere_xmp
 from ..spherical import equirect_view
 from ..stream import Unwarper
-from ..video import VIDEO_CODECS, count_frames, fell_back, open_capture, web_codec
+from ..video import (
+    VIDEO_CODECS,
+    check_even_size,
+    count_frames,
+    fell_back,
+    open_capture,
+    web_codec,
+)
 from ..views import PanoramaView, PerspectiveView
 from ._common import (
     EXIT_FAILURE,
@@ -272,6 +279,11 @@ def cmd_unwarp(args):
             raise CliError(str(e)) from None
     for spec in specs:
         spec.kind_out = _output_kind(spec.output, video_input)
+        if spec.kind_out == "video":  # before the tables are built, which can take seconds
+            try:
+                check_even_size(spec.output, spec.size)
+            except ValueError as e:
+                raise CliError(str(e)) from None
         if not live and os.path.exists(spec.output) and os.path.samefile(source, spec.output):
             raise CliError(f"output {spec.output} is the input")
         target = _sequence_name(spec.output, 0) if spec.kind_out == "sequence" else spec.output
