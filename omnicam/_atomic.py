@@ -2,7 +2,7 @@
 
 Every file omnicam writes (calibration, intrinsics and far-line files, images, maps, exports)
 goes through :func:`atomic_output`, and videos, written frame by frame, through the same steps
-(:class:`omnicam.stream.VideoOutput`), so a reader sees either the old file or the complete new
+(:class:`omnicam.video.VideoOutput`), so a reader sees either the old file or the complete new
 one, never a half-written one -- also on a full disk, Ctrl-C or a crash mid-write:
 
 1. a new, empty temporary file is created next to the target with the same extension (OpenCV
@@ -25,6 +25,7 @@ import atexit
 import contextlib
 import errno
 import os
+import re
 import secrets
 import signal
 import threading
@@ -42,11 +43,16 @@ __all__ = [
 ]
 
 TEMP_MARK = ".omnicam-tmp-"
+# the whole name of a temporary file of temp_beside, the writer's pid in group 1: only these are
+# ever removed as stale (a name that merely holds TEMP_MARK is someone else's file)
+_TEMP_NAME = re.compile(r"\..*" + re.escape(TEMP_MARK) + r"(\d{1,9})-[0-9a-f]{8}(\.[^.]*)?", re.S)
 # temporary files of this process not yet renamed or removed: a Ctrl-C can land between creating
 # one and the ``with`` block that owns it (in contextlib's __enter__), where no ``finally`` runs;
 # they are removed at exit
 _LIVE: set[str] = set()
-STALE_AFTER_S = 60.0  # a temporary file of a process that is gone, or this old, is litter
+# a temporary file whose process lives is litter only this long after its last write (its pid was
+# reused after the writer was killed); a live writer, even of a long video, touches it far sooner
+STALE_AFTER_S = 3600.0
 
 
 class OutputError(ValueError):
@@ -68,28 +74,32 @@ def _pid_alive(pid):
     except ProcessLookupError:
         return False
     except OSError:  # EPERM: someone else's live process
+        pass
+    try:  # a killed writer its parent has not reaped yet is a zombie: dead, as far as files go
+        with open(f"/proc/{pid}/stat", "rb") as f:
+            return f.read().rsplit(b")", 1)[1].split()[0] != b"Z"
+    except (OSError, IndexError):  # no /proc (macOS): alive, as kill said
         return True
-    return True
 
 
 def remove_stale(folder, now=None):
     """Remove temporary files of dead or long-gone writers in ``folder``; return how many.
 
-    A file ``.<name>.omnicam-tmp-<pid>-<random><ext>`` is stale when process ``pid`` no longer
-    exists or it is older than ``STALE_AFTER_S`` and its process is not this one. Errors are
-    ignored: this is housekeeping, never a reason to fail a save.
+    A process killed while writing (SIGKILL, a crash, the power) cannot remove its temporary
+    file, so the next write into the folder does. A file named exactly as :func:`temp_beside`
+    names them, ``.<name>.omnicam-tmp-<pid>-<8 hex digits><ext>``, is stale when process
+    ``pid`` is gone (or a zombie), or when it was last written ``STALE_AFTER_S`` ago (``pid``
+    reused); never while it is this process's. Errors are ignored: this is housekeeping, never
+    a reason to fail a save.
     """
     now = time.time() if now is None else now
     removed = 0
     with contextlib.suppress(OSError):
         for entry in os.scandir(folder):
-            name = entry.name
-            if not name.startswith(".") or TEMP_MARK not in name:
+            ours = _TEMP_NAME.fullmatch(entry.name)
+            if ours is None:
                 continue
-            try:
-                pid = int(name.split(TEMP_MARK, 1)[1].split("-", 1)[0])
-            except ValueError:
-                continue
+            pid = int(ours.group(1))
             if pid == os.getpid():
                 continue
             with contextlib.suppress(OSError):

@@ -296,55 +296,66 @@ def test_equirect_mp4_carries_spherical_video_metadata(data, tmp_path, capsys):
     assert hidden(tmp_path) == []
 
 
+def _ffprobe_codec(path):
+    return subprocess.run(
+        ["ffprobe", "-v", "error", "-show_entries", "stream=codec_name", "-of", "csv=p=0"]
+        + [str(path)],
+        capture_output=True,
+        text=True,
+        check=True,
+    ).stdout.strip()
+
+
 @pytest.mark.skipif(shutil.which("ffprobe") is None, reason="ffprobe is not installed")
 def test_each_video_output_names_its_codec_in_one_line(data, tmp_path, capsys):
-    from omnicam.stream import H264
+    from omnicam.video import H264
 
-    outs = [tmp_path / "a.mp4", tmp_path / "b.avi"]
-    code = main(
-        [
-            "unwarp",
-            str(data["video"]),
-            "-c",
-            str(data["calib"]),
-            "--panorama",
-            "64x16",
-            "-o",
-            str(outs[0]),
-            "--panorama",
-            "32x8",
-            "-o",
-            str(outs[1]),
-        ]
-    )
+    outs = [tmp_path / "a.mp4", tmp_path / "b.avi", tmp_path / "c.webm"]
+    argv = ["unwarp", str(data["video"]), "-c", str(data["calib"])]
+    for out, size in zip(outs, ("64x16", "32x8", "32x8")):
+        argv += ["--panorama", size, "-o", str(out)]
+    code = main(argv)
     out, err = capsys.readouterr()
     assert code == 0, err
     lines = out.splitlines()
-    assert len(lines) == 2
-    probed = [
-        subprocess.run(
-            ["ffprobe", "-v", "error", "-show_entries", "stream=codec_name", "-of", "csv=p=0"]
-            + [str(p)],
-            capture_output=True,
-            text=True,
-            check=True,
-        ).stdout.strip()
-        for p in outs
-    ]
+    assert len(lines) == 3
+    probed = [_ffprobe_codec(p) for p in outs]
     edge = "; lower edge -60.0 deg: the fixed default, no camera reflection recorded"
     assert lines[1] == f"wrote {outs[1]} (10 frames, 32x8, codec MJPG{edge})"
     assert probed[1] == "mjpeg"
+    assert lines[2] == f"wrote {outs[2]} (10 frames, 32x8, VP9 (VP90){edge})"
+    assert probed[2] == "vp9"
     if probed[0] == "h264":  # an OpenCV with an H.264 encoder
         assert re.fullmatch(
             rf"wrote {outs[0]} \(10 frames, 64x16, H\.264 \((\w+)\){re.escape(edge)}\)", lines[0]
         )
         assert re.search(r"H\.264 \((\w+)\)", lines[0]).group(1) in H264
-    else:  # mp4v, and why
+    else:
         assert probed[0] == "mpeg4"
-        assert lines[0] == (
-            f"wrote {outs[0]} (10 frames, 64x16, codec mp4v: this OpenCV has no H.264 "
-            f"encoder, so browsers will not play it{edge})"
-        )
+        assert lines[0] == f"wrote {outs[0]} (10 frames, 64x16, codec mp4v{edge})"
+
+
+@pytest.mark.skipif(shutil.which("ffprobe") is None, reason="ffprobe is not installed")
+def test_the_mp4_fallback_is_said_once(data, tmp_path, capsys):
+    outs = [tmp_path / "a.mp4", tmp_path / "b.mov", tmp_path / "c.avi"]
+    argv = ["unwarp", str(data["video"]), "-c", str(data["calib"]), "--quiet"]
+    for out in outs:
+        argv += ["--panorama", "32x8", "-o", str(out)]
+    code = main(argv)
+    out, err = capsys.readouterr()
+    assert code == 0, err
+    if _ffprobe_codec(outs[0]) == "h264":
+        assert err == ""
+        pytest.skip("this OpenCV writes H.264: nothing falls back")
+    assert [_ffprobe_codec(p) for p in outs] == ["mpeg4", "mpeg4", "mjpeg"]
+    assert err.splitlines() == [
+        f"omnicam: warning: this OpenCV has no H.264 encoder, so {outs[0]} and {outs[1]} are "
+        f"in mp4v, which browsers do not play; for a video they play, write .webm (VP9)"
+    ]
+    # a codec asked for is not a fallback
+    code = main([*argv, "--overwrite", "--fourcc", "mp4v"])
+    assert code == 0
+    assert capsys.readouterr().err == ""
 
 
 def test_each_panorama_line_says_where_its_lower_edge_came_from(data, rig, tmp_path, capsys):
@@ -478,13 +489,13 @@ def test_frames_lost_on_write_fail_and_keep_the_old_output(data, tmp_path, capsy
 
 
 def test_full_disk_stops_early_and_keeps_the_old_output(data, tmp_path, capsys, monkeypatch):
-    from omnicam import stream
+    from omnicam import video
 
     out = tmp_path / "out.avi"
     write_video(out, 2, (64, 16))
     before = out.read_bytes()
     long_video = write_video(tmp_path / "long.avi", 40)
-    monkeypatch.setattr(stream, "_free_bytes", lambda path: 1000)
+    monkeypatch.setattr(video, "_free_bytes", lambda path: 1000)
     code = main(
         [
             "unwarp",
@@ -662,10 +673,10 @@ def small_tmpfs(tmp_path):
 def test_a_really_full_disk_never_replaces_the_old_output(
     data, tmp_path, small_tmpfs, capsys, monkeypatch, ext, min_free
 ):
-    from omnicam import stream
+    from omnicam import video
 
     if min_free is not None:
-        monkeypatch.setattr(stream, "MIN_FREE_BYTES", min_free)  # only the read-back check
+        monkeypatch.setattr(video, "MIN_FREE_BYTES", min_free)  # only the read-back check
     src = write_video(tmp_path / "src.avi", 200)
     out = small_tmpfs / f"out.{ext}"
     write_video(out, 20, (128, 32))

@@ -318,6 +318,12 @@ INPUTS = {  # name -> (file name, bytes, words of the one error line)
         bytes(range(16)),
         "input {p} is not a video OpenCV can open (16 bytes)",
     ),
+    "16-byte mp4 header": (  # OpenCV's HEIF reader claims it: it is still no image
+        "head.mp4",
+        b"\0\0\0\x18ftypisom" + bytes(4),
+        "input {p} is an MP4 or QuickTime video OpenCV cannot open (16 bytes): truncated or "
+        "corrupt",
+    ),
     "corrupt png": (
         "p.png",
         b"\x89PNG\r\n\x1a\n" + bytes(100),
@@ -432,8 +438,33 @@ def test_calibrate_refuses_a_truncated_jpeg_by_name(tmp_path, capsys, jpeg):
     assert not (tmp_path / "c.yaml").exists()
 
 
+def test_an_odd_sized_video_output_names_the_file_its_size_and_an_even_one(
+    tmp_path, capsys, monkeypatch
+):
+    from omnicam.cli import main, unwarp
+
+    def no_tables(*args, **kwargs):
+        raise AssertionError("the size is refused before the tables are built")
+
+    monkeypatch.setattr(unwarp.Unwarper, "from_camera", no_tables)
+
+    src = tmp_path / "in.avi"
+    writer = cv2.VideoWriter(str(src), cv2.VideoWriter_fourcc(*"MJPG"), 10.0, (64, 64))
+    for _ in range(2):
+        writer.write(np.zeros((64, 64, 3), np.uint8))
+    writer.release()
+    out = tmp_path / "o.mp4"
+    argv = ["unwarp", str(src), "-c", CALIB, "--panorama", "63x16", "-o", str(out), "--quiet"]
+    assert main(argv) == 1
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1, err
+    assert f"cannot write video {out} at 63x16" in err[0] and "give 64x16" in err[0], err
+    assert "'0'" not in err[0]  # the view's internal key means nothing to the user
+    assert sorted(os.listdir(tmp_path)) == ["in.avi"]
+
+
 def test_a_video_opencv_cannot_open_is_named_with_its_size(tmp_path):
-    from omnicam.stream import open_capture
+    from omnicam.video import open_capture
 
     path = tmp_path / "clip.mp4"
     path.write_bytes(bytes(16))

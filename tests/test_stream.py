@@ -9,8 +9,9 @@ import numpy as np
 import pytest
 
 from omnicam import Unwarper, synthetic
-from omnicam import stream as stream_module
-from omnicam.stream import H264, OutputError, VideoOutput, open_capture, video_codec
+from omnicam import video as video_module
+from omnicam._quiet import opencv_silenced
+from omnicam.video import H264, OutputError, VideoOutput, open_capture, video_codec
 from omnicam.views import UNSEEN, PanoramaView, PerspectiveView
 
 VIEWS = {"pano": PanoramaView((256, 64)), "front": PerspectiveView((96, 72), fov=90.0, yaw=30.0)}
@@ -188,8 +189,13 @@ def test_stream_bad_sources_and_outputs(tmp_path, unwarper):
 def test_stream_refuses_odd_sized_video_outputs(tmp_path):
     cam = synthetic.aligned_rig((64, 64))
     unwarper = Unwarper.from_camera(cam, {"pano": PanoramaView((33, 8))})
-    with pytest.raises(ValueError, match="even"):
-        next(unwarper.stream(0, outputs={"pano": tmp_path / "p.avi"}))
+    out = tmp_path / "p.avi"
+    with pytest.raises(ValueError) as e:
+        next(unwarper.stream(0, outputs={"pano": out}))
+    assert str(e.value) == (
+        f"cannot write video {out} at 33x8: a video needs an even width and height (OpenCV "
+        f"drops an odd last row or column); give 34x8 (or another even size)"
+    )
 
 
 def test_perspective_view_and_maps_take_k_new_size_r_in_one_order(cam):
@@ -224,7 +230,7 @@ def hidden(folder):
 
 
 def decoded(path):
-    return stream_module.count_frames(path)
+    return video_module.count_frames(path)
 
 
 def test_stream_writes_a_temporary_file_and_replaces_the_output_only_at_the_end(tmp_path, unwarper):
@@ -358,8 +364,8 @@ def test_video_output_refuses_a_file_that_lost_frames(tmp_path, monkeypatch):
 
 
 def test_video_output_refuses_odd_sizes_and_bad_frame_rates(tmp_path):
-    with pytest.raises(ValueError, match="even"):
-        VideoOutput(tmp_path / "v.avi", (63, 32), 10.0)
+    with pytest.raises(ValueError, match=r"v\.avi at 63x31: .*even.*give 64x32"):
+        VideoOutput(tmp_path / "v.avi", (63, 31), 10.0)
     with pytest.raises(ValueError, match="fps"):
         VideoOutput(tmp_path / "v.avi", (64, 32), float("nan"))
     assert list(tmp_path.iterdir()) == []
@@ -388,7 +394,7 @@ def _codec_in_file(path):
 
 
 @pytest.mark.skipif(shutil.which("ffprobe") is None, reason="ffprobe is not installed")
-@pytest.mark.parametrize("ext", [".mp4", ".mov", ".avi"])
+@pytest.mark.parametrize("ext", [".mp4", ".mov", ".webm", ".avi"])
 def test_the_codec_the_stream_reports_is_the_one_in_the_file(tmp_path, unwarper, ext):
     src = tmp_path / "in.avi"
     write_video(src, frames(3))
@@ -397,15 +403,68 @@ def test_the_codec_the_stream_reports_is_the_one_in_the_file(tmp_path, unwarper,
     assert sum(1 for _ in s) == 3
     fourcc = s.fourcc["pano"]
     assert s.written["pano"].fourcc == fourcc
-    expected = stream_module.VIDEO_CODECS[ext]
+    expected = video_module.VIDEO_CODECS[ext]
     assert fourcc in expected
     if fourcc != expected[0]:  # fell back: the codecs before it really do not write here
         for code in expected[: expected.index(fourcc)]:
             with pytest.raises(OutputError, match=code):
                 video_codec(tmp_path / f"probe{ext}", (256, 64), fourcc=code)
-    names = {"mp4v": "mpeg4", "MJPG": "mjpeg", **dict.fromkeys(H264, "h264")}
+    names = {"mp4v": "mpeg4", "MJPG": "mjpeg", "VP90": "vp9", "VP80": "vp8"}
+    names.update(dict.fromkeys(H264, "h264"))
     assert _codec_in_file(out) == names[fourcc]
     assert hidden(tmp_path) == []
+
+
+def _writes_here(path, fourcc):
+    """Whether this OpenCV writes a frame with ``fourcc`` into ``path`` that reads back
+    (cv2 itself, not video_codec, which is under test)."""
+    writer = cv2.VideoWriter(str(path), cv2.VideoWriter_fourcc(*fourcc), 10.0, (64, 32))
+    try:
+        if not writer.isOpened():
+            return False
+        writer.write(np.zeros((32, 64, 3), np.uint8))
+    finally:
+        writer.release()
+    return path.exists() and video_module.count_frames(path) == 1
+
+
+@pytest.mark.skipif(shutil.which("ffprobe") is None, reason="ffprobe is not installed")
+def test_mp4_gets_h264_where_this_opencv_writes_it(tmp_path):
+    with opencv_silenced():
+        h264 = [c for c in ("avc1", "H264", "X264") if _writes_here(tmp_path / f"{c}.mp4", c)]
+    if not h264:
+        pytest.skip(
+            "this OpenCV's FFmpeg has no H.264 encoder (the opencv-python wheels ship none); "
+            "the fallback is tested by test_the_mp4_fallback_is_said_once"
+        )
+    out = tmp_path / "v.mp4"
+    with VideoOutput(out, (64, 32), 10.0) as video:
+        video.write(np.zeros((32, 64, 3), np.uint8))
+    assert video.fourcc == h264[0]
+    assert _codec_in_file(out) == "h264"
+    assert not video_module.fell_back(out, video.fourcc)
+
+
+@pytest.mark.skipif(shutil.which("ffprobe") is None, reason="ffprobe is not installed")
+def test_webm_gets_vp9_where_this_opencv_writes_it(tmp_path):
+    with opencv_silenced():
+        vp = [c for c in ("VP90", "VP80") if _writes_here(tmp_path / f"{c}.webm", c)]
+    if not vp:
+        pytest.skip("this OpenCV's FFmpeg has neither a VP9 nor a VP8 encoder")
+    out = tmp_path / "v.webm"
+    with VideoOutput(out, (64, 32), 10.0) as video:
+        video.write(np.zeros((32, 64, 3), np.uint8))
+    assert video.fourcc == vp[0]
+    assert _codec_in_file(out) == {"VP90": "vp9", "VP80": "vp8"}[vp[0]]
+    assert video_module.web_codec(video.fourcc) in ("VP9", "VP8")
+
+
+def test_only_a_default_codec_browsers_do_not_play_is_a_fallback():
+    assert video_module.fell_back("a.mp4", "mp4v")
+    assert video_module.fell_back("a.MOV", "mp4v")
+    assert not video_module.fell_back("a.mp4", "avc1")
+    assert not video_module.fell_back("a.webm", "VP80")
+    assert not video_module.fell_back("a.avi", "MJPG")  # .avi's first choice is no web codec
 
 
 class OpensButWritesNothing:

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import argparse
+import contextlib
 import dataclasses
 import math
 import os
@@ -246,7 +247,10 @@ def is_image_input(path):
         raise CliError(str(e)) from None
     if os.path.splitext(path)[1].lower() in IMAGE_EXTENSIONS:
         return True
-
+    with contextlib.suppress(OSError):  # unreadable: check_video_input says so
+        kind = file_kind(path)
+        if kind is not None and kind.endswith("video"):  # cv2's HEIF reader claims any MP4
+            return False
     with opencv_silenced():
         return cv2.haveImageReader(path)
 
@@ -278,6 +282,11 @@ def check_video_input(path):
             opened = False
     if not opened:
         size = os.stat(path).st_size
+        if kind is not None and kind.endswith("video"):
+            raise CliError(
+                f"input {shown(path)} is {kind} OpenCV cannot open ({size} bytes): "
+                f"truncated or corrupt"
+            )
         raise CliError(
             f"input {shown(path)} is not a video OpenCV can open ({size} bytes"
             + (f", {kind} by its first bytes)" if kind else ")")

@@ -4,18 +4,20 @@ Several views in one call, one decode for all: each ``--panorama``, ``--perspect
 ``--equirect`` starts a view, and the options after it (``--elevation``, ``--projection``,
 ``--fov``, ``--yaw``, ``--pitch``, ``--roll``, ``--depth``, ``-o``) belong to it; options given
 before the first view belong to the first. Every view has its own ``-o``: an image, a video
-(``.avi``, ``.mp4``, ``.m4v``, ``.mov``, ``.mkv``) or an image sequence (``out_%04d.png``, frames
-numbered from 0).
+(``.avi``, ``.mp4``, ``.m4v``, ``.mov``, ``.mkv``, ``.webm``) or an image sequence
+(``out_%04d.png``, frames numbered from 0).
 
 Video outputs are never lost: they are written by :meth:`omnicam.stream.Unwarper.stream`
-(:class:`omnicam.stream.VideoOutput`), to a temporary file beside the output that must decode
+(:class:`omnicam.video.VideoOutput`), to a temporary file beside the output that must decode
 every frame written before it replaces the output. On Ctrl-C the run stops after the current
 frame and keeps the frames so far: in the output itself when there was none before (the message
 says so), else in ``NAME.partial.EXT`` beside it, leaving the earlier complete output untouched;
 exit status 130. A failed write stops with an error and leaves any earlier output intact.
-``.mp4``, ``.m4v`` and ``.mov`` get H.264 where the installed OpenCV writes it, else mp4v;
-the line that names each output says which, and for a panorama of the default band where its
-lower edge came from (the camera's reflection as the calibration recorded it, else -60 deg).
+``.mp4``, ``.m4v`` and ``.mov`` get H.264 where the installed OpenCV writes it, else mp4v,
+which browsers do not play (one warning line says so, for all such outputs); ``.webm`` gets VP9,
+else VP8. The line that names each output says its codec, and for a panorama of the default
+band where its lower edge came from (the camera's reflection as the calibration recorded it,
+else -60 deg).
 """
 
 from __future__ import annotations
@@ -37,7 +39,15 @@ from .._atomic import OutputError, write_bytes
 from .._validate import file_path
 from ..formats.spherical_metadata import inject_spherical_mp4, jpeg_with_photosphere_xmp
 from ..spherical import equirect_view
-from ..stream import H264, VIDEO_CODECS, Unwarper, count_frames, open_capture
+from ..stream import Unwarper
+from ..video import (
+    VIDEO_CODECS,
+    check_even_size,
+    count_frames,
+    fell_back,
+    open_capture,
+    web_codec,
+)
 from ..views import PanoramaView, PerspectiveView
 from ._common import (
     EXIT_FAILURE,
@@ -269,6 +279,11 @@ def cmd_unwarp(args):
             raise CliError(str(e)) from None
     for spec in specs:
         spec.kind_out = _output_kind(spec.output, video_input)
+        if spec.kind_out == "video":  # before the tables are built, which can take seconds
+            try:
+                check_even_size(spec.output, spec.size)
+            except ValueError as e:
+                raise CliError(str(e)) from None
         if not live and os.path.exists(spec.output) and os.path.samefile(source, spec.output):
             raise CliError(f"output {spec.output} is the input")
         target = _sequence_name(spec.output, 0) if spec.kind_out == "sequence" else spec.output
@@ -369,7 +384,7 @@ class Progress:
 
 
 def _open_capture(source):
-    """:func:`omnicam.stream.open_capture` of the command's INPUT (digits: a camera index)."""
+    """:func:`omnicam.video.open_capture` of the command's INPUT (digits: a camera index)."""
     try:
         return open_capture(int(source) if source.isdigit() else source)
     except ValueError as e:
@@ -502,6 +517,7 @@ def _preview_name(output, index):
 
 def _finish(args, specs, stream, written, how, declared):
     """Say where each output went; the exit status."""
+    _say_fallback(args, specs, stream)
     for i, spec in enumerate(specs):
         if spec.kind_out == "video":
             _say_video(args, spec, stream.written.get(str(i)), how, declared)
@@ -539,18 +555,31 @@ def _say_video(args, spec, video, how, declared):
     elif not args.quiet:
         print(
             f"wrote {output} ({video.frames} frames, {spec.size[0]}x{spec.size[1]}, "
-            f"{_codec_text(output, video.fourcc, args.fourcc)}{spec.edge})"
+            f"{_codec_text(video.fourcc)}{spec.edge})"
         )
 
 
-def _codec_text(output, fourcc, asked):
-    """The codec of a video, and why, if a browser will not play it, that is so."""
-    if fourcc in H264:
-        return f"H.264 ({fourcc})"
-    ext = os.path.splitext(output)[1].lower()
-    if asked is None and any(c in H264 for c in VIDEO_CODECS.get(ext, ())):
-        return f"codec {fourcc}: this OpenCV has no H.264 encoder, so browsers will not play it"
-    return f"codec {fourcc}"
+def _codec_text(fourcc):
+    """``"H.264 (avc1)"`` for a codec browsers play, else ``"codec mp4v"``."""
+    name = web_codec(fourcc)
+    return f"{name} ({fourcc})" if name else f"codec {fourcc}"
+
+
+def _say_fallback(args, specs, stream):
+    """One warning line for all the video outputs written in a codec browsers do not play
+    because this OpenCV has no encoder for the one they do (never for a ``--fourcc`` given)."""
+    if args.fourcc is not None:
+        return
+    videos = [stream.written.get(str(i)) for i, s in enumerate(specs) if s.kind_out == "video"]
+    fallen = [v for v in videos if v is not None and fell_back(v.path, v.fourcc)]
+    if fallen:
+        paths = [v.path for v in fallen]
+        named = " and ".join([", ".join(paths[:-1]), paths[-1]] if len(paths) > 1 else paths)
+        codecs = " and ".join(sorted({v.fourcc for v in fallen}))
+        warn_user(
+            f"this OpenCV has no H.264 encoder, so {named} {'is' if len(paths) == 1 else 'are'} "
+            f"in {codecs}, which browsers do not play; for a video they play, write .webm (VP9)"
+        )
 
 
 def _spherical_metadata(output):
@@ -614,7 +643,7 @@ def add_parser(sub):
         type=fourcc_arg,
         metavar="CODE",
         help="video codec FourCC (default MJPG for .avi/.mkv; for .mp4/.m4v/.mov H.264 "
-        "where this OpenCV writes it, else mp4v)",
+        "where this OpenCV writes it, else mp4v; for .webm VP9, else VP8)",
     )
     p.add_argument(
         "--preview",
@@ -710,7 +739,7 @@ def add_view_arguments(p, output_help=None):
         action=_InOrder,
         help=output_help
         or "the view's output: an image, a video (.avi, .mp4, "
-        ".m4v, .mov, .mkv) for a video input, or an image sequence (out_%%04d.png)",
+        ".m4v, .mov, .mkv, .webm) for a video input, or an image sequence (out_%%04d.png)",
     )
 
 
