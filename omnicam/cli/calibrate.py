@@ -18,6 +18,7 @@ from ..formats.omnicam_files import SUFFIXES, Verdict, read_verdict, reading
 from ..gauge import posture_error
 from ..mirror import HyperbolicMirror
 from . import pattern
+from . import report as report_page
 from ._common import (
     EXIT_OK,
     CliError,
@@ -131,6 +132,8 @@ def _finish(args, camera, report, image, outputs, k_from, rig):
         print(_moved_text(camera, rig, args.from_rig, report))
     for w in implausible:
         warn_user(f"implausible: {w}")
+    if args.report:  # refused or not: the page shows what went wrong
+        report_page.write_image_page(args.report, camera, report, image, args.overwrite)
     if implausible and not args.force:
         # the overlay shows what went wrong; under its own name, so that it never blocks a retry
         write_image_file(refused_overlay, report.draw(image), True)
@@ -158,10 +161,12 @@ def cmd_calibrate(args):
             _refuse_beside_from(args)
         if args.guess_k:
             _refuse_beside_guess(args)
+        report_page.check_report_output(args.report, args.overwrite)
         return pattern.cmd_calibrate_pattern(args)
     _check_mode(args)
     args.image = args.image[0]
     outputs = _outputs(args)
+    report_page.check_report_output(args.report, args.overwrite)
     K, D, mirror, size, k_from, rig = _rig_inputs(args)
     image, image_size, far_lines, boundary = _image_inputs(args)
     if args.guess_k:
@@ -601,6 +606,7 @@ def add_parser(sub):
         metavar="PATH",
         help="overlay image to write (default: CALIB's stem + '_overlay.png', next to CALIB)",
     )
+    report_page.add_report_option(out)
     out.add_argument("--overwrite", action="store_true", help="replace existing output files")
     pattern.add_arguments(p)
     p.set_defaults(func=cmd_calibrate)

@@ -348,6 +348,12 @@ def cmd_calibrate_pattern(args):
             "(--force writes the file anyway)"
         )
     _write_overlays(args, report, images, folder)
+    if args.report:  # omnicam calibrate --report (cli/report.py)
+        from .report import write_pattern_page
+
+        write_pattern_page(
+            args.report, camera, report, images, names, args.chessboard, args.overwrite
+        )
     save_calibration(
         camera, calib, args.overwrite, report, forced=bool(one_side), implausible=one_side
     )
