@@ -232,11 +232,16 @@ def image_report_html(
     _choice(page, report)
     page.section("panorama", "Panorama")
     pano, view = panorama(camera, image)
+    colours = view_colours(max(len(report.far_lines), 1))
+    for k, line in enumerate(report.far_lines):
+        d = camera.unproject(np.asarray(line, np.float64).reshape(-1, 2))[1]
+        draw_wrapped(pano, panorama_pixels(view, d), colours[k], closed=False, thickness=2)
     lo, hi = view.elevation_range
     page.figure(
         pano,
         f"The calibrated camera's equirectangular panorama, elevation {lo:.1f} to "
-        f"{hi:.1f} deg, azimuth 0 at the left, turning right.",
+        f"{hi:.1f} deg, azimuth 0 at the left, turning right; the far lines in the colours of "
+        f"the candidates' legend.",
         jpeg=True,
     )
     page.section("posture", "The posture")

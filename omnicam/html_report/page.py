@@ -261,16 +261,16 @@ def rim_overlay(camera, image, rim_points=None, width=620):
     img = fit_width(img, width)
     items = []
     notes = []
+    if rim_points is not None and len(rim_points):
+        for p in np.asarray(rim_points, np.float64).reshape(-1, 2)[::3] * scale:
+            if np.isfinite(p).all():
+                cv2.circle(img, (int(round(p[0])), int(round(p[1]))), 2, (255, 160, 0), -1)
+        items.append(((255, 160, 0), "dot", "rim points used"))
     rim = camera.rim_image_points(720) * scale
     if np.isfinite(rim).all():
         q = np.round(rim * 16).astype(np.int32)
         cv2.polylines(img, [q], True, (0, 200, 0), 1, cv2.LINE_AA, 4)
     items.append(((0, 200, 0), "line", "rim as fitted"))
-    if rim_points is not None and len(rim_points):
-        for p in np.asarray(rim_points, np.float64).reshape(-1, 2)[::2] * scale:
-            if np.isfinite(p).all():
-                cv2.circle(img, (int(round(p[0])), int(round(p[1]))), 1, (255, 160, 0), -1)
-        items.append(((255, 160, 0), "dot", "rim points used"))
     refl = camera.camera_reflection
     if refl is not None:
         from ..calibration.reflection import outline_pixels

@@ -493,8 +493,13 @@ def _panorama(page, camera, report, images, order, colours):
         own = cv2.remap(images[i], m1, m2, cv2.INTER_LINEAR)
         mask = np.zeros(out.shape[:2], np.uint8)
         ok = np.isfinite(q).all(axis=1)
-        if ok.sum() >= 3 and np.ptp(q[ok, 0]) < out.shape[1] / 2:
-            cv2.fillPoly(mask, [np.round(q[ok]).astype(np.int32)], 255)
+        if ok.sum() >= 3:
+            w = out.shape[1]
+            u = q[ok].copy()  # unwrapped across the seam, filled at both ends
+            u[:, 0] = u[0, 0] + np.mod(u[:, 0] - u[0, 0] + w / 2, w) - w / 2
+            for shift in (-w, 0, w):
+                poly = np.round(u + (shift, 0)).astype(np.int32)
+                cv2.fillPoly(mask, [poly], 255)
             out[mask > 0] = own[mask > 0]
         draw_wrapped(out, q, colours[k], True, 2)
         c = q[ok].mean(axis=0) if ok.any() else None

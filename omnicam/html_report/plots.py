@@ -211,14 +211,21 @@ def with_legend(img, items, columns=None, scale=_SCALE):
     if not items:
         return img
     w = img.shape[1]
-    widths = [cv2.getTextSize(label, FONT, scale, 1)[0][0] + 40 for _, _, label in items]
-    cell = min(max(widths), w - 10)
-    cols = columns or max(1, (w - 10) // cell)
-    rows = math.ceil(len(items) / cols)
+    widths = [cv2.getTextSize(label, FONT, scale, 1)[0][0] + 48 for _, _, label in items]
+    if columns:  # a grid of equal cells
+        cell = min(max(widths), (w - 10) // columns)
+        places = [(8 + (k % columns) * cell, k // columns) for k in range(len(items))]
+    else:  # left to right, wrapped at the image's width
+        places, x, row = [], 8, 0
+        for width in widths:
+            if x > 8 and x + width > w - 4:
+                x, row = 8, row + 1
+            places.append((x, row))
+            x += width
+    rows = max(r for _, r in places) + 1
     strip = np.full((rows * 22 + 8, w, 3), 255, np.uint8)
-    for k, (colour, kind, label) in enumerate(items):
-        x = 8 + (k % cols) * cell
-        y = 16 + (k // cols) * 22
+    for (colour, kind, label), (x, r) in zip(items, places):
+        y = 16 + r * 22
         if kind == "line":
             cv2.line(strip, (x, y - 4), (x + 24, y - 4), colour, 2, cv2.LINE_AA)
         elif kind == "dot":
