@@ -161,12 +161,20 @@ def cmd_calibrate(args):
             _refuse_beside_from(args)
         if args.guess_k:
             _refuse_beside_guess(args)
+        for flag, given in (("--choose", args.choose), ("--candidates", args.candidates)):
+            if given is not None:
+                raise CliError(
+                    f"calibrate: {flag} is for one image (Chen's four postures); "
+                    f"--chessboard has no candidates",
+                    2,
+                )
         report_page.check_report_output(args.report, args.overwrite)
         return pattern.cmd_calibrate_pattern(args)
     _check_mode(args)
     args.image = args.image[0]
     outputs = _outputs(args)
     report_page.check_report_output(args.report, args.overwrite)
+    _check_candidates_folder(args.candidates, args.overwrite)
     K, D, mirror, size, k_from, rig = _rig_inputs(args)
     image, image_size, far_lines, boundary = _image_inputs(args)
     if args.guess_k:
@@ -196,11 +204,14 @@ def cmd_calibrate(args):
             max_offset_mm=args.max_offset,
             lens_r=args.lens_r,
             lens_z=args.lens_z,
+            choose=args.choose,
         )
     except (ValueError, RuntimeError, NotImplementedError, np.linalg.LinAlgError) as e:
         raise CliError(
             f"calibration of {args.image} failed: {one_line(e)}{aspect_note(image_size)}"
         ) from None
+    if args.candidates is not None:
+        _write_candidates(args.candidates, camera, report, image, args.overwrite)
     return _finish(args, camera, report, image, outputs, k_from, rig)
 
 
@@ -425,6 +436,42 @@ def _rim_hint(text):
     return cx, cy, r
 
 
+def _candidate_path(folder, i):
+    return os.path.join(folder, f"candidate_{i}.jpg")
+
+
+def _check_candidates_folder(folder, overwrite):
+    """``--candidates DIR``: a folder (made if missing) whose panoramas we may write."""
+    if folder is None:
+        return
+    if os.path.exists(folder) and not os.path.isdir(folder):
+        raise CliError(f"--candidates {folder} is a file, not a folder")
+    for i in range(4):
+        path = _candidate_path(folder, i)
+        if os.path.lexists(path) and not overwrite:
+            raise CliError(f"--candidates: {path} exists; pass --overwrite to replace it")
+
+
+def _write_candidates(folder, camera, report, image, overwrite):
+    """Each candidate's panorama (far lines drawn) into ``folder``, to choose by eye."""
+    from ..html_report.image import candidate_panoramas
+
+    try:
+        os.makedirs(folder, exist_ok=True)
+    except OSError as e:
+        raise CliError(f"--candidates: cannot create {folder}: {e.strerror or e}") from None
+    panos, _ = candidate_panoramas(camera, report, image, width=1200)
+    for i, pano, why in panos:
+        path = _candidate_path(folder, i)
+        if pano is None:
+            print(f"  candidate {i}: {why}")
+            continue
+        write_image_file(path, pano, overwrite)
+        mark = " (chosen)" if i == report.chosen else ""
+        print(f"  candidate {i}{mark}: wrote {path}")
+    print("  (look at them, then --choose N takes candidate N)", flush=True)
+
+
 def _overlay_path(calib):
     stem = os.path.splitext(os.path.basename(calib))[0]
     return os.path.join(os.path.dirname(calib), f"{stem}_overlay.png")
@@ -529,6 +576,20 @@ def add_parser(sub):
         metavar="LINES.json",
         help="JSON list of lines, each a list of [x, y] pixels of a straight scene "
         "line far from the camera; used to pick the right posture candidate",
+    )
+    rim.add_argument(
+        "--candidates",
+        metavar="DIR",
+        help="write each of Chen's four postures as a panorama (far lines drawn) into DIR, "
+        "candidate_N.jpg, to choose by eye (the impossible ones are named, not drawn)",
+    )
+    rim.add_argument(
+        "--choose",
+        type=int,
+        choices=range(4),
+        metavar="N",
+        help="take candidate N (0-3, a physically possible one) instead of the cues' choice; "
+        "the report and the file's verdict record it as the user's choice",
     )
     rim.add_argument(
         "--rim-hint",

@@ -180,6 +180,9 @@ def _choice(page, report):
             else "."
         )
     )
+    sel = report.steps.get("selection") if isinstance(report.steps, dict) else None
+    if getattr(sel, "chosen_by", "cues") == "user":
+        page.text(f"Candidate {report.chosen} was chosen by the user (by eye), not by the cues.")
     cues = list(report.scores_per_cue)
     header = ["candidate", "physical"] + cues
     rows = []
