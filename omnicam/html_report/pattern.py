@@ -136,7 +136,7 @@ def _per_view(page, camera, report, names):
     page.section("views", "Per view: RMS and held-out error")
     held = report.heldout
     views = _views(report)
-    header = ["image", "corners", "RMS px"]
+    header = ["view", "image", "corners", "RMS px"]
     if held is not None and held.rms:
         header += ["held-out px", "cv2.omnidir held-out px"]
     header += ["distance mm", "elevation deg", "found by"]
@@ -144,7 +144,12 @@ def _per_view(page, camera, report, names):
     for i in views:
         t = np.asarray(report.board_poses[i][1], np.float64)
         el = math.degrees(math.atan2(t[2], math.hypot(t[0], t[1])))
-        row = [_name(report, names, i), report.corners_used.get(i, ""), f"{report.view_rms[i]:.3f}"]
+        row = [
+            i,
+            _name(report, names, i),
+            report.corners_used.get(i, ""),
+            f"{report.view_rms[i]:.3f}",
+        ]
         if held is not None and held.rms:
             h = held.rms.get(i)
             o = held.omnidir.get(i)
@@ -156,9 +161,9 @@ def _per_view(page, camera, report, names):
         rows.append(row)
     for i, why in sorted(report.dropped.items()):
         rows.append(
-            [_name(report, names, i), "-", "dropped: " + str(why)] + [""] * (len(header) - 3)
+            [i, _name(report, names, i), "-", "dropped: " + str(why)] + [""] * (len(header) - 4)
         )
-    page.table(header, rows, left=1)
+    page.table(header, rows, left=2)
     page.figure(
         _rms_bars(report, names),
         "Each view's corner RMS (px), with the held-out "
@@ -182,10 +187,10 @@ def _rms_bars(report, names):
         (-0.5, len(views) - 0.5),
         (0.0, top),
         title="corner RMS per view",
-        xlabel="view",
+        xlabel="view (the image's index)",
         ylabel="RMS (px)",
     )
-    ax.frame(xticks=range(len(views)), xfmt=lambda v: _name(report, None, views[int(v)])[:10])
+    ax.frame(xticks=range(len(views)), xfmt=lambda v: str(views[int(v)]))
     bw = 0.8 / len(series)
     for s, (_, data, colour) in enumerate(series):
         for k, i in enumerate(views):
@@ -232,11 +237,11 @@ def _coverage_image(camera, report, images, order, colours):
     hatch[((xx + yy) % 9) < 2] = True
     img[empty & hatch] = _EMPTY
     cv2.polylines(img, [np.round(rim * 16).astype(np.int32)], True, (0, 160, 0), 1, cv2.LINE_AA, 4)
-    for k, i in enumerate(_views(report)):
+    for i in _views(report):
         p = _pts(report.image_points[i])
         if p is not None and np.isfinite(p).any():
             c = np.nanmean(p, axis=0)
-            put_label(img, str(k), c, (0, 0, 0), 0.5, "center", (255, 255, 255))
+            put_label(img, str(i), c, (0, 0, 0), 0.5, "center", (255, 255, 255))
     share = 100.0 * empty.sum() / max((mask > 0).sum(), 1)
     items = [((0, 160, 0), "line", "rim")]
     items.append((_EMPTY, "hatch", f"mirror far from every corner ({share:.0f}% of it)"))
@@ -294,7 +299,7 @@ def _coverage_directions(camera, report, view, order, colours):
         if len(az):
             put_label(
                 ax.img,
-                str(k),
+                str(_views(report)[k]),
                 ax.px(np.median(az), np.median(el)),
                 (0, 0, 0),
                 0.45,
@@ -310,7 +315,7 @@ def _coverage_directions(camera, report, view, order, colours):
 def _coverage(page, camera, report, images, view, order, colours):
     page.section("coverage", "Board coverage")
     img, items, share = _coverage_image(camera, report, images, order, colours)
-    legend = [(colours[k], "patch", f"view {k}") for k in range(len(_views(report)))]
+    legend = [(colours[k], "patch", f"view {i}") for k, i in enumerate(_views(report))]
     page.figure(
         with_legend(fit_width(img, 560), items + legend),
         "Over the image: each view's board (its corner grid, coloured and numbered) on the "
@@ -349,7 +354,7 @@ def _residuals(page, report, images, names, colours):
     scale = _residual_scale(report)
     views = _views(report)
     panels = []
-    for k, i in enumerate(views):
+    for i in views:
         d = _pts(report.image_points[i])
         q = _pts(report.reprojected.get(i))
         if d is None or q is None:
@@ -368,13 +373,14 @@ def _residuals(page, report, images, names, colours):
             cv2.circle(crop, (int(round(p[0])), int(round(p[1]))), 2, (0, 150, 0), -1, cv2.LINE_AA)
             residual_arrow(crop, p, e, scale, (0, 0, 220))
         # a scale bar of 1 px (or the residual's own size) in the corner
-        bar = scale * (1.0 if scale <= 200 else 0.1)
+        length = _bar_length(scale)  # image px, drawn scale x longer
+        bar = length * scale
         y = crop.shape[0] - 8
         cv2.line(crop, (8, y), (8 + int(round(bar)), y), (0, 0, 0), 2)
         put_label(
-            crop, f"{bar / scale:g} px", (12 + bar, y + 4), (0, 0, 0), 0.4, "left", (255, 255, 255)
+            crop, f"{length:g} px", (12 + bar, y + 4), (0, 0, 0), 0.4, "left", (255, 255, 255)
         )
-        title = f"{k}: {_name(report, names, i)[:22]}  RMS {report.view_rms[i]:.3f} px"
+        title = f"{i}: {_name(report, names, i)[:22]}  RMS {report.view_rms[i]:.3f} px"
         panels.append(with_title(crop, title))
     grid = _tile(panels, 4)
     page.figure(
@@ -391,6 +397,13 @@ def _residuals(page, report, images, names, colours):
         jpeg=True,
     )
     page.figure(_residual_scatter(report, colours), "All residuals, coloured per view.")
+
+
+def _bar_length(scale):
+    """A round length (image px: 1, 2 or 5 x 10^k) that ``scale`` draws 30 to 90 px long."""
+    target = 50.0 / scale
+    mag = 10.0 ** math.floor(math.log10(target))
+    return min((m * mag for m in (1, 2, 5, 10)), key=lambda v: abs(math.log(v / target)))
 
 
 def _tile(panels, cols):
@@ -442,7 +455,7 @@ def _residual_scatter(report, colours):
     t = np.linspace(0, 2 * np.pi, 90)
     ax.polyline(rms * np.cos(t), rms * np.sin(t), (0, 0, 0), 1, closed=True)
     items = [((0, 0, 0), "line", f"circle of the RMS per axis ({rms:.3f} px)")]
-    items += [(colours[k], "dot", f"view {k}") for k, _ in es]
+    items += [(colours[k], "dot", f"view {_views(report)[k]}") for k, _ in es]
     return with_legend(ax.img, items)
 
 
@@ -504,9 +517,9 @@ def _panorama(page, camera, report, images, order, colours):
         draw_wrapped(out, q, colours[k], True, 2)
         c = q[ok].mean(axis=0) if ok.any() else None
         if c is not None:
-            put_label(out, str(k), c, (0, 0, 0), 0.5, "center", (255, 255, 255))
+            put_label(out, str(i), c, (0, 0, 0), 0.5, "center", (255, 255, 255))
     lo, hi = view.elevation_range
-    legend = [(colours[k], "line", f"view {k}") for k in range(len(_views(report)))]
+    legend = [(colours[k], "line", f"view {i}") for k, i in enumerate(_views(report))]
     page.figure(
         with_legend(out, legend),
         f"Equirectangular panorama (elevation {lo:.1f} to {hi:.1f} deg; azimuth 0 at the "
