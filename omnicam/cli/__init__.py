@@ -5,9 +5,10 @@
     omnicam calibrate IMAGE --mirror A B RIM (--intrinsics K.yaml | --fx F --fy F --cx X --cy Y
                       [--dist D ...]) [--far-lines LINES.json] [--rim-hint CX,CY,R]
                       [--boundary-points FILE] [--max-tilt DEG] [--max-offset MM] [--force]
+                      [--candidates DIR] [--choose N]
                       -o CALIB [--no-refine] [--overlay PATH] [--report PAGE.html] [--overwrite]
     omnicam calibrate --chessboard CxR --square S IMAGES... --mirror A B RIM [--intrinsics K]
-                      -o CALIB
+                      -o CALIB [--report PAGE.html]
     omnicam unwarp INPUT -c CALIB VIEW [VIEW ...] [--overwrite] [--max-frames N]
                    [--fourcc CODE] [--preview N] [--quiet]
         VIEW: (--panorama WxH [--elevation LO HI] [--projection P]
