@@ -137,12 +137,16 @@ def test_write_report_is_atomic_and_refuses_to_overwrite_unless_told(tmp_path):
     assert [p.name for p in tmp_path.iterdir()] == ["page.html"]
 
 
-def test_redetected_report_keeps_the_camera_and_finds_every_board(chessboard):
+def test_redetected_report_keeps_the_camera_and_names_the_views_without_a_board(chessboard):
     verdict = omnicam.read_verdict(chessboard["calib"])
-    rep = redetected_pattern_report(
-        chessboard["camera"], chessboard["images"], PATTERN, SQUARE, verdict=verdict
-    )
-    assert sorted(rep.view_rms) == list(range(6)) and not rep.dropped
+    blank = np.full_like(chessboard["images"][0], 128)
+    images = [chessboard["images"][0], blank, *chessboard["images"][1:]]
+    rep = redetected_pattern_report(chessboard["camera"], images, PATTERN, SQUARE, verdict=verdict)
+    assert sorted(rep.view_rms) == [0, 2, 3, 4, 5, 6]
+    assert rep.dropped == {1: "no board found"}
+    page = pattern_report_html(chessboard["camera"], rep, images, pattern_size=PATTERN)
+    check_page(page, PATTERN_SECTIONS)
+    assert "dropped: no board found" in page
     # the poses fitted alone under the calibrated camera reproduce the adjustment's residuals
     assert rep.rms == pytest.approx(chessboard["report"].rms, abs=0.05)
     assert rep.std["axis_deg"] == pytest.approx(verdict.axis_std_deg)

@@ -17,6 +17,7 @@ photographs), the style inline: one file that opens offline, with no external re
 from __future__ import annotations
 
 from .._atomic import write_bytes
+from .._typing import PathLike
 from .image import IMAGE_SECTIONS, image_report_html
 from .pattern import PATTERN_SECTIONS, pattern_report_html
 
@@ -29,7 +30,7 @@ __all__ = [
 ]
 
 
-def write_report(path, page, overwrite=True):
+def write_report(path: PathLike, page: str, overwrite: bool = True) -> None:
     """Write the HTML ``page`` to ``path`` atomically (a temporary file renamed into place).
 
     Raises

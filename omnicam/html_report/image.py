@@ -5,6 +5,8 @@ panoramas, the far lines, the choice and its confidence, the posture."""
 from __future__ import annotations
 
 import math
+from collections.abc import Sequence
+from typing import Any
 
 import cv2
 import numpy as np
@@ -46,11 +48,15 @@ def _candidate_camera(camera, cand):
         return None, str(e)
 
 
-def candidate_panoramas(camera, report, image, width=560):
+def candidate_panoramas(
+    camera: Any, report: Any, image: np.ndarray, width: int = 560
+) -> tuple[list[tuple[int, np.ndarray | None, str]], Any]:
     """``[(index, panorama or None, why not)]``: each candidate's panorama of ``image`` with
-    the far lines drawn as that posture sees them (yellow), on one elevation band."""
+    the far lines drawn as that posture sees them (in the colours of the page's legend), on one
+    elevation band (the first candidate's default); and that band's :class:`PanoramaView`
+    (None when no candidate could be drawn)."""
     view = None
-    out = []
+    out: list[tuple[int, np.ndarray | None, str]] = []
     colours = view_colours(max(len(report.far_lines), 1))
     for i, cand in enumerate(report.candidates):
         cam, why = _candidate_camera(camera, cand)
@@ -206,8 +212,13 @@ def _choice(page, report):
 
 
 def image_report_html(
-    camera, report, image, *, notes=(), title="omnicam calibration from one image"
-):
+    camera: Any,
+    report: Any,
+    image: np.ndarray,
+    *,
+    notes: Sequence[str] = (),
+    title: str = "omnicam calibration from one image",
+) -> str:
     """The report page of a calibration from one image, as one self-contained HTML string.
 
     Parameters

@@ -3,6 +3,8 @@
 from __future__ import annotations
 
 import math
+from collections.abc import Sequence
+from typing import Any
 
 import cv2
 import numpy as np
@@ -535,16 +537,16 @@ def _posture(page, camera):
 
 
 def pattern_report_html(
-    camera,
-    report,
-    images,
+    camera: Any,
+    report: Any,
+    images: Sequence[np.ndarray],
     *,
-    names=None,
-    pattern_size=None,
-    verdict=None,
-    notes=(),
-    title="omnicam chessboard calibration",
-):
+    names: Sequence[str] | None = None,
+    pattern_size: tuple[int, int] | None = None,
+    verdict: Any = None,
+    notes: Sequence[str] = (),
+    title: str = "omnicam chessboard calibration",
+) -> str:
     """The report page of a chessboard calibration, as one self-contained HTML string.
 
     Parameters

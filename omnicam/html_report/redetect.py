@@ -4,11 +4,14 @@ each board found again and its pose fitted under the file's camera (the camera k
 from __future__ import annotations
 
 import math
+from collections.abc import Sequence
+from typing import Any
 
 import cv2
 import numpy as np
 from scipy.optimize import least_squares
 
+from .._typing import ArrayLike, FloatArray
 from ..chessboard.board_pose import board_pose_from_rays, object_points
 from ..chessboard.detect import detect_pattern
 from ..chessboard.report import PatternReport
@@ -18,7 +21,9 @@ __all__ = ["fit_board_pose", "redetected_pattern_report"]
 _UNSEEN_PX = 1e3
 
 
-def fit_board_pose(camera, corners, obj):
+def fit_board_pose(
+    camera: Any, corners: ArrayLike, obj: FloatArray
+) -> tuple[FloatArray, FloatArray, FloatArray] | None:
     """``(rvec_b, tvec_b, reprojected (N, 2))``: the board pose (mirror frame) that minimises
     the corners' reprojection error under ``camera``, started from the rays (non-central
     PnP, :func:`.board_pose.board_pose_from_rays`); None when fewer than 4 corners see the
@@ -65,7 +70,14 @@ def _rim_rms(camera, image):
     return pts, float(np.sqrt(np.mean(d * d)))
 
 
-def redetected_pattern_report(camera, images, pattern_size, square_size, names=(), verdict=None):
+def redetected_pattern_report(
+    camera: Any,
+    images: Sequence[np.ndarray],
+    pattern_size: tuple[int, int],
+    square_size: float,
+    names: Sequence[str] = (),
+    verdict: Any = None,
+) -> PatternReport:
     """A :class:`PatternReport` of ``camera`` (kept as it is) on ``images``: every board
     found again (:func:`detect_pattern`, with the camera's views), its pose fitted alone
     (:func:`fit_board_pose`), the residuals and per-view RMS of that fit, the rim found in the
@@ -84,7 +96,9 @@ def redetected_pattern_report(camera, images, pattern_size, square_size, names=(
         No board is found in any image.
     """
     obj = object_points(pattern_size, square_size)
-    image_points, view_rms, poses, reproj, found, dropped, used = [], {}, {}, {}, {}, {}, {}
+    image_points: list[np.ndarray | None] = []
+    view_rms, poses, reproj, found, dropped, used = {}, {}, {}, {}, {}, {}
+    errors = []
     for i, im in enumerate(images):
         det = detect_pattern(im, pattern_size, camera)
         if det is None:
@@ -98,6 +112,7 @@ def redetected_pattern_report(camera, images, pattern_size, square_size, names=(
             continue
         rvec, tvec, q = fit
         e = q - det.corners.reshape(-1, 2)
+        errors.append(e)
         view_rms[i] = float(np.sqrt(np.mean(np.sum(e * e, axis=1))))
         poses[i] = (rvec, tvec)
         reproj[i] = q.reshape(-1, 1, 2)
@@ -105,9 +120,7 @@ def redetected_pattern_report(camera, images, pattern_size, square_size, names=(
         used[i] = len(obj)
     if not view_rms:
         raise ValueError(f"no {pattern_size[0]}x{pattern_size[1]} board found in the images")
-    all_e = np.concatenate(
-        [(reproj[i].reshape(-1, 2) - image_points[i].reshape(-1, 2)) for i in view_rms]
-    )
+    all_e = np.concatenate(errors)
     rim_points, rim_rms = _rim_rms(camera, images[0])
     std = {}
     warnings: tuple = ()
