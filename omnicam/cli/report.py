@@ -3,7 +3,7 @@
 ::
 
     omnicam report CALIB IMAGES... -o PAGE.html [--chessboard COLSxROWS --square MM]
-                   [--far-lines LINES.json] [--overwrite]
+                   [--far-lines LINES.json] [--rim-hint CX,CY,R] [--overwrite]
 
 A chessboard calibration (its verdict says so, or ``--chessboard`` is given): every board is
 found again in IMAGES and its pose fitted under the file's camera, which is kept as it is; the
@@ -42,6 +42,13 @@ from ._common import (
     warn_user,
 )
 from .pattern import _pattern_size
+
+
+def _rim_hint(text):  # calibrate's parser (imported late: calibrate imports this module)
+    from .calibrate import _rim_hint as parse
+
+    return parse(text)
+
 
 PAGE_SUFFIXES = (".html", ".htm")
 
@@ -152,6 +159,7 @@ def _one_image(args, camera, images):
             camera_cls=MisalignedHyperbolicCamera,
             lens_r=None if refl is None else refl[0],
             lens_z=None if refl is None else refl[1],
+            rim_hint=args.rim_hint,
         )
     except (ValueError, RuntimeError, NotImplementedError, np.linalg.LinAlgError) as e:
         raise CliError(
@@ -190,8 +198,9 @@ def cmd_report(args):
             2,
         )
     if chessboard:
-        if args.far_lines:
-            raise CliError("report: --far-lines is for a calibration from one image", 2)
+        for flag, given in (("--far-lines", args.far_lines), ("--rim-hint", args.rim_hint)):
+            if given is not None:
+                raise CliError(f"report: {flag} is for a calibration from one image", 2)
         _chessboard(args, camera, verdict, images)
     else:
         if args.square is not None:
@@ -246,6 +255,12 @@ def add_parser(sub):
         metavar="LINES.json",
         help="one image: the far lines of the calibration (JSON list of lines of [x, y] "
         "pixels), drawn in the candidates' panoramas and used for the choice",
+    )
+    p.add_argument(
+        "--rim-hint",
+        type=_rim_hint,
+        metavar="CX,CY,R",
+        help="one image: the rough centre and radius of the rim (px), as for calibrate",
     )
     p.add_argument("--overwrite", action="store_true", help="replace an existing page")
     p.set_defaults(func=cmd_report)
