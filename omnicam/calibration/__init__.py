@@ -63,6 +63,7 @@ def calibrate(
     max_tilt_deg: float = 10.0,
     max_offset_mm: float = 10.0,
     check_plausibility: bool = True,
+    choose: int | None = None,
 ) -> tuple[MisalignedCatadioptricCamera, CalibrationReport]:
     """Mirror posture from one image: rim ellipse, Chen's method, far-line selection, refinement.
 
@@ -111,6 +112,9 @@ def calibrate(
     check_plausibility : bool
         Check the result (:func:`.plausibility.assess`): implausible findings are added to the
         report's ``warnings`` and listed in its ``plausibility``.
+    choose : int, optional
+        Take candidate ``choose`` (0-3, physical) instead of the cues' choice: the user's
+        choice by eye (:func:`.selection.user_choice`; the report's warnings record it).
 
     Returns
     -------
@@ -159,6 +163,8 @@ def calibrate(
     )
 
     sel, circles = steps.selection_step(cands, cue, lines, mirror, K, D, rim)
+    if choose is not None:
+        sel = selection.user_choice(sel, choose)
     ref = steps.refinement_step(
         K, mirror, cands.all[sel.chosen], rim, lines_xn, cue, circles.get(sel.chosen), refine
     )

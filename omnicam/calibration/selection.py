@@ -156,6 +156,8 @@ class Selection:
     sigma : dict
         ``{cue: separation of the two best candidates in standard deviations}``.
     warnings : tuple of str
+    chosen_by : str
+        ``"cues"`` (the scores above) or ``"user"`` (:func:`user_choice`).
     """
 
     candidates: tuple
@@ -166,6 +168,7 @@ class Selection:
     costs_per_cue: dict
     sigma: dict
     warnings: tuple
+    chosen_by: str = "cues"
 
 
 def line_costs(scores):
@@ -359,6 +362,46 @@ def _cue_warnings(costs, phys, chosen, confidence, ambiguous):
             f"{math.sqrt(costs[cue][chosen]):.1f} sigma): check that cue"
         )
     return out
+
+
+def user_choice(sel, index):
+    """``sel`` with candidate ``index`` chosen by the user (by eye, e.g. from the candidates'
+    panoramas), recorded as such.
+
+    The cues' scores stay for the record; a warning says what they chose. The confidence
+    is the cues' when they chose the same candidate, else 0 (nothing but the user's eye
+    supports it); the choice is no longer ambiguous (the user settled it).
+
+    Raises
+    ------
+    ValueError
+        ``index`` is not a candidate, or not a physically possible one.
+    """
+    n = len(sel.candidates)
+    if isinstance(index, bool) or not isinstance(index, (int, np.integer)) or not 0 <= index < n:
+        raise ValueError(f"choose must be a candidate's index, 0 to {n - 1}, got {index!r}")
+    index = int(index)
+    cand = sel.candidates[index]
+    phys = [i for i, c in enumerate(sel.candidates) if c.physical]
+    if not cand.physical:
+        raise ValueError(
+            f"choose: candidate {index} is not physically possible ({'; '.join(cand.reasons)}); "
+            f"the physical ones: {', '.join(map(str, phys))}"
+        )
+    agree = index == sel.chosen
+    note = (
+        f"candidate {index} chosen by the user; the cues chose "
+        + ("it too" if agree else f"{sel.chosen}")
+        + (f" (confidence {sel.confidence:.3f}{', ambiguous' if sel.ambiguous else ''})")
+    )
+    return dataclasses.replace(
+        sel,
+        chosen=index,
+        confidence=sel.confidence if agree else 0.0,
+        ambiguous=False,
+        warnings=(*sel.warnings, note),
+        chosen_by="user",
+    )
 
 
 def select_candidate(candidates, cameras, far_lines, lower_focus, reflection=None):

@@ -1,13 +1,14 @@
-"""The ``omnicam`` console script: calibrate, unwarp, maps, export, info and demo.
+"""The ``omnicam`` console script: calibrate, unwarp, maps, export, info, report and demo.
 
 ::
 
     omnicam calibrate IMAGE --mirror A B RIM (--intrinsics K.yaml | --fx F --fy F --cx X --cy Y
                       [--dist D ...]) [--far-lines LINES.json] [--rim-hint CX,CY,R]
                       [--boundary-points FILE] [--max-tilt DEG] [--max-offset MM] [--force]
-                      -o CALIB [--no-refine] [--overlay PATH] [--overwrite]
+                      [--candidates DIR] [--choose N]
+                      -o CALIB [--no-refine] [--overlay PATH] [--report PAGE.html] [--overwrite]
     omnicam calibrate --chessboard CxR --square S IMAGES... --mirror A B RIM [--intrinsics K]
-                      -o CALIB
+                      -o CALIB [--report PAGE.html]
     omnicam unwarp INPUT -c CALIB VIEW [VIEW ...] [--overwrite] [--max-frames N]
                    [--fourcc CODE] [--preview N] [--quiet]
         VIEW: (--panorama WxH [--elevation LO HI] [--projection P]
@@ -16,6 +17,8 @@
     omnicam maps CALIB VIEW [VIEW ...] (--ffmpeg [--supersample K] | --npy | --filestorage EXT)
     omnicam export CALIB --to omnidir|kalibr|camodocal|ocamcalib -o FILE [--depth MM]
     omnicam info CALIB
+    omnicam report CALIB IMAGES... -o PAGE.html [--chessboard CxR --square S]
+                   [--far-lines LINES.json] [--overwrite]
     omnicam demo [-o OUTDIR]
 
 Contract (py360convert style): :func:`main` takes ``argv`` and returns the exit status, so tests
@@ -38,7 +41,7 @@ import sys
 
 from .. import __version__
 from .._quiet import opencv_silenced
-from . import calibrate, demo, export, info, maps, unwarp
+from . import calibrate, demo, export, info, maps, report, unwarp
 from ._common import (
     EXIT_FAILURE,
     EXIT_INTERRUPTED,
@@ -64,7 +67,7 @@ def build_parser():
     parser.add_argument("--version", action="version", version=f"%(prog)s {__version__}")
     sub = parser.add_subparsers(dest="command", metavar="COMMAND", required=True)
 
-    for module in (calibrate, unwarp, maps, export, info, demo):
+    for module in (calibrate, unwarp, maps, export, info, report, demo):
         module.add_parser(sub)
     return parser
 

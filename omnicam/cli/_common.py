@@ -347,3 +347,28 @@ def save_calibration(camera, path, overwrite, report=None, **verdict):
 
 def indent_lines(text, prefix="   "):
     return "\n".join(prefix + line for line in text.splitlines())
+
+
+def pattern_size_arg(text):
+    """``COLSxROWS`` of inner corners -> ``(cols, rows)``, each at least 2."""
+    m = re.fullmatch(r"\s*(\d+)\s*[xX]\s*(\d+)\s*", text)
+    if not m or int(m.group(1)) < 2 or int(m.group(2)) < 2:
+        raise argparse.ArgumentTypeError(
+            f"expected COLSxROWS of inner corners such as 9x6, got {text!r}"
+        )
+    return int(m.group(1)), int(m.group(2))
+
+
+def rim_hint_arg(text):
+    """``CX,CY,R`` -> three floats, ``R`` positive."""
+    parts = text.replace(" ", "").split(",")
+    try:
+        cx, cy, r = (float(v) for v in parts)
+    except ValueError:
+        raise argparse.ArgumentTypeError(
+            f"expected CX,CY,R (the rim's centre and radius in px) such as 640,360,300, "
+            f"got {text!r}"
+        ) from None
+    if not all(math.isfinite(v) for v in (cx, cy, r)) or r <= 0:
+        raise argparse.ArgumentTypeError(f"expected finite CX,CY and a positive R, got {text!r}")
+    return cx, cy, r

@@ -2,7 +2,6 @@
 
 from __future__ import annotations
 
-import argparse
 import json
 import math
 import os
@@ -18,6 +17,7 @@ from ..formats.omnicam_files import SUFFIXES, Verdict, read_verdict, reading
 from ..gauge import posture_error
 from ..mirror import HyperbolicMirror
 from . import pattern
+from . import report_pages as report_page
 from ._common import (
     EXIT_OK,
     CliError,
@@ -30,6 +30,7 @@ from ._common import (
     read_image_file,
     read_intrinsics,
     report_text,
+    rim_hint_arg,
     save_calibration,
     warn_user,
     write_image_file,
@@ -131,6 +132,8 @@ def _finish(args, camera, report, image, outputs, k_from, rig):
         print(_moved_text(camera, rig, args.from_rig, report))
     for w in implausible:
         warn_user(f"implausible: {w}")
+    if args.report:  # refused or not: the page shows what went wrong
+        report_page.write_image_page(args.report, camera, report, image, args.overwrite)
     if implausible and not args.force:
         # the overlay shows what went wrong; under its own name, so that it never blocks a retry
         write_image_file(refused_overlay, report.draw(image), True)
@@ -158,10 +161,20 @@ def cmd_calibrate(args):
             _refuse_beside_from(args)
         if args.guess_k:
             _refuse_beside_guess(args)
+        for flag, given in (("--choose", args.choose), ("--candidates", args.candidates)):
+            if given is not None:
+                raise CliError(
+                    f"calibrate: {flag} is for one image (Chen's four postures); "
+                    f"--chessboard has no candidates",
+                    2,
+                )
+        report_page.check_report_output(args.report, args.overwrite)
         return pattern.cmd_calibrate_pattern(args)
     _check_mode(args)
     args.image = args.image[0]
     outputs = _outputs(args)
+    report_page.check_report_output(args.report, args.overwrite)
+    _check_candidates_folder(args.candidates, args.overwrite)
     K, D, mirror, size, k_from, rig = _rig_inputs(args)
     image, image_size, far_lines, boundary = _image_inputs(args)
     if args.guess_k:
@@ -190,11 +203,14 @@ def cmd_calibrate(args):
             max_offset_mm=args.max_offset,
             lens_r=args.lens_r,
             lens_z=args.lens_z,
+            choose=args.choose,
         )
     except (ValueError, RuntimeError, NotImplementedError, np.linalg.LinAlgError) as e:
         raise CliError(
             f"calibration of {args.image} failed: {one_line(e)}{aspect_note(image_size)}"
         ) from None
+    if args.candidates is not None:
+        _write_candidates(args.candidates, camera, report, image, args.overwrite)
     return _finish(args, camera, report, image, outputs, k_from, rig)
 
 
@@ -404,19 +420,40 @@ def read_boundary_points(path):
     return pts
 
 
-def _rim_hint(text):
-    """``CX,CY,R`` -> three floats, ``R`` positive."""
-    parts = text.replace(" ", "").split(",")
+def _candidate_path(folder, i):
+    return os.path.join(folder, f"candidate_{i}.jpg")
+
+
+def _check_candidates_folder(folder, overwrite):
+    """``--candidates DIR``: a folder (made if missing) whose panoramas we may write."""
+    if folder is None:
+        return
+    if os.path.exists(folder) and not os.path.isdir(folder):
+        raise CliError(f"--candidates {folder} is a file, not a folder")
+    for i in range(4):
+        path = _candidate_path(folder, i)
+        if os.path.lexists(path) and not overwrite:
+            raise CliError(f"--candidates: {path} exists; pass --overwrite to replace it")
+
+
+def _write_candidates(folder, camera, report, image, overwrite):
+    """Each candidate's panorama (far lines drawn) into ``folder``, to choose by eye."""
+    from ..html_report.image import candidate_panoramas
+
     try:
-        cx, cy, r = (float(v) for v in parts)
-    except ValueError:
-        raise argparse.ArgumentTypeError(
-            f"expected CX,CY,R (the rim's centre and radius in px) such as 640,360,300, "
-            f"got {text!r}"
-        ) from None
-    if not all(math.isfinite(v) for v in (cx, cy, r)) or r <= 0:
-        raise argparse.ArgumentTypeError(f"expected finite CX,CY and a positive R, got {text!r}")
-    return cx, cy, r
+        os.makedirs(folder, exist_ok=True)
+    except OSError as e:
+        raise CliError(f"--candidates: cannot create {folder}: {e.strerror or e}") from None
+    panos, _ = candidate_panoramas(camera, report, image, width=1200)
+    for i, pano, why in panos:
+        path = _candidate_path(folder, i)
+        if pano is None:
+            print(f"  candidate {i}: {why}")
+            continue
+        write_image_file(path, pano, overwrite)
+        mark = " (chosen)" if i == report.chosen else ""
+        print(f"  candidate {i}{mark}: wrote {path}")
+    print("  (look at them, then --choose N takes candidate N)", flush=True)
 
 
 def _overlay_path(calib):
@@ -525,8 +562,22 @@ def add_parser(sub):
         "line far from the camera; used to pick the right posture candidate",
     )
     rim.add_argument(
+        "--candidates",
+        metavar="DIR",
+        help="write each of Chen's four postures as a panorama (far lines drawn) into DIR, "
+        "candidate_N.jpg, to choose by eye (the impossible ones are named, not drawn)",
+    )
+    rim.add_argument(
+        "--choose",
+        type=int,
+        choices=range(4),
+        metavar="N",
+        help="take candidate N (0-3, a physically possible one) instead of the cues' choice; "
+        "the report and the file's verdict record it as the user's choice",
+    )
+    rim.add_argument(
         "--rim-hint",
-        type=_rim_hint,
+        type=rim_hint_arg,
         metavar="CX,CY,R",
         help="rough centre and radius of the mirror rim in IMAGE (px): the rim is searched "
         "only within 15%% of R of that circle (use it when the overlay shows another "
@@ -600,6 +651,7 @@ def add_parser(sub):
         metavar="PATH",
         help="overlay image to write (default: CALIB's stem + '_overlay.png', next to CALIB)",
     )
+    report_page.add_report_option(out)
     out.add_argument("--overwrite", action="store_true", help="replace existing output files")
     pattern.add_arguments(p)
     p.set_defaults(func=cmd_calibrate)

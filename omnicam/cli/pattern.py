@@ -23,7 +23,6 @@ list in the order of IMAGES; or ``.npz``, one ``(N, 2)`` array per image file na
 
 from __future__ import annotations
 
-import argparse
 import json
 import os
 import re
@@ -44,6 +43,7 @@ from ._common import (
     CliError,
     check_output,
     one_line,
+    pattern_size_arg,
     positive_arg,
     read_image_file,
     read_intrinsics,
@@ -53,15 +53,6 @@ from ._common import (
 )
 
 
-def _pattern_size(text):
-    m = re.fullmatch(r"\s*(\d+)\s*[xX]\s*(\d+)\s*", text)
-    if not m or int(m.group(1)) < 2 or int(m.group(2)) < 2:
-        raise argparse.ArgumentTypeError(
-            f"expected COLSxROWS of inner corners such as 9x6, got {text!r}"
-        )
-    return int(m.group(1)), int(m.group(2))
-
-
 def add_arguments(parser):
     """The chessboard options of ``omnicam calibrate``, as one group of its ``--help``."""
     p = parser.add_argument_group(
@@ -69,7 +60,7 @@ def add_arguments(parser):
     )
     p.add_argument(
         "--chessboard",
-        type=_pattern_size,
+        type=pattern_size_arg,
         metavar="COLSxROWS",
         help="calibrate K, D and the posture from chessboard IMAGES seen through the "
         "mirror: inner corners per row and per column, as OpenCV (e.g. 9x6); "
@@ -349,6 +340,12 @@ def cmd_calibrate_pattern(args):
             "(--force writes the file anyway)"
         )
     _write_overlays(args, report, images, folder)
+    if args.report:  # omnicam calibrate --report (cli/report.py)
+        from .report_pages import write_pattern_page
+
+        write_pattern_page(
+            args.report, camera, report, images, names, args.chessboard, args.overwrite
+        )
     save_calibration(
         camera, calib, args.overwrite, report, forced=bool(one_side), implausible=one_side
     )
