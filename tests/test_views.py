@@ -12,6 +12,7 @@ import numpy as np
 import pytest
 
 from omnicam import K_from_fov, MisalignedHyperbolicCamera, rotation_from_ypr, synthetic, views
+from omnicam.views import grid
 
 TOL = 0.01  # px, the accuracy every float table entry keeps
 
@@ -137,8 +138,8 @@ def test_views_across_the_edge_of_the_band_keep_the_bound(ypr):
     K = np.array([[125.0, 0.0, 159.5], [0.0, 125.0, 119.5], [0.0, 0.0, 1.0]])
     R = rotation_from_ypr(*ypr)
     stats = np.zeros(9, np.int64)
-    step = views._step_for(math.degrees(1.0 / 125.0))
-    mapx, mapy = views._table(
+    step = grid._step_for(math.degrees(1.0 / 125.0))
+    mapx, mapy = grid._table(
         cam,
         0,
         R.T @ np.linalg.inv(K),
@@ -175,9 +176,9 @@ def test_large_tables_are_interpolated_and_keep_the_bound():
     cam = synthetic.misaligned_rig()
     size = (1024, 256)
     lo, hi = views.visible_elevation_range(cam)
-    p0, p1, az = views._panorama_params(size, lo, hi, "equirectangular")
+    p0, p1, az = grid._panorama_params(size, lo, hi, "equirectangular")
     stats = np.zeros(9, np.int64)
-    mapx, mapy = views._table(
+    mapx, mapy = grid._table(
         cam, 2, np.eye(3), p0, p1, az, size, None, None, cv2.CV_32FC1, stats=stats
     )
     n_pixels = size[0] * size[1]
@@ -328,8 +329,8 @@ def test_rim_cells_give_the_entries_of_edge_cells(rig_name):
 
     cam = RIGS[rig_name]()
     m = cam.mirror
-    view = views._view_args(cam, 0, np.eye(3), 0.0, 0.0, 0.0, None, None)
-    rig = views._rig_args(cam)
+    view = grid._view_args(cam, 0, np.eye(3), 0.0, 0.0, 0.0, None, None)
+    rig = grid._rig_args(cam)
     rng = np.random.default_rng(5)
     radius = m.rim_radius * np.concatenate(
         [rng.uniform(0.05, 1.05, 300), 1.0 + rng.uniform(-2e-3, 2e-3, 100)]

@@ -40,9 +40,9 @@ import cv2
 import numpy as np
 import numpy.typing as npt
 
-from . import _kernels
-from ._jit import notice_if_cold, run_chunks
-from ._kernels import (
+from .. import _kernels
+from .._jit import notice_if_cold, run_chunks
+from .._kernels import (
     CHECK_CENTRE,
     CHECK_HORIZONTAL_EDGE,
     CHECK_VERTICAL_EDGE,
@@ -52,10 +52,10 @@ from ._kernels import (
     ViewArgs,
     cubic_blocks,
 )
-from ._typing import ArrayLike, FloatArray, Maps, Size
-from ._validate import finite_array, float_array, real_number, refuse_complex, validate_K
-from .camera import MisalignedCatadioptricCamera
-from .mirror import HyperbolicMirror
+from .._typing import ArrayLike, FloatArray, Maps, Size
+from .._validate import finite_array, float_array, real_number, refuse_complex, validate_K
+from ..camera import MisalignedCatadioptricCamera
+from ..mirror import HyperbolicMirror
 
 __all__ = [
     "init_panorama_maps",
