@@ -12,7 +12,7 @@ import numpy as np
 import pytest
 
 from omnicam import K_from_fov, MisalignedHyperbolicCamera, rotation_from_ypr, synthetic, views
-from omnicam.views import grid
+from omnicam.views import api, grid
 
 TOL = 0.01  # px, the accuracy every float table entry keeps
 
@@ -141,11 +141,7 @@ def test_views_across_the_edge_of_the_band_keep_the_bound(ypr):
     step = grid._step_for(math.degrees(1.0 / 125.0))
     mapx, mapy = grid._table(
         cam,
-        0,
-        R.T @ np.linalg.inv(K),
-        0.0,
-        0.0,
-        0.0,
+        grid.Directions(0, R.T @ np.linalg.inv(K)),
         size,
         None,
         None,
@@ -176,10 +172,10 @@ def test_large_tables_are_interpolated_and_keep_the_bound():
     cam = synthetic.misaligned_rig()
     size = (1024, 256)
     lo, hi = views.visible_elevation_range(cam)
-    p0, p1, az = grid._panorama_params(size, lo, hi, "equirectangular")
+    p0, p1, az = api._panorama_params(size, lo, hi, "equirectangular")
     stats = np.zeros(9, np.int64)
     mapx, mapy = grid._table(
-        cam, 2, np.eye(3), p0, p1, az, size, None, None, cv2.CV_32FC1, stats=stats
+        cam, grid.Directions(2, np.eye(3), p0, p1, az), size, None, None, cv2.CV_32FC1, stats=stats
     )
     n_pixels = size[0] * size[1]
     assert stats[2] > 0  # cells interpolated from the nodes

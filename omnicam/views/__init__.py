@@ -1,31 +1,44 @@
-"""Remap tables for ``cv2.remap``: panoramas and virtual perspective views (paper section 4.1)."""
+"""Remap tables for ``cv2.remap``: panoramas and virtual perspective views (paper section 4.1).
 
-from .grid import (
-    CELL_DEGREES,
+The views in three modules (and the checks they share, :mod:`omnicam.views.checks`):
+
+- :mod:`omnicam.views.api`: the public functions and view specs (``init_panorama_maps``,
+  ``init_perspective_maps``, ``PanoramaView``, ``PerspectiveView``, ``rotation_from_ypr``,
+  ``K_from_fov``).
+- :mod:`omnicam.views.elevation`: which elevations a panorama covers, what the mirror sees
+  (``visible_elevation_range``) and where the default panorama's lower edge is chosen
+  (``default_elevation_range``, ``camera_reflection_elevation``, ``LOWER_EDGE_*``).
+- :mod:`omnicam.views.grid`: the adaptive grid-table builder (nodes solved exactly, cubic cells
+  checked and refined, the calls into the numba kernels).
+
+The conventions (which output pixel looks where) are docs/conventions.md's, section "Views".
+"""
+
+from .api import (
+    R0,
+    UNSEEN_WARN_FRACTION,
+    K_from_fov,
+    PanoramaView,
+    PerspectiveView,
+    init_panorama_maps,
+    init_perspective_maps,
+    rotation_from_ypr,
+)
+from .checks import M1TYPES, PROJECTIONS
+from .elevation import (
     CYLINDRICAL_MIN_ELEVATION,
     LOWER_EDGE_ABOVE,
     LOWER_EDGE_FIXED,
     LOWER_EDGE_FLOOR,
     LOWER_EDGE_MIRROR,
     LOWER_EDGE_REFLECTION,
-    M1TYPES,
-    PROJECTIONS,
-    R0,
     REFLECTION_MARGIN_PX,
-    TOLERANCE,
-    UNSEEN,
-    UNSEEN_WARN_FRACTION,
     DefaultElevationRange,
-    K_from_fov,
-    PanoramaView,
-    PerspectiveView,
     camera_reflection_elevation,
     default_elevation_range,
-    init_panorama_maps,
-    init_perspective_maps,
-    rotation_from_ypr,
     visible_elevation_range,
 )
+from .grid import CELL_DEGREES, TOLERANCE, UNSEEN
 
 __all__ = [
     "init_panorama_maps",
