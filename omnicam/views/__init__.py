@@ -4,7 +4,7 @@ The views in three modules (and the checks they share, :mod:`omnicam.views.check
 
 - :mod:`omnicam.views.api`: the public functions and view specs (``init_panorama_maps``,
   ``init_perspective_maps``, ``PanoramaView``, ``PerspectiveView``, ``rotation_from_ypr``,
-  ``K_from_fov``).
+  ``K_from_fov``, ``camera_forward_yaw``: a default panorama's centre).
 - :mod:`omnicam.views.elevation`: which elevations a panorama covers, what the mirror sees
   (``visible_elevation_range``) and where the default panorama's lower edge is chosen
   (``default_elevation_range``, ``camera_reflection_elevation``, ``LOWER_EDGE_*``).
@@ -15,11 +15,13 @@ The conventions (which output pixel looks where) are docs/conventions.md's, sect
 """
 
 from .api import (
+    FORWARD_MIN_TILT_DEG,
     R0,
     UNSEEN_WARN_FRACTION,
     K_from_fov,
     PanoramaView,
     PerspectiveView,
+    camera_forward_yaw,
     init_panorama_maps,
     init_perspective_maps,
     rotation_from_ypr,
@@ -48,6 +50,7 @@ __all__ = [
     "visible_elevation_range",
     "default_elevation_range",
     "camera_reflection_elevation",
+    "camera_forward_yaw",
     "DefaultElevationRange",
     "PanoramaView",
     "PerspectiveView",
@@ -56,6 +59,7 @@ __all__ = [
     "M1TYPES",
     "TOLERANCE",
     "R0",
+    "FORWARD_MIN_TILT_DEG",
     "CELL_DEGREES",
     "CYLINDRICAL_MIN_ELEVATION",
     "REFLECTION_MARGIN_PX",

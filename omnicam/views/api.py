@@ -40,9 +40,11 @@ from .checks import (
     _check_depth,
     _check_elevation_range,
     _check_m1type,
+    _check_panorama_size,
     _check_rotation,
     _check_size,
     _check_viewpoint,
+    _check_yaw,
 )
 from .elevation import (
     DefaultElevationRange,
@@ -130,6 +132,57 @@ def K_from_fov(fov_deg: float, size: Size) -> FloatArray:
     return np.array([[f, 0.0, (w - 1) / 2.0], [0.0, f, (h - 1) / 2.0], [0.0, 0.0, 1.0]])
 
 
+#: Below this tilt of the camera's optical axis from the panorama's up axis, the way the axis
+#: leans is no forward direction: a calibration knows the axis to about 0.1 deg (its report's
+#: ``axis_std_deg``), which leaves the azimuth of a smaller lean to chance. The default centre
+#: of a panorama is then azimuth 0 (the camera's x axis, image-right, by the gauge).
+FORWARD_MIN_TILT_DEG = 1.0
+
+
+def camera_forward_yaw(camera: MisalignedCatadioptricCamera, R: ArrayLike | None = None) -> float:
+    """The yaw (degrees, as :func:`rotation_from_ypr`'s) of the camera's forward direction:
+    the centre of a default panorama (docs/conventions.md, "Views").
+
+    Forward is the azimuth of the camera's optical axis (its +z axis, ``camera.R[2]`` in the
+    mirror frame) in the panorama frame (``R @`` it; ``R=None`` the mirror frame): the way the
+    camera leans, seen from above. When the axis leans less than ``FORWARD_MIN_TILT_DEG`` from
+    the panorama's up axis (an aligned rig, exactly along it) forward is azimuth 0: the mirror
+    frame's +X, which the gauge puts along the camera's x axis (image-right). The yaw looking
+    at azimuth ``phi`` is ``-phi`` (positive yaw turns right).
+
+    Parameters
+    ----------
+    camera : MisalignedHyperbolicCamera
+    R : (3, 3) array_like or None
+        The panorama's rotation, as for :func:`init_panorama_maps`.
+
+    Returns
+    -------
+    float
+        Degrees in (-180, 180].
+    """
+    _check_camera(camera)
+    Rm = np.eye(3) if R is None else _check_rotation(R)
+    return _forward_yaw(camera, Rm)
+
+
+def _forward_yaw(camera: MisalignedCatadioptricCamera, Rm: FloatArray) -> float:
+    """:func:`camera_forward_yaw` of a checked rotation."""
+    x, y, z = (float(v) for v in Rm @ np.asarray(camera.R, dtype=np.float64)[2])
+    if math.degrees(math.atan2(math.hypot(x, y), z)) < FORWARD_MIN_TILT_DEG:
+        return 0.0
+    yaw = -math.degrees(math.atan2(y, x))
+    return 180.0 if yaw == -180.0 else yaw + 0.0  # (-180, 180], no -0.0
+
+
+def _turn(yaw: float, w: int) -> FloatArray:
+    """``Rz(phi0)``, taking the panorama's kernel layout (column ``j`` at azimuth ``-360 j / W``)
+    to the one of docs/conventions.md: column ``(W - 1) / 2`` at azimuth ``-yaw``."""
+    phi0 = -math.radians(yaw) + math.pi * (w - 1) / w
+    c, s = math.cos(phi0), math.sin(phi0)
+    return np.array([[c, -s, 0.0], [s, c, 0.0], [0.0, 0.0, 1.0]])
+
+
 def _panorama_params(
     size: Size, lo: float, hi: float, projection: str
 ) -> tuple[float, float, float]:
@@ -153,11 +206,14 @@ def init_panorama_maps(
     m1type: int = cv2.CV_16SC2,
     depth: float | None = None,
     viewpoint: ArrayLike | None = None,
+    *,
+    yaw: float | None = None,
 ) -> Maps:
     """``cv2.remap`` tables of a 360-degree panorama (paper section 4.1, Fig. 7).
 
-    Column ``j`` looks at azimuth ``-360 j / W`` degrees (measured in the panorama frame from +X
-    towards +Y, so the panorama turns right as ``j`` grows); row 0 is elevation ``hi``, row
+    Column ``j`` looks at azimuth ``-yaw - 360 (j - (W - 1) / 2) / W`` degrees (measured in the
+    panorama frame from +X towards +Y, so the panorama turns right as ``j`` grows, and its
+    centre looks where a perspective view of that ``yaw`` looks); row 0 is elevation ``hi``, row
     ``H - 1`` is ``lo``; rows are linear in ``tan(elevation)`` (``"cylindrical"``) or in
     elevation (``"equirectangular"``). A panorama direction ``d`` is ``R^T d`` in the mirror
     frame. Each entry is the exact non-central projection (to 0.01 px) of that direction
@@ -169,7 +225,7 @@ def init_panorama_maps(
         The calibrated rig, or ``MisalignedHyperbolicCamera.aligned(...)`` for the paper's
         uncalibrated baseline (eqs. 2-5).
     size : (int, int)
-        ``(W, H)`` of the panorama, ``H >= 2``.
+        ``(W, H)`` of the panorama, ``2 <= H <= W``.
     elevation_range : (float, float) or None
         ``(lo, hi)`` in degrees, ``lo < hi``, inside (-90, 90) for ``"cylindrical"`` and
         [-90, 90] for ``"equirectangular"``. ``None``: the band the mirror sees
@@ -189,6 +245,10 @@ def init_panorama_maps(
     viewpoint : (3,) array_like or None
         Mirror frame; ``None`` is the best-fit viewpoint (section 4.1). Unused when
         ``depth`` is None.
+    yaw : float or None
+        Degrees: the centre column looks at azimuth ``-yaw`` (as a perspective view of that
+        yaw). ``None``: the camera's forward direction (:func:`camera_forward_yaw`), so what
+        is in front of the camera is not cut by the seam.
 
     Returns
     -------
@@ -199,8 +259,9 @@ def init_panorama_maps(
     Raises
     ------
     ValueError
-        Naming the argument: malformed ``size``, unknown ``projection``, bad
-        ``elevation_range``, ``R``, ``m1type``, ``depth`` or ``viewpoint``.
+        Naming the argument: malformed ``size`` or one taller than wide, unknown
+        ``projection``, bad ``elevation_range``, ``R``, ``m1type``, ``depth``, ``viewpoint``
+        or ``yaw``.
 
     Notes
     -----
@@ -211,20 +272,22 @@ def init_panorama_maps(
     elevation, so row 0 lies on the rim.
     """
     _check_camera(camera)
-    w, h = _check_size(size, min_height=2)
+    w, h = _check_panorama_size(size)
     if projection not in PROJECTIONS:
         raise ValueError(f"projection must be one of {PROJECTIONS}, got {projection!r}")
     m1type = _check_m1type(m1type)
     Rm = np.eye(3) if R is None else _check_rotation(R)
     depth = _check_depth(depth)
     vp = _check_viewpoint(camera, viewpoint, depth)
+    yaw = _check_yaw(yaw)
     if elevation_range is None:  # above the camera's own reflection, else from -60 deg
         lo, hi, _ = _default_range(camera, projection, Rm, depth, vp)
     else:
         lo, hi = _check_elevation_range(elevation_range, projection)
     p0, p1, az_step = _panorama_params((w, h), lo, hi, projection)
     st = np.zeros(9, np.int64)
-    directions = Directions(_KIND[projection], Rm.T, p0, p1, az_step)
+    turn = _turn(_forward_yaw(camera, Rm) if yaw is None else yaw, w)
+    directions = Directions(_KIND[projection], Rm.T @ turn, p0, p1, az_step)
     maps = _table(camera, directions, (w, h), depth, vp, m1type, stats=st)
     # a full-sphere panorama (a 360 video's frame) is black above the band by its format
     _warn_if_unseen(camera, st[8] / (w * h), "panorama" if hi - lo < 170.0 else "360 panorama")
@@ -346,12 +409,13 @@ class PanoramaView:
     Parameters
     ----------
     size : (int, int)
-        ``(W, H)``, ``H >= 2``.
-    elevation_range, projection, R, depth, viewpoint
-        As for :func:`init_panorama_maps`.
+        ``(W, H)``, ``2 <= H <= W``.
+    elevation_range, projection, R, depth, viewpoint, yaw
+        As for :func:`init_panorama_maps` (``yaw=None``: the camera's forward direction at
+        the centre column, :func:`camera_forward_yaw`).
     """
 
-    __slots__ = ("size", "elevation_range", "projection", "R", "depth", "viewpoint")
+    __slots__ = ("size", "elevation_range", "projection", "R", "depth", "viewpoint", "yaw")
 
     def __init__(
         self,
@@ -361,8 +425,10 @@ class PanoramaView:
         R: ArrayLike | None = None,
         depth: float | None = None,
         viewpoint: ArrayLike | None = None,
+        *,
+        yaw: float | None = None,
     ) -> None:
-        self.size = _check_size(size, min_height=2)
+        self.size = _check_panorama_size(size)
         if projection not in PROJECTIONS:
             raise ValueError(f"projection must be one of {PROJECTIONS}, got {projection!r}")
         self.projection = projection
@@ -376,6 +442,7 @@ class PanoramaView:
             if viewpoint is None
             else _check_viewpoint(None, viewpoint, 1.0 if depth is None else depth)
         )
+        self.yaw = _check_yaw(yaw)
 
     def default_range(self, camera: MisalignedCatadioptricCamera) -> DefaultElevationRange | None:
         """The band this view covers for ``camera`` when its ``elevation_range`` is None
@@ -395,12 +462,13 @@ class PanoramaView:
             m1type,
             self.depth,
             self.viewpoint,
+            yaw=self.yaw,
         )
 
     def __repr__(self) -> str:
         return (
             f"PanoramaView(size={self.size}, elevation_range={self.elevation_range}, "
-            f"projection={self.projection!r}, depth={self.depth})"
+            f"projection={self.projection!r}, depth={self.depth}, yaw={self.yaw})"
         )
 
 

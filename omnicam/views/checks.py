@@ -46,6 +46,24 @@ def _check_size(size: Any, min_height: int = 1) -> Size:
     return w, h
 
 
+def _check_panorama_size(size: Any) -> Size:
+    """A panorama's ``(W, H)``: ``H >= 2`` and not taller than wide (its width spans 360 deg,
+    so a taller one is mostly a swapped size; the message gives the size to give)."""
+    w, h = _check_size(size, min_height=2)
+    if h > w:
+        raise ValueError(
+            f"size: a panorama is (width, height) with its width spanning 360 deg, and {w}x{h} "
+            f"is taller than wide; give size=({h}, {w}) (or any width >= the height)"
+        )
+    return w, h
+
+
+def _check_yaw(yaw: object) -> float | None:
+    if yaw is None:
+        return None
+    return real_number(yaw, "yaw", expected="None or a finite number of degrees")
+
+
 def _check_camera(camera: object) -> object:
     """The camera, refused unless it has what the views use of it (duck-typed, so the error
     names the class users know rather than an isinstance failure)."""
