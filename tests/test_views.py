@@ -328,6 +328,14 @@ def test_the_forward_direction_of_a_rig_leaning_less_than_a_degree_is_plus_X():
     assert views.camera_forward_yaw(leaning, R) == pytest.approx(-math.degrees(math.atan2(y, x)))
 
 
+@pytest.mark.parametrize("yaw", ["a", float("nan"), float("inf"), 1j, [1.0], True])
+def test_a_bad_yaw_is_refused_naming_it(yaw):
+    with pytest.raises(ValueError, match="yaw must be None or a finite number of degrees"):
+        views.PanoramaView((64, 16), yaw=yaw)
+    with pytest.raises(ValueError, match="yaw must be"):
+        synthetic.aligned_rig().init_panorama_maps((64, 16), yaw=yaw)
+
+
 @pytest.mark.parametrize("size", [(160, 640), (99, 100)])
 def test_a_panorama_taller_than_wide_is_refused_with_the_size_to_give(size):
     w, h = size
