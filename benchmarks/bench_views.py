@@ -152,7 +152,10 @@ def accuracy(cam, n=200_000):
                     hi = min(hi, 89.0)
                 h, w = mx.shape
                 ii, jj = rng.integers(0, h, n), rng.integers(0, w, n)
-                az = -2 * np.pi * jj / w
+                # column j at azimuth -yaw - 360 (j - (w - 1) / 2) / w, the camera's forward
+                # direction at the centre (the default yaw)
+                yaw = views.camera_forward_yaw(cam)
+                az = np.radians(-yaw - 360.0 * (jj - (w - 1) / 2.0) / w)
                 if name == "cylindrical":
                     tz = np.tan(np.radians(hi)) + (
                         np.tan(np.radians(lo)) - np.tan(np.radians(hi))

@@ -50,6 +50,7 @@ import numpy as np
 
 import omnicam
 from omnicam import synthetic
+from omnicam.views import camera_forward_yaw
 
 #: Default output folder: examples/out/ (git-ignored), wherever the script is run from.
 OUT = os.path.join(os.path.dirname(os.path.abspath(__file__)), "out")
@@ -104,8 +105,10 @@ def posture_error(camera, truth):
 
 def panorama_error(camera, truth, size):
     """RMS distance (source px) between the panorama tables of ``camera`` and the true rig."""
-    a = camera.init_panorama_maps(size, elevation_range=(-60.0, 10.0), m1type=cv2.CV_32FC2)[0]
-    b = truth.init_panorama_maps(size, elevation_range=(-60.0, 10.0), m1type=cv2.CV_32FC2)[0]
+    # one yaw for both: by default each panorama centres its own camera's forward direction
+    kw = dict(elevation_range=(-60.0, 10.0), m1type=cv2.CV_32FC2, yaw=0.0)
+    a = camera.init_panorama_maps(size, **kw)[0]
+    b = truth.init_panorama_maps(size, **kw)[0]
     ok = (a[..., 0] > -5) & (b[..., 0] > -5)  # both see the mirror (unseen maps to -10)
     d = (a - b)[ok]
     return float(np.sqrt(np.mean(np.sum(d * d, axis=-1))))
@@ -435,8 +438,11 @@ def main(argv=None):
             K, m, image=images[name], far_lines=pole_far_lines(rig, rng)
         )
         axis_err, origin_err = posture_error(calibrated, rig)
+        forward = camera_forward_yaw(rig)  # both kinds centred alike
         for kind, cam in (("uncalibrated", uncalibrated), ("calibrated", calibrated)):
-            map1, map2 = cam.init_panorama_maps(pano_size, elevation_range=(-60.0, 10.0))
+            map1, map2 = cam.init_panorama_maps(
+                pano_size, elevation_range=(-60.0, 10.0), yaw=forward
+            )
             pano = cv2.remap(images[name], map1, map2, cv2.INTER_LINEAR)
             written.append(save(f"fig7_{name}_{kind}.png", pano))
             err = panorama_error(cam, rig, (512, 128))

@@ -20,7 +20,8 @@ from conftest import make_frame, one_error_line, video_frames, write_video
 
 from omnicam import synthetic
 from omnicam.cli import main
-from omnicam.views import K_from_fov, rotation_from_ypr
+from omnicam.spherical import equirect_view
+from omnicam.views import K_from_fov, PanoramaView, rotation_from_ypr
 
 SIZE = (200, 200)
 
@@ -383,6 +384,30 @@ def test_each_panorama_line_says_where_its_lower_edge_came_from(data, rig, tmp_p
     assert main([*args, str(outs[2]), "--max-frames", "2"]) == 0
     edge = f"lower edge {lo:.1f} deg: the camera's reflection as detected"
     assert capsys.readouterr().out.splitlines() == [f"wrote 2 frames as {outs[2]} ({edge})"]
+
+
+@pytest.mark.parametrize("flag, size", [("--panorama", "121x30"), ("--equirect", "64x32")])
+def test_yaw_turns_a_panorama_and_a_360_view(data, rig, tmp_path, capsys, flag, size):
+    """``--yaw`` is the panorama's ``yaw``: its centre column looks at azimuth -yaw."""
+    out = tmp_path / "v.png"
+    argv = ["unwarp", str(data["image"]), "-c", str(data["calib"]), flag, size, "--yaw", "40"]
+    assert main([*argv, "-o", str(out)]) == 0, capsys.readouterr().err
+    w, h = (int(v) for v in size.split("x"))
+    make = PanoramaView if flag == "--panorama" else equirect_view
+    view = make((w, h), yaw=40.0)
+    src = cv2.imread(str(data["image"]))
+    expected = cv2.remap(src, *view.maps(rig), cv2.INTER_LINEAR)
+    np.testing.assert_array_equal(cv2.imread(str(out)), expected)
+
+
+def test_a_panorama_taller_than_wide_is_one_line_naming_the_size(data, tmp_path, capsys):
+    out = tmp_path / "p.png"
+    argv = ["unwarp", str(data["image"]), "-c", str(data["calib"]), "--panorama", "60x240"]
+    code = main([*argv, "-o", str(out)])
+    assert code == 2
+    line = one_error_line(capsys.readouterr().err)
+    assert "--panorama" in line and "taller than wide" in line and "size=(240, 60)" in line
+    assert not out.exists()
 
 
 def test_equirect_must_be_two_to_one_on_the_command_line(data, tmp_path, capsys):

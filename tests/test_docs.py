@@ -50,6 +50,7 @@ GUIDE_OF = {
     "export": ("guide-video-and-views.md",),
     "info": ("guide-video-and-views.md",),
     "demo": ("guide-video-and-views.md",),
+    "report": ("guide-report.md",),
 }
 
 
@@ -101,6 +102,8 @@ def inputs(args):
         named = [args.input, args.calibration]
     elif args.command in ("maps", "export", "info"):
         named = [args.calibration]
+    elif args.command == "report":
+        named = [args.calibration, *args.images]
     else:
         return None
     return [n for n in named if n is not None]

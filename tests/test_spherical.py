@@ -27,12 +27,13 @@ RIG = synthetic.misaligned_rig(image_size=(160, 160))
 
 def test_equirect_pixels_look_at_their_longitude_and_latitude():
     W, H = 72, 36
-    mx, my = equirect_view((W, H)).maps(RIG, cv2.CV_32FC1)
+    yaw = 25.0
+    mx, my = equirect_view((W, H), yaw=yaw).maps(RIG, cv2.CV_32FC1)
     _, hi = visible_elevation_range(RIG)
     for i, j in [(20, 36), (30, 5), (25, 60), (35, 0)]:
         lon = 360.0 * (j + 0.5) / W - 180.0
         lat = 90.0 - 180.0 * (i + 0.5) / H
-        az = math.radians(-lon)  # forward at the centre, turning right as j grows
+        az = math.radians(-yaw - lon)  # azimuth -yaw at the centre, turning right as j grows
         d = np.array(
             [
                 math.cos(math.radians(lat)) * math.cos(az),
@@ -49,13 +50,17 @@ def test_equirect_pixels_look_at_their_longitude_and_latitude():
     assert (mx[0] == UNSEEN).all() and hi < 90.0 - 180.0 * 0.5 / H
 
 
-def test_equirect_centre_column_is_forward():
+def test_equirect_centre_column_is_the_cameras_forward():
     W, H = 64, 32
     mx, my = equirect_view((W, H)).maps(RIG, cv2.CV_32FC1)
-    # between the two centre columns lies azimuth 0: their mean source pixel is the +X horizon's
+    # between the two centre columns lies the azimuth of the camera's optical axis (3 deg
+    # tilted): their mean source pixel is that horizon's
+    x, y, _ = RIG.R[2]
+    az = math.atan2(y, x)
     i = H // 2  # latitude -2.8 deg
     lat = math.radians(90.0 - 180.0 * (i + 0.5) / H)
-    exact = RIG.project_directions(np.array([[math.cos(lat), 0.0, math.sin(lat)]]))[0]
+    d = [math.cos(lat) * math.cos(az), math.cos(lat) * math.sin(az), math.sin(lat)]
+    exact = RIG.project_directions(np.array([d]))[0]
     mid = 0.5 * (
         np.array([mx[i, W // 2 - 1], my[i, W // 2 - 1]]) + np.array([mx[i, W // 2], my[i, W // 2]])
     )

@@ -12,6 +12,7 @@ import numpy as np
 import pytest
 
 from omnicam import K_from_fov, MisalignedHyperbolicCamera, rotation_from_ypr, synthetic, views
+from omnicam.views import api, grid
 
 TOL = 0.01  # px, the accuracy every float table entry keeps
 
@@ -36,10 +37,19 @@ def rig(request):
 
 
 # -- directions written from docs/conventions.md ------------------------------------------------
-def panorama_dirs(size, lo, hi, projection, R=None):
+def forward_yaw(cam, R=None):
+    """The default yaw: minus the azimuth of the camera's optical axis in the panorama frame,
+    0 when it leans less than 1 deg from the panorama's up axis."""
+    x, y, z = (np.eye(3) if R is None else R) @ cam.R[2]
+    if math.degrees(math.atan2(math.hypot(x, y), z)) < 1.0:
+        return 0.0
+    return -math.degrees(math.atan2(y, x))
+
+
+def panorama_dirs(size, lo, hi, projection, R=None, yaw=0.0):
     R = np.eye(3) if R is None else R
     w, h = size
-    az = np.radians(-360.0 * np.arange(w) / w)
+    az = np.radians(-yaw - 360.0 * (np.arange(w) - (w - 1) / 2.0) / w)
     if projection == "cylindrical":
         tz = np.linspace(math.tan(math.radians(hi)), math.tan(math.radians(lo)), h)
         el = np.arctan(tz)
@@ -107,7 +117,7 @@ def test_panorama_table_within_tolerance_of_exact_projection(rig, projection, de
     )
     lo, hi = views.visible_elevation_range(rig)
     lo = max(lo, views.CYLINDRICAL_MIN_ELEVATION)  # the default leaves out the camera itself
-    ref = exact(rig, panorama_dirs(size, lo, hi, projection), depth)
+    ref = exact(rig, panorama_dirs(size, lo, hi, projection, yaw=forward_yaw(rig)), depth)
     assert_matches_exact(rig, mapx, mapy, ref)
 
 
@@ -137,14 +147,10 @@ def test_views_across_the_edge_of_the_band_keep_the_bound(ypr):
     K = np.array([[125.0, 0.0, 159.5], [0.0, 125.0, 119.5], [0.0, 0.0, 1.0]])
     R = rotation_from_ypr(*ypr)
     stats = np.zeros(9, np.int64)
-    step = views._step_for(math.degrees(1.0 / 125.0))
-    mapx, mapy = views._table(
+    step = grid._step_for(math.degrees(1.0 / 125.0))
+    mapx, mapy = grid._table(
         cam,
-        0,
-        R.T @ np.linalg.inv(K),
-        0.0,
-        0.0,
-        0.0,
+        grid.Directions(0, R.T @ np.linalg.inv(K)),
         size,
         None,
         None,
@@ -175,47 +181,50 @@ def test_large_tables_are_interpolated_and_keep_the_bound():
     cam = synthetic.misaligned_rig()
     size = (1024, 256)
     lo, hi = views.visible_elevation_range(cam)
-    p0, p1, az = views._panorama_params(size, lo, hi, "equirectangular")
+    p0, p1, az = api._panorama_params(size, lo, hi, "equirectangular")
     stats = np.zeros(9, np.int64)
-    mapx, mapy = views._table(
-        cam, 2, np.eye(3), p0, p1, az, size, None, None, cv2.CV_32FC1, stats=stats
+    mapx, mapy = grid._table(
+        cam, grid.Directions(2, np.eye(3), p0, p1, az), size, None, None, cv2.CV_32FC1, stats=stats
     )
     n_pixels = size[0] * size[1]
     assert stats[2] > 0  # cells interpolated from the nodes
     assert stats[0] + stats[1] < 0.1 * n_pixels  # exact solutions at nodes and check points
     assert stats[7] < 0.02 * n_pixels  # few pixels solved one by one
-    ref = exact(cam, panorama_dirs(size, lo, hi, "equirectangular"))
+    # _table's own layout (no turn): column j at azimuth -360 j / W, the centre's yaw below
+    ref = exact(cam, panorama_dirs(size, lo, hi, "equirectangular", yaw=180.0 * 1023 / 1024))
     assert_matches_exact(cam, mapx, mapy, ref)
 
 
 # -- conventions ------------------------------------------------------------------------------
-def test_panorama_column_quarter_looks_towards_minus_Y():
+@pytest.mark.parametrize("W", [400, 401])
+def test_panorama_column_looks_at_minus_yaw_turning_right_from_the_centre(W):
+    """Column j looks at azimuth -yaw - 360 (j - (W - 1) / 2) / W: the centre at -yaw, a
+    quarter turn right of it (-90 deg more) a quarter of the width further, the seam between
+    the last column and the first."""
     cam = synthetic.misaligned_rig()
-    W, H = 400, 51
+    yaw, H = 30.0, 51
     mapx, mapy = cam.init_panorama_maps(
-        (W, H), elevation_range=(-50.0, 0.0), projection="equirectangular", m1type=cv2.CV_32FC1
+        (W, H), (-50.0, 0.0), "equirectangular", m1type=cv2.CV_32FC1, yaw=yaw
     )
     for row, el in ((0, 0.0), (25, -25.0), (50, -50.0)):
         e = math.radians(el)
-        for col, d in (
-            (0, (math.cos(e), 0.0, math.sin(e))),
-            (W // 4, (0.0, -math.cos(e), math.sin(e))),
-            (W // 2, (-math.cos(e), 0.0, math.sin(e))),
-            (3 * W // 4, (0.0, math.cos(e), math.sin(e))),
-        ):
+        for col in (0, W // 4, (W - 1) // 2, W // 2, 3 * W // 4, W - 1):
+            az = math.radians(-yaw - 360.0 * (col - (W - 1) / 2.0) / W)
+            d = (math.cos(e) * math.cos(az), math.cos(e) * math.sin(az), math.sin(e))
             ref = cam.project_directions(np.array([d]))[0]
             assert np.hypot(mapx[row, col] - ref[0], mapy[row, col] - ref[1]) < TOL
 
 
 def test_panorama_turns_right_and_is_not_mirrored():
-    """Aligned rig: azimuth 0 (+X) is image right of centre, -90 deg (-Y) is image up."""
+    """Aligned rig: the default centre is azimuth 0 (+X), image right of the image centre; a
+    quarter of the width to the right, -90 deg (-Y), is image up."""
     cam = synthetic.aligned_rig()
     mapx, mapy = cam.init_panorama_maps(
-        (400, 40), elevation_range=(-40.0, 0.0), m1type=cv2.CV_32FC1
+        (401, 40), elevation_range=(-40.0, 0.0), m1type=cv2.CV_32FC1
     )
     cx, cy = cam.K[0, 2], cam.K[1, 2]
-    assert mapx[20, 0] > cx + 50 and abs(mapy[20, 0] - cy) < 1
-    assert mapy[20, 100] < cy - 50 and abs(mapx[20, 100] - cx) < 1
+    assert mapx[20, 200] > cx + 50 and abs(mapy[20, 200] - cy) < 1
+    assert mapy[20, 300] < cy - 50 and abs(mapx[20, 300] - cx) < 1
 
 
 @pytest.mark.parametrize("projection", ["cylindrical", "equirectangular"])
@@ -224,7 +233,7 @@ def test_panorama_rows_from_hi_to_lo_with_the_projection_spacing(projection):
     lo, hi = -50.0, 10.0
     H = 41
     mapx, mapy = cam.init_panorama_maps(
-        (64, H), elevation_range=(lo, hi), projection=projection, m1type=cv2.CV_32FC1
+        (65, H), elevation_range=(lo, hi), projection=projection, m1type=cv2.CV_32FC1, yaw=0.0
     )
     if projection == "cylindrical":
         mid = math.degrees(
@@ -235,7 +244,7 @@ def test_panorama_rows_from_hi_to_lo_with_the_projection_spacing(projection):
     for row, el in ((0, hi), (H // 2, mid), (H - 1, lo)):
         e = math.radians(el)
         ref = cam.project_directions(np.array([[math.cos(e), 0.0, math.sin(e)]]))[0]
-        assert np.hypot(mapx[row, 0] - ref[0], mapy[row, 0] - ref[1]) < TOL
+        assert np.hypot(mapx[row, 32] - ref[0], mapy[row, 32] - ref[1]) < TOL  # azimuth 0
 
 
 def test_panorama_R_rotates_the_panorama_frame():
@@ -246,8 +255,96 @@ def test_panorama_R_rotates_the_panorama_frame():
         mapx, mapy = cam.init_panorama_maps(
             size, elevation_range=(-60.0, 5.0), R=R, m1type=cv2.CV_32FC1
         )
-    ref = exact(cam, panorama_dirs(size, -60.0, 5.0, "cylindrical", R))
+    ref = exact(cam, panorama_dirs(size, -60.0, 5.0, "cylindrical", R, forward_yaw(cam, R)))
     assert_matches_exact(cam, mapx, mapy, ref)
+
+
+def far_ahead_pixel(cam, yaw, el_deg, depth=1e7):
+    """The pixel of a point ``depth`` away from the camera centre, at the panorama azimuth
+    ``-yaw`` and elevation ``el_deg``."""
+    az, el = math.radians(-yaw), math.radians(el_deg)
+    d = np.array([math.cos(el) * math.cos(az), math.cos(el) * math.sin(az), math.sin(el)])
+    return cam.project(np.asarray(cam.camera_center) + depth * d[None])[0]
+
+
+def nearest_column(map1, row, pixel):
+    return int(np.argmin(np.linalg.norm(map1[row].astype(np.float64) - pixel, axis=1)))
+
+
+@pytest.mark.parametrize("rig_name", ["aligned", "misaligned", "distorted"])
+@pytest.mark.parametrize("depth", [None, 5000.0])
+def test_the_cameras_forward_lands_on_the_centre_column(rig_name, depth):
+    """A point far straight ahead of the camera (the azimuth of its optical axis; +X for the
+    aligned rig) is seen by the centre column of a default panorama: not cut by the seam."""
+    cam = RIGS[rig_name]()
+    x, y, _ = cam.R[2]
+    expected = 0.0 if rig_name == "aligned" else -math.degrees(math.atan2(y, x))
+    assert views.camera_forward_yaw(cam) == pytest.approx(expected, abs=1e-9)
+    W, H = 361, 61  # centre column 180
+    # row 30 halfway: elevation -20 deg, and tan(elevation) -0.4 for the cylindrical band
+    for projection, band, el in (
+        ("equirectangular", (-50.0, 10.0), -20.0),
+        ("cylindrical", (math.degrees(math.atan(-0.8)), 0.0), math.degrees(math.atan(-0.4))),
+    ):
+        view = views.PanoramaView((W, H), band, projection, depth=depth)
+        map1, _ = view.maps(cam, cv2.CV_32FC2)
+        pixel = far_ahead_pixel(cam, expected, el)
+        assert nearest_column(map1, 30, pixel) == 180
+        if depth is None:  # directions: the entry is that pixel
+            assert np.linalg.norm(map1[30, 180] - pixel) < TOL
+
+
+@pytest.mark.parametrize("rig_name", ["aligned", "misaligned"])
+def test_yaw_moves_the_forward_point_by_its_share_of_the_width(rig_name):
+    """yaw = forward + 360 k / W puts what is ahead k columns left of the centre."""
+    cam = RIGS[rig_name]()
+    W, H = 361, 61
+    forward = views.camera_forward_yaw(cam)
+    pixel = far_ahead_pixel(cam, forward, -20.0)
+    for k in (30, -75, 180):
+        map1, _ = cam.init_panorama_maps(
+            (W, H),
+            (-50.0, 10.0),
+            "equirectangular",
+            m1type=cv2.CV_32FC2,
+            yaw=forward + 360.0 * k / W,
+        )
+        col = nearest_column(map1, 30, pixel)
+        assert col == (180 - k) % W
+        assert np.linalg.norm(map1[30, col] - pixel) < TOL
+
+
+def test_the_forward_direction_of_a_rig_leaning_less_than_a_degree_is_plus_X():
+    """Below FORWARD_MIN_TILT_DEG the lean is no direction: yaw 0 (azimuth 0, +X)."""
+    assert views.FORWARD_MIN_TILT_DEG == 1.0
+    slight = synthetic.misaligned_rig(tilt_deg=0.9)
+    assert views.camera_forward_yaw(slight) == 0.0
+    leaning = synthetic.misaligned_rig(tilt_deg=1.1)
+    x, y, _ = leaning.R[2]
+    assert views.camera_forward_yaw(leaning) == pytest.approx(-math.degrees(math.atan2(y, x)))
+    # in a panorama frame turned by R, the lean is measured there
+    R = cv2.Rodrigues(np.array([0.0, 0.0, 0.5]))[0]
+    x, y, _ = R @ leaning.R[2]
+    assert views.camera_forward_yaw(leaning, R) == pytest.approx(-math.degrees(math.atan2(y, x)))
+
+
+@pytest.mark.parametrize("yaw", ["a", float("nan"), float("inf"), 1j, [1.0], True])
+def test_a_bad_yaw_is_refused_naming_it(yaw):
+    with pytest.raises(ValueError, match="yaw must be None or a finite number of degrees"):
+        views.PanoramaView((64, 16), yaw=yaw)
+    with pytest.raises(ValueError, match="yaw must be"):
+        synthetic.aligned_rig().init_panorama_maps((64, 16), yaw=yaw)
+
+
+@pytest.mark.parametrize("size", [(160, 640), (99, 100)])
+def test_a_panorama_taller_than_wide_is_refused_with_the_size_to_give(size):
+    w, h = size
+    msg = rf"size: .*{w}x{h} is taller than wide; give size=\({h}, {w}\)"
+    with pytest.raises(ValueError, match=msg):
+        views.PanoramaView(size)
+    with pytest.raises(ValueError, match=msg):
+        synthetic.aligned_rig().init_panorama_maps(size)
+    views.PanoramaView((100, 100))  # square is fine
 
 
 def test_default_elevation_range_is_the_band_the_mirror_sees():
@@ -311,7 +408,7 @@ def test_aligned_baseline_differs_from_calibrated_on_a_misaligned_rig():
     """Paper Fig. 7: the uncalibrated model (eqs. 2-5) warps a misaligned rig's panorama."""
     cam = synthetic.misaligned_rig()
     base = MisalignedHyperbolicCamera.aligned(cam.mirror, cam.K[0, 0], cam.K[0, 2], cam.K[1, 2])
-    kw = dict(elevation_range=(-60.0, 5.0), m1type=cv2.CV_32FC1)
+    kw = dict(elevation_range=(-60.0, 5.0), m1type=cv2.CV_32FC1, yaw=0.0)
     a = np.stack(cam.init_panorama_maps((256, 64), **kw), axis=-1)
     b = np.stack(base.init_panorama_maps((256, 64), **kw), axis=-1)
     ok = (a != views.UNSEEN).all(-1) & (b != views.UNSEEN).all(-1)
@@ -328,8 +425,8 @@ def test_rim_cells_give_the_entries_of_edge_cells(rig_name):
 
     cam = RIGS[rig_name]()
     m = cam.mirror
-    view = views._view_args(cam, 0, np.eye(3), 0.0, 0.0, 0.0, None, None)
-    rig = views._rig_args(cam)
+    view = grid._view_args(cam, 0, np.eye(3), 0.0, 0.0, 0.0, None, None)
+    rig = grid._rig_args(cam)
     rng = np.random.default_rng(5)
     radius = m.rim_radius * np.concatenate(
         [rng.uniform(0.05, 1.05, 300), 1.0 + rng.uniform(-2e-3, 2e-3, 100)]
@@ -520,7 +617,10 @@ def test_random_rigs_keep_the_bound(seed):
         size, (lo, hi), projection="equirectangular", m1type=cv2.CV_32FC1, depth=depth
     )
     assert_matches_exact(
-        cam, mapx, mapy, exact(cam, panorama_dirs(size, lo, hi, "equirectangular"), depth)
+        cam,
+        mapx,
+        mapy,
+        exact(cam, panorama_dirs(size, lo, hi, "equirectangular", yaw=forward_yaw(cam)), depth),
     )
     size = (400, 300)
     K = K_from_fov(rng.uniform(40.0, 140.0), size)

@@ -13,7 +13,7 @@ from .. import synthetic
 from ..formats.omnicam_files import write_far_lines, write_intrinsics
 from ..hyperbolic_camera import MisalignedHyperbolicCamera
 from ..synthetic.demo import DEMO_CLICK_NOISE_PX, demo_environment, demo_far_lines
-from ..views import UNSEEN, K_from_fov, rotation_from_ypr
+from ..views import UNSEEN, K_from_fov, camera_forward_yaw, rotation_from_ypr
 from ._common import (
     EXIT_OK,
     CliError,
@@ -28,8 +28,9 @@ from .info import posture, vector_text
 
 def _table_rms(cam_a, cam_b, size):
     """RMS distance (px) between two cameras' float panorama tables where both see the mirror."""
-    a = cam_a.init_panorama_maps(size, m1type=cv2.CV_32FC2)[0]
-    b = cam_b.init_panorama_maps(size, m1type=cv2.CV_32FC2)[0]
+    # one yaw for both: by default each panorama centres its own camera's forward direction
+    a = cam_a.init_panorama_maps(size, m1type=cv2.CV_32FC2, yaw=0.0)[0]
+    b = cam_b.init_panorama_maps(size, m1type=cv2.CV_32FC2, yaw=0.0)[0]
     ok = (a[..., 0] != UNSEEN) & (b[..., 0] != UNSEEN)
     d = (a - b)[ok]
     return float(np.sqrt(np.mean(np.sum(d * d, axis=-1)))) if d.size else float("nan")
@@ -106,9 +107,10 @@ def cmd_demo(args):
         f"{_table_rms(baseline, truth, (256, 64)):.2f} px"
     )
 
+    forward = camera_forward_yaw(camera)  # both panoramas centred alike, to compare them
     views = {
-        "panorama.png": camera.init_panorama_maps(pano_size),
-        "panorama_uncalibrated.png": baseline.init_panorama_maps(pano_size),
+        "panorama.png": camera.init_panorama_maps(pano_size, yaw=forward),
+        "panorama_uncalibrated.png": baseline.init_panorama_maps(pano_size, yaw=forward),
         "perspective.png": camera.init_perspective_maps(
             K_from_fov(90.0, (640, 480)),
             (640, 480),

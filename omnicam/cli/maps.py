@@ -17,7 +17,6 @@ from __future__ import annotations
 import math
 
 import cv2
-import numpy as np
 
 from .._atomic import OutputError
 from ..camera import scale_K
@@ -52,7 +51,7 @@ def _scaled_view(spec, camera, k):
     w, h = view.size
     size = (w * k, h * k)
     if spec.kind == "equirect":
-        return equirect_view(size, depth=view.depth)
+        return equirect_view(size, depth=view.depth, yaw=view.yaw)
     if spec.kind == "perspective":
         return type(view)(
             size,
@@ -77,18 +76,16 @@ def _scaled_view(spec, camera, k):
     limit = 89.999 if view.projection == "cylindrical" else 90.0
     hi2 = min(from_p(to_p(hi) - step * shift), limit)
     lo2 = max(from_p(to_p(lo) + step * shift), -limit)
-    # columns: sub-column m of column j looks at -360 (j - 0.5 + (m + 0.5) / k) / W degrees
-    delta = math.radians(360.0 * shift / w)
-    c, s_ = math.cos(delta), math.sin(delta)
-    Rz = np.array([[c, -s_, 0.0], [s_, c, 0.0], [0.0, 0.0, 1.0]])
-    R_old = np.eye(3) if view.R is None else view.R
+    # columns need no turn: the centre is column (W - 1) / 2 of both, so sub-column m of
+    # column j (fine column j k + m) looks at -yaw - 360 (j - 0.5 + (m + 0.5) / k - (W - 1) / 2) / W
     return PanoramaView(
         size,
         elevation_range=(lo2, hi2),
         projection=view.projection,
-        R=Rz.T @ R_old,
+        R=view.R,
         depth=view.depth,
         viewpoint=view.viewpoint,
+        yaw=view.yaw,
     )
 
 

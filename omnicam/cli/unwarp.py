@@ -144,9 +144,9 @@ def view_from_spec(spec):
     """
     o = spec.options
     allowed = {
-        "panorama": ("elevation", "projection", "depth"),
+        "panorama": ("elevation", "projection", "depth", "yaw"),
         "perspective": ("fov", "yaw", "pitch", "roll", "depth"),
-        "equirect": ("depth",),
+        "equirect": ("depth", "yaw"),
     }[spec.kind]
     refused = [f"--{k}" for k in o if k not in allowed]
     if refused:
@@ -154,7 +154,6 @@ def view_from_spec(spec):
             "elevation": "--panorama",
             "projection": "--panorama",
             "fov": "--perspective",
-            "yaw": "--perspective",
             "pitch": "--perspective",
             "roll": "--perspective",
         }
@@ -168,9 +167,10 @@ def view_from_spec(spec):
                 elevation_range=o.get("elevation"),
                 projection=o.get("projection") or "cylindrical",
                 depth=o.get("depth"),
+                yaw=o.get("yaw"),
             )
         if spec.kind == "equirect":
-            return equirect_view(spec.size, depth=o.get("depth"))
+            return equirect_view(spec.size, depth=o.get("depth"), yaw=o.get("yaw"))
         if o.get("fov") is None:
             raise CliError("--perspective needs --fov DEG (horizontal field of view)", EXIT_USAGE)
         return PerspectiveView(
@@ -709,7 +709,8 @@ def add_view_arguments(p, output_help=None):
         type=finite_arg,
         metavar="Y",
         action=_InOrder,
-        help="perspective view: turn right by Y degrees (default 0)",
+        help="turn right by Y degrees: a perspective view looks at azimuth -Y (default 0), a "
+        "panorama or --equirect has it at its centre (default: the camera's forward direction)",
     )
     p.add_argument(
         "--pitch",
