@@ -18,7 +18,7 @@ Sane magnitudes (a camera outside them is refused at construction and at load):
   across (every pixel inside it can be enumerated, as the best-fit viewpoint does, and there
   are enough of them);
 * integers in YAML and XML files within 32 bits (OpenCV's parser wraps larger ones around:
-  4294967297 reads as 1), see :mod:`omnicam.formats.omnicam_files`.
+  4294967297 reads as 1), see :mod:`omnicam.formats.filestorage`.
 """
 
 from __future__ import annotations

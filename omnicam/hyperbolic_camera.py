@@ -19,8 +19,8 @@ import numpy as np
 from . import views
 from ._typing import ArrayLike, FloatArray, PathLike, Size
 from .camera import MisalignedCatadioptricCamera
+from .formats.calibration_file import load_camera, save_camera
 from .formats.central_export import fit_omnidir
-from .formats.omnicam_files import load_camera, save_camera
 from .mirror import HyperbolicMirror
 
 if TYPE_CHECKING:  # annotations only; the routes load when calibrating (below)
@@ -211,7 +211,7 @@ class MisalignedHyperbolicCamera(MisalignedCatadioptricCamera):
         FileNotFoundError
             No file at ``path``.
         ValueError
-            Anything else (see :func:`omnicam.formats.omnicam_files.load_camera`), naming the
+            Anything else (see :func:`omnicam.formats.calibration_file.load_camera`), naming the
             file and the field.
         """
         return cls.of(load_camera(path))

@@ -14,7 +14,9 @@ from .._validate import validate_D, validate_K
 from ..calibration import calibrate
 from ..calibration.rim import check_hint, detect_rim, fit_rim
 from ..camera import scale_K
-from ..formats.omnicam_files import SUFFIXES, Verdict, read_verdict, reading
+from ..formats.calibration_file import read_verdict
+from ..formats.filestorage import SUFFIXES, reading
+from ..formats.verdict import Verdict
 from ..gauge import posture_error
 from ..mirror import HyperbolicMirror
 from . import pattern

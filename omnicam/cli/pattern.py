@@ -36,7 +36,7 @@ from ..calibration.rim import check_hint, detect_rim
 from ..camera import scale_K
 from ..chessboard import DIST_MODELS
 from ..chessboard.calibrate import ONE_SIDED
-from ..formats.omnicam_files import SUFFIXES
+from ..formats.filestorage import SUFFIXES
 from ..hyperbolic_camera import MisalignedHyperbolicCamera
 from ..mirror import HyperbolicMirror
 from ._common import (
