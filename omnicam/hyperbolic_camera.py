@@ -20,7 +20,7 @@ from . import views
 from ._typing import ArrayLike, FloatArray, PathLike, Size
 from .camera import MisalignedCatadioptricCamera
 from .formats.calibration_file import load_camera, save_camera
-from .formats.central_export import fit_omnidir
+from .formats.central_fit import fit_omnidir
 from .mirror import HyperbolicMirror
 
 if TYPE_CHECKING:  # annotations only; the routes load when calibrating (below)
@@ -172,7 +172,7 @@ class MisalignedHyperbolicCamera(MisalignedCatadioptricCamera):
 
         Returns ``(K, xi, D, M, origin, rms_px)`` with ``X_omni = M (X_mirror - origin)``
         (``det M = -1``: the image of a mirror is mirror-reversed); see
-        :func:`omnicam.formats.central_export.fit_omnidir`, which also gives the maximum error.
+        :func:`omnicam.formats.central_fit.fit_omnidir`, which also gives the maximum error.
         """
         return fit_omnidir(self, depth=depth).as_tuple()
 

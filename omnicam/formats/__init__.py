@@ -9,8 +9,9 @@
 - :mod:`.point_files`: pixels a user gives in files (far lines);
 - :mod:`.other_tools`: other tools' files (ROS and Kalibr intrinsics read; cv2.omnidir,
   Kalibr-omni and OCamCalib calibrations recognised);
-- :mod:`.central_export`: central approximations of a calibration in other tools' formats
-  (cv2.omnidir, Kalibr, camodocal, OCamCalib);
+- :mod:`.central_fit`: the central models closest to the exact rig (the unified model of
+  cv2.omnidir, Kalibr and camodocal; OCamCalib's polynomial);
+- :mod:`.central_export`: those approximations in the tools' own files;
 - :mod:`.maps`: remap tables as ffmpeg's ``remap`` maps and ``.npy``;
 - :mod:`.spherical_metadata`: 360 metadata (Photo Sphere XMP in JPEG, spherical video boxes).
 
