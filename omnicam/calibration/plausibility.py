@@ -29,7 +29,7 @@ import math
 import cv2
 import numpy as np
 
-from .._validate import refuse_complex, validate_D, validate_K
+from .._validate import positive_number, refuse_complex, validate_D, validate_K
 from ..mirror import HyperbolicMirror
 from ..raytrace import to_pixels
 from .ellipse import axes_angle, ellipse_from_conic
@@ -83,13 +83,7 @@ class PlausibilityWarning(UserWarning):
 
 def _limit(value, name):
     refuse_complex(value, name, "a positive number")
-    try:
-        v = float(value)
-    except (TypeError, ValueError):
-        raise ValueError(f"{name} must be a positive number, got {value!r}") from None
-    if not (math.isfinite(v) and v > 0):
-        raise ValueError(f"{name} must be a positive number, got {value!r}")
-    return v
+    return positive_number(value, name)
 
 
 def tilt_deg(R) -> float:

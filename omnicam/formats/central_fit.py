@@ -40,6 +40,7 @@ import cv2
 import numpy as np
 
 from .._typing import FloatArray
+from .._validate import positive_number
 
 __all__ = [
     "F_OMNI",
@@ -93,13 +94,7 @@ def _target_directions(P, d, origin, depth):
 def _check_depth(depth):
     if depth is None:
         return None
-    try:
-        depth = float(depth)
-    except (TypeError, ValueError):
-        raise ValueError(f"depth must be None or a positive distance, got {depth!r}") from None
-    if not (math.isfinite(depth) and depth > 0):
-        raise ValueError(f"depth must be None or a positive distance, got {depth!r}")
-    return depth
+    return positive_number(depth, "depth", "None or a positive distance")
 
 
 def _errors(pred, pix):
