@@ -381,8 +381,7 @@ def test_each_implausibility_warning_is_printed_once(scene, tmp_path, capsys):
 # -- K guessed from the rim and the mirror (issue 18 item 5) -------------------------------------
 def test_guessed_K_images_the_rim_where_it_was_found(scene):
     """guess_K is the aligned rig's K: expected_rim of it is the rim found (centre and size)."""
-    from omnicam.calibration.plausibility import expected_rim
-    from omnicam.cli.calibrate import guess_K
+    from omnicam.calibration.plausibility import expected_rim, guess_K
 
     truth = synthetic.aligned_rig(image_size=SIZE)
     rim = fit_rim(truth.rim_image_points(720), robust=False)

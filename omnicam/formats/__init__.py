@@ -6,7 +6,8 @@
   :mod:`.verdict` (how far to trust them; each report builds its own);
 - :mod:`.intrinsics`: a pinhole's ``K``, ``D`` and image size; the central models of
   ``cv2.omnidir`` and Kalibr read back;
-- :mod:`.point_files`: pixels a user gives in files (far lines);
+- :mod:`.point_files`: pixels a user gives in files (far lines, rim boundary points,
+  chessboard corners);
 - :mod:`.other_tools`: other tools' files (ROS and Kalibr intrinsics read; cv2.omnidir,
   Kalibr-omni and OCamCalib calibrations recognised);
 - :mod:`.central_fit`: the central models closest to the exact rig (the unified model of
