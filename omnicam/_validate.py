@@ -18,7 +18,7 @@ Sane magnitudes (a camera outside them is refused at construction and at load):
   across (every pixel inside it can be enumerated, as the best-fit viewpoint does, and there
   are enough of them);
 * integers in YAML and XML files within 32 bits (OpenCV's parser wraps larger ones around:
-  4294967297 reads as 1), see :mod:`omnicam.formats.omnicam_files`.
+  4294967297 reads as 1), see :mod:`omnicam.formats.filestorage`.
 """
 
 from __future__ import annotations
@@ -40,6 +40,7 @@ __all__ = [
     "finite_array",
     "float_array",
     "real_number",
+    "positive_number",
     "refuse_complex",
     "validate_rng",
     "validate_posture",
@@ -138,6 +139,22 @@ def real_number(
     except (TypeError, ValueError, OverflowError):
         raise ValueError(f"{name} must be {expected}, got {value!r}") from None
     if not math.isfinite(v) or v < lo or v > hi or (lo_open and v == lo):
+        raise ValueError(f"{name} must be {expected}, got {value!r}")
+    return v
+
+
+def positive_number(value: Any, name: str, expected: str = "a positive number") -> float:
+    """``float(value)`` when it is finite and above 0, or ``ValueError`` naming ``name``.
+
+    Unlike :func:`real_number`, anything ``float()`` takes is taken (a numeric string such as
+    ``"2.5"`` as well): the lengths and limits checked here always were. ``expected`` ends the
+    message ("square_size must be a positive number, got 0").
+    """
+    try:
+        v = float(value)
+    except (TypeError, ValueError):
+        raise ValueError(f"{name} must be {expected}, got {value!r}") from None
+    if not (math.isfinite(v) and v > 0):
         raise ValueError(f"{name} must be {expected}, got {value!r}")
     return v
 

@@ -19,8 +19,8 @@ import numpy as np
 from . import views
 from ._typing import ArrayLike, FloatArray, PathLike, Size
 from .camera import MisalignedCatadioptricCamera
-from .formats.central_export import fit_omnidir
-from .formats.omnicam_files import load_camera, save_camera
+from .formats.calibration_file import load_camera, save_camera
+from .formats.central_fit import fit_omnidir
 from .mirror import HyperbolicMirror
 
 if TYPE_CHECKING:  # annotations only; the routes load when calibrating (below)
@@ -172,7 +172,7 @@ class MisalignedHyperbolicCamera(MisalignedCatadioptricCamera):
 
         Returns ``(K, xi, D, M, origin, rms_px)`` with ``X_omni = M (X_mirror - origin)``
         (``det M = -1``: the image of a mirror is mirror-reversed); see
-        :func:`omnicam.formats.central_export.fit_omnidir`, which also gives the maximum error.
+        :func:`omnicam.formats.central_fit.fit_omnidir`, which also gives the maximum error.
         """
         return fit_omnidir(self, depth=depth).as_tuple()
 
@@ -211,7 +211,7 @@ class MisalignedHyperbolicCamera(MisalignedCatadioptricCamera):
         FileNotFoundError
             No file at ``path``.
         ValueError
-            Anything else (see :func:`omnicam.formats.omnicam_files.load_camera`), naming the
+            Anything else (see :func:`omnicam.formats.calibration_file.load_camera`), naming the
             file and the field.
         """
         return cls.of(load_camera(path))

@@ -41,7 +41,7 @@ def test_the_aligned_rig_is_recovered_from_its_unified_model_and_rim(mirror):
 
 
 def test_closed_form_agrees_with_the_unified_model_fitted_to_the_exact_rig():
-    from omnicam.formats.central_export import fit_omnidir
+    from omnicam.formats.central_fit import fit_omnidir
 
     rig = synthetic.aligned_rig((500, 500))
     fit = fit_omnidir(rig, skew=False, distortion=False)

@@ -10,7 +10,7 @@ import omnicam
 from omnicam import synthetic
 from omnicam.calibration import calibrate
 from omnicam.cli import main
-from omnicam.formats.omnicam_files import write_intrinsics
+from omnicam.formats.intrinsics import write_intrinsics
 from omnicam.synthetic.demo import demo_environment
 
 

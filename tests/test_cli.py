@@ -14,7 +14,7 @@ from conftest import leftovers, make_frame, one_error_line, video_frames, write_
 import omnicam
 from omnicam import synthetic
 from omnicam.cli import main
-from omnicam.formats.omnicam_files import read_intrinsics
+from omnicam.formats.intrinsics import read_intrinsics
 
 SIZE = (200, 200)  # frames of the small test videos and images
 
@@ -564,7 +564,7 @@ def test_info_says_when_a_file_records_no_verdict(data, capsys):
 
 
 def test_info_prints_the_verdict_and_says_what_is_doubtful(rig, tmp_path, capsys):
-    from omnicam.formats.omnicam_files import Verdict
+    from omnicam.formats.verdict import Verdict
 
     calib = tmp_path / "rig.yaml"
     verdict = Verdict(

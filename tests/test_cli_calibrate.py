@@ -381,8 +381,7 @@ def test_each_implausibility_warning_is_printed_once(scene, tmp_path, capsys):
 # -- K guessed from the rim and the mirror (issue 18 item 5) -------------------------------------
 def test_guessed_K_images_the_rim_where_it_was_found(scene):
     """guess_K is the aligned rig's K: expected_rim of it is the rim found (centre and size)."""
-    from omnicam.calibration.plausibility import expected_rim
-    from omnicam.cli.calibrate import guess_K
+    from omnicam.calibration.plausibility import expected_rim, guess_K
 
     truth = synthetic.aligned_rig(image_size=SIZE)
     rim = fit_rim(truth.rim_image_points(720), robust=False)
@@ -407,7 +406,7 @@ def test_guess_k_calibrates_an_aligned_rig_and_the_file_says_it_was_guessed(tmp_
     assert "with a guessed K" in captured.out.splitlines()[-1]
     cam = MisalignedHyperbolicCamera.load(calib)
     np.testing.assert_allclose(cam.K, truth.K, atol=0.1)  # measured: within 0.03 px
-    from omnicam.formats.omnicam_files import read_verdict
+    from omnicam.formats.calibration_file import read_verdict
 
     verdict = read_verdict(calib)
     assert verdict.K_source == "guessed" and "rim's centre" in verdict.K_note
@@ -439,7 +438,7 @@ def test_no_intrinsics_offers_the_guess(scene, tmp_path, capsys):
 
 # -- the verdict travels with the file (issue 18 item 3) -----------------------------------------
 def test_the_file_records_where_K_came_from_and_the_verdict(scene, tmp_path, capsys):
-    from omnicam.formats.omnicam_files import read_verdict
+    from omnicam.formats.calibration_file import read_verdict
 
     calib = tmp_path / "calib.yaml"
     assert run(scene["image"], scene["k"], calib) == 0
@@ -489,7 +488,7 @@ def test_the_file_records_where_K_came_from_and_the_verdict(scene, tmp_path, cap
 
 def test_from_an_earlier_guess_the_K_stays_guessed(tmp_path, capsys):
     """--from takes K from a file; when that file's K was guessed, the new one is too."""
-    from omnicam.formats.omnicam_files import read_verdict
+    from omnicam.formats.calibration_file import read_verdict
 
     truth = synthetic.aligned_rig(image_size=SIZE)
     image = tmp_path / "aligned.png"

@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 
 import omnicam
-import omnicam.formats.omnicam_files
+import omnicam.formats.calibration_file
 from omnicam import synthetic
 from omnicam.cli import main
 from omnicam.gauge import posture_error
@@ -51,7 +51,7 @@ def test_progress_names_and_the_heldout_check_are_printed(views, tmp_path, capsy
     assert "held-out corner RMS (3-fold" in out and "cv2.omnidir on the same folds" in out
     assert "viewing directions std" in out
     # the file keeps what the run printed: RMS, held-out figures, ray uncertainty (issue 18)
-    verdict = omnicam.formats.omnicam_files.read_verdict(tmp_path / "rig.yaml")
+    verdict = omnicam.formats.calibration_file.read_verdict(tmp_path / "rig.yaml")
     assert (verdict.method, verdict.K_source, verdict.forced) == ("chessboard", "chessboard", False)
     assert f"RMS {verdict.rms_px:.3f} px" in out
     held = f"median {verdict.heldout_median_px:.3f} px, max {verdict.heldout_max_px:.3f} px"
@@ -143,7 +143,8 @@ def test_boards_all_on_one_side_exit_one_unless_forced(tmp_path, capsys):
     assert not (tmp_path / "rig.yaml").exists()
     assert _calibrate(paths, tmp_path / "rig.yaml", "--heldout", "0", "--force") == 0
     assert (tmp_path / "rig.yaml").exists()
-    verdict = omnicam.formats.omnicam_files.read_verdict(tmp_path / "rig.yaml")  # forced, and why
+    # forced, and why
+    verdict = omnicam.formats.calibration_file.read_verdict(tmp_path / "rig.yaml")
     assert verdict.forced and "all boards are on one side" in verdict.implausible[0]
     assert verdict.doubts() == ("forced past 1 implausibility warning",)
 
@@ -177,7 +178,7 @@ def test_the_reflections_plane_is_honoured_and_its_radius_refused(views, tmp_pat
     assert _calibrate(views, tmp_path / "b.yaml", "--heldout", "0", "--lens-z", "25") == 0
     assert "camera's reflection: used: " in capsys.readouterr().out
     without, with_plane = (
-        omnicam.formats.omnicam_files.read_verdict(tmp_path / f"{n}.yaml") for n in "ab"
+        omnicam.formats.calibration_file.read_verdict(tmp_path / f"{n}.yaml") for n in "ab"
     )
     assert with_plane.axis_std_deg < 0.5 * without.axis_std_deg  # it pins the tilt
     cam = omnicam.MisalignedHyperbolicCamera.load(str(tmp_path / "b.yaml"))

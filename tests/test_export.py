@@ -8,10 +8,9 @@ import numpy as np
 import pytest
 
 from omnicam import synthetic
-from omnicam.formats.central_export import (
+from omnicam.formats.central_export import camodocal_text, export
+from omnicam.formats.central_fit import (
     F_OMNI,
-    camodocal_text,
-    export,
     fit_ocamcalib,
     fit_omnidir,
     omnidir_project,
@@ -206,7 +205,7 @@ def test_ocamcalib_file_reproduces_the_aligned_rig(tmp_path):
 
 def test_ocamcalib_error_figures_are_measured_on_the_tilted_rig(tmp_path):
     fit = fit_ocamcalib(TILTED)
-    from omnicam.formats.central_export import ocam_world2cam
+    from omnicam.formats.central_fit import ocam_world2cam
 
     epix, _, ed = sample_pixels(TILTED, max_points=10**6)
     err = np.linalg.norm(
@@ -296,7 +295,8 @@ def test_a_non_finite_number_is_refused_not_written():
 
 
 def test_kalibr_whole_number_intrinsics_are_floats_and_resolution_integers():
-    from omnicam.formats.central_export import OmnidirFit, kalibr_text
+    from omnicam.formats.central_export import kalibr_text
+    from omnicam.formats.central_fit import OmnidirFit
     from omnicam.formats.other_tools import parse_yaml
 
     K = np.array([[500.0, 0.0, 160.0], [0.0, 500.0, 160.0], [0.0, 0.0, 1.0]])
@@ -353,7 +353,7 @@ def test_an_export_within_a_pixel_does_not_warn(tmp_path, fmt):
 
 
 def test_ocamcalib_states_the_pixels_cam2world_sends_above_the_rim():
-    from omnicam.formats.central_export import ocam_cam2world
+    from omnicam.formats.central_fit import ocam_cam2world
 
     fit = fit_ocamcalib(TILTED)
     epix, _, _ = sample_pixels(TILTED, max_points=10**6)

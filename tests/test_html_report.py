@@ -14,7 +14,8 @@ import omnicam
 from omnicam import synthetic
 from omnicam.calibration import calibrate
 from omnicam.cli import main
-from omnicam.formats.omnicam_files import write_far_lines, write_intrinsics
+from omnicam.formats.intrinsics import write_intrinsics
+from omnicam.formats.point_files import write_far_lines
 from omnicam.html_report import (
     IMAGE_SECTIONS,
     PATTERN_SECTIONS,

@@ -10,7 +10,7 @@ from omnicam import read_intrinsics, synthetic
 from omnicam.chessboard.central import hyperbolic_start
 from omnicam.cli import main
 from omnicam.formats.central_export import export
-from omnicam.formats.omnicam_files import read_central_model
+from omnicam.formats.intrinsics import read_central_model
 from omnicam.formats.other_tools import MAX_NESTING, parse_yaml
 
 K_REF = np.array([[582.5, 0.0, 319.5], [0.0, 580.25, 239.75], [0.0, 0.0, 1.0]])

@@ -118,9 +118,9 @@ def test_failed_save_leaves_the_old_file_and_no_temporary(tmp_path, monkeypatch)
                 raise RuntimeError("disk full")
             return getattr(self.fs, name)
 
-    import omnicam.formats.omnicam_files
+    import omnicam.formats.filestorage
 
-    monkeypatch.setattr(omnicam.formats.omnicam_files.cv2, "FileStorage", Broken)
+    monkeypatch.setattr(omnicam.formats.filestorage.cv2, "FileStorage", Broken)
     with pytest.raises(RuntimeError, match="disk full"):
         RIGS["misaligned"].save(path)
     monkeypatch.undo()
@@ -144,7 +144,7 @@ def test_saved_file_has_the_usual_permissions(tmp_path):
 
 def test_intrinsics_file_round_trip(tmp_path):
     cam = RIGS["rational"]
-    from omnicam.formats.omnicam_files import read_intrinsics, write_intrinsics
+    from omnicam.formats.intrinsics import read_intrinsics, write_intrinsics
 
     write_intrinsics(tmp_path / "k.json", cam.K, cam.D, cam.image_size)
     K, D, size = read_intrinsics(tmp_path / "k.json")
@@ -163,7 +163,7 @@ def test_intrinsics_file_round_trip(tmp_path):
     ],
 )
 def test_bad_intrinsics_file_raises_value_error_naming_the_field(tmp_path, text, field):
-    from omnicam.formats.omnicam_files import read_intrinsics
+    from omnicam.formats.intrinsics import read_intrinsics
 
     path = tmp_path / "k.yaml"
     path.write_text(text)
@@ -243,7 +243,7 @@ def test_a_non_regular_file_named_yaml_is_not_a_regular_file(tmp_path, kind):
     else:
         path.symlink_to("/dev/null")
     assert "is not a regular file" in _load_error(path)
-    from omnicam.formats.omnicam_files import read_intrinsics
+    from omnicam.formats.intrinsics import read_intrinsics
 
     with pytest.raises(ValueError, match="is not a regular file"):
         read_intrinsics(path)
@@ -278,9 +278,9 @@ def test_save_that_does_not_read_back_equal_keeps_the_old_file(tmp_path, monkeyp
     path = tmp_path / "c.json"
     RIGS["aligned"].save(path)
     before = path.read_bytes()
-    import omnicam.formats.omnicam_files
+    import omnicam.formats.calibration_file
 
-    monkeypatch.setattr(omnicam.formats.omnicam_files, "_same_camera", lambda a, b: False)
+    monkeypatch.setattr(omnicam.formats.calibration_file, "_same_camera", lambda a, b: False)
     with pytest.raises(ValueError, match="does not read back"):
         RIGS["misaligned"].save(path)
     assert path.read_bytes() == before
@@ -345,7 +345,7 @@ def test_save_into_a_read_only_folder_raises_and_keeps_the_old_file(tmp_path):
 
 
 def test_far_lines_round_trip_also_from_opencv_shaped_arrays(tmp_path):
-    from omnicam.formats.omnicam_files import read_far_lines, write_far_lines
+    from omnicam.formats.point_files import read_far_lines, write_far_lines
 
     lines = [np.arange(10.0).reshape(5, 1, 2) + i for i in range(3)]
     write_far_lines(tmp_path / "l.json", lines)
@@ -356,7 +356,7 @@ def test_far_lines_round_trip_also_from_opencv_shaped_arrays(tmp_path):
 
 
 def test_image_size_written_as_an_opencv_matrix_is_read(tmp_path):
-    from omnicam.formats.omnicam_files import read_intrinsics
+    from omnicam.formats.intrinsics import read_intrinsics
 
     K = RIGS["aligned"].K
     for ext in (".yaml", ".xml", ".json"):
@@ -369,7 +369,7 @@ def test_image_size_written_as_an_opencv_matrix_is_read(tmp_path):
 
 # -- the verdict: how far to trust a calibration, recorded in the file (issue 18 item 3) ----------
 def _doubtful_verdict():
-    from omnicam.formats.omnicam_files import Verdict
+    from omnicam.formats.verdict import Verdict
 
     return Verdict(
         K_source="guessed",
@@ -387,7 +387,8 @@ def _doubtful_verdict():
 
 @pytest.mark.parametrize("ext", [".yaml", ".yml", ".xml", ".json"])
 def test_the_verdict_round_trips_in_every_format(tmp_path, ext):
-    from omnicam.formats.omnicam_files import Verdict, read_verdict
+    from omnicam.formats.calibration_file import read_verdict
+    from omnicam.formats.verdict import Verdict
 
     chessboard = Verdict(
         method="chessboard",
@@ -412,7 +413,7 @@ def test_the_verdict_round_trips_in_every_format(tmp_path, ext):
 
 def test_a_file_without_a_verdict_reads_as_before_and_has_none(tmp_path):
     from omnicam import samples
-    from omnicam.formats.omnicam_files import read_verdict
+    from omnicam.formats.calibration_file import read_verdict
 
     path = tmp_path / "c.yaml"
     RIGS["aligned"].save(path)
@@ -425,7 +426,7 @@ def test_a_file_without_a_verdict_reads_as_before_and_has_none(tmp_path):
 
 def test_a_file_with_a_verdict_keeps_format_version_1_and_reads_unknown_fields(tmp_path):
     """Compatible: the verdict is an optional map; a later field inside it is ignored."""
-    from omnicam.formats.omnicam_files import FORMAT_VERSION, read_verdict
+    from omnicam.formats.calibration_file import FORMAT_VERSION, read_verdict
 
     assert FORMAT_VERSION == 1
     path = tmp_path / "c.yaml"
@@ -438,7 +439,8 @@ def test_a_file_with_a_verdict_keeps_format_version_1_and_reads_unknown_fields(t
 
 def test_save_with_a_report_records_its_verdict(tmp_path):
     from omnicam import synthetic
-    from omnicam.formats.omnicam_files import Verdict, read_verdict
+    from omnicam.formats.calibration_file import read_verdict
+    from omnicam.formats.verdict import Verdict
 
     truth = synthetic.misaligned_rig()
     cam, report = MisalignedHyperbolicCamera.calibrate(
@@ -457,7 +459,7 @@ def test_save_with_a_report_records_its_verdict(tmp_path):
 
 
 def test_the_doubts_of_a_verdict_are_short_phrases():
-    from omnicam.formats.omnicam_files import Verdict
+    from omnicam.formats.verdict import Verdict
 
     assert Verdict().doubts() == ()
     assert _doubtful_verdict().doubts() == (
@@ -471,7 +473,8 @@ def test_the_doubts_of_a_verdict_are_short_phrases():
 def test_warning_texts_that_opencv_or_the_prescan_would_misread_still_round_trip(tmp_path):
     """OpenCV writes the string 'true' unquoted and a leading quote as if quoted; the pre-scan
     refuses ': true,' and 10-digit integers anywhere. Such texts are written readably."""
-    from omnicam.formats.omnicam_files import Verdict, read_verdict
+    from omnicam.formats.calibration_file import read_verdict
+    from omnicam.formats.verdict import Verdict
 
     texts = ["x: true, y", "true", "null", "'quoted'", '"half', "n 12345678901234", "a\nb"]
     verdict = Verdict(warnings=texts)
@@ -494,7 +497,7 @@ def test_warning_texts_that_opencv_or_the_prescan_would_misread_still_round_trip
     ],
 )
 def test_a_malformed_verdict_raises_naming_the_file_and_the_field(tmp_path, edit, field):
-    from omnicam.formats.omnicam_files import read_verdict
+    from omnicam.formats.calibration_file import read_verdict
 
     path = tmp_path / "c.yaml"
     RIGS["aligned"].save(path, _doubtful_verdict())

@@ -105,7 +105,7 @@ def test_the_camera_sits_at_the_bottom_of_the_house():
         "omnicam.views.api",
         "omnicam.calibration",
         "omnicam.chessboard.calibrate",
-        "omnicam.formats.omnicam_files",
+        "omnicam.formats.calibration_file",
     ):
         assert "omnicam.camera" in graph[above], above
 

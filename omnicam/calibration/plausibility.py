@@ -29,7 +29,7 @@ import math
 import cv2
 import numpy as np
 
-from .._validate import refuse_complex, validate_D, validate_K
+from .._validate import positive_number, refuse_complex, validate_D, validate_K
 from ..mirror import HyperbolicMirror
 from ..raytrace import to_pixels
 from .ellipse import axes_angle, ellipse_from_conic
@@ -46,6 +46,7 @@ __all__ = [
     "cue_costs",
     "expected_rim",
     "focus_offset",
+    "guess_K",
     "swapped_mirror_warnings",
     "tilt_deg",
 ]
@@ -83,13 +84,7 @@ class PlausibilityWarning(UserWarning):
 
 def _limit(value, name):
     refuse_complex(value, name, "a positive number")
-    try:
-        v = float(value)
-    except (TypeError, ValueError):
-        raise ValueError(f"{name} must be a positive number, got {value!r}") from None
-    if not (math.isfinite(v) and v > 0):
-        raise ValueError(f"{name} must be a positive number, got {value!r}")
-    return v
+    return positive_number(value, name)
 
 
 def tilt_deg(R) -> float:
@@ -150,6 +145,35 @@ def _rim_ellipse(K, D, rim, R, t):
         px = px.reshape(-1, 2)
     (cx, cy), (d1, d2), _ = cv2.fitEllipse(px.astype(np.float32))
     return np.array([cx, cy]), 0.5 * min(d1, d2), 0.5 * max(d1, d2)
+
+
+def guess_K(rim, mirror):
+    """The ``K`` of the aligned rig that images ``rim`` as found: a guess without intrinsics.
+
+    An aligned rig (the paper's eqs. 2-5: camera at the lower focus, axes parallel) images the
+    rim circle of radius ``rim_radius`` at depth ``z_rim + c`` as a circle of radius
+    ``f rim_radius / (z_rim + c)`` px about the principal point
+    (:func:`omnicam.calibration.plausibility.expected_rim`). So ``f = r (z_rim + c) /
+    rim_radius`` with ``r`` the rim's mean radius (the geometric mean of its semi-axes),
+    square pixels, no skew and the principal point at the rim's centre. The rim's centre moves
+    with the rig's tilt and offset (and the guess takes it for the principal point), and a
+    camera of another pixel aspect sees the rim as an ellipse, which reads as a tilt: the
+    posture found is only as right as the guess.
+
+    Parameters
+    ----------
+    rim : RimFit
+        The rim ellipse in the image (:func:`omnicam.detect_rim`, :func:`.rim.fit_rim`).
+    mirror : HyperbolicMirror
+
+    Returns
+    -------
+    K : (3, 3) float64 ndarray
+    """
+    r = math.sqrt(float(rim.axes[0]) * float(rim.axes[1]))
+    f = r * (mirror.z_rim + mirror.c) / mirror.rim_radius
+    cx, cy = (float(v) for v in rim.center)
+    return np.array([[f, 0.0, cx], [0.0, f, cy], [0.0, 0.0, 1.0]])
 
 
 def expected_rim(

@@ -8,6 +8,7 @@ import math
 import cv2
 import numpy as np
 
+from ..formats.verdict import Verdict, split_findings
 from ..images import to_bgr8
 
 __all__ = ["CalibrationReport"]
@@ -182,6 +183,39 @@ class CalibrationReport:
     def physical(self):
         """Indices of the physically possible candidates."""
         return [i for i, c in enumerate(self.candidates) if c.physical]
+
+    def verdict(
+        self,
+        *,
+        K_source: str | None = None,
+        K_file: str | None = None,
+        K_note: str = "",
+        forced: bool = False,
+        implausible=None,
+    ) -> Verdict:
+        """How far to trust this calibration, as its file records it (:class:`omnicam.Verdict`).
+
+        ``K_source`` defaults to ``"given"`` (:func:`~omnicam.calibrate` takes ``K``);
+        ``implausible`` to :attr:`plausibility`, whose findings are left out of ``warnings``.
+        ``K_file``, ``K_note`` and ``forced`` are the verdict's attributes.
+        """
+        warnings, implausible = split_findings(
+            self.warnings, self.plausibility if implausible is None else implausible
+        )
+        return Verdict(
+            method="image",
+            K_source=K_source or "given",
+            K_file=K_file,
+            K_note=K_note,
+            forced=forced,
+            confidence=self.confidence,
+            ambiguous=self.ambiguous,
+            axis_std_deg=self.axis_std_deg,
+            origin_std_mm=self.origin_std_mm,
+            rim_rms_px=self.rim_rms,
+            warnings=warnings,
+            implausible=implausible,
+        )
 
     def _uncertainty_kind(self):
         """How the stated uncertainty was found, in words."""

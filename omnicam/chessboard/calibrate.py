@@ -49,7 +49,13 @@ import cv2
 import numpy as np
 
 from .._typing import FloatArray
-from .._validate import float_array, validate_D, validate_image_size, validate_K
+from .._validate import (
+    float_array,
+    positive_number,
+    validate_D,
+    validate_image_size,
+    validate_K,
+)
 from ..calibration import calibrate
 from ..calibration.chen import rim_conic
 from ..calibration.ellipse import conic_distance
@@ -421,12 +427,7 @@ def _check_arguments(
     """Validated arguments: ``(cols, rows, square, D, free_d, n_d, images, image_points,
     image_size)``; ``ValueError`` naming what to change."""
     cols, rows = check_pattern_size(pattern_size)
-    try:
-        square = float(square_size)
-    except (TypeError, ValueError):
-        raise ValueError(f"square_size must be a positive number, got {square_size!r}") from None
-    if not (math.isfinite(square) and square > 0):
-        raise ValueError(f"square_size must be a positive number, got {square_size!r}")
+    square = positive_number(square_size, "square_size")
     if mirror is not None and not isinstance(mirror, HyperbolicMirror):
         raise ValueError(
             f"mirror must be a HyperbolicMirror or None (unknown), got {type(mirror).__name__}"

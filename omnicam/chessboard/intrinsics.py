@@ -13,6 +13,7 @@ import cv2
 import numpy as np
 
 from .._typing import FloatArray
+from .._validate import positive_number
 from ..images import check_image, read_image, to_gray
 
 __all__ = ["calibrate_intrinsics", "check_pattern_size", "find_chessboard", "gray8"]
@@ -126,12 +127,7 @@ def calibrate_intrinsics(
         ``pattern_size`` or ``square_size``, or the board found in fewer than ``min_views`` images.
     """
     cols, rows = check_pattern_size(pattern_size)
-    try:
-        square = float(square_size)
-    except (TypeError, ValueError):
-        raise ValueError(f"square_size must be a positive number, got {square_size!r}") from None
-    if not (np.isfinite(square) and square > 0):
-        raise ValueError(f"square_size must be a positive number, got {square_size!r}")
+    square = positive_number(square_size, "square_size")
     if int(min_views) != min_views or min_views < 3:
         raise ValueError(f"min_views must be an integer >= 3, got {min_views!r}")
     if isinstance(images, (str, os.PathLike)):

@@ -9,6 +9,7 @@ from typing import Any
 import cv2
 import numpy as np
 
+from ..formats.verdict import Verdict, split_findings
 from ..images import to_bgr8
 from .heldout import HeldOut
 
@@ -151,3 +152,40 @@ class PatternReport:
                         img, tuple(round(v) for v in p), (0, 0, 255), cv2.MARKER_CROSS, 6, 1
                     )
         return img
+
+    def verdict(
+        self,
+        *,
+        K_source: str | None = None,
+        K_file: str | None = None,
+        K_note: str = "",
+        forced: bool = False,
+        implausible=None,
+    ) -> Verdict:
+        """How far to trust this calibration, as its file records it (:class:`omnicam.Verdict`).
+
+        ``K_source`` defaults to ``"chessboard"`` (``K`` is fitted to the boards);
+        ``implausible``: the findings a refusal rests on (left out of ``warnings``), none by
+        default. ``K_file``, ``K_note`` and ``forced`` are the verdict's attributes.
+        """
+        implausible = () if implausible is None else implausible
+        warnings, implausible = split_findings(self.warnings, implausible)
+        std = self.std or {}
+        held = self.heldout
+        return Verdict(
+            method="chessboard",
+            K_source=K_source or "chessboard",
+            K_file=K_file,
+            K_note=K_note,
+            forced=forced,
+            axis_std_deg=std.get("axis_deg"),
+            origin_std_mm=std.get("origin"),
+            rim_rms_px=self.rim_rms,
+            rms_px=self.rms,
+            heldout_median_px=None if held is None else held.median,
+            heldout_max_px=None if held is None else held.max,
+            heldout_folds=None if held is None else held.folds,
+            ray_std_deg=tuple(self.ray_std_deg),
+            warnings=warnings,
+            implausible=implausible,
+        )

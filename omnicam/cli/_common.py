@@ -15,8 +15,9 @@ import cv2
 from .._atomic import OutputError, atomic_output
 from .._quiet import opencv_silenced
 from .._validate import check_readable, file_path, shown
-from ..formats import omnicam_files
-from ..formats.omnicam_files import Verdict, read_verdict
+from ..formats import calibration_file, intrinsics, point_files
+from ..formats.calibration_file import read_verdict
+from ..formats.verdict import Verdict
 from ..hyperbolic_camera import MisalignedHyperbolicCamera
 from ..images import file_kind, read_image
 
@@ -296,7 +297,7 @@ def check_video_input(path):
 def read_intrinsics(path):
     """:func:`omnicam.read_intrinsics` with its errors as one-line CLI errors."""
     try:
-        return omnicam_files.read_intrinsics(path)
+        return intrinsics.read_intrinsics(path)
     except (FileNotFoundError, ValueError) as e:
         raise CliError(one_line(e)) from None
 
@@ -304,7 +305,7 @@ def read_intrinsics(path):
 def read_far_lines(path):
     """:func:`omnicam.read_far_lines` with its errors as one-line CLI errors."""
     try:
-        return omnicam_files.read_far_lines(path)
+        return point_files.read_far_lines(path)
     except (FileNotFoundError, ValueError) as e:
         raise CliError(one_line(e)) from None
 
@@ -332,9 +333,9 @@ def save_calibration(camera, path, overwrite, report=None, **verdict):
         raise CliError(f"calibration file {path} exists; pass --overwrite to replace it")
     try:
         if report is None:
-            omnicam_files.save_camera(camera, path)
+            calibration_file.save_camera(camera, path)
         else:
-            omnicam_files.save_camera(
+            calibration_file.save_camera(
                 camera,
                 path,
                 report if isinstance(report, Verdict) else Verdict.from_report(report, **verdict),

@@ -2,7 +2,6 @@
 
 from __future__ import annotations
 
-import json
 import math
 import os
 
@@ -11,9 +10,13 @@ import numpy as np
 
 from .._validate import validate_D, validate_K
 from ..calibration import calibrate
+from ..calibration.plausibility import guess_K
 from ..calibration.rim import check_hint, detect_rim, fit_rim
 from ..camera import scale_K
-from ..formats.omnicam_files import SUFFIXES, Verdict, read_verdict, reading
+from ..formats.calibration_file import read_verdict
+from ..formats.filestorage import SUFFIXES
+from ..formats.point_files import BOUNDARY_FORMAT, read_boundary_points
+from ..formats.verdict import Verdict
 from ..gauge import posture_error
 from ..mirror import HyperbolicMirror
 from . import pattern
@@ -109,7 +112,7 @@ def _rig_inputs(args):
 def _image_inputs(args):
     """``(image, its size, far lines, boundary points)``, the rim hint checked."""
     far_lines = read_far_lines(args.far_lines) if args.far_lines else None
-    boundary = read_boundary_points(args.boundary_points) if args.boundary_points else None
+    boundary = _read_boundary_points(args.boundary_points) if args.boundary_points else None
     image = read_image_file(args.image, cv2.IMREAD_COLOR | cv2.IMREAD_IGNORE_ORIENTATION)
     image_size = (image.shape[1], image.shape[0])
     if args.rim_hint is not None:
@@ -245,35 +248,6 @@ def refused_overlay_path(overlay):
     return f"{stem}_refused{ext}"
 
 
-def guess_K(rim, mirror):
-    """The ``K`` of the aligned rig that images ``rim`` as found: a guess without intrinsics.
-
-    An aligned rig (the paper's eqs. 2-5: camera at the lower focus, axes parallel) images the
-    rim circle of radius ``rim_radius`` at depth ``z_rim + c`` as a circle of radius
-    ``f rim_radius / (z_rim + c)`` px about the principal point
-    (:func:`omnicam.calibration.plausibility.expected_rim`). So ``f = r (z_rim + c) /
-    rim_radius`` with ``r`` the rim's mean radius (the geometric mean of its semi-axes),
-    square pixels, no skew and the principal point at the rim's centre. The rim's centre moves
-    with the rig's tilt and offset (and the guess takes it for the principal point), and a
-    camera of another pixel aspect sees the rim as an ellipse, which reads as a tilt: the
-    posture found is only as right as the guess.
-
-    Parameters
-    ----------
-    rim : RimFit
-        The rim ellipse in the image (:func:`omnicam.detect_rim`, :func:`.rim.fit_rim`).
-    mirror : HyperbolicMirror
-
-    Returns
-    -------
-    K : (3, 3) float64 ndarray
-    """
-    r = math.sqrt(float(rim.axes[0]) * float(rim.axes[1]))
-    f = r * (mirror.z_rim + mirror.c) / mirror.rim_radius
-    cx, cy = (float(v) for v in rim.center)
-    return np.array([[f, 0.0, cx], [0.0, f, cy], [0.0, 0.0, 1.0]])
-
-
 def _guess_K_of_image(image, mirror, name, hint, boundary):
     """``(K, note)``: :func:`guess_K` of the rim in ``image`` (or fitted to ``boundary``)."""
     try:
@@ -359,65 +333,12 @@ def _moved_text(camera, rig, name, report):
     )
 
 
-BOUNDARY_FORMAT = (
-    "JSON list of [x, y] pixels on the mirror rim (at least 6, spread along it; "
-    "e.g. [[412.5, 80.0], [530.2, 101.7], ...]), or a cv2.FileStorage file "
-    "(.yaml/.yml/.xml/.json) with an Nx2 matrix 'boundary_points'"
-)
-
-
-def read_boundary_points(path):
-    """Rim pixels from ``path``: a JSON list of ``[x, y]`` or a FileStorage ``boundary_points``
-    (N x 2 matrix; ``N x 1`` two-channel as ``cv2`` writes point vectors works too).
-
-    Returns an ``(N, 2)`` float64 array; every failure is a :class:`CliError` naming the file.
-    """
-    what = "boundary-points file"
-    if not os.path.isfile(path):
-        raise CliError(
-            f"{what} {path} does not exist"
-            if not os.path.exists(path)
-            else f"{what} {path} is not a file"
-        )
-    data = None
-    if os.path.splitext(path)[1].lower() == ".json":
-        try:
-            with open(path, encoding="utf-8") as f:
-                data = json.load(f)
-        except json.JSONDecodeError as e:
-            raise CliError(f"{what} {path}: not valid JSON ({e})") from None
-        except (OSError, UnicodeDecodeError) as e:
-            raise CliError(f"{what} {path}: cannot read ({e})") from None
-    if isinstance(data, list):
-        ok = all(
-            isinstance(p, list)
-            and len(p) == 2
-            and all(isinstance(v, (int, float)) and not isinstance(v, bool) for v in p)
-            for p in data
-        )
-        if not ok:
-            raise CliError(f"{what} {path}: expected a {BOUNDARY_FORMAT}")
-        pts = np.array(data, dtype=np.float64).reshape(-1, 2)
-    elif data is not None and not isinstance(data, dict):
-        raise CliError(f"{what} {path}: expected a {BOUNDARY_FORMAT}")
-    else:
-        try:
-            pts = reading(path, what).matrix("boundary_points")
-        except (FileNotFoundError, ValueError) as e:
-            raise CliError(one_line(e)) from None
-        if pts.ndim == 3 and pts.shape[1:] == (1, 2):
-            pts = pts.reshape(-1, 2)
-        if pts.ndim != 2 or pts.shape[1] != 2:
-            raise CliError(
-                f"{what} {path}: 'boundary_points' must be an Nx2 matrix, got {pts.shape}"
-            )
-    if len(pts) < 6:
-        raise CliError(
-            f"{what} {path}: {len(pts)} point(s); give at least 6 pixels spread along the rim"
-        )
-    if not np.isfinite(pts).all():
-        raise CliError(f"{what} {path}: non-finite coordinates")
-    return pts
+def _read_boundary_points(path):
+    """:func:`omnicam.formats.point_files.read_boundary_points` with its errors as CLI errors."""
+    try:
+        return read_boundary_points(path)
+    except (FileNotFoundError, ValueError) as e:
+        raise CliError(one_line(e)) from None
 
 
 def _candidate_path(folder, i):

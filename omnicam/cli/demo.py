@@ -10,7 +10,8 @@ import cv2
 import numpy as np
 
 from .. import synthetic
-from ..formats.omnicam_files import write_far_lines, write_intrinsics
+from ..formats.intrinsics import write_intrinsics
+from ..formats.point_files import write_far_lines
 from ..hyperbolic_camera import MisalignedHyperbolicCamera
 from ..synthetic.demo import DEMO_CLICK_NOISE_PX, demo_environment, demo_far_lines
 from ..views import UNSEEN, K_from_fov, camera_forward_yaw, rotation_from_ypr

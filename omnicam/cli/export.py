@@ -5,7 +5,7 @@
     omnicam export CALIB --to omnidir|kalibr|camodocal|ocamcalib -o FILE [--depth MM]
 
 A misaligned rig has no single viewpoint; each format gets the central model closest to the
-exact rig over the pixels that see the mirror (:mod:`omnicam.formats.central_export`), and the
+exact rig over the pixels that see the mirror (:mod:`omnicam.formats.central_fit`), and the
 command prints (and the file records) its RMS and maximum error in pixels.
 """
 

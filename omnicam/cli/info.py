@@ -6,8 +6,8 @@ import math
 
 import numpy as np
 
-from ..formats.central_export import fit_omnidir
-from ..formats.omnicam_files import read_verdict
+from ..formats.calibration_file import read_verdict
+from ..formats.central_fit import fit_omnidir
 from ..views import default_elevation_range
 from ._common import EXIT_OK, load_calibration, one_line
 

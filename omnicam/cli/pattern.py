@@ -23,9 +23,7 @@ list in the order of IMAGES; or ``.npz``, one ``(N, 2)`` array per image file na
 
 from __future__ import annotations
 
-import json
 import os
-import re
 import warnings
 
 import cv2
@@ -35,7 +33,8 @@ from ..calibration.rim import check_hint, detect_rim
 from ..camera import scale_K
 from ..chessboard import DIST_MODELS
 from ..chessboard.calibrate import ONE_SIDED
-from ..formats.omnicam_files import SUFFIXES
+from ..formats.filestorage import SUFFIXES
+from ..formats.point_files import read_corners
 from ..hyperbolic_camera import MisalignedHyperbolicCamera
 from ..mirror import HyperbolicMirror
 from ._common import (
@@ -127,51 +126,12 @@ def refuse_chessboard_options(args):
             raise CliError(f"calibrate: {flag} is an option of --chessboard mode", 2)
 
 
-def read_corners(path, image_paths, n_corners):
-    """Corners per image from another tool's file (module docstring): a list, one ``(N, 2)``
-    float64 array or None per image of ``image_paths``."""
-    names = [os.path.basename(p) for p in image_paths]
+def _read_corners(path, image_paths, n_corners):
+    """:func:`omnicam.formats.point_files.read_corners` of ``--corners``, errors as CLI errors."""
     try:
-        if path.lower().endswith(".npz"):
-            with np.load(path, allow_pickle=False) as z:
-                table = {k: z[k] for k in z.files}
-            if all(re.fullmatch(r"arr_\d+", k) for k in table):
-                table = {names[int(k[4:])]: v for k, v in table.items() if int(k[4:]) < len(names)}
-        else:
-            with open(path, encoding="utf-8") as f:
-                data = json.load(f)
-            table = dict(zip(names, data)) if isinstance(data, list) else data
-            if not isinstance(table, dict):
-                raise ValueError("expected an object {image name: corners} or a list")
-    except FileNotFoundError:
-        raise CliError(f"--corners {path}: no such file") from None
-    except (OSError, ValueError) as e:
-        raise CliError(f"--corners {path}: cannot read it: {one_line(e)}") from None
-    unknown = sorted(set(table) - set(names))
-    if unknown:
-        raise CliError(
-            f"--corners {path}: {unknown[0]!r} is not one of the IMAGES' names "
-            f"({', '.join(names[:3])}{', ...' if len(names) > 3 else ''})"
-        )
-    out = []
-    for name in names:
-        v = table.get(name)
-        if v is None:
-            out.append(None)
-            continue
-        try:
-            arr = np.asarray(v, np.float64).reshape(-1, 2)
-        except (TypeError, ValueError):
-            raise CliError(
-                f"--corners {path}: the corners of {name} are not (x, y) pairs"
-            ) from None
-        if len(arr) != n_corners or not np.isfinite(arr).all():
-            raise CliError(
-                f"--corners {path}: {name} has {len(arr)} corners (finite: "
-                f"{int(np.isfinite(arr).all(axis=1).sum())}); the board has {n_corners}"
-            )
-        out.append(arr)
-    return out
+        return read_corners(path, image_paths, n_corners, what="--corners")
+    except (FileNotFoundError, ValueError) as e:
+        raise CliError(one_line(e)) from None
 
 
 def _start_intrinsics(args, size):
@@ -303,7 +263,7 @@ def cmd_calibrate_pattern(args):
     images, size = _read_views(args.image)
     K, D = _start_intrinsics(args, size)
     cols, rows = args.chessboard
-    points = None if args.corners is None else read_corners(args.corners, args.image, cols * rows)
+    points = None if args.corners is None else _read_corners(args.corners, args.image, cols * rows)
     boundary = _hinted_rim(args, images, size)
     names = [os.path.basename(p) for p in args.image]
 

@@ -24,7 +24,7 @@ import cv2
 import numpy as np
 
 from ..calibration import calibrate
-from ..formats.omnicam_files import read_verdict
+from ..formats.calibration_file import read_verdict
 from ..gauge import posture_error
 from ..html_report.redetect import redetected_pattern_report
 from ._common import (

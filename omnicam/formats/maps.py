@@ -35,6 +35,7 @@ import numpy.typing as npt
 
 from .._atomic import OutputError, atomic_output, write_bytes
 from .._typing import PathLike
+from ..images import read_image
 
 __all__ = [
     "UNSEEN_PGM",
@@ -42,7 +43,6 @@ __all__ = [
     "ffmpeg_maps",
     "float_maps",
     "pgm_bytes",
-    "read_pgm",
     "write_ffmpeg_maps",
     "write_filestorage_maps",
     "write_npy_maps",
@@ -102,41 +102,14 @@ def pgm_bytes(image) -> bytes:
     return f"P5\n{w} {h}\n65535\n".encode("ascii") + image.astype(">u2").tobytes()
 
 
-def read_pgm(path) -> tuple[npt.NDArray[np.uint16], int]:
-    """Read a binary PGM (8 or 16 bit); returns ``(image, maxval)``."""
-    with open(path, "rb") as f:
-        data = f.read()
-    tokens: list[bytes] = []
-    pos = 0
-    while len(tokens) < 4:
-        while pos < len(data) and data[pos : pos + 1].isspace():
-            pos += 1
-        if data[pos : pos + 1] == b"#":
-            pos = data.index(b"\n", pos) + 1
-            continue
-        end = pos
-        while end < len(data) and not data[end : end + 1].isspace():
-            end += 1
-        tokens.append(data[pos:end])
-        pos = end
-    pos += 1  # exactly one whitespace byte after maxval
-    if tokens[0] != b"P5":
-        raise ValueError(f"{path}: not a binary PGM (P5)")
-    w, h, maxval = (int(t) for t in tokens[1:])
-    dtype = ">u2" if maxval > 255 else "u1"
-    n = w * h * (2 if maxval > 255 else 1)
-    if len(data) - pos != n:
-        raise ValueError(f"{path}: expected {n} bytes of pixels, found {len(data) - pos}")
-    return np.frombuffer(data[pos:], dtype=dtype).reshape(h, w).astype(np.uint16), maxval
-
-
 def write_pgm(path, image, overwrite=True) -> None:
-    """Write :func:`pgm_bytes` atomically, checked by reading it back."""
+    """Write :func:`pgm_bytes` atomically, checked by reading it back (OpenCV reads a PGM of
+    maxval 65535 as uint16, as ffmpeg reads it as ``gray16be``)."""
     data = pgm_bytes(image)
 
     def verify(tmp):
-        back, maxval = read_pgm(tmp)
-        return maxval == 65535 and np.array_equal(back, image)
+        back = read_image(tmp, cv2.IMREAD_UNCHANGED, "PGM map")
+        return back.dtype == np.uint16 and np.array_equal(back, image)
 
     write_bytes(path, data, what="PGM map", overwrite=overwrite, verify=verify)
 

@@ -296,7 +296,7 @@ def read_other_intrinsics(path):
     """``(K, D, image_size)`` from a ROS or Kalibr YAML file; ``None`` when it is neither.
 
     Only :func:`parse_yaml` reads the file (never ``cv2.FileStorage``); call it after
-    :mod:`.omnicam_files`' pre-scan. ``image_size`` written as an OpenCV matrix is read by
+    :mod:`.filestorage`'s pre-scan. ``image_size`` written as an OpenCV matrix is read by
     :func:`omnicam.read_intrinsics` itself.
 
     Returns

@@ -554,8 +554,7 @@ def _build_table(
 def _store_entries(index: _IntArray, P: FloatArray, mode: int, outputs: _Outputs) -> int:
     """Write the solved entries ``P`` (n, 2) of the pixels ``index`` (flat) into ``outputs``
     as fill_rows' ``_row_store`` does: NaN as ``UNSEEN``, float32 maps (mode 0) or
-    cv2.convertMaps' CV_16SC2 fixed point (mode 1: cvRound(x * 32), ties to even, the integer
-    part >> 5 saturated to int16 and the fraction & 31). Returns how many were unseen."""
+    ``cv2.convertMaps``' CV_16SC2 fixed point (mode 1). Returns how many were unseen."""
     outx, outy, out16, outf16 = outputs
     unseen = np.isnan(P).any(axis=1)
     fx = np.where(unseen, UNSEEN, P[:, 0]).astype(np.float32)
@@ -564,10 +563,11 @@ def _store_entries(index: _IntArray, P: FloatArray, mode: int, outputs: _Outputs
         outx.reshape(-1)[index] = fx
         outy.reshape(-1)[index] = fy
         return int(np.count_nonzero(unseen))
-    ix = np.rint(fx.astype(np.float64) * 32.0).astype(np.int64)
-    iy = np.rint(fy.astype(np.float64) * 32.0).astype(np.int64)
-    pairs = out16.reshape(-1, 2)
-    pairs[index, 0] = np.clip(ix >> 5, -32768, 32767)
-    pairs[index, 1] = np.clip(iy >> 5, -32768, 32767)
-    outf16.reshape(-1)[index] = (iy & 31) * 32 + (ix & 31)
+    if len(index):
+        # convertMaps' cvRound(x * 32) overflows int32 beyond 2^26 px; 2^25 px saturates the
+        # int16 alike and, as every float32 that large, has no fraction (as _kernels' limit)
+        fx, fy = (np.clip(f, -(2.0**25), 2.0**25).reshape(1, -1) for f in (fx, fy))
+        pairs, fractions = cv2.convertMaps(fx, fy, cv2.CV_16SC2)
+        out16.reshape(-1, 2)[index] = pairs.reshape(-1, 2)
+        outf16.reshape(-1)[index] = fractions.reshape(-1)
     return int(np.count_nonzero(unseen))
