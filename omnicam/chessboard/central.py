@@ -24,6 +24,7 @@ import cv2
 import numpy as np
 
 from .._typing import FloatArray
+from ..calibration.plausibility import rim_depth
 from ..mirror import HyperbolicMirror
 
 __all__ = [
@@ -204,7 +205,7 @@ def hyperbolic_start(
     K = np.asarray(K, np.float64)
     f = math.sqrt(K[0, 0] * K[1, 1])
     R = float(rim_radius)
-    q = f * R / float(rim_px_radius)
+    q = rim_depth(f, float(rim_px_radius), R)
     # (gamma^2 - 1) b^2 - 2 q gamma b + (q^2 - R^2 / alpha^2) = 0, root with q - gamma b >= 0
     A, B, C = gamma * gamma - 1.0, -2.0 * q * gamma, q * q - R * R / (alpha * alpha)
     disc = B * B - 4.0 * A * C

@@ -12,6 +12,7 @@ import numpy as np
 
 from .._validate import validate_D, validate_K
 from ..calibration import calibrate
+from ..calibration.plausibility import focal_from_rim, rim_radius_px
 from ..calibration.rim import check_hint, detect_rim, fit_rim
 from ..camera import scale_K
 from ..formats.omnicam_files import SUFFIXES, Verdict, read_verdict, reading
@@ -252,8 +253,7 @@ def guess_K(rim, mirror):
     -------
     K : (3, 3) float64 ndarray
     """
-    r = math.sqrt(float(rim.axes[0]) * float(rim.axes[1]))
-    f = r * (mirror.z_rim + mirror.c) / mirror.rim_radius
+    f = focal_from_rim(rim_radius_px(rim), mirror)
     cx, cy = (float(v) for v in rim.center)
     return np.array([[f, 0.0, cx], [0.0, f, cy], [0.0, 0.0, 1.0]])
 
@@ -269,7 +269,7 @@ def _guess_K_of_image(image, mirror, name, hint, boundary):
             + aspect_note((image.shape[1], image.shape[0]))
         ) from None
     K = guess_K(rim, mirror)
-    r = math.sqrt(float(rim.axes[0]) * float(rim.axes[1]))
+    r = rim_radius_px(rim)
     note = (
         f"fx = fy = {K[0, 0]:.1f} px, principal point ({K[0, 2]:.1f}, {K[1, 2]:.1f}) at the "
         f"rim's centre; f = {r:.1f} px (the rim's radius) x (z_rim + c) / rim_radius, as if the "
