@@ -314,7 +314,7 @@ def test_a_detected_rim_that_leaves_corners_outside_is_rejected_and_a_larger_one
     monkeypatch,
 ):
     from omnicam.calibration.rim import fit_rim
-    from omnicam.chessboard import calibrate as pattern
+    from omnicam.chessboard import steps as pattern
 
     rim = RIG.rim_image_points(720)
     centre = rim.mean(axis=0)
@@ -347,7 +347,7 @@ def test_adjustment_jacobian_is_the_derivative_of_its_residuals():
     lens = lens[np.isfinite(lens).all(axis=1)]
     rng = np.random.default_rng(4)
     rim = _rim(0.5, 4)[::6]  # off the curve: distances that do not vanish
-    model = AdjustmentModel((0, 1), 4, True, True, MisalignedHyperbolicCamera, lens, None)
+    model = AdjustmentModel((0, 1), 4, True, True, lens, None)
     views = [v.reshape(-1, 2) for v in _corners(0.3, 4, POSES[:3])]
     adj = BundleAdjustment(RIG, RIG.mirror, object_points(PATTERN, SQUARE), views, rim, model)
     boards_x = [np.concatenate([np.ravel(r), np.ravel(t)]) for r, t in POSES[:3]]
@@ -372,7 +372,7 @@ def test_a_solver_step_to_a_shape_no_mirror_has_costs_instead_of_raising():
     from omnicam.chessboard.adjustment import AdjustmentModel, BundleAdjustment
     from omnicam.chessboard.board_pose import object_points
 
-    model = AdjustmentModel((0, 1), 4, False, True, MisalignedHyperbolicCamera)
+    model = AdjustmentModel((0, 1), 4, False, True)
     views = [v.reshape(-1, 2) for v in _corners(0.0, 0, POSES[:3])]
     adj = BundleAdjustment(RIG, RIG.mirror, object_points(PATTERN, SQUARE), views, _rim(), model)
     x = np.concatenate(
@@ -398,7 +398,7 @@ def test_outline_pixels_whose_rays_miss_the_lens_plane_cost_instead_of_fitting_p
     views = [v.reshape(-1, 2) for v in _corners(0.0, 0, POSES[:3])]
     x_boards = [np.concatenate([np.ravel(r), np.ravel(t)]) for r, t in POSES[:3]]
     for z, fits in ((8.0, True), (1e6, False)):
-        model = AdjustmentModel((0, 1), 4, False, False, MisalignedHyperbolicCamera, lens, z)
+        model = AdjustmentModel((0, 1), 4, False, False, lens, z)
         adj = BundleAdjustment(
             RIG, RIG.mirror, object_points(PATTERN, SQUARE), views, _rim(), model
         )
