@@ -22,11 +22,12 @@ from .._typing import FloatArray
 from .._validate import float_array, validate_D, validate_image_size, validate_K
 from ..calibration import calibrate
 from ..calibration.ellipse import conic_distance
+from ..calibration.inputs import edge_image
 from ..calibration.plausibility import focal_from_rim, rim_radius_px
 from ..calibration.reflection import detect_reflection
 from ..calibration.rim import detect_rim, fit_rim
 from ..camera import MisalignedCatadioptricCamera
-from ..images import read_image, to_gray
+from ..images import read_image
 from ..mirror import HyperbolicMirror
 from .adjustment import DIST_MODELS
 from .board_pose import object_points
@@ -162,27 +163,17 @@ class PatternOptions:
 # -- 0. the images, made grey once --------------------------------------------------------------
 @dataclasses.dataclass(frozen=True)
 class GreyImage:
-    """One image as its detectors take it, converted once for the whole calibration.
-
-    ``corners``: 8-bit grey for OpenCV's corner detectors (:func:`.intrinsics.gray8`), used by
-    every round of detection. ``edges``: for the rim's and the reflection's edge detectors, the
-    float grey on the 0-255 scale of an 8-bit image (from which both detectors' scales follow
-    exactly: its values are the colour conversion's own); an image of more bits, or one so
-    dark that its grey is within 0..1 (which the 0-255 scale would read as a float image's
-    0..1), is kept as it is, since its two scales part before the colour conversion."""
+    """One image as its detectors take it, converted once for the whole calibration:
+    ``corners``, 8-bit grey for OpenCV's corner detectors (:func:`.intrinsics.gray8`), used by
+    every round of detection; ``edges``, for the rim's and the reflection's edge detectors
+    (:func:`omnicam.calibration.inputs.edge_image`)."""
 
     corners: np.ndarray
     edges: np.ndarray
 
 
 def _grey_image(image, index) -> GreyImage:
-    corners = gray8(image, index)
-    edges = image
-    if image.dtype == np.uint8:
-        grey = to_gray(image, name=f"images[{index}]")
-        if float(grey.max()) > 1.0:
-            edges = grey
-    return GreyImage(corners, edges)
+    return GreyImage(gray8(image, index), edge_image(image))
 
 
 @dataclasses.dataclass(frozen=True)
