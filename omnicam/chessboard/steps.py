@@ -479,15 +479,14 @@ class StartStep:
 
 def start_step(boards: Boards, rim: RimStep, options: PatternOptions) -> StartStep:
     """4. The start: without a mirror the central fit's rig (:func:`_central_start`), else the
-    mirror given and ``K`` (given, or from the rim's size: :func:`_rim_start`), the posture by
+    mirror given and ``K`` (given, or from the rim's size: :func:`_chen_start`), the posture by
     Chen's method from the rim."""
-    obj_n = options.pattern_size[0] * options.pattern_size[1]
-    central, K, mirror, D, warns = _central_start(boards.points, obj_n, rim.fit, options)
+    central, K, mirror, D, warns = _central_start(boards.points, rim.fit, options)
     cam0 = _chen_start(K, mirror, rim, D, options.image_size)
     return StartStep(cam0, mirror, central, tuple(warns))
 
 
-def _central_start(image_points, n_corners, rim_fit, options):
+def _central_start(image_points, rim_fit, options):
     """Without a mirror, the central start (:mod:`.central`): ``cv2.omnidir.calibrate`` of the
     corners found so far and the hyperbolic rig it describes, at ``rim_radius``. Returns
     ``(central fit or None, K, mirror, start D, warnings)``; a given mirror is returned as it
@@ -502,7 +501,7 @@ def _central_start(image_points, n_corners, rim_fit, options):
     obj = object_points(options.pattern_size, options.square)
     image_size, mirror = options.image_size, options.mirror
     views = [np.asarray(p, np.float64).reshape(-1, 2) for p in image_points if p is not None]
-    views = [v for v in views if len(v) == n_corners]
+    views = [v for v in views if len(v) == len(obj)]
     central, error = None, ""
     try:
         central = fit_central(views, obj, image_size, hyperbolic=False)
