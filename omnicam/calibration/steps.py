@@ -303,7 +303,7 @@ def selection_step(cands, cue, lines, mirror, K, D, rim=None):
             self_px=self_px,
             # the reflection must fit some posture: within 5x its own scatter, at least 2 px
             # (the analytic posture is off along the rim's weak direction, which moves the
-            # predicted outline by 1-2 px on realistic renders; a wrong K moves it by 5+)
+            # predicted outline by a pixel or two; a wrong K moves it by several)
             limit=max(2.0, 5.0 * cue.sigma) if np.isfinite(cue.sigma) else 2.0,
         )
     cameras = candidate_cameras(cands.all, K, D, mirror) if lines else None

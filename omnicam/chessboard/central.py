@@ -135,8 +135,8 @@ def pinhole_K_from_unified(K_unified, xi, principal_point=None) -> FloatArray:
     the principal point unchanged or ``principal_point``.
 
     A start for a misaligned rig takes the focal length only: the central fit's principal
-    point carries the mirror's tilt (on the misaligned test rig it is 41 px off, the image
-    centre 9 px), which the non-central adjustment must then undo along its weakest valley.
+    point carries the mirror's tilt (on a misaligned rig it lies farther off than the image
+    centre), which the non-central adjustment must then undo along its weakest valley.
     """
     K = np.array(K_unified, np.float64)
     s = math.sqrt(max(1.0 - float(xi) ** 2, 1e-12))
