@@ -314,7 +314,7 @@ def test_a_detected_rim_that_leaves_corners_outside_is_rejected_and_a_larger_one
     monkeypatch,
 ):
     from omnicam.calibration.rim import fit_rim
-    from omnicam.chessboard import calibrate as pattern
+    from omnicam.chessboard import steps as pattern
 
     rim = RIG.rim_image_points(720)
     centre = rim.mean(axis=0)
@@ -427,3 +427,41 @@ def test_pinhole_distortion_behind_a_unified_models_is_the_same_image():
     K_p = pinhole_K_from_unified(K_u, xi)
     px, _ = cv2.projectPoints(Xp, np.zeros(3), np.zeros(3), K_p, pinhole_D_from_unified(D_u, xi))
     assert np.abs(px.reshape(-1, 2) - ref.reshape(-1, 2)).max() < 1e-9
+
+
+def test_each_warning_policy_speaks_alone_of_its_own_finding():
+    """The report's warning policies (chessboard/report_warnings.py) each read one fact: a
+    fit that gives none of them is silent, and each finding wakes its own policy only."""
+    from dataclasses import replace
+
+    from omnicam.chessboard import report_warnings as rw
+
+    around = np.array([[500.0, 0, 0], [-500.0, 0, 0], [0, 500.0, 0], [0, -500.0, 0]])
+    quiet = rw.FitFacts(
+        camera=RIG,
+        std={"cx": 0.1, "cy": 0.1, "fx": 0.1, "a": 0.0, "b": 0.0},
+        ray_deg=(0.01, 0.02),
+        rms=0.1,
+        n_views=10,
+        board_centres=around,
+        converged=True,
+        solver_message="",
+        held_shape=False,
+        estimated_shape=False,
+        central=None,
+        image_size=SIZE,
+    )
+    assert [p(quiet) for p in rw.POLICIES] == [None] * len(rw.POLICIES)
+    woken = {
+        rw.few_views: replace(quiet, n_views=5),
+        rw.one_sided: replace(quiet, board_centres=around[[0, 2]]),
+        rw.principal_point_weak: replace(quiet, std={**quiet.std, "cx": 2.0}),
+        rw.not_converged: replace(quiet, converged=False, solver_message="gave up"),
+        rw.held_shape: replace(quiet, held_shape=True),
+        rw.estimated_shape: replace(quiet, estimated_shape=True),
+        rw.focal_length_weak: replace(quiet, std={**quiet.std, "fx": 0.02 * RIG.K[0, 0]}),
+    }
+    for policy, facts in woken.items():
+        said = [p for p in rw.POLICIES if p(facts) is not None]
+        assert said == [policy], (policy.__name__, [p.__name__ for p in said])
+    assert rw.one_sided(woken[rw.one_sided]).startswith(rw.ONE_SIDED)

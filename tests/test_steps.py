@@ -451,3 +451,26 @@ def test_warnings_step_passes_on_the_rims_the_selections_and_the_rejected_cues(e
         "the far lines disagree(s) with the rim and was left out of the refinement: its own RMS "
         "is 4 px; check it (the posture rests on the rim alone)",
     )
+
+
+def test_the_image_made_grey_once_gives_the_edge_detectors_what_the_image_gives_them():
+    """calibrate and calibrate_pattern convert an image once (inputs.edge_image): the rim's and
+    the reflection's detections on it are those on the image, bit for bit; an image of more
+    bits, or one whose grey lies within 0..1, is kept as it is."""
+    from omnicam.calibration.inputs import edge_image
+    from omnicam.calibration.rim import detect_rim
+
+    img, _ = white_holder_render()
+    grey = edge_image(img)
+    assert img.dtype == np.uint8 and grey.shape == img.shape[:2] and grey.dtype == np.float32
+    rim, rim_grey = (
+        detect_rim(img, expected=(110.0, 150.0)),
+        detect_rim(grey, expected=(110.0, 150.0)),
+    )
+    assert np.array_equal(rim.points, rim_grey.points) and np.array_equal(rim.conic, rim_grey.conic)
+    seen = reflection.detect_reflection(img, rim, allow_coreless=True)
+    seen_grey = reflection.detect_reflection(grey, rim, allow_coreless=True)
+    assert np.array_equal(seen.points, seen_grey.points)
+    deep = img.astype(np.uint16) * 257
+    dark = (img > 128).astype(np.uint8)
+    assert edge_image(deep) is deep and edge_image(dark) is dark and edge_image(None) is None

@@ -2,11 +2,14 @@
 
 :func:`calibrate` composes named steps (:mod:`.steps`), each returning a frozen dataclass:
 
+0. **inputs** (:mod:`.inputs`): the options validated as one record
+   (:class:`.inputs.ImageOptions`; the plausibility re-run is ``dataclasses.replace`` of it)
+   and the image made grey once (:func:`.inputs.edge_image`);
 1. **rim** (:func:`.steps.rim_step` -> ``RimStep``): the rim ellipse ``Q_I`` (eqs. 20-22),
    detected (:func:`.rim.detect_rim`) or fitted to given boundary points (undistorted with ``D``);
 2. **candidates** (:func:`.steps.candidates_step` -> ``Candidates``): Chen's four postures
    (:mod:`.chen`, eqs. 23-29, 32-42), the impossible ones marked;
-3. **reflection cue** (:func:`.steps.reflection_step` -> ``ReflectionCue``): the outline of the
+3. **reflection cue** (:func:`.cue_step.reflection_step` -> ``ReflectionCue``): the outline of the
    camera's own reflection (:mod:`.reflection`, beyond the paper), given, or detected around
    the candidates' self-reflection pixels;
 4. **selection** (:func:`.steps.selection_step` -> :class:`.selection.Selection`): far lines
@@ -29,17 +32,17 @@ from __future__ import annotations
 import dataclasses
 import math
 from collections.abc import Sequence
-from typing import Any
+from typing import Any, cast
 
 import numpy as np
 
-from .._typing import ArrayLike
-from .._validate import validate_D, validate_image_size, validate_K
+from .._typing import ArrayLike, FloatArray
 from ..camera import MisalignedCatadioptricCamera
 from ..mirror import HyperbolicMirror
 from ..raytrace import normalize, to_pixels
 from . import selection, steps
 from .errors import EstimationError
+from .inputs import ImageOptions, edge_image
 from .plausibility import assess
 from .report import CalibrationReport
 from .shape import bowed_far_lines
@@ -133,23 +136,35 @@ def calibrate(
         Valid input but no estimate: no rim ellipse (in the image or among the points) or no
         physically possible posture.
     """
-    K = validate_K(K)
-    D = validate_D(D)
-    if not isinstance(mirror, HyperbolicMirror):
-        raise ValueError(f"mirror must be a HyperbolicMirror, got {type(mirror).__name__}")
-    if image is None and boundary_points is None:
-        raise ValueError(
-            "give the image (the rim is detected) or boundary_points (pixels on the mirror rim)"
-        )
-    if image_size is None and image is not None:
-        shape = np.shape(image)
-        if len(shape) >= 2:
-            image_size = (int(shape[1]), int(shape[0]))
-    image_size = validate_image_size(image_size)
-    lines = selection.validate_far_lines(far_lines)
+    options = ImageOptions(
+        K=K,
+        mirror=mirror,
+        boundary_points=boundary_points,
+        far_lines=far_lines,
+        D=D,
+        image_size=image_size,
+        refine=refine,
+        lens=lens,
+        lens_r=lens_r,
+        lens_z=lens_z,
+        rim_hint=rim_hint,
+        max_tilt_deg=max_tilt_deg,
+        max_offset_mm=max_offset_mm,
+        check_plausibility=check_plausibility,
+        choose=choose,
+    ).validated(image)
+    return _calibrate(options, edge_image(image))
 
+
+def _calibrate(
+    options: ImageOptions, image: np.ndarray | None
+) -> tuple[MisalignedCatadioptricCamera, CalibrationReport]:
+    """:func:`calibrate` of validated ``options`` on ``image`` (made grey once,
+    :func:`.inputs.edge_image`): the steps of the module docstring, in order."""
+    o = options
+    K, D, mirror, lines = cast(FloatArray, o.K), o.D, o.mirror, o.far_lines
     rim = steps.rim_step(
-        K, D, image, boundary_points, rim_hint, mirror, max_tilt_deg, max_offset_mm
+        K, D, image, o.boundary_points, o.rim_hint, mirror, o.max_tilt_deg, o.max_offset_mm
     )
     lines_xn = [normalize(line, K, D) for line in lines]
     # far-line pixels outside the fitted rim by more than its noise cannot see the mirror
@@ -159,44 +174,41 @@ def calibrate(
     )
     cands = steps.candidates_step(rim, K, mirror)
     cue = steps.reflection_step(
-        lens, image, rim.detected or rim.fit, K, D, lens_r, lens_z, cands, mirror
+        o.lens, image, rim.detected or rim.fit, K, D, o.lens_r, o.lens_z, cands, mirror
     )
 
     sel, circles = steps.selection_step(cands, cue, lines, mirror, K, D, rim)
-    if choose is not None:
-        sel = selection.user_choice(sel, choose)
+    if o.choose is not None:
+        sel = selection.user_choice(sel, o.choose)
     ref = steps.refinement_step(
-        K, mirror, cands.all[sel.chosen], rim, lines_xn, cue, circles.get(sel.chosen), refine
+        K, mirror, cands.all[sel.chosen], rim, lines_xn, cue, circles.get(sel.chosen), o.refine
     )
     warnings = steps.warnings_step(rim, cue, sel, ref, cands)
     # the camera's reflection as detected: default panoramas leave it out
     body = steps.camera_body(cue, ref)
     camera = MisalignedCatadioptricCamera(
-        K, mirror, ref.rvec, ref.tvec, D=D, image_size=image_size, camera_reflection=body
+        K, mirror, ref.rvec, ref.tvec, D=D, image_size=o.image_size, camera_reflection=body
     )
     report = CalibrationReport.from_steps(rim, cue, cands, sel, ref, list(warnings), camera, lines)
     bowed = bowed_far_lines(getattr(ref.result, "line_rms", math.nan), lines, mirror)
     if bowed is not None:  # (.shape) the one thing one image tells of the mirror's shape
         report.warnings.append(bowed)
-    if check_plausibility:  # (.plausibility) a second calibration only when suspicious
+    if o.check_plausibility:  # (.plausibility) a second calibration only when suspicious
+        # the same calibration from the rim points and the cues this one found
+        rerun = dataclasses.replace(
+            o,
+            choose=None,  # the user chose among this mirror's candidates, not the other's
+            boundary_points=rim.seen,
+            lens=cue.points if cue.used else False,
+            rim_hint=None,
+            check_plausibility=False,
+        )
         implausible = assess(
             report,
-            image_size,
-            lambda m: calibrate(
-                K,
-                m,
-                boundary_points=rim.seen,
-                far_lines=lines or None,
-                D=D,
-                image_size=image_size,
-                refine=refine,
-                lens=cue.points if cue.used else False,
-                lens_r=lens_r,
-                lens_z=lens_z,
-                check_plausibility=False,
-            ),
-            max_tilt_deg=max_tilt_deg,
-            max_offset_mm=max_offset_mm,
+            o.image_size,
+            lambda m: _calibrate(dataclasses.replace(rerun, mirror=m), None),
+            max_tilt_deg=o.max_tilt_deg,
+            max_offset_mm=o.max_offset_mm,
         )
         report.warnings.extend(str(w) for w in implausible)
         report = dataclasses.replace(report, plausibility=tuple(implausible))

@@ -45,8 +45,11 @@ __all__ = [
     "check_plausibility",
     "cue_costs",
     "expected_rim",
+    "focal_from_rim",
     "focus_offset",
     "guess_K",
+    "rim_depth",
+    "rim_radius_px",
     "swapped_mirror_warnings",
     "tilt_deg",
 ]
@@ -100,6 +103,28 @@ def focus_offset(camera_center, mirror) -> float:
 
 
 # -- what to expect from K and the mirror --------------------------------------------------------
+# The aligned rig (eqs. 2-5: camera at the lower focus, axes parallel) sees the rim circle of
+# radius rim_radius at depth z_rim + c: a circle of radius r = f * rim_radius / (z_rim + c) px.
+# The functions below read that one relation each way.
+def rim_radius_px(rim) -> float:
+    """The mean radius (px) of a rim ellipse (:class:`.rim.RimFit`): the geometric mean of its
+    semi-axes."""
+    return math.sqrt(float(rim.axes[0]) * float(rim.axes[1]))
+
+
+def focal_from_rim(rim_px_radius, mirror) -> float:
+    """The focal length (px) of the aligned rig whose image of the rim has the radius
+    ``rim_px_radius`` (px): ``f = r (z_rim + c) / rim_radius``."""
+    return rim_px_radius * (mirror.z_rim + mirror.c) / mirror.rim_radius
+
+
+def rim_depth(f, rim_px_radius, rim_radius) -> float:
+    """The rim's depth ``z_rim + c`` (mirror units) in the aligned rig whose camera of focal
+    length ``f`` (px) images the rim, of radius ``rim_radius``, with the radius
+    ``rim_px_radius`` (px): ``z_rim + c = f rim_radius / r``."""
+    return f * rim_radius / rim_px_radius
+
+
 @dataclasses.dataclass(frozen=True)
 class ExpectedRim:
     """The rim in the image as ``K`` and the mirror predict it.
@@ -170,8 +195,7 @@ def guess_K(rim, mirror):
     -------
     K : (3, 3) float64 ndarray
     """
-    r = math.sqrt(float(rim.axes[0]) * float(rim.axes[1]))
-    f = r * (mirror.z_rim + mirror.c) / mirror.rim_radius
+    f = focal_from_rim(rim_radius_px(rim), mirror)
     cx, cy = (float(v) for v in rim.center)
     return np.array([[f, 0.0, cx], [0.0, f, cy], [0.0, 0.0, 1.0]])
 

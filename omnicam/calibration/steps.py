@@ -1,9 +1,11 @@
 """The named steps of :func:`omnicam.calibration.calibrate`, each returning a typed result.
 
-rim (:func:`rim_step` -> :class:`RimStep`) -> reflection cue (:func:`reflection_step` ->
-:class:`ReflectionCue`) -> candidates (:func:`candidates_step` -> :class:`Candidates`) ->
-selection (:func:`selection_step` -> :class:`.selection.Selection`) -> refinement
-(:func:`refinement_step` -> :class:`Refinement`) -> warnings (:func:`warnings_step`).
+rim (:func:`rim_step` -> :class:`RimStep`) -> candidates (:func:`candidates_step` ->
+:class:`Candidates`) -> reflection cue (:func:`.cue_step.reflection_step` ->
+:class:`.cue_step.ReflectionCue`, re-exported here) -> selection (:func:`selection_step` ->
+:class:`.selection.Selection`) -> refinement (:func:`refinement_step` -> :class:`Refinement`)
+-> warnings (:func:`warnings_step`). The options and the image come validated and made grey
+once from :mod:`.inputs`.
 """
 
 from __future__ import annotations
@@ -19,7 +21,9 @@ from ..camera import MisalignedCatadioptricCamera
 from ..images import to_gray
 from ..raytrace import normalize, to_pixels
 from . import chen
+from .cue_step import ReflectionCue, reflection_step
 from .errors import EstimationError
+from .inputs import as_pixels
 from .plausibility import expected_rim
 from .refine import (
     ReflectionSpec,
@@ -33,7 +37,6 @@ from .refine import (
 )
 from .reflection import (
     ReflectionCircle,
-    detect_reflection,
     fit_circle,
     plane_radius,
     self_reflection_pixel,
@@ -59,9 +62,8 @@ __all__ = [
 #: (2 x the 99.9 % point of chi-square with 5 degrees of freedom, the posture's).
 CUE_CHI2 = 2.0 * 20.515
 #: Evaluations of each stage of the refinement with far lines: the lines' 4 parameters each
-#: follow the posture slowly; 15 (the rim's) left exact data from a start 0.3 mrad off at
-#: 0.35 deg and 0.14 px on one BLAS kernel (OpenBLAS Haswell) and exact on another; 30
-#: converges on both (``tests/test_refine.py``).
+#: follow the posture slowly, so the rim's 15 leave exact data unconverged on some BLAS
+#: kernels; 30 converge on all (``tests/test_refine.py``).
 LINES_MAX_NFEV = 30
 #: Rim and outline residuals are never taken as smaller than this (px): edge location limits.
 SIGMA_FLOOR = 0.02
@@ -75,26 +77,13 @@ AXIS_WARN_DEG = 0.05
 #: ``aligned_chi2``, in units of the observed residual variance with its correlation along
 #: the contour). A low-order shape error of the rim's image falls where the posture absorbs
 #: it, so the residuals cannot show it, and real rims have them larger than their residuals
-#: suggest: on OCamCalib's VMR frames the chessboard posture lies at the aligned one, at
-#: chi-square 0-40 from each frame's posture (a pixel aspect of K 0.05 % off moves the axis by
-#: 1.7 deg). The nearly aligned rigs of the stress renders (``benchmarks/bench_stress.py``)
-#: have theirs at 15-65; the quickstart's render at 97, a 1000 px render 3 deg out of line at
-#: 460: the warning says what one frame cannot exclude.
+#: suggest (a pixel aspect of K a little off moves the axis by degrees near alignment): the
+#: warning says what one frame cannot exclude. The nearly aligned rigs of the stress renders
+#: (``benchmarks/bench_stress.py``) fall within the bound, rigs a few degrees out of line far
+#: beyond it (docs/CHANGELOG.md has the figures that set it).
 ALIGNED_CHI2 = 64.0
 #: Outline points used in the refinement (evenly subsampled; selection uses all).
 MAX_REFINE_POINTS = 400
-
-
-def as_pixels(points, name):
-    """``(N, 2)`` float64 pixels from ``(N, 2)`` / ``(N, 1, 2)``; ``ValueError`` naming ``name``."""
-    arr = float_array(points, name, "an (N, 2) or (N, 1, 2) array of pixels")
-    if arr.ndim == 3 and arr.shape[1:] == (1, 2):
-        arr = arr.reshape(-1, 2)
-    if arr.ndim != 2 or arr.shape[1] != 2:
-        raise ValueError(
-            f"{name} must be an (N, 2) or (N, 1, 2) array of pixels, got shape {arr.shape}"
-        )
-    return arr
 
 
 # -- 1. rim ------------------------------------------------------------------------------------
@@ -203,174 +192,6 @@ def rim_step(
             f"posture error grows by about 1 deg per px of rim noise)"
         )
     return RimStep(fit=fit, detected=detected, seen=seen, warnings=tuple(warnings))
-
-
-# -- 2. the camera's reflection ----------------------------------------------------------------
-@dataclasses.dataclass(frozen=True, eq=False)
-class ReflectionCue:
-    """The outline of the camera's reflection, if any (:mod:`.reflection`).
-
-    Attributes
-    ----------
-    points : (M, 2) ndarray or None
-        Outline pixels as seen (None: not used).
-    normalized : (M, 2) ndarray or None
-        Their undistorted normalised coordinates.
-    fit : ReflectionFit or None
-        The detection (``lens="auto"``).
-    sigma : float
-        The measurement's own scatter, px (the detection's RMS to its ellipse; NaN for given
-        points).
-    r, z : float or None
-        Known radius and axial distance of the circle (None: fitted).
-    note : str
-        Whether it is used, and why not.
-    """
-
-    points: object
-    normalized: object
-    fit: object
-    sigma: float
-    r: object
-    z: object
-    note: str
-
-    @property
-    def used(self):
-        """Whether the camera's reflection was found and is used."""
-        return self.points is not None
-
-
-def reflection_step(lens, image, rim, K, D, r=None, z=None, cands=None, mirror=None):
-    """Detect or take the outline of the camera's reflection; see :class:`ReflectionCue`.
-
-    With ``cands`` (and ``mirror``) the detection looks around the physical candidates' self-
-    reflection pixels (their mean, within their spread plus 8 % of the rim's semi-axis): a
-    tilted mirror moves the camera's reflection well away from the rim centre; then around the
-    rim centre (:func:`_detect_outline`).
-
-    ``lens`` is ``"auto"`` (detect in ``image``), ``None``/``False`` (not used) or an
-    ``(M, 2)`` array of outline pixels.
-    """
-    for name, v in (("lens_r", r), ("lens_z", z)):
-        if v is not None and not (np.isfinite(v) and (name == "lens_z" or v > 0)):
-            raise ValueError(f"{name} must be a finite number (lens_r > 0) or None, got {v!r}")
-    fit, px, sigma = None, None, math.nan
-    if isinstance(lens, str):
-        if lens != "auto":
-            raise ValueError(
-                f"lens must be 'auto', None, False or an (M, 2) array of outline pixels, "
-                f"got {lens!r}"
-            )
-        if image is None:
-            return ReflectionCue(
-                None,
-                None,
-                None,
-                sigma,
-                r,
-                z,
-                "not used: no image (give lens=outline pixels to use it)",
-            )
-        try:
-            where = {}
-            if cands is not None and mirror is not None and cands.physical:
-                u = np.array(
-                    [
-                        self_reflection_pixel(mirror, cands.all[i].R, cands.all[i].tvec, K, D)
-                        for i in cands.physical
-                    ]
-                )
-                if np.isfinite(u).all():
-                    c = u.mean(axis=0)
-                    spread = float(np.linalg.norm(u - c, axis=1).max()) / float(min(rim.axes))
-                    where = {"center": c, "center_search": min(0.5, 0.08 + spread)}
-            fit, px, xn, why = _detect_outline(image, rim, where, cands, K, D, mirror, r, z)
-        except EstimationError as err:  # optional: the report says why it was not used
-            return ReflectionCue(None, None, None, sigma, r, z, f"not used: {err}")
-        if why is not None:
-            return ReflectionCue(None, None, None, sigma, r, z, f"not used: {why}")
-        sigma = float(fit.rms)
-    elif lens is None or lens is False:
-        return ReflectionCue(None, None, None, sigma, r, z, "not used (lens=None)")
-    else:
-        px = as_pixels(lens, "lens")
-        if len(px) < 8 or not np.isfinite(px).all():
-            raise ValueError(
-                f"lens has {len(px)} point(s) or non-finite values; give at least 8 finite "
-                f"pixels along the outline of the camera's reflection"
-            )
-        xn = _outline_normalized(px, K, D)
-    note = f"used: {len(px)} outline points"
-    if fit is not None and not fit.core:
-        note += " (uniformly dark: a posture explains it as the camera's circle)"
-    return ReflectionCue(px, xn, fit, sigma, r, z, note)
-
-
-def _outline_normalized(px, K, D):
-    """Undistorted normalised coordinates of outline pixels; ValueError if D cannot undistort
-    some of them."""
-    xn = normalize(px, K, D)
-    if not np.isfinite(xn).all():
-        raise ValueError("some lens outline points cannot be undistorted with D; check D")
-    return xn
-
-
-def _detect_outline(image, rim, where, cands, K, D, mirror, r, z):
-    """The camera's reflection detected around ``where`` (the postures' predicted self-reflection
-    pixel), else around the rim centre: a K or D a little off moves the predictions but not the
-    reflection, which stays near the rim centre for the misalignments of real rigs (the office
-    photograph with the principal point at the image centre: 25 px off). A silhouette without a
-    darker core counts only if :func:`_coreless_why` accepts it; one it rejects near the
-    predictions (an inner ring of the glass) also leads to the rim centre's search.
-
-    Returns ``(fit, px, xn, why)``: ``why`` (not ``None``) says why the only silhouette found
-    was not taken. Raises :class:`EstimationError` when nothing is found.
-    """
-    rejected, failure = None, None
-    for search in (where, {}) if where else ({},):
-        try:
-            fit = detect_reflection(image, rim, allow_coreless=True, **search)
-        except EstimationError as err:
-            failure = failure or err
-            continue
-        px = np.asarray(fit.points, np.float64)
-        xn = _outline_normalized(px, K, D)
-        why = None if fit.core else _coreless_why(fit, xn, cands, K, mirror, r, z)
-        if why is None:
-            return fit, px, xn, None
-        rejected = rejected or why
-    if rejected is not None:
-        return None, None, None, rejected
-    raise failure
-
-
-#: A silhouette without a darker core (uniformly dark glass, or a dark floor) is taken for the
-#: camera only if some physical posture explains it as a coaxial circle to within this many px
-#: (or 3x its own scatter). A floor's edge is a cone of directions, not a circle at a finite
-#: distance, and misfits: the own renderer's floor below -65 deg fits at 1.18 px best (its
-#: edge scatter 0.05 px); dark lenses of the stress renders (seed 0, cases 37, 59, 79, 87) at
-#: 0.08-0.32 px.
-CORELESS_MAX_RMS = 0.5
-
-
-def _coreless_why(fit, xn, cands, K, mirror, r, z):
-    """Why a silhouette without a darker core is not the camera's, or None if it may be."""
-    if cands is None or mirror is None or not cands.physical:
-        return "the silhouette has no darker core and no posture to test it against"
-    Kinv2 = np.linalg.inv(K)[:2, :2]
-    best = min(
-        fit_circle(mirror, cands.all[i].R, cands.all[i].tvec, xn, Kinv2, r=r, z=z).rms
-        for i in cands.physical
-    )
-    limit = max(CORELESS_MAX_RMS, 3.0 * fit.rms)
-    if best <= limit:
-        return None
-    return (
-        f"no camera reflection found: the round dark silhouette (radius {fit.radius:.1f} px) "
-        f"has no darker core and no posture explains it as the camera's circle (best RMS "
-        f"{best:.2f} px, allowed {limit:.2f}): a dark floor or clutter"
-    )
 
 
 # -- 3. candidates -----------------------------------------------------------------------------
@@ -482,7 +303,7 @@ def selection_step(cands, cue, lines, mirror, K, D, rim=None):
             self_px=self_px,
             # the reflection must fit some posture: within 5x its own scatter, at least 2 px
             # (the analytic posture is off along the rim's weak direction, which moves the
-            # predicted outline by 1-2 px on realistic renders; a wrong K moves it by 5+)
+            # predicted outline by a pixel or two; a wrong K moves it by several)
             limit=max(2.0, 5.0 * cue.sigma) if np.isfinite(cue.sigma) else 2.0,
         )
     cameras = candidate_cameras(cands.all, K, D, mirror) if lines else None
@@ -541,8 +362,8 @@ def _z_range(mirror, res):
 #: The reflection joins only if the posture it moves to is consistent with the rim alone:
 #: ``d^T (C_rim - C_joint)^+ d <= CUE_SHIFT_CHI2`` for the shift ``d`` of the mirror axis (a
 #: Hausman test on the two axis angles: the 99 % point of chi-square with 2 degrees of
-#: freedom). The rim's chi-square rise alone let a biased outline move the axis by 3.5 times
-#: the uncertainty it then reported (stress case 5 of seed 0 with lens_z given).
+#: freedom). The rim's chi-square rise alone lets a biased outline move the axis by several
+#: times the uncertainty then reported (``benchmarks/bench_stress.py`` with lens_z given).
 CUE_SHIFT_CHI2 = 9.21
 
 
@@ -661,9 +482,9 @@ def _refine_with_cues(K, mirror, cand, rim_px, lines_xn, cue, spec):
     var = _rim_variance(K, mirror, base, rim_px)
     if spec is not None and cue.r is None and cue.z is None:
         # with r and z both unknown the circle trades its z with the mirror's tilt along a
-        # valley the linear uncertainty does not see (exact outlines + 0.05 px noise, 10
-        # rigs: axis 0.05-0.2 deg -> 0.1-1.3 deg, reported 0.03-0.14): it chose the
-        # candidate; the posture rests on the rim (and far lines)
+        # valley the linear uncertainty does not see (the axis errors grow several times
+        # beyond the reported uncertainty): it chose the candidate; the posture rests on the
+        # rim (and far lines)
         out.skipped.append(
             (
                 "reflection",

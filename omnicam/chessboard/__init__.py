@@ -8,7 +8,10 @@
   describes;
 - :mod:`.board_pose`: a board's object points and its pose from its corners' rays;
 - :mod:`.adjustment`: the non-central bundle adjustment, its solver and uncertainty;
-- :mod:`.calibrate`: ``calibrate_pattern``, the pipeline as named steps;
+- :mod:`.calibrate`: ``calibrate_pattern``, the pipeline as a composition of named steps:
+  :mod:`.steps` (options, images, boards, rim, reflection, start) and :mod:`.fit_steps`
+  (corners, adjustment, detection rounds, the held shape, the report), whose warnings are
+  :mod:`.report_warnings`' policies;
 - :mod:`.report`: ``PatternReport``;
 - :mod:`.heldout`: what a calibration predicts on views it did not fit.
 

@@ -50,7 +50,6 @@ __all__ = [
     "pattern_uncertainty",
     "ray_uncertainty",
     "rim_curve",
-    "rim_foot",
     "rim_foot_normals",
     "rim_normalized",
     "robust_residuals",
@@ -114,13 +113,6 @@ def rim_foot_normals(cam_K, D, R, t, mirror, u, phi) -> tuple[FloatArray, FloatA
     nrm = np.stack([tang[:, 1], -tang[:, 0]], axis=1)
     nrm /= np.linalg.norm(nrm, axis=1, keepdims=True)
     return np.einsum("ij,ij->i", u - c0, nrm), nrm
-
-
-def rim_foot(cam_K, D, R, t, mirror, u, phi) -> FloatArray:
-    """Orthogonal distances of pixels ``u`` to the rim image, with foot parameters ``phi``
-    refined in place by Newton's method. Returns signed distances (px)
-    (:func:`rim_foot_normals`)."""
-    return rim_foot_normals(cam_K, D, R, t, mirror, u, phi)[0]
 
 
 @dataclasses.dataclass(frozen=True)
@@ -295,12 +287,6 @@ class BundleAdjustment:
             j = np.argmin(((self.rim_px[:, None, :] - c[None]) ** 2).sum(-1), axis=1)
             self.rim_phi = ph[j]
         return self.rim_phi.copy()
-
-    def rim_residuals(self, x) -> FloatArray:
-        """Every rim point's signed distance (px) to the rim circle's image (:func:`rim_foot`)."""
-        K, D, R, tvec, mirror = self.unpack(x)
-        phi = self.rim_start(K, R, tvec, mirror)
-        return rim_foot(K, D, R, tvec, mirror, self.rim_px, phi)
 
     def lens_residuals(self, x) -> FloatArray:
         """The camera's reflection (:mod:`.reflection`): ``(rho(u) - r) / |grad rho|`` px for every

@@ -24,6 +24,7 @@ import cv2
 import numpy as np
 
 from .._typing import FloatArray
+from ..calibration.plausibility import rim_depth
 from ..mirror import HyperbolicMirror
 
 __all__ = [
@@ -134,8 +135,8 @@ def pinhole_K_from_unified(K_unified, xi, principal_point=None) -> FloatArray:
     the principal point unchanged or ``principal_point``.
 
     A start for a misaligned rig takes the focal length only: the central fit's principal
-    point carries the mirror's tilt (on the misaligned test rig it is 41 px off, the image
-    centre 9 px), which the non-central adjustment must then undo along its weakest valley.
+    point carries the mirror's tilt (on a misaligned rig it lies farther off than the image
+    centre), which the non-central adjustment must then undo along its weakest valley.
     """
     K = np.array(K_unified, np.float64)
     s = math.sqrt(max(1.0 - float(xi) ** 2, 1e-12))
@@ -204,7 +205,7 @@ def hyperbolic_start(
     K = np.asarray(K, np.float64)
     f = math.sqrt(K[0, 0] * K[1, 1])
     R = float(rim_radius)
-    q = f * R / float(rim_px_radius)
+    q = rim_depth(f, float(rim_px_radius), R)
     # (gamma^2 - 1) b^2 - 2 q gamma b + (q^2 - R^2 / alpha^2) = 0, root with q - gamma b >= 0
     A, B, C = gamma * gamma - 1.0, -2.0 * q * gamma, q * q - R * R / (alpha * alpha)
     disc = B * B - 4.0 * A * C

@@ -2,7 +2,6 @@
 
 from __future__ import annotations
 
-import math
 import os
 
 import cv2
@@ -10,7 +9,7 @@ import numpy as np
 
 from .._validate import validate_D, validate_K
 from ..calibration import calibrate
-from ..calibration.plausibility import guess_K
+from ..calibration.plausibility import guess_K, rim_radius_px
 from ..calibration.rim import check_hint, detect_rim, fit_rim
 from ..camera import scale_K
 from ..formats.calibration_file import read_verdict
@@ -259,7 +258,7 @@ def _guess_K_of_image(image, mirror, name, hint, boundary):
             + aspect_note((image.shape[1], image.shape[0]))
         ) from None
     K = guess_K(rim, mirror)
-    r = math.sqrt(float(rim.axes[0]) * float(rim.axes[1]))
+    r = rim_radius_px(rim)
     note = (
         f"fx = fy = {K[0, 0]:.1f} px, principal point ({K[0, 2]:.1f}, {K[1, 2]:.1f}) at the "
         f"rim's centre; f = {r:.1f} px (the rim's radius) x (z_rim + c) / rim_radius, as if the "
