@@ -1,8 +1,9 @@
 """Chessboards alone on a real rig: detection, fit time and 5-fold held-out corner RMS, omnicam
-(no mirror, no K) beside cv2.omnidir.calibrate, in one run.
+(no mirror, no K) beside cv2.omnidir.calibrate and OCamCalib's Taylor model, in one run.
 
     python benchmarks/bench_chessboard_real.py FOLDER --pattern 6x7 --square 30 [--glob 'VMR*.jpg']
-        [--heldout ../shared/tools/heldout.py] [--mirror A B R] [--runs 5]
+        [--heldout ../shared/tools/heldout.py] [--taylor ../shared/tools/taylor.py]
+        [--mirror A B R] [--runs 5]
 
 FOLDER holds the images (e.g. OCamCalib's public VMRImage0..9.jpg); nothing is committed. The
 held-out test is shared/tools/heldout.py's: calibrate on 4 folds, keep the intrinsics, fit each
@@ -30,8 +31,8 @@ from omnicam.chessboard.detect import detect_pattern
 BUDGET = 20.0
 
 
-def _heldout_module(path):
-    spec = importlib.util.spec_from_file_location("heldout", path)
+def _heldout_module(path, name="heldout"):
+    spec = importlib.util.spec_from_file_location(name, path)
     mod = importlib.util.module_from_spec(spec)
     spec.loader.exec_module(mod)
     return mod
@@ -82,6 +83,11 @@ def main(argv=None):
     ap.add_argument(
         "--heldout", default=os.path.join(here, "..", "..", "shared", "tools", "heldout.py")
     )
+    ap.add_argument(
+        "--taylor",
+        default=os.path.join(here, "..", "..", "shared", "tools", "taylor.py"),
+        help="the Taylor-model (OCamCalib) fit to compare with; 'none' leaves it out",
+    )
     a = ap.parse_args(argv)
     pattern = tuple(int(v) for v in a.pattern.lower().split("x"))
     paths = sorted(glob.glob(os.path.join(a.folder, a.glob)))
@@ -90,6 +96,7 @@ def main(argv=None):
     images = [cv2.imread(p) for p in paths]
     size = (images[0].shape[1], images[0].shape[0])
     H = _heldout_module(a.heldout)
+    T = None if a.taylor == "none" else _heldout_module(a.taylor, "taylor")
     mirror = omnicam.HyperbolicMirror(*a.mirror) if a.mirror else None
 
     t = time.perf_counter()
@@ -141,18 +148,29 @@ def main(argv=None):
     print(f"omnicam on all views: RMS {rep.rms:.3f} px, fx {cam.K[0, 0]:.1f}, mirror {cam.mirror}")
 
     folds = H.folds(len(corners), 5)
-    held = {"omnidir": [], "omnicam": []}
-    for f in folds:
+    held = {"omnidir": [], "taylor": [], "omnicam": []} if T else {"omnidir": [], "omnicam": []}
+    for i, f in enumerate(folds):
         train = [k for k in range(len(corners)) if k not in f]
-        od = H.omnidir_fit([corners[k] for k in train], obj, size)
+        models = {"omnidir": H.omnidir_fit([corners[k] for k in train], obj, size)}
+        if T:
+            models["taylor"] = T.fit([corners[k] for k in train], obj, size)
         cam, _ = fit_omnicam(train)
-        oc = H.omnicam_model(cam)
+        models["omnicam"] = H.omnicam_model(cam)
         for k in f:
-            held["omnidir"].append(H.heldout_rms(od["project"], od["directions"], corners[k], obj))
-            held["omnicam"].append(H.heldout_rms(oc["project"], oc["directions"], corners[k], obj))
+            for name, m in models.items():
+                held[name].append(H.heldout_rms(m["project"], m["directions"], corners[k], obj))
+        print(f"fold {i + 1} of {len(folds)} done", flush=True)
     print("5-fold held-out corner RMS, px (median / max):")
     for name, v in held.items():
         print(f"  {name:8s} {np.median(v):.3f} / {np.max(v):.3f}")
+    central = [n for n in held if n != "omnicam"]
+    best_med = min(np.median(held[n]) for n in central)
+    best_max = min(np.max(held[n]) for n in central)
+    med, worst = np.median(held["omnicam"]) / best_med, np.max(held["omnicam"]) / best_max
+    print(
+        f"omnicam against the better central model: median {med:.2f}x, max {worst:.2f}x "
+        f"(issue 28's target: at most 1.05x)"
+    )
 
 
 if __name__ == "__main__":
