@@ -68,6 +68,7 @@ from .adjustment import (
     std_from_jacobian,
 )
 from .board_pose import board_pose_from_rays, object_points, rodrigues, start_viewpoint
+from .board_size import raw_boards
 from .central import NOMINAL_RIM_RADIUS, fit_central, hyperbolic_start, pinhole_D_from_unified
 from .detect import detect_pattern
 from .heldout import cross_validate
@@ -667,17 +668,12 @@ def _start_step(K, mirror, rim_fit, rim_seen, D, image_size):
 
 
 def _raw_detection_step(images, pattern_size, progress=None):
-    """2a. Every image's board by OpenCV's detectors on the raw image, which need no camera
-    (:func:`.detect.detect_pattern`). Returns ``(corners or None per image, how each
-    was found or None)``; ``progress(index, text)`` hears of each image."""
-    points, found_by = [], []
-    for k, im in enumerate(images):
-        det = detect_pattern(im, pattern_size, None, methods=("raw", "raw-sb"))
-        points.append(None if det is None else det.corners)
-        found_by.append(None if det is None else det.method)
-        if progress is not None:
-            progress(k, "no board on the raw image" if det is None else f"board ({det.method})")
-    return points, found_by
+    """2a. Every image's board by OpenCV's detectors on the raw image, which need no camera,
+    grids that are no chessboard's dropped with a warning, and ``ValueError`` naming the size
+    to give when most images show a board of another size (:func:`.board_size.raw_boards`).
+    Returns ``(corners or None per image, how each was found or None)``; ``progress(index,
+    text)`` hears of each image."""
+    return raw_boards(images, pattern_size, progress)
 
 
 def _central_step(image_points, obj, image_size, rim_fit, mirror, rim_radius, K, dist):
