@@ -124,8 +124,8 @@ def raw_boards(images, pattern_size, progress=None):
     Each image's grids come from :func:`.detect.detect_grids` (``"raw"``, then ``"raw-sb"``);
     a grid that is no chessboard's is dropped, with a ``RuntimeWarning`` naming the image and
     why. Then the board's size is checked (:func:`board_size_in`) in the images with a grid,
-    until :data:`SIZE_CHECKS_AGREE` agree with ``pattern_size``; without any grid, in up to
-    five images. When more than half of the images checked show a whole board of another size
+    until :data:`SIZE_CHECKS_AGREE` agree and none disagrees; without any grid, in up to five
+    images. When more than half of the images checked show a whole board of another size
     (the most common one), ``ValueError`` names it: ``pattern_size`` is a sub-board of it, or
     its squares, or no board of it is there.
 
@@ -191,8 +191,8 @@ def _rejections(grids):
 def _whole_board(images, pattern_size, order, most=None):
     """``(size, images)``: the size of the whole board in most of the images ``order`` (the
     first ``most`` of them at most) when it is not ``pattern_size``, with the images that show
-    it; else ``(None, [])``. Stops once :data:`SIZE_CHECKS_AGREE` images show
-    ``pattern_size``, or show nothing while none shows a board."""
+    it; else ``(None, [])``. Stops once :data:`SIZE_CHECKS_AGREE` images agree and none
+    disagrees, or show nothing while none shows a board."""
     same, other, blank = 0, {}, 0
     for k in list(order)[:most]:
         size = board_size_in(images[k], pattern_size)
@@ -202,7 +202,9 @@ def _whole_board(images, pattern_size, order, most=None):
             same += 1
         else:
             other[k] = size
-        if same >= SIZE_CHECKS_AGREE or (blank >= SIZE_CHECKS_AGREE and not other and not same):
+        sizes = set(other.values()) | ({tuple(pattern_size)} if same else set())
+        agreed = len(sizes) == 1 and same + len(other) >= SIZE_CHECKS_AGREE
+        if agreed or (blank >= SIZE_CHECKS_AGREE and not sizes):
             break
     if not other:
         return None, []
