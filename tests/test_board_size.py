@@ -220,3 +220,26 @@ def test_cli_names_the_option_and_the_file_for_a_sub_board_size(renders, tmp_pat
     err = capsys.readouterr().err
     assert code != 0
     assert "give --chessboard 7x9" in err and "board0.png" in err
+
+
+def test_a_larger_board_in_a_minority_of_the_images_is_no_refusal(monkeypatch):
+    sizes = iter([(7, 9), (7, 5), (7, 5), (7, 5)])
+    monkeypatch.setattr(board_size, "board_size_in", lambda image, pattern_size: next(sizes))
+    assert board_size._whole_board([None] * 4, SUB, [0, 1, 2, 3]) == (None, [])
+    sizes = iter([(7, 9), (7, 5), (7, 9), (7, 9)])
+    assert board_size._whole_board([None] * 4, SUB, [0, 1, 2, 3]) == ((7, 9), [0, 2, 3])
+
+
+def test_the_refusal_names_the_size_to_give_for_a_sub_board_squares_or_another_board():
+    msg = board_size.wrong_size_message((7, 11), (7, 6), [2, 4, 5])
+    assert msg == (
+        "the board in images[2] (and 2 more images) has 7x11 inner corners, not 7x6: give "
+        "pattern_size=(7, 11)"
+    )
+    msg = board_size.wrong_size_message((7, 11), (8, 12), [0], grids_found=False)
+    assert msg.endswith("give the inner corners, pattern_size=(7, 11), not the 8x12 squares")
+    msg = board_size.wrong_size_message((11, 7), (9, 6), [0, 1], grids_found=False)
+    assert msg == (
+        "no board of 9x6 inner corners is found, but the board in images[0] (and 1 more image) "
+        "has 11x7 inner corners: give pattern_size=(11, 7)"
+    )
