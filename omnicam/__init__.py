@@ -26,6 +26,7 @@ _LAZY = {
     "calibrate_intrinsics": "omnicam.chessboard.intrinsics",
     "find_pattern": "omnicam.chessboard.detect",
     "detect_pattern": "omnicam.chessboard.detect",
+    "board_size_in": "omnicam.chessboard.board_size",
     "PatternReport": "omnicam.chessboard.report",
     "Unwarper": "omnicam.stream",
     "rotation_from_ypr": "omnicam.views",

@@ -4,6 +4,8 @@
   the mirror (``cv2.calibrateCamera``);
 - :mod:`.detect`: ``detect_pattern`` / ``find_pattern``, a board's corners in an image of the
   mirror (OpenCV's detectors on the raw image, then unwarped views);
+- :mod:`.board_size`: ``board_size_in``, the inner corners of the whole board in an image, and
+  the size to give when the one given is a sub-board of it or counts its squares;
 - :mod:`.central`: the central start, ``cv2.omnidir.calibrate`` and the hyperbolic rig it
   describes;
 - :mod:`.board_pose`: a board's object points and its pose from its corners' rays;
@@ -20,6 +22,7 @@ reflection, Chen's posture, the plausibility checks), never the other way round.
 """
 
 from .adjustment import DIST_MODELS, pattern_uncertainty
+from .board_size import board_size_in
 from .calibrate import calibrate_pattern
 from .detect import detect_pattern, find_pattern
 from .heldout import HeldOut
@@ -30,6 +33,7 @@ __all__ = [
     "DIST_MODELS",
     "HeldOut",
     "PatternReport",
+    "board_size_in",
     "calibrate_intrinsics",
     "calibrate_pattern",
     "detect_pattern",

@@ -4,18 +4,24 @@
 
 1. ``"raw"``: ``cv2.findChessboardCorners`` on the image as it is, refined by
    ``cv2.cornerSubPix``; then ``"raw-sb"``: ``cv2.findChessboardCornersSB`` (exhaustive,
-   accurate). A board the mirror bends little is found so, as OpenCV finds it for
-   ``cv2.omnidir.calibrate``. The grid is accepted only if no quadrilateral of neighbouring
-   corners folds or degenerates (a wrongly linked grid does). One reflection shows the board
-   mirrored, so the rows OpenCV returns are put back in the board's order;
+   accurate), when the first finds no board. A board the mirror bends little is found so, as
+   OpenCV finds it for ``cv2.omnidir.calibrate``. A grid is accepted only if it is consistent
+   with a chessboard (:func:`check_grid`): no quadrilateral of neighbouring corners folds or
+   degenerates (a wrongly linked grid does), and the cells between the corners, and those of
+   the ring around them, alternate dark and light (:func:`parity_failure`;
+   ``findChessboardCornersSB`` asked for fewer corners than the board has may return a grid
+   that skips rows of squares). :func:`detect_grids` lists the grids rejected so. One
+   reflection shows the board mirrored, so the rows OpenCV returns are put back in the
+   board's order;
 2. ``"views"``, given a first calibration (even a rough one): the annulus is looked at through
    virtual perspective views (:func:`omnicam.views.init_perspective_maps`, scene at
    infinity), several yaws and pitches covering the band of elevations the mirror sees, where
    the board's lines are nearly straight again. In each view ``cv2.findChessboardCorners``
    runs (fast check first) and ``cv2.cornerSubPix`` refines; a detection is accepted only if a
    homography fits the view's corners to the board's grid to :data:`HOMOGRAPHY_RMS_PX` RMS
-   with no corner standing out (:data:`HOMOGRAPHY_MAX_PX`): a wrong or partial grid, or one
-   corner pulled off by cornerSubPix, does not. The view's corners are mapped back to the
+   with no corner standing out (:data:`HOMOGRAPHY_MAX_PX`) and its cells alternate dark and
+   light in the view: a wrong or partial grid, or one corner pulled off by cornerSubPix, does
+   not. The view's corners are mapped back to the
    source image exactly through the view's own remap table: a feature at view pixel ``u`` was
    sampled from source pixel ``map(u)``, bilinear in the float tables, whatever the
    calibration's errors (optionally they are refined once more by ``cv2.cornerSubPix`` in the
@@ -55,10 +61,17 @@ __all__ = [
     "HOMOGRAPHY_MAX_PX",
     "HOMOGRAPHY_RMS_PX",
     "METHODS",
+    "PARITY_BORDER_MISSES",
+    "PARITY_MARGIN",
+    "PARITY_MIN_CONTRAST",
     "PatternDetection",
+    "cell_values",
+    "check_grid",
+    "detect_grids",
     "detect_pattern",
     "detection_views",
     "find_pattern",
+    "parity_failure",
 ]
 
 #: How a board's corners can be found, in the order :func:`detect_pattern` tries them.
@@ -69,6 +82,18 @@ HOMOGRAPHY_RMS_PX = 1.5
 #: A corner farther than this (view px) and than 6 times the median from that homography
 #: rejects the view's detection.
 HOMOGRAPHY_MAX_PX = 1.0
+#: Where a cell is sampled, in its own bilinear coordinates: a 3x3 patch about its centre,
+#: away from its edges (a grid off by half a cell samples across an edge).
+_CELL_UV = np.array([0.3, 0.5, 0.7])
+#: Each pair of neighbouring cells must differ the checker's way by at least this fraction of
+#: the grid's median difference (inner cells: all of them; cells of the border ring: all but
+#: :data:`PARITY_BORDER_MISSES` of them).
+PARITY_MARGIN = 0.25
+#: The least median difference between neighbouring cells, grey levels (of 255).
+PARITY_MIN_CONTRAST = 8.0
+#: The fraction of border-ring pairs allowed to miss (the rim, the board's edge or a shadow
+#: may cut the border squares).
+PARITY_BORDER_MISSES = 0.25
 _FIND_FLAGS = cv2.CALIB_CB_ADAPTIVE_THRESH | cv2.CALIB_CB_NORMALIZE_IMAGE | cv2.CALIB_CB_FAST_CHECK
 _RAW_HALF_WINDOW = 5  # cornerSubPix's half window in the raw image, px
 _SB_FLAGS = cv2.CALIB_CB_EXHAUSTIVE | cv2.CALIB_CB_ACCURACY | cv2.CALIB_CB_NORMALIZE_IMAGE
@@ -196,10 +221,15 @@ class PatternDetection:
         docstring's corner order).
     method : str
         How they were found: one of :data:`METHODS`.
+    rejected : str
+        Empty for a board; for a grid a detector returned that is no chessboard's (of
+        :func:`detect_grids` only), why: it folds (:func:`_grid_is_regular`) or its cells do
+        not alternate dark and light (:func:`parity_failure`).
     """
 
     corners: np.ndarray
     method: str
+    rejected: str = ""
 
 
 def find_pattern(image, pattern_size, camera=None, refine_in_source=False) -> np.ndarray | None:
@@ -248,6 +278,31 @@ def detect_pattern(
     -------
     PatternDetection or None
     """
+    for det in detect_grids(image, pattern_size, camera, refine_in_source, methods):
+        if not det.rejected:
+            return det
+    return None
+
+
+def detect_grids(
+    image, pattern_size, camera=None, refine_in_source=False, methods=METHODS
+) -> list[PatternDetection]:
+    """The grids the detectors returned, in the order tried, up to the first board accepted.
+
+    :func:`detect_pattern` with the grids it rejected before (or instead of) the board: those
+    OpenCV's detectors returned on the raw image that fold or whose cells do not alternate dark
+    and light, each with ``rejected`` saying why (the last item is the board, if one is found).
+    A view's detection that fails the checks is not listed (each image has many views).
+
+    Parameters
+    ----------
+    image, pattern_size, camera, refine_in_source, methods
+        As for :func:`detect_pattern`.
+
+    Returns
+    -------
+    list of PatternDetection
+    """
     cols, rows = check_pattern_size(pattern_size)
     unknown = [m for m in methods if m not in METHODS]
     if unknown:
@@ -262,18 +317,24 @@ def detect_pattern(
             f"image is {gray.shape[1]}x{gray.shape[0]} but camera.image_size is "
             f"{camera.image_size}: use camera.scaled(image_size)"
         )
+    found = []
     for method in methods:
+        why = ""
         if method == "views":
             if camera is None:
                 continue
             corners = _detect_in_views(gray, cols, rows, camera, refine_in_source)
         else:
-            corners = _detect_raw(gray, cols, rows, sb=method == "raw-sb")
+            corners, why = _detect_raw(gray, cols, rows, sb=method == "raw-sb")
             if corners is not None:
                 corners = _counterclockwise(corners, cols, _axis_pixel(gray, camera))
         if corners is not None:
-            return PatternDetection(corners.reshape(-1, 1, 2).astype(np.float32), method)
-    return None
+            found.append(
+                PatternDetection(corners.reshape(-1, 1, 2).astype(np.float32), method, why)
+            )
+            if not why:
+                break
+    return found
 
 
 def _axis_pixel(gray, camera):
@@ -292,16 +353,17 @@ def _counterclockwise(c, cols, centre):
 
 
 def _detect_raw(gray, cols, rows, sb):
-    """OpenCV's detector on the raw image (``sb``: ``findChessboardCornersSB``), (N, 2) or
-    None when nothing is found or the grid folds."""
+    """OpenCV's detector on the raw image (``sb``: ``findChessboardCornersSB``): ``(corners
+    (N, 2), "")``, or ``(corners, why)`` for a grid that folds or whose cells do not alternate
+    (:func:`check_grid`), or ``(None, "")`` when it finds nothing."""
     if sb:
         found, corners = cv2.findChessboardCornersSB(gray, (cols, rows), flags=_SB_FLAGS)
         if not found:
-            return None
+            return None, ""
     else:
         found, corners = cv2.findChessboardCorners(gray, (cols, rows), flags=_FIND_FLAGS)
         if not found:
-            return None
+            return None, ""
         # a window of 11 px (5 px in the bent raw image, smaller only for boards whose corners
         # are closer than 8 px): the most accurate on renders of known corners
         # (benchmarks/bench_pattern.py) and OCamCalib's own on its real samples
@@ -309,11 +371,20 @@ def _detect_raw(gray, cols, rows, sb):
         crit = (cv2.TERM_CRITERIA_EPS + cv2.TERM_CRITERIA_MAX_ITER, 100, 1e-4)
         corners = cv2.cornerSubPix(gray, corners, (half, half), (-1, -1), crit)
     grid = corners.reshape(rows, cols, 2).astype(np.float64)
-    if not _grid_is_regular(grid):
-        return None
+    why = check_grid(gray, grid)
     # the mirror shows the board mirrored: OpenCV's rows of the image are the board's rows in
     # reverse, so the order that a rigid pose of the board explains has them turned back
-    return grid[::-1].reshape(-1, 2).copy()
+    return grid[::-1].reshape(-1, 2).copy(), why
+
+
+def check_grid(gray, grid) -> str:
+    """Why the grid of corners ``(rows, cols, 2)`` in the grey image is no chessboard's, or
+    ``""`` when it is consistent with one: no quadrilateral of neighbouring corners folds or
+    degenerates (:func:`_grid_is_regular`), and the cells between them alternate dark and light
+    (:func:`parity_failure`)."""
+    if not _grid_is_regular(grid):
+        return "it folds (a quadrilateral of neighbouring corners is not convex or degenerates)"
+    return parity_failure(gray, grid)
 
 
 def _grid_is_regular(grid):
@@ -329,6 +400,106 @@ def _grid_is_regular(grid):
     area = np.abs(turn.sum(axis=2)) / 4.0  # the mean turn: a measure of the cell's size
     med = float(np.median(area))
     return bool(med > 0 and area.min() > med / 16.0 and area.max() < 16.0 * med)
+
+
+def _extend(grid):
+    """The grid ``(rows, cols, 2)`` with one more row and column of corners on every side,
+    extrapolated along the rows and the columns (quadratically when there are three or more,
+    as the mirror bends the board's lines)."""
+
+    def ext(g):  # along axis 0
+        if len(g) >= 3:
+            first, last = 3 * g[0] - 3 * g[1] + g[2], 3 * g[-1] - 3 * g[-2] + g[-3]
+        else:
+            first, last = 2 * g[0] - g[1], 2 * g[-1] - g[-2]
+        return np.concatenate([first[None], g, last[None]])
+
+    return ext(ext(grid).transpose(1, 0, 2)).transpose(1, 0, 2)
+
+
+def cell_values(gray, grid):
+    """The brightness of every cell of the grid and of its border ring: ``(rows + 1, cols + 1)``.
+
+    A cell's value is the median of the image (bilinear) at 3x3 points of its central part
+    (:data:`_CELL_UV` in the cell's bilinear coordinates); NaN where one of them is outside the
+    image. Row 0, column 0 and the last ones are the border ring, extrapolated (:func:`_extend`).
+    """
+    g = _extend(np.asarray(grid, np.float64))
+    p00, p01, p10, p11 = g[:-1, :-1], g[:-1, 1:], g[1:, :-1], g[1:, 1:]
+    u = _CELL_UV[None, None, :, None, None]  # along the row (columns)
+    v = _CELL_UV[None, None, None, :, None]  # across (rows)
+    pts = (
+        (1 - u) * (1 - v) * p00[:, :, None, None]
+        + u * (1 - v) * p01[:, :, None, None]
+        + (1 - u) * v * p10[:, :, None, None]
+        + u * v * p11[:, :, None, None]
+    )  # (rows + 1, cols + 1, 3, 3, 2)
+    h, w = gray.shape[:2]
+    flat = pts.reshape(-1, 2).astype(np.float32)
+    samples = cv2.remap(
+        gray.astype(np.float32),
+        flat[:, 0].reshape(-1, 1),
+        flat[:, 1].reshape(-1, 1),
+        cv2.INTER_LINEAR,
+        borderMode=cv2.BORDER_CONSTANT,
+        borderValue=np.nan,
+    ).reshape(pts.shape[:4])
+    inside = (
+        (pts[..., 0] >= 0) & (pts[..., 0] <= w - 1) & (pts[..., 1] >= 0) & (pts[..., 1] <= h - 1)
+    ).all(axis=(2, 3))
+    values = np.median(samples.reshape(*pts.shape[:2], -1), axis=2)
+    return np.where(inside, values, np.nan)
+
+
+def parity_failure(gray, grid) -> str:
+    """Why the cells of the grid ``(rows, cols, 2)`` are no chessboard's, or ``""``.
+
+    The cells between neighbouring corners, and those of the ring around them that are inside
+    the image, must alternate dark and light (:func:`cell_values`): every pair of neighbouring
+    cells, its difference signed by the checker's parity, must lie on the side of the grid's
+    median difference and exceed :data:`PARITY_MARGIN` of it, which itself must reach
+    :data:`PARITY_MIN_CONTRAST`. A grid that skips a row of squares or lies over something
+    that is no chessboard does not.
+    """
+    vals = cell_values(gray, grid)
+    n_r, n_c = vals.shape
+    parity = np.where((np.add.outer(np.arange(n_r), np.arange(n_c)) % 2) == 0, 1.0, -1.0)
+    border = np.ones(vals.shape, bool)
+    border[1:-1, 1:-1] = False
+    # the difference of every pair of neighbours, signed by the first cell's parity
+    d = np.concatenate(
+        [
+            ((vals[:, :-1] - vals[:, 1:]) * parity[:, :-1]).ravel(),
+            ((vals[:-1] - vals[1:]) * parity[:-1]).ravel(),
+        ]
+    )
+    on_border = np.concatenate(
+        [(border[:, :-1] | border[:, 1:]).ravel(), (border[:-1] | border[1:]).ravel()]
+    )
+    inner = d[~on_border]
+    if inner.size == 0:
+        return ""
+    contrast = float(np.median(inner))
+    if abs(contrast) < PARITY_MIN_CONTRAST:
+        return (
+            f"its cells do not alternate dark and light (median contrast {abs(contrast):.1f} "
+            f"grey levels, less than {PARITY_MIN_CONTRAST:g})"
+        )
+    ok = d * np.sign(contrast) > PARITY_MARGIN * abs(contrast)
+    bad_inner = int(np.sum(~ok[~on_border]))
+    if bad_inner:
+        return (
+            f"its cells do not alternate dark and light ({bad_inner} of {inner.size} pairs of "
+            f"neighbouring cells do not)"
+        )
+    seen = on_border & np.isfinite(d)
+    bad_border = int(np.sum(~ok[seen]))
+    if bad_border > PARITY_BORDER_MISSES * max(int(seen.sum()), 1):
+        return (
+            f"the squares around its corners do not alternate dark and light ({bad_border} of "
+            f"{int(seen.sum())} pairs of border cells do not)"
+        )
+    return ""
 
 
 def _detect_in_views(gray, cols, rows, camera, refine_in_source):
@@ -388,6 +559,8 @@ def _detect(gray, cols, rows, views):
             np.sqrt(np.mean(res**2)) < HOMOGRAPHY_RMS_PX
             and res.max() < max(HOMOGRAPHY_MAX_PX, 6.0 * np.median(res))
         ):
+            continue
+        if parity_failure(view, c.reshape(rows, cols, 2)):  # a grid over no chessboard
             continue
         margin = float(
             min(c[:, 0].min(), c[:, 1].min(), w - 1 - c[:, 0].max(), h - 1 - c[:, 1].max())

@@ -30,6 +30,7 @@ from ..images import read_image
 from ..mirror import HyperbolicMirror
 from .adjustment import DIST_MODELS
 from .board_pose import object_points
+from .board_size import raw_boards
 from .central import NOMINAL_RIM_RADIUS, fit_central, hyperbolic_start, pinhole_D_from_unified
 from .detect import detect_pattern
 from .intrinsics import check_pattern_size, gray8
@@ -264,18 +265,13 @@ class Boards:
 
 def raw_detection_step(inputs: Inputs, pattern_size, progress=None) -> Boards:
     """1. The corners given, or every image's board by OpenCV's detectors on the raw image,
-    which need no camera (:func:`.detect.detect_pattern`); ``progress(index, text)`` hears of
-    each image."""
+    which need no camera: grids that are no chessboard's dropped with a warning, and
+    ``ValueError`` naming the size to give when most images show a board of another size
+    (:func:`.board_size.raw_boards`); ``progress(index, text)`` hears of each image."""
     if inputs.image_points is not None:
         points = inputs.image_points
         return Boards(tuple(points), tuple("given" if p is not None else None for p in points))
-    found, found_by = [], []
-    for k, grey in enumerate(inputs.greys):
-        det = detect_pattern(grey.corners, pattern_size, None, methods=("raw", "raw-sb"))
-        found.append(None if det is None else det.corners)
-        found_by.append(None if det is None else det.method)
-        if progress is not None:
-            progress(k, "no board on the raw image" if det is None else f"board ({det.method})")
+    found, found_by = raw_boards([g.corners for g in inputs.greys], pattern_size, progress)
     return Boards(tuple(found), tuple(found_by))
 
 

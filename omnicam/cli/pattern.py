@@ -24,6 +24,7 @@ list in the order of IMAGES; or ``.npz``, one ``(N, 2)`` array per image file na
 from __future__ import annotations
 
 import os
+import re
 import warnings
 
 import cv2
@@ -221,6 +222,17 @@ def _hinted_rim(args, images, size):
         raise CliError(f"--rim-hint: {one_line(e)}") from None
 
 
+def _cli_terms(text, names):
+    """A library message in the command's words: ``pattern_size=(7, 11)`` as ``--chessboard
+    7x11``, ``images[i]`` as the image's file name."""
+    text = re.sub(r"pattern_size=\((\d+), (\d+)\)", r"--chessboard \1x\2", text)
+    return re.sub(
+        r"images\[(\d+)\]",
+        lambda m: names[int(m[1])] if int(m[1]) < len(names) else m[0],
+        text,
+    )
+
+
 def _print_report(camera, report, names, caught):
     """The per-view table, the figures, the held-out check and every warning once."""
     print(report.table(names), flush=True)
@@ -239,10 +251,10 @@ def _print_report(camera, report, names, caught):
     if report.heldout is not None:
         print(report.heldout.summary(), flush=True)
     for w in report.warnings:
-        warn_user(w)
+        warn_user(_cli_terms(w, names))
     for w in caught:
         if not any(str(w.message) == r for r in report.warnings):
-            warn_user(str(w.message))
+            warn_user(_cli_terms(str(w.message), names))
 
 
 def _write_overlays(args, report, images, folder):
@@ -290,7 +302,7 @@ def cmd_calibrate_pattern(args):
                 progress=progress,
             )
         except (ValueError, RuntimeError, np.linalg.LinAlgError) as e:
-            raise CliError(f"calibration failed: {one_line(e)}") from None
+            raise CliError(f"calibration failed: {_cli_terms(one_line(e), names)}") from None
     _print_report(camera, report, names, caught)
     one_side = [w for w in report.warnings if w.startswith(ONE_SIDED)]
     if one_side and not args.force:
