@@ -32,7 +32,12 @@ def test_mei_model_of_a_hyperbolic_rig_gives_its_mirror_focal_length_and_posture
     K_u = rig.K.copy()
     K_u[:2, :2] *= math.sqrt(1 - xi * xi)
     start = central_start(
-        unified_directions(K_u, xi), rig.K[:2, 2], _rim_px(rig, rig.K[:2, 2]), 30.0, f=f, n_terms=0
+        unified_directions(K_u, xi),
+        rig.K[:2, 2],
+        _rim_px(rig, rig.K[:2, 2]),
+        30.0,
+        f=f,
+        max_terms=0,
     )
     assert start.f_given and np.allclose(start.K, rig.K)
     assert start.mirror.R == pytest.approx(a * a / b, rel=1e-6)
@@ -41,7 +46,7 @@ def test_mei_model_of_a_hyperbolic_rig_gives_its_mirror_focal_length_and_posture
     np.testing.assert_allclose(start.tvec, [0, 0, b + c], rtol=1e-8)  # the vertex, b + c above
     assert start.mirror_kwargs()["alpha"] == () and np.max(start.alpha_spread) < 1e-9
     shifted = central_start(
-        unified_directions(K_u, xi), rig.K[:2, 2], 340.0, 30.0, f=f, n_terms=0, vertex_z=b
+        unified_directions(K_u, xi), rig.K[:2, 2], 340.0, 30.0, f=f, max_terms=0, vertex_z=b
     )
     np.testing.assert_allclose(shifted.tvec, [0, 0, c], rtol=1e-8)  # eq. 1's frame: camera at -c
 
@@ -60,7 +65,7 @@ def test_taylor_fit_of_an_aligned_rigs_boards_gives_the_hyperboloid():
     assert np.max(np.abs(start.profile.z - z_true)) < 1e-3
     assert start.tvec[2] == pytest.approx(m.b + m.c, rel=1e-5)
     assert start.mirror.max_error < 1e-4
-    exact = central_start(fit.directions, fit.centre, 340.0, 30.0, f=rig.K[0, 0], n_terms=0)
+    exact = central_start(fit.directions, fit.centre, 340.0, 30.0, f=rig.K[0, 0], max_terms=0)
     assert exact.mirror.R == pytest.approx(m.a**2 / m.b, rel=1e-4)
     assert exact.mirror.k == pytest.approx(-1 - m.a**2 / m.b**2, rel=1e-4)
 

@@ -7,7 +7,7 @@ import pytest
 
 from omnicam import HyperbolicMirror
 from omnicam.chessboard.heldout import unified_predictor
-from omnicam.chessboard.profile import fit_even_asphere, profile_from_central
+from omnicam.chessboard.profile import fit_convex_asphere, fit_even_asphere, profile_from_central
 
 
 def _hyperbolic_elevations(mirror, f):
@@ -91,3 +91,13 @@ def test_profile_refuses_elevations_no_mirror_reflects():
         profile_from_central(lambda rho: np.full_like(rho, np.pi / 2), 300.0, 100.0, 20.0)
     with pytest.raises(ValueError, match="rim_radius"):
         profile_from_central(lambda rho: rho * 0 - np.pi / 2, 300.0, 100.0, -1.0)
+
+
+def test_convex_asphere_keeps_the_convex_fit_of_least_error():
+    f, rim, gain = 300.0, 20.0, 11.0
+    rho_rim = f * math.tan(0.8 * np.pi / (1 + gain))
+    prof = profile_from_central(lambda rho: gain * np.arctan(rho / f) - np.pi / 2, f, rho_rim, rim)
+    best = fit_convex_asphere(prof.r, prof.z, rim, max_terms=3)
+    fits = [fit_even_asphere(prof.r, prof.z, rim, n) for n in range(4)]
+    assert best.convex and fits[0].convex  # the conic alone always is
+    assert best.max_error <= min(f.max_error for f in fits if f.convex) * (1 + 1e-9)

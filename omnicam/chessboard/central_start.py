@@ -35,7 +35,7 @@ from scipy.interpolate import CubicSpline
 
 from .._typing import FloatArray
 from .heldout import unified_predictor
-from .profile import AsphereFit, MirrorProfile, fit_even_asphere, profile_from_central
+from .profile import AsphereFit, MirrorProfile, fit_convex_asphere, profile_from_central
 
 __all__ = [
     "RIM_HALF_ANGLE_DEG",
@@ -157,7 +157,7 @@ def central_start(
     rho_rim: float,
     rim_radius: float,
     f: float | None = None,
-    n_terms: int = 4,
+    max_terms: int = 6,
     vertex_z: float = 0.0,
 ) -> CentralStart:
     """The aligned rig, with an even-asphere mirror, whose pixels see a central model's
@@ -179,8 +179,9 @@ def central_start(
     f : float, optional
         The pinhole's focal length, px; by default the one that makes the rim subtend
         :data:`RIM_HALF_ANGLE_DEG` (``f = rho_rim / tan(20 deg)``).
-    n_terms : int
-        Even polynomial terms of the asphere (:func:`~omnicam.chessboard.profile.fit_even_asphere`).
+    max_terms : int
+        Most even polynomial terms of the asphere: the convex fit of least maximum error with
+        0 to ``max_terms`` terms (:func:`~omnicam.chessboard.profile.fit_convex_asphere`).
     vertex_z : float
         The vertex's height in the mirror frame wanted (0: the mirror frame's origin at the
         vertex, ``tvec = (0, 0, camera-vertex distance)``).
@@ -201,7 +202,7 @@ def central_start(
     rho, alpha, spread = elevations_along_radii(directions, principal_point, rho_rim)
     spline = CubicSpline(rho, alpha)
     profile = profile_from_central(spline, float(f), float(rho_rim), float(rim_radius))
-    mirror = fit_even_asphere(profile.r, profile.z, float(rim_radius), n_terms)
+    mirror = fit_convex_asphere(profile.r, profile.z, float(rim_radius), max_terms)
     shift = float(vertex_z) - mirror.vertex_z
     mirror = dataclasses.replace(mirror, vertex_z=float(vertex_z))
     c = np.asarray(principal_point, np.float64).reshape(2)

@@ -66,6 +66,7 @@ __all__ = [
     "AsphereFit",
     "MirrorProfile",
     "even_asphere_sag",
+    "fit_convex_asphere",
     "fit_even_asphere",
     "profile_from_central",
 ]
@@ -212,6 +213,10 @@ class AsphereFit:
         ``max |z_fit - z|`` over the profile's samples (mirror units).
     conic_error : float
         The same for the conic alone (before the polynomial terms).
+    convex : bool
+        Whether the fitted surface is convex inside the rim (``f' > 0``, ``f'' > 0``), as
+        :class:`~omnicam.asphere.AsphericMirror` requires: a profile far from a conic may
+        need terms that break it (then fewer terms, or the profile itself).
     """
 
     R: float
@@ -221,6 +226,7 @@ class AsphereFit:
     vertex_z: float
     max_error: float
     conic_error: float
+    convex: bool
 
 
 def even_asphere_sag(r, R, k, alphas=(), rho_n=1.0) -> FloatArray:
@@ -243,6 +249,12 @@ def _conic_from(x, rim_radius) -> tuple[float, float]:
     return 1.0 / c, w / (c * c * rim_radius * rim_radius) - 1.0
 
 
+def _conic_to(R, k, rim_radius) -> FloatArray:
+    """``(ln c, v)`` of ``(R, k)`` (:func:`_conic_from`'s inverse)."""
+    w = (1.0 + k) * (rim_radius / R) ** 2
+    return np.array([-math.log(R), math.log(max(1.0 - w, 1e-300))])
+
+
 def _osculating_start(r, z, rim_radius) -> FloatArray:
     """``(ln c, v)`` of the osculating sphere at the vertex (``z ~ z0 + c r^2 / 2`` fitted
     within :data:`_OSCULATING_FRACTION` of the rim), or the osculating paraboloid when that
@@ -259,6 +271,16 @@ def _osculating_start(r, z, rim_radius) -> FloatArray:
     return np.array([math.log(c), math.log(1.0 - (1.0 + k_start) * w)])
 
 
+def _is_convex(R, k, alphas, rim_radius) -> bool:
+    """Whether ``z = sag(r)`` has ``f' > 0`` and ``f'' > 0`` on ``(0, rim_radius]``
+    (:class:`~omnicam.asphere.AsphericMirror`'s contract), by finite differences on
+    :data:`PROFILE_SAMPLES` points."""
+    r = np.linspace(0.0, rim_radius, PROFILE_SAMPLES)
+    d1 = np.gradient(even_asphere_sag(r, R, k, alphas, rim_radius), r)
+    d2 = np.gradient(d1, r)
+    return bool(np.all(d1[1:] > 0) and np.all(d2 > 0))
+
+
 def _linear_part(r, z, sag, basis) -> tuple[FloatArray, FloatArray]:
     """Least squares of ``z - sag`` on ``[1, basis]``: ``(coefficients, residuals)``."""
     A = np.column_stack([np.ones_like(r), basis]) if basis.size else np.ones((len(r), 1))
@@ -266,7 +288,7 @@ def _linear_part(r, z, sag, basis) -> tuple[FloatArray, FloatArray]:
     return coef, A @ coef - (z - sag)
 
 
-def fit_even_asphere(r, z, rim_radius: float, n_terms: int = 4) -> AsphereFit:
+def fit_even_asphere(r, z, rim_radius: float, n_terms: int = 4, start=None) -> AsphereFit:
     """The even asphere through a profile: the conic by nonlinear least squares, then the even
     polynomial terms linear given the conic.
 
@@ -276,7 +298,8 @@ def fit_even_asphere(r, z, rim_radius: float, n_terms: int = 4) -> AsphereFit:
     (or the paraboloid when that sphere is too small for the rim), scipy's trf; its error is
     :attr:`AsphereFit.conic_error`. Then the ``n_terms`` coefficients of ``(r / rim_radius)^4,
     ^6, ...`` with the height are linear given the conic, and the conic is refined with them
-    (variable projection again, started from the conic alone): the terms' ``(r / r_n)^4``
+    (variable projection again, started from the conic alone and from the osculating
+    conic, the one of least maximum error kept): the terms' ``(r / r_n)^4``
     trades with ``k`` (both are 4th order at the vertex), so the joint fit reaches a far
     smaller error than terms fitted to the best conic's residual (an equiangular profile of
     gain 5, 5 terms: 5e-9 against 2e-4 of the rim radius).
@@ -288,6 +311,9 @@ def fit_even_asphere(r, z, rim_radius: float, n_terms: int = 4) -> AsphereFit:
     rim_radius : float
     n_terms : int
         Polynomial terms (0: the conic alone).
+    start : (float, float), optional
+        ``(R, k)`` of a further start of the joint fit (e.g. the fit with fewer terms:
+        :func:`fit_convex_asphere`).
 
     Returns
     -------
@@ -309,14 +335,20 @@ def fit_even_asphere(r, z, rim_radius: float, n_terms: int = 4) -> AsphereFit:
         R, k = _conic_from(x, rim_radius)
         return _linear_part(r, z, even_asphere_sag(r, R, k), basis)[1]
 
-    opts = dict(method="trf", x_scale="jac", xtol=1e-15, ftol=1e-15, gtol=1e-15)
-    conic = least_squares(
-        residuals, _osculating_start(r, z, rim_radius), args=(np.empty(0),), **opts
-    )
+    # (ln c, v) within c rim in [1e-6, 1e6] and (1 + k) c^2 rim^2 in [1 - e^10, 1 - e^-40]
+    lc = math.log(1.0 / rim_radius)
+    bounds = ([lc - 14.0, -40.0], [lc + 14.0, 10.0])
+    opts = dict(method="trf", x_scale="jac", xtol=1e-15, ftol=1e-15, gtol=1e-15, bounds=bounds)
+    x0 = np.clip(_osculating_start(r, z, rim_radius), *bounds)
+    conic = least_squares(residuals, x0, args=(np.empty(0),), **opts)
     conic_error = float(np.max(np.abs(conic.fun)))
     x = conic.x
-    if n_terms:
-        x = least_squares(residuals, x, args=(basis,), **opts).x
+    if n_terms:  # from the conic alone, the osculating conic, ``start``: the valley has minima
+        starts = [x, x0]
+        if start is not None:
+            starts.append(np.clip(_conic_to(float(start[0]), float(start[1]), rim_radius), *bounds))
+        fits = [least_squares(residuals, x1, args=(basis,), **opts) for x1 in starts]
+        x = min(fits, key=lambda sol: float(np.max(np.abs(sol.fun)))).x
     R, k = _conic_from(x, rim_radius)
     coef, res = _linear_part(r, z, even_asphere_sag(r, R, k), basis)
     return AsphereFit(
@@ -327,4 +359,22 @@ def fit_even_asphere(r, z, rim_radius: float, n_terms: int = 4) -> AsphereFit:
         vertex_z=float(coef[0]),
         max_error=float(np.max(np.abs(res))),
         conic_error=conic_error,
+        convex=_is_convex(R, k, coef[1:], rim_radius),
     )
+
+
+def fit_convex_asphere(r, z, rim_radius: float, max_terms: int = 6) -> AsphereFit:
+    """The convex even asphere of least maximum error with at most ``max_terms`` terms.
+
+    Fits 0, 1, ..., ``max_terms`` terms (:func:`fit_even_asphere`, each also started from the
+    fit with one term fewer) and keeps, among the convex fits (:attr:`AsphereFit.convex`), the
+    one of least :attr:`AsphereFit.max_error`; the conic alone is always convex. A profile far
+    from a conic (OCamCalib's Kaidan sample) can make the fit with more terms neither convex
+    nor better.
+    """
+    fits: list[AsphereFit] = []
+    for n in range(int(max_terms) + 1):
+        prev = (fits[-1].R, fits[-1].k) if fits else None
+        fits.append(fit_even_asphere(r, z, rim_radius, n, start=prev))
+    convex = [f for f in fits if f.convex] or fits[:1]
+    return min(convex, key=lambda f: f.max_error)
