@@ -61,7 +61,8 @@ def _show(label, st, rim_radius):
         f"  {label}: f {st.f:.1f} px (rim at {math.degrees(st.profile.phi[-1]):.1f} deg), "
         f"R {m.R:.3f} (R/rim {m.R / rim_radius:.4f}), k {m.k:.4f}, "
         f"{len(m.alphas)} terms {np.round(m.alphas, 5).tolist()}, fit error {m.max_error:.2e} "
-        f"(conic alone {m.conic_error:.2e}), convex {m.convex}, camera-vertex {st.tvec[2]:.3f}, "
+        f"(conic alone {m.conic_error:.2e}), direction error {st.direction_error_deg:.4f} deg, "
+        f"convex {m.convex}, camera-vertex {st.tvec[2]:.3f}, "
         f"z_rim - vertex {st.profile.z[-1] - st.profile.z[0]:.3f}"
     )
 

@@ -45,6 +45,7 @@ def test_mei_model_of_a_hyperbolic_rig_gives_its_mirror_focal_length_and_posture
     assert start.mirror.vertex_z == 0.0 and np.allclose(start.rvec, 0)
     np.testing.assert_allclose(start.tvec, [0, 0, b + c], rtol=1e-8)  # the vertex, b + c above
     assert start.mirror_kwargs()["alpha"] == () and np.max(start.alpha_spread) < 1e-9
+    assert start.direction_error_deg < 1e-6
     shifted = central_start(
         unified_directions(K_u, xi), rig.K[:2, 2], 340.0, 30.0, f=f, max_terms=0, vertex_z=b
     )
@@ -64,7 +65,7 @@ def test_taylor_fit_of_an_aligned_rigs_boards_gives_the_hyperboloid():
     # the rim (340 px) lies beyond the corners (255 px): the polynomial is extrapolated there
     assert np.max(np.abs(start.profile.z - z_true)) < 1e-3
     assert start.tvec[2] == pytest.approx(m.b + m.c, rel=1e-5)
-    assert start.mirror.max_error < 1e-4
+    assert start.mirror.max_error < 1e-4 and start.direction_error_deg < 1e-3
     exact = central_start(fit.directions, fit.centre, 340.0, 30.0, f=rig.K[0, 0], max_terms=0)
     assert exact.mirror.R == pytest.approx(m.a**2 / m.b, rel=1e-4)
     assert exact.mirror.k == pytest.approx(-1 - m.a**2 / m.b**2, rel=1e-4)

@@ -37,7 +37,9 @@ def test_hyperboloid_seen_from_its_outer_focus_is_rebuilt_from_its_central_model
     z_true = b * np.sqrt(1 + prof.r**2 / a**2) + mirror.c
     assert np.max(np.abs(prof.z - z_true)) < 1e-6 * rim
     assert prof.vertex_distance == pytest.approx(b + mirror.c, rel=1e-9)
-    fit = fit_even_asphere(prof.r, prof.z, rim, n_terms=0)
+    slope = b * prof.r / (a * a * np.sqrt(1 + prof.r**2 / a**2))  # eq. 3's exact slopes
+    assert np.max(np.abs(prof.slope - slope)) < 1e-9
+    fit = fit_even_asphere(prof.r, prof.z, rim, n_terms=0, slope=prof.slope)
     assert fit.k == pytest.approx(-1 - a * a / (b * b), rel=1e-6)
     assert fit.R == pytest.approx(a * a / b, rel=1e-6)
     assert fit.vertex_z == pytest.approx(b + mirror.c, rel=1e-9)
@@ -66,7 +68,7 @@ def test_sphere_seen_by_a_pinhole_is_rebuilt_from_its_exact_elevations():
     prof = profile_from_central(_sphere_elevations(radius, centre_z, f), f, rho_rim, rim)
     z_true = centre_z - np.sqrt(radius**2 - prof.r**2)
     assert np.max(np.abs(prof.z - z_true)) < 1e-6 * rim
-    fit = fit_even_asphere(prof.r, prof.z, rim, n_terms=2)
+    fit = fit_even_asphere(prof.r, prof.z, rim, n_terms=2, slope=prof.slope)
     assert abs(fit.k) < 1e-6 and fit.R == pytest.approx(radius, rel=1e-6)
     assert np.max(np.abs(fit.alphas)) < 1e-6 * rim and fit.max_error < 1e-6 * rim
 
@@ -81,7 +83,7 @@ def test_equiangular_elevations_give_chahl_and_srinivasans_profile(gain):
     r_polar = np.cos(p * prof.phi) ** (-1 / p)
     r0 = rim / (r_polar[-1] * np.sin(prof.phi[-1]))  # the rim fixes r0
     assert np.max(np.abs(np.hypot(prof.r, prof.z) - r0 * r_polar)) < 1e-6 * rim
-    fit = fit_even_asphere(prof.r, prof.z, rim, n_terms=5)
+    fit = fit_even_asphere(prof.r, prof.z, rim, n_terms=5, slope=prof.slope)
     assert fit.max_error < 1e-6 * rim  # 5e-9 at gain 5 (the conic alone: 1e-3)
     assert fit.R == pytest.approx(2 * r0 / (gain - 1), rel=1e-5)  # its vertex curvature
 
@@ -97,7 +99,7 @@ def test_convex_asphere_keeps_the_convex_fit_of_least_error():
     f, rim, gain = 300.0, 20.0, 11.0
     rho_rim = f * math.tan(0.8 * np.pi / (1 + gain))
     prof = profile_from_central(lambda rho: gain * np.arctan(rho / f) - np.pi / 2, f, rho_rim, rim)
-    best = fit_convex_asphere(prof.r, prof.z, rim, max_terms=3)
-    fits = [fit_even_asphere(prof.r, prof.z, rim, n) for n in range(4)]
+    best = fit_convex_asphere(prof.r, prof.z, rim, max_terms=3, slope=prof.slope)
+    fits = [fit_even_asphere(prof.r, prof.z, rim, n, slope=prof.slope) for n in range(4)]
     assert best.convex and fits[0].convex  # the conic alone always is
-    assert best.max_error <= min(f.max_error for f in fits if f.convex) * (1 + 1e-9)
+    assert best.slope_error <= min(f.slope_error for f in fits if f.convex) * (1 + 1e-9)

@@ -35,7 +35,13 @@ from scipy.interpolate import CubicSpline
 
 from .._typing import FloatArray
 from .heldout import unified_predictor
-from .profile import AsphereFit, MirrorProfile, fit_convex_asphere, profile_from_central
+from .profile import (
+    AsphereFit,
+    MirrorProfile,
+    asphere_elevations,
+    fit_convex_asphere,
+    profile_from_central,
+)
 
 __all__ = [
     "RIM_HALF_ANGLE_DEG",
@@ -75,6 +81,11 @@ class CentralStart:
         The radii (px) where the central model was read, its elevation there (rad, mean over
         azimuth) and the spread over azimuth (rad, standard deviation): how far the central
         model is from symmetric about its principal point.
+    direction_error_deg : float
+        The largest difference (deg) between the elevations the start's rig sees through the
+        fitted asphere and the central model's, over the profile's camera rays
+        (:func:`~omnicam.chessboard.profile.asphere_elevations`): what the asphere's fit
+        error costs in directions (the profile itself is exact).
     """
 
     K: FloatArray
@@ -87,6 +98,7 @@ class CentralStart:
     rho: FloatArray
     alpha: FloatArray
     alpha_spread: FloatArray
+    direction_error_deg: float
 
     def mirror_kwargs(self) -> dict:
         """The arguments of :class:`omnicam.asphere.AsphericMirror` for :attr:`mirror`."""
@@ -202,14 +214,16 @@ def central_start(
     rho, alpha, spread = elevations_along_radii(directions, principal_point, rho_rim)
     spline = CubicSpline(rho, alpha)
     profile = profile_from_central(spline, float(f), float(rho_rim), float(rim_radius))
-    mirror = fit_convex_asphere(profile.r, profile.z, float(rim_radius), max_terms)
+    mirror = fit_convex_asphere(profile.r, profile.z, rim_radius, max_terms, profile.slope)
+    seen = asphere_elevations(mirror, profile.phi, np.hypot(profile.r, profile.z))
+    error = float(np.degrees(np.max(np.abs(seen - spline(f * np.tan(profile.phi))))))
     shift = float(vertex_z) - mirror.vertex_z
     mirror = dataclasses.replace(mirror, vertex_z=float(vertex_z))
     c = np.asarray(principal_point, np.float64).reshape(2)
     K = np.array([[f, 0.0, c[0]], [0.0, f, c[1]], [0.0, 0.0, 1.0]])
     tvec = np.array([0.0, 0.0, -shift])
     return CentralStart(
-        K, float(f), f_given, np.zeros(3), tvec, mirror, profile, rho, alpha, spread
+        K, float(f), f_given, np.zeros(3), tvec, mirror, profile, rho, alpha, spread, error
     )
 
 

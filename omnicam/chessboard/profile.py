@@ -65,7 +65,9 @@ from .._typing import FloatArray
 __all__ = [
     "AsphereFit",
     "MirrorProfile",
+    "asphere_elevations",
     "even_asphere_sag",
+    "even_asphere_slope",
     "fit_convex_asphere",
     "fit_even_asphere",
     "profile_from_central",
@@ -90,6 +92,9 @@ class MirrorProfile:
         rim ``(rim_radius, z_rim)``.
     phi : (n,) ndarray
         The camera ray's angle from the axis of each point, rad.
+    slope : (n,) ndarray
+        ``dz/dr`` at each point, exact from eq. 3: the tangent is normal to ``d_out - d_in``,
+        ``dz/dr = (cos alpha - sin phi) / (cos phi - sin alpha)``.
     f : float
         The pinhole focal length (px) the profile was built for.
     """
@@ -97,6 +102,7 @@ class MirrorProfile:
     r: FloatArray
     z: FloatArray
     phi: FloatArray
+    slope: FloatArray
     f: float
 
     @property
@@ -106,9 +112,9 @@ class MirrorProfile:
 
     @property
     def slope_angles(self) -> FloatArray:
-        """The profile's tangent angle ``atan(dz/dr)`` at each point, rad (eq. 3's normal
-        turned by 90 degrees); increasing outwards on a convex mirror."""
-        return np.arctan2(np.gradient(self.z, self.phi), np.gradient(self.r, self.phi))
+        """The profile's tangent angle ``atan(dz/dr)`` at each point, rad; increasing
+        outwards on a convex mirror."""
+        return np.arctan(self.slope)
 
 
 def _log_distance_rate(phi, alpha) -> FloatArray:
@@ -184,7 +190,8 @@ def profile_from_central(
     s *= rim_radius / (s[-1] * math.sin(phi_rim))  # the rim fixes the scale
     r, z = s * np.sin(phi), s * np.cos(phi)
     r[-1] = rim_radius
-    return MirrorProfile(r, z, phi, float(f))
+    slope = (np.cos(alpha) - np.sin(phi)) / (np.cos(phi) - np.sin(alpha))  # eq. 3
+    return MirrorProfile(r, z, phi, slope, float(f))
 
 
 # -- the even asphere through a profile -------------------------------------------------------
@@ -213,6 +220,9 @@ class AsphereFit:
         ``max |z_fit - z|`` over the profile's samples (mirror units).
     conic_error : float
         The same for the conic alone (before the polynomial terms).
+    slope_error : float
+        ``max |atan(sag') - atan(z')|`` over the samples (rad): twice that bounds what the fit
+        turns the reflected rays by.
     convex : bool
         Whether the fitted surface is convex inside the rim (``f' > 0``, ``f'' > 0``), as
         :class:`~omnicam.asphere.AsphericMirror` requires: a profile far from a conic may
@@ -227,6 +237,7 @@ class AsphereFit:
     max_error: float
     conic_error: float
     convex: bool
+    slope_error: float
 
 
 def even_asphere_sag(r, R, k, alphas=(), rho_n=1.0) -> FloatArray:
@@ -239,6 +250,42 @@ def even_asphere_sag(r, R, k, alphas=(), rho_n=1.0) -> FloatArray:
     for j, a in enumerate(alphas):
         sag = sag + a * t ** (j + 2)
     return sag
+
+
+def even_asphere_slope(r, R, k, alphas=(), rho_n=1.0) -> FloatArray:
+    """``d sag / dr`` of :func:`even_asphere_sag`: ``r / (R sqrt(1 - (1 + k) r^2 / R^2)) +
+    sum_j alphas[j] (2 j + 4) r^(2 j + 3) / rho_n^(2 j + 4)``."""
+    r = np.asarray(r, np.float64)
+    with np.errstate(invalid="ignore", divide="ignore"):
+        slope = r / (R * np.sqrt(1.0 - (1.0 + k) * r * r / (R * R)))
+    for j, a in enumerate(alphas):
+        slope = slope + a * (2 * j + 4) * r ** (2 * j + 3) / rho_n ** (2 * j + 4)
+    return slope
+
+
+def asphere_elevations(fit: AsphereFit, phi, s_start) -> FloatArray:
+    """The elevations (rad) the aligned camera sees through the fitted asphere along camera
+    rays at ``phi`` (rad from the axis): the hit ``s u(phi)`` by Newton on ``s cos(phi) =
+    vertex_z + sag(s sin(phi))`` from ``s_start`` (e.g. the profile's own ``s``), then the
+    reflection law with the normal ``(sag'(r), -1)``. NaN where Newton does not converge.
+
+    Compared with the elevations the profile was built from, this is the fit's error in the
+    directions, which is what the start gets wrong (the profile itself is exact).
+    """
+    phi = np.asarray(phi, np.float64)
+    sn, cs = np.sin(phi), np.cos(phi)
+    s = np.asarray(s_start, np.float64).copy()
+    args = (fit.R, fit.k, fit.alphas, fit.rim_radius)
+    for _ in range(30):
+        g = s * cs - fit.vertex_z - even_asphere_sag(s * sn, *args)
+        s = s - g / (cs - even_asphere_slope(s * sn, *args) * sn)
+    g = s * cs - fit.vertex_z - even_asphere_sag(s * sn, *args)
+    n = np.stack([even_asphere_slope(s * sn, *args), -np.ones_like(s)], axis=-1)
+    n /= np.linalg.norm(n, axis=-1, keepdims=True)
+    u = np.stack([sn, cs], axis=-1)
+    d = u - 2.0 * np.sum(u * n, axis=-1, keepdims=True) * n  # eq. 3's reflection law
+    el = np.arctan2(d[..., 1], d[..., 0])
+    return np.where(np.abs(g) < 1e-9 * fit.rim_radius, el, np.nan)
 
 
 def _conic_from(x, rim_radius) -> tuple[float, float]:
@@ -281,25 +328,62 @@ def _is_convex(R, k, alphas, rim_radius) -> bool:
     return bool(np.all(d1[1:] > 0) and np.all(d2 > 0))
 
 
-def _linear_part(r, z, sag, basis) -> tuple[FloatArray, FloatArray]:
-    """Least squares of ``z - sag`` on ``[1, basis]``: ``(coefficients, residuals)``."""
-    A = np.column_stack([np.ones_like(r), basis]) if basis.size else np.ones((len(r), 1))
-    coef = np.linalg.lstsq(A, z - sag, rcond=None)[0]
-    return coef, A @ coef - (z - sag)
+def _design(r, rim_radius, n_terms) -> tuple[FloatArray, FloatArray]:
+    """The polynomial terms ``(r / rim)^(2 j + 4)`` and their ``d/dr``, ``(n, n_terms)`` each."""
+    q = r / rim_radius
+    powers = np.arange(n_terms)[None, :] * 2 + 4
+    return q[:, None] ** powers, powers * q[:, None] ** (powers - 1) / rim_radius
 
 
-def fit_even_asphere(r, z, rim_radius: float, n_terms: int = 4, start=None) -> AsphereFit:
+def _linear_part(profile, conic, design, rim_radius) -> tuple[FloatArray, FloatArray]:
+    """The vertex height and the terms by linear least squares given the conic ``(R, k)``:
+    ``(coefficients, residuals)``, the residuals the heights' over ``rim_radius`` then the
+    slope angles' (rad, ``(sag' - z') / (1 + z'^2)``, first order)."""
+    r, z, slope = profile
+    Bh, Bs = design
+    w = 1.0 / (1.0 + slope * slope)
+    A = np.block([[np.ones((len(r), 1)), Bh], [np.zeros((len(r), 1)), Bs * w[:, None]]])
+    A[: len(r)] /= rim_radius
+    y = np.r_[
+        (z - even_asphere_sag(r, *conic)) / rim_radius, (slope - even_asphere_slope(r, *conic)) * w
+    ]
+    coef = np.linalg.lstsq(A, y, rcond=None)[0]
+    return coef, A @ coef - y
+
+
+def _check_profile(r, z, slope, n_terms) -> tuple[FloatArray, FloatArray, FloatArray]:
+    r = np.asarray(r, np.float64).ravel()
+    z = np.asarray(z, np.float64).ravel()
+    if r.shape != z.shape or len(r) < 5 + n_terms:
+        raise ValueError(f"r and z must be matching profiles of {5 + n_terms} points or more")
+    if slope is None:
+        slope = np.gradient(z, r, edge_order=2)
+    slope = np.asarray(slope, np.float64).ravel()
+    if slope.shape != r.shape:
+        raise ValueError(f"slope must have the {len(r)} samples of r, got {slope.shape}")
+    return r, z, slope
+
+
+def fit_even_asphere(
+    r, z, rim_radius: float, n_terms: int = 4, start=None, slope=None
+) -> AsphereFit:
     """The even asphere through a profile: the conic by nonlinear least squares, then the even
     polynomial terms linear given the conic.
+
+    The fit matches both the heights (divided by the rim radius) and the slope angles (rad):
+    the slopes are what the directions depend on (a reflected ray turns by twice the normal's
+    error), and a fit on heights alone leaves its largest slope errors at the rim, where the
+    heights end (OCamCalib's VMR sample, 6 terms: 0.36 deg in the directions on heights
+    alone, 0.064 deg with the slopes; Kaidan 0.55 and 0.29 deg).
 
     The conic ``(R, k)`` and the vertex height first: variable projection (the height is
     linear given the conic) on ``(ln 1/R, v)`` with ``(1 + k) rim^2 / R^2 = 1 - exp(v)`` (the
     conic reaches the rim for every value), started from the osculating sphere at the vertex
-    (or the paraboloid when that sphere is too small for the rim), scipy's trf; its error is
-    :attr:`AsphereFit.conic_error`. Then the ``n_terms`` coefficients of ``(r / rim_radius)^4,
-    ^6, ...`` with the height are linear given the conic, and the conic is refined with them
-    (variable projection again, started from the conic alone and from the osculating
-    conic, the one of least maximum error kept): the terms' ``(r / r_n)^4``
+    (or the paraboloid when that sphere is too small for the rim), scipy's trf; its height
+    error is :attr:`AsphereFit.conic_error`. Then the ``n_terms`` coefficients of ``(r /
+    rim_radius)^4, ^6, ...`` with the height are linear given the conic, and the conic is
+    refined with them (variable projection again, started from the conic alone, from the
+    osculating conic and from ``start``, the least squares kept): the terms' ``(r / r_n)^4``
     trades with ``k`` (both are 4th order at the vertex), so the joint fit reaches a far
     smaller error than terms fitted to the best conic's residual (an equiangular profile of
     gain 5, 5 terms: 5e-9 against 2e-4 of the rim radius).
@@ -314,6 +398,9 @@ def fit_even_asphere(r, z, rim_radius: float, n_terms: int = 4, start=None) -> A
     start : (float, float), optional
         ``(R, k)`` of a further start of the joint fit (e.g. the fit with fewer terms:
         :func:`fit_convex_asphere`).
+    slope : (n,) array_like, optional
+        ``dz/dr`` at the samples (:attr:`MirrorProfile.slope`, exact); by default finite
+        differences of ``z``.
 
     Returns
     -------
@@ -324,57 +411,59 @@ def fit_even_asphere(r, z, rim_radius: float, n_terms: int = 4, start=None) -> A
     ValueError
         Mismatched or too few samples, or a profile not convex at the vertex.
     """
-    r = np.asarray(r, np.float64).ravel()
-    z = np.asarray(z, np.float64).ravel()
-    if r.shape != z.shape or len(r) < 5 + n_terms:
-        raise ValueError(f"r and z must be matching profiles of {5 + n_terms} points or more")
-    t = (r / rim_radius) ** 2
-    basis = np.stack([t ** (j + 2) for j in range(n_terms)], axis=1) if n_terms else np.empty(0)
+    profile = _check_profile(r, z, slope, n_terms)
+    r, z, slope = profile
+    design = _design(r, rim_radius, n_terms)
+    no_terms = _design(r, rim_radius, 0)
 
-    def residuals(x, basis):
-        R, k = _conic_from(x, rim_radius)
-        return _linear_part(r, z, even_asphere_sag(r, R, k), basis)[1]
+    def residuals(x, design):
+        return _linear_part(profile, _conic_from(x, rim_radius), design, rim_radius)[1]
 
     # (ln c, v) within c rim in [1e-6, 1e6] and (1 + k) c^2 rim^2 in [1 - e^10, 1 - e^-40]
     lc = math.log(1.0 / rim_radius)
     bounds = ([lc - 14.0, -40.0], [lc + 14.0, 10.0])
     opts = dict(method="trf", x_scale="jac", xtol=1e-15, ftol=1e-15, gtol=1e-15, bounds=bounds)
     x0 = np.clip(_osculating_start(r, z, rim_radius), *bounds)
-    conic = least_squares(residuals, x0, args=(np.empty(0),), **opts)
-    conic_error = float(np.max(np.abs(conic.fun)))
+    conic = least_squares(residuals, x0, args=(no_terms,), **opts)
+    conic_error = float(np.max(np.abs(conic.fun[: len(r)]))) * rim_radius
     x = conic.x
     if n_terms:  # from the conic alone, the osculating conic, ``start``: the valley has minima
         starts = [x, x0]
         if start is not None:
             starts.append(np.clip(_conic_to(float(start[0]), float(start[1]), rim_radius), *bounds))
-        fits = [least_squares(residuals, x1, args=(basis,), **opts) for x1 in starts]
-        x = min(fits, key=lambda sol: float(np.max(np.abs(sol.fun)))).x
+        fits = [least_squares(residuals, x1, args=(design,), **opts) for x1 in starts]
+        x = min(fits, key=lambda sol: float(sol.cost)).x
     R, k = _conic_from(x, rim_radius)
-    coef, res = _linear_part(r, z, even_asphere_sag(r, R, k), basis)
+    coef, _ = _linear_part(profile, (R, k), design, rim_radius)
+    alphas = coef[1:]
+    height = float(coef[0]) + even_asphere_sag(r, R, k, alphas, rim_radius) - z
+    angle = np.arctan(even_asphere_slope(r, R, k, alphas, rim_radius)) - np.arctan(slope)
     return AsphereFit(
         R=float(R),
         k=float(k),
-        alphas=tuple(float(a) for a in coef[1:]),
+        alphas=tuple(float(a) for a in alphas),
         rim_radius=float(rim_radius),
         vertex_z=float(coef[0]),
-        max_error=float(np.max(np.abs(res))),
+        max_error=float(np.max(np.abs(height))),
         conic_error=conic_error,
-        convex=_is_convex(R, k, coef[1:], rim_radius),
+        convex=_is_convex(R, k, alphas, rim_radius),
+        slope_error=float(np.max(np.abs(angle))),
     )
 
 
-def fit_convex_asphere(r, z, rim_radius: float, max_terms: int = 6) -> AsphereFit:
-    """The convex even asphere of least maximum error with at most ``max_terms`` terms.
+def fit_convex_asphere(r, z, rim_radius: float, max_terms: int = 6, slope=None) -> AsphereFit:
+    """The convex even asphere of least slope error with at most ``max_terms`` terms.
 
     Fits 0, 1, ..., ``max_terms`` terms (:func:`fit_even_asphere`, each also started from the
     fit with one term fewer) and keeps, among the convex fits (:attr:`AsphereFit.convex`), the
-    one of least :attr:`AsphereFit.max_error`; the conic alone is always convex. A profile far
+    one of least :attr:`AsphereFit.slope_error` (what the directions depend on); the conic
+    alone is always convex. A profile far
     from a conic (OCamCalib's Kaidan sample) can make the fit with more terms neither convex
     nor better.
     """
     fits: list[AsphereFit] = []
     for n in range(int(max_terms) + 1):
         prev = (fits[-1].R, fits[-1].k) if fits else None
-        fits.append(fit_even_asphere(r, z, rim_radius, n, start=prev))
+        fits.append(fit_even_asphere(r, z, rim_radius, n, start=prev, slope=slope))
     convex = [f for f in fits if f.convex] or fits[:1]
-    return min(convex, key=lambda f: f.max_error)
+    return min(convex, key=lambda f: f.slope_error)
