@@ -25,7 +25,7 @@ import numpy as np
 
 from omnicam.calibration.rim import detect_rim
 from omnicam.chessboard.board_pose import object_points
-from omnicam.chessboard.central_start import central_start
+from omnicam.chessboard.central_start import central_start, unified_directions
 from omnicam.chessboard.detect import detect_pattern
 from omnicam.chessboard.profile import fit_even_asphere
 from omnicam.chessboard.taylor import fit_taylor
@@ -117,7 +117,7 @@ def main(argv=None):
     op = [obj.reshape(1, -1, 3) for _ in views]
     ip = [v.reshape(1, -1, 2) for v in views]
     crit = (cv2.TERM_CRITERIA_COUNT + cv2.TERM_CRITERIA_EPS, 200, 1e-8)
-    _, K_u, xi, _, _, _, _ = cv2.omnidir.calibrate(op, ip, size, None, None, None, 0, crit)
+    _, K_u, xi, D_u, _, _, _ = cv2.omnidir.calibrate(op, ip, size, None, None, None, 0, crit)
     xi = float(np.ravel(xi)[0])
     print(
         f"Mei (cv2.omnidir, flags 0, heldout.omnidir_fit): xi {xi:.4f}, gamma "
@@ -146,6 +146,12 @@ def main(argv=None):
             central_start(ours.directions, ours.centre, rho_rim, a.rim_radius, f=f_mei),
             a.rim_radius,
         )
+    try:  # the same start from Mei's directions (its own principal point), for comparison
+        mei_dirs = unified_directions(K_u, xi, D_u)
+        st_mei = central_start(mei_dirs, K_u[:2, 2], rho_rim, a.rim_radius, f=st.f)
+        _show("from Mei's model, default f", st_mei, a.rim_radius)
+    except ValueError as e:
+        print(f"  from Mei's model: {e}")
     return 0
 
 
