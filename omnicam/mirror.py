@@ -9,7 +9,8 @@ The physical mirror is the cap of that sheet inside the rim, the circle of radiu
 ``rim_radius`` at height ``z_rim = b * sqrt(1 + rim_radius^2 / a^2)``.
 
 These are vectorised numpy functions: the readable reference of the model. The per-pixel
-hot loops use the same formulas in :mod:`omnicam._kernels`.
+hot loops use the same formulas in the seam of the kernels, :mod:`omnicam._kernels.mirror`,
+which takes the mirror as :meth:`HyperbolicMirror.kernel_params`.
 """
 
 from __future__ import annotations
@@ -90,6 +91,21 @@ class HyperbolicMirror:
     def z_rim(self) -> float:
         """Height of the rim, ``b * sqrt(1 + rim_radius^2 / a^2)``."""
         return self._b * math.sqrt(1.0 + (self._rim_radius / self._a) ** 2)
+
+    @property
+    def vertex_z(self) -> float:
+        """Height of the apex, the sheet's lowest point ``(0, 0, b)``."""
+        return self._b
+
+    @property
+    def length_scale(self) -> float:
+        """``a + b``: the length the kernels' Newton tolerances are relative to."""
+        return self._a + self._b
+
+    def kernel_params(self) -> FloatArray:
+        """The mirror as the kernels take it (:mod:`omnicam._kernels.mirror`):
+        ``[KIND_HYPERBOLOID, rim_radius, a + b, a, b]``, a fresh float64 array."""
+        return np.array([0.0, self._rim_radius, self.length_scale, self._a, self._b])
 
     def __eq__(self, other: object) -> bool:
         if not isinstance(other, HyperbolicMirror):

@@ -194,9 +194,7 @@ def trace(
         _f64(Kinv),
         _f64(R),
         _f64(C),
-        float(mirror.a),
-        float(mirror.b),
-        float(mirror.rim_radius),
+        mirror.kernel_params(),
         origins,
         directions,
         min_chunk=4096,
@@ -251,7 +249,7 @@ def project(
     """Exact non-central projection of points (or directions) to pixels, ``(N, 2)``.
 
     For each point the reflection point on the mirror is found by Newton's method on Fermat's
-    path length (see :func:`omnicam._kernels._reflection_point`) and imaged by the pinhole
+    path length (see :func:`omnicam._kernels.raytrace.reflection_point`) and imaged by the pinhole
     (eq. 6) and OpenCV's distortion. Points the rig cannot see give NaN.
     """
     out = np.empty((points.shape[0], 2))
@@ -265,9 +263,7 @@ def project(
         _f64(R),
         _f64(t),
         _f64(C),
-        float(mirror.a),
-        float(mirror.b),
-        float(mirror.rim_radius),
+        mirror.kernel_params(),
         _f64(Kk),
         out,
         min_chunk=256,
