@@ -39,6 +39,7 @@ from ._validate import (
     validate_K,
     validate_posture,
 )
+from .asphere import AsphericMirror
 from .formats.central_export import fit_omnidir
 from .formats.omnicam_files import MODEL_NAME, load_camera, save_camera
 from .gauge import canonical_rvec
@@ -171,7 +172,7 @@ class MisalignedHyperbolicCamera:
         image_size: Size | None = None,
         camera_reflection: tuple[float, float] | None = None,
     ) -> None:
-        if not isinstance(mirror, HyperbolicMirror):
+        if not isinstance(mirror, HyperbolicMirror | AsphericMirror):
             raise ValueError(f"mirror must be a HyperbolicMirror, got {type(mirror).__name__}")
         self._K = _readonly(validate_K(K))
         D = validate_D(D)

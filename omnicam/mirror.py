@@ -22,8 +22,9 @@ import numpy as np
 
 from ._typing import ArrayLike, FloatArray
 from ._validate import LENGTH_RANGE, float_array, real_number
+from .asphere import AsphericMirror
 
-__all__ = ["HyperbolicMirror"]
+__all__ = ["HyperbolicMirror", "Mirror"]
 
 
 def _positive_finite(name: str, value: float) -> float:
@@ -106,6 +107,13 @@ class HyperbolicMirror:
         """The mirror as the kernels take it (:mod:`omnicam._kernels.mirror`):
         ``[KIND_HYPERBOLOID, rim_radius, a + b, a, b]``, a fresh float64 array."""
         return np.array([0.0, self._rim_radius, self.length_scale, self._a, self._b])
+
+    def as_asphere(self) -> AsphericMirror:
+        """The same surface as an even asphere (:mod:`omnicam.asphere`): ``R = a^2 / b``,
+        ``k = -1 - a^2 / b^2``, ``vertex_z = b``, no polynomial terms; the mirror frames are
+        the same (origin at the hyperboloid's centre)."""
+        a, b = self._a, self._b
+        return AsphericMirror(a * a / b, -1.0 - (a / b) ** 2, self._rim_radius, vertex_z=b)
 
     def __eq__(self, other: object) -> bool:
         if not isinstance(other, HyperbolicMirror):
@@ -243,3 +251,8 @@ class HyperbolicMirror:
         t = np.linspace(0.0, 2.0 * np.pi, int(n), endpoint=False)
         r = self._rim_radius
         return np.stack([r * np.cos(t), r * np.sin(t), np.full_like(t, self.z_rim)], axis=1)
+
+
+#: The mirrors the ray tracer and the view tables take (through ``kernel_params()``, the seam
+#: of :mod:`omnicam._kernels.mirror`)
+Mirror = HyperbolicMirror | AsphericMirror
