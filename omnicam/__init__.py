@@ -13,6 +13,7 @@ __version__ = "0.3.0"
 _LAZY = {
     "MisalignedHyperbolicCamera": "omnicam.camera",
     "HyperbolicMirror": "omnicam.mirror",
+    "AsphericMirror": "omnicam.asphere",
     "detect_rim": "omnicam.calibration.rim",
     "RimFit": "omnicam.calibration.rim",
     "CalibrationReport": "omnicam.calibration",

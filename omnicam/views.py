@@ -1037,8 +1037,8 @@ def _build_table(
 def _store_entries(index: _IntArray, P: FloatArray, mode: int, outputs: _Outputs) -> int:
     """Write the solved entries ``P`` (n, 2) of the pixels ``index`` (flat) into ``outputs``
     as fill_rows' ``_row_store`` does: NaN as ``UNSEEN``, float32 maps (mode 0) or
-    cv2.convertMaps' CV_16SC2 fixed point (mode 1: cvRound(x * 32), ties to even, the integer
-    part >> 5 saturated to int16 and the fraction & 31). Returns how many were unseen."""
+    ``cv2.convertMaps``' CV_16SC2 fixed point of them (mode 1; fill_rows' in-loop
+    ``_row_fixed`` gives the same bits). Returns how many were unseen."""
     outx, outy, out16, outf16 = outputs
     unseen = np.isnan(P).any(axis=1)
     fx = np.where(unseen, UNSEEN, P[:, 0]).astype(np.float32)
@@ -1047,12 +1047,9 @@ def _store_entries(index: _IntArray, P: FloatArray, mode: int, outputs: _Outputs
         outx.reshape(-1)[index] = fx
         outy.reshape(-1)[index] = fy
         return int(np.count_nonzero(unseen))
-    ix = np.rint(fx.astype(np.float64) * 32.0).astype(np.int64)
-    iy = np.rint(fy.astype(np.float64) * 32.0).astype(np.int64)
-    pairs = out16.reshape(-1, 2)
-    pairs[index, 0] = np.clip(ix >> 5, -32768, 32767)
-    pairs[index, 1] = np.clip(iy >> 5, -32768, 32767)
-    outf16.reshape(-1)[index] = (iy & 31) * 32 + (ix & 31)
+    fixed, fraction = cv2.convertMaps(fx[None], fy[None], cv2.CV_16SC2)
+    out16.reshape(-1, 2)[index] = fixed[0]
+    outf16.reshape(-1)[index] = fraction[0]
     return int(np.count_nonzero(unseen))
 
 
