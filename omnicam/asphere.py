@@ -44,6 +44,8 @@ __all__ = ["AsphericMirror", "equiangular_profile", "fit_equiangular"]
 #: Largest magnitude of the conic constant and of a polynomial coefficient (mirror units)
 K_RANGE = (-1e6, 1e6)
 ALPHA_LIMIT = 1e6
+#: Polynomial terms the kernels take (omnicam._kernels.mirror.MAX_ALPHA)
+MAX_ALPHA = 8
 #: Points per rim radius where convexity is checked
 CONVEXITY_SAMPLES = 2001
 #: Newton iterations of :meth:`AsphericMirror.intersect` (monotone: see there)
@@ -108,6 +110,8 @@ class AsphericMirror:
             real_number(a, f"alpha[{j}]", -ALPHA_LIMIT, ALPHA_LIMIT, expected="a finite number")
             for j, a in enumerate(alpha)
         )
+        if len(self._alpha) > MAX_ALPHA:
+            raise ValueError(f"alpha must have at most {MAX_ALPHA} terms, got {len(self._alpha)}")
         if not (1.0 + self._k) * self._rim_radius**2 < self._R**2:
             raise ValueError(
                 f"rim_radius must be below R / sqrt(1 + k) = "
@@ -195,11 +199,13 @@ class AsphericMirror:
         """``2 rim_radius``: the length the kernels' Newton tolerances are relative to."""
         return 2.0 * self._rim_radius
 
-    def kernel_params(self) -> FloatArray:
-        """The mirror as the kernels take it (:mod:`omnicam._kernels.mirror`):
-        ``[KIND_ASPHERE, rim_radius, 2 rim_radius, R, k, vertex_z, rho_n, *alpha]``."""
-        head = [1.0, self._rim_radius, self.length_scale, self._R, self._k, self._vertex_z]
-        return np.array([*head, self._rho_n, *self._alpha], dtype=np.float64)
+    def kernel_params(self) -> tuple[float, ...]:
+        """The mirror as the kernels take it (:mod:`omnicam._kernels.mirror`): ``(KIND_ASPHERE,
+        rim_radius, 2 rim_radius, R, k, vertex_z, rho_n, len(alpha), *alpha)`` padded with
+        zeros to 16 floats (the length tells the kernels the kind)."""
+        head = (1.0, self._rim_radius, self.length_scale, self._R, self._k, self._vertex_z)
+        params = (*head, self._rho_n, float(len(self._alpha)), *self._alpha)
+        return params + (0.0,) * (16 - len(params))
 
     def _key(self) -> tuple[object, ...]:
         return (self._R, self._k, self._rim_radius, self._alpha, self._rho_n, self._vertex_z)
@@ -399,8 +405,12 @@ def fit_equiangular(
         raise ValueError(f"alpha must be > 1 for a convex equiangular mirror, got {alpha!r}")
     r0 = _length("r0", r0)
     rim_radius = _length("rim_radius", rim_radius)
-    if isinstance(n_terms, bool) or not isinstance(n_terms, numbers.Integral) or n_terms < 0:
-        raise ValueError(f"n_terms must be a non-negative integer, got {n_terms!r}")
+    if (
+        isinstance(n_terms, bool)
+        or not isinstance(n_terms, numbers.Integral)
+        or not 0 <= n_terms <= MAX_ALPHA
+    ):
+        raise ValueError(f"n_terms must be an integer in [0, {MAX_ALPHA}], got {n_terms!r}")
     theta_max = math.pi / (1.0 + alpha)
     lo, hi = 0.0, theta_max * (1.0 - 1e-12)
     for _ in range(200):  # bisection for the rim's polar angle: rho(theta) increases

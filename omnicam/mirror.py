@@ -103,10 +103,12 @@ class HyperbolicMirror:
         """``a + b``: the length the kernels' Newton tolerances are relative to."""
         return self._a + self._b
 
-    def kernel_params(self) -> FloatArray:
+    def kernel_params(self) -> tuple[float, ...]:
         """The mirror as the kernels take it (:mod:`omnicam._kernels.mirror`):
-        ``[KIND_HYPERBOLOID, rim_radius, a + b, a, b]``, a fresh float64 array."""
-        return np.array([0.0, self._rim_radius, self.length_scale, self._a, self._b])
+        ``(KIND_HYPERBOLOID, rim_radius, a + b, a, b)`` padded with zeros to 15 floats (the
+        length tells the kernels the kind)."""
+        head = (0.0, self._rim_radius, self.length_scale, self._a, self._b)
+        return head + (0.0,) * (15 - len(head))
 
     def as_asphere(self) -> AsphericMirror:
         """The same surface as an even asphere (:mod:`omnicam.asphere`): ``R = a^2 / b``,

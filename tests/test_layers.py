@@ -94,6 +94,7 @@ def test_low_layers_import_nothing_of_the_camera():
         "omnicam._validate",
         "omnicam.gauge",
         "omnicam.mirror",
+        "omnicam.asphere",
         "omnicam.formats.omnicam_files",
         "omnicam.raytrace",
         "omnicam.views",

@@ -1,7 +1,7 @@
 """numba kernels of the per-point work, one concern per module.
 
 * :mod:`~omnicam._kernels.mirror` -- **the seam**: the mirror's surface (height, slopes,
-  curvature, ray/surface intersection, body) as functions of its parameter array ``mp``. Every
+  curvature, ray/surface intersection, body) as functions of its parameter tuple ``mp``. Every
   other kernel reaches the mirror through it; a new surface of revolution is added there.
 * :mod:`~omnicam._kernels.raytrace` -- pixel -> reflected ray (``trace_rays``, eqs. 6-19),
   the reflection-point Newton on Fermat's path length and ``project_points``.

@@ -192,10 +192,13 @@ def _fill_refined_cell(view, rig, grids, c, row, rowx, rowy, pending):
     float maps (:func:`fill_rows`). Returns the counts of pending and of unseen entries.
     """
     i, j0, j1, fine_row, fine_tv, row_z, row_cos = row
+    # the records' arrays taken out once: each access to a field costs a reference count
     fine_S = grids.fine_S[c]
     fine_P = grids.fine_P[c]
     fine_cls = grids.fine_cls[c]
     fine_weights = grids.fine_weights
+    column_cos = grids.column_cos
+    column_sin = grids.column_sin
     g = fine_weights.shape[1]
     v0, v1, v2, v3 = _lagrange4(fine_tv)
     n_pending = 0
@@ -237,9 +240,7 @@ def _fill_refined_cell(view, rig, grids, c, row, rowx, rowy, pending):
                 # direction)
                 decided = True
             else:
-                dx, dy, dz = _pixel_direction(
-                    view, i, j, row_z, row_cos, grids.column_cos, grids.column_sin
-                )
+                dx, dy, dz = _pixel_direction(view, i, j, row_z, row_cos, column_cos, column_sin)
                 decided = not dz <= view.sin_reject  # above every elevation the rig sees
                 if not decided and fine_class == CELL_EDGE:
                     x, y, decided = _edge_pixel(view, rig, c1, c2, dx, dy, dz)
@@ -353,16 +354,19 @@ def fill_rows(lo, hi, view, rig, grids, out):
         out.row_counts[i, 1] = n_unseen
 
 
-@kernel
+@kernel(inline="always")
 def _fill_row(view, rig, grids, i, row_P, rowx, rowy, pending):
     """Float entries of row i, cell by cell, into ``rowx, rowy``; ``row_P`` (nx + 3, 2) is
     scratch for the nodes' pixels interpolated to the row. Returns the counts of pending and
     of unseen entries."""
-    h = grids.weights.shape[1]
-    g = grids.fine_weights.shape[1]
-    W = pending.shape[1]
+    # the records' arrays taken out once: each access to a field costs a reference count
+    weights = grids.weights
     cls = grids.cls
     P = grids.P
+    refined_index = grids.refined_index
+    h = weights.shape[1]
+    g = grids.fine_weights.shape[1]
+    W = pending.shape[1]
     n_pending = 0
     n_unseen = 0
     r = i // h
@@ -394,7 +398,7 @@ def _fill_row(view, rig, grids, i, row_P, rowx, rowy, pending):
             _fill_seen(
                 (row_P[k, 0], row_P[k + 1, 0], row_P[k + 2, 0], row_P[k + 3, 0]),
                 (row_P[k, 1], row_P[k + 1, 1], row_P[k + 2, 1], row_P[k + 3, 1]),
-                grids.weights,
+                weights,
                 j1 - j0,
                 rowx[j0:j1],
                 rowy[j0:j1],
@@ -405,7 +409,7 @@ def _fill_row(view, rig, grids, i, row_P, rowx, rowy, pending):
         else:  # refined (coarse cells are never EDGE: classify_cells without allow_edge)
             row = (i, j0, j1, fine_row, fine_tv, row_z, row_cos)
             p, u = _fill_refined_cell(
-                view, rig, grids, grids.refined_index[r, k], row, rowx, rowy, pending
+                view, rig, grids, refined_index[r, k], row, rowx, rowy, pending
             )
             n_pending += p
             n_unseen += u

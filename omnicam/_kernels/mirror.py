@@ -2,7 +2,12 @@
 
 A mirror is a surface of revolution about the mirror frame's Z axis, ``Z = f(rho)`` with
 ``rho = sqrt(X^2 + Y^2)``, convex, seen from below (docs/conventions.md). The kernels take it as
-one float64 parameter array ``mp`` (``mirror.kernel_params()``):
+one tuple ``mp`` of floats (``mirror.kernel_params()``): a tuple, not an array, because it is
+passed by value, where every access to an array argument or record field in the per-pixel
+loops costs an atomic reference count. Its length tells the kind (``HYPERBOLOID_SIZE`` or
+``ASPHERE_SIZE``): a constant at compile time, so numba compiles each kernel once per kind and
+each kind's code carries no branch of the other's (the asphere's branches, inlined into the
+hyperboloid's per-pixel loops, made its tables twice as slow).
 
 ====  =============================================================================
 mp    meaning
@@ -14,8 +19,8 @@ mp    meaning
 ====  =============================================================================
 
 * hyperboloid (eq. 1): ``mp[3:5] = a, b``; ``Z = b sqrt(1 + rho^2 / a^2)``; scale ``a + b``.
-* even asphere (:class:`omnicam.asphere.AsphericMirror`): ``mp[3:7] = R, k, vertex_z, rho_n``,
-  ``mp[7:]`` the coefficients of ``(rho / rho_n)^4, ^6, ...``;
+* even asphere (:class:`omnicam.asphere.AsphericMirror`): ``mp[3:8] = R, k, vertex_z, rho_n,
+  n``, ``mp[8:8 + n]`` the coefficients of ``(rho / rho_n)^4, ^6, ...`` (``n <= MAX_ALPHA``);
   ``Z = vertex_z + rho^2 / (R (1 + sqrt(1 - (1 + k) rho^2 / R^2))) + sum alpha_j
   (rho / rho_n)^(2 j + 4)``; scale ``2 rim_radius``.
 
@@ -47,6 +52,9 @@ _NAN = math.nan
 KIND_HYPERBOLOID = 0.0
 KIND_ASPHERE = 1.0
 MP_KIND, MP_RIM, MP_SCALE = 0, 1, 2  # the header every kind shares
+HYPERBOLOID_SIZE = 15  # lengths of mp: the kind, known at compile time (see above)
+ASPHERE_SIZE = 16
+MAX_ALPHA = 8  # polynomial terms of an asphere that fit in ASPHERE_SIZE
 
 
 @kernel
@@ -75,12 +83,12 @@ def _hyperboloid_hit_k(Fx, Fy, Fz, Vx, Vy, Vz, ia2, ib2):
 
 
 # -- the even asphere: Z = vertex_z + sag(rho), all in u = rho^2 (smooth on the axis) ---------
-A_R, A_K, A_VERTEX_Z, A_RHO_N, A_ALPHA = 3, 4, 5, 6, 7
+A_R, A_K, A_VERTEX_Z, A_RHO_N, A_N_ALPHA, A_ALPHA = 3, 4, 5, 6, 7, 8
 HIT_MAX_ITER = 100  # Newton steps of _asphere_hit (monotone, quadratic but for grazing rays)
 HIT_TOL_REL = 1e-13  # a step this short times the mirror's scale ends it
 
 
-@kernel
+@kernel(inline="always")
 def _asphere_sag(mp, u):
     """``(sag, d sag / du, d^2 sag / du^2)`` at ``u = rho^2``; NaN past the conic's end.
 
@@ -100,7 +108,7 @@ def _asphere_sag(mp, u):
     rn2 = mp[A_RHO_N] * mp[A_RHO_N]
     t = u / rn2
     tp = 1.0  # t^(m - 2) of the term alpha t^m, m = j + 2
-    for j in range(mp.shape[0] - A_ALPHA):
+    for j in range(int(mp[A_N_ALPHA])):
         a = mp[A_ALPHA + j]
         m = j + 2.0
         w += a * tp * t * t
@@ -213,33 +221,33 @@ def _asphere_start_height(mp, Cz):
     return mp[A_VERTEX_Z] + 0.5 * R
 
 
-@kernel
+@kernel(inline="always")
 def rim_radius(mp):
     """Radius of the rim circle."""
     return mp[MP_RIM]
 
 
-@kernel
+@kernel(inline="always")
 def length_scale(mp):
     """The mirror's length scale (Newton's tolerances are relative to it)."""
     return mp[MP_SCALE]
 
 
-@kernel
+@kernel(inline="always")
 def sheet_z(mp, s1, s2):
     """Height ``f(s1, s2)`` of the sheet (eq. 13 for the hyperboloid)."""
-    if mp[MP_KIND] == KIND_ASPHERE:
+    if len(mp) == ASPHERE_SIZE:
         return mp[A_VERTEX_Z] + _asphere_sag(mp, s1 * s1 + s2 * s2)[0]
     a = mp[3]
     b = mp[4]
     return b * math.sqrt(1.0 + (s1 * s1 + s2 * s2) / (a * a))
 
 
-@kernel
+@kernel(inline="always")
 def sheet_slopes(mp, s1, s2):
     """``(z, f_X, f_Y)`` at ``(s1, s2)``: the height and the unnormalised normal
     ``(f_X, f_Y, -1)`` (eq. 14), which points down and out of the mirror."""
-    if mp[MP_KIND] == KIND_ASPHERE:
+    if len(mp) == ASPHERE_SIZE:
         w, w1, _w2 = _asphere_sag(mp, s1 * s1 + s2 * s2)
         return mp[A_VERTEX_Z] + w, 2.0 * w1 * s1, 2.0 * w1 * s2
     a = mp[3]
@@ -250,10 +258,10 @@ def sheet_slopes(mp, s1, s2):
     return z, b2 * s1 / (a2 * z), b2 * s2 / (a2 * z)
 
 
-@kernel
+@kernel(inline="always")
 def normal_at(mp, Px, Py, Pz):
     """``(f_X, f_Y)`` of the normal ``(f_X, f_Y, -1)`` (eq. 14) at a point P of the sheet."""
-    if mp[MP_KIND] == KIND_ASPHERE:
+    if len(mp) == ASPHERE_SIZE:
         w1 = _asphere_sag(mp, Px * Px + Py * Py)[1]
         return 2.0 * w1 * Px, 2.0 * w1 * Py
     a = mp[3]
@@ -262,13 +270,13 @@ def normal_at(mp, Px, Py, Pz):
     return b2a2 * Px / Pz, b2a2 * Py / Pz
 
 
-@kernel
+@kernel(inline="always")
 def sheet_derivs(mp, s1, s2):
     """``(z, f_X, f_Y, f_XX, f_YY, f_XY)`` at ``(s1, s2)``: what Newton on Fermat's path
     length needs (the tangents ``(1, 0, f_X)``, ``(0, 1, f_Y)`` and their derivatives).
     With ``f = g(u)``, ``u = X^2 + Y^2``: ``f_X = 2 g' X``, ``f_XX = 2 g' + 4 g'' X^2``,
     ``f_XY = 4 g'' X Y`` (no singularity on the axis)."""
-    if mp[MP_KIND] == KIND_ASPHERE:
+    if len(mp) == ASPHERE_SIZE:
         w, w1, w2 = _asphere_sag(mp, s1 * s1 + s2 * s2)
         return (
             mp[A_VERTEX_Z] + w,
@@ -292,19 +300,19 @@ def sheet_derivs(mp, s1, s2):
     return z, fx, fy, fxx, fyy, fxy
 
 
-@kernel
+@kernel(inline="always")
 def line_hit(mp, Fx, Fy, Fz, Vx, Vy, Vz):
     """First ``k > 0`` where ``F + k V`` meets the sheet from outside or inside (eqs. 8-11),
     NaN if none; the caller checks the rim and the side (eq. 12). The asphere's hit is the
     first entry from below inside the rim (:func:`_asphere_hit`), NaN otherwise."""
-    if mp[MP_KIND] == KIND_ASPHERE:
+    if len(mp) == ASPHERE_SIZE:
         return _asphere_hit(mp, Fx, Fy, Fz, Vx, Vy, Vz)
     a = mp[3]
     b = mp[4]
     return _hyperboloid_hit_k(Fx, Fy, Fz, Vx, Vy, Vz, 1.0 / (a * a), 1.0 / (b * b))
 
 
-@kernel
+@kernel(inline="always")
 def start_hit(mp, Cz, Xx, Xy, Xz, at_infinity):
     """Newton's start for the reflection point towards X: ``(s1, s2)``, NaN if none.
 
@@ -313,7 +321,7 @@ def start_hit(mp, Cz, Xx, Xy, Xz, at_infinity):
     rig (eqs. 2-5). The asphere's viewpoint is the paraxial image of the camera at height
     ``Cz`` (:func:`_asphere_start_height`), and the line leaves its conic part.
     """
-    if mp[MP_KIND] == KIND_ASPHERE:
+    if len(mp) == ASPHERE_SIZE:
         z0 = _asphere_start_height(mp, Cz)
         if at_infinity:
             Wx, Wy, Wz = Xx, Xy, Xz
@@ -334,11 +342,11 @@ def start_hit(mp, Cz, Xx, Xy, Xz, at_infinity):
     return k * Wx, k * Wy
 
 
-@kernel
+@kernel(inline="always")
 def inside_body(mp, Xx, Xy, Xz):
     """Whether a finite point lies inside the mirror's body: above the sheet (eq. 1) for the
     hyperboloid, above the cap inside the rim's cylinder for the asphere."""
-    if mp[MP_KIND] == KIND_ASPHERE:
+    if len(mp) == ASPHERE_SIZE:
         u = Xx * Xx + Xy * Xy
         return u <= mp[MP_RIM] * mp[MP_RIM] and Xz > mp[A_VERTEX_Z] + _asphere_sag(mp, u)[0]
     a = mp[3]
@@ -346,13 +354,13 @@ def inside_body(mp, Xx, Xy, Xz):
     return Xz > 0.0 and (Xx * Xx + Xy * Xy) / (a * a) - Xz * Xz / (b * b) + 1.0 < 0.0
 
 
-@kernel
+@kernel(inline="always")
 def body_margin(mp, Xx, Xy, Xz):
     """A smooth signed margin of a finite point to the mirror's body: positive outside,
     negative inside, of order 1 one mirror size away. The asphere's: the larger of the height
     below the cap (at the radius clamped to the rim) and the distance outside the rim's
     cylinder, over the rim radius."""
-    if mp[MP_KIND] == KIND_ASPHERE:
+    if len(mp) == ASPHERE_SIZE:
         rim = mp[MP_RIM]
         rho = math.sqrt(Xx * Xx + Xy * Xy)
         rc = min(rho, rim)

@@ -55,7 +55,7 @@ _NAN = math.nan
 # refined grids of the failing coarse cells (G = their number).
 
 #: What the table kernels know of the rig (omnicam.views._rig_args builds it): camera centre
-#: ``C`` (mirror frame), mirror -> camera motion ``R, t``, the mirror's parameter array
+#: ``C`` (mirror frame), mirror -> camera motion ``R, t``, the mirror's parameter tuple
 #: ``mirror`` (``kernel_params()``, :mod:`omnicam._kernels.mirror`), pinhole ``K`` (skew
 #: allowed), OpenCV distortion ``dist`` (14 values, zeros padded) and its ``tilt`` matrix,
 #: ``has_dist``.
@@ -319,9 +319,15 @@ def solve_view_points(lo, hi, view, rig, points, out):
     and, ``with_mirror_error``, |exact pixel - pixel of the start| (the interpolated mirror
     point); inf where not solved or not computed.
     """
+    # records' arrays taken out once: each access to a field costs a reference count
     positions = points.positions
     starts = points.starts
     estimates = points.estimates
+    ok = out.ok
+    S = out.S
+    P = out.P
+    margins = out.margins
+    errors = out.errors
     checks = estimates.shape[0] > 0
     for n in range(lo, hi):
         xs = _NAN
@@ -338,16 +344,16 @@ def solve_view_points(lo, hi, view, rig, points, out):
             starts[n, 1],
             points.pixels_only,
         )
-        out.ok[n] = solved
-        out.S[n, 0] = s1
-        out.S[n, 1] = s2
-        out.P[n, 0] = x
-        out.P[n, 1] = y
-        out.margins[n, 0] = vis if solved else -np.inf
-        out.margins[n, 1] = rim_m if solved else np.inf
-        out.margins[n, 2] = other if solved else -np.inf
+        ok[n] = solved
+        S[n, 0] = s1
+        S[n, 1] = s2
+        P[n, 0] = x
+        P[n, 1] = y
+        margins[n, 0] = vis if solved else -np.inf
+        margins[n, 1] = rim_m if solved else np.inf
+        margins[n, 2] = other if solved else -np.inf
         if checks:
-            _check_errors(out.errors, n, solved, x, y, estimates[n, 0], estimates[n, 1], xs, ys)
+            _check_errors(errors, n, solved, x, y, estimates[n, 0], estimates[n, 1], xs, ys)
 
 
 @kernel(inline="always")
@@ -488,6 +494,9 @@ def classify_cells(view, grid, W, H, half_tol, allow_edge, cls):
     above_band = view.kind == 0 and 0.0 < view.sin_reject < 1.0
     node_margins = grid.node_margins
     check_margins = grid.check_margins
+    pixel_error = grid.pixel_error
+    mirror_error = grid.mirror_error
+    origins = grid.origins
     for c in range(cls.shape[0]):
         for r in range(cls.shape[1]):
             for k in range(cls.shape[2]):
@@ -500,17 +509,17 @@ def classify_cells(view, grid, W, H, half_tol, allow_edge, cls):
                 seen, unseen = _clearly(node_margins[c], check_margins[c], r, k, vmin, rmax)
                 cell_class = CELL_BAD
                 if solved:
-                    if seen and _cell_error(grid.pixel_error[c], r, k) <= half_tol:
+                    if seen and _cell_error(pixel_error[c], r, k) <= half_tol:
                         cell_class = CELL_SEEN
                     elif unseen:
                         cell_class = CELL_UNSEEN
-                    elif _cell_error(grid.mirror_error[c], r, k) <= half_tol and allow_edge:
+                    elif _cell_error(mirror_error[c], r, k) <= half_tol and allow_edge:
                         cell_class = CELL_EDGE
                         if _clearly_seen_but_rim(node_margins[c], check_margins[c], r, k):
                             cell_class = CELL_RIM
                 if cell_class == CELL_BAD and above_band:
-                    u0 = grid.origins[c, 0] + k * grid.spacing
-                    v0 = grid.origins[c, 1] + r * grid.spacing
+                    u0 = origins[c, 0] + k * grid.spacing
+                    v0 = origins[c, 1] + r * grid.spacing
                     if _corners_above(view, u0, v0, grid.spacing, W, H):
                         cell_class = CELL_UNSEEN
                 cls[c, r, k] = cell_class
