@@ -19,6 +19,7 @@ _LAZY = {
     "load_camera": "omnicam.formats.calibration_file",
     "save_camera": "omnicam.formats.calibration_file",
     "HyperbolicMirror": "omnicam.mirror",
+    "AsphericMirror": "omnicam.asphere",
     "detect_rim": "omnicam.calibration.rim",
     "RimFit": "omnicam.calibration.rim",
     "CalibrationReport": "omnicam.calibration",

@@ -4,7 +4,9 @@
   write its cache for this package, else the same without ``cache`` after one line on stderr
   saying so (numba raises "cannot cache function ...: no locator available" when neither the
   package's ``__pycache__`` nor the user cache folder is writable and ``NUMBA_CACHE_DIR`` is
-  unset).
+  unset). A cached kernel's index is stamped with every ``.py`` file of its folder (numba
+  stamps it with its own file only, and would load a stale kernel after an edit to a helper
+  it inlines from a sibling module).
 * :func:`notice_if_cold` prints, once per process, "omnicam: compiling kernels once (about N s);
   later runs start fast" before a kernel whose cache index is missing or stale is first called.
 * :func:`run_chunks` runs a ``nogil`` kernel over ``range(n)`` in chunks on a small thread pool
@@ -14,6 +16,8 @@
 
 from __future__ import annotations
 
+import inspect
+import os
 import sys
 from collections.abc import Callable
 from concurrent.futures import ThreadPoolExecutor
@@ -69,16 +73,41 @@ def _cache_flag() -> bool:
 CACHE = _cache_flag()
 
 
+def folder_stamp(path: str) -> tuple[float, int, int]:
+    """``(latest mtime, total size, count)`` of the ``.py`` files in the folder of ``path``."""
+    folder = os.path.dirname(os.path.abspath(path))
+    stats = [os.stat(os.path.join(folder, f)) for f in os.listdir(folder) if f.endswith(".py")]
+    return max(s.st_mtime for s in stats), sum(s.st_size for s in stats), len(stats)
+
+
+def stamp_with_folder(dispatcher: Any, path: str) -> Any:
+    """Make ``dispatcher``'s cache index stale whenever any ``.py`` file beside ``path``
+    changes (:func:`folder_stamp` in place of numba's stamp of ``path`` alone)."""
+    cache = getattr(dispatcher, "_cache", None)
+    cache_file = getattr(cache, "_cache_file", None)
+    if cache_file is not None and hasattr(cache_file, "_source_stamp"):
+        cache_file._source_stamp = folder_stamp(path)
+    return dispatcher
+
+
 def kernel(func: Callable[..., Any] | None = None, **options: Any) -> Any:
-    """``numba.njit`` with ``cache`` (when possible) and ``nogil``; ``options`` are passed on."""
+    """``numba.njit`` with ``cache`` (when possible) and ``nogil``; ``options`` are passed on.
+    A cached kernel is stamped with its whole folder (:func:`stamp_with_folder`)."""
     options.setdefault("cache", CACHE)
     options.setdefault("nogil", True)
     # IEEE division (x / 0 is inf or NaN) as in numpy and in numba's parallel loops, not
     # Python's ZeroDivisionError: no test-and-raise branch in every division
     options.setdefault("error_model", "numpy")
+
+    def make(f: Callable[..., Any]) -> Any:
+        dispatcher = numba.njit(**options)(f)
+        if options["cache"]:
+            stamp_with_folder(dispatcher, inspect.getfile(f))
+        return dispatcher
+
     if func is None:
-        return numba.njit(**options)
-    return numba.njit(**options)(func)
+        return make
+    return make(func)
 
 
 def _is_cold(dispatcher: Any) -> bool:

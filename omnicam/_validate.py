@@ -257,7 +257,7 @@ def validate_rng(
 def validate_posture(
     R: npt.NDArray[np.float64],
     tvec: npt.NDArray[np.float64],
-    mirror: Any,  # a HyperbolicMirror, which sits above this module
+    mirror: Any,  # a HyperbolicMirror or AsphericMirror, which sit above this module
     rim_points: Callable[[], npt.NDArray[np.float64]],
 ) -> None:
     """Refuse a posture no real rig has (``ValueError`` naming ``rvec``/``tvec``).
@@ -273,10 +273,10 @@ def validate_posture(
         only once the rim is known to be in front of the camera.
 
     Checks: ``R`` finite and a rotation, ``|tvec| <= MAX_DISTANCE``; the camera centre
-    ``C = -R^T tvec`` below the mirror sheet (``C_z < b sqrt(1 + (C_x^2 + C_y^2) / a^2)``,
-    eq. 13), so it looks at the mirror from outside; every rim point in front of the camera
-    (camera-frame z > 0); the rim's image between ``MIN_RIM_SPAN`` and ``MAX_RIM_SPAN`` px
-    across.
+    ``C = -R^T tvec`` below the mirror sheet (``C_z < mirror.surface_z(C_x, C_y)``, eq. 13
+    for the hyperboloid), so it looks at the mirror from outside; every rim point in front of
+    the camera (camera-frame z > 0); the rim's image between ``MIN_RIM_SPAN`` and
+    ``MAX_RIM_SPAN`` px across.
     """
     if not np.isfinite(R).all() or np.abs(R @ R.T - np.eye(3)).max() > 1e-9:
         raise ValueError("rvec must give a finite rotation matrix")
@@ -286,7 +286,7 @@ def validate_posture(
             f"units), got {tvec.tolist()}"
         )
     C = -R.T @ tvec
-    sheet = mirror.b * math.sqrt(1.0 + (C[0] ** 2 + C[1] ** 2) / mirror.a**2)
+    sheet = float(mirror.surface_z(C[0], C[1]))
     if not C[2] < sheet:
         raise ValueError(
             f"tvec, rvec: the camera centre {C.tolist()} (mirror frame) must lie "

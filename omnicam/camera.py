@@ -44,8 +44,9 @@ from ._validate import (
     validate_K,
     validate_posture,
 )
+from .asphere import AsphericMirror
 from .gauge import canonical_rvec
-from .mirror import HyperbolicMirror
+from .mirror import HyperbolicMirror, Mirror
 
 __all__ = [
     "MisalignedCatadioptricCamera",
@@ -122,7 +123,10 @@ class MisalignedCatadioptricCamera:
     ----------
     K : (3, 3) array_like
         Camera matrix, skew allowed, last row ``(0, 0, 1)``.
-    mirror : HyperbolicMirror
+    mirror : HyperbolicMirror or AsphericMirror
+        The hyperboloid of eq. 1, or any convex mirror of revolution as an even asphere
+        (:class:`~omnicam.AsphericMirror`); the kernels reach either through one seam
+        (:mod:`omnicam._kernels.mirror`).
     rvec, tvec : (3,) array_like
         Mirror posture in the camera frame, as ``cv2.solvePnP`` returns it with the mirror as
         the object. ``rvec`` is stored in the gauge of docs/conventions.md (see
@@ -162,15 +166,18 @@ class MisalignedCatadioptricCamera:
     def __init__(
         self,
         K: ArrayLike,
-        mirror: HyperbolicMirror,
+        mirror: Mirror,
         rvec: ArrayLike,
         tvec: ArrayLike,
         D: ArrayLike | None = None,
         image_size: Size | None = None,
         camera_reflection: tuple[float, float] | None = None,
     ) -> None:
-        if not isinstance(mirror, HyperbolicMirror):
-            raise ValueError(f"mirror must be a HyperbolicMirror, got {type(mirror).__name__}")
+        if not isinstance(mirror, HyperbolicMirror | AsphericMirror):
+            raise ValueError(
+                f"mirror must be a HyperbolicMirror or an AsphericMirror, got "
+                f"{type(mirror).__name__}"
+            )
         self._K = _readonly(validate_K(K))
         D = validate_D(D)
         self._D = None if D is None else _readonly(D)
@@ -261,8 +268,8 @@ class MisalignedCatadioptricCamera:
         return self._D
 
     @property
-    def mirror(self) -> HyperbolicMirror:
-        """The HyperbolicMirror."""
+    def mirror(self) -> Mirror:
+        """The mirror: a HyperbolicMirror or an AsphericMirror."""
         return self._mirror
 
     @property

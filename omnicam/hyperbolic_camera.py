@@ -12,7 +12,7 @@ from __future__ import annotations
 
 import dataclasses
 from collections.abc import Sequence
-from typing import TYPE_CHECKING, Any, TypeVar
+from typing import TYPE_CHECKING, Any, TypeVar, cast
 
 import numpy as np
 
@@ -72,7 +72,7 @@ class MisalignedHyperbolicCamera(MisalignedCatadioptricCamera):
             return camera
         return cls(
             camera.K,
-            camera.mirror,  # a hyperboloid: checked by __init__
+            cast(HyperbolicMirror, camera.mirror),  # a hyperboloid: checked by __init__
             camera.rvec,
             camera.tvec,
             camera.D,

@@ -9,7 +9,8 @@ The physical mirror is the cap of that sheet inside the rim, the circle of radiu
 ``rim_radius`` at height ``z_rim = b * sqrt(1 + rim_radius^2 / a^2)``.
 
 These are vectorised numpy functions: the readable reference of the model. The per-pixel
-hot loops use the same formulas in :mod:`omnicam._kernels`.
+hot loops use the same formulas in the seam of the kernels, :mod:`omnicam._kernels.mirror`,
+which takes the mirror as :meth:`HyperbolicMirror.kernel_params`.
 """
 
 from __future__ import annotations
@@ -21,8 +22,9 @@ import numpy as np
 
 from ._typing import ArrayLike, FloatArray
 from ._validate import LENGTH_RANGE, float_array, real_number
+from .asphere import AsphericMirror
 
-__all__ = ["HyperbolicMirror"]
+__all__ = ["HyperbolicMirror", "Mirror"]
 
 
 def _positive_finite(name: str, value: float) -> float:
@@ -90,6 +92,30 @@ class HyperbolicMirror:
     def z_rim(self) -> float:
         """Height of the rim, ``b * sqrt(1 + rim_radius^2 / a^2)``."""
         return self._b * math.sqrt(1.0 + (self._rim_radius / self._a) ** 2)
+
+    @property
+    def vertex_z(self) -> float:
+        """Height of the apex, the sheet's lowest point ``(0, 0, b)``."""
+        return self._b
+
+    @property
+    def length_scale(self) -> float:
+        """``a + b``: the length the kernels' Newton tolerances are relative to."""
+        return self._a + self._b
+
+    def kernel_params(self) -> tuple[float, ...]:
+        """The mirror as the kernels take it (:mod:`omnicam._kernels.mirror`):
+        ``(KIND_HYPERBOLOID, rim_radius, a + b, a, b)`` padded with zeros to 15 floats (the
+        length tells the kernels the kind)."""
+        head = (0.0, self._rim_radius, self.length_scale, self._a, self._b)
+        return head + (0.0,) * (15 - len(head))
+
+    def as_asphere(self) -> AsphericMirror:
+        """The same surface as an even asphere (:mod:`omnicam.asphere`): ``R = a^2 / b``,
+        ``k = -1 - a^2 / b^2``, ``vertex_z = b``, no polynomial terms; the mirror frames are
+        the same (origin at the hyperboloid's centre)."""
+        a, b = self._a, self._b
+        return AsphericMirror(a * a / b, -1.0 - (a / b) ** 2, self._rim_radius, vertex_z=b)
 
     def __eq__(self, other: object) -> bool:
         if not isinstance(other, HyperbolicMirror):
@@ -227,3 +253,8 @@ class HyperbolicMirror:
         t = np.linspace(0.0, 2.0 * np.pi, int(n), endpoint=False)
         r = self._rim_radius
         return np.stack([r * np.cos(t), r * np.sin(t), np.full_like(t, self.z_rim)], axis=1)
+
+
+#: The mirrors the ray tracer and the view tables take (through ``kernel_params()``, the seam
+#: of :mod:`omnicam._kernels.mirror`)
+Mirror = HyperbolicMirror | AsphericMirror

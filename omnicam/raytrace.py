@@ -15,7 +15,7 @@ import numpy as np
 from . import _kernels
 from ._jit import notice_if_cold, run_chunks
 from ._typing import ArrayLike, FloatArray
-from .mirror import HyperbolicMirror
+from .mirror import Mirror
 
 __all__ = [
     "as_points",
@@ -155,7 +155,7 @@ def trace(
     D: FloatArray | None,
     R: FloatArray,
     C: FloatArray,
-    mirror: HyperbolicMirror,
+    mirror: Mirror,
 ) -> tuple[FloatArray, FloatArray]:
     """Reflected rays of pixels (eqs. 6-19): ``(origins, directions)``, each ``(N, 3)``.
 
@@ -170,7 +170,7 @@ def trace(
         Mirror -> camera rotation (eq. 29).
     C : (3,) ndarray
         Camera centre in the mirror frame (``F_M`` of eq. 17).
-    mirror : HyperbolicMirror
+    mirror : HyperbolicMirror or AsphericMirror
 
     Returns
     -------
@@ -194,9 +194,7 @@ def trace(
         _f64(Kinv),
         _f64(R),
         _f64(C),
-        float(mirror.a),
-        float(mirror.b),
-        float(mirror.rim_radius),
+        mirror.kernel_params(),
         origins,
         directions,
         min_chunk=4096,
@@ -205,14 +203,14 @@ def trace(
 
 
 def trace_normalized(
-    xn: ArrayLike, R: ArrayLike, C: ArrayLike, mirror: HyperbolicMirror
+    xn: ArrayLike, R: ArrayLike, C: ArrayLike, mirror: Mirror
 ) -> tuple[FloatArray, FloatArray]:
     """Reflected rays of undistorted normalised coordinates, in numpy: the one reference tracer.
 
     The calibration code traces a few hundred points per evaluation under trial postures, where
     a numba call's overhead and the kernel's pixel interface do not fit; this is the same
-    model as :func:`trace` (eqs. 6-19) written with :class:`~omnicam.mirror.HyperbolicMirror`'s
-    vectorised methods.
+    model as :func:`trace` (eqs. 6-19) written with the mirror's vectorised methods
+    (:class:`~omnicam.mirror.HyperbolicMirror`, :class:`~omnicam.asphere.AsphericMirror`).
 
     Parameters
     ----------
@@ -222,7 +220,7 @@ def trace_normalized(
         Mirror -> camera rotation (eq. 29).
     C : (3,) ndarray
         Camera centre in the mirror frame (eq. 17).
-    mirror : HyperbolicMirror
+    mirror : HyperbolicMirror or AsphericMirror
 
     Returns
     -------
@@ -246,12 +244,12 @@ def project(
     R: FloatArray,
     t: FloatArray,
     C: FloatArray,
-    mirror: HyperbolicMirror,
+    mirror: Mirror,
 ) -> FloatArray:
     """Exact non-central projection of points (or directions) to pixels, ``(N, 2)``.
 
     For each point the reflection point on the mirror is found by Newton's method on Fermat's
-    path length (see :func:`omnicam._kernels._reflection_point`) and imaged by the pinhole
+    path length (see :func:`omnicam._kernels.raytrace.reflection_point`) and imaged by the pinhole
     (eq. 6) and OpenCV's distortion. Points the rig cannot see give NaN.
     """
     out = np.empty((points.shape[0], 2))
@@ -265,9 +263,7 @@ def project(
         _f64(R),
         _f64(t),
         _f64(C),
-        float(mirror.a),
-        float(mirror.b),
-        float(mirror.rim_radius),
+        mirror.kernel_params(),
         _f64(Kk),
         out,
         min_chunk=256,

@@ -67,3 +67,57 @@ def hyperomni_direction(u, v, a, b, f_C, x_c, y_c):
         [math.cos(alpha) * math.cos(azimuth), math.cos(alpha) * math.sin(azimuth), math.sin(alpha)]
     )
     return d, np.array([0.0, 0.0, c])  # eq. 3
+
+
+def asphere_height(rho, R, k, alpha, rho_n, vertex_z):
+    """The even asphere's height at one radius, as optical designers write it (textbook sag)."""
+    z = vertex_z + rho**2 / (R * (1 + math.sqrt(1 - (1 + k) * rho**2 / R**2)))
+    for j, a in enumerate(alpha):
+        z += a * (rho / rho_n) ** (2 * j + 4)
+    return z
+
+
+def trace_pixel_surface(u, v, K, R, tvec, height, rim_radius, samples=20000):
+    """Ray tracing of one pixel to a mirror of revolution ``Z = height(rho)``, brute force.
+
+    The ray is sampled from the camera outwards for the first sign change, inside the rim,
+    of ``Z - height(rho)`` from below to above, refined by bisection; the normal comes from
+    central differences of ``height``. Returns (P, d) or None (no hit inside the rim).
+    """
+    V = R.T @ np.linalg.solve(K, [u, v, 1.0])
+    V = V / np.linalg.norm(V)
+    F = -R.T @ tvec
+
+    def g(t):
+        P = F + t * V
+        rho = math.hypot(P[0], P[1])
+        return None if rho > rim_radius else P[2] - height(rho)
+
+    reach = 4.0 * (np.linalg.norm(F) + rim_radius + abs(height(0.0)))
+    ts = np.linspace(0.0, reach, samples)
+    prev = None
+    for t0, t1 in zip(ts[:-1], ts[1:]):
+        g0, g1 = g(t0), g(t1)
+        if g0 is not None and g1 is not None and g0 < 0 <= g1:
+            prev = (t0, t1)
+            break
+    if prev is None:
+        return None
+    lo, hi = prev
+    for _ in range(200):
+        mid = 0.5 * (lo + hi)
+        if g(mid) < 0:
+            lo = mid
+        else:
+            hi = mid
+    P = F + 0.5 * (lo + hi) * V
+    rho = math.hypot(P[0], P[1])
+    e = 1e-5 * rim_radius
+    slope = (height(rho + e) - height(rho - e)) / (2 * e)  # dZ/drho
+    N = (
+        np.array([slope * P[0] / rho, slope * P[1] / rho, -1.0])
+        if rho > 0
+        else np.array([0, 0, -1.0])
+    )
+    n = N / np.linalg.norm(N)
+    return P, V - 2 * n * (n @ V)  # eq. 15

@@ -92,3 +92,29 @@ def test_run_chunks_covers_the_range_once_in_disjoint_chunks():
     assert (hits == 1).all()
     _jit.run_chunks(mark, 0, hits)  # empty range: nothing
     assert (hits == 1).all()
+
+
+@needs_jit
+def test_a_kernel_goes_cold_when_a_sibling_module_it_inlines_changes(tmp_path):
+    """numba stamps a cache index with the kernel's own file; omnicam's kernels inline the
+    mirror seam from a sibling module, so :func:`_jit.kernel` stamps them with the folder."""
+    helper = tmp_path / "helper.py"
+    helper.write_text("from omnicam._jit import kernel\n\n@kernel\ndef h(x):\n    return x + 1\n")
+    (tmp_path / "kern.py").write_text(
+        "import sys\nfrom omnicam._jit import kernel\nh = sys.modules['helper'].h\n\n"
+        "@kernel\ndef f(x):\n    return h(x) * 2\n"
+    )
+    sys.modules["helper"] = load_module(helper, "helper")
+    try:
+        first = load_module(tmp_path / "kern.py", "kern_a")
+        assert first.f(1) == 4  # compiles and writes the cache
+        assert not _jit._is_cold(load_module(tmp_path / "kern.py", "kern_b").f)
+        stamp = os.stat(helper).st_mtime
+        helper.write_text(helper.read_text().replace("x + 1", "x + 2"))
+        os.utime(helper, (stamp + 10, stamp + 10))
+        sys.modules["helper"] = load_module(helper, "helper")
+        again = load_module(tmp_path / "kern.py", "kern_c")
+        assert _jit._is_cold(again.f)
+        assert again.f(1) == 6
+    finally:
+        sys.modules.pop("helper", None)

@@ -421,7 +421,7 @@ def test_rim_cells_give_the_entries_of_edge_cells(rig_name):
     the rim margin alone (``_rim_pixel``); where the other tests pass, that is the entry the
     full per-pixel test of an EDGE sub-cell (``_edge_pixel``) gives: unseen past the rim's
     margin, undecided within it, the same pixel inside it."""
-    from omnicam import _kernels as k
+    from omnicam._kernels import fill as k
 
     cam = RIGS[rig_name]()
     m = cam.mirror
@@ -479,7 +479,7 @@ def test_m1type_variants_agree(kind):
 def test_fixed_point_rounding_is_rint_of_32x_with_ties_to_even():
     """The vectorised fixed point of SEEN cells (1.5 * 2^52 trick) is cvRound(x * 32) as
     np.rint gives it, ties to even included, and saturates beyond its clamp."""
-    from omnicam._kernels import _round_fixed
+    from omnicam._kernels.fill import _round_fixed
 
     ties = np.arange(-200, 200) / 64.0  # x * 32 = k / 2: every other one a tie
     rng = np.random.default_rng(1)

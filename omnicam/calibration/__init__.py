@@ -38,7 +38,7 @@ import numpy as np
 
 from .._typing import ArrayLike, FloatArray
 from ..camera import MisalignedCatadioptricCamera
-from ..mirror import HyperbolicMirror
+from ..mirror import Mirror
 from ..raytrace import normalize, to_pixels
 from . import selection, steps
 from .errors import EstimationError
@@ -52,7 +52,7 @@ __all__ = ["calibrate", "recalibrate", "CalibrationReport", "EstimationError"]
 
 def calibrate(
     K: ArrayLike,
-    mirror: HyperbolicMirror,
+    mirror: Mirror,
     image: np.ndarray | None = None,
     boundary_points: ArrayLike | None = None,
     far_lines: Sequence[ArrayLike] | None = None,

@@ -12,7 +12,7 @@ import numpy as np
 from .._typing import ArrayLike
 from .._validate import float_array, validate_D, validate_image_size, validate_K
 from ..images import check_image, to_gray
-from ..mirror import HyperbolicMirror
+from ..mirror import HyperbolicMirror, Mirror
 from . import selection
 
 __all__ = ["ImageOptions", "as_pixels", "edge_image"]
@@ -45,7 +45,7 @@ class ImageOptions:
     pixel arrays, ``image_size`` the image's when not given."""
 
     K: ArrayLike
-    mirror: HyperbolicMirror
+    mirror: Mirror
     boundary_points: Any = None
     far_lines: Any = None
     D: ArrayLike | None = None

@@ -9,13 +9,14 @@ from __future__ import annotations
 
 import dataclasses
 from collections.abc import Callable
-from typing import Any
+from typing import Any, cast
 
 import numpy as np
 
 from ..calibration.chen import rim_conic
 from ..calibration.plausibility import check_plausibility
 from ..camera import MisalignedCatadioptricCamera
+from ..mirror import HyperbolicMirror
 from .steps import XI_NOT_HYPERBOLIC
 
 __all__ = ["ONE_SIDED", "POLICIES", "SHAPE_WEAK", "FitFacts", "report_warnings"]
@@ -104,12 +105,17 @@ def not_converged(f: FitFacts) -> str | None:
     return None
 
 
+def _hyperboloid(f: FitFacts) -> HyperbolicMirror:
+    """The fitted mirror, a hyperboloid: the shape's policies speak of its ``a, b``."""
+    return cast(HyperbolicMirror, f.camera.mirror)
+
+
 def held_shape(f: FitFacts) -> str | None:
     """The mirror unknown and its shape held from the central fit: its uncertainty is in the
     stated ones."""
     if not f.held_shape:
         return None
-    m, std = f.camera.mirror, f.std
+    m, std = _hyperboloid(f), f.std
     return (
         f"the mirror's shape is the central fit's (a = {m.a:.3f} +- {std['a']:.3f}, "
         f"b = {m.b:.3f} +- {std['b']:.3f}), held, and its uncertainty is in the stated ones of "
@@ -122,7 +128,7 @@ def estimated_shape(f: FitFacts) -> str | None:
     """The mirror's ``a, b`` estimated: how well, and that the data sheet's are better."""
     if not f.estimated_shape:
         return None
-    m, std = f.camera.mirror, f.std
+    m, std = _hyperboloid(f), f.std
     ra, rb = std["a"] / m.a, std["b"] / m.b
     weak = max(ra, rb) > SHAPE_WEAK
     return (

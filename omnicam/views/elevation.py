@@ -19,7 +19,7 @@ import numpy as np
 from .._typing import ArrayLike, FloatArray
 from .._validate import real_number
 from ..camera import MisalignedCatadioptricCamera
-from ..mirror import HyperbolicMirror
+from ..mirror import Mirror
 from .checks import PROJECTIONS, _check_camera, _check_depth, _check_rotation, _check_viewpoint
 
 #: The default band of a panorama stops here when the camera's reflection is unknown (it leaves
@@ -43,9 +43,7 @@ LOWER_EDGE_MIRROR = "what the mirror sees"
 
 
 @functools.lru_cache(maxsize=8)
-def _rim_directions_of(
-    mirror: HyperbolicMirror, a: float, b: float, rim_radius: float, centre_bytes: bytes, n: int
-) -> FloatArray:
+def _rim_directions_of(mirror: Mirror, centre_bytes: bytes, n: int) -> FloatArray:
     """Reflected directions of ``n`` rim points (eqs. 14-15 at the rim), mirror frame.
 
     They depend on the mirror and the camera centre only; the last few rigs' are kept (every
@@ -66,21 +64,15 @@ def _rim_band(camera: MisalignedCatadioptricCamera) -> tuple[float, float, bool]
     few rigs' are kept."""
     m = camera.mirror
     C = np.asarray(camera.camera_center, dtype=np.float64)
-    return _rim_band_of(m, float(m.a), float(m.b), float(m.rim_radius), C.tobytes())
+    return _rim_band_of(m, C.tobytes())
 
 
 @functools.lru_cache(maxsize=8)
-def _rim_band_of(
-    mirror: HyperbolicMirror,
-    a: float,
-    b: float,
-    rim_radius: float,
-    centre_bytes: bytes,
-    n: int = 3600,
-) -> tuple[float, float, bool]:
-    rim_dirs = _rim_directions_of(mirror, a, b, rim_radius, centre_bytes, n)
+def _rim_band_of(mirror: Mirror, centre_bytes: bytes, n: int = 3600) -> tuple[float, float, bool]:
+    rim_dirs = _rim_directions_of(mirror, centre_bytes, n)
     el = _elevation_deg(rim_dirs)
-    nadir = bool(_nadir_seen(b, np.frombuffer(centre_bytes, dtype=np.float64), rim_dirs))
+    centre = np.frombuffer(centre_bytes, dtype=np.float64)
+    nadir = bool(_nadir_seen(mirror.vertex_z, centre, rim_dirs))
     return float(np.min(el)), float(np.max(el)), nadir
 
 
@@ -88,14 +80,14 @@ def _elevation_deg(d: FloatArray) -> FloatArray:
     return np.degrees(np.arctan2(d[..., 2], np.hypot(d[..., 0], d[..., 1])))
 
 
-def _nadir_seen(b: float, camera_center: FloatArray, rim_dirs: FloatArray) -> bool:
+def _nadir_seen(vertex_z: float, camera_center: FloatArray, rim_dirs: FloatArray) -> bool:
     """Whether the straight-down direction (0, 0, -1) is among those the mirror shows.
 
     The cap maps one-to-one onto the directions it shows, so these are the region bounded by
     the closed curve of rim rays that contains the ray of the apex. The nadir is in it when that
     curve winds around the mirror axis and the apex ray lies below the whole curve.
     """
-    V = np.array([0.0, 0.0, b]) - camera_center
+    V = np.array([0.0, 0.0, vertex_z]) - camera_center
     apex_ray = np.array([V[0], V[1], -V[2]])  # reflection about the apex normal (0, 0, -1)
     az = np.arctan2(rim_dirs[:, 1], rim_dirs[:, 0])
     turns = np.diff(np.append(az, az[0]))

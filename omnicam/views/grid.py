@@ -35,8 +35,13 @@ from .._kernels import (
     CHECK_VERTICAL_EDGE,
     FINE,
     NEWTON_TOL_REL,
+    GridMargins,
     RigArgs,
+    Solutions,
+    TableGrids,
+    TableOutputs,
     ViewArgs,
+    ViewPoints,
     cubic_blocks,
 )
 from .._typing import ArrayLike, FloatArray, Maps, Size
@@ -136,9 +141,7 @@ def _rig_args(camera: MisalignedCatadioptricCamera) -> RigArgs:
         _arg(camera.camera_center),
         _arg(camera.R),
         _arg(camera.tvec),
-        float(m.a),
-        float(m.b),
-        float(m.rim_radius),
+        m.kernel_params(),
         _arg(camera.K),
         dist,
         tilt,
@@ -170,7 +173,7 @@ def _view_args(
         np.zeros(3) if viewpoint is None else _arg(viewpoint),
         float(sin_reject),
         float(sin_try),
-        NEWTON_TOL_REL * (float(m.a) + float(m.b)),
+        NEWTON_TOL_REL * float(m.length_scale),
     )
 
 
@@ -281,20 +284,15 @@ class _GridStack:
 
         G, _w, ny1, nx1 = self.pixel_error.shape
         self.cls = np.empty((G, ny1 - 1, nx1 - 1), np.int64)
-        _kernels.classify_cells(
-            view,
+        grid = GridMargins(
             self.origins,
             self.spacing,
-            size[0],
-            size[1],
             self.node_margins,
             self.check_margins,
             np.ascontiguousarray(self.pixel_error),
             np.ascontiguousarray(self.mirror_error),
-            half_tol,
-            allow_edge,
-            self.cls,
         )
+        _kernels.classify_cells(view, grid, size[0], size[1], half_tol, allow_edge, self.cls)
         return self.cls
 
     def n_solved(self) -> tuple[int, int]:
@@ -438,23 +436,21 @@ def _solve(
         estimates = errors = np.empty((0, 2))
     else:
         errors = np.empty(shape + (2,))
-    run_chunks(
-        _kernels.solve_view_points,
-        n,
-        view,
-        rig,
+    points = ViewPoints(
         positions.reshape(-1, 2),
         starts.reshape(-1, 2),
-        pixels_only,
         estimates.reshape(-1, 2),
+        pixels_only,
         with_mirror_error,
+    )
+    out = Solutions(
         ok.reshape(-1),
         S.reshape(-1, 2),
         P.reshape(-1, 2),
         margins.reshape(-1, 3),
         errors.reshape(-1, 2),
-        min_chunk=32,
     )
+    run_chunks(_kernels.solve_view_points, n, view, rig, points, out, min_chunk=32)
     return S, P, margins, ok, errors if checks else None
 
 
@@ -505,11 +501,7 @@ def _build_table(
     pending = np.zeros((h, w), np.bool_)  # bool: numpy's nonzero is ten times faster than on uint8
     row_counts = np.empty((h, 2), np.int64)  # pending and unseen entries per row
     outx, outy, out16, outf16 = outputs
-    run_chunks(
-        _kernels.fill_rows,
-        h,
-        view,
-        rig,
+    grids = TableGrids(
         cls,
         refined_index,
         coarse.P[0],
@@ -520,15 +512,9 @@ def _build_table(
         column_sin,
         weights,
         fine_weights,
-        mode,
-        outx,
-        outy,
-        out16,
-        outf16,
-        pending,
-        row_counts,
-        min_chunk=16,
     )
+    out = TableOutputs(mode, outx, outy, out16, outf16, pending, row_counts)
+    run_chunks(_kernels.fill_rows, h, view, rig, grids, out, min_chunk=16)
     rows = np.flatnonzero(row_counts[:, 0])
     q = np.flatnonzero(pending[rows])
     index = rows[q // w] * w + q % w
