@@ -88,7 +88,7 @@ HIT_MAX_ITER = 100  # Newton steps of _asphere_hit (monotone, quadratic but for 
 HIT_TOL_REL = 1e-13  # a step this short times the mirror's scale ends it
 
 
-@kernel(inline="always")
+@kernel
 def _asphere_sag(mp, u):
     """``(sag, d sag / du, d^2 sag / du^2)`` at ``u = rho^2``; NaN past the conic's end.
 
@@ -258,7 +258,7 @@ def sheet_slopes(mp, s1, s2):
     return z, b2 * s1 / (a2 * z), b2 * s2 / (a2 * z)
 
 
-@kernel(inline="always")
+@kernel
 def normal_at(mp, Px, Py, Pz):
     """``(f_X, f_Y)`` of the normal ``(f_X, f_Y, -1)`` (eq. 14) at a point P of the sheet."""
     if len(mp) == ASPHERE_SIZE:
@@ -270,7 +270,7 @@ def normal_at(mp, Px, Py, Pz):
     return b2a2 * Px / Pz, b2a2 * Py / Pz
 
 
-@kernel(inline="always")
+@kernel
 def sheet_derivs(mp, s1, s2):
     """``(z, f_X, f_Y, f_XX, f_YY, f_XY)`` at ``(s1, s2)``: what Newton on Fermat's path
     length needs (the tangents ``(1, 0, f_X)``, ``(0, 1, f_Y)`` and their derivatives).
@@ -300,7 +300,7 @@ def sheet_derivs(mp, s1, s2):
     return z, fx, fy, fxx, fyy, fxy
 
 
-@kernel(inline="always")
+@kernel
 def line_hit(mp, Fx, Fy, Fz, Vx, Vy, Vz):
     """First ``k > 0`` where ``F + k V`` meets the sheet from outside or inside (eqs. 8-11),
     NaN if none; the caller checks the rim and the side (eq. 12). The asphere's hit is the
@@ -312,7 +312,7 @@ def line_hit(mp, Fx, Fy, Fz, Vx, Vy, Vz):
     return _hyperboloid_hit_k(Fx, Fy, Fz, Vx, Vy, Vz, 1.0 / (a * a), 1.0 / (b * b))
 
 
-@kernel(inline="always")
+@kernel
 def start_hit(mp, Cz, Xx, Xy, Xz, at_infinity):
     """Newton's start for the reflection point towards X: ``(s1, s2)``, NaN if none.
 
@@ -354,7 +354,7 @@ def inside_body(mp, Xx, Xy, Xz):
     return Xz > 0.0 and (Xx * Xx + Xy * Xy) / (a * a) - Xz * Xz / (b * b) + 1.0 < 0.0
 
 
-@kernel(inline="always")
+@kernel
 def body_margin(mp, Xx, Xy, Xz):
     """A smooth signed margin of a finite point to the mirror's body: positive outside,
     negative inside, of order 1 one mirror size away. The asphere's: the larger of the height

@@ -160,7 +160,7 @@ def _newton_step(mp, s1, s2, C, X, at_infinity):
     return 0.0, 0.0, g1, g2, r1, False
 
 
-@kernel(inline="always")
+@kernel
 def _damped_step(mp, s1, s2, C, X, at_infinity, d1, d2):
     """Backtracking on L along ``(d1, d2)`` from ``s``: ``(n1, n2, t, accepted)``."""
     L = _path_length(mp, s1, s2, C, X, at_infinity)
@@ -256,7 +256,7 @@ def newton_warm(mp, C, s1, s2, X, at_infinity, tol):
     return s1, s2, False
 
 
-@kernel(inline="always")
+@kernel
 def _seen_from(mp, s1, s2, C, X, at_infinity):
     """The reflection point's height z and whether the camera C and the target X are on the
     outer side of its tangent plane (eqs. 12 and 15)."""
