@@ -27,6 +27,16 @@ pixels of the room's straight edges (:func:`far_line_pixels`, own bisection) and
 
 Typical use (the stress benchmark ``benchmarks/bench_stress.py``)::
 
+    for case in stress_cases(100, seed=0):
+        r = render_case(case)
+        cam, report = MisalignedHyperbolicCamera.calibrate(r.camera.K, r.camera.mirror,
+                                                           image=r.image, D=r.camera.D)
+
+Supersampling: pixel ``(x, y)`` covers ``[x - 1/2, x + 1/2]^2``; its ``s x s`` samples sit at
+offsets ``(k + 1/2)/s - 1/2`` and their colours are averaged (linear), so edges are area-true.
+Samples are taken only near edges (where the centres of a 3x3 neighbourhood disagree);
+per-pixel labels are those of the pixel centre.
+
 The renderer is a package, one concern per module: :mod:`.scene` (what a render holds),
 :mod:`.optics` (camera rays, the mirror, the reflection), :mod:`.surfaces` (what a ray meets and
 its colour), :mod:`.tracer`, :mod:`.render` (images and their degradations), :mod:`.far_lines`
