@@ -11,8 +11,8 @@ lines' parameters alone at the analytic posture (its fair cost), then everything
 What it can add: the rim ellipse has 5 parameters and so has the posture, so with a geometric
 ellipse fit (:func:`.rim.fit_rim`) the analytic posture is already the best the rim allows and
 the rim term alone changes nothing. Far lines constrain mostly the coplanarity of their rays,
-which a rim-consistent error of the axis (a tilt with a compensating shift) barely changes:
-on the default rigs three far lines shrink the axis uncertainty by well under 1 %.
+which a rim-consistent error of the axis (a tilt with a compensating shift) barely changes,
+so they shrink the axis uncertainty only slightly.
 
 The result is kept only if its cost is lower than the cost of the analytic posture (with the
 line parameters fitted to it), so refinement never makes an exact analytic result worse.

@@ -54,8 +54,8 @@ __all__ = [
 
 
 #: :func:`fit_circle` seeks ``z`` up to this fraction of the camera's distance to the mirror
-#: vertex (a lens barrel may reach far towards the mirror: the stress renders' fronts lie at
-#: 5-40 mm with the vertex at 65 mm), on a grid of ``Z_GRID`` values refined by Brent.
+#: vertex (a lens barrel may reach most of the way towards the mirror), on a grid of ``Z_GRID``
+#: values refined by Brent.
 Z_MAX_FRACTION = 0.9
 Z_GRID = 25
 

@@ -34,9 +34,8 @@ __all__ = ["detect_reflection"]
 #: between the dark centre and the mirror's scene: a fifth first; when that finds nothing, or
 #: only a silhouette without a core, a tenth (kept if it finds one with a core around the
 #: coreless one, else the coreless one stands): the barrel's front ring against a dark box
-#: behind it rises by a fifth of the contrast or less (stress renders, seed 0, 1920x1080,
-#: case 6: grey 26 to 51 against 117). A tenth at once would let the glass's inner rings vote
-#: and win over a uniformly dark barrel (seed 0, case 87).
+#: behind it may rise by a fifth of the contrast or less. A tenth at once would let the glass's
+#: inner rings vote and win over a uniformly dark barrel.
 RISE_FRACTIONS = (0.2, 0.1)
 
 
@@ -344,9 +343,8 @@ def _body_in_surround(gray, G, surround, bw, sig, rng):
     c, floor, interior = surround.fit.center, surround.shell, surround.interior
     contrast = interior - floor
     if not (contrast > 10.0 and surround.spread < 0.5 * contrast):
-        # a textured band is no dark floor or holder (the checkered ground of
-        # synthetic.render_environment: spread 1.2 times the contrast; dark floors of the
-        # realistic renders with planks, noise and blur: 0.2-0.3)
+        # a textured band is no dark floor or holder: a checkered ground spreads by more than
+        # the contrast, a dark floor with planks, noise and blur by a small part of it
         raise EstimationError(
             "no camera reflection found: no uniformly dark surround with something brighter inside"
         )

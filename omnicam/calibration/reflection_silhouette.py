@@ -40,10 +40,9 @@ DARK_INSIDE = 0.8
 
 
 #: A silhouette is round when its ellipse's axes differ by at most this ratio. The outline of
-#: a coaxial circle is nearly a circle: the stress renders' barrels (tilts up to 5 deg, offsets
-#: up to 5 mm, mild distortion; seeds 0-2, 199 outlines) give 1.003 (median) to 1.009 (max);
-#: a pixel aspect of a few % adds as much. An ellipse through the barrel's edge on some rays
-#: and the glass's on others is flatter (seed 0, case 37: 1.12). (Was 1.4.)
+#: a coaxial circle is nearly a circle (within about 1 % for tilts up to 5 deg, offsets up to
+#: 5 mm and mild distortion), and a pixel aspect of a few % adds as much; an ellipse through
+#: the barrel's edge on some rays and the glass's on others is flatter.
 MAX_ASPECT = 1.1
 
 

@@ -128,10 +128,9 @@ def coarse_ellipse(coarse_edges, hint=None, expected=None):
        is weighted by how well the ellipse's size fits: a log-normal prior about the hinted
        radius (``sigma = HINT_RADIUS / 2``) or about the middle of the expected range (its
        ends at two sigma). A holder's outer edge, a few percent to tens of percent larger than
-       the rim and often the stronger edge, then loses to the rim. (Weighting by the texture
-       contrast across the ellipse, textured mirror inside and plain holder outside, was
-       tried and dropped: on renders of rooms with plain walls the true rim's contrast was
-       negative, noise on a dark holder looks like texture.)
+       the rim and often the stronger edge, then loses to the rim. (Not by the texture
+       contrast across the ellipse, textured mirror inside and plain holder outside: a plain
+       wall seen in the mirror and noise on a dark holder reverse it.)
 
     ``hint = (cx, cy, r)`` (full-resolution px) keeps centres within ``HINT_CENTER * r`` of
     ``(cx, cy)`` and radii within ``r (1 -+ HINT_RADIUS)``; ``expected = (r_min, r_max)`` keeps
