@@ -33,15 +33,15 @@ from scipy.optimize import least_squares
 
 from ..gauge import gauge_rotation  # re-exported: refine.gauge_rotation
 from .refine_residuals import (
-    _N_POSTURE,
+    N_POSTURE,
     FarLineTerm,
+    Posture,
+    Problem,
     ReflectionSpec,
     ReflectionTerm,
     RimTerm,
-    _Posture,
-    _Problem,
-    _rays,
-    _reflection_spec,
+    reflected_rays,
+    reflection_spec,
 )
 from .uncertainty import (
     MIN_EFFECTIVE_POINTS,
@@ -171,7 +171,9 @@ def refine_posture(
     depth = 1000.0 * mirror.rim_radius if line_depth is None else float(line_depth)
     # lines whose rays mostly miss the mirror under this posture are left out
     lines_xn = [
-        x for x in lines_xn if np.isfinite(_rays(mirror, R0, t0, x)[1]).all(axis=1).sum() >= 3
+        x
+        for x in lines_xn
+        if np.isfinite(reflected_rays(mirror, R0, t0, x)[1]).all(axis=1).sum() >= 3
     ]
     rim = RimTerm(K, mirror, R0, t0, rim_px)
     if robust:
@@ -179,10 +181,10 @@ def refine_posture(
     terms = [rim]
     if lines_xn:
         terms.append(FarLineTerm(K, mirror, R0, t0, lines_xn, depth))
-    spec = _reflection_spec(reflection)
+    spec = reflection_spec(reflection)
     if spec is not None:
         terms.append(ReflectionTerm(K, mirror, R0, t0, *spec))
-    prob = _Problem(_Posture(R0, t0), terms)
+    prob = Problem(Posture(R0, t0), terms)
     x0 = prob.x0()
     opts = dict(method="lm", x_scale="jac", xtol=1e-8, ftol=1e-6, gtol=1e-10)
     nfev = 0
@@ -210,7 +212,7 @@ def refine_posture(
         # keep the refined posture only if it is better: never worse than the analytic one
         if np.isfinite(cost_fin) and cost_fin < cost_init:
             x, accepted = sol.x, True
-    R, t = prob.posture(x[:_N_POSTURE])
+    R, t = prob.posture(x[:N_POSTURE])
     rim_rms = float(np.sqrt(np.mean(rim.residuals(R, t, weighted=False) ** 2)))
     line_rms, lines = math.nan, []
     if lines_xn:

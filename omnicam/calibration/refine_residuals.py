@@ -21,7 +21,7 @@ pixels,
 
 Each kind of residual is one class (:class:`RimTerm`, :class:`FarLineTerm`,
 :class:`ReflectionTerm`) with ``residuals(R, t, y)`` and ``jacobian(posture, x, y, steps)``
-(posture columns, own nuisance columns); ``_Problem`` stacks the terms it is given.
+(posture columns, own nuisance columns); ``Problem`` stacks the terms it is given.
 
 Parameters: two small rotations of the mirror axis (about two axes perpendicular to it), the
 three components of the mirror origin ``tvec``, and per line a rotation of ``e`` (2) and a shift
@@ -43,9 +43,19 @@ from ..gauge import rotate_vector as _rotate
 from .reflection import plane_radius
 from .robust import mad_sigma
 
-__all__ = ["FarLineTerm", "ReflectionSpec", "ReflectionTerm", "RimTerm"]
+__all__ = [
+    "N_POSTURE",
+    "FarLineTerm",
+    "Posture",
+    "Problem",
+    "ReflectionSpec",
+    "ReflectionTerm",
+    "RimTerm",
+    "reflected_rays",
+    "reflection_spec",
+]
 
-_N_POSTURE = 5
+N_POSTURE = 5  # two angles of the mirror axis and tvec
 _STEPS = np.array([1e-7, 1e-7, 1e-6, 1e-6, 1e-6])  # posture steps of the difference quotients
 
 
@@ -79,7 +89,7 @@ def _line_from_rays(P, V, N, rim_radius):
     return Q, e
 
 
-class _Posture:
+class Posture:
     """The 5 posture parameters: two small rotations of the mirror axis about axes
     perpendicular to it, and the shift of ``tvec`` (the rotation about the axis is the gauge)."""
 
@@ -89,6 +99,7 @@ class _Posture:
         self.t0 = np.asarray(t0, np.float64)
 
     def __call__(self, x):
+        """``(R, t)`` of the parameters ``x`` (5,)."""
         axis = _rotate(self.a0, x[0] * self.b1 + x[1] * self.b2)
         return gauge_rotation(axis), self.t0 + x[2:5]
 
@@ -195,7 +206,7 @@ class RimTerm:
         R, t = posture(x)
         phi = self._foot_points(R, t, phi=self.phi0)
         cx, cy, nx, ny = self._normals(R, t, phi)
-        J = np.zeros((len(self.px), _N_POSTURE))
+        J = np.zeros((len(self.px), N_POSTURE))
         for k in range(2):
             xk = x.copy()
             xk[k] += steps[k]
@@ -215,7 +226,7 @@ class RimTerm:
         return J, np.zeros((len(self.px), 0))
 
 
-def _rays(mirror, R, t, xn):
+def reflected_rays(mirror, R, t, xn):
     """Reflected rays of normalised coordinates (eqs. 6-19) in the mirror frame, in numpy: the
     sets are small and this runs hundreds of times (no thread start-up per call)."""
     C = -R.T @ t  # F_M (eq. 17)
@@ -255,7 +266,7 @@ class FarLineTerm:
         self.line0 = []
         self.scale = np.ones(len(self))
         for xn in self.lines_xn:
-            P, V = _rays(self.mirror, R, t, xn)
+            P, V = reflected_rays(self.mirror, R, t, xn)
             ok = np.isfinite(V).all(axis=1)
             P, V = P[ok], V[ok]
             _, E = np.linalg.eigh(V.T @ V)
@@ -298,10 +309,10 @@ class FarLineTerm:
         if lines_xn is self.lines_xn:  # the rays depend on the posture only: cache them
             key = (R.tobytes(), t.tobytes())
             if self._cache[0] != key:
-                self._cache = (key, *_rays(self.mirror, R, t, np.concatenate(lines_xn)))
+                self._cache = (key, *reflected_rays(self.mirror, R, t, np.concatenate(lines_xn)))
             _, P, V = self._cache
         else:
-            P, V = _rays(self.mirror, R, t, np.concatenate(lines_xn))
+            P, V = reflected_rays(self.mirror, R, t, np.concatenate(lines_xn))
         idx = np.repeat(np.arange(len(sizes)), sizes)
         Q = np.empty((len(lines_xn), 3))
         E = np.empty((len(lines_xn), 3))
@@ -398,8 +409,8 @@ def _posture_fd(term, posture, x, y, steps):
     """Posture columns of a term by forward differences."""
     R, t = posture(x)
     base = term.residuals(R, t, y)
-    J = np.zeros((len(base), _N_POSTURE))
-    for k in range(_N_POSTURE):
+    J = np.zeros((len(base), N_POSTURE))
+    for k in range(N_POSTURE):
         xk = x.copy()
         xk[k] += steps[k]
         Rk, tk = posture(xk)
@@ -407,34 +418,38 @@ def _posture_fd(term, posture, x, y, steps):
     return J
 
 
-class _Problem:
+class Problem:
     """A sum of terms over the posture and each term's nuisance parameters."""
 
     def __init__(self, posture, terms):
         self.posture = posture
         self.terms = terms
-        self.slices, i = [], _N_POSTURE
+        self.slices, i = [], N_POSTURE
         for term in terms:
             self.slices.append(slice(i, i + term.n_nuisance))
             i += term.n_nuisance
         self.n = i
 
     def x0(self):
-        return np.concatenate([np.zeros(_N_POSTURE)] + [t.x0() for t in self.terms])
+        """The start: the posture unchanged, each term's nuisances at their start."""
+        return np.concatenate([np.zeros(N_POSTURE)] + [t.x0() for t in self.terms])
 
     def parts(self, x):
-        R, t = self.posture(x[:_N_POSTURE])
+        """Each term's residuals at ``x``, a list."""
+        R, t = self.posture(x[:N_POSTURE])
         return [term.residuals(R, t, x[s]) for term, s in zip(self.terms, self.slices)]
 
     def residuals(self, x):
+        """All the residuals at ``x``, px."""
         return np.concatenate(self.parts(x))
 
     def jacobian(self, x, steps=_STEPS):
+        """The Jacobian at ``x``: each term's posture and own nuisance columns."""
         rows = []
         for term, s in zip(self.terms, self.slices):
-            Jp, Jn = term.jacobian(self.posture, x[:_N_POSTURE], x[s], steps)
+            Jp, Jn = term.jacobian(self.posture, x[:N_POSTURE], x[s], steps)
             block = np.zeros((len(Jp), self.n))
-            block[:, :_N_POSTURE] = Jp
+            block[:, :N_POSTURE] = Jp
             block[:, s] = Jn
             rows.append(block)
         return np.concatenate(rows)
@@ -461,7 +476,7 @@ class ReflectionSpec(typing.NamedTuple):
     z_known: bool
 
 
-def _reflection_spec(reflection):
+def reflection_spec(reflection):
     """A checked :class:`ReflectionSpec` (any 5-sequence in its order), or None if the outline
     is empty or the circle not finite."""
     if reflection is None:

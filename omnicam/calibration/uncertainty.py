@@ -17,12 +17,12 @@ import numpy as np
 
 from ..gauge import perpendicular_basis
 from .refine_residuals import (
-    _N_POSTURE,
+    N_POSTURE,
+    Posture,
+    Problem,
     ReflectionTerm,
     RimTerm,
-    _Posture,
-    _Problem,
-    _reflection_spec,
+    reflection_spec,
 )
 
 __all__ = [
@@ -155,11 +155,11 @@ def _weighted_problem(K, mirror, R, t, rim_px, rim_sigma, reflection, reflection
     its :func:`correlation_factor`; the free ``z``'s weak pull carries (almost) no weight."""
     terms = [RimTerm(K, mirror, R, t, rim_px)]
     sig = [max(float(rim_sigma), floor)]
-    spec = _reflection_spec(reflection)
+    spec = reflection_spec(reflection)
     if spec is not None and reflection_sigma is not None and np.isfinite(reflection_sigma):
         terms.append(ReflectionTerm(K, mirror, R, t, *spec))
         sig.append(max(float(reflection_sigma), floor))
-    prob = _Problem(_Posture(R, t), terms)
+    prob = Problem(Posture(R, t), terms)
     w = []
     for term, s in zip(terms, sig):
         res = term.residuals(R, t, term.x0())
@@ -222,7 +222,7 @@ def posture_uncertainty(
     )
     if full is None:
         return Uncertainty(math.inf, math.inf)
-    return uncertainty_from_cov(full[:_N_POSTURE, :_N_POSTURE], t)
+    return uncertainty_from_cov(full[:N_POSTURE, :N_POSTURE], t)
 
 
 #: The stated region of the axis (:func:`profile_uncertainty`): where the profile cost rises
@@ -337,7 +337,7 @@ def profile_uncertainty(
     )
     if full is None:
         return Uncertainty(math.inf, math.inf)
-    cov = full[:_N_POSTURE, :_N_POSTURE]
+    cov = full[:N_POSTURE, :N_POSTURE]
     first = uncertainty_from_cov(cov, t)
     C = cov[:2, :2]
     lam, E = np.linalg.eigh(C)
@@ -410,7 +410,7 @@ def uncertainty_from_cov(cov, tvec):
 def perturbed_posture(R0, t0, x):
     """The posture ``x`` away from ``(R0, t0)`` in the 5 parameters of :class:`Uncertainty`:
     ``(R, t)``, the mirror axis turned by ``x[:2]`` (radians) and the origin moved by ``x[2:]``."""
-    return _Posture(np.asarray(R0, np.float64), t0)(np.asarray(x, np.float64))
+    return Posture(np.asarray(R0, np.float64), t0)(np.asarray(x, np.float64))
 
 
 def posture_offsets(rvec0, tvec0, rvec1, tvec1):

@@ -5,13 +5,13 @@ from __future__ import annotations
 
 import numpy as np
 
-from .optics import _dot, _lin, _Numbers, camera_rays, intersect_mirror, mirror_normal, reflect
-from .render import _rim_box
+from .optics import CameraNumbers, camera_rays, dot, intersect_mirror, lin, mirror_normal, reflect
+from .render import rim_box
 
 
-def _directions(num, pixels):
+def reflected_directions(num, pixels):
     """Unit reflected directions of pixels (mirror frame, NaN off the mirror): eqs. 6-15 only."""
-    v = _lin(camera_rays(num.K, num.D, pixels), num.R.T)
+    v = lin(camera_rays(num.K, num.D, pixels), num.R.T)
     t = intersect_mirror(num.a, num.b, num.rim, np.broadcast_to(num.C, v.shape), v)
     P = num.C + t[:, None] * v
     with np.errstate(invalid="ignore"):
@@ -19,14 +19,14 @@ def _directions(num, pixels):
         return d / np.linalg.norm(d, axis=1, keepdims=True)
 
 
-def _mirror_grid(camera):
+def mirror_grid(camera):
     """Integer pixels of the rim's bounding box and their reflected directions (h, w, 3)."""
-    num = _Numbers(camera)
-    lo, hi = _rim_box(num)
+    num = CameraNumbers(camera)
+    lo, hi = rim_box(num)
     xs = np.arange(lo[0], hi[0] + 1)
     ys = np.arange(lo[1], hi[1] + 1)
     gx, gy = np.meshgrid(xs, ys)
-    d = _directions(num, np.stack([gx.ravel(), gy.ravel()], axis=1))
+    d = reflected_directions(num, np.stack([gx.ravel(), gy.ravel()], axis=1))
     return xs, ys, d.reshape(len(ys), len(xs), 3)
 
 
@@ -56,17 +56,17 @@ def far_line_pixels(camera, p1, p2, n_points=40, valid=None, margin=2, _grid=Non
     (M, 2) float64 ndarray
         ``M <= n_points`` pixels, ordered along the line (empty when the line is not seen).
     """
-    num = _Numbers(camera)
+    num = CameraNumbers(camera)
     p1 = np.asarray(p1, np.float64)
     p2 = np.asarray(p2, np.float64)
     nrm = np.cross(p1, p2)
     nrm /= np.linalg.norm(nrm)
-    xs, ys, dgrid = _grid if _grid is not None else _mirror_grid(camera)
+    xs, ys, dgrid = _grid if _grid is not None else mirror_grid(camera)
 
     def side(px):
-        return _dot(_directions(num, px), nrm)
+        return dot(reflected_directions(num, px), nrm)
 
-    f = _dot(dgrid.reshape(-1, 3), nrm).reshape(dgrid.shape[:2])
+    f = dot(dgrid.reshape(-1, 3), nrm).reshape(dgrid.shape[:2])
     found = []
     for axis in (0, 1):
         fa = f[:, :-1] if axis == 0 else f[:-1, :]
@@ -90,9 +90,9 @@ def far_line_pixels(camera, p1, p2, n_points=40, valid=None, margin=2, _grid=Non
     if not found:
         return np.zeros((0, 2))
     pts = np.concatenate(found)
-    d = _directions(num, pts)
+    d = reflected_directions(num, pts)
     good = np.isfinite(d[:, 0])
-    on_arc = (_dot(np.cross(p1, d), nrm) >= 0) & (_dot(np.cross(d, p2), nrm) >= 0)
+    on_arc = (dot(np.cross(p1, d), nrm) >= 0) & (dot(np.cross(d, p2), nrm) >= 0)
     w, h = num.size
     inside = (
         (pts[:, 0] >= margin)
@@ -109,7 +109,7 @@ def far_line_pixels(camera, p1, p2, n_points=40, valid=None, margin=2, _grid=Non
     if not len(pts):
         return np.zeros((0, 2))
     u1 = p1 / np.linalg.norm(p1)
-    ang = np.arctan2(_dot(np.cross(u1, d), nrm), _dot(d, u1))
+    ang = np.arctan2(dot(np.cross(u1, d), nrm), dot(d, u1))
     order = np.argsort(ang)
     pts, ang = pts[order], ang[order]
     if len(pts) > n_points:

@@ -13,7 +13,7 @@ import numpy as np
 _CRITERIA = (cv2.TERM_CRITERIA_COUNT | cv2.TERM_CRITERIA_EPS, 100, 1e-14)
 
 
-def _lin(v, M):
+def lin(v, M):
     """``v @ M.T`` for (N, k) ``v`` and (m, k) ``M``, column by column."""
     M = np.asarray(M, np.float64)
     out = v[:, :1] * M[:, 0]
@@ -22,13 +22,13 @@ def _lin(v, M):
     return out
 
 
-def _dot(v, n):
+def dot(v, n):
     """``v @ n`` for (N, 3) ``v`` and a (3,) vector ``n``."""
     return v[:, 0] * n[0] + v[:, 1] * n[1] + v[:, 2] * n[2]
 
 
 # -- the camera's numbers --------------------------------------------------------------------
-class _Numbers:
+class CameraNumbers:
     """The truth camera read as numbers only (no method of it is called)."""
 
     def __init__(self, camera):
@@ -69,7 +69,7 @@ def camera_rays(K, D, pixels):
     """
     pix = np.asarray(pixels, np.float64).reshape(-1, 2)
     Kinv = np.linalg.inv(np.asarray(K, np.float64))
-    xn = _lin(pix, Kinv[:2, :2]) + Kinv[:2, 2]
+    xn = lin(pix, Kinv[:2, :2]) + Kinv[:2, 2]
     if D is not None:
         src = np.ascontiguousarray(xn.reshape(-1, 1, 2))
         Dn = np.asarray(D, np.float64)

@@ -8,9 +8,9 @@ import dataclasses
 import cv2
 import numpy as np
 
-from .optics import _Numbers
+from .optics import CameraNumbers
 from .scene import Photometric, Rig
-from .tracer import _trace_many
+from .tracer import trace_many
 
 
 @dataclasses.dataclass(frozen=True)
@@ -36,7 +36,7 @@ class Rendering:
     side_seen: bool
 
 
-def _rim_box(num):
+def rim_box(num):
     """Integer pixel bounds that can see the mirror (rim circle projected, plus margin)."""
     phi = np.linspace(0.0, 2.0 * np.pi, 721)
     rim = np.stack(
@@ -72,7 +72,7 @@ def render_rig(camera, rig=None, supersample=3):
     -------
     Rendering
     """
-    num = _Numbers(camera)
+    num = CameraNumbers(camera)
     rig = Rig() if rig is None else rig
     if isinstance(supersample, bool) or not isinstance(supersample, (int, np.integer)):
         raise ValueError(f"supersample must be an integer from 1 to 8, got {supersample!r}")
@@ -89,7 +89,7 @@ def render_rig(camera, rig=None, supersample=3):
     img = bg.copy()
     labels = np.zeros((h, w), np.int8)
     coverage = np.zeros((h, w), np.float32)
-    lo, hi = _rim_box(num)
+    lo, hi = rim_box(num)
     if rig.holder is not None:  # the holder's outer edge reaches farther
         scale = max(rig.holder.outer_axes) / num.rim
         mid = 0.5 * (lo + hi)
@@ -103,7 +103,7 @@ def render_rig(camera, rig=None, supersample=3):
         centres = np.stack([gx.ravel(), gy.ravel()], axis=1).astype(np.float64)
         block_bg = bg[y0 : y1 + 1, x0 : x1 + 1].reshape(-1, 3)
         # pass 1: pixel centres
-        lab, col, on = _trace_many(num, rig, centres)
+        lab, col, on = trace_many(num, rig, centres)
         side_seen |= bool((lab == 7).any())
         col = np.where((lab == 0)[:, None], block_bg, col).astype(np.float32)
         cov = on.astype(np.float32)
@@ -122,7 +122,7 @@ def render_rig(camera, rig=None, supersample=3):
                 ox, oy = np.meshgrid(off, off)
                 offs = np.stack([ox.ravel(), oy.ravel()], axis=1)
                 sub = (centres[idx][:, None, :] + offs[None, :, :]).reshape(-1, 2)
-                lab_s, col_s, on_s = _trace_many(num, rig, sub)
+                lab_s, col_s, on_s = trace_many(num, rig, sub)
                 side_seen |= bool((lab_s == 7).any())
                 bg_s = np.repeat(block_bg[idx], s * s, axis=0)
                 col_s = np.where((lab_s == 0)[:, None], bg_s, col_s)

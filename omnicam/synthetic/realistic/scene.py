@@ -36,9 +36,8 @@ LABELS = {
     "strut_reflected": 9,  # ... a strut, seen in the mirror
     "board": 10,  # ... a chessboard (Rig.boards)
 }
-_L = LABELS
-_MIRROR_LABELS = (3, 4, 5, 6, 7, 8, 9, 10)
-_FRONT_LABELS = (5, 6)
+MIRROR_LABELS = (3, 4, 5, 6, 7, 8, 9, 10)
+FRONT_LABELS = (5, 6)
 
 
 # -- geometry descriptions ----------------------------------------------------------------------

@@ -9,10 +9,10 @@ import math
 import cv2
 import numpy as np
 
-from .far_lines import _mirror_grid, far_line_pixels
-from .optics import _Numbers
+from .far_lines import far_line_pixels, mirror_grid
+from .optics import CameraNumbers
 from .render import degrade, render_rig
-from .scene import _FRONT_LABELS, VARIANTS, BodyGeometry, Holder, Photometric, Rig, RoomScene, Strut
+from .scene import FRONT_LABELS, VARIANTS, BodyGeometry, Holder, Photometric, Rig, RoomScene, Strut
 
 
 def random_room(rng, dark_floor=False):
@@ -97,7 +97,7 @@ def random_struts(rng, camera, count=None):
     line of sight from the camera centre to a mirror point at 25-60 % of the rim radius, 55-80 %
     of the way to the mirror: in the image a radial stripe from the rim inwards.
     """
-    num = _Numbers(camera)
+    num = CameraNumbers(camera)
     count = int(rng.integers(2, 5)) if count is None else int(count)
     colour = (24.0, 24.0, 26.0) if rng.uniform() < 0.5 else (228.0, 228.0, 225.0)
     phi0 = rng.uniform(0, 2 * np.pi)
@@ -330,7 +330,7 @@ def stress_cases(n=100, seed=0, image_size=None):
 
 def _reflection_visible(rendering, size, n_sectors=36):
     """Whether the barrel front's silhouette is in the frame and contrasts with its surround."""
-    front = np.isin(rendering.labels, _FRONT_LABELS).astype(np.uint8)
+    front = np.isin(rendering.labels, FRONT_LABELS).astype(np.uint8)
     if front.sum() < 20:
         return False
     w, h = size
@@ -373,7 +373,7 @@ def render_case(case):
     if not isinstance(case, StressCase):
         raise ValueError(f"case must be a StressCase, got {type(case).__name__}")
     camera = case.camera()
-    num = _Numbers(camera)
+    num = CameraNumbers(camera)
     rng = np.random.default_rng([case.seed, case.index, 1])
     flags = case.flags
     room = random_room(rng, dark_floor="dark_floor" in flags)
@@ -406,7 +406,7 @@ def render_case(case):
     scene = np.isin(rendering.labels, (3,)).astype(np.uint8)
     valid = cv2.erode(scene, np.ones((7, 7), np.uint8)).astype(bool)
     lines = []
-    grid = _mirror_grid(camera)
+    grid = mirror_grid(camera)
     for p1, p2 in room.edges():
         px = far_line_pixels(camera, p1, p2, n_points=40, valid=valid, _grid=grid)
         if len(px) >= 8:

@@ -8,10 +8,10 @@ import math
 import cv2
 import numpy as np
 
-from .optics import _dot, _lin
+from .optics import dot, lin
 
 
-def _keep_nearer(t_best, lab, c_out, t, label, colors):
+def keep_nearer(t_best, lab, c_out, t, label, colors):
     """Where ``t < t_best`` the hit at ``t`` wins: its label and colour are written into
     ``lab`` and ``c_out`` (in place); returns the new nearest distances."""
     nearer = t < t_best
@@ -22,7 +22,7 @@ def _keep_nearer(t_best, lab, c_out, t, label, colors):
     return np.where(nearer, t, t_best)
 
 
-def _rod_hits(o, v, strut):
+def rod_hits(o, v, strut):
     """Entry ``t`` of unit rays on a strut's cylinder (inf where missed) and ``dist / radius``.
 
     Exact for the cylinder's silhouette: a ray touches it where its distance to the axis line
@@ -33,9 +33,9 @@ def _rod_hits(o, v, strut):
     length = float(np.linalg.norm(u))
     e = u / length
     w = o - s0
-    bb = _dot(v, e)
+    bb = dot(v, e)
     d = np.einsum("ij,ij->i", v, w)
-    ew = _dot(w, e)
+    ew = dot(w, e)
     denom = 1.0 - bb * bb
     with np.errstate(invalid="ignore", divide="ignore"):
         t = (bb * ew - d) / denom
@@ -49,7 +49,7 @@ def _rod_hits(o, v, strut):
     return np.where(ok, t_in, np.inf), dist / rr
 
 
-def _near_body(o, v, body):
+def near_body(o, v, body):
     """Indices of camera-frame rays that pass the body's bounding sphere (ahead of them)."""
     zlo = min(0.0, body.z_box - body.depth_box)
     zc = 0.5 * (zlo + body.z_barrel)
@@ -61,7 +61,7 @@ def _near_body(o, v, body):
     return np.flatnonzero((miss2 <= rad2) & (tc > 0))
 
 
-def _body_hits(o, v, body):
+def body_hits(o, v, body):
     """Nearest hit of camera-frame rays on the body: ``t`` (inf: none), part label, hit point."""
     n = len(o)
     t_best = np.full(n, np.inf)
@@ -118,17 +118,17 @@ def _body_hits(o, v, body):
     return t_best, label, X
 
 
-def _board_hits(o, v, board):
+def board_hits(o, v, board):
     """Hits of rays ``o + t v`` (mirror frame, t > 0) on a :class:`Chessboard`: ``t`` (inf where
     missed) and the BGR colour of the hit (black or white square, or the white margin)."""
     Rb = cv2.Rodrigues(np.asarray(board.rvec, np.float64).reshape(3, 1))[0]
     tb = np.asarray(board.tvec, np.float64)
     nrm = Rb[:, 2]
-    den = _dot(v, nrm)
+    den = dot(v, nrm)
     with np.errstate(divide="ignore", invalid="ignore"):
-        t = (float(tb @ nrm) - _dot(o, nrm)) / den
+        t = (float(tb @ nrm) - dot(o, nrm)) / den
         X = o + np.where(np.isfinite(t), t, 0.0)[:, None] * v
-    xb = _lin(X - tb, Rb.T)  # board frame: R^T (X - t)
+    xb = lin(X - tb, Rb.T)  # board frame: R^T (X - t)
     cols, rows = (int(c) for c in board.pattern_size)
     fx = xb[:, 0] / board.square_size
     fy = xb[:, 1] / board.square_size
@@ -145,7 +145,7 @@ def _board_hits(o, v, board):
 
 
 # -- shading -------------------------------------------------------------------------------------
-def _shade_room(room, d):
+def shade_room(room, d):
     """Colours (N, 3) float64 of unit directions ``d`` (mirror frame) in the room at infinity."""
     n = len(d)
     c, s = math.cos(math.radians(room.yaw_deg)), math.sin(math.radians(room.yaw_deg))
@@ -190,7 +190,7 @@ def _shade_room(room, d):
     return col, label
 
 
-def _shade_body(body, X, label):
+def shade_body(body, X, label):
     """Colours of body hits (camera frame hit points ``X``, labels 5-8)."""
     col = np.zeros((len(X), 3))
     rho = np.hypot(X[:, 0], X[:, 1])
@@ -226,7 +226,7 @@ def _shade_body(body, X, label):
     return col
 
 
-def _shade_holder(holder, X):
+def shade_holder(holder, X):
     """Colours of hits on the holder plate (mirror-frame points ``X``)."""
     if holder.kind == "white":
         base = np.array([232.0, 234.0, 236.0])

@@ -7,17 +7,17 @@ import math
 
 import numpy as np
 
-from .optics import _lin, _Numbers, camera_rays, intersect_mirror, mirror_normal, reflect
+from .optics import CameraNumbers, camera_rays, intersect_mirror, lin, mirror_normal, reflect
 from .scene import Rig
 from .surfaces import (
-    _board_hits,
-    _body_hits,
-    _keep_nearer,
-    _near_body,
-    _rod_hits,
-    _shade_body,
-    _shade_holder,
-    _shade_room,
+    board_hits,
+    body_hits,
+    keep_nearer,
+    near_body,
+    rod_hits,
+    shade_body,
+    shade_holder,
+    shade_room,
 )
 
 _CHUNK = 1 << 18  # samples traced per chunk
@@ -29,7 +29,7 @@ def _trace_chunk(num, rig, pixels):
     label = np.zeros(n, np.int8)
     col = np.zeros((n, 3))
     vc = camera_rays(num.K, num.D, pixels)
-    V = _lin(vc, num.R.T)  # V_M = R^T V_C  (eq. 16)
+    V = lin(vc, num.R.T)  # V_M = R^T V_C  (eq. 16)
     O = np.broadcast_to(num.C, V.shape)
     t_m = intersect_mirror(num.a, num.b, num.rim, O, V)
     hit = np.isfinite(t_m)
@@ -51,11 +51,11 @@ def _trace_chunk(num, rig, pixels):
             & (Xh[:, 0] ** 2 + Xh[:, 1] ** 2 >= num.rim**2)
         )
         label[on] = 1
-        col[on] = _shade_holder(rig.holder, Xh[on])
+        col[on] = shade_holder(rig.holder, Xh[on])
         t_prim = np.where(on, th, t_prim)
     # struts seen directly, in front of the mirror or the holder
     for strut in rig.struts:
-        ts, q = _rod_hits(O, V, strut)
+        ts, q = rod_hits(O, V, strut)
         front = ts < t_prim
         if front.any():
             label[front] = 2
@@ -77,27 +77,27 @@ def _trace_chunk(num, rig, pixels):
         lab = np.zeros(len(idx), np.int8)
         c_out = np.zeros((len(idx), 3))
         if rig.body is not None:
-            oc = _lin(Pm, num.R) + num.t  # camera frame
-            vcam = _lin(dm, num.R)
-            near = _near_body(oc, vcam, rig.body)
-            tb, lb, Xb = _body_hits(oc[near], vcam[near], rig.body)
+            oc = lin(Pm, num.R) + num.t  # camera frame
+            vcam = lin(dm, num.R)
+            near = near_body(oc, vcam, rig.body)
+            tb, lb, Xb = body_hits(oc[near], vcam[near], rig.body)
             got = np.isfinite(tb)
             t_best[near] = tb
             lab[near[got]] = lb[got]
-            c_out[near[got]] = _shade_body(rig.body, Xb[got], lb[got])
+            c_out[near[got]] = shade_body(rig.body, Xb[got], lb[got])
         for strut in rig.struts:
-            ts, q = _rod_hits(Pm, dm, strut)
+            ts, q = rod_hits(Pm, dm, strut)
             shade = (
                 np.asarray(strut.color)
                 * (0.7 + 0.3 * np.sqrt(np.clip(1.0 - q**2, 0.0, 1.0)))[:, None]
             )
-            t_best = _keep_nearer(t_best, lab, c_out, ts, 9, shade)
+            t_best = keep_nearer(t_best, lab, c_out, ts, 9, shade)
         for board in rig.boards:
-            tb, cb = _board_hits(Pm, dm, board)
-            t_best = _keep_nearer(t_best, lab, c_out, tb, 10, cb)
+            tb, cb = board_hits(Pm, dm, board)
+            t_best = keep_nearer(t_best, lab, c_out, tb, 10, cb)
         sky = ~np.isfinite(t_best)
         if sky.any():
-            c_sky, l_sky = _shade_room(rig.room, dm[sky])
+            c_sky, l_sky = shade_room(rig.room, dm[sky])
             c_out[sky] = c_sky
             lab[sky] = l_sky
         label[idx] = lab
@@ -105,7 +105,7 @@ def _trace_chunk(num, rig, pixels):
     return label, col, P, d, on_mirror
 
 
-def _trace_many(num, rig, pixels):
+def trace_many(num, rig, pixels):
     """:func:`_trace_chunk` over chunks: labels, colours and the on-mirror flags."""
     out = [_trace_chunk(num, rig, pixels[i : i + _CHUNK]) for i in range(0, len(pixels), _CHUNK)]
     return tuple(np.concatenate([o[j] for o in out]) for j in (0, 1, 4))
@@ -132,7 +132,7 @@ def trace(camera, pixels, rig=None):
         Mirror points and unit reflected directions (mirror frame); NaN where the primary ray
         does not reach the mirror (missed, or occluded by a strut).
     """
-    num = _Numbers(camera)
+    num = CameraNumbers(camera)
     rig = Rig() if rig is None else rig
     pix = np.asarray(pixels, np.float64).reshape(-1, 2)
     out = [_trace_chunk(num, rig, pix[i : i + _CHUNK])[:4] for i in range(0, len(pix), _CHUNK)]
