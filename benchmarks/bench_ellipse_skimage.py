@@ -41,7 +41,7 @@ from skimage.measure import EllipseModel, profile_line, ransac
 
 import omnicam
 from omnicam import synthetic
-from omnicam.calibration import rim
+from omnicam.calibration import rim, rim_coarse, rim_fit
 from omnicam.calibration.ellipse import (
     coeffs_to_conic,
     conic_distance,
@@ -54,7 +54,7 @@ from omnicam.calibration.ellipse import (
     ransac_conic,
     sampson_distances,
 )
-from omnicam.calibration.rim import _fit_with_mask, fit_rim
+from omnicam.calibration.rim_fit import fit_rim, fit_with_mask
 
 HERE = os.path.dirname(os.path.abspath(__file__))
 PHOTO = os.path.join(
@@ -211,7 +211,7 @@ def section_ransac(rigs):
                 try:
                     if mask is None or mask.sum() < 5:
                         raise ValueError("no consensus")
-                    err = rms(conic_distance(_fit_with_mask(pts, N, mask, True, 2.0).conic, true))
+                    err = rms(conic_distance(fit_with_mask(pts, N, mask, True, 2.0).conic, true))
                 except ValueError:
                     err = np.inf
                 if not err <= 1.0:
@@ -289,7 +289,8 @@ def section_end_to_end(repeat, photo):
         K = np.array([[f, 0, fit.center[0]], [0, f, fit.center[1]], [0, 0, 1.0]])
         cases.append(("real photo 1920x1080", img, K, mirror))
     calibrate = omnicam.MisalignedHyperbolicCamera.calibrate
-    saved = rim.direct_ellipse, rim.ransac_conic
+    fitters = (rim_fit, rim_coarse)  # the modules that call the two fits
+    saved = [(m.direct_ellipse, m.ransac_conic) for m in fitters]
     fits = [0, 0.0]  # direct fits in the last calibrate and their time
 
     def counted(direct):
@@ -307,7 +308,8 @@ def section_end_to_end(repeat, photo):
             outs = {}
             for rep in range(repeat + 1):  # the first round warms up
                 for v, (direct, rsc) in variants.items():
-                    rim.direct_ellipse, rim.ransac_conic = counted(direct), rsc
+                    for m in fitters:
+                        m.direct_ellipse, m.ransac_conic = counted(direct), rsc
                     fit, t_rim = clocked(rim.detect_rim, img)
                     fits[:] = [0, 0.0]
                     (_, report), t_cal = clocked(calibrate, K, mirror, image=img)
@@ -334,7 +336,8 @@ def section_end_to_end(repeat, photo):
                     + (" (ambiguous)" if rep.ambiguous else "")
                 )
     finally:
-        rim.direct_ellipse, rim.ransac_conic = saved
+        for m, (direct, rsc) in zip(fitters, saved):
+            m.direct_ellipse, m.ransac_conic = direct, rsc
 
 
 def section_import(repeat):

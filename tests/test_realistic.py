@@ -12,6 +12,9 @@ import pytest
 
 from omnicam import MisalignedHyperbolicCamera, synthetic
 from omnicam.synthetic import realistic as rl
+from omnicam.synthetic.realistic.optics import CameraNumbers, lin
+from omnicam.synthetic.realistic.scene import MIRROR_LABELS
+from omnicam.synthetic.realistic.stress import _reflection_visible
 
 FRONT = (rl.LABELS["glass"], rl.LABELS["front_ring"])
 
@@ -26,13 +29,13 @@ DISTORTED = _rig(4.0, 100.0, (-2.0, 1.0, 2.0), D=[-0.08, 0.02, 0.0008, -0.0005, 
 def _mirror_edge_along(camera, centre, targets, lo=0.5, hi=1.5, iters=60):
     """Own tracer: where the mirror ends on rays from ``centre`` through ``targets`` (bisection
     on the fraction of the way, inside at ``lo``, outside at ``hi``)."""
-    num = rl._Numbers(camera)
+    num = CameraNumbers(camera)
     a = np.full(len(targets), lo)
     b = np.full(len(targets), hi)
     for _ in range(iters):
         m = 0.5 * (a + b)
         px = centre + m[:, None] * (targets - centre)
-        v = rl._lin(rl.camera_rays(num.K, num.D, px), num.R.T)
+        v = lin(rl.camera_rays(num.K, num.D, px), num.R.T)
         inside = np.isfinite(
             rl.intersect_mirror(num.a, num.b, num.rim, np.broadcast_to(num.C, v.shape), v)
         )
@@ -85,9 +88,9 @@ def test_rendered_mask_edge_matches_rim_ellipse_within_half_a_pixel():
 
 def test_reflection_law_angle_in_equals_angle_out():
     cam = _rig()
-    num = rl._Numbers(cam)
+    num = CameraNumbers(cam)
     pix = cam.rim_image_points(50) * 0.6 + 0.4 * cam.K[:2, 2]
-    v = rl._lin(rl.camera_rays(num.K, num.D, pix), num.R.T)
+    v = lin(rl.camera_rays(num.K, num.D, pix), num.R.T)
     t = rl.intersect_mirror(num.a, num.b, num.rim, np.broadcast_to(num.C, v.shape), v)
     P = num.C + t[:, None] * v
     assert (
@@ -208,9 +211,9 @@ def test_reflection_visible_follows_the_contrast_of_the_silhouette():
     seen = rl.render_rig(cam, rl.Rig(body=silver), supersample=2)
     hidden = rl.render_rig(cam, rl.Rig(body=dark), supersample=2)
     assert (seen.labels == rl.LABELS["box"]).sum() > 100  # the box shows around the barrel
-    assert rl._reflection_visible(seen, cam.image_size)
-    assert not rl._reflection_visible(hidden, cam.image_size)  # dark front on a dark box
-    assert not rl._reflection_visible(rl.render_rig(cam, rl.Rig(), 2), cam.image_size)
+    assert _reflection_visible(seen, cam.image_size)
+    assert not _reflection_visible(hidden, cam.image_size)  # dark front on a dark box
+    assert not _reflection_visible(rl.render_rig(cam, rl.Rig(), 2), cam.image_size)
 
 
 def test_clipped_frame_really_clips_the_rim():
@@ -219,7 +222,7 @@ def test_clipped_frame_really_clips_the_rim():
     h = r.image.shape[0]
     rim = r.camera.rim_image_points(360)
     assert rim[:, 1].min() < 0 and rim[:, 1].max() > h - 1  # the rim overflows top and bottom
-    mirror = np.isin(r.labels, rl._MIRROR_LABELS)
+    mirror = np.isin(r.labels, MIRROR_LABELS)
     assert mirror[0].any() and mirror[-1].any()  # the mirror is cut by the frame
 
 

@@ -5,9 +5,12 @@ import numpy as np
 import pytest
 from conftest import REAL_PHOTO, white_holder_render
 
+import omnicam
 from omnicam import synthetic
+from omnicam.calibration import rim as rim_module
 from omnicam.calibration.rim import (
     RimFit,
+    RimRejected,
     conic_distance,
     conic_from_ellipse,
     detect_rim,
@@ -500,3 +503,35 @@ def test_detect_rim_metal_holder_whose_contrast_changes_sign_along_the_rim():
     assert ring_l < inside_l - 40 and ring_r > inside_r + 10  # the sign changes
     fit = detect_rim(img, expected=(115.0, 150.0))
     assert _rms_to_conic(fit.conic, rim) < 0.1
+
+
+def _jagged_disc(jitter, seed=1):
+    """A bright disc of radius 100 px whose edge zigzags by up to ``jitter`` px."""
+    rng = np.random.default_rng(seed)
+    img = np.zeros((320, 320), np.uint8)
+    t = np.linspace(0.0, 2.0 * np.pi, 90, endpoint=False)
+    r = 100.0 + rng.uniform(-jitter, jitter, len(t))
+    cv2.fillPoly(
+        img, [np.stack([160 + r * np.cos(t), 160 + r * np.sin(t)], 1).astype(np.int32)], 200
+    )
+    return img
+
+
+@pytest.mark.parametrize("jitter", [5.0, 8.0], ids=["too rough", "no ellipse"])
+def test_no_private_class_reaches_a_user_through_detect_rim(jitter):
+    """Every exception detect_rim raises on a valid image is a ValueError whose classes are
+    public names of omnicam (issue 29): a boundary too rough to be a rim is a
+    :class:`RimRejected`, an :class:`omnicam.EstimationError` that says what was found."""
+    with pytest.raises(ValueError, match="no ellipse found") as err:
+        detect_rim(_jagged_disc(jitter))
+    for cls in type(err.value).__mro__:
+        if cls.__module__.startswith("omnicam"):
+            assert not cls.__name__.startswith("_"), cls
+            assert (
+                getattr(rim_module, cls.__name__, None) is cls
+                or getattr(omnicam, cls.__name__) is cls
+            )
+    if jitter == 5.0:
+        assert isinstance(err.value, RimRejected) and isinstance(err.value, omnicam.EstimationError)
+        assert isinstance(err.value.fit, RimFit) and 0.3 <= err.value.support <= 1.0
+        assert err.value.fit.rms > 1.5 and "px RMS" in str(err.value)
