@@ -59,6 +59,7 @@ __all__ = [
     "MODEL_NAME",
     "MODEL_NAME_ASPHERE",
     "load_camera",
+    "read_mirror",
     "read_verdict",
     "save_camera",
 ]
@@ -75,15 +76,23 @@ def _read_mirror(r, version) -> Mirror:
     """The ``mirror`` map of a file of format ``version`` (1: a, b, rim_radius; 2: a kind)."""
     mnode = r.node("mirror")
     if version == FORMAT_VERSION:
-        if not isinstance(mnode, dict):
-            raise r.fail("mirror", "must be a map with a, b, rim_radius")
-        ab = [r.number(f"mirror.{k}", mnode) for k in ("a", "b", "rim_radius")]
-        return r.check("mirror", lambda v: HyperbolicMirror(*v), ab)
+        return _hyperboloid_of(r, mnode)
     if not isinstance(mnode, dict):
         raise r.fail("mirror", "must be a map with kind, R, k, rim_radius (and alpha, rho_n)")
     kind = r.node("mirror.kind", mnode)
     if kind != ASPHERE_KIND:
         raise r.fail("mirror.kind", f"must be {ASPHERE_KIND!r}, got {kind!r}")
+    return _asphere_of(r, mnode)
+
+
+def _hyperboloid_of(r, mnode) -> HyperbolicMirror:
+    if not isinstance(mnode, dict):
+        raise r.fail("mirror", "must be a map with a, b, rim_radius")
+    ab = [r.number(f"mirror.{k}", mnode) for k in ("a", "b", "rim_radius")]
+    return r.check("mirror", lambda v: HyperbolicMirror(*v), ab)
+
+
+def _asphere_of(r, mnode) -> AsphericMirror:
     R, k, rim = (r.number(f"mirror.{n}", mnode) for n in ("R", "k", "rim_radius"))
     alpha = mnode.get("alpha")
     alpha = [alpha] if is_number(alpha) else alpha  # XML: one item, a scalar
@@ -97,6 +106,39 @@ def _read_mirror(r, version) -> Mirror:
         lambda v: AsphericMirror(R, k, rim, tuple(map(float, v)), rho_n, vertex_z),
         alpha,
     )
+
+
+def read_mirror(path: PathLike) -> Mirror:
+    """The mirror alone, from a file's ``mirror`` map: a data sheet's mirror for the command
+    line (``omnicam calibrate --mirror-file``), or a calibration file's.
+
+    ``mirror: {kind: hyperboloid, a, b, rim_radius}`` (``kind`` may be left out, as format 1
+    writes it) or ``mirror: {kind: even_asphere, R, k, alpha, rho_n, vertex_z, rim_radius}``
+    (``alpha``, ``rho_n`` and ``vertex_z`` optional: none, the rim radius, 0), in a
+    ``cv2.FileStorage`` file (``.yaml``, ``.yml``, ``.xml``, ``.json``); other fields are
+    ignored.
+
+    Raises
+    ------
+    FileNotFoundError
+        No file at ``path``.
+    ValueError
+        A missing or malformed field, or a mirror the model refuses, naming the file and the
+        field.
+    """
+    r = reading(path, "mirror file")
+    mnode = r.node("mirror")
+    if not isinstance(mnode, dict):
+        raise r.fail("mirror", f"must be a map with kind {MIRROR_KINDS} and its parameters")
+    kind = mnode.get("kind", "hyperboloid")
+    if kind == "hyperboloid":
+        return _hyperboloid_of(r, mnode)
+    if kind == ASPHERE_KIND:
+        return _asphere_of(r, mnode)
+    raise r.fail("mirror.kind", f"must be one of {MIRROR_KINDS}, got {kind!r}")
+
+
+MIRROR_KINDS = "hyperboloid, even_asphere"
 
 
 def _write_mirror(fs, mirror: Mirror) -> None:
