@@ -564,7 +564,8 @@ def add_parser(sub):
         default=10.0,
         metavar="MM",
         help="plausibility limit on the distance of the camera centre from the mirror's "
-        "lower focus, in the mirror's unit (default %(default)g)",
+        "lower focus (another mirror: its nominal camera position, see --vertex-z), in the "
+        "mirror's unit (default %(default)g)",
     )
     checks.add_argument(
         "--force",
