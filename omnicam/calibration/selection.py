@@ -412,7 +412,9 @@ def user_choice(sel, index):
     )
 
 
-def select_candidate(candidates, cameras, far_lines, lower_focus, reflection=None):
+def select_candidate(
+    candidates, cameras, far_lines, lower_focus, reflection=None, focus_name="lower focus"
+):
     """Score the physical candidates by every cue given and choose one (section 3.2).
 
     Parameters
@@ -428,6 +430,8 @@ def select_candidate(candidates, cameras, far_lines, lower_focus, reflection=Non
         :func:`omnicam.mirror.nominal_camera_z`), for the fallback without any cue: the
         candidate whose camera is nearest it; None (a mirror without one): the candidate whose
         mirror axis is least tilted from the optical axis.
+    focus_name : str
+        What ``lower_focus`` is, as the fallback's warning names it.
     reflection : ReflectionEvidence, optional
         The camera's reflection fitted under each physical candidate; it chooses only if the
         best RMS is within its ``limit``.
@@ -465,7 +469,7 @@ def select_candidate(candidates, cameras, far_lines, lower_focus, reflection=Non
             fallback = "the mirror axis least tilted"
         else:
             chosen = _nearest_lower_focus(candidates, phys, lower_focus)
-            fallback = "the camera nearest the lower focus"
+            fallback = f"the camera nearest the {focus_name}"
         warnings.append(
             "no far_lines given and no camera reflection used: the choice between "
             f"the physical postures is ambiguous (fallback: {fallback}, "

@@ -19,7 +19,7 @@ import numpy as np
 from .._validate import float_array
 from ..camera import MisalignedCatadioptricCamera
 from ..images import to_gray
-from ..mirror import describe_mirror, nominal_camera_z
+from ..mirror import HyperbolicMirror, describe_mirror, nominal_camera_z
 from ..raytrace import normalize, to_pixels
 from . import chen
 from .cue_step import ReflectionCue, reflection_step
@@ -310,9 +310,9 @@ def selection_step(cands, cue, lines, mirror, K, D, rim=None):
         )
     cameras = candidate_cameras(cands.all, K, D, mirror) if lines else None
     z = nominal_camera_z(mirror)  # -c: the hyperboloid's lower focus
-    sel = select_candidate(
-        cands.all, cameras, lines, None if z is None else (0.0, 0.0, z), evidence
-    )
+    nominal = None if z is None else (0.0, 0.0, z)
+    name = "lower focus" if isinstance(mirror, HyperbolicMirror) else "nominal camera position"
+    sel = select_candidate(cands.all, cameras, lines, nominal, evidence, name)
     return sel, circles
 
 
