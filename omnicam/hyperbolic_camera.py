@@ -18,6 +18,7 @@ import numpy as np
 
 from . import views
 from ._typing import ArrayLike, FloatArray, PathLike, Size
+from ._validate import shown
 from .camera import MisalignedCatadioptricCamera
 from .formats.calibration_file import load_camera, save_camera
 from .formats.central_fit import fit_omnidir
@@ -212,6 +213,14 @@ class MisalignedHyperbolicCamera(MisalignedCatadioptricCamera):
             No file at ``path``.
         ValueError
             Anything else (see :func:`omnicam.formats.calibration_file.load_camera`), naming the
-            file and the field.
+            file and the field; a file of a mirror that is no hyperboloid (format 2), saying to
+            read it with :func:`omnicam.load_camera`.
         """
-        return cls.of(load_camera(path))
+        camera = load_camera(path)
+        if not isinstance(camera.mirror, HyperbolicMirror):
+            raise ValueError(
+                f"calibration file {shown(path)}: its mirror is an even asphere (format_version "
+                f"2), not a hyperboloid; MisalignedHyperbolicCamera is the hyperboloid's: read "
+                f"it with omnicam.load_camera, which returns a MisalignedCatadioptricCamera"
+            )
+        return cls.of(camera)

@@ -24,7 +24,7 @@ from ._typing import ArrayLike, FloatArray
 from ._validate import LENGTH_RANGE, float_array, real_number
 from .asphere import AsphericMirror
 
-__all__ = ["HyperbolicMirror", "Mirror"]
+__all__ = ["HyperbolicMirror", "Mirror", "describe_mirror", "nominal_camera_z"]
 
 
 def _positive_finite(name: str, value: float) -> float:
@@ -258,3 +258,42 @@ class HyperbolicMirror:
 #: The mirrors the ray tracer and the view tables take (through ``kernel_params()``, the seam
 #: of :mod:`omnicam._kernels.mirror`)
 Mirror = HyperbolicMirror | AsphericMirror
+
+
+def nominal_camera_z(mirror: Mirror) -> float | None:
+    """Where a rig built as designed puts the camera's centre: its height on the mirror axis
+    (mirror frame), or None when the mirror does not say.
+
+    - A :class:`HyperbolicMirror`: its lower focus, ``-c`` (the aligned HyperOmni rig of the
+      paper's eqs. 2-5, the one central placement).
+    - An :class:`~omnicam.asphere.AsphericMirror` that is a hyperboloid (``k < -1``, no
+      ``alpha``): its lower focus too, ``vertex_z - b - c`` with ``b = R / (-1 - k)``,
+      ``a^2 = R b`` (for ``HyperbolicMirror.as_asphere()`` the same ``-c``).
+    - Any other asphere with ``vertex_z > 0``: the mirror frame's origin, 0. The convention for
+      a mirror placed by its data sheet: the camera's centre of projection at the origin, the
+      vertex ``vertex_z`` above it (as :meth:`AsphericMirror.equiangular` places it).
+    - Otherwise (``vertex_z <= 0``: the frame says nothing of the camera) None; the checks that
+      need it (the rim's expected size, ``guess_K``, the camera's offset) say so and are left
+      out rather than guessed.
+    """
+    if isinstance(mirror, HyperbolicMirror):
+        return -mirror.c
+    if mirror.k < -1.0 and not mirror.alpha:
+        b = mirror.R / (-1.0 - mirror.k)
+        return mirror.vertex_z - b - math.sqrt(mirror.R * b + b * b)
+    if mirror.vertex_z > 0.0:
+        return 0.0
+    return None
+
+
+def describe_mirror(mirror: Mirror) -> str:
+    """The mirror's parameters for a message: ``a = 23.4, b = 28.1, rim radius 30`` for a
+    hyperboloid, ``even asphere R = 30, k = 0, vertex at Z = 40, rim radius 18`` (and its
+    polynomial terms) otherwise."""
+    if isinstance(mirror, HyperbolicMirror):
+        return f"a = {mirror.a:g}, b = {mirror.b:g}, rim radius {mirror.rim_radius:g}"
+    terms = f", {len(mirror.alpha)} polynomial terms" if mirror.alpha else ""
+    return (
+        f"even asphere R = {mirror.R:g}, k = {mirror.k:g}{terms}, vertex at Z = "
+        f"{mirror.vertex_z:g}, rim radius {mirror.rim_radius:g}"
+    )

@@ -43,7 +43,7 @@ from ..raytrace import normalize, to_pixels
 from . import selection, steps
 from .errors import EstimationError
 from .inputs import ImageOptions, edge_image
-from .plausibility import assess
+from .plausibility import assess, nominal_note
 from .report import CalibrationReport
 from .shape import bowed_far_lines
 
@@ -74,8 +74,13 @@ def calibrate(
     ----------
     K : (3, 3) array_like
         Camera matrix of the calibrated camera (skew allowed), non-singular.
-    mirror : HyperbolicMirror
-        Known mirror (``a``, ``b``, ``rim_radius``).
+    mirror : HyperbolicMirror or AsphericMirror
+        Known mirror (``a``, ``b``, ``rim_radius``; or any even asphere: a data sheet's, a
+        chessboard calibration's). The rim is a circle on the axis for every mirror of
+        revolution, so Chen's method, the candidates and the cues hold for any; the checks that
+        assume a rig built as designed put the camera at
+        :func:`omnicam.mirror.nominal_camera_z` (a mirror without one has them left out, with
+        a note among the warnings).
     image : ndarray, optional
         Grey or BGR image (uint8, uint16 or float); the rim is found by ``detect_rim``.
     boundary_points : (N, 2) or (N, 1, 2) array_like, optional
@@ -212,6 +217,9 @@ def _calibrate(
         )
         report.warnings.extend(str(w) for w in implausible)
         report = dataclasses.replace(report, plausibility=tuple(implausible))
+        note = nominal_note(mirror)  # a mirror that does not say where the camera sits
+        if note is not None:
+            report.warnings.append(note)
     return camera, report
 
 

@@ -40,6 +40,7 @@ import numpy as np
 
 from .._typing import FloatArray
 from .._validate import validate_K
+from ..asphere import AsphericMirror
 from ..gauge import canonical_rvec
 from ..mirror import HyperbolicMirror
 
@@ -214,8 +215,9 @@ def chen_candidates(Qe, mirror) -> list[Candidate]:
     ----------
     Qe : (3, 3) array_like
         Rim cone from :func:`normalized_conic` (one negative eigenvalue).
-    mirror : HyperbolicMirror
-        Gives the rim radius ``r`` and height ``z_rim``.
+    mirror : HyperbolicMirror or AsphericMirror
+        Gives the rim radius ``r`` and height ``z_rim`` (the rim is a circle on the axis for
+        every mirror of revolution: nothing else of the mirror enters).
 
     Returns
     -------
@@ -223,8 +225,10 @@ def chen_candidates(Qe, mirror) -> list[Candidate]:
         Four candidates in the order ``(l, m) = (0, 0), (0, 1), (1, 0), (1, 1)``; ``(l, m)`` and
         ``(l+1, m+1)`` share the rim circle and have opposite axes. Non-physical ones are marked.
     """
-    if not isinstance(mirror, HyperbolicMirror):
-        raise ValueError(f"mirror must be a HyperbolicMirror, got {type(mirror).__name__}")
+    if not isinstance(mirror, HyperbolicMirror | AsphericMirror):
+        raise ValueError(
+            f"mirror must be a HyperbolicMirror or an AsphericMirror, got {type(mirror).__name__}"
+        )
     Qe = np.asarray(Qe, np.float64)
     lam, V = _eigen(Qe)
     if not (lam[0] >= lam[1] > 0 > lam[2]):

@@ -11,6 +11,7 @@ import numpy as np
 
 from .._typing import ArrayLike
 from .._validate import float_array, validate_D, validate_image_size, validate_K
+from ..asphere import AsphericMirror
 from ..images import check_image, to_gray
 from ..mirror import HyperbolicMirror, Mirror
 from . import selection
@@ -65,8 +66,11 @@ class ImageOptions:
         K = validate_K(self.K)
         D = validate_D(self.D)
         mirror = self.mirror
-        if not isinstance(mirror, HyperbolicMirror):
-            raise ValueError(f"mirror must be a HyperbolicMirror, got {type(mirror).__name__}")
+        if not isinstance(mirror, HyperbolicMirror | AsphericMirror):
+            raise ValueError(
+                "mirror must be a HyperbolicMirror or an AsphericMirror, got "
+                f"{type(mirror).__name__}"
+            )
         if image is None and self.boundary_points is None:
             raise ValueError(
                 "give the image (the rim is detected) or boundary_points (pixels on the mirror rim)"

@@ -16,7 +16,15 @@ is far from it:
   pixel aspect ``fx / fy`` far from 1 (``K`` rescaled to another aspect ratio), a rim of another
   size than ``K`` and the mirror predict (``K`` for another resolution, wrong mirror);
 - the cues after refinement: far-line or outline residuals above ``max_residual_px``;
-- the mirror: ``a`` and ``b`` that fit clearly better swapped (:func:`swapped_mirror_warnings`).
+- the mirror: ``a`` and ``b`` that fit clearly better swapped (:func:`swapped_mirror_warnings`;
+  a hyperboloid's only).
+
+Any mirror of revolution: "the lower focus" is the mirror's nominal camera position
+(:func:`omnicam.mirror.nominal_camera_z`: the hyperboloid's lower focus ``-c``, an asphere's
+frame origin when its vertex is above it), and ``z_rim + c`` is ``z_rim - nominal_camera_z``.
+For a mirror without one (an asphere with ``vertex_z <= 0``) the checks that need it (the rim's
+size and centre, the camera's offset) are left out, :func:`expected_rim` and :func:`guess_K`
+raise ``ValueError`` saying so, and :func:`nominal_note` gives the report's note.
 
 Each finding is a :class:`PlausibilityWarning` whose message says what to check.
 """
@@ -30,7 +38,7 @@ import cv2
 import numpy as np
 
 from .._validate import positive_number, refuse_complex, validate_D, validate_K
-from ..mirror import HyperbolicMirror
+from ..mirror import HyperbolicMirror, describe_mirror, nominal_camera_z
 from ..raytrace import to_pixels
 from .ellipse import axes_angle, ellipse_from_conic
 
@@ -48,6 +56,7 @@ __all__ = [
     "focal_from_rim",
     "focus_offset",
     "guess_K",
+    "nominal_note",
     "rim_depth",
     "rim_radius_px",
     "swapped_mirror_warnings",
@@ -98,8 +107,38 @@ def tilt_deg(R) -> float:
 
 
 def focus_offset(camera_center, mirror) -> float:
-    """Distance of the camera centre (mirror frame) from the lower focus ``(0, 0, -c)``."""
-    return float(np.linalg.norm(np.asarray(camera_center, np.float64) - (0.0, 0.0, -mirror.c)))
+    """Distance of the camera centre (mirror frame) from the nominal camera position
+    ``(0, 0, nominal_camera_z(mirror))``: a hyperboloid's lower focus ``(0, 0, -c)``; NaN for
+    a mirror without one."""
+    z = nominal_camera_z(mirror)
+    if z is None:
+        return math.nan
+    return float(np.linalg.norm(np.asarray(camera_center, np.float64) - (0.0, 0.0, z)))
+
+
+def nominal_note(mirror) -> str | None:
+    """The report's note for a mirror without a nominal camera position (None for others)."""
+    if nominal_camera_z(mirror) is not None:
+        return None
+    return (
+        f"the mirror ({describe_mirror(mirror)}) does not say where the camera sits (its "
+        f"vertex is not above the frame's origin): the rim's expected size and centre and the "
+        f"camera's offset were not checked; place the mirror frame with the camera's centre "
+        f"at the origin (vertex_z > 0) to have them checked"
+    )
+
+
+def _aligned_depth(mirror) -> float:
+    """``z_rim - nominal_camera_z``: the rim's depth from the camera of the rig built as
+    designed (``z_rim + c`` for a hyperboloid); ``ValueError`` for a mirror without one."""
+    z = nominal_camera_z(mirror)
+    if z is None:
+        raise ValueError(
+            f"the mirror ({describe_mirror(mirror)}) does not say where the camera sits, so "
+            f"the rim's size cannot be predicted from it: give K, or place the mirror frame "
+            f"with the camera's centre at the origin (vertex_z > 0)"
+        )
+    return mirror.z_rim - z  # z_rim + c for a hyperboloid, to the last digit
 
 
 # -- what to expect from K and the mirror --------------------------------------------------------
@@ -114,8 +153,9 @@ def rim_radius_px(rim) -> float:
 
 def focal_from_rim(rim_px_radius, mirror) -> float:
     """The focal length (px) of the aligned rig whose image of the rim has the radius
-    ``rim_px_radius`` (px): ``f = r (z_rim + c) / rim_radius``."""
-    return rim_px_radius * (mirror.z_rim + mirror.c) / mirror.rim_radius
+    ``rim_px_radius`` (px): ``f = r (z_rim + c) / rim_radius`` (``z_rim - nominal_camera_z``
+    for any mirror; ``ValueError`` for a mirror without a nominal camera position)."""
+    return rim_px_radius * _aligned_depth(mirror) / mirror.rim_radius
 
 
 def rim_depth(f, rim_px_radius, rim_radius) -> float:
@@ -189,11 +229,17 @@ def guess_K(rim, mirror):
     ----------
     rim : RimFit
         The rim ellipse in the image (:func:`omnicam.detect_rim`, :func:`.rim.fit_rim`).
-    mirror : HyperbolicMirror
+    mirror : HyperbolicMirror or AsphericMirror
+        The aligned rig's camera at :func:`omnicam.mirror.nominal_camera_z`.
 
     Returns
     -------
     K : (3, 3) float64 ndarray
+
+    Raises
+    ------
+    ValueError
+        A mirror without a nominal camera position (no aligned rig to guess from).
     """
     f = focal_from_rim(rim_radius_px(rim), mirror)
     cx, cy = (float(v) for v in rim.center)
@@ -215,7 +261,8 @@ def expected_rim(
     Parameters
     ----------
     K : (3, 3) array_like
-    mirror : HyperbolicMirror
+    mirror : HyperbolicMirror or AsphericMirror
+        Any mirror: the lower focus is :func:`omnicam.mirror.nominal_camera_z`.
     D : array_like or None
     max_tilt_deg, max_offset_mm : float
         Positive limits.
@@ -223,12 +270,18 @@ def expected_rim(
     Returns
     -------
     ExpectedRim
+
+    Raises
+    ------
+    ValueError
+        A mirror without a nominal camera position (:func:`nominal_note`).
     """
     K = validate_K(K)
     D = validate_D(D)
     max_tilt_deg = _limit(max_tilt_deg, "max_tilt_deg")
     max_offset_mm = _limit(max_offset_mm, "max_offset_mm")
-    focus = np.array([0.0, 0.0, -mirror.c])
+    _aligned_depth(mirror)  # a mirror without a nominal camera position: ValueError
+    focus = np.array([0.0, 0.0, nominal_camera_z(mirror)])  # (0, 0, -c) for a hyperboloid
     rim = mirror.rim_points(36)
     aligned = _rim_ellipse(K, D, rim, np.eye(3), -focus)
     if aligned is None:
@@ -260,6 +313,24 @@ def expected_rim(
 
 
 # -- the checks ----------------------------------------------------------------------------------
+def _has_nominal(mirror) -> bool:
+    return nominal_camera_z(mirror) is not None
+
+
+def _params(mirror) -> str:
+    """The mirror's parameters to check, as a message names them."""
+    if isinstance(mirror, HyperbolicMirror):
+        return "a, b and rim radius"
+    return "R, k, polynomial terms, vertex height and rim radius"
+
+
+def _nominal_name(mirror) -> str:
+    """What the nominal camera position is, as a message names it."""
+    if isinstance(mirror, HyperbolicMirror):
+        return "lower focus"
+    return f"nominal camera position (0, 0, {nominal_camera_z(mirror):g})"
+
+
 def _rim_geometry(rim):
     """``(center, (major, minor))`` of a RimFit or of a (3, 3) conic."""
     if hasattr(rim, "center") and hasattr(rim, "axes"):
@@ -321,7 +392,14 @@ def check_plausibility(
     center, axes = _rim_geometry(rim)
     out = []
     fx, fy, cx, cy = K[0, 0], K[1, 1], K[0, 2], K[1, 2]
-    exp = expected_rim(K, mirror, None, max_tilt_deg, max_offset_mm)  # rim is in ideal pixels
+    hyperboloid = isinstance(mirror, HyperbolicMirror)
+    # rim is in ideal pixels; a mirror without a nominal camera position predicts no rim, and
+    # then nothing (any size, any centre) is implausible
+    exp = (
+        expected_rim(K, mirror, None, max_tilt_deg, max_offset_mm)
+        if _has_nominal(mirror)
+        else ExpectedRim(np.zeros(2), math.nan, (0.0, math.inf), math.inf, math.nan, math.nan)
+    )
     limits = f"tilt <= {max_tilt_deg:g} deg, offset <= {max_offset_mm:g}"
 
     # the rim's size against K and the mirror
@@ -337,8 +415,8 @@ def check_plausibility(
             PlausibilityWarning(
                 "rim_size",
                 f"the rim found has semi-axes {axes[0]:.1f} and {axes[1]:.1f} px, but K (f = "
-                f"{0.5 * (fx + fy):.1f} px) and the mirror (a = {mirror.a:g}, b = {mirror.b:g}, "
-                f"rim radius {mirror.rim_radius:g}) predict {exp.radius:.1f} px for an aligned "
+                f"{0.5 * (fx + fy):.1f} px) and the mirror ({describe_mirror(mirror)}) "
+                f"predict {exp.radius:.1f} px for an aligned "
                 f"rig and {lo:.1f}-{hi:.1f} px within {limits}{why}: check K, the mirror "
                 f"parameters and "
                 f"that the ellipse found is the mirror's rim (see the overlay; --rim-hint)",
@@ -411,8 +489,12 @@ def check_plausibility(
                 "units",
                 f"the mirror's rim radius is {mirror.rim_radius:g}: in metres? omnicam's "
                 f"lengths and limits (max_offset_mm = {max_offset_mm:g}) are in millimetres; "
-                f"give a, b and the rim radius in mm (e.g. {1000 * mirror.a:g} "
-                f"{1000 * mirror.b:g} {1000 * mirror.rim_radius:g})",
+                + (
+                    f"give a, b and the rim radius in mm (e.g. {1000 * mirror.a:g} "
+                    f"{1000 * mirror.b:g} {1000 * mirror.rim_radius:g})"
+                    if hyperboloid
+                    else "give the mirror's lengths in mm"
+                ),
                 mirror.rim_radius,
                 1.0,
             )
@@ -426,7 +508,7 @@ def check_plausibility(
                 "tilt",
                 f"the mirror axis is tilted {tilt:.1f} deg from the optical axis (limit "
                 f"{max_tilt_deg:g} deg; real rigs are within a few degrees): check K (resolution, "
-                f"aspect ratio), the mirror's a, b and rim radius, and that the ellipse found is "
+                f"aspect ratio), the mirror's {_params(mirror)}, and that the ellipse found is "
                 f"the mirror's rim (see the overlay); raise the limit (--max-tilt) only for a rig "
                 f"built tilted",
                 tilt,
@@ -438,10 +520,12 @@ def check_plausibility(
         out.append(
             PlausibilityWarning(
                 "offset",
-                f"the camera centre is {off:.1f} from the mirror's lower focus (limit "
-                f"{max_offset_mm:g}, mirror units): check K (resolution, focal length), the "
-                f"mirror's a, b (swapped?) and rim radius, and that the ellipse found is the "
-                f"mirror's rim; raise the limit (--max-offset) only for a rig built that way",
+                f"the camera centre is {off:.1f} from the mirror's {_nominal_name(mirror)} "
+                f"(limit {max_offset_mm:g}, mirror units): check K (resolution, focal length), "
+                f"the mirror's "
+                + ("a, b (swapped?) and rim radius" if hyperboloid else _params(mirror))
+                + ", and that the ellipse found is the "
+                "mirror's rim; raise the limit (--max-offset) only for a rig built that way",
                 off,
                 max_offset_mm,
             )
@@ -499,8 +583,8 @@ def swapped_mirror_warnings(
     list of PlausibilityWarning
         At most one, of kind ``"swapped_ab"``.
     """
-    if swapped is None or mirror.a == mirror.b:
-        return []
+    if swapped is None or not isinstance(mirror, HyperbolicMirror) or mirror.a == mirror.b:
+        return []  # a swap of a and b is a hyperboloid's mistake
     better = []
     for name, cost in given.get("costs", {}).items():
         other = swapped.get("costs", {}).get(name)
@@ -620,8 +704,8 @@ def assess(
                 f"camera's reflection in the overlay",
             )
         )
-    if recalibrate is None or mirror.a == mirror.b:
-        return out
+    if recalibrate is None or not isinstance(mirror, HyperbolicMirror) or mirror.a == mirror.b:
+        return out  # a swap of a and b is a hyperboloid's mistake
     costs = cue_costs(report)
     f = 0.5 * (camera.K[0, 0] + camera.K[1, 1])
     # eq. 31's score is a mean squared sine between the rays and their plane: sqrt * f ~ px

@@ -40,6 +40,7 @@ import numpy as np
 
 from ..gauge import gauge_rotation, perpendicular_basis
 from ..gauge import rotate_vector as _rotate
+from ..mirror import HyperbolicMirror
 from .reflection import plane_radius
 from .robust import mad_sigma
 
@@ -365,7 +366,9 @@ class ReflectionTerm:
         _, g = plane_radius(mirror, R0, t0, xn, self.z0, np.linalg.inv(K)[:2, :2])
         ok = np.isfinite(g) & (g > 0)
         self.scale = np.where(ok, 1.0 / np.where(ok, g, 1.0), 0.0)
-        self.prior = 1e-2 / mirror.c if self.free[1] else None
+        # a weak prior on z, relative to the mirror's size (c for a hyperboloid)
+        size = mirror.c if isinstance(mirror, HyperbolicMirror) else mirror.rim_radius
+        self.prior = 1e-2 / size if self.free[1] else None
 
     def __len__(self):
         return len(self.xn) + (self.prior is not None)

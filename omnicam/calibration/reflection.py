@@ -37,6 +37,7 @@ import numpy as np
 from scipy.optimize import minimize_scalar
 
 from .._typing import FloatArray
+from ..mirror import HyperbolicMirror
 from ..raytrace import distort_normalized
 from .reflection_detect import detect_reflection
 from .reflection_silhouette import ReflectionFit
@@ -70,23 +71,51 @@ class ReflectionCircle:
     rms: float = math.nan
 
 
+def behind_depth(mirror, vertex) -> float:
+    """How far behind the camera centre the reflection's circle may lie (mirror units): ``c /
+    2`` for a hyperboloid; for any other mirror half the camera's distance ``vertex`` to the
+    mirror's vertex (about ``c / 2`` for a hyperboloid's aligned rig too)."""
+    if isinstance(mirror, HyperbolicMirror):
+        return 0.5 * mirror.c
+    return 0.5 * float(vertex)
+
+
+def _surface(mirror):
+    """``(Z(q), dZ/dq(q))`` of the mirror's surface over ``q = (X, Y)``."""
+    if isinstance(mirror, HyperbolicMirror):
+        a2, b2 = mirror.a**2, mirror.b**2
+
+        def hyperboloid(q):  # Z = b sqrt(1 + (X^2 + Y^2) / a^2)  (eq. 1)
+            Z = math.sqrt(b2 * (1.0 + (q @ q) / a2))
+            return Z, b2 * q / (a2 * Z)
+
+        return hyperboloid
+
+    def asphere(q):  # Z = vertex_z + sag(rho); the normal is (dZ/dX, dZ/dY, -1)
+        Z = float(mirror.surface_z(q[0], q[1]))
+        return Z, mirror.normal(np.array([q[0], q[1], Z]))[:2]
+
+    return asphere
+
+
 def self_reflection_point(mirror, C, iters=20) -> FloatArray:
     """The mirror point nearest to ``C`` (mirror frame): where the camera sees itself.
 
-    Newton's method on ``f(X, Y) = |P(X, Y) - C|^2`` with ``P = (X, Y, Z(X, Y))`` on the sheet
-    ``Z = b sqrt(1 + (X^2 + Y^2) / a^2)`` (eq. 1), started below ``C`` on the sheet.
+    Newton's method on ``f(X, Y) = |P(X, Y) - C|^2`` with ``P = (X, Y, Z(X, Y))`` on the mirror
+    (the hyperboloid's sheet ``Z = b sqrt(1 + (X^2 + Y^2) / a^2)``, eq. 1, or any mirror of
+    revolution's surface), started below ``C`` on the surface.
 
     Returns
     -------
     (3,) float64 ndarray
     """
-    a2, b2 = mirror.a**2, mirror.b**2
+    surface = _surface(mirror)
+    scale = mirror.a if isinstance(mirror, HyperbolicMirror) else mirror.rim_radius
     C = np.asarray(C, np.float64)
     q = C[:2].copy()
 
     def grad(q):
-        Z = math.sqrt(b2 * (1.0 + (q @ q) / a2))
-        Zq = b2 * q / (a2 * Z)  # dZ/d(X, Y)
+        Z, Zq = surface(q)  # Z and dZ/d(X, Y)
         return (q - C[:2]) + (Z - C[2]) * Zq
 
     for _ in range(iters):
@@ -95,9 +124,9 @@ def self_reflection_point(mirror, C, iters=20) -> FloatArray:
         H = np.stack([(grad(q + h * e) - g) / h for e in np.eye(2)], axis=1)
         step = np.linalg.solve(H, g)
         q = q - step
-        if float(np.abs(step).max()) < 1e-13 * max(1.0, mirror.a):
+        if float(np.abs(step).max()) < 1e-13 * max(1.0, scale):
             break
-    return np.array([q[0], q[1], math.sqrt(b2 * (1.0 + (q @ q) / a2))])
+    return np.array([q[0], q[1], surface(q)[0]])
 
 
 def self_reflection_pixel(mirror, R, t, K, D=None) -> FloatArray:
@@ -205,8 +234,8 @@ def fit_circle(
     for k in range(2):
         d = h * Kinv2[:, k]
         rays += [_rays_camera(mirror, R, t, xn + d), _rays_camera(mirror, R, t, xn - d)]
-    vertex = float(np.linalg.norm(R @ np.array([0.0, 0.0, mirror.b]) + t))
-    z_lo, z_hi = -0.5 * mirror.c, Z_MAX_FRACTION * vertex
+    vertex = float(np.linalg.norm(R @ np.array([0.0, 0.0, mirror.vertex_z]) + t))
+    z_lo, z_hi = -behind_depth(mirror, vertex), Z_MAX_FRACTION * vertex
 
     def rms_at(zz):
         rho, xp, xm, yp, ym = (_radius_in_plane(P, V, zz) for P, V in rays)

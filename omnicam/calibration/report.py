@@ -10,6 +10,7 @@ import numpy as np
 
 from ..formats.verdict import Verdict, split_findings
 from ..images import to_bgr8
+from ..mirror import HyperbolicMirror, describe_mirror
 
 __all__ = ["CalibrationReport"]
 
@@ -235,9 +236,7 @@ class CalibrationReport:
         tilt = math.degrees(math.atan2(math.hypot(axis[0], axis[1]), axis[2]))
         lines = [
             "omnicam mirror posture calibration",
-            f"  mirror: assumed the hyperboloid a {cam.mirror.a:g}, b {cam.mirror.b:g}, rim "
-            f"{cam.mirror.rim_radius:g} (one image does not tell a paraboloid or a sphere "
-            f"from it; far lines that come out bowed do)",
+            _mirror_line(cam.mirror),
             f"  rim: {len(self.boundary_points)} boundary points, RMS {self.rim_rms:.4f} px",
             f"  rvec = [{', '.join(f'{v:.9f}' for v in cam.rvec)}]",
             f"  tvec = [{', '.join(f'{v:.6f}' for v in cam.tvec)}]",
@@ -427,6 +426,20 @@ class CalibrationReport:
             entries.append((_OTHER, f"{curve} under the other posture"))
         _text_box(canvas, entries, scale, thick, top=False, swatch=True)
         return canvas
+
+
+def _mirror_line(mirror) -> str:
+    """The summary's line on the mirror assumed."""
+    if isinstance(mirror, HyperbolicMirror):
+        return (
+            f"  mirror: assumed the hyperboloid a {mirror.a:g}, b {mirror.b:g}, rim "
+            f"{mirror.rim_radius:g} (one image does not tell a paraboloid or a sphere "
+            f"from it; far lines that come out bowed do)"
+        )
+    return (
+        f"  mirror: assumed the {describe_mirror(mirror)} (one image does not tell another "
+        f"profile from it; far lines that come out bowed do)"
+    )
 
 
 def _text_box(canvas, entries, scale, thick, top, swatch=False):

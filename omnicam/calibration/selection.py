@@ -322,6 +322,14 @@ def _score_far_lines(candidates, phys, cameras, far_lines, warnings):
     return scored, line_s
 
 
+def _least_tilted(candidates, phys):
+    """The fallback without any cue nor a nominal camera position: the physical candidate
+    whose mirror axis ``R e_z`` is nearest the optical axis (a tie to the lower index)."""
+    cos = [float(candidates[i].R[2, 2]) for i in phys]
+    near = max(cos) - 1e-12
+    return next(i for i, c in zip(phys, cos) if c >= near)
+
+
 def _nearest_lower_focus(candidates, phys, lower_focus):
     """The fallback without any cue: the physical candidate whose camera centre is nearest the
     lower focus."""
@@ -404,7 +412,9 @@ def user_choice(sel, index):
     )
 
 
-def select_candidate(candidates, cameras, far_lines, lower_focus, reflection=None):
+def select_candidate(
+    candidates, cameras, far_lines, lower_focus, reflection=None, focus_name="lower focus"
+):
     """Score the physical candidates by every cue given and choose one (section 3.2).
 
     Parameters
@@ -415,8 +425,13 @@ def select_candidate(candidates, cameras, far_lines, lower_focus, reflection=Non
         candidates that are not physical). Unused without far lines, where it may be None.
     far_lines : list of (N_i, 2) ndarray
         Validated far-line pixels (may be empty).
-    lower_focus : (3,) array_like
-        ``(0, 0, -c)``, for the fallback without any cue.
+    lower_focus : (3,) array_like or None
+        The nominal camera position (``(0, 0, -c)`` for a hyperboloid,
+        :func:`omnicam.mirror.nominal_camera_z`), for the fallback without any cue: the
+        candidate whose camera is nearest it; None (a mirror without one): the candidate whose
+        mirror axis is least tilted from the optical axis.
+    focus_name : str
+        What ``lower_focus`` is, as the fallback's warning names it.
     reflection : ReflectionEvidence, optional
         The camera's reflection fitted under each physical candidate; it chooses only if the
         best RMS is within its ``limit``.
@@ -449,11 +464,16 @@ def select_candidate(candidates, cameras, far_lines, lower_focus, reflection=Non
     if len(phys) == 1:
         return Selection(tuple(scored), phys[0], 1.0, False, scores, costs, sigma, tuple(warnings))
     if not costs:
-        chosen = _nearest_lower_focus(candidates, phys, lower_focus)
+        if lower_focus is None:
+            chosen = _least_tilted(candidates, phys)
+            fallback = "the mirror axis least tilted"
+        else:
+            chosen = _nearest_lower_focus(candidates, phys, lower_focus)
+            fallback = f"the camera nearest the {focus_name}"
         warnings.append(
             "no far_lines given and no camera reflection used: the choice between "
-            "the physical postures is ambiguous (fallback: the camera nearest the "
-            "lower focus, right about half of the time); give far_lines (pixels "
+            f"the physical postures is ambiguous (fallback: {fallback}, "
+            "right about half of the time); give far_lines (pixels "
             "along the image of a far straight line) or an image showing the "
             "camera's reflection"
         )

@@ -18,6 +18,8 @@ import math
 
 import numpy as np
 
+from ..mirror import HyperbolicMirror, describe_mirror
+
 __all__ = ["BOWED_FACTOR", "BOWED_FLOOR_PX", "bowed_far_lines", "far_line_scatter"]
 
 #: A far-line residual above this many times the pixels' own scatter is the model's misfit.
@@ -77,7 +79,7 @@ def bowed_far_lines(line_rms, far_lines, mirror) -> str | None:
         The far lines' RMS residual after the refinement, px (``RefineResult.line_rms``).
     far_lines : list of (N_i, 2) array_like
         Their pixels (:func:`far_line_scatter`).
-    mirror : HyperbolicMirror
+    mirror : HyperbolicMirror or AsphericMirror
         The mirror assumed, named in the message.
 
     Returns
@@ -94,6 +96,11 @@ def bowed_far_lines(line_rms, far_lines, mirror) -> str | None:
     return (
         f"the far lines do not come out straight: {line_rms:.2f} px RMS after refinement "
         f"against {scatter:.2f} px of their pixels' own scatter; the mirror may not be the "
-        f"hyperboloid a {mirror.a:g}, b {mirror.b:g} given (a paraboloid, a sphere, or other "
-        f"a and b), or a line is not straight or not far, or K and D are off"
+        + (
+            f"hyperboloid a {mirror.a:g}, b {mirror.b:g} given (a paraboloid, a sphere, or "
+            f"other a and b)"
+            if isinstance(mirror, HyperbolicMirror)
+            else f"{describe_mirror(mirror)} given (another profile)"
+        )
+        + ", or a line is not straight or not far, or K and D are off"
     )

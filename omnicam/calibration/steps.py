@@ -19,6 +19,7 @@ import numpy as np
 from .._validate import float_array
 from ..camera import MisalignedCatadioptricCamera
 from ..images import to_gray
+from ..mirror import HyperbolicMirror, describe_mirror, nominal_camera_z
 from ..raytrace import normalize, to_pixels
 from . import chen
 from .cue_step import ReflectionCue, reflection_step
@@ -37,6 +38,7 @@ from .refine import (
 )
 from .reflection import (
     ReflectionCircle,
+    behind_depth,
     fit_circle,
     plane_radius,
     self_reflection_pixel,
@@ -158,7 +160,7 @@ def rim_step(
             float_array(hint, "rim_hint", "(cx, cy, r): the rim's rough centre and radius in px")
         hint = check_hint(hint, (gray.shape[1], gray.shape[0]))  # bad hint: ValueError
         expected = None
-        if mirror is not None:
+        if mirror is not None and nominal_camera_z(mirror) is not None:
             expected = expected_rim(K, mirror, D, max_tilt_deg, max_offset_mm).radius_range
         try:
             detected = detect_rim(image, hint=hint, expected=expected)
@@ -167,8 +169,8 @@ def rim_step(
             if expected is not None and hint is None:  # the size was K's and the mirror's
                 why = (
                     f"{why if why.endswith(('?', '.')) else why + '.'} The expected size is "
-                    f"what K (fx = {K[0, 0]:.1f}, fy = {K[1, 1]:.1f} px) and the mirror (a = "
-                    f"{mirror.a:g}, b = {mirror.b:g}, rim radius {mirror.rim_radius:g}) "
+                    f"what K (fx = {K[0, 0]:.1f}, fy = {K[1, 1]:.1f} px) and the mirror "
+                    f"({describe_mirror(mirror)}) "
                     f"predict for rigs tilted up to {max_tilt_deg:g} deg and offset up to "
                     f"{max_offset_mm:g}: check fx and the mirror, or give a rim hint "
                     f"(rim_hint=(cx, cy, r); --rim-hint CX,CY,R on the command line)"
@@ -307,7 +309,10 @@ def selection_step(cands, cue, lines, mirror, K, D, rim=None):
             limit=max(2.0, 5.0 * cue.sigma) if np.isfinite(cue.sigma) else 2.0,
         )
     cameras = candidate_cameras(cands.all, K, D, mirror) if lines else None
-    sel = select_candidate(cands.all, cameras, lines, (0.0, 0.0, -mirror.c), evidence)
+    z = nominal_camera_z(mirror)  # -c: the hyperboloid's lower focus
+    nominal = None if z is None else (0.0, 0.0, z)
+    name = "lower focus" if isinstance(mirror, HyperbolicMirror) else "nominal camera position"
+    sel = select_candidate(cands.all, cameras, lines, nominal, evidence, name)
     return sel, circles
 
 
@@ -352,11 +357,12 @@ def _subsample(x, n):
 
 
 def _z_range(mirror, res):
-    """Where the reflection's circle may lie: from ``-c / 2`` behind the camera centre to the
-    mirror vertex's distance (as :func:`.reflection.fit_circle` searches, up to the vertex)."""
+    """Where the reflection's circle may lie: from ``-c / 2`` behind the camera centre (a
+    hyperboloid; :func:`.reflection.behind_depth` for any mirror) to the mirror vertex's
+    distance (as :func:`.reflection.fit_circle` searches, up to the vertex)."""
     R = cv2.Rodrigues(np.asarray(res.rvec, np.float64).reshape(3, 1))[0]
-    vertex = float(np.linalg.norm(R @ np.array([0.0, 0.0, mirror.b]) + res.tvec))
-    return -0.5 * mirror.c, vertex
+    vertex = float(np.linalg.norm(R @ np.array([0.0, 0.0, mirror.vertex_z]) + res.tvec))
+    return -behind_depth(mirror, vertex), vertex
 
 
 #: The reflection joins only if the posture it moves to is consistent with the rim alone:

@@ -7,6 +7,9 @@
                       [--boundary-points FILE] [--max-tilt DEG] [--max-offset MM] [--force]
                       [--candidates DIR] [--choose N]
                       -o CALIB [--no-refine] [--overlay PATH] [--report PAGE.html] [--overwrite]
+        (or any other mirror of revolution instead of --mirror: --sphere RADIUS RIM |
+         --paraboloid R RIM | --asphere R K RIM [--alpha A ...], each [--vertex-z Z] |
+         --equiangular GAIN R0 RIM | --mirror-file MIRROR.yaml)
     omnicam calibrate --chessboard CxR --square S IMAGES... --mirror A B RIM [--intrinsics K]
                       -o CALIB [--report PAGE.html]
     omnicam unwarp INPUT -c CALIB VIEW [VIEW ...] [--overwrite] [--max-frames N]

@@ -20,6 +20,7 @@ from ..formats.calibration_file import read_verdict
 from ..formats.verdict import Verdict
 from ..hyperbolic_camera import MisalignedHyperbolicCamera
 from ..images import file_kind, read_image
+from ..mirror import HyperbolicMirror
 
 PROG = "omnicam"
 
@@ -109,8 +110,10 @@ def warn_user(message):
 def load_calibration(path, say_doubt=False):
     """The camera of a calibration file; with ``say_doubt``, one warning line when its verdict
     records a doubt (:func:`doubt_line`)."""
-    try:
-        camera = MisalignedHyperbolicCamera.load(path)
+    try:  # any mirror (format 1 or 2); a hyperboloid's as the design's class
+        camera = calibration_file.load_camera(path)
+        if isinstance(camera.mirror, HyperbolicMirror):
+            camera = MisalignedHyperbolicCamera.of(camera)
     except (FileNotFoundError, ValueError) as e:
         raise CliError(one_line(e)) from None
     if say_doubt:

@@ -37,6 +37,7 @@ from ._common import (
     warn_user,
     write_image_file,
 )
+from .mirror_args import MIRROR_FLAGS, add_mirror_options, given_flags, mirror_of_args
 
 
 def _check_mode(args):
@@ -88,17 +89,20 @@ def _rig_inputs(args):
     if args.from_rig is not None:  # after a bump: K, D and the mirror of an earlier calibration
         rig = load_calibration(args.from_rig)
         return rig.K, rig.D, rig.mirror, rig.image_size, _k_from_rig(args.from_rig), rig
-    if args.mirror is None:
+    mirror = mirror_of_args(args)  # any other mirror of revolution (.mirror_args)
+    if mirror is None and args.mirror is None:
         raise CliError(
-            "calibrate: give the mirror: --mirror A B RIM (or calibrate from chessboards "
-            "with --chessboard, which needs no mirror, or take K, D and the mirror of an "
-            "earlier calibration with --from RIG.yaml)",
+            "calibrate: give the mirror: --mirror A B RIM (a hyperboloid), or --sphere, "
+            "--paraboloid, --asphere, --equiangular or --mirror-file (or calibrate from "
+            "chessboards with --chessboard, which needs no mirror, or take K, D and the mirror "
+            "of an earlier calibration with --from RIG.yaml)",
             2,
         )
-    try:
-        mirror = HyperbolicMirror(*args.mirror)
-    except ValueError as e:
-        raise CliError(f"--mirror: {e}") from None
+    if mirror is None:
+        try:
+            mirror = HyperbolicMirror(*args.mirror)
+        except ValueError as e:
+            raise CliError(f"--mirror: {e}") from None
     if args.intrinsics is not None:
         K, D, size = read_intrinsics(args.intrinsics)
         return K, D, mirror, size, {"K_source": "file", "K_file": args.intrinsics}, None
@@ -170,6 +174,13 @@ def cmd_calibrate(args):
                     f"--chessboard has no candidates",
                     2,
                 )
+        if given_flags(args) or args.alpha is not None or args.vertex_z is not None:
+            raise CliError(
+                "calibrate: --sphere, --paraboloid, --asphere, --equiangular and "
+                "--mirror-file are for one image; with --chessboard the mirror is --mirror A B "
+                "RIM or estimated from the boards",
+                2,
+            )
         report_page.check_report_output(args.report, args.overwrite)
         return pattern.cmd_calibrate_pattern(args)
     _check_mode(args)
@@ -257,11 +268,15 @@ def _guess_K_of_image(image, mirror, name, hint, boundary):
             f"CX,CY,R or --boundary-points, or the intrinsics"
             + aspect_note((image.shape[1], image.shape[0]))
         ) from None
-    K = guess_K(rim, mirror)
+    try:
+        K = guess_K(rim, mirror)
+    except ValueError as e:  # a mirror that does not say where the camera sits
+        raise CliError(f"--guess-k: {one_line(e)} (--vertex-z)") from None
     r = rim_radius_px(rim)
+    depth = "(z_rim + c)" if isinstance(mirror, HyperbolicMirror) else "(z_rim - camera's z)"
     note = (
         f"fx = fy = {K[0, 0]:.1f} px, principal point ({K[0, 2]:.1f}, {K[1, 2]:.1f}) at the "
-        f"rim's centre; f = {r:.1f} px (the rim's radius) x (z_rim + c) / rim_radius, as if the "
+        f"rim's centre; f = {r:.1f} px (the rim's radius) x {depth} / rim_radius, as if the "
         f"rig were aligned (the posture is only as right as this guess)"
     )
     return K, note
@@ -296,6 +311,9 @@ def _refuse_beside_guess(args):
 # the options whose values --from takes from its file (K, D and the mirror)
 _NOT_WITH_FROM = (
     ("mirror", "--mirror", "the mirror"),
+    *((dest, flag, "the mirror") for dest, flag in MIRROR_FLAGS),
+    ("alpha", "--alpha", "the mirror"),
+    ("vertex_z", "--vertex-z", "the mirror"),
     ("fx", "--fx", "K"),
     ("fy", "--fy", "K"),
     ("cx", "--cx", "K"),
@@ -420,10 +438,12 @@ def add_parser(sub):
         "the semi-axis ALONG the axis (the mirror's apex is B from the hyperboloid's centre, "
         "its foci are sqrt(A^2+B^2) from it); A is the semi-axis ACROSS it (the asymptotes "
         "rise B/A per unit of radius). Data sheets name them either way: one that writes "
-        "Z^2/a^2 - (X^2+Y^2)/b^2 = 1 means --mirror b a RIM. Required for one image (unless "
+        "Z^2/a^2 - (X^2+Y^2)/b^2 = 1 means --mirror b a RIM. One image needs it or another mirror "
+        "option below (unless "
         "--from); with --chessboard optional (a start; without it the mirror is estimated "
         "from the boards)",
     )
+    add_mirror_options(mirror)  # any other mirror of revolution: --sphere, --asphere, ...
     k = p.add_argument_group(
         "the camera's intrinsics",
         "one of --intrinsics, --fx/--fy/--cx/--cy [--dist], --guess-k or --from; with "
@@ -544,7 +564,8 @@ def add_parser(sub):
         default=10.0,
         metavar="MM",
         help="plausibility limit on the distance of the camera centre from the mirror's "
-        "lower focus, in the mirror's unit (default %(default)g)",
+        "lower focus (another mirror: its nominal camera position, see --vertex-z), in the "
+        "mirror's unit (default %(default)g)",
     )
     checks.add_argument(
         "--force",

@@ -8,6 +8,7 @@ import numpy as np
 
 from ..formats.calibration_file import read_verdict
 from ..formats.central_fit import fit_omnidir
+from ..mirror import HyperbolicMirror, nominal_camera_z
 from ..views import default_elevation_range
 from ._common import EXIT_OK, load_calibration, one_line
 
@@ -22,12 +23,15 @@ def posture(camera):
     tilt_azimuth_deg : float
         Direction of the tilt in the camera's x-y plane (``atan2`` of the axis' y and x).
     offset : (3,) float64 ndarray
-        Camera centre minus the lower focus ``(0, 0, -c)``, mirror frame (mm).
+        Camera centre minus the lower focus ``(0, 0, -c)`` (for any mirror its nominal camera
+        position, :func:`omnicam.mirror.nominal_camera_z`; NaN for a mirror without one),
+        mirror frame (mm).
     """
     axis = camera.R[:, 2]  # the mirror's +Z in the camera frame
     tilt = math.degrees(math.atan2(math.hypot(axis[0], axis[1]), axis[2]))
     azimuth = math.degrees(math.atan2(axis[1], axis[0])) if tilt > 0 else 0.0
-    offset = np.asarray(camera.camera_center) - np.array([0.0, 0.0, -camera.mirror.c])
+    z = nominal_camera_z(camera.mirror)
+    offset = np.asarray(camera.camera_center) - np.array([0.0, 0.0, math.nan if z is None else z])
     return tilt, azimuth, offset
 
 
@@ -52,20 +56,52 @@ def describe_reflection(camera):
     return f"{text}; default panorama: {band}"
 
 
+def describe_mirror_params(m):
+    """The mirror's kind and parameters, one line."""
+    if isinstance(m, HyperbolicMirror):
+        return (
+            f"a = {m.a:g} mm, b = {m.b:g} mm, rim radius = {m.rim_radius:g} mm "
+            f"(c = {m.c:.4f} mm, rim at Z = {m.z_rim:.4f} mm)"
+        )
+    alpha = ", ".join(f"{a:.6g}" for a in m.alpha)
+    terms = (
+        f"alpha = [{alpha}] mm of (rho / {m.rho_n:g} mm)^4, ^6, ..."
+        if m.alpha
+        else "no polynomial terms"
+    )
+    return (
+        f"even asphere: R = {m.R:g} mm, k = {m.k:g}, {terms}, vertex at Z = {m.vertex_z:g} mm, "
+        f"rim radius = {m.rim_radius:g} mm (rim at Z = {m.z_rim:.4f} mm; format_version 2)"
+    )
+
+
+def _offset_text(m, offset):
+    """The camera offset's row: from the lower focus (a hyperboloid) or the nominal camera
+    position (any mirror), or why there is none."""
+    if not np.all(np.isfinite(offset)):
+        return "none: the mirror does not say where the camera sits (vertex_z <= 0)"
+    where = (
+        "the lower focus"
+        if isinstance(m, HyperbolicMirror)
+        else f"the nominal camera position (0, 0, {nominal_camera_z(m):g})"
+    )
+    return (
+        f"{vector_text(offset)} mm from {where} (mirror frame), "
+        f"|offset| = {np.linalg.norm(offset):.4f} mm"
+    )
+
+
 def describe_camera(camera):
     """Multi-line text of a calibration: mirror, K, D, posture, best-fit viewpoint, the camera's
     own reflection."""
     m = camera.mirror
+    hyperboloid = isinstance(m, HyperbolicMirror)
     K = camera.K
     tilt, az, offset = posture(camera)
     viewpoint, rms = camera.best_fit_viewpoint()
     size = camera.image_size
     rows = [
-        (
-            "mirror",
-            f"a = {m.a:g} mm, b = {m.b:g} mm, rim radius = {m.rim_radius:g} mm "
-            f"(c = {m.c:.4f} mm, rim at Z = {m.z_rim:.4f} mm)",
-        ),
+        ("mirror", describe_mirror_params(m)),
         ("image size", "unknown" if size is None else f"{size[0]} x {size[1]}"),
         (
             "K",
@@ -79,15 +115,11 @@ def describe_camera(camera):
             "axis tilt",
             f"{tilt:.4f} deg, towards {az:.2f} deg in the camera's x-y plane",
         ),
-        (
-            "camera offset",
-            f"{vector_text(offset)} mm from the lower focus (mirror frame), "
-            f"|offset| = {np.linalg.norm(offset):.4f} mm",
-        ),
+        ("camera offset", _offset_text(m, offset)),
         (
             "viewpoint",
-            f"{vector_text(viewpoint)} mm, best fit to all mirror rays (mirror frame; "
-            f"the outer focus is (0, 0, {m.c:.4f}))",
+            f"{vector_text(viewpoint)} mm, best fit to all mirror rays (mirror frame"
+            + (f"; the outer focus is (0, 0, {m.c:.4f}))" if hyperboloid else ")"),
         ),
         (
             "viewpoint RMS",

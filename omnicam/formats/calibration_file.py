@@ -13,6 +13,19 @@ Layout (format_version 1)::
     camera_reflection: {r: 9., z: 12.}  (optional: the circle of the camera's reflection)
     verdict: {...}                  (optional: how far to trust it, see :class:`Verdict`)
 
+A camera whose mirror is an :class:`~omnicam.asphere.AsphericMirror` is written in format 2,
+the same layout with another model tag and the mirror as a map of its kind::
+
+    format_version: 2
+    model: misaligned_catadioptric
+    mirror: {kind: even_asphere, R: 25., k: -1.5, alpha: [0.01, ...], rho_n: 30.,
+             vertex_z: 0., rim_radius: 30.}   (alpha absent when it has no terms)
+
+A reader that ignored the new fields would read another camera, so the version changes: an
+omnicam that reads format 1 only refuses these files ("field 'format_version' is 2; this
+omnicam reads 1"), and this one reads both. A hyperboloid is written in format 1 whichever
+class holds it, so its files stay what they were, byte for byte.
+
 The ``verdict`` map (``format_version`` 1 all the same: every field of it is optional and
 readers ignore fields they do not know, so older omnicams read these files and files without it
 read as before) records what the calibration's report said when the file was written: where
@@ -34,21 +47,135 @@ import cv2
 import numpy as np
 
 from .._typing import PathLike
+from ..asphere import AsphericMirror
 from ..camera import MisalignedCatadioptricCamera
-from ..mirror import HyperbolicMirror
+from ..mirror import HyperbolicMirror, Mirror
 from .filestorage import atomic_filestorage, is_number, reading, same_values, write_int_seq
 from .verdict import Verdict
 
-__all__ = ["FORMAT_VERSION", "MODEL_NAME", "load_camera", "read_verdict", "save_camera"]
+__all__ = [
+    "FORMAT_VERSION",
+    "FORMAT_VERSION_ASPHERE",
+    "MODEL_NAME",
+    "MODEL_NAME_ASPHERE",
+    "load_camera",
+    "read_mirror",
+    "read_verdict",
+    "save_camera",
+]
 
-FORMAT_VERSION = 1
+FORMAT_VERSION = 1  # a hyperboloid's file
 MODEL_NAME = "misaligned_hyperbolic"  # the model tag of a calibration file
+FORMAT_VERSION_ASPHERE = 2  # an even asphere's file
+MODEL_NAME_ASPHERE = "misaligned_catadioptric"
+ASPHERE_KIND = "even_asphere"  # mirror.kind of a format 2 file
+_MODELS = {FORMAT_VERSION: MODEL_NAME, FORMAT_VERSION_ASPHERE: MODEL_NAME_ASPHERE}
+
+
+def _read_mirror(r, version) -> Mirror:
+    """The ``mirror`` map of a file of format ``version`` (1: a, b, rim_radius; 2: a kind)."""
+    mnode = r.node("mirror")
+    if version == FORMAT_VERSION:
+        return _hyperboloid_of(r, mnode)
+    if not isinstance(mnode, dict):
+        raise r.fail("mirror", "must be a map with kind, R, k, rim_radius (and alpha, rho_n)")
+    kind = r.node("mirror.kind", mnode)
+    if kind != ASPHERE_KIND:
+        raise r.fail("mirror.kind", f"must be {ASPHERE_KIND!r}, got {kind!r}")
+    return _asphere_of(r, mnode)
+
+
+def _hyperboloid_of(r, mnode) -> HyperbolicMirror:
+    if not isinstance(mnode, dict):
+        raise r.fail("mirror", "must be a map with a, b, rim_radius")
+    ab = [r.number(f"mirror.{k}", mnode) for k in ("a", "b", "rim_radius")]
+    return r.check("mirror", lambda v: HyperbolicMirror(*v), ab)
+
+
+def _asphere_of(r, mnode) -> AsphericMirror:
+    R, k, rim = (r.number(f"mirror.{n}", mnode) for n in ("R", "k", "rim_radius"))
+    alpha = mnode.get("alpha")
+    alpha = [alpha] if is_number(alpha) else alpha  # XML: one item, a scalar
+    alpha = [] if alpha is None else alpha
+    if not isinstance(alpha, list) or not all(map(is_number, alpha)):
+        raise r.fail("mirror.alpha", "must be a sequence of numbers")
+    rho_n = r.number("mirror.rho_n", mnode) if "rho_n" in mnode else None
+    vertex_z = r.number("mirror.vertex_z", mnode) if "vertex_z" in mnode else 0.0
+    return r.check(
+        "mirror",
+        lambda v: AsphericMirror(R, k, rim, tuple(map(float, v)), rho_n, vertex_z),
+        alpha,
+    )
+
+
+def read_mirror(path: PathLike) -> Mirror:
+    """The mirror alone, from a file's ``mirror`` map: a data sheet's mirror for the command
+    line (``omnicam calibrate --mirror-file``), or a calibration file's.
+
+    ``mirror: {kind: hyperboloid, a, b, rim_radius}`` (``kind`` may be left out, as format 1
+    writes it) or ``mirror: {kind: even_asphere, R, k, alpha, rho_n, vertex_z, rim_radius}``
+    (``alpha``, ``rho_n`` and ``vertex_z`` optional: none, the rim radius, 0), in a
+    ``cv2.FileStorage`` file (``.yaml``, ``.yml``, ``.xml``, ``.json``); other fields are
+    ignored.
+
+    Raises
+    ------
+    FileNotFoundError
+        No file at ``path``.
+    ValueError
+        A missing or malformed field, or a mirror the model refuses, naming the file and the
+        field.
+    """
+    r = reading(path, "mirror file")
+    mnode = r.node("mirror")
+    if not isinstance(mnode, dict):
+        raise r.fail("mirror", f"must be a map with kind {MIRROR_KINDS} and its parameters")
+    kind = mnode.get("kind", "hyperboloid")
+    if kind == "hyperboloid":
+        return _hyperboloid_of(r, mnode)
+    if kind == ASPHERE_KIND:
+        return _asphere_of(r, mnode)
+    raise r.fail("mirror.kind", f"must be one of {MIRROR_KINDS}, got {kind!r}")
+
+
+MIRROR_KINDS = "hyperboloid, even_asphere"
+
+
+def _write_mirror(fs, mirror: Mirror) -> None:
+    """The ``format_version``, ``model`` and ``mirror`` of :func:`save_camera`: format 1 for a
+    hyperboloid (the same bytes as before asphere files existed), 2 for an even asphere."""
+    if isinstance(mirror, HyperbolicMirror):
+        fs.write("format_version", FORMAT_VERSION)
+        fs.write("model", MODEL_NAME)
+        fs.startWriteStruct("mirror", cv2.FileNode_MAP)
+        fs.write("a", mirror.a)
+        fs.write("b", mirror.b)
+        fs.write("rim_radius", mirror.rim_radius)
+        fs.endWriteStruct()
+        return
+    fs.write("format_version", FORMAT_VERSION_ASPHERE)
+    fs.write("model", MODEL_NAME_ASPHERE)
+    fs.startWriteStruct("mirror", cv2.FileNode_MAP)
+    fs.write("kind", ASPHERE_KIND)
+    fs.write("R", mirror.R)
+    fs.write("k", mirror.k)
+    if mirror.alpha:
+        fs.startWriteStruct("alpha", cv2.FileNode_SEQ)
+        for a in mirror.alpha:
+            fs.write("", float(a))
+        fs.endWriteStruct()
+    fs.write("rho_n", mirror.rho_n)
+    fs.write("vertex_z", mirror.vertex_z)
+    fs.write("rim_radius", mirror.rim_radius)
+    fs.endWriteStruct()
 
 
 def load_camera(path: PathLike) -> MisalignedCatadioptricCamera:
     """Read and validate a calibration file written by :func:`save_camera`.
 
-    :meth:`omnicam.MisalignedHyperbolicCamera.load` is this, as the design's class.
+    Reads format 1 (a hyperboloid) and format 2 (an even asphere, :class:`AsphericMirror`);
+    :meth:`omnicam.MisalignedHyperbolicCamera.load` is this, as the design's class, for a
+    hyperboloid's file.
 
     Raises
     ------
@@ -61,16 +188,15 @@ def load_camera(path: PathLike) -> MisalignedCatadioptricCamera:
     """
     r = reading(path, "calibration file")
     version = r.number("format_version")
-    if version != FORMAT_VERSION:
-        raise r.fail("format_version", f"is {version:g}; this omnicam reads {FORMAT_VERSION}")
+    if version not in _MODELS:
+        raise r.fail(
+            "format_version",
+            f"is {version:g}; this omnicam reads {FORMAT_VERSION} and {FORMAT_VERSION_ASPHERE}",
+        )
     model = r.node("model")
-    if model != MODEL_NAME:
-        raise r.fail("model", f"must be {MODEL_NAME!r}")
-    mnode = r.node("mirror")
-    if not isinstance(mnode, dict):
-        raise r.fail("mirror", "must be a map with a, b, rim_radius")
-    ab = [r.number(f"mirror.{k}", mnode) for k in ("a", "b", "rim_radius")]
-    mirror = r.check("mirror", lambda v: HyperbolicMirror(*v), ab)
+    if model != _MODELS[version]:
+        raise r.fail("model", f"must be {_MODELS[version]!r} in format {version:g}")
+    mirror = _read_mirror(r, version)
     K = r.matrix("K", (3, 3))
     D = r.matrix("D", required=False)
     rvec = r.matrix("rvec", (3,))
@@ -203,13 +329,7 @@ def save_camera(
         verdict = Verdict.from_report(verdict)
 
     def write(fs):
-        fs.write("format_version", FORMAT_VERSION)
-        fs.write("model", MODEL_NAME)
-        fs.startWriteStruct("mirror", cv2.FileNode_MAP)
-        fs.write("a", camera.mirror.a)
-        fs.write("b", camera.mirror.b)
-        fs.write("rim_radius", camera.mirror.rim_radius)
-        fs.endWriteStruct()
+        _write_mirror(fs, camera.mirror)
         fs.write("K", np.asarray(camera.K))
         if camera.D is not None:
             fs.write("D", np.asarray(camera.D).reshape(1, -1))

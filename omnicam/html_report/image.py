@@ -11,6 +11,7 @@ from typing import Any
 import cv2
 import numpy as np
 
+from ..mirror import HyperbolicMirror, describe_mirror
 from .page import (
     Page,
     draw_wrapped,
@@ -100,7 +101,11 @@ def _summary(page, camera, report, notes):
         ("confidence", f"{report.confidence:.4f}" + (" (AMBIGUOUS)" if report.ambiguous else "")),
         ("rim", f"{len(report.boundary_points)} points, RMS {report.rim_rms:.4f} px"),
         ("K", f"fx {K[0, 0]:.2f} fy {K[1, 1]:.2f} cx {K[0, 2]:.2f} cy {K[1, 2]:.2f} px"),
-        ("mirror a, b, rim", f"{m.a:g}, {m.b:g}, {m.rim_radius:g} mm"),
+        (
+            ("mirror a, b, rim", f"{m.a:g}, {m.b:g}, {m.rim_radius:g} mm")
+            if isinstance(m, HyperbolicMirror)
+            else ("mirror", describe_mirror(m) + " mm")
+        ),
         ("tilt", f"{tilt:.4f} deg towards {az:.1f} deg"),
         ("centre - lower focus", f"({off[0]:.3f}, {off[1]:.3f}, {off[2]:.3f}) mm"),
         (

@@ -10,6 +10,7 @@ import math
 import cv2
 import numpy as np
 
+from ..mirror import HyperbolicMirror, nominal_camera_z
 from ..views import PanoramaView
 from .plots import Axes, arrow, fit_width, put_label, with_legend
 
@@ -120,12 +121,34 @@ class Page:
 def posture_numbers(camera):
     """``(tilt deg, tilt azimuth deg, offset (3,))``: the angle between the optical axis and
     the mirror axis, its direction in the camera's x-y plane, and the camera centre minus the
-    lower focus ``(0, 0, -c)`` in the mirror frame."""
+    lower focus ``(0, 0, -c)`` in the mirror frame (any mirror: its nominal camera position,
+    :func:`omnicam.mirror.nominal_camera_z`; NaN for a mirror without one)."""
     axis = np.asarray(camera.R)[:, 2]
     tilt = math.degrees(math.atan2(math.hypot(axis[0], axis[1]), axis[2]))
     az = math.degrees(math.atan2(axis[1], axis[0])) if tilt > 0 else 0.0
-    offset = np.asarray(camera.camera_center) - np.array([0.0, 0.0, -camera.mirror.c])
+    z = nominal_camera_z(camera.mirror)
+    offset = np.asarray(camera.camera_center) - np.array([0.0, 0.0, math.nan if z is None else z])
     return tilt, az, offset
+
+
+def _reference_z(camera):
+    """The sketch's lower focus: the nominal camera position, or the camera centre's own
+    height for a mirror without one."""
+    z = nominal_camera_z(camera.mirror)
+    return float(camera.camera_center[2]) if z is None else z
+
+
+def _profile_z(m, x):
+    """The mirror's height over ``(x, 0)``."""
+    if isinstance(m, HyperbolicMirror):
+        return m.b * np.sqrt(1.0 + (x / m.a) ** 2)
+    return m.surface_z(x, np.zeros_like(x))
+
+
+def _rim_z(m):
+    if isinstance(m, HyperbolicMirror):
+        return m.b * math.sqrt(1 + (m.rim_radius / m.a) ** 2)
+    return m.z_rim
 
 
 def _rot(axis, angle):
@@ -148,13 +171,14 @@ def posture_sketch(camera, size=(560, 470)):
         n = np.cross((0.0, 0.0, 1.0), axis)
         n /= np.linalg.norm(n)
         R = _rot(n, math.radians(tilt) * (k - 1.0)) @ R
-    focus_cam = R @ np.array([0.0, 0.0, -m.c])
+    zf = _reference_z(camera)  # -c for a hyperboloid
+    focus_cam = R @ np.array([0.0, 0.0, zf])
     # camera centre at the origin: its offset from the focus, scaled; the mirror moved with it
-    off_cam = -(np.asarray(camera.R) @ np.array([0.0, 0.0, -m.c]) + t)  # focus -> centre
+    off_cam = -(np.asarray(camera.R) @ np.array([0.0, 0.0, zf]) + t)  # focus -> centre
     t = -focus_cam - k * off_cam
     u = np.array([math.cos(math.radians(az)), math.sin(math.radians(az)), 0.0])  # across
     x = np.linspace(-m.rim_radius, m.rim_radius, 121)
-    prof = np.stack([x, np.zeros_like(x), m.b * np.sqrt(1.0 + (x / m.a) ** 2)], axis=1)
+    prof = np.stack([x, np.zeros_like(x), _profile_z(m, x)], axis=1)
     # the profile in the mirror's plane through its axis and the tilt direction
     e1 = R.T @ u
     e1 -= e1[2] * np.array([0.0, 0.0, 1.0])
@@ -178,8 +202,8 @@ def posture_sketch(camera, size=(560, 470)):
     ax.polyline(across, along, (0, 0, 200), 2)
     ends = np.array([0.0, top * 0.98])
     ax.polyline([0.0, 0.0], ends, (200, 80, 0), 1)
-    foc = R @ np.array([0.0, 0.0, -m.c]) + t
-    top_pt = R @ np.array([0.0, 0.0, m.b * math.sqrt(1 + (m.rim_radius / m.a) ** 2)]) + t
+    foc = R @ np.array([0.0, 0.0, zf]) + t
+    top_pt = R @ np.array([0.0, 0.0, _rim_z(m)]) + t
     d = top_pt - foc
     s = np.linspace(-0.05, 1.05, 2)
     ax.polyline((foc @ u) + s * (d @ u), foc[2] + s * d[2], (0, 0, 200), 1)
@@ -190,8 +214,12 @@ def posture_sketch(camera, size=(560, 470)):
     cv2.polylines(ax.img, [np.round(cam).astype(np.int32)], True, (200, 80, 0), 1, cv2.LINE_AA)
     lines = [
         f"tilt {tilt:.3f} deg towards azimuth {az:.1f} deg (camera x-y plane)",
-        f"camera centre - lower focus: ({offset[0]:.2f}, {offset[1]:.2f}, {offset[2]:.2f}) mm,"
-        f" |{np.linalg.norm(offset):.2f}| mm",
+        (
+            f"camera centre - lower focus: ({offset[0]:.2f}, {offset[1]:.2f}, {offset[2]:.2f}) "
+            f"mm, |{np.linalg.norm(offset):.2f}| mm"
+            if np.all(np.isfinite(offset))
+            else "camera centre - lower focus: none (the mirror does not say where it is)"
+        ),
         "to scale" if k == 1.0 else f"tilt and offset drawn x{k:g} to be seen",
     ]
     strip = np.full((10 + 18 * len(lines), ax.img.shape[1], 3), 255, np.uint8)

@@ -9,6 +9,7 @@ from typing import Any
 import cv2
 import numpy as np
 
+from ..mirror import HyperbolicMirror, describe_mirror
 from .page import (
     Page,
     draw_wrapped,
@@ -95,7 +96,11 @@ def _summary(page, camera, report, verdict, notes):
         ("fx, fy", f"{K[0, 0]:.2f}{pm('fx', '{:.2f}')}, {K[1, 1]:.2f}{pm('fy', '{:.2f}')} px"),
         ("cx, cy", f"{K[0, 2]:.2f}{pm('cx', '{:.2f}')}, {K[1, 2]:.2f}{pm('cy', '{:.2f}')} px"),
         ("D", "none" if camera.D is None else " ".join(f"{v:.4g}" for v in camera.D.ravel())),
-        ("mirror a, b, rim", f"{m.a:.3f}{pm('a')}, {m.b:.3f}{pm('b')}, {m.rim_radius:g} mm"),
+        (
+            ("mirror a, b, rim", f"{m.a:.3f}{pm('a')}, {m.b:.3f}{pm('b')}, {m.rim_radius:g} mm")
+            if isinstance(m, HyperbolicMirror)
+            else ("mirror", describe_mirror(m) + " mm")
+        ),
         ("mirror axis std", f"{std['axis_deg']:.3f} deg" if "axis_deg" in std else "not stated"),
         (
             "camera centre std",
