@@ -583,7 +583,7 @@ def test_info_prints_the_verdict_and_says_what_is_doubtful(rig, tmp_path, capsys
     out = capsys.readouterr().out
     assert (
         "verdict        DOUBTFUL: calibrated ambiguous (confidence 0.00), forced past 1 "
-        "implausibility warning (from one image of the mirror)"
+        "implausibility warning, with 1 warning (from one image of the mirror)"
     ) in out
     assert "K from         read from a file: K.yaml" in out
     assert "posture        chosen with confidence 0.0000 AMBIGUOUS" in out

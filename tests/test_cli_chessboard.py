@@ -146,7 +146,7 @@ def test_boards_all_on_one_side_exit_one_unless_forced(tmp_path, capsys):
     # forced, and why
     verdict = omnicam.formats.calibration_file.read_verdict(tmp_path / "rig.yaml")
     assert verdict.forced and "all boards are on one side" in verdict.implausible[0]
-    assert verdict.doubts() == ("forced past 1 implausibility warning",)
+    assert verdict.doubts()[0] == "forced past 1 implausibility warning"
 
 
 @pytest.mark.parametrize(

@@ -36,6 +36,7 @@ import numpy as np
 from .._typing import ArrayLike
 from .._validate import validate_D, validate_image_size, validate_K
 from ..camera import MisalignedCatadioptricCamera
+from ..formats.verdict import judged
 from ..mirror import HyperbolicMirror
 from ..raytrace import normalize, to_pixels
 from . import selection, steps
@@ -200,7 +201,7 @@ def calibrate(
         )
         report.warnings.extend(str(w) for w in implausible)
         report = dataclasses.replace(report, plausibility=tuple(implausible))
-    return camera, report
+    return judged(camera, report)  # the camera carries the report's verdict
 
 
 def recalibrate(

@@ -63,6 +63,7 @@ from ..calibration.plausibility import check_plausibility
 from ..calibration.reflection import detect_reflection
 from ..calibration.rim import detect_rim, fit_rim
 from ..camera import MisalignedCatadioptricCamera
+from ..formats.verdict import judged
 from ..images import read_image
 from ..mirror import HyperbolicMirror
 from .adjustment import (
@@ -381,7 +382,7 @@ def calibrate_pattern(
     report = dataclasses.replace(
         report, found_by=found, central=central, warnings=warns_all, heldout=held, names=names
     )
-    return camera, report
+    return judged(camera, report)  # the camera carries the report's verdict
 
 
 # -- the steps' results ------------------------------------------------------------------------

@@ -124,7 +124,8 @@ def doubt_line(path):
     """One line on what the calibration file ``path`` records as doubtful, or None.
 
     E.g. ``rig.yaml: calibrated with a guessed K, ambiguous (confidence 0.00): its views may
-    be skewed ('omnicam info rig.yaml' says why)``; a verdict that cannot be read says so.
+    be skewed ('omnicam info rig.yaml' says why)``, or ``rig.yaml: calibrated with 2 warnings
+    ('omnicam info rig.yaml' lists them)``; a verdict that cannot be read says so.
     """
     try:
         verdict = read_verdict(path)
@@ -133,10 +134,12 @@ def doubt_line(path):
     doubts = () if verdict is None else verdict.doubts()
     if not doubts:
         return None
-    return (
-        f"{path}: calibrated {', '.join(doubts)}: its views may be skewed "
-        f"('omnicam info {path}' says why)"
-    )
+    if verdict.serious():
+        return (
+            f"{path}: calibrated {', '.join(doubts)}: its views may be skewed "
+            f"('omnicam info {path}' says why)"
+        )
+    return f"{path}: calibrated {', '.join(doubts)} ('omnicam info {path}' lists them)"
 
 
 def check_output(path, overwrite, what="output"):

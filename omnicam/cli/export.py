@@ -30,7 +30,7 @@ from ._common import (
 def cmd_export(args):
     """``omnicam export``: the module docstring."""
     check_output(args.output, args.overwrite)
-    camera = load_calibration(args.calibration)
+    camera = load_calibration(args.calibration, say_doubt=True)  # one line on a doubtful file
     if args.to in ("kalibr", "camodocal", "ocamcalib") and camera.image_size is None:
         raise CliError(f"{args.to} files need the image size; {args.calibration} has none")
     ext = os.path.splitext(args.output)[1].lower()

@@ -178,6 +178,7 @@ def describe_verdict(verdict, width=13):
         rows.append(("forced", "written with --force although implausible"))
     rows += [("implausible", f"- {w}") for w in v.implausible]
     rows += [("warning", f"- {w}") for w in v.warnings]
+    rows += [("note", f"- {w}") for w in v.notes]
     return "\n".join(f"{k:<{width}}  {text}" for k, text in rows)
 
 
