@@ -186,3 +186,57 @@ def test_the_reflections_plane_is_honoured_and_its_radius_refused(views, tmp_pat
     assert _calibrate(views, tmp_path / "c.yaml", "--lens-r", "15", "--lens-z", "25") == 2
     assert "--lens-r is for one image" in capsys.readouterr().err
     assert not (tmp_path / "c.yaml").exists()
+
+
+def test_an_implausible_chessboard_calibration_is_refused_as_one_from_one_image(
+    views, tmp_path, capsys
+):
+    """One set of limits (issue 29 item 1): the rig's mirror axis leans 3 deg, so with
+    --max-tilt 1 the plausibility checks of one image refuse it: exit 1 and no file, unless
+    --force, whose file records the finding."""
+    calib = tmp_path / "rig.yaml"
+    assert _calibrate(views, calib, "--heldout", "0", "--max-tilt", "1") == 1
+    cap = capsys.readouterr()
+    assert "verdict: REFUSED: 1 implausible finding" in cap.out
+    assert "implausible: the mirror axis is tilted" in cap.err and "(limit 1 deg" in cap.err
+    assert "not written" in cap.err.strip().splitlines()[-1] and not calib.exists()
+    assert _calibrate(views, calib, "--heldout", "0", "--max-tilt", "1", "--force") == 0
+    verdict = omnicam.read_verdict(calib)
+    assert verdict.forced and "tilted" in verdict.implausible[0]
+    assert omnicam.load_camera(calib).verdict == verdict
+    capsys.readouterr()
+    assert _calibrate(views, tmp_path / "ok.yaml", "--heldout", "0") == 0  # default limits
+    assert "verdict: " in capsys.readouterr().out
+    assert not omnicam.read_verdict(tmp_path / "ok.yaml").implausible
+
+
+def test_the_report_leads_with_the_rays_the_heldout_check_and_the_verdict(views, tmp_path, capsys):
+    """What users use first (issue 29 item 2), right after the line per image."""
+    assert _calibrate(views, tmp_path / "rig.yaml", "--heldout", "3") == 0
+    out = capsys.readouterr().out.splitlines()
+    first = [ln for ln in out if not ln.startswith("[")][:3]
+    assert first[0].startswith("viewing directions known to ")
+    assert first[1].startswith("held-out corner RMS (3-fold") and "cv2.omnidir" in first[1]
+    assert first[2].startswith("verdict: ")
+
+
+def test_an_unscaled_calibration_of_a_good_rig_raises_no_alarm_about_fx(tmp_path, capsys):
+    """Without --mirror the scale and fx against the mirror's size are unknown by nature: a
+    neutral line says so, no warning (issue 29 item 2). A rig close to the design, 10 views."""
+    good = synthetic.misaligned_rig(1.0, 30.0, (0.5, -0.5, 0.5), image_size=SIZE)
+    poses = boards.random_board_poses(
+        good, 10, PATTERN, SQUARE, distance=(350.0, 700.0), max_tilt_deg=40.0, rng=11
+    )
+    paths = []
+    for i, p in enumerate(poses):
+        paths.append(str(tmp_path / f"good{i}.png"))
+        cv2.imwrite(paths[-1], boards.render_board(good, PATTERN, SQUARE, *p, supersample=2))
+    args = ["calibrate", "--chessboard", "7x5", "--square", "60", *paths, "--heldout", "0"]
+    assert main([*args, "--dist-model", "none", "-o", str(tmp_path / "rig.yaml")]) == 0
+    cap = capsys.readouterr()
+    assert "focal length" not in cap.err and "fx" not in cap.err and "scale" not in cap.err
+    assert "by nature, boards alone do not fix fx and the mirror's size separately" in cap.out
+    assert "nor the scale, without" in cap.out
+    verdict = omnicam.read_verdict(tmp_path / "rig.yaml")
+    assert any("scale is assumed" in n for n in verdict.notes)
+    assert not any("focal length" in w or "scale" in w for w in verdict.warnings)

@@ -79,7 +79,7 @@ from .central import NOMINAL_RIM_RADIUS, fit_central, hyperbolic_start, pinhole_
 from .detect import detect_pattern
 from .heldout import cross_validate
 from .intrinsics import check_pattern_size
-from .report import PatternReport
+from .report import ONE_SIDED, PatternReport
 
 __all__ = ["ONE_SIDED", "calibrate_pattern", "pooled_reflection"]
 
@@ -117,9 +117,6 @@ _SHAPE_CHECK_NFEV = 10
 #: the residual variance: chi-square with 2 degrees of freedom exceeds ``-2 ln p`` with
 #: probability ``p = 0.001``.
 SHAPE_REJECT_CHI2 = -2.0 * math.log(1e-3)
-#: The start of the warning that the views cannot tell the principal point from the tilt (the
-#: command line refuses such a calibration unless forced).
-ONE_SIDED = "all boards are on one side of the mirror (an azimuth gap over 180 deg)"
 
 
 # -- helpers ----------------------------------------------------------------------------------
@@ -1107,12 +1104,12 @@ def _report_step(fit, corners, cam0, image_size, lens_note, central, shape_unkno
             f"central fit's {central.rms:.3f} px: the mirror may not be a hyperboloid (a "
             f"sphere, a paraboloid, a cone), or the start was far off"
         )
-    warns.extend(
-        str(w)
-        for w in check_plausibility(
+    implausible = tuple(
+        check_plausibility(
             camera, rim_conic(camera.K, camera.R, camera.tvec, camera.mirror), image_size
         )
     )
+    warns.extend(str(w) for w in implausible)
     image_points_out = [None if p is None else p.reshape(-1, 1, 2).astype(np.float32) for p in pts]
     report = PatternReport(
         rms=rms,
@@ -1132,5 +1129,6 @@ def _report_step(fit, corners, cam0, image_size, lens_note, central, shape_unkno
         nfev=int(sol.nfev),
         camera=camera,
         start=cam0,
+        plausibility=implausible,
     )
     return camera, report

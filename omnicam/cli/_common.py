@@ -313,18 +313,19 @@ def read_far_lines(path):
         raise CliError(one_line(e)) from None
 
 
-def report_text(report, leave_out=()):
+def report_text(report, leave_out=(), **lead):
     """The report's summary; ``leave_out``: warnings the caller prints itself (on stderr), left
-    out of it so that each is printed once."""
+    out of it so that each is printed once; ``lead``: the ``verdict`` and ``refused`` of its
+    first lines (:meth:`CalibrationReport.lead`), default the report's own."""
     leave_out = {str(w) for w in leave_out}
     if leave_out and dataclasses.is_dataclass(report) and hasattr(report, "warnings"):
         kept = [w for w in report.warnings if str(w) not in leave_out]
         report = dataclasses.replace(report, warnings=kept)
         if not kept:  # "no warnings" would be wrong: the caller's follow
-            lines = report_text(report).splitlines()
+            lines = report_text(report, **lead).splitlines()
             return "\n".join(lines[:-1] if lines[-1].strip() == "no warnings" else lines)
     summary = getattr(report, "summary", None)
-    return str(summary() if callable(summary) else summary if summary is not None else report)
+    return str(summary(**lead) if callable(summary) else summary if summary is not None else report)
 
 
 def save_calibration(camera, path, overwrite, report=None, **verdict):

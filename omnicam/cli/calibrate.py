@@ -130,14 +130,17 @@ def _finish(args, camera, report, image, outputs, k_from, rig):
     its own name) or write the overlay and the file with its verdict."""
     calib, overlay, refused_overlay = outputs
     implausible = [str(w) for w in getattr(report, "plausibility", ())]
-    print(report_text(report, leave_out=implausible), flush=True)
+    refused = bool(implausible) and not args.force
+    verdict = Verdict.from_report(report, forced=bool(implausible) and args.force, **k_from)
+    # the lead (the uncertainty of the rays, the verdict) as judged here
+    print(report_text(report, implausible, verdict=verdict, refused=refused), flush=True)
     if rig is not None:
         print(_moved_text(camera, rig, args.from_rig, report))
     for w in implausible:
         warn_user(f"implausible: {w}")
     if args.report:  # refused or not: the page shows what went wrong
         report_page.write_image_page(args.report, camera, report, image, args.overwrite)
-    if implausible and not args.force:
+    if refused:
         # the overlay shows what went wrong; under its own name, so that it never blocks a retry
         write_image_file(refused_overlay, report.draw(image), True)
         raise CliError(
@@ -146,7 +149,6 @@ def _finish(args, camera, report, image, outputs, k_from, rig):
             f"{refused_overlay}; fix the inputs, or pass --force to write it anyway"
             + aspect_note((image.shape[1], image.shape[0]))
         )
-    verdict = Verdict.from_report(report, forced=bool(implausible), **k_from)
     write_image_file(overlay, report.draw(image), args.overwrite)
     save_calibration(camera, calib, args.overwrite, verdict)
     doubts = verdict.doubts()
@@ -551,7 +553,8 @@ def add_parser(sub):
         "--force",
         action="store_true",
         help="write the calibration file even when it is implausible (the warnings are "
-        "printed either way; without --force an implausible result exits with status 1)",
+        "printed either way; without --force an implausible result exits with status 1). "
+        "One image and --chessboard are checked alike, with the same limits",
     )
     out = p.add_argument_group("outputs")
     out.add_argument(

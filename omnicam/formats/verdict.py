@@ -238,6 +238,22 @@ class Verdict:
             out.append(f"with {n} warning{'s' if n != 1 else ''}")
         return tuple(out)
 
+    def status(self, refused: bool = False) -> str:
+        """The verdict in one line: ``ok: no doubt recorded``, ``DOUBTFUL: calibrated ...``
+        (:meth:`doubts`), ``IMPLAUSIBLE: ...`` (what ``omnicam calibrate`` refuses without
+        ``--force``) or, with ``refused``, ``REFUSED: ...`` (it did)."""
+        n = len(self.implausible)
+        if n and not self.forced:
+            rest = [d for d in self.doubts() if "implausibility" not in d]
+            found = f"{n} implausible finding{'s' if n != 1 else ''}"
+            return (
+                f"REFUSED: {found} (--force writes it anyway)"
+                if refused
+                else f"IMPLAUSIBLE: {found} (omnicam calibrate refuses it without --force)"
+            ) + (f"; calibrated {', '.join(rest)}" if rest else "")
+        doubts = self.doubts()
+        return f"DOUBTFUL: calibrated {', '.join(doubts)}" if doubts else "ok: no doubt recorded"
+
     def serious(self) -> bool:
         """A doubt about the views themselves: a guessed ``K``, an ambiguous posture or an
         implausible finding (the warnings alone say what to check)."""
