@@ -2,6 +2,7 @@
 corners from other tools, starts for K honoured or refused, views that cannot determine the rig."""
 
 import json
+import re
 
 import cv2
 import numpy as np
@@ -18,6 +19,10 @@ PATTERN, SQUARE = (7, 5), 60.0
 SIZE = (700, 700)
 RIG = synthetic.misaligned_rig(3.0, 30.0, (1.5, -2.0, 1.9), image_size=SIZE)
 MIRROR = ["--mirror", "23.4", "28.1", "30"]
+#: The library's parameter names that the command line must say as options (issue 29 item 7).
+PYTHON_NAMES = re.compile(
+    r"\b(lens_z|lens_r|pattern_size|rim_radius|refine_mirror_shape|image_points|square_size)\b"
+)
 
 
 def _render(folder, poses, prefix="board"):
@@ -236,7 +241,31 @@ def test_an_unscaled_calibration_of_a_good_rig_raises_no_alarm_about_fx(tmp_path
     cap = capsys.readouterr()
     assert "focal length" not in cap.err and "fx" not in cap.err and "scale" not in cap.err
     assert "by nature, boards alone do not fix fx and the mirror's size separately" in cap.out
-    assert "nor the scale, without" in cap.out
+    assert "nor the scale, without --rim-radius" in cap.out
+    assert not PYTHON_NAMES.search(cap.out + cap.err)  # options, not parameters (item 7)
     verdict = omnicam.read_verdict(tmp_path / "rig.yaml")
     assert any("scale is assumed" in n for n in verdict.notes)
     assert not any("focal length" in w or "scale" in w for w in verdict.warnings)
+
+
+@pytest.mark.parametrize(
+    "extra",
+    [
+        ["--chessboard", "9x8"],  # no board: the library says the mirror's (a, b, rim_radius)
+        ["--chessboard", "9x8", *MIRROR],  # no board: the library says pattern_size
+        ["--refine-mirror-shape", "--force"],  # the notes name refine_mirror_shape, rim_radius
+    ],
+    ids=["no-start", "no-board", "notes"],
+)
+def test_the_command_line_names_options_not_python_parameters(views, tmp_path, capsys, extra):
+    """Library messages reaching the command line say --chessboard, --rim-radius, --lens-z,
+    --refine-mirror-shape (cli/_common.py OPTION_OF), not the parameters' names."""
+    args = ["calibrate", "--chessboard", "7x5", "--square", "60", *views, "--heldout", "0"]
+    main([*args, "--dist-model", "none", "-o", str(tmp_path / "rig.yaml"), *extra])
+    cap = capsys.readouterr()
+    assert not PYTHON_NAMES.search(cap.out + cap.err), PYTHON_NAMES.search(cap.out + cap.err)
+    said = cap.out + cap.err
+    if "9x8" in extra:
+        assert ("--chessboard" if "--mirror" in extra else "--mirror A B RIM") in cap.err
+    else:
+        assert "--lens-z" in said and "--rim-radius" in said

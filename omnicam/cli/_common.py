@@ -98,12 +98,81 @@ def one_line(e, limit=None):
     return text
 
 
+#: The library's parameters as the command line's options: the library's messages name its
+#: parameters (``lens_z``), the command line's user knows options (``--lens-z``). One mapping,
+#: applied to every line the command line prints from the library (:func:`user_terms`).
+OPTION_OF = {
+    "refine_mirror_shape": "--refine-mirror-shape",
+    "rim_radius": "--rim-radius",
+    "lens_z": "--lens-z",
+    "lens_r": "--lens-r",
+    "pattern_size": "--chessboard",
+    "square_size": "--square",
+    "max_tilt_deg": "--max-tilt",
+    "max_offset_mm": "--max-offset",
+    "rim_hint": "--rim-hint",
+    "boundary_points": "--boundary-points",
+    "far_lines": "--far-lines",
+    "dist_model": "--dist-model",
+    "image_points": "--corners",
+    "lens=None": "no --lens-z",
+}
+_NAME = "|".join(re.escape(n) for n in sorted(OPTION_OF, key=len, reverse=True))
+_EDGE_BEFORE = r"(?<![\w/.'\"-])"  # not a part of a word, a path, an option, a quoted field
+_EDGE_AFTER = r"(?![\w/]|\.\w)"
+
+
+def _option(name):
+    return OPTION_OF[name]
+
+
+def user_terms(text):
+    """``text`` with the library's parameter names as the command line's options.
+
+    ``refine_mirror_shape=True (--refine-mirror-shape)`` and ``give lens_z, or --lens-z on the
+    command line`` read ``--refine-mirror-shape`` and ``give --lens-z``; ``rim_radius = 30``
+    reads ``--rim-radius 30``; ``image_points[2]`` reads ``--corners (image 2, from 0)``.
+    Paths are left alone (a name inside a path or a file name is not a parameter).
+    """
+    text = re.sub(r"\bpattern_size \((\d+), (\d+)\)", r"--chessboard \1x\2", str(text))
+    text = re.sub(  # the mirror as a start: the option that gives it
+        r"the mirror \(a, b, rim_radius\)|its a, b and rim_radius", "--mirror A B RIM", text
+    )
+    text = re.sub(  # a parameter followed by its option already: the option alone
+        rf"{_EDGE_BEFORE}({_NAME})(?:=\w+)? \((--[\w-]+)\)",
+        lambda m: m.group(2) if m.group(2) == _option(m.group(1)) else m.group(0),
+        text,
+    )
+    text = re.sub(
+        rf"{_EDGE_BEFORE}({_NAME}), or (--[\w-]+) on the command line",
+        lambda m: m.group(2) if m.group(2) == _option(m.group(1)) else m.group(0),
+        text,
+    )
+    text = re.sub(
+        rf"{_EDGE_BEFORE}({_NAME})\[(\d+)\]",
+        lambda m: (
+            f"{_option(m.group(1))} (image {m.group(2)}, from 0)"
+            if m.group(1) == "image_points"
+            else f"{_option(m.group(1))} (line {m.group(2)}, from 0)"
+        ),
+        text,
+    )
+    text = re.sub(
+        rf"{_EDGE_BEFORE}({_NAME})(?: ?= ?(True|[-+\d.]+))?{_EDGE_AFTER}",
+        lambda m: (
+            _option(m.group(1)) + (f" {m.group(2)}" if m.group(2) and m.group(2) != "True" else "")
+        ),
+        text,
+    )
+    return text
+
+
 def print_error(message):
-    print(f"{PROG}: error: {one_line(message)}", file=sys.stderr, flush=True)
+    print(f"{PROG}: error: {user_terms(one_line(message))}", file=sys.stderr, flush=True)
 
 
 def warn_user(message):
-    print(f"{PROG}: warning: {one_line(message)}", file=sys.stderr, flush=True)
+    print(f"{PROG}: warning: {user_terms(one_line(message))}", file=sys.stderr, flush=True)
 
 
 def load_calibration(path, say_doubt=False):

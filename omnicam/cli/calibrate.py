@@ -35,6 +35,7 @@ from ._common import (
     report_text,
     rim_hint_arg,
     save_calibration,
+    user_terms,
     warn_user,
     write_image_file,
 )
@@ -133,7 +134,8 @@ def _finish(args, camera, report, image, outputs, k_from, rig):
     refused = bool(implausible) and not args.force
     verdict = Verdict.from_report(report, forced=bool(implausible) and args.force, **k_from)
     # the lead (the uncertainty of the rays, the verdict) as judged here
-    print(report_text(report, implausible, verdict=verdict, refused=refused), flush=True)
+    text = report_text(report, implausible, verdict=verdict, refused=refused)
+    print(user_terms(text), flush=True)
     if rig is not None:
         print(_moved_text(camera, rig, args.from_rig, report))
     for w in implausible:

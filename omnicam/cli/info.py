@@ -9,7 +9,7 @@ import numpy as np
 from ..formats.calibration_file import read_verdict
 from ..formats.central_fit import fit_omnidir
 from ..views import default_elevation_range
-from ._common import EXIT_OK, load_calibration, one_line
+from ._common import EXIT_OK, load_calibration, one_line, user_terms
 
 
 def posture(camera):
@@ -179,7 +179,8 @@ def describe_verdict(verdict, width=13):
     rows += [("implausible", f"- {w}") for w in v.implausible]
     rows += [("warning", f"- {w}") for w in v.warnings]
     rows += [("note", f"- {w}") for w in v.notes]
-    return "\n".join(f"{k:<{width}}  {text}" for k, text in rows)
+    # the texts as the command line says them (options, not the library's parameters)
+    return "\n".join(f"{k:<{width}}  {user_terms(text)}" for k, text in rows)
 
 
 def cmd_info(args):

@@ -49,6 +49,7 @@ from ._common import (
     read_image_file,
     read_intrinsics,
     save_calibration,
+    user_terms,
     warn_user,
     write_image_file,
 )
@@ -228,7 +229,7 @@ def _print_report(camera, report, names, caught, verdict, refused):
     check, the verdict, what boards cannot fix), then the per-view table and the figures; the
     notes on stdout, every alarm and implausible finding once on stderr."""
     for line in report.lead(verdict, refused):
-        print(line, flush=True)
+        print(user_terms(line), flush=True)
     print(report.table(names), flush=True)
     print(
         f"RMS {report.rms:.3f} px over {len(report.view_rms)} views; rim RMS "
@@ -241,9 +242,9 @@ def _print_report(camera, report, names, caught, verdict, refused):
         flush=True,
     )
     if report.lens_note:
-        print(f"camera's reflection: {report.lens_note}", flush=True)
+        print(user_terms(f"camera's reflection: {report.lens_note}"), flush=True)
     for w in report.notes:
-        print(f"note (by nature, not a doubt): {w}", flush=True)
+        print(user_terms(f"note (by nature, not a doubt): {w}"), flush=True)
     for w in report.alarms:
         warn_user(w)
     for w in report.implausible:
