@@ -269,3 +269,37 @@ def test_the_command_line_names_options_not_python_parameters(views, tmp_path, c
         assert ("--chessboard" if "--mirror" in extra else "--mirror A B RIM") in cap.err
     else:
         assert "--lens-z" in said and "--rim-radius" in said
+
+
+def test_progress_lines_on_stderr_for_the_long_steps_and_quiet_silences_them(
+    views, tmp_path, capsys
+):
+    """Issue 29 item 3: the adjustment's evaluations and cost, each held-out fold; -q: none."""
+    assert _calibrate(views, tmp_path / "rig.yaml", "--heldout", "2") == 0
+    err = capsys.readouterr().err.splitlines()
+    adjust = [ln for ln in err if ln.startswith("omnicam: adjustment of ")]
+    assert adjust and all("evaluations in" in ln and "cost" in ln for ln in adjust[-1:])
+    assert "omnicam: held-out check: fold 1/2, the rig calibrated on 3 views" in err
+    assert "omnicam: held-out check: fold 2/2, the rig calibrated on 3 views" in err
+    assert _calibrate(views, tmp_path / "q.yaml", "--heldout", "2", "-q") == 0
+    cap = capsys.readouterr()
+    assert "adjustment of" not in cap.err and "held-out check: fold" not in cap.err
+    assert "[1/6]" not in cap.out
+
+
+def test_the_library_is_silent_by_default_and_reports_through_progress(views):
+    heard = []
+    images = [cv2.imread(p) for p in views]
+    omnicam.calibrate_pattern(
+        images,
+        PATTERN,
+        SQUARE,
+        RIG.mirror,
+        dist_model="none",
+        heldout=2,
+        progress=lambda i, text: heard.append((i, text)),
+    )
+    steps = [t for i, t in heard if i is None]
+    assert any(t.startswith("adjustment of ") for t in steps)
+    assert sum(t.startswith("held-out check: fold") for t in steps) == 2
+    assert [i for i, _ in heard if i is not None] == list(range(6))

@@ -48,6 +48,7 @@ import warnings as _warnings
 import cv2
 import numpy as np
 
+from .._progress import reports_progress, say
 from .._typing import FloatArray
 from .._validate import (
     float_array,
@@ -170,6 +171,7 @@ def _azimuth_gap_deg(centres):
     return float(gaps.max())
 
 
+@reports_progress  # progress(None, text) hears the long steps (omnicam._progress)
 def calibrate_pattern(
     images,
     pattern_size,
@@ -279,7 +281,9 @@ def calibrate_pattern(
         ``report.heldout``; it costs ``k`` more calibrations. 0: not run.
     progress : callable, optional
         ``progress(index, text)`` hears of each image as its board is looked for (a command
-        line prints it).
+        line prints it), and ``progress(None, text)`` of the long steps: the adjustment's
+        evaluations and cost, the shape check, each fold of the held-out check. Silent by
+        default.
 
     Returns
     -------
@@ -350,6 +354,7 @@ def calibrate_pattern(
         return step, start_corners
 
     if mirror_given is None and not refine_mirror_shape:
+        say("shape check: is the central fit's mirror shape consistent with the corners?")
         fit, corners = _shape_check_step(fit, corners, image_size, f_scale, shape_free_from_start)
     camera, report = _report_step(
         fit, corners, cam0, image_size, lens_note, central, shape_unknown=mirror_given is None

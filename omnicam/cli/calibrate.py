@@ -579,6 +579,13 @@ def add_parser(sub):
     )
     report_page.add_report_option(out)
     out.add_argument("--overwrite", action="store_true", help="replace existing output files")
+    out.add_argument(
+        "-q",
+        "--quiet",
+        action="store_true",
+        help="no progress lines (--chessboard: the line per image and, on stderr, per long "
+        "step: the adjustment, the shape check, each held-out fold)",
+    )
     pattern.add_arguments(p)
     p.set_defaults(func=cmd_calibrate)
     return p

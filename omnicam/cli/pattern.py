@@ -8,7 +8,9 @@
                       [--dist-model M] [--refine-mirror-shape] [--heldout K]
                       [--overlay FOLDER] [--overwrite] [--force]
 
-Prints a line per image as its board is looked for, the per-view table, the held-out check
+Prints a line per image as its board is looked for, a line on stderr per long step (the
+adjustment's evaluations and cost every 2 s and at its end, the shape check, each held-out
+fold; ``-q`` silences both), the per-view table, the held-out check
 (``--heldout``, 5 folds by default) and the warnings, writes the calibration file and, for each
 view, an overlay of the detected (green circles) and reprojected (red crosses) corners into
 FOLDER (default: CALIB's stem + ``_views`` next to CALIB). A calibration the plausibility
@@ -25,6 +27,7 @@ list in the order of IMAGES; or ``.npz``, one ``(N, 2)`` array per image file na
 from __future__ import annotations
 
 import os
+import sys
 import warnings
 
 import cv2
@@ -41,6 +44,7 @@ from ..hyperbolic_camera import MisalignedHyperbolicCamera
 from ..mirror import HyperbolicMirror
 from ._common import (
     EXIT_OK,
+    PROG,
     CliError,
     check_output,
     one_line,
@@ -277,7 +281,12 @@ def cmd_calibrate_pattern(args):
     names = [os.path.basename(p) for p in args.image]
 
     def progress(i, text):
-        print(f"[{i + 1}/{len(names)}] {names[i]}: {text}", flush=True)
+        if args.quiet:
+            return
+        if i is None:  # a long step (the adjustment, the shape check, a held-out fold)
+            print(f"{PROG}: {user_terms(text)}", file=sys.stderr, flush=True)
+        else:
+            print(f"[{i + 1}/{len(names)}] {names[i]}: {text}", flush=True)
 
     with warnings.catch_warnings(record=True) as caught:
         warnings.simplefilter("always", RuntimeWarning)
