@@ -17,6 +17,7 @@ from .._quiet import opencv_silenced
 from .._validate import check_readable, file_path, shown
 from ..formats import calibration_file, intrinsics, point_files
 from ..formats.calibration_file import read_verdict
+from ..formats.other_tools import other_tool_file
 from ..formats.verdict import Verdict
 from ..hyperbolic_camera import MisalignedHyperbolicCamera
 from ..images import file_kind, read_image
@@ -177,10 +178,19 @@ def warn_user(message):
 
 def load_calibration(path, say_doubt=False):
     """The camera of a calibration file; with ``say_doubt``, one warning line when its verdict
-    records a doubt (:func:`doubt_line`)."""
+    records a doubt (:func:`doubt_line`). Another tool's camera file (a Kalibr camchain, a ROS
+    camera_info, an OCamCalib or cv2.omnidir calibration) is refused naming what it is and the
+    option that reads it (:func:`omnicam.formats.other_tools.other_tool_file`)."""
     try:
         camera = MisalignedHyperbolicCamera.load(path)
-    except (FileNotFoundError, ValueError) as e:
+    except FileNotFoundError as e:
+        raise CliError(one_line(e)) from None
+    except ValueError as e:
+        other = other_tool_file(path)  # another tool's file, named for what it is
+        if other is not None:
+            raise CliError(
+                f"{shown(path)} is {other[0]}, not an omnicam calibration; {other[1]}"
+            ) from None
         raise CliError(one_line(e)) from None
     if say_doubt:
         line = doubt_line(path)
