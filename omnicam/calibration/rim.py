@@ -26,7 +26,7 @@ import numpy as np
 
 from .._typing import ArrayLike, FloatArray
 from .._validate import real_number, refuse_complex, validate_rng
-from ..images import to_gray
+from ..images import aspect_note, to_gray
 from ..raytrace import as_points
 from .edges import edge_points_along_normals
 from .ellipse import (
@@ -635,7 +635,9 @@ def detect_rim(
     ------
     ValueError
         Not an image, a bad ``hint`` or ``expected``, or no elliptic rim found (near the hint;
-        with ``expected``, the message names the best boundary found and the size expected).
+        with ``expected``, the message names the best boundary found and the size expected;
+        in an image too wide or too tall for a camera's frame of a mirror, it says so:
+        :func:`omnicam.images.aspect_note`, as ``omnicam calibrate`` does).
     """
     # arguments first (ValueError naming them); sigma bounded so the blur cannot run for hours
     sigma = real_number(sigma, "sigma", 0.0, 25.0, expected="a number of pixels in [0, 25]")
@@ -650,7 +652,10 @@ def detect_rim(
             f"(need at least 32x32)"
         )
     if not gray.max() > 0:
-        raise ValueError("no ellipse found: the image is uniform (no mirror rim visible)")
+        raise ValueError(
+            "no ellipse found: the image is uniform (no mirror rim visible)"
+            + aspect_note((gray.shape[1], gray.shape[0]))
+        )
     if sigma > max(1.0, min(gray.shape) / 8):
         raise ValueError(
             f"sigma must be at most 1/8 of the image's shorter side "
@@ -658,20 +663,26 @@ def detect_rim(
         )
     hint = check_hint(hint, (gray.shape[1], gray.shape[0]))
     expected = _check_expected(expected)
-    edges = _coarse_edges(gray)
-    if hint is not None:
-        return _detect(
-            gray,
-            _coarse_ellipse(edges, hint, None),
-            hint,
-            sigma,
-            threshold,
-            rng,
-            _size_prior(hint, None),
-        )
-    if expected is None:
-        return _detect(gray, _coarse_ellipse(edges), None, sigma, threshold, rng)
-    return _detect_expected(gray, edges, expected, sigma, threshold, rng)
+    try:
+        edges = _coarse_edges(gray)
+        if hint is not None:
+            return _detect(
+                gray,
+                _coarse_ellipse(edges, hint, None),
+                hint,
+                sigma,
+                threshold,
+                rng,
+                _size_prior(hint, None),
+            )
+        if expected is None:
+            return _detect(gray, _coarse_ellipse(edges), None, sigma, threshold, rng)
+        return _detect_expected(gray, edges, expected, sigma, threshold, rng)
+    except ValueError as e:  # no rim: an 8:1 strip is no camera's frame of a mirror, say so
+        note = aspect_note((gray.shape[1], gray.shape[0]))
+        if not note:
+            raise
+        raise ValueError(f"{e}{note}") from None
 
 
 def _detect_expected(gray, edges, expected, sigma, threshold, rng):

@@ -18,6 +18,7 @@ from ..formats.filestorage import SUFFIXES
 from ..formats.point_files import BOUNDARY_FORMAT, read_boundary_points
 from ..formats.verdict import Verdict
 from ..gauge import posture_error
+from ..images import aspect_note as frame_aspect_note
 from ..mirror import HyperbolicMirror
 from . import pattern
 from . import report_pages as report_page
@@ -214,31 +215,19 @@ def cmd_calibrate(args):
         )
     except (ValueError, RuntimeError, NotImplementedError, np.linalg.LinAlgError) as e:
         raise CliError(
-            f"calibration of {args.image} failed: {one_line(e)}{aspect_note(image_size)}"
+            f"calibration of {args.image} failed: {one_line(e)}"
+            f"{aspect_note(image_size, one_line(e))}"
         ) from None
     if args.candidates is not None:
         _write_candidates(args.candidates, camera, report, image, args.overwrite)
     return _finish(args, camera, report, image, outputs, k_from, rig)
 
 
-#: Wider (or taller) than any camera's frame of a mirror: 16:9 is 1.78, cinema's 2.39, two
-#: fisheyes side by side 2.
-MAX_FRAME_ASPECT = 3.0
-
-
-def aspect_note(image_size):
-    """``"; the image is 4000x500 (8.0:1), ..."`` for an image too wide or too tall to be a
-    camera's frame of a mirror (whose image is round), else ``""``."""
-    w, h = image_size
-    ratio = max(w, h) / min(w, h)
-    if ratio <= MAX_FRAME_ASPECT:
-        return ""
-    side = min(w, h)
-    return (
-        f"; the image is {w}x{h} ({ratio:.1f}:1), no camera's frame of a mirror: the mirror's "
-        f"round image would fill at most {side}x{side} px of it (a panorama already unwarped, "
-        f"or a crop?); give the camera's own image"
-    )
+def aspect_note(image_size, said=""):
+    """:func:`omnicam.images.aspect_note` of ``image_size``, unless ``said`` (the library's
+    message, e.g. :func:`omnicam.detect_rim`'s) says it already."""
+    note = frame_aspect_note(image_size)
+    return "" if note and note in said else note
 
 
 def refused_overlay_path(overlay):
@@ -260,7 +249,7 @@ def _guess_K_of_image(image, mirror, name, hint, boundary):
         raise CliError(
             f"--guess-k: no rim to guess K from in {name} ({one_line(e)}); give --rim-hint "
             f"CX,CY,R or --boundary-points, or the intrinsics"
-            + aspect_note((image.shape[1], image.shape[0]))
+            + aspect_note((image.shape[1], image.shape[0]), one_line(e))
         ) from None
     K = guess_K(rim, mirror)
     r = math.sqrt(float(rim.axes[0]) * float(rim.axes[1]))
