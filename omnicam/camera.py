@@ -48,7 +48,6 @@ from ._validate import (
     validate_K,
     validate_posture,
 )
-from .formats.verdict import Verdict
 from .gauge import canonical_rvec
 from .mirror import HyperbolicMirror
 
@@ -181,11 +180,12 @@ class MisalignedCatadioptricCamera:
         D: ArrayLike | None = None,
         image_size: Size | None = None,
         camera_reflection: tuple[float, float] | None = None,
-        verdict: Verdict | None = None,
+        verdict: Any = None,
     ) -> None:
         if not isinstance(mirror, HyperbolicMirror):
             raise ValueError(f"mirror must be a HyperbolicMirror, got {type(mirror).__name__}")
-        if verdict is not None and not isinstance(verdict, Verdict):
+        # an omnicam.Verdict (formats/, a layer above the model: known by what it does)
+        if verdict is not None and not callable(getattr(verdict, "doubts", None)):
             raise ValueError(
                 f"verdict must be an omnicam.Verdict or None, got {type(verdict).__name__} "
                 f"(a report's is report.verdict())"
@@ -321,7 +321,7 @@ class MisalignedCatadioptricCamera:
         return self._camera_reflection
 
     @property
-    def verdict(self) -> Verdict | None:
+    def verdict(self) -> Any:
         """How far to trust the calibration that made this camera (:class:`omnicam.Verdict`),
         or None when unknown; not part of ``==``."""
         return self._verdict
