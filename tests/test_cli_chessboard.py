@@ -290,7 +290,7 @@ def test_progress_lines_on_stderr_for_the_long_steps_and_quiet_silences_them(
 def test_the_library_is_silent_by_default_and_reports_through_progress(views):
     heard = []
     images = [cv2.imread(p) for p in views]
-    omnicam.calibrate_pattern(
+    cam, report = omnicam.calibrate_pattern(
         images,
         PATTERN,
         SQUARE,
@@ -303,3 +303,8 @@ def test_the_library_is_silent_by_default_and_reports_through_progress(views):
     assert any(t.startswith("adjustment of ") for t in steps)
     assert sum(t.startswith("held-out check: fold") for t in steps) == 2
     assert [i for i, _ in heard if i is not None] == list(range(6))
+    # str(report) leads with what users use; the camera carries the report's verdict
+    lead = str(report).splitlines()[1:4]
+    assert lead[0].strip().startswith("viewing directions known to ")
+    assert lead[1].strip().startswith("held-out corner RMS (2-fold")
+    assert lead[2].strip().startswith("verdict: ") and cam.verdict == report.verdict()

@@ -20,6 +20,9 @@ def _calibrated():
 def test_a_calibrated_camera_carries_its_reports_verdict_and_save_records_it(tmp_path):
     cam, report = _calibrated()
     assert cam.verdict == report.verdict() and report.camera is cam
+    lead = str(report).splitlines()[1:3]  # what users use first (issue 29 item 2)
+    assert lead[0].strip().startswith("viewing directions: the mirror axis is known to ")
+    assert lead[1].strip() == f"verdict: {report.verdict().status()}"
     cam.save(tmp_path / "c.yaml")  # the README's quick start: no report handed over
     assert read_verdict(tmp_path / "c.yaml") == report.verdict()
     back = MisalignedHyperbolicCamera.load(tmp_path / "c.yaml")
