@@ -3,9 +3,11 @@
 A route that takes ``progress`` (:func:`omnicam.calibrate_pattern`) is wrapped by
 :func:`reports_progress`: for the length of the call, its steps' :func:`say` reach
 ``progress(None, text)`` (``None``: no image's; a line per image is ``progress(index, text)``).
-Silent by default (no callback), and silent inside a nested call made without one (the
-held-out check's calibrations of each fold, which the check itself reports fold by fold).
-A context variable carries the callback, so the steps below the route need no parameter.
+Silent by default (no callback). A nested call made without one (the held-out check's
+calibration of each fold, which the check reports fold by fold) is quiet but for the lines
+of a fit that runs long (:class:`Meter`, every :data:`PERIOD_S` seconds), so no stretch of a
+long run goes without a line. A context variable carries the callback, so the steps below
+the route need no parameter.
 """
 
 from __future__ import annotations
@@ -21,6 +23,8 @@ __all__ = ["PERIOD_S", "Meter", "reports_progress", "say"]
 _CURRENT: contextvars.ContextVar[Callable[[int | None, str], Any] | None] = contextvars.ContextVar(
     "omnicam_progress", default=None
 )
+#: Inside a nested call without its own callback: only the long fits' periodic lines pass.
+_NESTED: contextvars.ContextVar[bool] = contextvars.ContextVar("omnicam_nested", default=False)
 #: Seconds between two lines of one long step (the adjustment's evaluations).
 PERIOD_S = 2.0
 
@@ -32,19 +36,24 @@ def reports_progress(func: F) -> F:
 
     @functools.wraps(func)
     def wrapper(*args: Any, **kwargs: Any) -> Any:
-        token = _CURRENT.set(kwargs.get("progress"))
+        own = kwargs.get("progress")
+        outer = _CURRENT.get()
+        token = _CURRENT.set(own if own is not None else outer)
+        nested = _NESTED.set(own is None and outer is not None)
         try:
             return func(*args, **kwargs)
         finally:
+            _NESTED.reset(nested)
             _CURRENT.reset(token)
 
     return wrapper  # type: ignore[return-value]
 
 
-def say(text: str) -> None:
-    """Tell the current route's ``progress`` callback ``text`` (one line), if it has one."""
+def say(text: str, long: bool = False) -> None:
+    """Tell the current route's ``progress`` callback ``text`` (one line), if it has one;
+    inside a nested call without its own, only the lines of a fit that runs ``long``."""
     tell = _CURRENT.get()
-    if tell is not None:
+    if tell is not None and (long or not _NESTED.get()):
         tell(None, text)
 
 
@@ -69,7 +78,8 @@ class Meter:
             self.last = now
             say(
                 f"{self.what}: evaluation {self.n}, cost {cost:.6g} "
-                f"({now - self.start:.0f} s so far)"
+                f"({now - self.start:.0f} s so far)",
+                long=True,
             )
 
     def done(self, cost: float) -> None:
