@@ -17,6 +17,10 @@ Model contract (the binding text is ``docs/conventions.md``):
 * **The camera's own reflection** (optional): ``camera_reflection``, the circle coaxial with the
   optical axis (radius ``r`` at axial distance ``z``, camera frame) whose reflection a
   calibration detected; default panoramas start above it.
+* **The verdict** (optional): ``verdict``, how far to trust the calibration that made the camera
+  (:class:`omnicam.Verdict`): set by the calibration routes, saved and loaded with the file;
+  carried by ``replace`` and ``scaled``, not part of equality (the same rig is the same rig,
+  however far one trusts it).
 * **Methods**: ``unproject`` (pixel -> reflected ray, eqs. 6-19), ``project`` (scene point ->
   pixel, the exact non-central inverse), ``project_directions`` (points at infinity).
 * **Pixels**: centres at integer coordinates; no clipping to ``image_size``.
@@ -139,6 +143,13 @@ class MisalignedCatadioptricCamera:
         ``(r, z)`` of the circle whose reflection outlines the camera in the image
         (:class:`CameraReflection`), as a calibration detected it; None when unknown. Default
         panoramas start just above its reflection (:func:`omnicam.views.default_elevation_range`).
+    verdict : Verdict or None
+        How far to trust the calibration that made this camera (:class:`omnicam.Verdict`, what
+        its report said): the calibration routes set it, :func:`omnicam.save_camera` records
+        it, :func:`omnicam.load_camera` gives it back; None when unknown (a camera built by
+        hand, a file without one). Carried by :meth:`replace` and :meth:`scaled` (the same
+        calibration); not part of ``==`` nor of ``repr``: two cameras that map every pixel alike
+        are equal, whatever their verdicts.
 
     Raises
     ------
@@ -161,6 +172,7 @@ class MisalignedCatadioptricCamera:
         "_image_size",
         "_viewpoint",
         "_camera_reflection",
+        "_verdict",
     )
 
     def __init__(
@@ -172,12 +184,20 @@ class MisalignedCatadioptricCamera:
         D: ArrayLike | None = None,
         image_size: Size | None = None,
         camera_reflection: tuple[float, float] | None = None,
+        verdict: Any = None,
     ) -> None:
         if not isinstance(mirror, HyperbolicMirror | AsphericMirror):
             raise ValueError(
                 f"mirror must be a HyperbolicMirror or an AsphericMirror, got "
                 f"{type(mirror).__name__}"
             )
+        # an omnicam.Verdict (formats/, a layer above the model: known by what it does)
+        if verdict is not None and not callable(getattr(verdict, "doubts", None)):
+            raise ValueError(
+                f"verdict must be an omnicam.Verdict or None, got {type(verdict).__name__} "
+                f"(a report's is report.verdict())"
+            )
+        self._verdict = verdict
         self._K = _readonly(validate_K(K))
         D = validate_D(D)
         self._D = None if D is None else _readonly(D)
@@ -236,11 +256,13 @@ class MisalignedCatadioptricCamera:
             self._D,
             new,
             self._camera_reflection,  # a circle of the body: the same at any resolution
+            self._verdict,  # the same calibration
         )
 
     def replace(self, **changes: Any) -> MisalignedCatadioptricCamera:
-        """A copy with some of ``K, mirror, rvec, tvec, D, image_size, camera_reflection``
-        changed."""
+        """A copy with some of ``K, mirror, rvec, tvec, D, image_size, camera_reflection,
+        verdict`` changed (the verdict is kept unless given: ``replace(verdict=None)`` drops
+        it)."""
         args: dict[str, Any] = dict(
             K=self._K,
             mirror=self._mirror,
@@ -249,6 +271,7 @@ class MisalignedCatadioptricCamera:
             D=self._D,
             image_size=self._image_size,
             camera_reflection=self._camera_reflection,
+            verdict=self._verdict,
         )
         unknown = set(changes) - set(args)
         if unknown:
@@ -303,6 +326,12 @@ class MisalignedCatadioptricCamera:
         mirror's length unit; :class:`CameraReflection`), as detected when calibrated; None
         when unknown."""
         return self._camera_reflection
+
+    @property
+    def verdict(self) -> Any:
+        """How far to trust the calibration that made this camera (:class:`omnicam.Verdict`),
+        or None when unknown; not part of ``==``."""
+        return self._verdict
 
     def __repr__(self) -> str:
         body = self._camera_reflection

@@ -22,6 +22,7 @@ from ._validate import shown
 from .camera import MisalignedCatadioptricCamera
 from .formats.calibration_file import load_camera, save_camera
 from .formats.central_fit import fit_omnidir
+from .formats.verdict import Verdict
 from .mirror import HyperbolicMirror
 
 if TYPE_CHECKING:  # annotations only; the routes load when calibrating (below)
@@ -60,10 +61,11 @@ class MisalignedHyperbolicCamera(MisalignedCatadioptricCamera):
         D: ArrayLike | None = None,
         image_size: Size | None = None,
         camera_reflection: tuple[float, float] | None = None,
+        verdict: Verdict | None = None,
     ) -> None:
         if not isinstance(mirror, HyperbolicMirror):
             raise ValueError(f"mirror must be a HyperbolicMirror, got {type(mirror).__name__}")
-        super().__init__(K, mirror, rvec, tvec, D, image_size, camera_reflection)
+        super().__init__(K, mirror, rvec, tvec, D, image_size, camera_reflection, verdict)
 
     @classmethod
     def of(cls, camera: MisalignedCatadioptricCamera) -> MisalignedHyperbolicCamera:
@@ -79,6 +81,7 @@ class MisalignedHyperbolicCamera(MisalignedCatadioptricCamera):
             camera.D,
             camera.image_size,
             camera.camera_reflection,
+            camera.verdict,
         )
 
     # -- calibration ------------------------------------------------------------------------
@@ -184,14 +187,17 @@ class MisalignedHyperbolicCamera(MisalignedCatadioptricCamera):
         :func:`omnicam.save_camera` of this camera: the file is written beside ``path``, read
         back and compared, then renamed into place. ``cam.save(path, report)`` also records how
         far to trust it: the report's confidence, stated uncertainty and warnings (the file's
-        ``verdict``, read by :func:`omnicam.read_verdict` and ``omnicam info``).
+        ``verdict``, read by :func:`omnicam.read_verdict` and ``omnicam info``); a calibrated
+        camera carries its report's verdict already, so ``cam.save(path)`` records it too.
 
         Parameters
         ----------
         path : str or os.PathLike
         verdict : CalibrationReport, PatternReport or omnicam.Verdict, optional
             What the calibration's report said (a report is taken as
-            :meth:`omnicam.Verdict.from_report` of it); None writes none.
+            :meth:`omnicam.Verdict.from_report` of it); None records the verdict this camera
+            carries (:attr:`verdict`: the calibration routes set it, :meth:`load` gives it
+            back), none if it carries none.
 
         Raises
         ------

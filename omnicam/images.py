@@ -31,7 +31,9 @@ from ._quiet import opencv_silenced
 from ._validate import check_readable, file_path, regular_file, shown
 
 __all__ = [
+    "MAX_FRAME_ASPECT",
     "SCALES",
+    "aspect_note",
     "check_image",
     "file_kind",
     "image_problem",
@@ -41,6 +43,25 @@ __all__ = [
 ]
 
 SCALES = ("levels", "range")
+#: Wider (or taller) than any camera's frame of a mirror: 16:9 is 1.78, cinema's 2.39, two
+#: fisheyes side by side 2.
+MAX_FRAME_ASPECT = 3.0
+
+
+def aspect_note(image_size) -> str:
+    """``"; the image is 4000x500 (8.0:1), ..."`` for an image too wide or too tall to be a
+    camera's frame of a mirror (whose image is round), else ``""``: what a failed rim search
+    (:func:`omnicam.detect_rim`) and ``omnicam calibrate`` add to their message."""
+    w, h = image_size
+    ratio = max(w, h) / max(min(w, h), 1)
+    if ratio <= MAX_FRAME_ASPECT:
+        return ""
+    side = min(w, h)
+    return (
+        f"; the image is {w}x{h} ({ratio:.1f}:1), no camera's frame of a mirror: the mirror's "
+        f"round image would fill at most {side}x{side} px of it (a panorama already unwarped, "
+        f"or a crop?); give the camera's own image"
+    )
 
 
 def check_image(image, name="image") -> np.ndarray:

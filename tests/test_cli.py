@@ -583,13 +583,13 @@ def test_info_prints_the_verdict_and_says_what_is_doubtful(rig, tmp_path, capsys
     out = capsys.readouterr().out
     assert (
         "verdict        DOUBTFUL: calibrated ambiguous (confidence 0.00), forced past 1 "
-        "implausibility warning (from one image of the mirror)"
+        "implausibility warning, with 1 warning (from one image of the mirror)"
     ) in out
     assert "K from         read from a file: K.yaml" in out
     assert "posture        chosen with confidence 0.0000 AMBIGUOUS" in out
     assert "uncertainty    mirror axis 0.127 deg, camera centre 0.15 mm" in out
     assert "implausible    - the camera centre is 13.0 from the lower focus" in out
-    assert "warning        - no far_lines given" in out
+    assert "warning        - no --far-lines given" in out  # as the command line says it
     rig.save(calib, Verdict(confidence=1.0))
     assert main(["info", str(calib)]) == 0
     assert "verdict        no doubt recorded" in capsys.readouterr().out

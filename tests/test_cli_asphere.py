@@ -106,7 +106,7 @@ def test_equiangular_option_is_the_constructor():
         (["--sphere", "30", "18", "--paraboloid", "20", "25"], "one mirror"),
         (["--sphere", "30", "18", "--alpha", "0.1"], "--alpha goes with --asphere"),
         (["--mirror", "23.4", "28.1", "30", "--vertex-z", "3"], "--vertex-z goes with"),
-        (["--sphere", "30", "40"], "--sphere: rim_radius must be below"),
+        (["--sphere", "30", "40"], "--sphere: RIM must be below"),
         (["--asphere", "30", "0", "18", "--alpha", "-50"], "--asphere: alpha"),
         (["--mirror-file", "missing.yaml"], "--mirror-file: mirror file missing.yaml"),
     ],

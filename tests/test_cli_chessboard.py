@@ -2,6 +2,7 @@
 corners from other tools, starts for K honoured or refused, views that cannot determine the rig."""
 
 import json
+import re
 
 import cv2
 import numpy as np
@@ -18,6 +19,10 @@ PATTERN, SQUARE = (7, 5), 60.0
 SIZE = (700, 700)
 RIG = synthetic.misaligned_rig(3.0, 30.0, (1.5, -2.0, 1.9), image_size=SIZE)
 MIRROR = ["--mirror", "23.4", "28.1", "30"]
+#: The library's parameter names that the command line must say as options (issue 29 item 7).
+PYTHON_NAMES = re.compile(
+    r"\b(lens_z|lens_r|pattern_size|rim_radius|refine_mirror_shape|image_points|square_size)\b"
+)
 
 
 def _render(folder, poses, prefix="board"):
@@ -146,7 +151,7 @@ def test_boards_all_on_one_side_exit_one_unless_forced(tmp_path, capsys):
     # forced, and why
     verdict = omnicam.formats.calibration_file.read_verdict(tmp_path / "rig.yaml")
     assert verdict.forced and "all boards are on one side" in verdict.implausible[0]
-    assert verdict.doubts() == ("forced past 1 implausibility warning",)
+    assert verdict.doubts()[0] == "forced past 1 implausibility warning"
 
 
 @pytest.mark.parametrize(
@@ -186,3 +191,120 @@ def test_the_reflections_plane_is_honoured_and_its_radius_refused(views, tmp_pat
     assert _calibrate(views, tmp_path / "c.yaml", "--lens-r", "15", "--lens-z", "25") == 2
     assert "--lens-r is for one image" in capsys.readouterr().err
     assert not (tmp_path / "c.yaml").exists()
+
+
+def test_an_implausible_chessboard_calibration_is_refused_as_one_from_one_image(
+    views, tmp_path, capsys
+):
+    """One set of limits (issue 29 item 1): the rig's mirror axis leans 3 deg, so with
+    --max-tilt 1 the plausibility checks of one image refuse it: exit 1 and no file, unless
+    --force, whose file records the finding."""
+    calib = tmp_path / "rig.yaml"
+    assert _calibrate(views, calib, "--heldout", "0", "--max-tilt", "1") == 1
+    cap = capsys.readouterr()
+    assert "verdict: REFUSED: 1 implausible finding" in cap.out
+    assert "implausible: the mirror axis is tilted" in cap.err and "(limit 1 deg" in cap.err
+    assert "not written" in cap.err.strip().splitlines()[-1] and not calib.exists()
+    assert _calibrate(views, calib, "--heldout", "0", "--max-tilt", "1", "--force") == 0
+    verdict = omnicam.read_verdict(calib)
+    assert verdict.forced and "tilted" in verdict.implausible[0]
+    assert omnicam.load_camera(calib).verdict == verdict
+    capsys.readouterr()
+    assert _calibrate(views, tmp_path / "ok.yaml", "--heldout", "0") == 0  # default limits
+    assert "verdict: " in capsys.readouterr().out
+    assert not omnicam.read_verdict(tmp_path / "ok.yaml").implausible
+
+
+def test_the_report_leads_with_the_rays_the_heldout_check_and_the_verdict(views, tmp_path, capsys):
+    """What users use first (issue 29 item 2), right after the line per image."""
+    assert _calibrate(views, tmp_path / "rig.yaml", "--heldout", "3") == 0
+    out = capsys.readouterr().out.splitlines()
+    first = [ln for ln in out if not ln.startswith("[")][:3]
+    assert first[0].startswith("viewing directions known to ")
+    assert first[1].startswith("held-out corner RMS (3-fold") and "cv2.omnidir" in first[1]
+    assert first[2].startswith("verdict: ")
+
+
+def test_an_unscaled_calibration_of_a_good_rig_raises_no_alarm_about_fx(tmp_path, capsys):
+    """Without --mirror the scale and fx against the mirror's size are unknown by nature: a
+    neutral line says so, no warning (issue 29 item 2). A rig close to the design, 10 views."""
+    good = synthetic.misaligned_rig(1.0, 30.0, (0.5, -0.5, 0.5), image_size=SIZE)
+    poses = boards.random_board_poses(
+        good, 10, PATTERN, SQUARE, distance=(350.0, 700.0), max_tilt_deg=40.0, rng=11
+    )
+    paths = []
+    for i, p in enumerate(poses):
+        paths.append(str(tmp_path / f"good{i}.png"))
+        cv2.imwrite(paths[-1], boards.render_board(good, PATTERN, SQUARE, *p, supersample=2))
+    args = ["calibrate", "--chessboard", "7x5", "--square", "60", *paths, "--heldout", "0"]
+    assert main([*args, "--dist-model", "none", "-o", str(tmp_path / "rig.yaml")]) == 0
+    cap = capsys.readouterr()
+    assert "focal length" not in cap.err and "fx" not in cap.err and "scale" not in cap.err
+    assert "by nature, boards alone do not fix fx and the mirror's size separately" in cap.out
+    assert "nor the scale, without --rim-radius" in cap.out
+    assert not PYTHON_NAMES.search(cap.out + cap.err)  # options, not parameters (item 7)
+    verdict = omnicam.read_verdict(tmp_path / "rig.yaml")
+    assert any("scale is assumed" in n for n in verdict.notes)
+    assert not any("focal length" in w or "scale" in w for w in verdict.warnings)
+
+
+@pytest.mark.parametrize(
+    "extra",
+    [
+        ["--chessboard", "9x8"],  # no board: the library says the mirror's (a, b, rim_radius)
+        ["--chessboard", "9x8", *MIRROR],  # no board: the library says pattern_size
+        ["--refine-mirror-shape", "--force"],  # the notes name refine_mirror_shape, rim_radius
+    ],
+    ids=["no-start", "no-board", "notes"],
+)
+def test_the_command_line_names_options_not_python_parameters(views, tmp_path, capsys, extra):
+    """Library messages reaching the command line say --chessboard, --rim-radius, --lens-z,
+    --refine-mirror-shape (cli/_common.py OPTION_OF), not the parameters' names."""
+    args = ["calibrate", "--chessboard", "7x5", "--square", "60", *views, "--heldout", "0"]
+    main([*args, "--dist-model", "none", "-o", str(tmp_path / "rig.yaml"), *extra])
+    cap = capsys.readouterr()
+    assert not PYTHON_NAMES.search(cap.out + cap.err), PYTHON_NAMES.search(cap.out + cap.err)
+    said = cap.out + cap.err
+    if "9x8" in extra:
+        assert ("--chessboard" if "--mirror" in extra else "--mirror A B RIM") in cap.err
+    else:
+        assert "--lens-z" in said and "--rim-radius" in said
+
+
+def test_progress_lines_on_stderr_for_the_long_steps_and_quiet_silences_them(
+    views, tmp_path, capsys
+):
+    """Issue 29 item 3: the adjustment's evaluations and cost, each held-out fold; -q: none."""
+    assert _calibrate(views, tmp_path / "rig.yaml", "--heldout", "2") == 0
+    err = capsys.readouterr().err.splitlines()
+    adjust = [ln for ln in err if ln.startswith("omnicam: adjustment of ")]
+    assert adjust and all("evaluations in" in ln and "cost" in ln for ln in adjust[-1:])
+    assert "omnicam: held-out check: fold 1/2, the rig calibrated on 3 views" in err
+    assert "omnicam: held-out check: fold 2/2, the rig calibrated on 3 views" in err
+    assert _calibrate(views, tmp_path / "q.yaml", "--heldout", "2", "-q") == 0
+    cap = capsys.readouterr()
+    assert "adjustment of" not in cap.err and "held-out check: fold" not in cap.err
+    assert "[1/6]" not in cap.out
+
+
+def test_the_library_is_silent_by_default_and_reports_through_progress(views):
+    heard = []
+    images = [cv2.imread(p) for p in views]
+    cam, report = omnicam.calibrate_pattern(
+        images,
+        PATTERN,
+        SQUARE,
+        RIG.mirror,
+        dist_model="none",
+        heldout=2,
+        progress=lambda i, text: heard.append((i, text)),
+    )
+    steps = [t for i, t in heard if i is None]
+    assert any(t.startswith("adjustment of ") for t in steps)
+    assert sum(t.startswith("held-out check: fold") for t in steps) == 2
+    assert [i for i, _ in heard if i is not None] == list(range(6))
+    # str(report) leads with what users use; the camera carries the report's verdict
+    lead = str(report).splitlines()[1:4]
+    assert lead[0].strip().startswith("viewing directions known to ")
+    assert lead[1].strip().startswith("held-out corner RMS (2-fold")
+    assert lead[2].strip().startswith("verdict: ") and cam.verdict == report.verdict()

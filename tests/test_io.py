@@ -466,6 +466,7 @@ def test_the_doubts_of_a_verdict_are_short_phrases():
         "with a guessed K",
         "ambiguous (confidence 0.00)",
         "forced past 1 implausibility warning",
+        "with 1 warning",
     )
     assert Verdict(implausible=("a", "b")).doubts() == ("with 2 implausibility warnings",)
 

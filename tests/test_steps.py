@@ -424,9 +424,11 @@ def test_warnings_step_says_when_a_shape_error_could_have_moved_a_nearly_aligned
     near = Uncertainty(0.03, 0.03, aligned_chi2=40.0, aligned_px=0.2, twin_deg=2.0)
     (w,) = warnings_of(exact, sel, dataclasses.replace(ref, uncertainty=near))
     assert w.startswith("the rig is nearly aligned (the camera close to the mirror's axis)")
-    assert "midway between the two physical postures, 1.00 deg from the one returned" in w
+    assert "with the rim's image as fitted the axis is known to 0.03 deg (RMS)" in w
+    assert "could put it up to 1.00 deg off: the aligned posture midway between" in w
     assert "by only 0.20 px RMS (chi-square +40 with the residuals' correlation)" in w
-    assert "moved the axis by up to 1.00 deg, beyond the stated 0.03 deg" in w
+    # honest about what the bound is (issue 29 item 1)
+    assert "a bound over the shapes of the rim's image the data cannot rule out, not an " in w
     assert "lens_z" in w
     # quiet when the cost rises by more than ALIGNED_CHI2 there, or the aligned posture lies
     # within twice the stated uncertainty, or is unknown (no twin)

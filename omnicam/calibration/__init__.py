@@ -38,6 +38,7 @@ import numpy as np
 
 from .._typing import ArrayLike, FloatArray
 from ..camera import MisalignedCatadioptricCamera
+from ..formats.verdict import judged
 from ..mirror import Mirror
 from ..raytrace import normalize, to_pixels
 from . import selection, steps
@@ -220,7 +221,7 @@ def _calibrate(
         note = nominal_note(mirror)  # a mirror that does not say where the camera sits
         if note is not None:
             report.warnings.append(note)
-    return camera, report
+    return judged(camera, report)  # the camera carries the report's verdict
 
 
 def recalibrate(

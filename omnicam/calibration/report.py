@@ -229,13 +229,26 @@ class CalibrationReport:
             f"{unc.first_order_axis_std_deg:.3g} deg on the axis"
         )
 
-    def summary(self):
-        """A readable multi-line summary (what the CLI prints)."""
+    def lead(self, verdict: Verdict | None = None, refused: bool = False) -> list[str]:
+        """The report's first lines: what users use, the uncertainty of the viewing directions
+        (the mirror axis's and the camera centre's, which move every ray), and the verdict
+        (``verdict``, default :meth:`verdict`; ``refused``: the command line refuses it)."""
+        v = self.verdict() if verdict is None else verdict
+        return [
+            f"viewing directions: the mirror axis is known to {self.axis_std_deg:.3g} deg, the "
+            f"camera centre to {self.origin_std_mm:.3g} (RMS, {self._uncertainty_kind()}); one "
+            f"image has no held-out check",
+            f"verdict: {v.status(refused)}",
+        ]
+
+    def summary(self, verdict=None, refused=False):
+        """A readable multi-line summary (what the CLI prints), :meth:`lead` first."""
         cam = self.camera
         axis = cam.R[:, 2]
         tilt = math.degrees(math.atan2(math.hypot(axis[0], axis[1]), axis[2]))
         lines = [
             "omnicam mirror posture calibration",
+            *(f"  {ln}" for ln in self.lead(verdict, refused)),
             _mirror_line(cam.mirror),
             f"  rim: {len(self.boundary_points)} boundary points, RMS {self.rim_rms:.4f} px",
             f"  rvec = [{', '.join(f'{v:.9f}' for v in cam.rvec)}]",
@@ -297,7 +310,8 @@ class CalibrationReport:
             lines.append("  no warnings")
         return "\n".join(lines)
 
-    __str__ = summary
+    def __str__(self):
+        return self.summary()
 
     def __repr__(self):
         return (

@@ -24,7 +24,7 @@ import math
 import numpy as np
 
 from .._validate import real_number, refuse_complex, validate_rng
-from ..images import to_gray
+from ..images import aspect_note, to_gray
 from .ellipse import conic_distance, conic_from_ellipse, ellipse_from_conic
 from .rim_coarse import coarse_edges, coarse_ellipse, size_prior
 from .rim_expected import check_expected, detect_expected
@@ -124,7 +124,9 @@ def detect_rim(
     ------
     ValueError
         Not an image, a bad ``hint`` or ``expected``, or no elliptic rim found (near the hint;
-        with ``expected``, the message names the best boundary found and the size expected).
+        with ``expected``, the message names the best boundary found and the size expected;
+        in an image too wide or too tall for a camera's frame of a mirror, it says so:
+        :func:`omnicam.images.aspect_note`, as ``omnicam calibrate`` does).
     RimRejected
         (a ``ValueError``) The best elliptic boundary is too short or too rough to be a rim; its
         ``fit`` and ``support`` say what was found.
@@ -142,7 +144,10 @@ def detect_rim(
             f"(need at least 32x32)"
         )
     if not gray.max() > 0:
-        raise ValueError("no ellipse found: the image is uniform (no mirror rim visible)")
+        raise ValueError(
+            "no ellipse found: the image is uniform (no mirror rim visible)"
+            + aspect_note((gray.shape[1], gray.shape[0]))
+        )
     if sigma > max(1.0, min(gray.shape) / 8):
         raise ValueError(
             f"sigma must be at most 1/8 of the image's shorter side "
@@ -150,20 +155,28 @@ def detect_rim(
         )
     hint = check_hint(hint, (gray.shape[1], gray.shape[0]))
     expected = check_expected(expected)
-    edges = coarse_edges(gray)
-    if hint is not None:
-        return fit_from_coarse(
-            gray,
-            coarse_ellipse(edges, hint, None),
-            hint,
-            sigma,
-            threshold,
-            rng,
-            size_prior(hint, None),
-        )
-    if expected is None:
-        return fit_from_coarse(gray, coarse_ellipse(edges), None, sigma, threshold, rng)
-    return detect_expected(gray, edges, expected, sigma, threshold, rng)
+    try:
+        edges = coarse_edges(gray)
+        if hint is not None:
+            return fit_from_coarse(
+                gray,
+                coarse_ellipse(edges, hint, None),
+                hint,
+                sigma,
+                threshold,
+                rng,
+                size_prior(hint, None),
+            )
+        if expected is None:
+            return fit_from_coarse(gray, coarse_ellipse(edges), None, sigma, threshold, rng)
+        return detect_expected(gray, edges, expected, sigma, threshold, rng)
+    except RimRejected:
+        raise  # a boundary was found and judged: its message says why, whatever the frame
+    except ValueError as e:  # no rim: an 8:1 strip is no camera's frame of a mirror, say so
+        note = aspect_note((gray.shape[1], gray.shape[0]))
+        if not note:
+            raise
+        raise ValueError(f"{e}{note}") from None
 
 
 def check_hint(hint, image_size) -> tuple[float, float, float] | None:

@@ -654,14 +654,15 @@ def warnings_step(rim, cue, selection, refinement, cands):
     if unc.aligned_chi2 <= ALIGNED_CHI2 and half > 2 * unc.axis_std_deg:
         out.append(
             f"the rig is nearly aligned (the camera close to the mirror's axis), where the "
-            f"rim's image depends on the tilt only to second order: the aligned posture "
-            f"midway between the two physical postures, {half:.2f} deg from the one returned, "
-            f"changes the rim's image by only {unc.aligned_px:.2f} px RMS (chi-square "
-            f"+{unc.aligned_chi2:.0f} with the residuals' correlation), so a low-order shape "
-            f"error of the rim's image (or a pixel aspect ratio of K a little off) may have "
-            f"moved the axis by up to {half:.2f} deg, beyond the stated "
-            f"{unc.axis_std_deg:.2f} deg; the camera's reflection with its z or r given "
-            f"(lens_z, lens_r) pins the tilt"
+            f"rim's image depends on the tilt only to second order: with the rim's image as "
+            f"fitted the axis is known to {unc.axis_std_deg:.2f} deg (RMS), but a low-order "
+            f"shape error of that image (or a pixel aspect ratio of K a little off), which "
+            f"this fit cannot see, could put it up to {half:.2f} deg off: the aligned posture "
+            f"midway between the two physical postures changes the rim's image by only "
+            f"{unc.aligned_px:.2f} px RMS (chi-square +{unc.aligned_chi2:.0f} with the "
+            f"residuals' correlation). That is a bound over the shapes of the rim's image the "
+            f"data cannot rule out, not an error estimate; the camera's reflection with its z "
+            f"or r given (lens_z, lens_r) pins the tilt"
         )
     others = [i for i in cands.physical if i != selection.chosen]
     if others and not selection.ambiguous and selection.costs_per_cue:

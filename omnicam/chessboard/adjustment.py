@@ -33,6 +33,7 @@ import numpy as np
 from scipy.optimize import OptimizeResult, least_squares
 
 from .. import raytrace
+from .._progress import Meter
 from .._typing import FloatArray
 from ..calibration.reflection import fit_circle, plane_radius
 from ..camera import MisalignedCatadioptricCamera
@@ -446,8 +447,11 @@ class BundleAdjustment:
 
         last = {}  # MINPACK asks for the Jacobian where it last evaluated the residuals
 
+        meter = Meter(f"adjustment of {int(free.sum())} parameters")  # progress (silent by default)
+
         def fun(xf):
             last["x"], last["z"] = xf.copy(), robust_residuals(self.residuals(full(xf)), f_scale)
+            meter(float(last["z"][0] @ last["z"][0]))  # progress: the robust cost
             return last["z"][0]
 
         def jac(xf):
@@ -468,6 +472,7 @@ class BundleAdjustment:
         )
         sol.x = full(sol.x)
         sol.cost = float(sol.cost)
+        meter.done(2.0 * sol.cost)
         return sol
 
 

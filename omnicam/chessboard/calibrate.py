@@ -59,7 +59,9 @@ import warnings as _warnings
 
 import numpy as np
 
+from .._progress import reports_progress, say
 from ..camera import MisalignedCatadioptricCamera
+from ..formats.verdict import judged
 from .adjustment import AdjustmentModel
 from .board_pose import object_points
 from .fit_steps import SHAPE_REJECT_CHI2, report_step, rounds_step, shape_check_step
@@ -96,6 +98,7 @@ __all__ = [
 ]
 
 
+@reports_progress  # progress(None, text) hears the long steps (omnicam._progress)
 def calibrate_pattern(
     images,
     pattern_size,
@@ -205,7 +208,9 @@ def calibrate_pattern(
         ``report.heldout``; it costs ``k`` more calibrations. 0: not run.
     progress : callable, optional
         ``progress(index, text)`` hears of each image as its board is looked for (a command
-        line prints it).
+        line prints it), and ``progress(None, text)`` of the long steps: the adjustment's
+        evaluations and cost, the shape check, each fold of the held-out check. Silent by
+        default.
 
     Returns
     -------
@@ -267,6 +272,7 @@ def _calibrate(
     )
     rounds = rounds_step(inputs.greys, boards, start, rim, model, options, progress)
     if options.mirror is None and not options.refine_mirror_shape:
+        say("shape check: is the central fit's mirror shape consistent with the corners?")
         rounds = shape_check_step(rounds, start, rim, model, options)
     camera, report = report_step(rounds, start, lens.note, options)
     start_warns = rim.warnings + start.warnings
@@ -291,7 +297,7 @@ def _calibrate(
         heldout=held,
         names=inputs.names,
     )
-    return camera, report
+    return judged(camera, report)  # the camera carries the report's verdict
 
 
 def _heldout_step(report: PatternReport, options: PatternOptions, k: int) -> HeldOut:

@@ -26,7 +26,7 @@ from .adjustment import (
 )
 from .board_pose import board_pose_from_rays, object_points, rodrigues, start_viewpoint
 from .report import PatternReport
-from .report_warnings import FitFacts, report_warnings
+from .report_warnings import FitFacts, implausible, report_warnings
 from .steps import Boards, GreyImage, PatternOptions, RimStep, StartStep, redetect
 
 __all__ = [
@@ -454,5 +454,6 @@ def report_step(
         nfev=int(sol.nfev),
         camera=camera,
         start=start.camera,
+        plausibility=implausible(camera, image_size),
     )
     return camera, report

@@ -19,6 +19,7 @@ import cv2
 import numpy as np
 from scipy.optimize import least_squares
 
+from .._progress import say
 from ..raytrace import undistort_normalized
 from .board_pose import board_pose_from_rays
 
@@ -211,9 +212,10 @@ def cross_validate(fit: Callable, views: dict, obj, image_size, k: int = 5) -> H
     rms: dict[int, float] = {}
     omni: dict[int, float] | None = {}
     failed: dict[int, str] = {}
-    for fold in fold_of(len(ids), k):
+    for n, fold in enumerate(fold_of(len(ids), k)):
         held = [ids[j] for j in fold]
         train = [i for i in ids if i not in held]
+        say(f"held-out check: fold {n + 1}/{k}, the rig calibrated on {len(train)} views")
         try:
             project, directions = omnicam_predictor(fit(train))
         except ValueError as e:  # this fold's views alone cannot determine the rig

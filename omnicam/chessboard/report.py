@@ -9,11 +9,31 @@ from typing import Any
 import cv2
 import numpy as np
 
+from ..calibration.chen import rim_conic
+from ..calibration.plausibility import (
+    DEFAULT_MAX_OFFSET_MM,
+    DEFAULT_MAX_TILT_DEG,
+    check_plausibility,
+)
 from ..formats.verdict import Verdict, split_findings
 from ..images import to_bgr8
 from .heldout import HeldOut
 
-__all__ = ["PatternReport"]
+__all__ = ["ONE_SIDED", "PatternReport"]
+
+#: The start of the warning that the views cannot tell the principal point from the tilt (an
+#: implausible finding: the command line refuses such a calibration unless forced).
+ONE_SIDED = "all boards are on one side of the mirror (an azimuth gap over 180 deg)"
+#: The starts of the findings that the data cannot fix by nature when the mirror is not given
+#: (its scale without a rim radius; its shape, which trades against fx): notes, not alarms.
+_SCALE_ASSUMED = "the mirror's scale is assumed"
+_SHAPE_HELD = "the mirror's shape is the central fit's"
+_BY_NATURE = (
+    _SCALE_ASSUMED,
+    _SHAPE_HELD,
+    "the mirror's a, b were estimated",
+    "the focal length is weakly determined",
+)
 
 
 @dataclasses.dataclass(frozen=True, eq=False)
@@ -75,6 +95,10 @@ class PatternReport:
     heldout : HeldOut or None
         With ``calibrate_pattern(heldout=k)``, the k-fold held-out corner RMS of the views
         used (:mod:`.heldout`), ``cv2.omnidir``'s on the same folds beside it.
+    plausibility : tuple of PlausibilityWarning
+        The implausible findings of the single-image route's checks (tilt, offset, ``K``
+        against the image, with its default limits; :meth:`with_limits` checks at others),
+        also in ``warnings``. :attr:`implausible` adds boards all on one side.
     """
 
     rms: float
@@ -99,6 +123,122 @@ class PatternReport:
     heldout: HeldOut | None = None
     ray_std_deg: tuple = (math.nan, math.nan)
     names: dict = dataclasses.field(default_factory=dict)
+    plausibility: tuple = ()
+
+    # -- what the warnings say: implausible, by nature, or alarms ------------------------------
+    @property
+    def implausible(self) -> tuple[str, ...]:
+        """The implausible findings: :attr:`plausibility` (the single-image route's checks,
+        :func:`omnicam.calibration.plausibility.check_plausibility`, with the same limits) and
+        boards all on one side of the mirror. ``omnicam calibrate`` refuses on them without
+        ``--force``, as it refuses an implausible calibration from one image."""
+        found = [str(w) for w in self.plausibility]
+        found += [w for w in self.warnings if w.startswith(ONE_SIDED) and w not in found]
+        return tuple(found)
+
+    @property
+    def mirror_unknown(self) -> bool:
+        """The mirror was not given: its scale (without ``rim_radius``) or its shape is
+        unknown, which no view of boards can fix."""
+        return any(w.startswith((_SCALE_ASSUMED, _SHAPE_HELD)) for w in self.warnings)
+
+    @property
+    def notes(self) -> tuple[str, ...]:
+        """What the data cannot fix by nature (with the mirror unknown: its scale, its shape
+        and ``fx``, which trades against the shape): stated, not doubted (:meth:`verdict`
+        records them as ``notes``)."""
+        if not self.mirror_unknown:
+            return ()
+        return tuple(w for w in self.warnings if w.startswith(_BY_NATURE))
+
+    @property
+    def alarms(self) -> tuple[str, ...]:
+        """The warnings that say something may be wrong: the others than :attr:`notes` and
+        :attr:`implausible`."""
+        skip = set(self.notes) | set(self.implausible)
+        return tuple(w for w in self.warnings if w not in skip)
+
+    def undetermined(self) -> str:
+        """One neutral line on what these boards cannot fix by nature ("" with the mirror
+        given): ``fx`` against the mirror's size, and the scale without a rim radius."""
+        if not self.mirror_unknown:
+            return ""
+        scale = any(w.startswith(_SCALE_ASSUMED) for w in self.warnings)
+        return (
+            "by nature, boards alone do not fix fx and the mirror's size separately, only "
+            "their ratio (the viewing directions do not depend on it)"
+            + ("; nor the scale, without rim_radius (the rim's radius is nominal)" if scale else "")
+        )
+
+    def with_limits(
+        self,
+        max_tilt_deg: float = DEFAULT_MAX_TILT_DEG,
+        max_offset_mm: float = DEFAULT_MAX_OFFSET_MM,
+    ) -> PatternReport:
+        """The report with the plausibility checks made at other limits (``omnicam calibrate
+        --max-tilt, --max-offset``; :func:`calibrate_pattern` checks at the defaults, as the
+        single-image route does): :attr:`plausibility` and their warnings replaced."""
+        cam = self.camera
+        size = cam.image_size
+        found = tuple(
+            check_plausibility(
+                cam,
+                rim_conic(cam.K, cam.R, cam.tvec, cam.mirror),
+                size,
+                max_tilt_deg=max_tilt_deg,
+                max_offset_mm=max_offset_mm,
+            )
+        )
+        old = {str(w) for w in self.plausibility}
+        kept = [w for w in self.warnings if w not in old]
+        return dataclasses.replace(
+            self, plausibility=found, warnings=tuple(kept) + tuple(str(w) for w in found)
+        )
+
+    # -- what users use first ----------------------------------------------------------------
+    def lead(self, verdict: Verdict | None = None, refused: bool = False) -> list[str]:
+        """The report's first lines: the viewing directions' uncertainty over the field, the
+        held-out error beside cv2.omnidir's (when checked), the verdict (``verdict``, default
+        :meth:`verdict`; ``refused``: the command line refuses it) and what the boards cannot
+        fix by nature."""
+        v = self.verdict() if verdict is None else verdict
+        med, worst = self.ray_std_deg
+        lines = [
+            f"viewing directions known to {med:.3f} deg (median over the mirror's image, worst "
+            f"{worst:.3f} deg; 1 sigma)"
+        ]
+        if self.heldout is not None:  # cv2.omnidir's on the same folds beside it
+            lines.append(self.heldout.summary())
+        lines.append(f"verdict: {v.status(refused)}")
+        undetermined = self.undetermined()
+        if undetermined:
+            lines.append(undetermined)
+        return lines
+
+    def summary(self) -> str:
+        """A readable multi-line summary: :meth:`lead`, the per-view table, the fitted values,
+        the notes and the warnings (``str(report)``)."""
+        cam = self.camera
+        std = self.std or {}
+        lines = ["omnicam chessboard calibration", *(f"  {ln}" for ln in self.lead())]
+        lines.append(self.table())
+        lines.append(
+            f"  RMS {self.rms:.3f} px over {len(self.view_rms)} views; rim RMS "
+            f"{self.rim_rms:.3f} px; K fx {cam.K[0, 0]:.2f} fy {cam.K[1, 1]:.2f} cx "
+            f"{cam.K[0, 2]:.2f} cy {cam.K[1, 2]:.2f}; axis std {std.get('axis_deg', math.nan):.3f}"
+            f" deg, origin std {std.get('origin', math.nan):.3f}"
+        )
+        for title, texts in (
+            ("implausible", self.implausible),
+            ("warnings", self.alarms),
+            ("by nature", self.notes),
+        ):
+            if texts:
+                lines.append(f"  {title}:")
+                lines.extend(f"   - {w}" for w in texts)
+        return "\n".join(lines)
+
+    __str__ = summary
 
     def table(self, names=None) -> str:
         """The per-view table as text: image, corners, RMS px, distance and elevation of the
@@ -165,11 +305,14 @@ class PatternReport:
         """How far to trust this calibration, as its file records it (:class:`omnicam.Verdict`).
 
         ``K_source`` defaults to ``"chessboard"`` (``K`` is fitted to the boards);
-        ``implausible``: the findings a refusal rests on (left out of ``warnings``), none by
-        default. ``K_file``, ``K_note`` and ``forced`` are the verdict's attributes.
+        ``implausible``: the findings a refusal rests on (left out of ``warnings``), by
+        default :attr:`implausible`; :attr:`notes` (by nature) are recorded apart.
+        ``K_file``, ``K_note`` and ``forced`` are the verdict's attributes.
         """
-        implausible = () if implausible is None else implausible
+        implausible = self.implausible if implausible is None else implausible
         warnings, implausible = split_findings(self.warnings, implausible)
+        notes = tuple(w for w in self.notes if w not in implausible)
+        warnings = tuple(w for w in warnings if w not in notes)
         std = self.std or {}
         held = self.heldout
         return Verdict(
@@ -188,4 +331,5 @@ class PatternReport:
             ray_std_deg=tuple(self.ray_std_deg),
             warnings=warnings,
             implausible=implausible,
+            notes=notes,
         )

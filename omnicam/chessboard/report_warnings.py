@@ -23,7 +23,8 @@ __all__ = ["ONE_SIDED", "POLICIES", "SHAPE_WEAK", "FitFacts", "report_warnings"]
 
 #: The start of the warning that the views cannot tell the principal point from the tilt (the
 #: command line refuses such a calibration unless forced).
-ONE_SIDED = "all boards are on one side of the mirror (an azimuth gap over 180 deg)"
+from .report import ONE_SIDED
+
 #: A relative standard deviation of ``a``, ``b`` (or of ``fx``) above this: not determined.
 SHAPE_WEAK = 0.01
 #: Fewer views than this: too few for a reliable ``K`` and posture.
@@ -176,11 +177,16 @@ def not_a_hyperboloid(f: FitFacts) -> str | None:
     return None
 
 
+def implausible(camera: MisalignedCatadioptricCamera, image_size: Any) -> tuple:
+    """The single-image route's plausibility checks of the camera, with the same limits
+    (:func:`omnicam.calibration.plausibility.check_plausibility`): the findings."""
+    conic = rim_conic(camera.K, camera.R, camera.tvec, camera.mirror)
+    return tuple(check_plausibility(camera, conic, image_size))
+
+
 def _implausible(f: FitFacts) -> list[str]:
-    """The single-image route's plausibility checks of the camera."""
-    cam = f.camera
-    conic = rim_conic(cam.K, cam.R, cam.tvec, cam.mirror)
-    return [str(w) for w in check_plausibility(cam, conic, f.image_size)]
+    """The plausibility findings' warnings."""
+    return [str(w) for w in implausible(f.camera, f.image_size)]
 
 
 #: The policies, in the order the report gives their warnings.

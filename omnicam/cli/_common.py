@@ -17,6 +17,7 @@ from .._quiet import opencv_silenced
 from .._validate import check_readable, file_path, shown
 from ..formats import calibration_file, intrinsics, point_files
 from ..formats.calibration_file import read_verdict
+from ..formats.other_tools import other_tool_file
 from ..formats.verdict import Verdict
 from ..hyperbolic_camera import MisalignedHyperbolicCamera
 from ..images import file_kind, read_image
@@ -99,22 +100,101 @@ def one_line(e, limit=None):
     return text
 
 
+#: The library's parameters as the command line's options: the library's messages name its
+#: parameters (``lens_z``), the command line's user knows options (``--lens-z``). One mapping,
+#: applied to every line the command line prints from the library (:func:`user_terms`).
+OPTION_OF = {
+    "refine_mirror_shape": "--refine-mirror-shape",
+    "rim_radius": "--rim-radius",
+    "lens_z": "--lens-z",
+    "lens_r": "--lens-r",
+    "pattern_size": "--chessboard",
+    "square_size": "--square",
+    "max_tilt_deg": "--max-tilt",
+    "max_offset_mm": "--max-offset",
+    "rim_hint": "--rim-hint",
+    "boundary_points": "--boundary-points",
+    "far_lines": "--far-lines",
+    "dist_model": "--dist-model",
+    "image_points": "--corners",
+    "lens=None": "no --lens-z",
+}
+_NAME = "|".join(re.escape(n) for n in sorted(OPTION_OF, key=len, reverse=True))
+_EDGE_BEFORE = r"(?<![\w/.'\"-])"  # not a part of a word, a path, an option, a quoted field
+_EDGE_AFTER = r"(?![\w/]|\.\w)"
+
+
+def _option(name):
+    return OPTION_OF[name]
+
+
+def user_terms(text):
+    """``text`` with the library's parameter names as the command line's options.
+
+    ``refine_mirror_shape=True (--refine-mirror-shape)`` and ``give lens_z, or --lens-z on the
+    command line`` read ``--refine-mirror-shape`` and ``give --lens-z``; ``rim_radius = 30``
+    reads ``--rim-radius 30``; ``image_points[2]`` reads ``--corners (image 2, from 0)``.
+    Paths are left alone (a name inside a path or a file name is not a parameter).
+    """
+    text = re.sub(r"\bpattern_size \((\d+), (\d+)\)", r"--chessboard \1x\2", str(text))
+    text = re.sub(  # the mirror as a start: the option that gives it
+        r"the mirror \(a, b, rim_radius\)|its a, b and rim_radius", "--mirror A B RIM", text
+    )
+    text = re.sub(  # a parameter followed by its option already: the option alone
+        rf"{_EDGE_BEFORE}({_NAME})(?:=\w+)? \((--[\w-]+)\)",
+        lambda m: m.group(2) if m.group(2) == _option(m.group(1)) else m.group(0),
+        text,
+    )
+    text = re.sub(
+        rf"{_EDGE_BEFORE}({_NAME}), or (--[\w-]+) on the command line",
+        lambda m: m.group(2) if m.group(2) == _option(m.group(1)) else m.group(0),
+        text,
+    )
+    text = re.sub(
+        rf"{_EDGE_BEFORE}({_NAME})\[(\d+)\]",
+        lambda m: (
+            f"{_option(m.group(1))} (image {m.group(2)}, from 0)"
+            if m.group(1) == "image_points"
+            else f"{_option(m.group(1))} (line {m.group(2)}, from 0)"
+        ),
+        text,
+    )
+    text = re.sub(
+        rf"{_EDGE_BEFORE}({_NAME})(?: ?= ?(True|[-+\d.]+))?{_EDGE_AFTER}",
+        lambda m: (
+            _option(m.group(1)) + (f" {m.group(2)}" if m.group(2) and m.group(2) != "True" else "")
+        ),
+        text,
+    )
+    return text
+
+
 def print_error(message):
-    print(f"{PROG}: error: {one_line(message)}", file=sys.stderr, flush=True)
+    print(f"{PROG}: error: {user_terms(one_line(message))}", file=sys.stderr, flush=True)
 
 
 def warn_user(message):
-    print(f"{PROG}: warning: {one_line(message)}", file=sys.stderr, flush=True)
+    print(f"{PROG}: warning: {user_terms(one_line(message))}", file=sys.stderr, flush=True)
 
 
 def load_calibration(path, say_doubt=False):
     """The camera of a calibration file; with ``say_doubt``, one warning line when its verdict
-    records a doubt (:func:`doubt_line`)."""
-    try:  # any mirror (format 1 or 2); a hyperboloid's as the design's class
+    records a doubt (:func:`doubt_line`). Any mirror's file (format 1 or 2; a hyperboloid's as
+    the design's class). Another tool's camera file (a Kalibr camchain, a ROS camera_info, an
+    OCamCalib or cv2.omnidir calibration) is refused naming what it is and the option that
+    reads it (:func:`omnicam.formats.other_tools.other_tool_file`)."""
+    try:
         camera = calibration_file.load_camera(path)
         if isinstance(camera.mirror, HyperbolicMirror):
             camera = MisalignedHyperbolicCamera.of(camera)
-    except (FileNotFoundError, ValueError) as e:
+    except FileNotFoundError as e:
+        raise CliError(one_line(e)) from None
+    except ValueError as e:
+        other = other_tool_file(path)  # another tool's file, named for what it is
+        if other is not None:
+            raise CliError(
+                f"{shown(path)} is {other[0]}, not an omnicam calibration; {other[1]}"
+            ) from None
         raise CliError(one_line(e)) from None
     if say_doubt:
         line = doubt_line(path)
@@ -127,7 +207,8 @@ def doubt_line(path):
     """One line on what the calibration file ``path`` records as doubtful, or None.
 
     E.g. ``rig.yaml: calibrated with a guessed K, ambiguous (confidence 0.00): its views may
-    be skewed ('omnicam info rig.yaml' says why)``; a verdict that cannot be read says so.
+    be skewed ('omnicam info rig.yaml' says why)``, or ``rig.yaml: calibrated with 2 warnings
+    ('omnicam info rig.yaml' lists them)``; a verdict that cannot be read says so.
     """
     try:
         verdict = read_verdict(path)
@@ -136,10 +217,12 @@ def doubt_line(path):
     doubts = () if verdict is None else verdict.doubts()
     if not doubts:
         return None
-    return (
-        f"{path}: calibrated {', '.join(doubts)}: its views may be skewed "
-        f"('omnicam info {path}' says why)"
-    )
+    if verdict.serious():
+        return (
+            f"{path}: calibrated {', '.join(doubts)}: its views may be skewed "
+            f"('omnicam info {path}' says why)"
+        )
+    return f"{path}: calibrated {', '.join(doubts)} ('omnicam info {path}' lists them)"
 
 
 def check_output(path, overwrite, what="output"):
@@ -313,18 +396,19 @@ def read_far_lines(path):
         raise CliError(one_line(e)) from None
 
 
-def report_text(report, leave_out=()):
+def report_text(report, leave_out=(), **lead):
     """The report's summary; ``leave_out``: warnings the caller prints itself (on stderr), left
-    out of it so that each is printed once."""
+    out of it so that each is printed once; ``lead``: the ``verdict`` and ``refused`` of its
+    first lines (:meth:`CalibrationReport.lead`), default the report's own."""
     leave_out = {str(w) for w in leave_out}
     if leave_out and dataclasses.is_dataclass(report) and hasattr(report, "warnings"):
         kept = [w for w in report.warnings if str(w) not in leave_out]
         report = dataclasses.replace(report, warnings=kept)
         if not kept:  # "no warnings" would be wrong: the caller's follow
-            lines = report_text(report).splitlines()
+            lines = report_text(report, **lead).splitlines()
             return "\n".join(lines[:-1] if lines[-1].strip() == "no warnings" else lines)
     summary = getattr(report, "summary", None)
-    return str(summary() if callable(summary) else summary if summary is not None else report)
+    return str(summary(**lead) if callable(summary) else summary if summary is not None else report)
 
 
 def save_calibration(camera, path, overwrite, report=None, **verdict):

@@ -17,6 +17,7 @@ from ..formats.filestorage import SUFFIXES
 from ..formats.point_files import BOUNDARY_FORMAT, read_boundary_points
 from ..formats.verdict import Verdict
 from ..gauge import posture_error
+from ..images import aspect_note as frame_aspect_note
 from ..mirror import HyperbolicMirror
 from . import pattern
 from . import report_pages as report_page
@@ -34,6 +35,7 @@ from ._common import (
     report_text,
     rim_hint_arg,
     save_calibration,
+    user_terms,
     warn_user,
     write_image_file,
 )
@@ -133,14 +135,18 @@ def _finish(args, camera, report, image, outputs, k_from, rig):
     its own name) or write the overlay and the file with its verdict."""
     calib, overlay, refused_overlay = outputs
     implausible = [str(w) for w in getattr(report, "plausibility", ())]
-    print(report_text(report, leave_out=implausible), flush=True)
+    refused = bool(implausible) and not args.force
+    verdict = Verdict.from_report(report, forced=bool(implausible) and args.force, **k_from)
+    # the lead (the uncertainty of the rays, the verdict) as judged here
+    text = report_text(report, implausible, verdict=verdict, refused=refused)
+    print(user_terms(text), flush=True)
     if rig is not None:
         print(_moved_text(camera, rig, args.from_rig, report))
     for w in implausible:
         warn_user(f"implausible: {w}")
     if args.report:  # refused or not: the page shows what went wrong
         report_page.write_image_page(args.report, camera, report, image, args.overwrite)
-    if implausible and not args.force:
+    if refused:
         # the overlay shows what went wrong; under its own name, so that it never blocks a retry
         write_image_file(refused_overlay, report.draw(image), True)
         raise CliError(
@@ -149,7 +155,6 @@ def _finish(args, camera, report, image, outputs, k_from, rig):
             f"{refused_overlay}; fix the inputs, or pass --force to write it anyway"
             + aspect_note((image.shape[1], image.shape[0]))
         )
-    verdict = Verdict.from_report(report, forced=bool(implausible), **k_from)
     write_image_file(overlay, report.draw(image), args.overwrite)
     save_calibration(camera, calib, args.overwrite, verdict)
     doubts = verdict.doubts()
@@ -220,31 +225,19 @@ def cmd_calibrate(args):
         )
     except (ValueError, RuntimeError, NotImplementedError, np.linalg.LinAlgError) as e:
         raise CliError(
-            f"calibration of {args.image} failed: {one_line(e)}{aspect_note(image_size)}"
+            f"calibration of {args.image} failed: {one_line(e)}"
+            f"{aspect_note(image_size, one_line(e))}"
         ) from None
     if args.candidates is not None:
         _write_candidates(args.candidates, camera, report, image, args.overwrite)
     return _finish(args, camera, report, image, outputs, k_from, rig)
 
 
-#: Wider (or taller) than any camera's frame of a mirror: 16:9 is 1.78, cinema's 2.39, two
-#: fisheyes side by side 2.
-MAX_FRAME_ASPECT = 3.0
-
-
-def aspect_note(image_size):
-    """``"; the image is 4000x500 (8.0:1), ..."`` for an image too wide or too tall to be a
-    camera's frame of a mirror (whose image is round), else ``""``."""
-    w, h = image_size
-    ratio = max(w, h) / min(w, h)
-    if ratio <= MAX_FRAME_ASPECT:
-        return ""
-    side = min(w, h)
-    return (
-        f"; the image is {w}x{h} ({ratio:.1f}:1), no camera's frame of a mirror: the mirror's "
-        f"round image would fill at most {side}x{side} px of it (a panorama already unwarped, "
-        f"or a crop?); give the camera's own image"
-    )
+def aspect_note(image_size, said=""):
+    """:func:`omnicam.images.aspect_note` of ``image_size``, unless ``said`` (the library's
+    message, e.g. :func:`omnicam.detect_rim`'s) says it already."""
+    note = frame_aspect_note(image_size)
+    return "" if note and note in said else note
 
 
 def refused_overlay_path(overlay):
@@ -266,7 +259,7 @@ def _guess_K_of_image(image, mirror, name, hint, boundary):
         raise CliError(
             f"--guess-k: no rim to guess K from in {name} ({one_line(e)}); give --rim-hint "
             f"CX,CY,R or --boundary-points, or the intrinsics"
-            + aspect_note((image.shape[1], image.shape[0]))
+            + aspect_note((image.shape[1], image.shape[0]), one_line(e))
         ) from None
     try:
         K = guess_K(rim, mirror)
@@ -571,7 +564,8 @@ def add_parser(sub):
         "--force",
         action="store_true",
         help="write the calibration file even when it is implausible (the warnings are "
-        "printed either way; without --force an implausible result exits with status 1)",
+        "printed either way; without --force an implausible result exits with status 1). "
+        "One image and --chessboard are checked alike, with the same limits",
     )
     out = p.add_argument_group("outputs")
     out.add_argument(
@@ -594,6 +588,13 @@ def add_parser(sub):
     )
     report_page.add_report_option(out)
     out.add_argument("--overwrite", action="store_true", help="replace existing output files")
+    out.add_argument(
+        "-q",
+        "--quiet",
+        action="store_true",
+        help="no progress lines (--chessboard: the line per image and, on stderr, per long "
+        "step: the adjustment, the shape check, each held-out fold)",
+    )
     pattern.add_arguments(p)
     p.set_defaults(func=cmd_calibrate)
     return p

@@ -22,6 +22,7 @@ from ._common import (
     one_line,
     report_text,
     save_calibration,
+    user_terms,
     write_image_file,
 )
 from .info import posture, vector_text
@@ -82,9 +83,9 @@ def cmd_demo(args):
         )
     except (ValueError, RuntimeError, NotImplementedError, np.linalg.LinAlgError) as e:
         raise CliError(f"demo: calibration failed: {one_line(e)}") from None
-    print(indent_lines(report_text(report)))
+    print(indent_lines(user_terms(report_text(report))))
     write_image_file(path("overlay.png"), report.draw(image))
-    save_calibration(camera, path("calibration.yaml"), overwrite=True)
+    save_calibration(camera, path("calibration.yaml"), overwrite=True)  # with its verdict
 
     e_tilt, e_az, e_offset = posture(camera)
     axis_error = math.degrees(math.acos(float(np.clip(camera.R[:, 2] @ truth.R[:, 2], -1, 1))))
@@ -95,7 +96,7 @@ def cmd_demo(args):
     print("4. posture error vs the truth:")
     print(
         f"   axis tilt      {e_tilt:.3f} deg (true {tilt:.3f}); axis direction off by "
-        f"{axis_error:.3f} deg"
+        f"{axis_error:.3f} deg (stated uncertainty {report.axis_std_deg:.3f} deg RMS)"
     )
     print(
         f"   camera offset  {vector_text(e_offset, '{:.3f}')} mm "

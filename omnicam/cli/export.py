@@ -12,12 +12,14 @@ command prints (and the file records) its RMS and maximum error in pixels.
 from __future__ import annotations
 
 import os
+import sys
 import warnings
 
 from .._atomic import OutputError
 from ..formats.central_export import export
 from ._common import (
     EXIT_OK,
+    PROG,
     CliError,
     check_output,
     load_calibration,
@@ -30,7 +32,7 @@ from ._common import (
 def cmd_export(args):
     """``omnicam export``: the module docstring."""
     check_output(args.output, args.overwrite)
-    camera = load_calibration(args.calibration)
+    camera = load_calibration(args.calibration, say_doubt=True)  # one line on a doubtful file
     if args.to in ("kalibr", "camodocal", "ocamcalib") and camera.image_size is None:
         raise CliError(f"{args.to} files need the image size; {args.calibration} has none")
     ext = os.path.splitext(args.output)[1].lower()
@@ -38,6 +40,13 @@ def cmd_export(args):
         raise CliError(
             f"output {args.output}: an omnidir file is a cv2.FileStorage file "
             f"(.yaml, .yml, .xml or .json)"
+        )
+    if not args.quiet:  # the fit takes seconds: say what is being done
+        print(
+            f"{PROG}: fitting the central model closest to {args.calibration} for {args.to} "
+            f"(over the pixels that see the mirror)",
+            file=sys.stderr,
+            flush=True,
         )
     with warnings.catch_warnings(record=True) as caught:
         warnings.simplefilter("always", RuntimeWarning)
@@ -78,6 +87,9 @@ def add_parser(sub):
         "(default: at infinity; not for ocamcalib)",
     )
     p.add_argument("--overwrite", action="store_true", help="replace FILE if it exists")
+    p.add_argument(
+        "-q", "--quiet", action="store_true", help="no progress line (the fit takes seconds)"
+    )
     p.set_defaults(func=cmd_export)
     return p
 

@@ -10,7 +10,7 @@ from ..formats.calibration_file import read_verdict
 from ..formats.central_fit import fit_omnidir
 from ..mirror import HyperbolicMirror, nominal_camera_z
 from ..views import default_elevation_range
-from ._common import EXIT_OK, load_calibration, one_line
+from ._common import EXIT_OK, load_calibration, one_line, user_terms
 
 
 def posture(camera):
@@ -210,7 +210,9 @@ def describe_verdict(verdict, width=13):
         rows.append(("forced", "written with --force although implausible"))
     rows += [("implausible", f"- {w}") for w in v.implausible]
     rows += [("warning", f"- {w}") for w in v.warnings]
-    return "\n".join(f"{k:<{width}}  {text}" for k, text in rows)
+    rows += [("note", f"- {w}") for w in v.notes]
+    # the texts as the command line says them (options, not the library's parameters)
+    return "\n".join(f"{k:<{width}}  {user_terms(text)}" for k, text in rows)
 
 
 def cmd_info(args):

@@ -94,7 +94,7 @@ def cmd_maps(args):
     if not (args.ffmpeg or args.npy or args.filestorage):
         raise CliError("choose what to write: --ffmpeg, --npy and/or --filestorage EXT", EXIT_USAGE)
     specs = view_specs(args)
-    camera = load_calibration(args.calibration)
+    camera = load_calibration(args.calibration, say_doubt=True)  # one line on a doubtful file
     if args.frame_size is not None:
         if camera.image_size is None:
             raise CliError(f"--frame-size: the calibration {args.calibration} has no image size")

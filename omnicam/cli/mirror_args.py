@@ -137,4 +137,5 @@ def mirror_of_args(args):
             return AsphericMirror(R, k, rim, tuple(args.alpha or ()), vertex_z=vz)
         return AsphericMirror.equiangular(*args.equiangular)
     except (FileNotFoundError, ValueError) as e:
-        raise CliError(f"{flag}: {one_line(e)}") from None
+        # the mirror's rim_radius is its RIM argument here, not the chessboards' --rim-radius
+        raise CliError(f"{flag}: {one_line(e).replace('rim_radius', 'RIM')}") from None

@@ -8,12 +8,15 @@
                       [--dist-model M] [--refine-mirror-shape] [--heldout K]
                       [--overlay FOLDER] [--overwrite] [--force]
 
-Prints a line per image as its board is looked for, the per-view table, the held-out check
+Prints a line per image as its board is looked for, a line on stderr per long step (the
+adjustment's evaluations and cost every 2 s and at its end, the shape check, each held-out
+fold; ``-q`` silences both), the per-view table, the held-out check
 (``--heldout``, 5 folds by default) and the warnings, writes the calibration file and, for each
 view, an overlay of the detected (green circles) and reprojected (red crosses) corners into
-FOLDER (default: CALIB's stem + ``_views`` next to CALIB). Views that cannot determine the rig
-(fewer than 3, or all boards on one side of the mirror) exit 1 without a file (``--force``
-writes it anyway).
+FOLDER (default: CALIB's stem + ``_views`` next to CALIB). A calibration the plausibility
+checks refuse (those of one image, with the same limits ``--max-tilt``, ``--max-offset``; or
+all boards on one side of the mirror) exits 1 without a file, as one from one image does
+(``--force`` writes it anyway, and its verdict says so).
 
 ``--corners FILE`` gives the corners found by another tool, in OpenCV's order (row by row of
 ``COLSxROWS`` inner corners): JSON, an object ``{"image file name": [[x, y], ...] or null}`` or a
@@ -25,21 +28,24 @@ from __future__ import annotations
 
 import os
 import re
+import sys
 import warnings
 
 import cv2
 import numpy as np
 
+from ..calibration.plausibility import DEFAULT_MAX_OFFSET_MM, DEFAULT_MAX_TILT_DEG
 from ..calibration.rim import check_hint, detect_rim
 from ..camera import scale_K
 from ..chessboard import DIST_MODELS
-from ..chessboard.calibrate import ONE_SIDED
+from ..chessboard.report import ONE_SIDED
 from ..formats.filestorage import SUFFIXES
 from ..formats.point_files import read_corners
 from ..hyperbolic_camera import MisalignedHyperbolicCamera
 from ..mirror import HyperbolicMirror
 from ._common import (
     EXIT_OK,
+    PROG,
     CliError,
     check_output,
     one_line,
@@ -48,6 +54,7 @@ from ._common import (
     read_image_file,
     read_intrinsics,
     save_calibration,
+    user_terms,
     warn_user,
     write_image_file,
 )
@@ -233,8 +240,12 @@ def _cli_terms(text, names):
     )
 
 
-def _print_report(camera, report, names, caught):
-    """The per-view table, the figures, the held-out check and every warning once."""
+def _print_report(camera, report, names, caught, verdict, refused):
+    """What users use first (:meth:`PatternReport.lead`: the viewing directions, the held-out
+    check, the verdict, what boards cannot fix), then the per-view table and the figures; the
+    notes on stdout, every alarm and implausible finding once on stderr."""
+    for line in report.lead(verdict, refused):
+        print(user_terms(line), flush=True)
     print(report.table(names), flush=True)
     print(
         f"RMS {report.rms:.3f} px over {len(report.view_rms)} views; rim RMS "
@@ -247,11 +258,13 @@ def _print_report(camera, report, names, caught):
         flush=True,
     )
     if report.lens_note:
-        print(f"camera's reflection: {report.lens_note}", flush=True)
-    if report.heldout is not None:
-        print(report.heldout.summary(), flush=True)
-    for w in report.warnings:
+        print(user_terms(f"camera's reflection: {report.lens_note}"), flush=True)
+    for w in report.notes:
+        print(user_terms(f"note (by nature, not a doubt): {w}"), flush=True)
+    for w in report.alarms:
         warn_user(_cli_terms(w, names))
+    for w in report.implausible:
+        warn_user(f"implausible: {w}")
     for w in caught:
         if not any(str(w.message) == r for r in report.warnings):
             warn_user(_cli_terms(str(w.message), names))
@@ -280,7 +293,12 @@ def cmd_calibrate_pattern(args):
     names = [os.path.basename(p) for p in args.image]
 
     def progress(i, text):
-        print(f"[{i + 1}/{len(names)}] {names[i]}: {text}", flush=True)
+        if args.quiet:
+            return
+        if i is None:  # a long step (the adjustment, the shape check, a held-out fold)
+            print(f"{PROG}: {user_terms(text)}", file=sys.stderr, flush=True)
+        else:
+            print(f"[{i + 1}/{len(names)}] {names[i]}: {text}", flush=True)
 
     with warnings.catch_warnings(record=True) as caught:
         warnings.simplefilter("always", RuntimeWarning)
@@ -303,13 +321,24 @@ def cmd_calibrate_pattern(args):
             )
         except (ValueError, RuntimeError, np.linalg.LinAlgError) as e:
             raise CliError(f"calibration failed: {_cli_terms(one_line(e), names)}") from None
-    _print_report(camera, report, names, caught)
-    one_side = [w for w in report.warnings if w.startswith(ONE_SIDED)]
-    if one_side and not args.force:
+    if (args.max_tilt, args.max_offset) != (DEFAULT_MAX_TILT_DEG, DEFAULT_MAX_OFFSET_MM):
+        report = report.with_limits(args.max_tilt, args.max_offset)
+    implausible = report.implausible
+    refused = bool(implausible) and not args.force
+    verdict = report.verdict(forced=bool(implausible) and args.force)
+    camera = camera.replace(verdict=verdict)
+    _print_report(camera, report, names, caught, verdict, refused)
+    if refused:  # as an implausible calibration from one image
         raise CliError(
-            "calibration refused: the boards are all on one side of the mirror, so the views "
-            "cannot tell the principal point from the tilt; add views on the other side "
-            "(--force writes the file anyway)"
+            f"the calibration is implausible ({len(implausible)} finding"
+            f"{'s' if len(implausible) > 1 else ''} above"
+            + (
+                ": the boards are all on one side of the mirror, so the views cannot tell the "
+                "principal point from the tilt; add views on the other side"
+                if any(w.startswith(ONE_SIDED) for w in implausible)
+                else ""
+            )
+            + f"); {calib} not written; fix the inputs, or pass --force to write it anyway"
         )
     _write_overlays(args, report, images, folder)
     if args.report:  # omnicam calibrate --report (cli/report.py)
@@ -318,8 +347,6 @@ def cmd_calibrate_pattern(args):
         write_pattern_page(
             args.report, camera, report, images, names, args.chessboard, args.overwrite
         )
-    save_calibration(
-        camera, calib, args.overwrite, report, forced=bool(one_side), implausible=one_side
-    )
+    save_calibration(camera, calib, args.overwrite, verdict)
     print(f"wrote {calib} and {len(images)} overlays in {folder}")
     return EXIT_OK

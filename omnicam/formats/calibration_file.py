@@ -51,7 +51,7 @@ from ..asphere import AsphericMirror
 from ..camera import MisalignedCatadioptricCamera
 from ..mirror import HyperbolicMirror, Mirror
 from .filestorage import atomic_filestorage, is_number, reading, same_values, write_int_seq
-from .verdict import Verdict
+from .verdict import TEXTS, Verdict
 
 __all__ = [
     "FORMAT_VERSION",
@@ -173,8 +173,10 @@ def _write_mirror(fs, mirror: Mirror) -> None:
 def load_camera(path: PathLike) -> MisalignedCatadioptricCamera:
     """Read and validate a calibration file written by :func:`save_camera`.
 
-    Reads format 1 (a hyperboloid) and format 2 (an even asphere, :class:`AsphericMirror`);
-    :meth:`omnicam.MisalignedHyperbolicCamera.load` is this, as the design's class, for a
+    Reads format 1 (a hyperboloid) and format 2 (an even asphere, :class:`AsphericMirror`).
+    The camera carries the file's verdict (``camera.verdict``, as :func:`read_verdict` reads
+    it; None when the file has none, or one that cannot be read: :func:`read_verdict` says
+    why). :meth:`omnicam.MisalignedHyperbolicCamera.load` is this, as the design's class, for a
     hyperboloid's file.
 
     Raises
@@ -187,6 +189,10 @@ def load_camera(path: PathLike) -> MisalignedCatadioptricCamera:
         a name that is not UTF-8, and files that are too large, binary or nested too deeply.
     """
     r = reading(path, "calibration file")
+    try:  # the camera of every file alike: a verdict that cannot be read is left out
+        verdict = _verdict_of(r)
+    except ValueError:
+        verdict = None
     version = r.number("format_version")
     if version not in _MODELS:
         raise r.fail(
@@ -217,6 +223,7 @@ def load_camera(path: PathLike) -> MisalignedCatadioptricCamera:
             D=None if D is None else D.ravel(),
             image_size=size,
             camera_reflection=reflection,
+            verdict=verdict,
         )
     except ValueError as e:
         raise r.fail(str(e).split(" ", 1)[0].rstrip(":,"), str(e)) from None
@@ -252,7 +259,7 @@ def _verdict_of(r):
         if value is None:
             continue
         name = f"verdict.{field.name}"
-        if field.name in ("warnings", "implausible"):
+        if field.name in TEXTS:
             value = [value] if isinstance(value, str) else value  # XML: one item, a scalar
             if not isinstance(value, list) or not all(isinstance(v, str) for v in value):
                 raise r.fail(name, "must be a sequence of strings")
@@ -280,7 +287,7 @@ def _write_verdict(fs, verdict):
         value = getattr(verdict, field.name)
         if value is None or (isinstance(value, (str, tuple)) and not value):
             continue
-        if field.name in ("warnings", "implausible"):
+        if field.name in TEXTS:
             fs.startWriteStruct(field.name, cv2.FileNode_SEQ)
             for text in value:
                 fs.write("", text)
@@ -302,7 +309,7 @@ def _write_verdict(fs, verdict):
 def save_camera(
     camera: MisalignedCatadioptricCamera, path: PathLike, verdict: object = None
 ) -> None:
-    """Write ``camera`` to ``path`` atomically and verified, with its verdict if given.
+    """Write ``camera`` to ``path`` atomically and verified, with its verdict.
 
     A temporary file in the same folder is written, flushed, read back and compared with
     ``camera`` (and ``verdict``), and only then renamed into place
@@ -315,7 +322,10 @@ def save_camera(
         ``.yaml``, ``.yml``, ``.xml`` or ``.json`` (the format follows the extension).
     verdict : Verdict or a calibration report, optional
         Recorded as the file's ``verdict`` map (:class:`Verdict`); a ``CalibrationReport`` or
-        ``PatternReport`` is taken as :meth:`Verdict.from_report` of it. None: no verdict.
+        ``PatternReport`` is taken as :meth:`Verdict.from_report` of it. None (the default):
+        the verdict the camera carries (``camera.verdict``, set by the calibration routes and
+        by :func:`load_camera`), none if it carries none; ``camera.replace(verdict=None)``
+        writes a file without one.
 
     Raises
     ------
@@ -325,7 +335,9 @@ def save_camera(
         the message names the file, the old file at ``path`` is unchanged and no temporary file
         is left.
     """
-    if verdict is not None and not isinstance(verdict, Verdict):
+    if verdict is None:
+        verdict = getattr(camera, "verdict", None)
+    elif not isinstance(verdict, Verdict):
         verdict = Verdict.from_report(verdict)
 
     def write(fs):

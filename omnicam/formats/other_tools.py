@@ -43,6 +43,7 @@ __all__ = [
     "MAX_NESTING",
     "OCAMCALIB_HEADER",
     "not_pinhole",
+    "other_tool_file",
     "parse_yaml",
     "read_other_central",
     "read_other_intrinsics",
@@ -331,3 +332,49 @@ def read_other_central(path):
         )
 
     return _read_other(path, "central model file", ros, _kalibr_omni)
+
+
+# -- recognised where omnicam's own calibration file is expected ---------------------------------
+_OMNIDIR_XI = re.compile(r'^\s*(?:"xi"\s*:|xi\s*:|<xi>)', re.MULTILINE)
+
+
+def other_tool_file(path) -> tuple[str, str] | None:
+    """``(what the file is, how omnicam takes it)`` when ``path`` is another tool's camera file
+    (a Kalibr camchain, a ROS ``camera_info``, an OCamCalib ``calib_results.txt``, a
+    ``cv2.omnidir`` calibration), else ``None``: what to say when such a file is given where
+    omnicam's own calibration file is expected. The second part names the command-line option
+    that reads it, or says that none does and what to do instead.
+    """
+    text = _text(os.fspath(path))
+    if text is None:
+        return None
+    central = (
+        "a central model of the whole catadioptric camera, which no option of omnicam reads "
+        "(omnicam's model is not central); calibrate the rig with omnicam calibrate (one image "
+        "of the mirror with the lens's K, or --chessboard, which needs no K)"
+    )
+    if text.lstrip().startswith(OCAMCALIB_HEADER):
+        return "an OCamCalib calib_results.txt", central
+    if "!!opencv-matrix" in text or text.lstrip().startswith(("%YAML", "<?xml", "{")):
+        if _OMNIDIR_XI.search(text):
+            return "a cv2.omnidir calibration (it has an xi)", central
+        return None
+    try:
+        doc = parse_yaml(text)
+    except ValueError:
+        return None
+    if not isinstance(doc, dict):
+        return None
+    pinhole = (
+        "it holds the lens's K and D: give it to --intrinsics of omnicam calibrate, which "
+        "calibrates the mirror's posture (omnicam's calibration file) from one image with it"
+    )
+    if "camera_matrix" in doc and ("distortion_model" in doc or "image_width" in doc):
+        return "a ROS camera_info", pinhole
+    cam = doc.get("cam0") if isinstance(doc.get("cam0"), dict) else doc
+    model = cam.get("camera_model") if isinstance(cam, dict) else None
+    if model is None:
+        return None
+    if model == "pinhole":
+        return "a Kalibr camchain (a pinhole camera)", pinhole
+    return f"a Kalibr camchain (camera_model {model})", central

@@ -17,7 +17,7 @@ import numpy as np
 from .._validate import file_path, shown
 from .filestorage import LONG_INT, MAX_VALUES
 
-__all__ = ["K_SOURCES", "METHODS", "Verdict", "split_findings"]
+__all__ = ["K_SOURCES", "METHODS", "Verdict", "judged", "split_findings"]
 
 #: Where a calibration's ``K`` came from (:attr:`Verdict.K_source`).
 K_SOURCES = ("given", "file", "guessed", "chessboard")
@@ -32,6 +32,8 @@ _VERDICT_FLOATS = (
     "heldout_median_px",
     "heldout_max_px",
 )
+#: The verdict's fields that are sequences of texts.
+TEXTS = ("warnings", "implausible", "notes")
 _MAX_TEXT = 2000  # characters of one warning or note
 
 
@@ -102,6 +104,10 @@ class Verdict:
         The report's warnings, the implausible findings left out.
     implausible : tuple of str
         The implausible findings: what makes ``omnicam calibrate`` refuse without ``--force``.
+    notes : tuple of str
+        What the data cannot fix by nature, said and not doubted: the mirror's scale without
+        a rim radius, ``fx`` against the mirror's size when the mirror is not given (only
+        their ratio is fixed; the viewing directions are not affected).
     """
 
     method: str = "image"
@@ -121,6 +127,7 @@ class Verdict:
     ray_std_deg: tuple | None = None
     warnings: tuple = ()
     implausible: tuple = ()
+    notes: tuple = ()
 
     def __post_init__(self):
         def put(name, value):
@@ -156,7 +163,7 @@ class Verdict:
                 raise ValueError(f"ray_std_deg must be (median, worst), got {ray!r}")
             ray = tuple(_optional_number(v, "ray_std_deg") for v in ray)
             put("ray_std_deg", None if None in ray else ray)
-        for name in ("warnings", "implausible"):
+        for name in TEXTS:
             texts = getattr(self, name)
             if isinstance(texts, str) or not isinstance(texts, (list, tuple)):
                 raise ValueError(f"{name} must be a sequence of strings")
@@ -210,8 +217,9 @@ class Verdict:
         """What makes the calibration doubtful, each a short phrase (empty: no doubt recorded).
 
         A guessed ``K``, an ambiguous choice of posture, implausible findings (written with
-        ``--force`` or from the library), e.g. ``("with a guessed K", "ambiguous (confidence
-        0.00)")``.
+        ``--force`` or from the library), the report's warnings, e.g. ``("with a guessed K",
+        "ambiguous (confidence 0.00)", "with 2 warnings")``. The notes (what the data cannot
+        fix by nature) are no doubt.
         """
         out = []
         if self.K_source == "guessed":
@@ -225,7 +233,31 @@ class Verdict:
             out.append(f"forced past {found}" if n else "forced")
         elif n:
             out.append(f"with {found}")
+        n = len(self.warnings)
+        if n:
+            out.append(f"with {n} warning{'s' if n != 1 else ''}")
         return tuple(out)
+
+    def status(self, refused: bool = False) -> str:
+        """The verdict in one line: ``ok: no doubt recorded``, ``DOUBTFUL: calibrated ...``
+        (:meth:`doubts`), ``IMPLAUSIBLE: ...`` (what ``omnicam calibrate`` refuses without
+        ``--force``) or, with ``refused``, ``REFUSED: ...`` (it did)."""
+        n = len(self.implausible)
+        if n and not self.forced:
+            rest = [d for d in self.doubts() if "implausibility" not in d]
+            found = f"{n} implausible finding{'s' if n != 1 else ''}"
+            return (
+                f"REFUSED: {found} (--force writes it anyway)"
+                if refused
+                else f"IMPLAUSIBLE: {found} (omnicam calibrate refuses it without --force)"
+            ) + (f"; calibrated {', '.join(rest)}" if rest else "")
+        doubts = self.doubts()
+        return f"DOUBTFUL: calibrated {', '.join(doubts)}" if doubts else "ok: no doubt recorded"
+
+    def serious(self) -> bool:
+        """A doubt about the views themselves: a guessed ``K``, an ambiguous posture or an
+        implausible finding (the warnings alone say what to check)."""
+        return self.K_source == "guessed" or self.ambiguous or bool(self.implausible)
 
 
 def _optional_number(value, name):
@@ -247,3 +279,16 @@ def split_findings(warnings, implausible) -> tuple[tuple[str, ...], tuple[str, .
     the warnings (a verdict keeps the two apart: what a refusal rests on, and the rest)."""
     implausible = tuple(str(w) for w in implausible)
     return tuple(str(w) for w in warnings if str(w) not in implausible), implausible
+
+
+def judged(camera, report):
+    """``(camera, report)`` with the camera carrying the report's verdict.
+
+    What each calibration route returns (``camera.verdict == report.verdict()``, and
+    ``report.camera`` the same camera), so that ``camera.save(path)`` records what the report
+    said without being handed the report again.
+    """
+    carried = camera.replace(verdict=report.verdict())
+    if getattr(report, "camera", None) is camera:
+        report = dataclasses.replace(report, camera=carried)
+    return carried, report
