@@ -117,3 +117,44 @@ def test_no_camera_class_is_passed_down_the_layers():
         text = path.read_text(encoding="utf-8")
         for name in ("camera_cls", "make_camera", "CameraLike", "CameraT"):
             assert name not in text, (path.name, name)
+
+
+#: Lines a module of the library may have: one concept a module, reviewable in a sitting.
+MAX_MODULE_LINES = 800
+#: Parameters a function may take; a public entry point may take more, its options keyword-only.
+MAX_PARAMETERS = 10
+
+
+def _functions(tree):
+    for node in ast.walk(tree):
+        if isinstance(node, (ast.FunctionDef, ast.AsyncFunctionDef)):
+            yield node
+
+
+def test_no_module_of_the_library_is_over_800_lines():
+    long = {
+        str(p.relative_to(ROOT)): n
+        for p in ROOT.rglob("*.py")
+        if (n := len(p.read_text(encoding="utf-8").splitlines())) > MAX_MODULE_LINES
+    }
+    assert not long, long
+
+
+def test_functions_take_at_most_10_parameters_but_public_entry_points_by_keyword():
+    """A private function (or any of a private module) takes at most 10 parameters; a public
+    one may take more only as keyword-only options after at most 10 positional ones."""
+    bad = []
+    for path in ROOT.rglob("*.py"):
+        private_module = any(
+            part.startswith("_") and part != "__init__.py" for part in path.relative_to(ROOT).parts
+        )
+        for f in _functions(ast.parse(path.read_text(encoding="utf-8"))):
+            a = f.args
+            positional = [x.arg for x in a.posonlyargs + a.args if x.arg not in ("self", "cls")]
+            total = len(positional) + len(a.kwonlyargs)
+            if total <= MAX_PARAMETERS:
+                continue
+            public = not f.name.startswith("_") and not private_module
+            if not public or len(positional) > MAX_PARAMETERS:
+                bad.append(f"{path.relative_to(ROOT)}:{f.lineno} {f.name} ({total})")
+    assert not bad, bad

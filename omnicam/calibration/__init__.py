@@ -61,6 +61,7 @@ def calibrate(
     image_size: tuple[int, int] | None = None,
     refine: bool = True,
     lens: str | bool | ArrayLike | None = "auto",
+    *,
     lens_r: float | None = None,
     lens_z: float | None = None,
     rim_hint: tuple[float, float, float] | None = None,

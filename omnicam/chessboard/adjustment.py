@@ -585,6 +585,7 @@ def pattern_uncertainty(
     rim_points,
     sigma_corner,
     sigma_rim,
+    *,
     lens_points=None,
     lens_z=None,
     sigma_lens=None,
