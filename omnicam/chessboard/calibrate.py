@@ -60,6 +60,7 @@ import warnings as _warnings
 import numpy as np
 
 from ..camera import MisalignedCatadioptricCamera
+from ..mirror import HyperbolicMirror
 from .adjustment import AdjustmentModel
 from .board_pose import object_points
 from .fit_steps import SHAPE_REJECT_CHI2, report_step, rounds_step, shape_check_step
@@ -257,16 +258,19 @@ def _calibrate(
     if inputs.greys:  # the boards not found yet, in the views of the start camera
         new = redetect(inputs.greys, boards.missing(), options.pattern_size, start.camera, progress)
         boards = boards.with_found(new, "views")
+    # an asphere's shape is always estimated: its start is a central model's extrapolation
+    # and its focal length a default, which only the adjustment with both free corrects
+    aspheric = not isinstance(start.mirror, HyperbolicMirror)
     model = AdjustmentModel(
         options.free_d,
         options.n_d,
         options.fit_skew,
-        options.refine_mirror_shape,
+        options.refine_mirror_shape or aspheric,
         lens.points,
         options.lens_z,
     )
     rounds = rounds_step(inputs.greys, boards, start, rim, model, options, progress)
-    if options.mirror is None and not options.refine_mirror_shape:
+    if options.mirror is None and not model.fit_shape:
         rounds = shape_check_step(rounds, start, rim, model, options)
     camera, report = report_step(rounds, start, lens.note, options)
     start_warns = rim.warnings + start.warnings
