@@ -63,6 +63,7 @@ from ..camera import MisalignedCatadioptricCamera
 from ..mirror import HyperbolicMirror
 from .adjustment import AdjustmentModel
 from .board_pose import object_points
+from .family import family_step
 from .fit_steps import SHAPE_REJECT_CHI2, report_step, rounds_step, shape_check_step
 from .heldout import HeldOut, cross_validate
 from .report import PatternReport
@@ -272,6 +273,8 @@ def _calibrate(
     rounds = rounds_step(inputs.greys, boards, start, rim, model, options, progress)
     if options.mirror is None and not model.fit_shape:
         rounds = shape_check_step(rounds, start, rim, model, options)
+    if options.mirror is None and aspheric:  # the polynomial terms the corners ask for
+        rounds = family_step(rounds, options)[0]
     camera, report = report_step(rounds, start, lens.note, options)
     start_warns = rim.warnings + start.warnings
     for w in start_warns:
