@@ -19,6 +19,10 @@ The steps (:mod:`.steps`, :mod:`.fit_steps`):
    (``cv2.omnidir.calibrate`` of the corners; ``xi`` gives the mirror's shape, its focal
    length the pinhole's, the rim's image the mirror's size at ``rim_radius``, which fixes the
    scale; the fit with ``k1, k2`` free instead when it fits far better, a wide-angle lens).
+   Where Mei's model gives no hyperboloid (``xi >= XI_NOT_HYPERBOLIC`` or no fit), the generic
+   start of :mod:`.any_start`: the corners' Taylor model and the aligned rig with the even
+   asphere that sees its directions, whose shape and focal length the adjustment frees, and
+   whose polynomial terms a likelihood-ratio test may extend (:mod:`.family`).
    With a mirror and without ``K``, the aligned rig's focal length from the rim's size
    (:func:`omnicam.calibration.plausibility.focal_from_rim`) and the principal point at the
    image centre; the posture from the rim by :func:`omnicam.calibration.calibrate` (Chen's
@@ -135,11 +139,15 @@ def calibrate_pattern(
         Inner corners ``(columns, rows)``, as ``cv2.findChessboardCorners``.
     square_size : float
         Side of a square in the mirror's length unit (mm by convention).
-    mirror : HyperbolicMirror or None
+    mirror : HyperbolicMirror, AsphericMirror or None
         The mirror (a start: only its shape's agreement with the central fit is checked, and
-        with ``refine_mirror_shape`` its ``a, b`` are estimated). ``None``: unknown, its shape
-        from the central fit's ``xi`` and its size from the rim's image at ``rim_radius``
-        (:func:`.central.hyperbolic_start`).
+        with ``refine_mirror_shape`` its ``a, b`` are estimated; an
+        :class:`~omnicam.asphere.AsphericMirror` is started aligned, ``K`` from the corners'
+        Taylor model unless given, and its shape always estimated). ``None``: unknown, its
+        shape from the central fit's ``xi`` and its size from the rim's image at
+        ``rim_radius`` (:func:`.central.hyperbolic_start`); where that fit gives no
+        hyperboloid, an even asphere from the corners' Taylor model (:mod:`.any_start`,
+        :mod:`.family`).
     K : (3, 3) array_like, optional
         Start of the camera matrix (refined). Default: from the central fit of the corners
         (:func:`.central.fit_central`), else from the rim (see the module docstring).
@@ -211,7 +219,9 @@ def calibrate_pattern(
 
     Returns
     -------
-    camera : MisalignedHyperbolicCamera
+    camera : MisalignedCatadioptricCamera
+        Its mirror a ``HyperbolicMirror`` or, for a rig no hyperboloid fits, an
+        ``AsphericMirror``.
     report : PatternReport
 
     Raises
