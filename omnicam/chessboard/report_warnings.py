@@ -164,7 +164,7 @@ def _estimated_asphere(f: FitFacts) -> str:
         + f"); the shape relative to the rim (k and the terms, R / rim_radius) is what the "
         f"boards determine, the focal length and the mirror's size only as their ratio "
         f"without rim_radius (--rim-radius) and the camera's distance with the focal length; "
-        f"{f.rays}"
+        f"{f.rays} (the single-image route's plausibility checks, a hyperboloid's, are not run)"
     )
 
 
