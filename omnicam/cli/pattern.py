@@ -38,6 +38,7 @@ from ..calibration.plausibility import DEFAULT_MAX_OFFSET_MM, DEFAULT_MAX_TILT_D
 from ..calibration.rim import check_hint, detect_rim
 from ..camera import scale_K
 from ..chessboard import DIST_MODELS
+from ..chessboard.calibrate import calibrate_pattern
 from ..chessboard.report import ONE_SIDED
 from ..formats.filestorage import SUFFIXES
 from ..formats.point_files import read_corners
@@ -303,7 +304,7 @@ def cmd_calibrate_pattern(args):
     with warnings.catch_warnings(record=True) as caught:
         warnings.simplefilter("always", RuntimeWarning)
         try:
-            camera, report = MisalignedHyperbolicCamera.calibrate_pattern(
+            camera, report = calibrate_pattern(
                 images,
                 args.chessboard,
                 args.square,
@@ -321,6 +322,8 @@ def cmd_calibrate_pattern(args):
             )
         except (ValueError, RuntimeError, np.linalg.LinAlgError) as e:
             raise CliError(f"calibration failed: {_cli_terms(one_line(e), names)}") from None
+    if isinstance(camera.mirror, HyperbolicMirror):  # (an asphere stays the generic camera)
+        camera, report = MisalignedHyperbolicCamera._with_report(camera, report)
     if (args.max_tilt, args.max_offset) != (DEFAULT_MAX_TILT_DEG, DEFAULT_MAX_OFFSET_MM):
         report = report.with_limits(args.max_tilt, args.max_offset)
     implausible = report.implausible
