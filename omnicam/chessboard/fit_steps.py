@@ -455,5 +455,6 @@ def report_step(
         nfev=int(sol.nfev),
         camera=camera,
         start=start.camera,
+        dist_model=options.dist_model,
     )
     return camera, report

@@ -12,6 +12,7 @@ import numpy as np
 from ..formats.verdict import Verdict, split_findings
 from ..images import to_bgr8
 from .heldout import HeldOut
+from .lens_model import LensChoice, coefficient_lines
 
 __all__ = ["PatternReport"]
 
@@ -75,6 +76,11 @@ class PatternReport:
     heldout : HeldOut or None
         With ``calibrate_pattern(heldout=k)``, the k-fold held-out corner RMS of the views
         used (:mod:`.heldout`), ``cv2.omnidir``'s on the same folds beside it.
+    dist_model : str
+        The lens model fitted (a key of :data:`.adjustment.DIST_MODELS`).
+    lens_choice : LensChoice or None
+        With ``dist_model="auto"``, the candidates' held-out figures and the model taken
+        (:mod:`.lens_model`).
     """
 
     rms: float
@@ -99,6 +105,19 @@ class PatternReport:
     heldout: HeldOut | None = None
     ray_std_deg: tuple = (math.nan, math.nan)
     names: dict = dataclasses.field(default_factory=dict)
+    dist_model: str = ""
+    lens_choice: LensChoice | None = None
+
+    def lens_lines(self) -> list[str]:
+        """The lens model: with ``"auto"`` which model and why (:meth:`.LensChoice.summary`),
+        then each estimated coefficient with its standard deviation and whether these views
+        determine it (:func:`.lens_model.coefficient_lines`)."""
+        lines = [] if self.lens_choice is None else [self.lens_choice.summary()]
+        if self.dist_model and self.camera is not None:
+            coeffs = coefficient_lines(self.camera.D, self.std, self.dist_model)
+            if coeffs:
+                lines.append(f"distortion ({self.dist_model}): " + "; ".join(coeffs))
+        return lines
 
     def table(self, names=None) -> str:
         """The per-view table as text: image, corners, RMS px, distance and elevation of the

@@ -125,15 +125,19 @@ class PatternOptions:
                 f"mirror must be a HyperbolicMirror or None (unknown), got {type(mirror).__name__}"
             )
         dist_model = self.dist_model
-        if dist_model not in DIST_MODELS:
-            raise ValueError(f"dist_model must be one of {sorted(DIST_MODELS)}, got {dist_model!r}")
+        if dist_model not in DIST_MODELS and dist_model != "auto":
+            raise ValueError(
+                f"dist_model must be one of {sorted(DIST_MODELS)} or 'auto', got {dist_model!r}"
+            )
         D = validate_D(self.D)
         if D is not None and D.size not in (4, 5, 8):
             raise ValueError(
                 f"D must have 4, 5 or 8 coefficients (k1, k2, p1, p2[, k3[, k4, k5, k6]]) for "
                 f"pattern calibration, got {D.size}"
             )
-        free_d = DIST_MODELS[dist_model]
+        # "auto" is started as its simplest candidate (lens_model.AUTO_CANDIDATES), each
+        # candidate's D padded to its own length by the adjustment
+        free_d = DIST_MODELS["k1k2" if dist_model == "auto" else dist_model]
         n_d = n_coefficients(free_d, None if D is None else D.size)
         if D is not None and D.size < n_d:
             D = np.concatenate([D, np.zeros(n_d - D.size)])
