@@ -35,9 +35,13 @@ __all__ = [
 #: OpenCV's 5 coefficients, and its rational model (a wide-angle lens).
 AUTO_CANDIDATES = ("k1k2", "k1k2p1p2k3", "rational")
 #: ``"auto"`` keeps the simplest model whose median held-out RMS is at most ``1 +`` this
-#: times the best's (the folds' medians scatter by a few per cent between models that fit the
-#: lens alike).
-AUTO_TOLERANCE = 0.05
+#: times the best's. Models that fit the lens alike differed by 2 % at most on the renders of
+#: ``tests/test_lens_model.py`` and the wide-angle k1k2 case of
+#: ``benchmarks/bench_chessboard_hostile.py`` (the richer one worse); behind the rational
+#: lens ``k1k2p1p2k3``, whose rays were 0.6-1.0 deg off, came within 4.5-8 % of the rational
+#: model over three draws of noise: a held-out view's own board pose absorbs most of a wrong
+#: lens model's error, so the margin is thin either way.
+AUTO_TOLERANCE = 0.03
 #: Folds of ``"auto"``'s held-out check when ``heldout`` is not given (0).
 AUTO_FOLDS = 3
 
