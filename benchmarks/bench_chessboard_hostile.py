@@ -2,6 +2,7 @@
 (tests/quadric_rig.py): held-out corners and ray directions, omnicam beside cv2.omnidir.
 
     python benchmarks/bench_chessboard_hostile.py [--only TEXT] [--wide-seeds N | --seeds N]
+        [--dist-model M]
 
 Rigs tilted 3 deg and offset 3 mm, 12 views, 0.15 px corner noise
 (tests/test_chessboard_hostile.py):
@@ -75,7 +76,7 @@ def ray_bound(fit, mirror_given):
         rig.rim_pixels(360),  # as many as the adjustment keeps
         T.NOISE_PX,
         T.RIM_NOISE_PX,
-        dist_model="k1k2",
+        dist_model=fit.report.dist_model,  # the model fitted ("auto"'s choice)
         refine_mirror_shape=not mirror_given,
     )
     return std["ray_deg_median"], std["ray_deg_max"]
@@ -112,6 +113,8 @@ def row(case, only=None):
         f"{e_od.max():.3f} | {start} | {shape} | {time.perf_counter() - t:.0f} s |",
         flush=True,
     )
+    for line in r.lens_lines():  # the lens model ("auto": which and why) and its coefficients
+        print(f"|  {line} |", flush=True)
 
 
 def seeds(case, n, only=None):
@@ -146,15 +149,18 @@ def seeds(case, n, only=None):
         )
 
 
-def cases():
-    """``(label, make(seed, heldout), mirror given)``: seed None is the case's own draw."""
+def cases(dist_model="k1k2"):
+    """``(label, make(seed, heldout), mirror given)``: seed None is the case's own draw; every
+    fit with ``dist_model``."""
     out = []
     for i, m in enumerate(T.MIRRORS):
         rig = T._hyperbolic(*m)
         out.append(
             (
                 f"unknown a={m[0]:.1f} b={m[1]:.1f}",
-                lambda s, k, i=i, rig=rig: T.Fit(rig, seed=i if s is None else s, heldout=k),
+                lambda s, k, i=i, rig=rig: T.Fit(
+                    rig, seed=i if s is None else s, heldout=k, dist_model=dist_model
+                ),
                 False,
             )
         )
@@ -169,6 +175,7 @@ def cases():
                 (300.0, 900.0),
                 seed=1 if s is None else s,
                 heldout=k,
+                dist_model=dist_model,
             ),
             False,
         )
@@ -188,6 +195,7 @@ def cases():
                     (300.0, 1500.0),
                     seed=1 if s is None else s,
                     heldout=k,
+                    dist_model=dist_model,
                 ),
                 False,
             )
@@ -201,7 +209,11 @@ def cases():
             (
                 label,
                 lambda s, k, rig=rig, mirror=mirror: T.Fit(
-                    rig, seed=1 if s is None else s, heldout=k, mirror=mirror
+                    rig,
+                    seed=1 if s is None else s,
+                    heldout=k,
+                    mirror=mirror,
+                    dist_model=dist_model,
                 ),
                 True,
             )
@@ -214,6 +226,9 @@ def main(argv=None):
     ap.add_argument("--only", default=None, help="only the cases whose label holds this text")
     ap.add_argument("--wide-seeds", type=int, default=0, help="--seeds N --only wide-angle")
     ap.add_argument("--seeds", type=int, default=0, help="each case over N seeds (rays only)")
+    ap.add_argument(
+        "--dist-model", default="k1k2", help="the lens model of every fit (auto: chosen)"
+    )
     args = ap.parse_args(argv)
     if args.wide_seeds:  # (the command of earlier notes)
         args.seeds, args.only = args.wide_seeds, "wide-angle"
@@ -223,7 +238,7 @@ def main(argv=None):
             "start | shape | verdict |"
         )
         print("|---|---|---|---|---|---|---|---|---|")
-        for case in cases():
+        for case in cases(args.dist_model):
             seeds(case, args.seeds, args.only)
         return
     print(
@@ -231,7 +246,7 @@ def main(argv=None):
         "bound deg | rays omnidir deg | start | shape | time |"
     )
     print("|---|---|---|---|---|---|---|---|---|---|---|")
-    for case in cases():
+    for case in cases(args.dist_model):
         row(case, args.only)
 
 

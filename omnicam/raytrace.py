@@ -104,18 +104,22 @@ def undistort_normalized(pixels: FloatArray, K: FloatArray, D: ArrayLike) -> Flo
 def distort_normalized(xn: FloatArray, K: FloatArray, D: ArrayLike) -> FloatArray:
     """Undistorted normalised coordinates -> pixels (OpenCV's distortion, then ``K`` with skew).
 
-    ``D = (k1, k2, p1, p2[, k3])`` is applied in numpy (the formula of ``cv2.projectPoints``,
-    without its per-call cost, which the chessboard adjustment's rim residuals pay thousands of
-    times); longer models (rational, thin prism, tilt) go through ``cv2.projectPoints``."""
+    ``D = (k1, k2, p1, p2[, k3[, k4, k5, k6]])`` is applied in numpy (the formula of
+    ``cv2.projectPoints``, with the rational model's radial factor ``(1 + k1 r^2 + k2 r^4 +
+    k3 r^6) / (1 + k4 r^2 + k5 r^4 + k6 r^6)``, without its per-call cost, which the chessboard
+    adjustment's rim residuals pay thousands of times); longer models (thin prism, tilt) go
+    through ``cv2.projectPoints``."""
     D = np.ravel(np.asarray(D, np.float64))
     ok = np.isfinite(xn).all(axis=1)
     out = np.full_like(xn, np.nan)
-    if ok.any() and len(D) in (4, 5):
+    if ok.any() and len(D) in (4, 5, 8):
         x, y = xn[ok, 0], xn[ok, 1]
         k1, k2, p1, p2 = D[:4]
-        k3 = D[4] if len(D) == 5 else 0.0
+        k3 = D[4] if len(D) >= 5 else 0.0
         r2 = x * x + y * y
         radial = 1.0 + r2 * (k1 + r2 * (k2 + r2 * k3))
+        if len(D) == 8:  # the rational model's denominator
+            radial = radial / (1.0 + r2 * (D[5] + r2 * (D[6] + r2 * D[7])))
         xd = x * radial + 2.0 * p1 * x * y + p2 * (r2 + 2.0 * x * x)
         yd = y * radial + p1 * (r2 + 2.0 * y * y) + 2.0 * p2 * x * y
         out[ok, 0] = K[0, 0] * xd + K[0, 1] * yd + K[0, 2]

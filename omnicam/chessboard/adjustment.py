@@ -46,9 +46,11 @@ from .shape_params import LOG_NAMES, shape_names, shape_steps, shape_vector, wit
 
 __all__ = [
     "DIST_MODELS",
+    "D_NAMES",
     "AdjustmentModel",
     "BundleAdjustment",
     "covariance",
+    "n_coefficients",
     "pattern_uncertainty",
     "ray_uncertainty",
     "rim_curve",
@@ -59,18 +61,36 @@ __all__ = [
 ]
 
 
-#: Distortion models: which of OpenCV's ``(k1, k2, p1, p2, k3)`` are estimated.
+#: OpenCV's distortion coefficients, in its order (``CALIB_RATIONAL_MODEL``'s 8).
+D_NAMES = ("k1", "k2", "p1", "p2", "k3", "k4", "k5", "k6")
+
+#: Distortion models: which of OpenCV's ``(k1, k2, p1, p2, k3, k4, k5, k6)`` are estimated.
+#: ``radial6`` and ``rational`` are OpenCV's rational model, the radial factor
+#: ``(1 + k1 r^2 + k2 r^4 + k3 r^6) / (1 + k4 r^2 + k5 r^4 + k6 r^6)`` (a wide-angle lens),
+#: without and with the tangential ``p1, p2``.
 DIST_MODELS = {
     "none": (),
     "k1": (0,),
     "k1k2": (0, 1),
     "k1k2p1p2": (0, 1, 2, 3),
     "k1k2p1p2k3": (0, 1, 2, 3, 4),
+    "radial6": (0, 1, 4, 5, 6, 7),
+    "rational": (0, 1, 2, 3, 4, 5, 6, 7),
 }
 
 
+def n_coefficients(free_d, D_size=None) -> int:
+    """The length of ``D`` an adjustment of the free coefficients ``free_d`` works with,
+    ``D_size`` that of a given start (None: none): 0 (no distortion), 4, 5 or 8 (OpenCV's
+    lengths; the shortest that holds both)."""
+    if not free_d and D_size is None:
+        return 0
+    top = max([*free_d, (D_size or 4) - 1])
+    return 4 if top < 4 else (5 if top == 4 else 8)
+
+
 #: Parameters that act after the mirror (the pinhole and its distortion).
-_AFTER_MIRROR = frozenset(("fx", "fy", "cx", "cy", "skew", "k1", "k2", "p1", "p2", "k3"))
+_AFTER_MIRROR = frozenset(("fx", "fy", "cx", "cy", "skew", *D_NAMES))
 
 
 def rim_normalized(R, t, mirror, phi) -> FloatArray:
@@ -124,9 +144,10 @@ class AdjustmentModel:
     Attributes
     ----------
     free_d : tuple of int
-        The free coefficients of ``D = (k1, k2, p1, p2, k3)`` (:data:`DIST_MODELS`).
+        The free coefficients of ``D = (k1, k2, p1, p2, k3, k4, k5, k6)``
+        (:data:`DIST_MODELS`).
     n_d : int
-        Coefficients of ``D`` (0: no distortion, 4 or 5).
+        Coefficients of ``D`` (0: no distortion, 4, 5 or 8: :func:`n_coefficients`).
     fit_skew, fit_shape : bool
         Also the skew ``K[0, 1]``; also the mirror's shape (:mod:`.shape_params`).
     lens_px : (M, 2) ndarray or None
@@ -173,7 +194,10 @@ class BundleAdjustment:
                 self.fit_lens_z = True
         self.free_d, self.n_d, self.fit_skew, self.fit_shape = free_d, n_d, fit_skew, fit_shape
         self.R0 = cam0.R.copy()
-        self.D0 = np.zeros(n_d) if cam0.D is None else np.array(cam0.D, np.float64)
+        self.D0 = np.zeros(n_d)
+        if cam0.D is not None:  # padded with zeros to n_d (a start of 4 for the rational model)
+            D = np.ravel(np.asarray(cam0.D, np.float64))
+            self.D0 = np.concatenate([D, np.zeros(max(n_d - D.size, 0))])
         self.rim_phi = None
         self.last = None  # (x, traced(x)...) of the last evaluation
         K = cam0.K
@@ -190,7 +214,7 @@ class BundleAdjustment:
         self.names = (
             ["fx", "fy", "cx", "cy"]
             + (["skew"] if fit_skew else [])
-            + [("k1", "k2", "p1", "p2", "k3")[i] for i in free_d]
+            + [D_NAMES[i] for i in free_d]
             + ["w1", "w2", "tx", "ty", "tz"]
             + self.shape_names
             + (["lens_z"] if self.fit_lens_z else [])
@@ -637,7 +661,7 @@ def pattern_uncertainty(
     if dist_model not in DIST_MODELS:
         raise ValueError(f"dist_model must be one of {sorted(DIST_MODELS)}, got {dist_model!r}")
     free_d = DIST_MODELS[dist_model]
-    n_d = 0 if not free_d and camera.D is None else (5 if 4 in free_d else 4)
+    n_d = n_coefficients(free_d, None if camera.D is None else np.size(camera.D))
     obj = object_points((cols, rows), square_size)
     views = [
         camera.project(obj @ rodrigues(rv).T + np.asarray(tv, np.float64)) for rv, tv in board_poses

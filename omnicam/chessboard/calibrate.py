@@ -59,6 +59,7 @@ accurate when those parameters are not; the report says which case a calibration
 from __future__ import annotations
 
 import dataclasses
+import math
 import warnings as _warnings
 
 import numpy as np
@@ -72,6 +73,7 @@ from .board_pose import object_points
 from .family import family_step
 from .fit_steps import SHAPE_REJECT_CHI2, report_step, rounds_step, shape_check_step
 from .heldout import HeldOut, cross_validate
+from .lens_model import AUTO_CANDIDATES, AUTO_FOLDS, LensChoice, choose
 from .report import PatternReport
 from .report_warnings import ONE_SIDED
 from .steps import (
@@ -80,8 +82,12 @@ from .steps import (
     RADIAL_START_GAIN,
     XI_NOT_HYPERBOLIC,
     XI_START_MAX,
+    Boards,
     Inputs,
+    LensStep,
     PatternOptions,
+    RimStep,
+    StartStep,
     load_step,
     pooled_reflection,
     raw_detection_step,
@@ -155,8 +161,8 @@ def calibrate_pattern(
         Start of the camera matrix (refined). Default: from the central fit of the corners
         (:func:`.central.fit_central`), else from the rim (see the module docstring).
     D : array_like, optional
-        Start of the distortion (4 or 5 coefficients); its free coefficients follow
-        ``dist_model``.
+        Start of the distortion (4, 5 or 8 coefficients, OpenCV's order); its free
+        coefficients follow ``dist_model``.
     image_size : (int, int), optional
         ``(width, height)``; defaults to the images' size.
     image_points : sequence of (N, 1, 2) array_like or None, optional
@@ -175,12 +181,17 @@ def calibrate_pattern(
         (:func:`.adjustment.pattern_uncertainty` gives the bound, ``benchmarks/bench_pattern.py``
         prints it); estimating them costs several times the held fit, along that valley.
     dist_model : str
-        One of ``"none", "k1", "k1k2", "k1k2p1p2", "k1k2p1p2k3"``: the OpenCV coefficients
-        estimated (the others stay at ``D``'s values, or 0). Default ``"k1k2"``: a decentred
-        lens (``p1, p2``) moves the image as a tilt of the mirror does, which the posture
-        already holds, so the tangential terms mostly trade against it (see the module
-        docstring) and predict held-out views worse
-        (``benchmarks/bench_chessboard_real.py --dist-model``).
+        One of ``"none", "k1", "k1k2", "k1k2p1p2", "k1k2p1p2k3"``, ``"radial6"`` (``k1, k2,
+        k3`` and ``k4, k5, k6``: OpenCV's rational model without ``p1, p2``), ``"rational"``
+        (all 8 of ``CALIB_RATIONAL_MODEL``: a wide-angle lens) or ``"auto"``: the OpenCV
+        coefficients estimated (the others stay at ``D``'s values, or 0). ``"auto"`` fits
+        each of :data:`.lens_model.AUTO_CANDIDATES` with its held-out check (``heldout``
+        folds, 3 when 0) and keeps the simplest within :data:`.lens_model.AUTO_TOLERANCE` of
+        the best median held-out RMS; ``report.lens_choice`` says which and why, and costs
+        3 (1 + k) calibrations. Default ``"k1k2"``: a decentred lens (``p1, p2``) moves the
+        image as a tilt of the mirror does, which the posture already holds, so the
+        tangential terms mostly trade against it (see the module docstring) and predict
+        held-out views worse (``benchmarks/bench_chessboard_real.py --dist-model``).
     rim_radius : float, optional
         With ``mirror=None``: the rim's radius (mirror units), which fixes the scale of the
         mirror and of the camera's position in its frame (default
@@ -262,11 +273,23 @@ def calibrate_pattern(
     return _calibrate(dataclasses.replace(options, image_size=inputs.image_size), inputs, progress)
 
 
+@dataclasses.dataclass(frozen=True)
+class _Prepared:
+    """Steps 1-4, which no lens model changes: the boards, the rim, the camera's reflection
+    and the start."""
+
+    boards: Boards
+    rim: RimStep
+    lens: LensStep
+    start: StartStep
+
+
 def _calibrate(
     options: PatternOptions, inputs: Inputs, progress=None
 ) -> tuple[MisalignedCatadioptricCamera, PatternReport]:
     """:func:`calibrate_pattern` of validated ``options`` on the loaded ``inputs``: the steps
-    of the module docstring, in order."""
+    of the module docstring, in order; with ``dist_model="auto"`` steps 5-9 once per
+    candidate lens model (:func:`_auto_lens`)."""
     boards = raw_detection_step(inputs, options.pattern_size, progress)
     rim = rim_step(inputs.greys, options.boundary_points, options.image_size, boards.points)
     lens = reflection_step(options.lens, inputs.greys, rim, options.lens_z)
@@ -274,6 +297,21 @@ def _calibrate(
     if inputs.greys:  # the boards not found yet, in the views of the start camera
         new = redetect(inputs.greys, boards.missing(), options.pattern_size, start.camera, progress)
         boards = boards.with_found(new, "views")
+    prepared = _Prepared(boards, rim, lens, start)
+    for w in rim.warnings + start.warnings:
+        _warnings.warn(w, RuntimeWarning, stacklevel=3)
+    if options.dist_model == "auto":
+        camera, report = _auto_lens(options, inputs, prepared, progress)
+    else:
+        camera, report = _fit(options, inputs, prepared, progress)
+    return camera, dataclasses.replace(report, names=inputs.names)
+
+
+def _fit(
+    options: PatternOptions, inputs: Inputs, prepared: _Prepared, progress=None
+) -> tuple[MisalignedCatadioptricCamera, PatternReport]:
+    """Steps 5-9 of one lens model (``options.dist_model``) from ``prepared``."""
+    boards, rim, lens, start = prepared.boards, prepared.rim, prepared.lens, prepared.start
     # an asphere's shape is always estimated: its start is a central model's extrapolation
     # and its focal length a default, which only the adjustment with both free corrects
     aspheric = not isinstance(start.mirror, HyperbolicMirror)
@@ -292,9 +330,6 @@ def _calibrate(
     if options.mirror is None and aspheric:  # the polynomial terms the corners ask for
         rounds = family_step(rounds, options)[0]
     camera, report = report_step(rounds, start, lens.note, options)
-    start_warns = rim.warnings + start.warnings
-    for w in start_warns:
-        _warnings.warn(w, RuntimeWarning, stacklevel=3)
     held = None
     if options.heldout:  # the same calibration on each fold's views, with these rim points
         rerun = dataclasses.replace(
@@ -310,11 +345,40 @@ def _calibrate(
         report,
         found_by=found,
         central=start.central,
-        warnings=start_warns + report.warnings,
+        warnings=rim.warnings + start.warnings + report.warnings,
         heldout=held,
-        names=inputs.names,
     )
     return judged(camera, report)  # the camera carries the report's verdict
+
+
+def _auto_lens(
+    options: PatternOptions, inputs: Inputs, prepared: _Prepared, progress=None
+) -> tuple[MisalignedCatadioptricCamera, PatternReport]:
+    """``dist_model="auto"``: steps 5-9 with each of :data:`.lens_model.AUTO_CANDIDATES` and
+    its k-fold held-out check (``heldout`` folds, :data:`.lens_model.AUTO_FOLDS` when 0), the
+    model of :func:`.lens_model.choose` taken; its report holds the comparison
+    (``lens_choice``) and its held-out check."""
+    k = options.heldout or AUTO_FOLDS
+    fits, figures, errors = {}, {}, []
+    for name in AUTO_CANDIDATES:
+        candidate = dataclasses.replace(options, dist_model=name, heldout=k).validated()
+        with _warnings.catch_warnings(record=True) as caught:  # said for the one taken
+            _warnings.simplefilter("always")
+            try:
+                fits[name] = (*_fit(candidate, inputs, prepared, progress), caught)
+            except ValueError as e:
+                figures[name] = math.inf
+                errors.append(e)
+                continue
+        held = fits[name][1].heldout
+        figures[name] = held.median if held is not None and not held.failed else math.inf
+    if not fits:  # no model fits these views: the simplest's reason
+        raise errors[0]
+    chosen = choose({m: v for m, v in figures.items() if m in fits})
+    camera, report, caught = fits[chosen]
+    for w in caught:
+        _warnings.warn(w.message, w.category, stacklevel=4)
+    return camera, dataclasses.replace(report, lens_choice=LensChoice(chosen, figures, k))
 
 
 def _heldout_step(report: PatternReport, options: PatternOptions, k: int) -> HeldOut:

@@ -18,6 +18,7 @@ import numpy as np
 
 from ..camera import MisalignedCatadioptricCamera
 from .adjustment import (
+    D_NAMES,
     AdjustmentModel,
     BundleAdjustment,
     ray_uncertainty,
@@ -202,7 +203,7 @@ def _adjust(cam0, mirror, corners, rim_px, model, f_scale, view_ids, x_boards, x
         # tangential distortion) trades against a tilt of the mirror; only a start for
         # stage 2, which converges to 1e-10 on its own: its last evaluations would lower the
         # cost by fractions of a millionth
-        adj.fixed = {"cx", "cy", "skew", "k1", "k2", "p1", "p2", "k3"}
+        adj.fixed = {"cx", "cy", "skew", *D_NAMES}
         x0 = adj.solve(x0, f_scale=f_scale, max_nfev=20, tol=_STAGE1_TOL).x
         adj.fixed = set()
     # with the mirror's shape free the fit follows a long, flat valley (a, b trade against
@@ -461,5 +462,6 @@ def report_step(
         camera=camera,
         start=start.camera,
         plausibility=implausible(camera, image_size),
+        dist_model=options.dist_model,
     )
     return camera, report

@@ -18,6 +18,7 @@ from ..calibration.plausibility import (
 from ..formats.verdict import Verdict, split_findings
 from ..images import to_bgr8
 from .heldout import HeldOut
+from .lens_model import LensChoice, coefficient_lines
 
 __all__ = ["ONE_SIDED", "PatternReport"]
 
@@ -99,6 +100,11 @@ class PatternReport:
         The implausible findings of the single-image route's checks (tilt, offset, ``K``
         against the image, with its default limits; :meth:`with_limits` checks at others),
         also in ``warnings``. :attr:`implausible` adds boards all on one side.
+    dist_model : str
+        The lens model fitted (a key of :data:`.adjustment.DIST_MODELS`).
+    lens_choice : LensChoice or None
+        With ``dist_model="auto"``, the candidates' held-out figures and the model taken
+        (:mod:`.lens_model`).
     """
 
     rms: float
@@ -124,6 +130,19 @@ class PatternReport:
     ray_std_deg: tuple = (math.nan, math.nan)
     names: dict = dataclasses.field(default_factory=dict)
     plausibility: tuple = ()
+    dist_model: str = ""
+    lens_choice: LensChoice | None = None
+
+    def lens_lines(self) -> list[str]:
+        """The lens model: with ``"auto"`` which model and why (:meth:`.LensChoice.summary`),
+        then each estimated coefficient with its standard deviation and whether these views
+        determine it (:func:`.lens_model.coefficient_lines`)."""
+        lines = [] if self.lens_choice is None else [self.lens_choice.summary()]
+        if self.dist_model and self.camera is not None:
+            coeffs = coefficient_lines(self.camera.D, self.std, self.dist_model)
+            if coeffs:
+                lines.append(f"distortion ({self.dist_model}): " + "; ".join(coeffs))
+        return lines
 
     # -- what the warnings say: implausible, by nature, or alarms ------------------------------
     @property

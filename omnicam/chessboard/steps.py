@@ -29,7 +29,7 @@ from ..calibration.rim import detect_rim, fit_rim
 from ..camera import MisalignedCatadioptricCamera
 from ..images import read_image
 from ..mirror import HyperbolicMirror
-from .adjustment import DIST_MODELS
+from .adjustment import DIST_MODELS, n_coefficients
 from .any_start import aligned_camera, generic_start
 from .board_pose import object_points
 from .board_size import raw_boards
@@ -128,19 +128,20 @@ class PatternOptions:
                 f"{type(mirror).__name__}"
             )
         dist_model = self.dist_model
-        if dist_model not in DIST_MODELS:
-            raise ValueError(f"dist_model must be one of {sorted(DIST_MODELS)}, got {dist_model!r}")
-        D = validate_D(self.D)
-        if D is not None and D.size not in (4, 5):
+        if dist_model not in DIST_MODELS and dist_model != "auto":
             raise ValueError(
-                f"D must have 4 or 5 coefficients (k1, k2, p1, p2[, k3]) for pattern "
-                f"calibration, got {D.size}"
+                f"dist_model must be one of {sorted(DIST_MODELS)} or 'auto', got {dist_model!r}"
             )
-        free_d = DIST_MODELS[dist_model]
-        if not free_d and D is None:
-            n_d = 0
-        else:
-            n_d = 5 if (4 in free_d or (D is not None and D.size == 5)) else 4
+        D = validate_D(self.D)
+        if D is not None and D.size not in (4, 5, 8):
+            raise ValueError(
+                f"D must have 4, 5 or 8 coefficients (k1, k2, p1, p2[, k3[, k4, k5, k6]]) for "
+                f"pattern calibration, got {D.size}"
+            )
+        # "auto" is started as its simplest candidate (lens_model.AUTO_CANDIDATES), each
+        # candidate's D padded to its own length by the adjustment
+        free_d = DIST_MODELS["k1k2" if dist_model == "auto" else dist_model]
+        n_d = n_coefficients(free_d, None if D is None else D.size)
         if D is not None and D.size < n_d:
             D = np.concatenate([D, np.zeros(n_d - D.size)])
         return dataclasses.replace(

@@ -82,10 +82,11 @@ def add_arguments(parser):
     )
     p.add_argument(
         "--dist-model",
-        choices=sorted(DIST_MODELS),
+        choices=[*sorted(DIST_MODELS), "auto"],
         default=None,
         help="with --chessboard: distortion coefficients to estimate (default k1k2; p1, p2 "
-        "trade against the mirror's tilt)",
+        "trade against the mirror's tilt; rational and radial6: OpenCV's rational model, a "
+        "wide-angle lens; auto: the simplest that predicts held-out views as well as the best)",
     )
     p.add_argument(
         "--corners",
@@ -161,9 +162,9 @@ def _start_intrinsics(args, size):
         if k_size is not None and k_size != size:
             warn_user(f"intrinsics are for {k_size[0]}x{k_size[1]}: K rescaled to the images")
             K = scale_K(K, k_size, size)
-    if D is not None and np.size(D) not in (4, 5):
-        warn_user("the distortion start: only k1 k2 p1 p2 k3 of D are used")
-        D = np.ravel(D)[:5]
+    if D is not None and np.size(D) not in (4, 5, 8):
+        warn_user("the distortion start: only k1 k2 p1 p2 k3 k4 k5 k6 of D are used")
+        D = np.ravel(D)[: 8 if np.size(D) > 8 else 5]
     return K, D
 
 
@@ -258,6 +259,8 @@ def _print_report(camera, report, names, caught, verdict, refused):
         f"{report.ray_std_deg[1]:.3f})",
         flush=True,
     )
+    for line in report.lens_lines():
+        print(line, flush=True)
     if report.lens_note:
         print(user_terms(f"camera's reflection: {report.lens_note}"), flush=True)
     for w in report.notes:
