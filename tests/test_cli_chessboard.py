@@ -308,3 +308,26 @@ def test_the_library_is_silent_by_default_and_reports_through_progress(views):
     assert lead[0].strip().startswith("viewing directions known to ")
     assert lead[1].strip().startswith("held-out corner RMS (2-fold")
     assert lead[2].strip().startswith("verdict: ") and cam.verdict == report.verdict()
+
+
+def test_a_chessboard_calibration_records_the_cameras_reflection_for_default_panoramas(
+    views, tmp_path
+):
+    """The renders show the lens barrel's reflection: without --lens-z it takes no part in the
+    fit, but the file records its circle, so a default panorama starts above the lens
+    (issue 29 item 6), as after a calibration from one image."""
+    out = tmp_path / "rig.yaml"
+    assert _calibrate(views, out, "--heldout", "0") == 0
+    cam = omnicam.load_camera(out)
+    assert cam.camera_reflection is not None
+    band = omnicam.default_elevation_range(cam)
+    assert band.lower_edge in (omnicam.views.LOWER_EDGE_REFLECTION, omnicam.views.LOWER_EDGE_FLOOR)
+    # the lens's reflection lies below the band: its outline's rays point lower
+    r, z = cam.camera_reflection
+    phi = np.linspace(0, 2 * np.pi, 36, endpoint=False)
+    ring = np.stack([r * np.cos(phi), r * np.sin(phi), np.full_like(phi, z)], axis=1)
+    X = (ring - cam.tvec) @ cam.R  # camera frame -> mirror frame
+    pixels = cam.project(X)
+    _, d = cam.unproject(pixels[np.isfinite(pixels).all(axis=1)])
+    elevation = np.degrees(np.arcsin(d[:, 2]))
+    assert np.nanmax(elevation) <= band.lo + 1e-6

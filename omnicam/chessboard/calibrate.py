@@ -91,6 +91,7 @@ from .steps import (
     load_step,
     pooled_reflection,
     raw_detection_step,
+    recorded_reflection,
     redetect,
     reflection_step,
     rim_step,
@@ -304,7 +305,9 @@ def _calibrate(
         camera, report = _auto_lens(options, inputs, prepared, progress)
     else:
         camera, report = _fit(options, inputs, prepared, progress)
-    return camera, dataclasses.replace(report, names=inputs.names)
+    # where the camera sees itself: default panoramas start above the lens
+    camera = recorded_reflection(camera, lens, inputs.greys, rim, options.lens)
+    return camera, dataclasses.replace(report, names=inputs.names, camera=camera)
 
 
 def _fit(

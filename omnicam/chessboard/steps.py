@@ -11,6 +11,7 @@ corners, the adjustment rounds and the report follow in :mod:`.fit_steps`.
 from __future__ import annotations
 
 import dataclasses
+import math
 import os
 from typing import Any
 
@@ -24,11 +25,13 @@ from ..calibration import calibrate
 from ..calibration.ellipse import conic_distance
 from ..calibration.inputs import edge_image
 from ..calibration.plausibility import focal_from_rim, rim_radius_px
-from ..calibration.reflection import detect_reflection
+from ..calibration.reflection import detect_reflection, fit_circle
 from ..calibration.rim import detect_rim, fit_rim
+from ..calibration.steps import BODY_MAX_RMS_PX
 from ..camera import MisalignedCatadioptricCamera
 from ..images import read_image
 from ..mirror import HyperbolicMirror
+from ..raytrace import normalize
 from .adjustment import DIST_MODELS, n_coefficients
 from .any_start import aligned_camera, generic_start
 from .board_pose import object_points
@@ -454,6 +457,41 @@ def reflection_step(lens, greys, rim: RimStep, lens_z) -> LensStep:
             "lens must hold at least 8 finite pixels along the outline of the camera's reflection"
         )
     return LensStep(lens_px, f"used: {len(lens_px)} outline points given")
+
+
+#: Images searched for the camera's reflection to record when it took no part in the fit:
+#: a few agree on the rigid rig's outline (:func:`pooled_reflection` pools them).
+RECORD_REFLECTION_IMAGES = 4
+
+
+def recorded_reflection(camera, lens: LensStep, greys, rim: RimStep, lens_option):
+    """The camera with its own reflection recorded where it is seen (``camera_reflection``), so
+    that a default panorama starts above the lens (:func:`omnicam.views.default_elevation_range`).
+
+    The outline the fit used, or, when it took no part (its plane unknown), the one detected
+    in a few images (:data:`RECORD_REFLECTION_IMAGES`); its coaxial circle under the fitted
+    posture (:func:`omnicam.calibration.reflection.fit_circle`) is recorded when the outline
+    fits it within ``BODY_MAX_RMS_PX``, as the single-image route records it
+    (:func:`omnicam.calibration.steps.camera_body`). Otherwise the camera as it is.
+    """
+    px = lens.points
+    if px is None:
+        if not (isinstance(lens_option, str) and greys):
+            return camera  # not to be detected (lens=None), or no image
+        k = rim.image if 0 <= rim.image < len(greys) else 0
+        few = [greys[k]] + [g for i, g in enumerate(greys) if i != k]
+        px, _ = pooled_reflection([g.edges for g in few[:RECORD_REFLECTION_IMAGES]], 0, rim.fit)
+        if px is None:
+            return camera
+    K = camera.K
+    xn = normalize(px, K, camera.D)
+    circle = fit_circle(camera.mirror, camera.R, camera.tvec, xn, np.linalg.inv(K)[:2, :2])
+    if (
+        not (math.isfinite(circle.r) and circle.r > 0 and math.isfinite(circle.z))
+        or not circle.rms <= BODY_MAX_RMS_PX
+    ):
+        return camera
+    return camera.replace(camera_reflection=(float(circle.r), float(circle.z)))
 
 
 # -- 4. the start -------------------------------------------------------------------------------

@@ -7,7 +7,7 @@ import os
 
 from .._atomic import OutputError
 from ..html_report import image_report_html, pattern_report_html, write_report
-from ._common import CliError, check_output, one_line
+from ._common import CliError, check_output, one_line, user_terms
 
 PAGE_SUFFIXES = (".html", ".htm")
 
@@ -35,7 +35,9 @@ def write_pattern_page(
 ):
     """Build and write the chessboard page (:func:`pattern_report_html`); ``say``: print
     where."""
-    page = pattern_report_html(camera, report, images, names=names, pattern_size=pattern_size, **kw)
+    page = pattern_report_html(
+        camera, report, images, names=names, pattern_size=pattern_size, terms=user_terms, **kw
+    )
     _write(path, page, overwrite, say)
 
 

@@ -3,7 +3,7 @@
 from __future__ import annotations
 
 import math
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from typing import Any
 
 import cv2
@@ -78,8 +78,11 @@ def _name(report, names, i):
 
 
 # -- the sections ------------------------------------------------------------------------------
-def _summary(page, camera, report, verdict, notes):
+def _summary(page, camera, report, verdict, notes, terms):
     page.section("summary", "Summary")
+    # what users use first: the rays' uncertainty, the held-out check, the verdict
+    lead = report.lead(verdict) if hasattr(report, "lead") else []
+    page.items([terms(line) for line in lead], "lead")
     page.items(notes, "note")
     K = camera.K
     std = report.std or {}
@@ -118,9 +121,14 @@ def _summary(page, camera, report, verdict, notes):
     if report.lens_note:
         rows.append(("camera's reflection", report.lens_note))
     page.table(("figure", "value"), rows, left=2)
-    if report.warnings:
+    by_nature = tuple(getattr(report, "notes", ()))
+    alarms = [str(w) for w in report.warnings if w not in by_nature]
+    if by_nature:  # what boards cannot fix by nature: stated, not doubted
+        page.text("Notes (by nature, not doubts):", "note")
+        page.items([terms(w) for w in by_nature], "note")
+    if alarms:
         page.text("Warnings:", "warn")
-        page.items([str(w) for w in report.warnings], "warn")
+        page.items([terms(w) for w in alarms], "warn")
 
 
 def _heldout_line(report, verdict):
@@ -551,6 +559,7 @@ def pattern_report_html(
     verdict: Any = None,
     notes: Sequence[str] = (),
     title: str = "omnicam chessboard calibration",
+    terms: Callable[[str], str] = str,
 ) -> str:
     """The report page of a chessboard calibration, as one self-contained HTML string.
 
@@ -574,6 +583,9 @@ def pattern_report_html(
     notes : sequence of str
         Lines for the top of the page (where the figures came from).
     title : str
+    terms : callable
+        How the report's texts are worded on the page (the command line passes its own,
+        which names options instead of the library's parameters).
 
     Returns
     -------
@@ -592,7 +604,7 @@ def pattern_report_html(
     order = _outline_index(pattern_size, n)
     colours = view_colours(len(views))
     page = Page(title)
-    _summary(page, camera, report, verdict, list(notes))
+    _summary(page, camera, report, verdict, list(notes), terms)
     _per_view(page, camera, report, names)
     view = panorama_view(camera, 64)
     _coverage(page, camera, report, images, view, order, colours)
