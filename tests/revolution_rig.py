@@ -20,8 +20,9 @@ of a radius by Newton on ``rho(theta) = r(theta) sin(theta)`` (increasing; start
 dense table), and past the rim continued along its tangent (a convex continuation, used only to
 bracket the hits). A ray ``O + t V`` meets it where ``H(t) = z(t) - z(rho(t))`` vanishes; ``H``
 is concave in ``t`` (a linear function minus a convex function of an affine one), so its
-maximum over the segment below the rim's plane is found by golden-section search, the first
-root before it by bisection and polished by Newton.
+maximum over the segment below the rim's plane is found by golden-section search (where the
+ray is not already above the cap at that plane), the first root before it by bisection and
+polished by Newton.
 """
 
 from __future__ import annotations
@@ -72,13 +73,17 @@ class Equiangular:
         r = polar_radius(self.alpha, self.r0, theta)
         return r * np.sin(theta), r * np.cos(theta)
 
-    @property
+    @functools.cached_property
     def rim_radius(self) -> float:
         return float(self._rho_z(self.theta_rim)[0])
 
-    @property
+    @functools.cached_property
     def z_rim(self) -> float:
         return float(self._rho_z(self.theta_rim)[1])
+
+    @functools.cached_property
+    def _rim_slope(self) -> float:
+        return math.tan(0.5 * (self.alpha - 1.0) * self.theta_rim)
 
     @functools.cached_property
     def _table(self):
@@ -89,7 +94,7 @@ class Equiangular:
         """The polar angle of the profile's point at radius ``rho`` (``0 <= rho <= rim``)."""
         rho = np.asarray(rho, np.float64)
         th = np.interp(rho, *self._table)
-        for _ in range(6):  # Newton on rho(theta) - rho; d rho / d theta = r (tan b sin + cos)
+        for _ in range(3):  # Newton on rho(theta) - rho; d rho / d theta = r (tan b sin + cos)
             r = polar_radius(self.alpha, self.r0, th)
             b = 0.5 * (1.0 + self.alpha) * th
             th = th - (r * np.sin(th) - rho) / (r * (np.tan(b) * np.sin(th) + np.cos(th)))
@@ -108,8 +113,7 @@ class Equiangular:
         inside = np.minimum(rho, R)
         th = self.theta_of_rho(inside)
         z = polar_radius(self.alpha, self.r0, th) * np.cos(th)
-        s_rim = math.tan(0.5 * (self.alpha - 1.0) * self.theta_rim)
-        return np.where(rho <= R, z, self.z_rim + s_rim * (rho - R))
+        return np.where(rho <= R, z, self.z_rim + self._rim_slope * (rho - R))
 
     def gradient(self, P):
         """``grad (z - z(rho))`` at ``(N, 3)`` points: ``(-s x / rho, -s y / rho, 1)``."""
@@ -124,7 +128,7 @@ class Equiangular:
         X = O + t[:, None] * V
         return X[:, 2] - self.height(np.hypot(X[:, 0], X[:, 1]))
 
-    def intersect(self, O, V, iterations=90):
+    def intersect(self, O, V, iterations=45):
         """First hit of the rays ``O + t V`` (``t > 0``) on the cap inside the rim, from below.
 
         Returns ``(P (N, 3), t (N,))``, NaN where the ray misses the cap (module docstring).
@@ -136,34 +140,39 @@ class Equiangular:
         up = V[:, 2] > 1e-12
         with np.errstate(invalid="ignore", divide="ignore"):
             t_top = np.where(up, (self.z_rim - O[:, 2]) / V[:, 2], 0.0)
-        # the maximum of the concave H on [0, t_top] (golden section)
-        a, b = np.zeros(n), t_top.copy()
-        c, d = b - GOLDEN * (b - a), a + GOLDEN * (b - a)
-        Hc, Hd = self._H(O, V, c), self._H(O, V, d)
-        for _ in range(iterations):
-            left = Hc > Hd
-            b = np.where(left, d, b)
-            a = np.where(left, a, c)
-            c_new, d_new = b - GOLDEN * (b - a), a + GOLDEN * (b - a)
-            c, d = c_new, d_new
-            Hc, Hd = self._H(O, V, c), self._H(O, V, d)
-        t_max = 0.5 * (a + b)
+        # where the ray is above the cap at the rim's plane (inside the rim), t_top brackets the
+        # hit; elsewhere the maximum of the concave H on [0, t_top] (golden section) does
+        t_max = t_top.copy()
         H_max = self._H(O, V, t_max)
+        g = np.flatnonzero(up & ~(H_max >= 0.0))
+        if len(g):
+            Og, Vg = O[g], V[g]
+            a, b = np.zeros(len(g)), t_top[g]
+            c, d = b - GOLDEN * (b - a), a + GOLDEN * (b - a)
+            Hc, Hd = self._H(Og, Vg, c), self._H(Og, Vg, d)
+            for _ in range(iterations):
+                left = Hc > Hd
+                b, a = np.where(left, d, b), np.where(left, a, c)
+                c, d = b - GOLDEN * (b - a), a + GOLDEN * (b - a)
+                Hc, Hd = self._H(Og, Vg, c), self._H(Og, Vg, d)
+            t_max[g] = 0.5 * (a + b)
+            H_max[g] = self._H(Og, Vg, t_max[g])
         below = self._H(O, V, np.zeros(n)) < 0.0
         hits = up & below & (H_max >= 0.0)
-        # the first root on [0, t_max] (bisection), then Newton: H' = V_z - s (d rho / d t)
+        # the first root on [0, t_max]: bisection to 2^-28 of the segment, then Newton (kept in
+        # the bracket), H' = V_z - s (d rho / d t)
         lo, hi = np.zeros(n), np.where(hits, t_max, 0.0)
-        for _ in range(iterations):
+        for _ in range(28):
             mid = 0.5 * (lo + hi)
             pos = self._H(O, V, mid) >= 0.0
             lo, hi = np.where(pos, lo, mid), np.where(pos, mid, hi)
         t = 0.5 * (lo + hi)
-        for _ in range(2):
+        for _ in range(3):
             X = O + t[:, None] * V
             rho = np.hypot(X[:, 0], X[:, 1])
             with np.errstate(invalid="ignore", divide="ignore"):
                 drho = np.where(rho > 0, (X[:, 0] * V[:, 0] + X[:, 1] * V[:, 1]) / rho, 0.0)
-            t = t - self._H(O, V, t) / (V[:, 2] - self.slope(rho) * drho)
+            t = np.clip(t - self._H(O, V, t) / (V[:, 2] - self.slope(rho) * drho), lo, hi)
         P = O + t[:, None] * V
         ok = hits & (np.hypot(P[:, 0], P[:, 1]) <= self.rim_radius * (1.0 + 1e-9)) & (t > 1e-9)
         P[~ok] = np.nan
