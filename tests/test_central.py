@@ -104,6 +104,9 @@ def test_no_mirror_calibrates_from_the_boards_alone_and_says_the_scale_is_assume
     _, given, _ = _fit(tp.RIG.mirror)
     cam, report, caught = _fit(None)
     assert report.central is not None and 0 < report.central.xi < 1
+    # a hyperbolic rig's family is the hyperboloid's (the generic start is not run)
+    assert isinstance(cam.mirror, HyperbolicMirror)
+    assert not any("even asphere" in w for w in report.warnings)
     assert report.rms < 1.05 * given.rms  # the corners fit as with the data sheet's mirror
     assert np.median(_ray_error_deg(cam)) < 0.5  # 0.2 px noise, 10 views
     scale = [w for w in report.warnings if "scale is assumed" in w]

@@ -4,8 +4,9 @@ uncertainty (beyond the paper).
 :class:`BundleAdjustment` holds ``fx, fy, cx, cy`` (skew optional), the free distortion
 coefficients, the 5-DOF posture (two small rotations of the mirror frame about its own x and y
 axes and ``tvec``; the turn about the axis is put in the gauge of docs/conventions.md once, at
-the end), every board's 6-DOF pose and, optionally, the mirror's ``a, b`` (as logarithms;
-``rim_radius`` fixes the scale) and the plane of the camera's reflection. Residuals, in px:
+the end), every board's 6-DOF pose and, optionally, the mirror's shape (:mod:`.shape_params`: a
+hyperboloid's ``a, b`` or an asphere's ``R, k`` and polynomial terms; ``rim_radius`` fixes the
+scale) and the plane of the camera's reflection. Residuals, in px:
 every corner's reprojection through the exact non-central projection
 (:func:`omnicam.raytrace.project`, what ``camera.project`` runs), every rim point's orthogonal
 distance to the image of the rim circle and, when the camera's own reflection is seen, its
@@ -37,10 +38,10 @@ from .._typing import FloatArray
 from ..calibration.reflection import fit_circle, plane_radius
 from ..camera import MisalignedCatadioptricCamera
 from ..gauge import gauge_rotation
-from ..mirror import HyperbolicMirror
 from ..raytrace import normalize, to_pixels
 from .board_pose import object_points, rodrigues
 from .intrinsics import check_pattern_size
+from .shape_params import LOG_NAMES, shape_names, shape_steps, shape_vector, with_shape
 
 __all__ = [
     "DIST_MODELS",
@@ -126,7 +127,7 @@ class AdjustmentModel:
     n_d : int
         Coefficients of ``D`` (0: no distortion, 4 or 5).
     fit_skew, fit_shape : bool
-        Also the skew ``K[0, 1]``; also the mirror's ``a, b``.
+        Also the skew ``K[0, 1]``; also the mirror's shape (:mod:`.shape_params`).
     lens_px : (M, 2) ndarray or None
         Outline pixels of the camera's reflection (None: not used).
     lens_z : float or None
@@ -144,7 +145,7 @@ class AdjustmentModel:
 class BundleAdjustment:
     """Parameter vector, residuals and Jacobian of the non-central bundle adjustment.
 
-    ``x = [fx, fy, cx, cy, (skew), d_free..., w1, w2, t_x, t_y, t_z, (ln a, ln b), (lens_z),
+    ``x = [fx, fy, cx, cy, (skew), d_free..., w1, w2, t_x, t_y, t_z, (shape), (lens_z),
     boards...]``
     with ``R = R0 R(w1, w2, 0)``: the mirror frame of the start turned about its own x and y
     axes, so the axis moves with no twist about it (the gauge's smallest rotation would add a
@@ -178,8 +179,10 @@ class BundleAdjustment:
         g = [K[0, 0], K[1, 1], K[0, 2], K[1, 2]] + ([K[0, 1]] if fit_skew else [])
         g += [self.D0[i] for i in free_d]
         g += [0.0, 0.0, *cam0.tvec]
-        if fit_shape:  # as logarithms: a, b stay positive wherever a step goes
-            g += [math.log(mirror.a), math.log(mirror.b)]
+        # the mirror's shape (:mod:`.shape_params`: a hyperboloid's ln a, ln b; an
+        # asphere's ln R, k and polynomial terms)
+        self.shape_names = shape_names(mirror) if fit_shape else []
+        g += shape_vector(mirror) if fit_shape else []
         if self.fit_lens_z:
             g += [self.lens_z]
         self.n_global = len(g)
@@ -188,7 +191,7 @@ class BundleAdjustment:
             + (["skew"] if fit_skew else [])
             + [("k1", "k2", "p1", "p2", "k3")[i] for i in free_d]
             + ["w1", "w2", "tx", "ty", "tz"]
-            + (["a", "b"] if fit_shape else [])
+            + self.shape_names
             + (["lens_z"] if self.fit_lens_z else [])
         )
         self.x0_global = np.array(g, np.float64)
@@ -198,9 +201,7 @@ class BundleAdjustment:
         self.n_rows_view = 2 * n
         self.obs = np.concatenate(views) if len(views) else np.zeros((0, 2))
 
-    def unpack(
-        self, x
-    ) -> tuple[FloatArray, FloatArray | None, FloatArray, FloatArray, HyperbolicMirror]:
+    def unpack(self, x) -> tuple[FloatArray, FloatArray | None, FloatArray, FloatArray, Any]:
         """``(K, D, R, tvec, mirror)`` of the parameter vector ``x``."""
         i = 0
         fx, fy, cx, cy = x[0:4]
@@ -222,8 +223,9 @@ class BundleAdjustment:
         i += 5
         mirror = self.mirror
         if self.fit_shape:
-            mirror = HyperbolicMirror(math.exp(x[i]), math.exp(x[i + 1]), self.mirror.rim_radius)
-            i += 2
+            n = len(self.shape_names)
+            mirror = with_shape(self.mirror, x[i : i + n])
+            i += n
         return K, D, R, tvec, mirror
 
     def to_gauge(self, x, image_size=None) -> tuple[Any, list[tuple[np.ndarray, FloatArray]]]:
@@ -320,8 +322,8 @@ class BundleAdjustment:
 
     def residuals(self, x) -> FloatArray:
         """The corner, rim and (when used) outline residuals, px, in that order; 50 px each
-        where ``x`` holds a shape no mirror has (a step of the solver to ``a`` or ``b`` out of
-        :class:`~omnicam.mirror.HyperbolicMirror`'s range), as for a corner the rig cannot
+        where ``x`` holds a shape no mirror has (a step of the solver out of the mirror
+        family's range, :func:`.shape_params.with_shape`), as for a corner the rig cannot
         see."""
         try:
             K, D, _, _, _ = self.unpack(x)
@@ -338,6 +340,7 @@ class BundleAdjustment:
         """Central-difference steps of the parameters (:meth:`jacobian`)."""
         h = np.empty_like(x)
         g = self.n_global
+        shape_h = dict(zip(self.shape_names, shape_steps(self.mirror)))
         for k, name in enumerate(self.names):
             if name in ("fx", "fy", "cx", "cy", "skew"):
                 h[k] = 1e-6 * max(abs(x[0]), 1.0)
@@ -345,8 +348,8 @@ class BundleAdjustment:
                 h[k] = 1e-7
             elif name in ("tx", "ty", "tz", "lens_z"):
                 h[k] = 1e-6 * self.mirror.rim_radius
-            elif name in ("a", "b"):  # their logarithms
-                h[k] = 1e-6
+            elif name in shape_h:  # (:func:`.shape_params.shape_steps`)
+                h[k] = shape_h[name]
             else:
                 h[k] = 1e-7
         B = h[g:].reshape(-1, 6)
@@ -518,7 +521,7 @@ def std_from_jacobian(
         if name in ("w1", "w2", "tx", "ty", "tz"):
             continue
         std[name] = float(math.sqrt(max(var[k], 0.0))) if math.isfinite(var[k]) else math.nan
-        if name in ("a", "b"):  # the parameter is the logarithm
+        if name in LOG_NAMES:  # the parameter is the logarithm
             std[name] *= math.exp(x[k])
     ip = adj.names.index("w1")
     std["axis_deg"] = math.degrees(math.sqrt(max(var[ip] + var[ip + 1], 0.0)))

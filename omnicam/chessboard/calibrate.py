@@ -19,6 +19,10 @@ The steps (:mod:`.steps`, :mod:`.fit_steps`):
    (``cv2.omnidir.calibrate`` of the corners; ``xi`` gives the mirror's shape, its focal
    length the pinhole's, the rim's image the mirror's size at ``rim_radius``, which fixes the
    scale; the fit with ``k1, k2`` free instead when it fits far better, a wide-angle lens).
+   Where Mei's model gives no hyperboloid (``xi >= XI_NOT_HYPERBOLIC`` or no fit), the generic
+   start of :mod:`.any_start`: the corners' Taylor model and the aligned rig with the even
+   asphere that sees its directions, whose shape and focal length the adjustment frees, and
+   whose polynomial terms a likelihood-ratio test may extend (:mod:`.family`).
    With a mirror and without ``K``, the aligned rig's focal length from the rim's size
    (:func:`omnicam.calibration.plausibility.focal_from_rim`) and the principal point at the
    image centre; the posture from the rim by :func:`omnicam.calibration.calibrate` (Chen's
@@ -60,8 +64,10 @@ import warnings as _warnings
 import numpy as np
 
 from ..camera import MisalignedCatadioptricCamera
+from ..mirror import HyperbolicMirror
 from .adjustment import AdjustmentModel
 from .board_pose import object_points
+from .family import family_step
 from .fit_steps import SHAPE_REJECT_CHI2, report_step, rounds_step, shape_check_step
 from .heldout import HeldOut, cross_validate
 from .report import PatternReport
@@ -133,11 +139,15 @@ def calibrate_pattern(
         Inner corners ``(columns, rows)``, as ``cv2.findChessboardCorners``.
     square_size : float
         Side of a square in the mirror's length unit (mm by convention).
-    mirror : HyperbolicMirror or None
+    mirror : HyperbolicMirror, AsphericMirror or None
         The mirror (a start: only its shape's agreement with the central fit is checked, and
-        with ``refine_mirror_shape`` its ``a, b`` are estimated). ``None``: unknown, its shape
-        from the central fit's ``xi`` and its size from the rim's image at ``rim_radius``
-        (:func:`.central.hyperbolic_start`).
+        with ``refine_mirror_shape`` its ``a, b`` are estimated; an
+        :class:`~omnicam.asphere.AsphericMirror` is started aligned, ``K`` from the corners'
+        Taylor model unless given, and its shape always estimated). ``None``: unknown, its
+        shape from the central fit's ``xi`` and its size from the rim's image at
+        ``rim_radius`` (:func:`.central.hyperbolic_start`); where that fit gives no
+        hyperboloid, an even asphere from the corners' Taylor model (:mod:`.any_start`,
+        :mod:`.family`).
     K : (3, 3) array_like, optional
         Start of the camera matrix (refined). Default: from the central fit of the corners
         (:func:`.central.fit_central`), else from the rim (see the module docstring).
@@ -209,7 +219,9 @@ def calibrate_pattern(
 
     Returns
     -------
-    camera : MisalignedHyperbolicCamera
+    camera : MisalignedCatadioptricCamera
+        Its mirror a ``HyperbolicMirror`` or, for a rig no hyperboloid fits, an
+        ``AsphericMirror``.
     report : PatternReport
 
     Raises
@@ -257,17 +269,22 @@ def _calibrate(
     if inputs.greys:  # the boards not found yet, in the views of the start camera
         new = redetect(inputs.greys, boards.missing(), options.pattern_size, start.camera, progress)
         boards = boards.with_found(new, "views")
+    # an asphere's shape is always estimated: its start is a central model's extrapolation
+    # and its focal length a default, which only the adjustment with both free corrects
+    aspheric = not isinstance(start.mirror, HyperbolicMirror)
     model = AdjustmentModel(
         options.free_d,
         options.n_d,
         options.fit_skew,
-        options.refine_mirror_shape,
+        options.refine_mirror_shape or aspheric,
         lens.points,
         options.lens_z,
     )
     rounds = rounds_step(inputs.greys, boards, start, rim, model, options, progress)
-    if options.mirror is None and not options.refine_mirror_shape:
+    if options.mirror is None and not model.fit_shape:
         rounds = shape_check_step(rounds, start, rim, model, options)
+    if options.mirror is None and aspheric:  # the polynomial terms the corners ask for
+        rounds = family_step(rounds, options)[0]
     camera, report = report_step(rounds, start, lens.note, options)
     start_warns = rim.warnings + start.warnings
     for w in start_warns:

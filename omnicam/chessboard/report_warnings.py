@@ -13,10 +13,12 @@ from typing import Any, cast
 
 import numpy as np
 
+from ..asphere import AsphericMirror
 from ..calibration.chen import rim_conic
 from ..calibration.plausibility import check_plausibility
 from ..camera import MisalignedCatadioptricCamera
 from ..mirror import HyperbolicMirror
+from .shape_params import family
 from .steps import XI_NOT_HYPERBOLIC
 
 __all__ = ["ONE_SIDED", "POLICIES", "SHAPE_WEAK", "FitFacts", "report_warnings"]
@@ -113,7 +115,7 @@ def _hyperboloid(f: FitFacts) -> HyperbolicMirror:
 def held_shape(f: FitFacts) -> str | None:
     """The mirror unknown and its shape held from the central fit: its uncertainty is in the
     stated ones."""
-    if not f.held_shape:
+    if not f.held_shape or not isinstance(f.camera.mirror, HyperbolicMirror):
         return None
     m, std = _hyperboloid(f), f.std
     return (
@@ -125,9 +127,11 @@ def held_shape(f: FitFacts) -> str | None:
 
 
 def estimated_shape(f: FitFacts) -> str | None:
-    """The mirror's ``a, b`` estimated: how well, and that the data sheet's are better."""
+    """The mirror's shape estimated: how well, and that the data sheet's is better."""
     if not f.estimated_shape:
         return None
+    if not isinstance(f.camera.mirror, HyperbolicMirror):
+        return _estimated_asphere(f)
     m, std = _hyperboloid(f), f.std
     ra, rb = std["a"] / m.a, std["b"] / m.b
     weak = max(ra, rb) > SHAPE_WEAK
@@ -145,6 +149,25 @@ def estimated_shape(f: FitFacts) -> str | None:
     )
 
 
+def _estimated_asphere(f: FitFacts) -> str:
+    """An even asphere's shape estimated: its parameters and what the data determine."""
+    m, std = cast(AsphericMirror, f.camera.mirror), f.std
+    terms = ", ".join(
+        f"alpha{2 * j + 4} = {a:.4f} +- {std.get(f'alpha{2 * j + 4}', float('nan')):.4f}"
+        for j, a in enumerate(m.alpha)
+    )
+    rR = std["R"] / m.R
+    return (
+        f"the mirror's shape was estimated as an even asphere ({family(m)}: R = {m.R:.3f} +- "
+        f"{std['R']:.3f} ({100 * rR:.1f} %), k = {m.k:.3f} +- {std['k']:.3f}"
+        + (f", {terms}" if terms else "")
+        + f"); the shape relative to the rim (k and the terms, R / rim_radius) is what the "
+        f"boards determine, the focal length and the mirror's size only as their ratio "
+        f"without rim_radius (--rim-radius) and the camera's distance with the focal length; "
+        f"{f.rays} (the single-image route's plausibility checks, a hyperboloid's, are not run)"
+    )
+
+
 def focal_length_weak(f: FitFacts) -> str | None:
     fx = f.camera.K[0, 0]
     if f.std["fx"] > SHAPE_WEAK * fx:
@@ -159,8 +182,8 @@ def not_a_hyperboloid(f: FitFacts) -> str | None:
     """The central fit says the mirror is no hyperboloid, or fits the corners far better than
     this rig does."""
     central = f.central
-    if central is None:
-        return None
+    if central is None or not isinstance(f.camera.mirror, HyperbolicMirror):
+        return None  # (an asphere: the start's warning says why Mei's model was set aside)
     if central.xi >= XI_NOT_HYPERBOLIC:
         return (
             f"the central fit of the corners gives xi = {central.xi:.2f}, which no hyperboloid "
@@ -179,6 +202,8 @@ def not_a_hyperboloid(f: FitFacts) -> str | None:
 def _implausible(f: FitFacts) -> list[str]:
     """The single-image route's plausibility checks of the camera."""
     cam = f.camera
+    if not isinstance(cam.mirror, HyperbolicMirror):
+        return []  # (the single-image route's checks are the hyperboloid's: not run)
     conic = rim_conic(cam.K, cam.R, cam.tvec, cam.mirror)
     return [str(w) for w in check_plausibility(cam, conic, f.image_size)]
 

@@ -19,6 +19,7 @@ import numpy as np
 
 from .._typing import FloatArray
 from .._validate import float_array, positive_number, validate_D, validate_image_size, validate_K
+from ..asphere import AsphericMirror
 from ..calibration import calibrate
 from ..calibration.ellipse import conic_distance
 from ..calibration.inputs import edge_image
@@ -29,6 +30,7 @@ from ..camera import MisalignedCatadioptricCamera
 from ..images import read_image
 from ..mirror import HyperbolicMirror
 from .adjustment import DIST_MODELS
+from .any_start import aligned_camera, generic_start
 from .board_pose import object_points
 from .board_size import raw_boards
 from .central import NOMINAL_RIM_RADIUS, fit_central, hyperbolic_start, pinhole_D_from_unified
@@ -96,7 +98,7 @@ class PatternOptions:
 
     pattern_size: tuple[int, int]
     square: float
-    mirror: HyperbolicMirror | None
+    mirror: HyperbolicMirror | AsphericMirror | None
     K: Any
     D: FloatArray | None
     image_size: tuple[int, int] | None
@@ -120,9 +122,10 @@ class PatternOptions:
         cols, rows = check_pattern_size(self.pattern_size)
         square = positive_number(self.square, "square_size")
         mirror = self.mirror
-        if mirror is not None and not isinstance(mirror, HyperbolicMirror):
+        if mirror is not None and not isinstance(mirror, (HyperbolicMirror, AsphericMirror)):
             raise ValueError(
-                f"mirror must be a HyperbolicMirror or None (unknown), got {type(mirror).__name__}"
+                f"mirror must be a HyperbolicMirror, an AsphericMirror or None (unknown), got "
+                f"{type(mirror).__name__}"
             )
         dist_model = self.dist_model
         if dist_model not in DIST_MODELS:
@@ -455,22 +458,52 @@ def reflection_step(lens, greys, rim: RimStep, lens_z) -> LensStep:
 # -- 4. the start -------------------------------------------------------------------------------
 @dataclasses.dataclass(frozen=True)
 class StartStep:
-    """The start camera (``K`` and the posture by Chen's method), the mirror it holds, the
-    central fit (None if it failed) and the start's warnings."""
+    """The start camera (``K`` and the posture by Chen's method, or the aligned rig of the
+    generic start), the mirror it holds, the central fit (None if it failed), the Taylor fit
+    of the generic start (None: not run) and the start's warnings."""
 
     camera: MisalignedCatadioptricCamera
-    mirror: HyperbolicMirror
+    mirror: HyperbolicMirror | AsphericMirror
     central: Any
     warnings: tuple[str, ...]
+    taylor: Any = None
 
 
 def start_step(boards: Boards, rim: RimStep, options: PatternOptions) -> StartStep:
-    """4. The start: without a mirror the central fit's rig (:func:`_central_start`), else the
-    mirror given and ``K`` (given, or from the rim's size: :func:`_chen_start`), the posture by
-    Chen's method from the rim."""
+    """4. The start: without a mirror the central fit's rig (:func:`_central_start`: a
+    hyperboloid, or where Mei's model gives none the generic start's asphere,
+    :mod:`.any_start`), else the mirror given and ``K`` (given, or from the rim's size:
+    :func:`_chen_start`), the posture by Chen's method from the rim; a given asphere is
+    started aligned (:func:`.any_start.aligned_camera`, ``K`` from the Taylor model unless
+    given)."""
     central, K, mirror, D, warns = _central_start(boards.points, rim.fit, options)
-    cam0 = _chen_start(K, mirror, rim, D, options.image_size)
-    return StartStep(cam0, mirror, central, tuple(warns))
+    if isinstance(mirror, HyperbolicMirror):
+        cam0 = _chen_start(K, mirror, rim, D, options.image_size)
+        return StartStep(cam0, mirror, central, tuple(warns))
+    if options.mirror is None:  # the generic start's rig, ``K`` here its camera
+        return StartStep(K.camera, mirror, central, tuple(warns), K.taylor)
+    taylor = None
+    if K is None:
+        views = _full_views(boards.points, options)
+        gen = generic_start(views, _obj(options), options.image_size, rim.fit, mirror.rim_radius)
+        K, taylor = gen.camera.K, gen.taylor
+    cam0 = aligned_camera(K, mirror, rim.fit, options.image_size)
+    if D is not None:
+        cam0 = MisalignedCatadioptricCamera(
+            cam0.K, mirror, cam0.rvec, cam0.tvec, D=D, image_size=options.image_size
+        )
+    return StartStep(cam0, mirror, central, tuple(warns), taylor)
+
+
+def _obj(options):
+    return object_points(options.pattern_size, options.square)
+
+
+def _full_views(image_points, options):
+    """The views whose every corner was found, ``(N, 2)`` each."""
+    n = len(_obj(options))
+    views = [np.asarray(p, np.float64).reshape(-1, 2) for p in image_points if p is not None]
+    return [v for v in views if len(v) == n]
 
 
 def _central_start(image_points, rim_fit, options):
@@ -485,10 +518,9 @@ def _central_start(image_points, rim_fit, options):
     its aspect and so into Chen's start posture (:func:`_radial_choice`). The central fit's
     shape is not used to judge a given mirror: with the pinhole's distortion fixed its ``xi``
     is biased on misaligned rigs, and with it free ``xi`` trades with ``k1``."""
-    obj = object_points(options.pattern_size, options.square)
+    obj = _obj(options)
     image_size, mirror = options.image_size, options.mirror
-    views = [np.asarray(p, np.float64).reshape(-1, 2) for p in image_points if p is not None]
-    views = [v for v in views if len(v) == len(obj)]
+    views = _full_views(image_points, options)
     central, error = None, ""
     try:
         central = fit_central(views, obj, image_size, hyperbolic=False)
@@ -497,19 +529,11 @@ def _central_start(image_points, rim_fit, options):
     if mirror is not None:  # the rim's start; the central fit to compare
         return central, options.K, mirror, options.D, []
     central, D_c = _radial_choice(central, views, obj, image_size, options)
-    if central is None:
-        raise ValueError(
-            f"the rig could not be started without a mirror: {error}; give the mirror "
-            f"(a, b, rim_radius) as a start"
-        )
+    rim_radius = options.rim_radius
+    R = NOMINAL_RIM_RADIUS if rim_radius is None else float(rim_radius)
+    if central is None or not central.xi < XI_NOT_HYPERBOLIC:
+        return _generic(central, error, views, obj, rim_fit, R, options)
     xi = central.xi
-    if not xi < XI_NOT_HYPERBOLIC:
-        raise ValueError(
-            f"the central fit of the corners gives xi = {xi:.2f}: no hyperboloid does (a "
-            f"hyperboloid has xi < 1, a paraboloid 1, a sphere more); the mirror may not be a "
-            f"hyperboloid, which omnicam does not model. If it is one, give its a, b and "
-            f"rim_radius as a start"
-        )
     warns = []
     if xi >= 1.0:  # a misaligned hyperboloid's fit can pass 1 a little
         warns.append(
@@ -518,16 +542,40 @@ def _central_start(image_points, rim_fit, options):
         )
         xi = XI_START_MAX
     centre = ((image_size[0] - 1) / 2.0, (image_size[1] - 1) / 2.0)  # as the rim's start
-    rim_radius = options.rim_radius
-    R = NOMINAL_RIM_RADIUS if rim_radius is None else float(rim_radius)
     K_c, mirror = hyperbolic_start(central.K, xi, rim_radius_px(rim_fit), R, options.K, centre)
     if rim_radius is None:
-        warns.append(
-            f"the mirror's scale is assumed (rim_radius = {R:g}, nominal): a, b and the "
-            f"camera's position in the mirror frame scale with it; K, D and the viewing "
-            f"directions do not. Give rim_radius for the true scale"
-        )
+        warns.append(_scale_assumed(R, "a, b"))
     return central, K_c, mirror, D_c, warns
+
+
+def _scale_assumed(R, shape):
+    return (
+        f"the mirror's scale is assumed (rim_radius = {R:g}, nominal): {shape} and the "
+        f"camera's position in the mirror frame scale with it; K, D and the viewing "
+        f"directions do not. Give rim_radius for the true scale"
+    )
+
+
+def _generic(central, error, views, obj, rim_fit, R, options):
+    """The generic start (:mod:`.any_start`) where Mei's model gives no hyperboloid
+    (``central`` None, or ``xi >= XI_NOT_HYPERBOLIC``): ``(central, GenericStart, mirror,
+    None, warnings)``, the :class:`.any_start.GenericStart` in ``K``'s place."""
+    why = (
+        f"Mei's central model fails ({error})"
+        if central is None
+        else f"Mei's central model gives xi = {central.xi:.2f}, which no hyperboloid has (< 1)"
+    )
+    try:
+        gen = generic_start(views, obj, options.image_size, rim_fit, R, options.K)
+    except ValueError as e:
+        raise ValueError(
+            f"the rig could not be started without a mirror: {why}, and the Taylor model's "
+            f"start failed: {e}; give the mirror as a start"
+        ) from None
+    warns = [f"{why}: {gen.warnings[0]}"]
+    if options.rim_radius is None:
+        warns.append(_scale_assumed(R, "R, the polynomial terms"))
+    return central, gen, gen.camera.mirror, None, warns
 
 
 def _radial_choice(central, views, obj, image_size, options):

@@ -33,7 +33,7 @@ import numpy as np
 from ..calibration.rim import check_hint, detect_rim
 from ..camera import scale_K
 from ..chessboard import DIST_MODELS
-from ..chessboard.calibrate import ONE_SIDED
+from ..chessboard.calibrate import ONE_SIDED, calibrate_pattern
 from ..formats.filestorage import SUFFIXES
 from ..formats.point_files import read_corners
 from ..hyperbolic_camera import MisalignedHyperbolicCamera
@@ -285,7 +285,7 @@ def cmd_calibrate_pattern(args):
     with warnings.catch_warnings(record=True) as caught:
         warnings.simplefilter("always", RuntimeWarning)
         try:
-            camera, report = MisalignedHyperbolicCamera.calibrate_pattern(
+            camera, report = calibrate_pattern(
                 images,
                 args.chessboard,
                 args.square,
@@ -303,6 +303,8 @@ def cmd_calibrate_pattern(args):
             )
         except (ValueError, RuntimeError, np.linalg.LinAlgError) as e:
             raise CliError(f"calibration failed: {_cli_terms(one_line(e), names)}") from None
+    if isinstance(camera.mirror, HyperbolicMirror):  # (an asphere stays the generic camera)
+        camera, report = MisalignedHyperbolicCamera._with_report(camera, report)
     _print_report(camera, report, names, caught)
     one_side = [w for w in report.warnings if w.startswith(ONE_SIDED)]
     if one_side and not args.force:
