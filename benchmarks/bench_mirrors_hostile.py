@@ -116,6 +116,8 @@ def one(mirror_label, lens_label, seed):
     bound = ray_bound(fit)
     central = min([c[0] for c in (od, ty) if not isinstance(c, str)], default=np.nan)
     verdict = B._verdict(fit)
+    if verdict == "said wrong":  # by which of the distrust warnings
+        verdict += ": " + ", ".join(f'"{w}"' for w in T.DISTRUST if fit.warned(w))
     if not np.isfinite(e).all():
         verdict += f" ({np.sum(~np.isfinite(e))} pixels unseen)"
     print(

@@ -12,7 +12,6 @@ depths drawn log-uniformly over a range, 0.15 px of corner noise, 0.1 px of rim 
 """
 
 import functools
-import importlib.util
 import math
 
 import cv2
@@ -224,12 +223,6 @@ def test_omnicams_truth_traces_the_models_rays_within_1e_4_deg(case):
 #: Two fast cases: a sphere (no single viewpoint, Mei's xi > 1) and an equiangular mirror (no
 #: conic: its asphere needs the polynomial terms), both behind the near-pinhole lens.
 FAST = [("sphere", "near-pinhole"), ("equiangular 5", "near-pinhole")]
-ANY_MIRROR = pytest.mark.xfail(
-    importlib.util.find_spec("omnicam.chessboard.any_start") is None,
-    reason="calibrate_pattern(mirror=None) refuses mirrors no hyperboloid fits until the "
-    "any-mirror calibration (branch wt-any, omnicam/chessboard/any_start.py) is merged",
-    strict=True,
-)
 
 
 @functools.cache
@@ -237,7 +230,6 @@ def _fast_fit(i):
     return Fit(*FAST[i], seed=0)
 
 
-@ANY_MIRROR
 @pytest.mark.parametrize("i", range(len(FAST)), ids=lambda i: ", ".join(FAST[i]))
 def test_unknown_mirror_of_revolution_is_right_or_says_it_is_not(i):
     """Never silently wrong: the rays within 3 times their stated uncertainty of the truth, or
@@ -245,3 +237,15 @@ def test_unknown_mirror_of_revolution_is_right_or_says_it_is_not(i):
     fit = _fast_fit(i)
     assert fit.refused is None, fit.refused
     assert T._rays_within_their_uncertainty(fit) or T._says_it_is_wrong(fit), fit.report.warnings
+
+
+@pytest.mark.xfail(
+    reason="silently wrong on the any-mirror calibration as merged at 08:01 (wt-any fa951a1): "
+    "rays 1.44 / 2.48 deg off (median / worst) for 0.245 / 0.741 stated, the bound 0.124 / "
+    "0.153, cv2.omnidir 0.37 / 1.47 (bench_mirrors_hostile --only 'paraboloid, near')",
+    strict=True,
+)
+def test_unknown_paraboloid_behind_a_near_pinhole_is_right_or_says_it_is_not():
+    fit = Fit("paraboloid", "near-pinhole", seed=0)
+    assert fit.refused is None, fit.refused
+    assert T._rays_within_their_uncertainty(fit) or T._says_it_is_wrong(fit)
