@@ -148,7 +148,8 @@ def main(argv=None):
             m = np.nanmedian(np.array(got), axis=0)
             print(
                 f"| {mirror_label}, {lens_label} | median of {len(got)} | | {m[0]:.3f} | "
-                f"{m[1]:.3f} | {m[2]:.3f} | | {m[3]:.3f} (better) | {m[0] / m[3]:.2f} | | |",
+                f"{m[1]:.3f} | {m[2]:.3f} | {m[3]:.3f} (the better central) | | "
+                f"{m[0] / m[3]:.2f} | | |",
                 flush=True,
             )
 
