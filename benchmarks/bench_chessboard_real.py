@@ -23,9 +23,13 @@ import cv2
 import numpy as np
 
 import omnicam
+from omnicam.calibration.ellipse import conic_distance
+from omnicam.calibration.inputs import edge_image
 from omnicam.calibration.rim import detect_rim
 from omnicam.chessboard.board_pose import object_points
 from omnicam.chessboard.detect import detect_pattern
+from omnicam.chessboard.intrinsics import gray8
+from omnicam.chessboard.steps import GreyImage, rim_step
 
 #: Issue 17: one fit on given corners costs at most this times cv2.omnidir.calibrate's.
 BUDGET = 20.0
@@ -38,15 +42,19 @@ def _heldout_module(path, name="heldout"):
     return mod
 
 
-def _first_rim(images):
-    """The rim of the first image where it is found (as the route's rim step: MiniOmni's first
-    image shows none that fits)."""
-    for i, im in enumerate(images):
-        try:
-            return detect_rim(im)
-        except ValueError as e:
-            print(f"rim: image {i}: {e}")
-    raise SystemExit("the rim was found in no image")
+def _first_rim(images, corners):
+    """The first image's rim; where it is not found or leaves corners outside (MiniOmni's),
+    the route's rim step (:func:`omnicam.chessboard.steps.rim_step`: the next images, a larger
+    rim where corners lie outside)."""
+    try:
+        rim = detect_rim(images[0])
+        if not (conic_distance(rim.conic, np.concatenate(corners)) > 1.0).any():
+            return rim.points
+        print("rim: image 0's leaves corners outside: the route's rim step instead")
+    except ValueError as e:
+        print(f"rim: image 0: {e}: the route's rim step instead")
+    greys = [GreyImage(gray8(im, i), edge_image(im)) for i, im in enumerate(images)]
+    return rim_step(greys, None, (images[0].shape[1], images[0].shape[0]), corners).seen
 
 
 def _against_ocamcalib(folder, dets):
@@ -118,7 +126,7 @@ def main(argv=None):
     _against_ocamcalib(a.folder, dets)
     corners = [dets[i].corners.reshape(-1, 2).astype(np.float64) for i in found]
     obj = object_points(pattern, a.square)
-    rim = _first_rim(images)
+    rim_points = _first_rim(images, corners)
 
     def fit_omnicam(ids):
         with warnings.catch_warnings():
@@ -130,7 +138,7 @@ def main(argv=None):
                 a.square,
                 mirror,
                 image_points=pts,
-                boundary_points=rim.points,
+                boundary_points=rim_points,
                 image_size=size,
                 lens=None,
                 refine_mirror_shape={"auto": None, "yes": True, "no": False}[a.refine_shape],

@@ -74,12 +74,12 @@ def family_step(rounds: Rounds, options) -> tuple[Rounds, str]:
     fit, f_scale = rounds.fit, options.f_scale
     said = []
     while len(fit.adj.mirror.alpha) < min(MAX_TERMS, MAX_ALPHA):
-        adj2, x2 = _with_term(fit, options.image_size)
-        name = adj2.shape_names[-1]
-        try:
+        try:  # (a fit that ran off to a rig that cannot be: the report step says so)
+            adj2, x2 = _with_term(fit, options.image_size)
             chi2, short = _term_chi2(adj2, x2, len(x2), f_scale)
         except ValueError:
             break
+        name = adj2.shape_names[-1]
         if not chi2 > TERM_ADD_CHI2:
             said.append(f"{name} would lower the cost by {chi2:.2f} times it: not added")
             break

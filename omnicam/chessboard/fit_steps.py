@@ -406,7 +406,13 @@ def report_step(
     fit is not known, and what it leaves unknown must be in them."""
     fit, corners, image_size = rounds.fit, rounds.corners, options.image_size
     adj, sol, used, obj = fit.adj, fit.sol, fit.used, corners.obj
-    camera, gauged = adj.to_gauge(sol.x, image_size)
+    try:
+        camera, gauged = adj.to_gauge(sol.x, image_size)
+    except ValueError as e:  # (an aspheric fit can run off along its valley: MiniOmni's)
+        raise ValueError(
+            f"the adjustment ended at a rig that cannot be ({e}); the start was too far: give "
+            f"the mirror (a data sheet) or K as a start"
+        ) from None
     r_all = adj.residuals(sol.x)
     groups = ResidualGroups.of(adj)
     held_shape = options.mirror is None and not adj.fit_shape
