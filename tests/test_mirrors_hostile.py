@@ -240,7 +240,7 @@ def test_unknown_mirror_of_revolution_is_right_or_says_it_is_not(i):
 
 
 @pytest.mark.xfail(
-    reason="silently wrong on the any-mirror calibration as merged at 08:01 (wt-any fa951a1): "
+    reason="silently wrong on the any-mirror calibration (wt-any at fa951a1 and 6ee5267): "
     "rays 1.44 / 2.48 deg off (median / worst) for 0.245 / 0.741 stated, the bound 0.124 / "
     "0.153, cv2.omnidir 0.37 / 1.47 (bench_mirrors_hostile --only 'paraboloid, near')",
     strict=True,
