@@ -18,7 +18,14 @@ of ``rho = sqrt(x^2 + y^2)``, for ``rho <= rim_radius`` (the rim, a circle at he
 * sphere of radius ``s`` centred at ``(0, 0, z0)``, its lower cap: ``alpha = 1``,
   ``beta = -z0``, ``gamma = z0^2 - s^2``;
 * paraboloid ``z = z0 + rho^2 / (2 h)``: ``alpha = 0``, ``beta = -h``, ``gamma = 2 h z0``; focus
-  ``(0, 0, z0 + h / 2)``.
+  ``(0, 0, z0 + h / 2)``;
+* ellipsoid ``rho^2 / A^2 + (z - z0)^2 / C^2 = 1``, its lower cap (prolate when ``C > A``, the
+  long axis the mirror's): ``alpha = A^2 / C^2``, ``beta = -alpha z0``,
+  ``gamma = alpha z0^2 - A^2``; foci ``(0, 0, z0 +- sqrt(C^2 - A^2))``.
+
+A mirror that is no quadric (``tests/revolution_rig.py``) joins the :class:`Rig` through the
+same two methods, ``intersect(O, V)`` and ``reflect(P, V)``, and ``height``, ``z_rim``,
+``rim_radius``, ``name``.
 
 ``grad F = (2x, 2y, 2 (alpha z + beta))`` points down, towards the camera, on all three caps:
 a ray from the camera hits the cap's outside when ``V . grad F < 0``.
@@ -96,6 +103,14 @@ class Quadric:
             return inside
         return inside & (self.sheet * (self.alpha * P[..., 2] + self.beta) >= 0.0)
 
+    def intersect(self, O, V):
+        """:func:`intersect` on this cap."""
+        return intersect(self, O, V)
+
+    def reflect(self, P, V):
+        """:func:`reflect` on this cap."""
+        return reflect(self, P, V)
+
 
 def hyperboloid(a, b, rim_radius):
     """``(x^2 + y^2) / a^2 - z^2 / b^2 = -1``, sheet ``z > 0`` (times ``a^2``)."""
@@ -112,6 +127,15 @@ def sphere(radius, z_centre, rim_radius):
 def paraboloid(h, z_vertex, rim_radius):
     """``z = z_vertex + rho^2 / (2 h)``, focus at ``z_vertex + h / 2``."""
     return Quadric(0.0, -h, 2.0 * h * z_vertex, rim_radius, 1.0, f"paraboloid h={h:g}")
+
+
+def ellipsoid(A, C, z_centre, rim_radius):
+    """The lower cap of ``rho^2 / A^2 + (z - z_centre)^2 / C^2 = 1`` (prolate when ``C > A``);
+    its vertex at ``z_centre - C``."""
+    al = A * A / (C * C)
+    return Quadric(
+        al, -al * z_centre, al * z_centre**2 - A * A, rim_radius, -1.0, f"ellipsoid {A:g}/{C:g}"
+    )
 
 
 def intersect(quadric, O, V):
@@ -243,8 +267,8 @@ class Rig:
         """``(P, d)``: the mirror point and the unit reflected direction of each pixel (mirror
         frame), NaN where the pixel does not see the cap."""
         V = self.camera_rays(pixels)
-        P, _ = intersect(self.mirror, self.centre, V)
-        return P, reflect(self.mirror, P, V)
+        P, _ = self.mirror.intersect(self.centre, V)
+        return P, self.mirror.reflect(P, V)
 
     def rim_pixels(self, n=720):
         """The rim circle as the camera sees it (directly, not in the mirror)."""
