@@ -439,6 +439,7 @@ def report_step(
         estimated_shape=adj.fit_shape,
         central=start.central,
         image_size=image_size,
+        plausibility=implausible(camera, image_size),
     )
     warns = list(fit.warnings) + report_warnings(facts)
     report = PatternReport(
@@ -461,7 +462,7 @@ def report_step(
         nfev=int(sol.nfev),
         camera=camera,
         start=start.camera,
-        plausibility=implausible(camera, image_size),
+        plausibility=facts.plausibility,
         dist_model=options.dist_model,
     )
     return camera, report

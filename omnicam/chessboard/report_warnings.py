@@ -18,14 +18,13 @@ from ..calibration.chen import rim_conic
 from ..calibration.plausibility import check_plausibility
 from ..camera import MisalignedCatadioptricCamera
 from ..mirror import HyperbolicMirror
+from .report import (
+    ONE_SIDED,  # the warning that views cannot tell the principal point from the tilt
+)
 from .shape_params import family
 from .steps import XI_NOT_HYPERBOLIC
 
 __all__ = ["ONE_SIDED", "POLICIES", "SHAPE_WEAK", "FitFacts", "report_warnings"]
-
-#: The start of the warning that the views cannot tell the principal point from the tilt (the
-#: command line refuses such a calibration unless forced).
-from .report import ONE_SIDED
 
 #: A relative standard deviation of ``a``, ``b`` (or of ``fx``) above this: not determined.
 SHAPE_WEAK = 0.01
@@ -41,7 +40,7 @@ class FitFacts:
     parameters, the rays' uncertainty ``ray_deg`` (median, worst; deg), the corners' ``rms``
     (px), the number of views used, the boards' centres (mirror frame), whether the solver
     converged (and its message), whether the shape was held unknown or estimated, the
-    central fit (or None) and the image size."""
+    central fit (or None), the image size and the plausibility findings (:func:`implausible`)."""
 
     camera: MisalignedCatadioptricCamera
     std: dict
@@ -55,6 +54,7 @@ class FitFacts:
     estimated_shape: bool
     central: Any
     image_size: tuple[int, int] | None
+    plausibility: tuple = ()
 
     @property
     def rays(self) -> str:
@@ -208,8 +208,9 @@ def implausible(camera: MisalignedCatadioptricCamera, image_size: Any) -> tuple:
 
 
 def _implausible(f: FitFacts) -> list[str]:
-    """The plausibility findings' warnings."""
-    return [str(w) for w in implausible(f.camera, f.image_size)]
+    """The plausibility findings' warnings (:func:`implausible`, found once by the report
+    step)."""
+    return [str(w) for w in f.plausibility]
 
 
 #: The policies, in the order the report gives their warnings.

@@ -14,6 +14,7 @@ import numpy as np
 from ..mirror import HyperbolicMirror, describe_mirror
 from .page import (
     Page,
+    bgr_view,
     draw_wrapped,
     panorama,
     panorama_pixels,
@@ -27,17 +28,6 @@ __all__ = ["IMAGE_SECTIONS", "candidate_panoramas", "image_report_html"]
 
 #: The ``id`` of every section of the one-image page, in order.
 IMAGE_SECTIONS = ("summary", "rim", "candidates", "choice", "panorama", "posture")
-
-
-def _bgr(image):
-    a = np.asarray(image)
-    if a.dtype != np.uint8:
-        raise ValueError(f"image: expected a uint8 image, got {a.dtype}")
-    if a.ndim == 2:
-        return cv2.cvtColor(a, cv2.COLOR_GRAY2BGR)
-    if a.ndim == 3 and a.shape[2] == 4:
-        return cv2.cvtColor(a, cv2.COLOR_BGRA2BGR)
-    return a
 
 
 def _candidate_camera(camera, cand):
@@ -243,7 +233,7 @@ def image_report_html(
     str
         The page (sections :data:`IMAGE_SECTIONS`).
     """
-    image = _bgr(image)
+    image = bgr_view(image, "image")
     page = Page(title)
     _summary(page, camera, report, list(notes))
     _rim(page, camera, report, image)

@@ -328,3 +328,17 @@ def rim_overlay(camera, image, rim_points=None, width=620):
 def residual_arrow(img, p, r, scale, colour):
     """An arrow from ``p`` along ``r * scale`` (pixels)."""
     arrow(img, p, np.asarray(p) + np.asarray(r) * scale, colour)
+
+
+def bgr_view(image, name="image"):
+    """An 8-bit view to draw on as BGR: grey and BGRA converted, BGR as it is; ``ValueError``
+    naming ``name`` for any other dtype (the page shows the images as the calibration saw them,
+    not rescaled)."""
+    a = np.asarray(image)
+    if a.dtype != np.uint8:
+        raise ValueError(f"{name}: expected uint8, got {a.dtype}")
+    if a.ndim == 2:
+        return cv2.cvtColor(a, cv2.COLOR_GRAY2BGR)
+    if a.ndim == 3 and a.shape[2] == 4:
+        return cv2.cvtColor(a, cv2.COLOR_BGRA2BGR)
+    return a

@@ -12,6 +12,7 @@ import numpy as np
 from ..mirror import HyperbolicMirror, describe_mirror
 from .page import (
     Page,
+    bgr_view,
     draw_wrapped,
     panorama,
     panorama_pixels,
@@ -592,7 +593,7 @@ def pattern_report_html(
     str
         The page (sections :data:`PATTERN_SECTIONS`).
     """
-    images = [_bgr(im) for im in images]
+    images = [bgr_view(im, "images") for im in images]
     if not images:
         raise ValueError("images: give the views of the calibration")
     views = _views(report)
@@ -614,14 +615,3 @@ def pattern_report_html(
     _panorama(page, camera, report, images, order, colours)
     _posture(page, camera)
     return page.html()
-
-
-def _bgr(image):
-    a = np.asarray(image)
-    if a.dtype != np.uint8:
-        raise ValueError(f"images: expected uint8 images, got {a.dtype}")
-    if a.ndim == 2:
-        return cv2.cvtColor(a, cv2.COLOR_GRAY2BGR)
-    if a.ndim == 3 and a.shape[2] == 4:
-        return cv2.cvtColor(a, cv2.COLOR_BGRA2BGR)
-    return a
