@@ -222,7 +222,13 @@ def test_omnicams_truth_traces_the_models_rays_within_1e_4_deg(case):
 # -- calibrate_pattern(mirror=None) ------------------------------------------------------------
 #: Two fast cases: a sphere (no single viewpoint, Mei's xi > 1) and an equiangular mirror (no
 #: conic: its asphere needs the polynomial terms), both behind the near-pinhole lens.
-FAST = [("sphere", "near-pinhole"), ("equiangular 5", "near-pinhole")]
+#: The last: its shape converges next to the convex aspheres' edge, where a central difference
+#: of the adjustment stepped out of the family and refused the calibration (one-sided there now).
+FAST = [
+    ("sphere", "near-pinhole"),
+    ("equiangular 5", "near-pinhole"),
+    ("equiangular 5", "wide-angle"),
+]
 
 
 @functools.cache

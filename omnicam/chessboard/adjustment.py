@@ -397,6 +397,28 @@ class BundleAdjustment:
         px = to_pixels(np.concatenate(normalized), K, D)
         return self.corners_from_pixels(px[:n])[0], px[n:]
 
+    def steps_within_the_family(self, x, k, step) -> tuple[FloatArray, FloatArray, float]:
+        """``(x_plus, x_minus, their distance)`` of the central difference in parameter ``k``;
+        where one side holds a shape no mirror of the family has (an asphere's step past the
+        convex ones), the one-sided difference from ``x`` on the other side."""
+        xp, xm = x.copy(), x.copy()
+        xp[k] += step
+        xm[k] -= step
+        if not self.fit_shape:
+            return xp, xm, 2.0 * step
+        ok = []
+        for xs in (xp, xm):
+            try:
+                self.unpack(xs)
+                ok.append(True)
+            except ValueError:
+                ok.append(False)
+        if ok == [True, False]:
+            return xp, x.copy(), step
+        if ok == [False, True]:
+            return x.copy(), xm, step
+        return xp, xm, 2.0 * step
+
     def jacobian(self, x) -> FloatArray:
         """Central differences, evaluated where each parameter acts; columns of parameters
         held fixed (``self.fixed``) are zero.
@@ -419,18 +441,16 @@ class BundleAdjustment:
         xr = rim_normalized(R, tvec, mirror, phi)
         pts = self.board_points(self.boards(x))  # (the posture's steps do not move them)
         for k in [i for i, name in enumerate(self.names) if name not in self.fixed]:
-            xp, xm = x.copy(), x.copy()
-            xp[k] += h[k]
-            xm[k] -= h[k]
+            xp, xm, span = self.steps_within_the_family(x, k, h[k])
             if self.lens_px is not None:
-                J[nc + nr :, k] = (self.lens_residuals(xp) - self.lens_residuals(xm)) / (2 * h[k])
+                J[nc + nr :, k] = (self.lens_residuals(xp) - self.lens_residuals(xm)) / span
             if self.names[k] == "lens_z":  # the corners and the rim do not see its plane
                 continue
             after = self.names[k] in _AFTER_MIRROR
             cp, rp = self.imaged(xp, phi, pts, (xn, xr) if after else None)
             cm, rm = self.imaged(xm, phi, pts, (xn, xr) if after else None)
-            J[:nc, k] = (cp - cm) / (2 * h[k])
-            J[nc : nc + nr, k] = -np.einsum("ij,ij->i", nrm, rp - rm) / (2 * h[k])
+            J[:nc, k] = (cp - cm) / span
+            J[nc : nc + nr, k] = -np.einsum("ij,ij->i", nrm, rp - rm) / span
         # the boards: 6 groups of steps (+ and -), one trace of all 12 sets of corners
         B = self.boards(x)
         hb = h[g:].reshape(-1, 6)
@@ -591,10 +611,8 @@ def ray_uncertainty(adj, x, cov_global, image_size, n=24) -> tuple[float, float]
     steps = adj.steps(x)
     G = np.zeros((len(px), 3, adj.n_global))
     for k in np.flatnonzero(live):
-        xp, xm = x.copy(), x.copy()
-        xp[k] += steps[k]
-        xm[k] -= steps[k]
-        G[:, :, k] = (rays(xp, px) - rays(xm, px)) / (2 * steps[k])
+        xp, xm, span = adj.steps_within_the_family(x, k, steps[k])
+        G[:, :, k] = (rays(xp, px) - rays(xm, px)) / span
     C = cov_global[np.ix_(live, live)]
     Gl = G[:, :, live]
     var = np.einsum("nik,kl,nil->n", Gl, C, Gl)
