@@ -10,6 +10,7 @@ import pytest
 from asphere_rigs import rig
 
 import omnicam
+import omnicam.formats.calibration_file
 from omnicam.asphere import AsphericMirror
 from omnicam.cli import main
 from omnicam.formats.central_fit import fit_ocamcalib, fit_omnidir
@@ -127,7 +128,7 @@ def test_bad_mirror_options_are_one_line(sphere, tmp_path, capsys, extra, words)
     assert not (tmp_path / "o.yaml").exists()
 
 
-def test_mirror_options_are_refused_beside_from_and_chessboard(sphere, tmp_path, capsys):
+def test_mirror_options_are_refused_beside_from(sphere, tmp_path, capsys):
     cam, folder = sphere
     argv = [
         "calibrate",
@@ -142,22 +143,66 @@ def test_mirror_options_are_refused_beside_from_and_chessboard(sphere, tmp_path,
     ]
     assert main(argv) == 2
     assert "do not give --sphere with it" in capsys.readouterr().err
-    argv = [
-        "calibrate",
-        "--chessboard",
-        "9x6",
-        "--square",
-        "25",
-        str(folder / "dome.png"),
-        "--equiangular",
-        "7",
-        "30",
-        "8",
-        "-o",
-        str(tmp_path / "o.yaml"),
-    ]
-    assert main(argv) == 2
-    assert "are for one image" in capsys.readouterr().err
+
+
+@pytest.mark.parametrize(
+    "extra, words",
+    [
+        (["--rim-radius", "18"], "--sphere gives the rim's radius"),
+        (["--mirror", "23.4", "28.1", "30"], "give one mirror, not --sphere and --mirror"),
+    ],
+)
+def test_a_mirror_beside_chessboards_is_one_mirror_that_gives_the_scale(
+    sphere, tmp_path, capsys, extra, words
+):
+    cam, folder = sphere
+    argv = ["calibrate", "--chessboard", "9x6", "--square", "25", str(folder / "dome.png")]
+    assert main([*argv, "--sphere", "30", "18", *extra, "-o", str(tmp_path / "o.yaml")]) == 2
+    err = capsys.readouterr().err
+    assert words in err and err.count("\n") == 1
+    assert not (tmp_path / "o.yaml").exists()
+
+
+def test_chessboards_with_a_sphere_data_sheet_calibrate_its_rig(sphere, tmp_path):
+    """A data sheet of any mirror beside --chessboard (issue 28 item 4), as --mirror's: held
+    (the boards trade the focal length with a sphere's radius), its rim's radius the scale, a
+    format 2 file, the rays within 3x their stated std. The corners come from a file (the rim
+    from the images)."""
+    import shutil
+
+    from omnicam.chessboard.board_pose import object_points
+    from omnicam.synthetic import boards
+
+    cam, folder = sphere
+    pattern, square = (7, 5), 25.0
+    rng = np.random.default_rng(3)
+    poses = boards.random_board_poses(
+        cam, 8, pattern, square, distance=(150.0, 400.0), max_tilt_deg=35.0, rng=rng, body=None
+    )
+    obj = object_points(pattern, square)
+    corners, paths = [], []
+    for i, (rvec, tvec) in enumerate(poses):
+        corners.append((cam.project(obj, rvec, tvec) + rng.normal(0, 0.15, (len(obj), 2))).tolist())
+        paths.append(str(tmp_path / f"b{i}.png"))
+        shutil.copy(folder / "dome.png", paths[-1])
+    (tmp_path / "c.json").write_text(json.dumps(corners))
+    out = tmp_path / "rig.yaml"
+    sheet = ["--sphere", "30", "18", "--vertex-z", "40"]
+    argv = ["calibrate", "--chessboard", "7x5", "--square", "25", *paths, *sheet, "-q"]
+    argv += ["--corners", str(tmp_path / "c.json"), "--heldout", "0", "-o", str(out)]
+    assert main(argv) == 0
+    fitted = omnicam.load_camera(out)
+    assert isinstance(fitted.mirror, AsphericMirror) and fitted.mirror.rim_radius == 18.0
+    assert fitted.mirror.R == 30.0
+    assert fitted.K[0, 0] == pytest.approx(cam.K[0, 0], rel=0.05)
+    grid = np.stack(np.meshgrid(np.arange(130, 510, 15.0), np.arange(50, 430, 15.0)), -1)
+    _, d_true = cam.unproject(grid.reshape(-1, 2))
+    _, d_fit = fitted.unproject(grid.reshape(-1, 2))
+    ok = np.isfinite(d_true).all(1) & np.isfinite(d_fit).all(1)
+    assert ok.sum() > 200
+    err = np.degrees(np.arccos(np.clip(np.sum(d_true[ok] * d_fit[ok], 1), -1.0, 1.0)))
+    median_std, worst_std = omnicam.formats.calibration_file.read_verdict(out).ray_std_deg
+    assert np.median(err) < 3.0 * median_std and err.max() < 3.0 * worst_std
 
 
 def test_guess_k_with_a_mirror_that_does_not_say_where_the_camera_sits(sphere, tmp_path, capsys):

@@ -315,14 +315,15 @@ def _fit(
 ) -> tuple[MisalignedCatadioptricCamera, PatternReport]:
     """Steps 5-9 of one lens model (``options.dist_model``) from ``prepared``."""
     boards, rim, lens, start = prepared.boards, prepared.rim, prepared.lens, prepared.start
-    # an asphere's shape is always estimated: its start is a central model's extrapolation
-    # and its focal length a default, which only the adjustment with both free corrects
+    # the generic start's asphere is always estimated: it is a central model's extrapolation
+    # and its focal length a default, which only the adjustment with both free corrects; a
+    # mirror given (a data sheet of any kind) is held unless refine_mirror_shape
     aspheric = not isinstance(start.mirror, HyperbolicMirror)
     model = AdjustmentModel(
         options.free_d,
         options.n_d,
         options.fit_skew,
-        options.refine_mirror_shape or aspheric,
+        options.refine_mirror_shape or (aspheric and options.mirror is None),
         lens.points,
         options.lens_z,
     )

@@ -39,7 +39,7 @@ from ._common import (
     warn_user,
     write_image_file,
 )
-from .mirror_args import MIRROR_FLAGS, add_mirror_options, given_flags, mirror_of_args
+from .mirror_args import MIRROR_FLAGS, add_mirror_options, mirror_of_args
 
 
 def _check_mode(args):
@@ -179,13 +179,6 @@ def cmd_calibrate(args):
                     f"--chessboard has no candidates",
                     2,
                 )
-        if given_flags(args) or args.alpha is not None or args.vertex_z is not None:
-            raise CliError(
-                "calibrate: --sphere, --paraboloid, --asphere, --equiangular and "
-                "--mirror-file are for one image; with --chessboard the mirror is --mirror A B "
-                "RIM or estimated from the boards",
-                2,
-            )
         report_page.check_report_output(args.report, args.overwrite)
         return pattern.cmd_calibrate_pattern(args)
     _check_mode(args)

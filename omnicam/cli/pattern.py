@@ -2,7 +2,9 @@
 
 ::
 
-    omnicam calibrate --chessboard 9x6 --square 25 IMAGES... [--mirror A B R] -o rig.yaml
+    omnicam calibrate --chessboard 9x6 --square 25 IMAGES... [--mirror A B R | --sphere ... |
+                      --paraboloid ... | --asphere ... | --equiangular ... | --mirror-file F]
+                      -o rig.yaml
                       [--intrinsics K.yaml | --fx --fy --cx --cy [--dist ...]]
                       [--corners FILE] [--rim-hint CX,CY,R] [--rim-radius R]
                       [--dist-model M] [--refine-mirror-shape] [--heldout K]
@@ -17,6 +19,11 @@ FOLDER (default: CALIB's stem + ``_views`` next to CALIB). A calibration the pla
 checks refuse (those of one image, with the same limits ``--max-tilt``, ``--max-offset``; or
 all boards on one side of the mirror) exits 1 without a file, as one from one image does
 (``--force`` writes it anyway, and its verdict says so).
+
+A mirror given (``--mirror`` for a hyperboloid, or any mirror of :mod:`.mirror_args`) is a start
+and sets the scale: a hyperboloid's ``a, b`` are held unless ``--refine-mirror-shape``, every
+other mirror's shape is estimated from it (its data sheet's ``R``, ``k`` and terms start the
+adjustment; its rim's radius is held). Without one the mirror is estimated from the boards.
 
 ``--corners FILE`` gives the corners found by another tool, in OpenCV's order (row by row of
 ``COLSxROWS`` inner corners): JSON, an object ``{"image file name": [[x, y], ...] or null}`` or a
@@ -59,6 +66,7 @@ from ._common import (
     warn_user,
     write_image_file,
 )
+from .mirror_args import given_flags, mirror_of_args
 
 
 def add_arguments(parser):
@@ -107,13 +115,14 @@ def add_arguments(parser):
         type=float,
         default=None,
         metavar="R",
-        help="with --chessboard and no --mirror: the rim's radius (mm), which fixes the "
+        help="with --chessboard and no mirror given: the rim's radius (mm), which fixes the "
         "mirror's scale (default 30, nominal; the report says so)",
     )
     p.add_argument(
         "--refine-mirror-shape",
         action="store_true",
-        help="with --chessboard: also estimate the mirror's a and b (RIM fixes the scale)",
+        help="with --chessboard and --mirror: also estimate the hyperboloid's a and b (RIM "
+        "fixes the scale); any other mirror's shape is always estimated",
     )
 
 
@@ -184,10 +193,18 @@ def _check_options(args):
     args.dist_model = args.dist_model or "k1k2"
     if args.heldout < 0 or args.heldout == 1:
         raise CliError("calibrate: --heldout K needs K >= 2 folds (0 skips the check)", 2)
-    if args.mirror is None:
+    sheet = mirror_of_args(args)  # --sphere, --asphere, ...: a data sheet of any mirror
+    if args.mirror is None and sheet is None:
         return None
     if args.rim_radius is not None:
-        raise CliError("calibrate: --rim-radius is for --chessboard without --mirror", 2)
+        flag = "--mirror" if sheet is None else given_flags(args)[0]
+        raise CliError(
+            f"calibrate: --rim-radius is for --chessboard without a mirror; {flag} gives the "
+            f"rim's radius",
+            2,
+        )
+    if sheet is not None:
+        return sheet
     try:
         return HyperbolicMirror(*args.mirror)
     except ValueError as e:
