@@ -150,10 +150,10 @@ def calibrate_pattern(
     square_size : float
         Side of a square in the mirror's length unit (mm by convention).
     mirror : HyperbolicMirror, AsphericMirror or None
-        The mirror (a start: only its shape's agreement with the central fit is checked, and
-        with ``refine_mirror_shape`` its ``a, b`` are estimated; an
-        :class:`~omnicam.asphere.AsphericMirror` is started aligned, ``K`` from the corners'
-        Taylor model unless given, and its shape always estimated). ``None``: unknown, its
+        The mirror (a start, its rim radius the scale: its shape is held, and estimated with
+        ``refine_mirror_shape``: a hyperboloid's ``a, b``, an asphere's ``R, k`` and terms;
+        an :class:`~omnicam.asphere.AsphericMirror` is started aligned, ``K`` from the
+        corners' Taylor model unless given). ``None``: unknown, its
         shape from the central fit's ``xi`` and its size from the rim's image at
         ``rim_radius`` (:func:`.central.hyperbolic_start`); where that fit gives no
         hyperboloid, an even asphere from the corners' Taylor model (:mod:`.any_start`,
@@ -170,7 +170,7 @@ def calibrate_pattern(
         Corners per image in OpenCV's order (None for an image without a board); skips
         detection.
     refine_mirror_shape : bool or None
-        Also estimate the mirror's ``a, b`` (``rim_radius`` fixes the scale). Default (None):
+        Also estimate the given mirror's shape (``rim_radius`` fixes the scale). Default (None):
         not; with ``mirror=None`` the shape is then the central fit's, held, and the reported
         standard deviations (of ``K`` and of the rays) are those of the fit with ``a, b``
         free at the same solution, so what the unknown shape leaves unknown is in them;
