@@ -38,7 +38,9 @@ The steps (:mod:`.steps`, :mod:`.fit_steps`):
    missing are looked for in the views of the fitted camera, and the rig fitted again when
    one is found;
 8. a shape held from the central fit is checked, and estimated when the corners reject it
-   (:func:`.fit_steps.shape_check_step`);
+   (:func:`.fit_steps.shape_check_step`); the mirror's family tested by the data: the
+   hyperboloid against the conic with a polynomial term, an asphere's terms one more at a
+   time (likelihood-ratio tests, :mod:`.family`; the report's ``family`` says which and why);
 9. a :class:`.report.PatternReport` (:func:`.fit_steps.report_step`): RMS overall and per
    view, poses, standard deviations of the parameters and of the viewing directions, the
    single-image route's plausibility checks, warnings (:mod:`.report_warnings`, one policy
@@ -70,7 +72,7 @@ from ..formats.verdict import judged
 from ..mirror import HyperbolicMirror
 from .adjustment import AdjustmentModel
 from .board_pose import object_points
-from .family import family_step
+from .family import family_step, hyperboloid_term_check
 from .fit_steps import SHAPE_REJECT_CHI2, report_step, rounds_step, shape_check_step
 from .heldout import HeldOut, cross_validate
 from .lens_model import AUTO_CANDIDATES, AUTO_FOLDS, LensChoice, choose
@@ -331,8 +333,11 @@ def _fit(
     if options.mirror is None and not model.fit_shape:
         say("shape check: is the central fit's mirror shape consistent with the corners?")
         rounds = shape_check_step(rounds, start, rim, model, options)
+    family = ""
     if options.mirror is None and aspheric:  # the polynomial terms the corners ask for
-        rounds = family_step(rounds, options)[0]
+        rounds, family = family_step(rounds, options)
+    elif options.mirror is None:  # does the hyperboloid hold, or do the corners ask for more?
+        rounds, family = hyperboloid_term_check(rounds, options)
     camera, report = report_step(rounds, start, lens.note, options)
     held = None
     if options.heldout:  # the same calibration on each fold's views, with these rim points
@@ -351,6 +356,7 @@ def _fit(
         central=start.central,
         warnings=rim.warnings + start.warnings + report.warnings,
         heldout=held,
+        family=family,
     )
     return judged(camera, report)  # the camera carries the report's verdict
 

@@ -11,6 +11,9 @@ to convergence. The generic start (:mod:`.any_start`) begins with the terms that
 Taylor model's profile best (at most :data:`.any_start.START_TERMS`); the short refinement is
 a weak bound in the adjustment's flat valley, so the test only adds, it does not build the
 family from the conic up (a conic start runs off along that valley on KaidanOmni).
+The central start's hyperboloid is tested the same way against the conic with ``alpha_4``
+(:func:`hyperboloid_term_check`), the test's degrees of freedom the parameters it frees. The
+sentence each returns is the report's ``family``.
 """
 
 from __future__ import annotations
@@ -20,10 +23,11 @@ import dataclasses
 import numpy as np
 
 from ..asphere import MAX_ALPHA, AsphericMirror
+from ..mirror import HyperbolicMirror
 from .adjustment import AdjustmentModel, BundleAdjustment, robust_residuals
 from .fit_steps import AdjustmentStep, ResidualGroups, Rounds
 
-__all__ = ["MAX_TERMS", "TERM_ADD_CHI2", "family_step"]
+__all__ = ["MAX_TERMS", "TERM_ADD_CHI2", "chi2_limit", "family_step", "hyperboloid_term_check"]
 
 #: A term is added when it lowers the cost by more than this times the residual variance:
 #: chi-square with 1 degree of freedom exceeds it with probability 0.001.
@@ -41,6 +45,8 @@ def _with_term(fit: AdjustmentStep, image_size):
     adj, sol = fit.adj, fit.sol
     camera, gauged = adj.to_gauge(sol.x, image_size)
     m = camera.mirror
+    if isinstance(m, HyperbolicMirror):  # the same surface, the conic of the asphere family
+        m = m.as_asphere()
     mirror = AsphericMirror(
         m.R, m.k, m.rim_radius, alpha=(*m.alpha, 0.0), rho_n=m.rho_n, vertex_z=m.vertex_z
     )
@@ -68,9 +74,52 @@ def _term_chi2(adj2, x2, n_params, f_scale):
     return (c0 - cost(short.x)) / sigma2, short
 
 
-def family_step(rounds: Rounds, options) -> tuple[Rounds, str]:
+def _carried_on(fit: AdjustmentStep, adj2, short, f_scale) -> AdjustmentStep:
+    """``fit`` replaced by the adjustment ``adj2`` carried on to convergence from its short
+    refinement ``short``."""
+    sol2 = adj2.solve(short.x, f_scale=f_scale, max_nfev=400)
+    r = adj2.corner_residuals(sol2.x).reshape(len(fit.used), -1)
+    vr = {i: float(np.sqrt(np.mean(r[k] ** 2) * 2)) for k, i in enumerate(fit.used)}
+    return dataclasses.replace(fit, adj=adj2, sol=sol2, view_rms=vr)
+
+
+def hyperboloid_term_check(rounds: Rounds, options) -> tuple[Rounds, str]:
+    """A hyperboloid's fit (the central start's family) tested against the conic with one
+    polynomial term by the likelihood-ratio test of :func:`family_step`, its degrees of
+    freedom the parameters freed (``alpha4``, and ``R, k`` where the hyperboloid's ``a, b``
+    were held): ``(rounds, the report's sentence on the family)``, the hyperboloid's fit where
+    it stands, else the asphere's (more terms tested as in :func:`family_step`)."""
+    fit, f_scale = rounds.fit, options.f_scale
+    dof = 1 if fit.adj.fit_shape else 3
+    try:
+        adj2, x2 = _with_term(fit, options.image_size)
+        chi2, short = _term_chi2(adj2, x2, len(x2), f_scale)
+    except ValueError:  # (no conic with a term near it: the hyperboloid stands untested)
+        return rounds, ""
+    test = (
+        f"a conic with alpha4 {{}} the cost by {chi2:.2f} times the residual variance "
+        f"({'above' if chi2 > chi2_limit(dof) else 'not above'} {chi2_limit(dof):.2f}, "
+        f"chi-square with {dof} degree(s) of freedom at p = 0.001)"
+    )
+    if not chi2 > chi2_limit(dof):
+        held = test.format("would lower")
+        return rounds, f"the mirror's family: a hyperboloid, as the central fit's ({held})"
+    fit = _carried_on(fit, adj2, short, f_scale)
+    origin = f"the central fit's hyperboloid does not hold: {test.format('lowers')}; alpha4 added"
+    return family_step(dataclasses.replace(rounds, fit=fit), options, origin)
+
+
+def chi2_limit(dof: int) -> float:
+    """The chi-square quantile at ``1 - 0.001`` of ``dof`` degrees of freedom."""
+    from scipy.stats import chi2
+
+    return float(chi2.ppf(0.999, dof))
+
+
+def family_step(rounds: Rounds, options, origin: str = "") -> tuple[Rounds, str]:
     """The terms of an aspheric fit's mirror chosen by the likelihood-ratio test (module
-    docstring): ``(rounds with the chosen fit, the report's sentence on the family)``."""
+    docstring): ``(rounds with the chosen fit, the report's sentence on the family)``;
+    ``origin`` says where the fit's terms came from (default: the generic start's)."""
     fit, f_scale = rounds.fit, options.f_scale
     said = []
     while len(fit.adj.mirror.alpha) < min(MAX_TERMS, MAX_ALPHA):
@@ -84,17 +133,14 @@ def family_step(rounds: Rounds, options) -> tuple[Rounds, str]:
             said.append(f"{name} would lower the cost by {chi2:.2f} times it: not added")
             break
         said.append(f"{name} lowers the cost by {chi2:.0f} times it: added")
-        sol2 = adj2.solve(short.x, f_scale=f_scale, max_nfev=400)
-        r = adj2.corner_residuals(sol2.x).reshape(len(fit.used), -1)
-        vr = {i: float(np.sqrt(np.mean(r[k] ** 2) * 2)) for k, i in enumerate(fit.used)}
-        fit = dataclasses.replace(fit, adj=adj2, sol=sol2, view_rms=vr)
+        fit = _carried_on(fit, adj2, short, f_scale)
     n = len(fit.adj.mirror.alpha)
     what = "a conic" if n == 0 else f"a conic with {n} polynomial term(s)"
     note = (
-        f"the mirror's family: {what} (the start's terms those that fit the Taylor model's "
-        f"profile best; one more tested by a likelihood-ratio test on the adjustment's cost, "
+        f"the mirror's family: {what} ("
+        + (origin or "the start's terms those that fit the Taylor model's profile best")
+        + "; one more tested by a likelihood-ratio test on the adjustment's cost, "
         f"chi-square with 1 degree of freedom above {TERM_ADD_CHI2:g} times the residual "
         f"variance, p = 0.001: " + "; ".join(said) + ")"
     )
-    fit = dataclasses.replace(fit, warnings=(*fit.warnings, note))
     return dataclasses.replace(rounds, fit=fit), note

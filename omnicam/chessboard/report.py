@@ -105,6 +105,9 @@ class PatternReport:
     lens_choice : LensChoice or None
         With ``dist_model="auto"``, the candidates' held-out figures and the model taken
         (:mod:`.lens_model`).
+    family : str
+        With the mirror unknown, which family the data chose for it and why (the
+        likelihood-ratio tests of :mod:`.family`); "" with a mirror given.
     """
 
     rms: float
@@ -132,6 +135,7 @@ class PatternReport:
     plausibility: tuple = ()
     dist_model: str = ""
     lens_choice: LensChoice | None = None
+    family: str = ""
 
     def lens_lines(self) -> list[str]:
         """The lens model: with ``"auto"`` which model and why (:meth:`.LensChoice.summary`),
@@ -218,8 +222,8 @@ class PatternReport:
     def lead(self, verdict: Verdict | None = None, refused: bool = False) -> list[str]:
         """The report's first lines: the viewing directions' uncertainty over the field, the
         held-out error beside cv2.omnidir's (when checked), the verdict (``verdict``, default
-        :meth:`verdict`; ``refused``: the command line refuses it) and what the boards cannot
-        fix by nature."""
+        :meth:`verdict`; ``refused``: the command line refuses it), the mirror's family the
+        data chose and what the boards cannot fix by nature."""
         v = self.verdict() if verdict is None else verdict
         med, worst = self.ray_std_deg
         lines = [
@@ -229,6 +233,8 @@ class PatternReport:
         if self.heldout is not None:  # cv2.omnidir's on the same folds beside it
             lines.append(self.heldout.summary())
         lines.append(f"verdict: {v.status(refused)}")
+        if self.family:
+            lines.append(self.family)
         undetermined = self.undetermined()
         if undetermined:
             lines.append(undetermined)
