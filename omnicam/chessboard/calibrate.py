@@ -72,8 +72,8 @@ from ..formats.verdict import judged
 from ..mirror import HyperbolicMirror
 from .adjustment import AdjustmentModel
 from .board_pose import object_points
-from .family import family_step, hyperboloid_term_check
-from .fit_steps import SHAPE_REJECT_CHI2, report_step, rounds_step, shape_check_step
+from .family import chi2_limit, family_step, hyperboloid_term_check
+from .fit_steps import SHAPE_REJECT_CHI2, report_step, rounds_step, shape_check_step, shape_free
 from .heldout import HeldOut, cross_validate
 from .lens_model import AUTO_CANDIDATES, AUTO_FOLDS, LensChoice, choose
 from .report import PatternReport
@@ -90,6 +90,7 @@ from .steps import (
     PatternOptions,
     RimStep,
     StartStep,
+    generic_start_step,
     load_step,
     pooled_reflection,
     raw_detection_step,
@@ -338,6 +339,7 @@ def _fit(
         rounds, family = family_step(rounds, options)
     elif options.mirror is None:  # does the hyperboloid hold, or do the corners ask for more?
         rounds, family = hyperboloid_term_check(rounds, options)
+        rounds, family, start = _other_start(options, prepared, rounds, family, model, progress)
     camera, report = report_step(rounds, start, lens.note, options)
     held = None
     if options.heldout:  # the same calibration on each fold's views, with these rim points
@@ -359,6 +361,55 @@ def _fit(
         family=family,
     )
     return judged(camera, report)  # the camera carries the report's verdict
+
+
+#: Mei's ``xi`` from which the hyperboloid's start is at its edge (clamped to
+#: :data:`XI_START_MAX`): the generic start's asphere is fitted too (:func:`_other_start`).
+XI_EDGE = 1.0
+
+
+def _free_count(adj, sol) -> int:
+    return len(sol.x) - sum(1 for n in adj.names if n in adj.fixed)
+
+
+def _other_start(options, prepared, rounds, family, model, progress=None):
+    """Where Mei's ``xi`` is at a hyperboloid's edge (at least :data:`XI_EDGE`), the generic
+    start's asphere (:func:`.steps.generic_start_step`, its terms by :func:`.family_step`) is
+    fitted too, and taken where the same views' robust cost is lower than the hyperboloid's
+    by more than chance allows (a likelihood-ratio test, its degrees of freedom the parameters
+    it has more, p = 0.001): the hyperboloid's start can end in a minimum of its own there,
+    the asphere's holds the hyperboloid. Returns ``(rounds, family, start)``."""
+    start = prepared.start
+    if start.central is None or not start.central.xi >= XI_EDGE:
+        return rounds, family, start
+    say("the central fit is at a hyperboloid's edge: the generic start too")
+    try:
+        other = generic_start_step(rounds.boards, prepared.rim, options, start.central)
+        free = dataclasses.replace(model, fit_shape=True)
+        alt = rounds_step((), rounds.boards, other, prepared.rim, free, options, progress)
+        alt, alt_family = family_step(alt, options)
+    except ValueError:
+        return rounds, family, start
+    fit, fit2 = rounds.fit, alt.fit
+    if list(fit.used) != list(fit2.used):  # (not the same residuals: not compared)
+        return rounds, family, start
+    adj, sol = fit.adj, fit.sol
+    if not adj.fit_shape:  # the family against the family: the hyperboloid's a, b freed
+        camera, gauged = adj.to_gauge(sol.x, options.image_size)
+        adj, x = shape_free(adj, sol.x, camera, gauged)
+        sol = adj.solve(x, f_scale=options.f_scale, max_nfev=400)
+    dof = max(_free_count(fit2.adj, fit2.sol) - _free_count(adj, sol), 1)
+    sigma2 = 2.0 * fit2.sol.cost / max(len(fit2.sol.fun) - _free_count(fit2.adj, fit2.sol), 1)
+    chi2 = 2.0 * (sol.cost - fit2.sol.cost) / sigma2
+    test = (
+        f"the generic start's asphere lowers the cost by {chi2:.2f} times the residual variance "
+        f"({{}} {chi2_limit(dof):.2f}, chi-square with {dof} degree(s) of freedom at p = 0.001)"
+    )
+    if not chi2 > chi2_limit(dof):
+        return rounds, f"{family}; {test.format('not above')}", start
+    for w in other.warnings:
+        _warnings.warn(w, RuntimeWarning, stacklevel=4)
+    return alt, f"{alt_family}; Mei's xi at a hyperboloid's edge, {test.format('above')}", other
 
 
 def _auto_lens(

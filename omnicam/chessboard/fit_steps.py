@@ -41,6 +41,7 @@ __all__ = [
     "report_step",
     "rounds_step",
     "shape_check_step",
+    "shape_free",
 ]
 
 MIN_VIEWS = 3
@@ -298,7 +299,7 @@ def _mean_cost(sol) -> float:
     return 2.0 * float(sol.cost) / max(len(sol.fun), 1)
 
 
-def _shape_free(adj, x, camera, board_poses):
+def shape_free(adj, x, camera, board_poses):
     """The adjustment ``adj`` at ``x`` again, with the mirror's ``a, b`` free: ``(adj2, x2)``
     at the same solution (``camera`` and its ``board_poses`` in the gauge), whose covariance
     holds what an unknown shape leaves unknown."""
@@ -321,7 +322,7 @@ def _held_shape_chi2(fit: AdjustmentStep, image_size, f_scale):
     than noise), in units of the residual variance: ``(chi2, adj2, short solution, camera)``."""
     adj, sol = fit.adj, fit.sol
     camera, gauged = adj.to_gauge(sol.x, image_size)
-    adj2, x2 = _shape_free(adj, sol.x, camera, gauged)
+    adj2, x2 = shape_free(adj, sol.x, camera, gauged)
     boards_rows = slice(0, ResidualGroups.of(adj2).rim.stop)
 
     def boards_cost(x):
@@ -403,7 +404,7 @@ def report_step(
     standard deviations, the plausibility checks and the warnings
     (:func:`.report_warnings.report_warnings`). With the mirror unknown and its shape held
     (``refine_mirror_shape=False``), the standard deviations are those of the fit with
-    ``a, b`` free at the same solution (:func:`_shape_free`): the shape taken from the central
+    ``a, b`` free at the same solution (:func:`shape_free`): the shape taken from the central
     fit is not known, and what it leaves unknown must be in them."""
     fit, corners, image_size = rounds.fit, rounds.corners, options.image_size
     adj, sol, used, obj = fit.adj, fit.sol, fit.used, corners.obj
@@ -417,7 +418,7 @@ def report_step(
     r_all = adj.residuals(sol.x)
     groups = ResidualGroups.of(adj)
     held_shape = options.mirror is None and not adj.fit_shape
-    adj_u, x_u = _shape_free(adj, sol.x, camera, gauged) if held_shape else (adj, sol.x)
+    adj_u, x_u = shape_free(adj, sol.x, camera, gauged) if held_shape else (adj, sol.x)
     sigma = _row_sigma(r_all, len(sol.x), groups)
     std, cov = std_from_jacobian(adj_u, x_u, adj_u.jacobian(x_u), sigma, unweighted=True)
     ray_deg = ray_uncertainty(adj_u, x_u, cov, image_size)

@@ -534,6 +534,17 @@ def start_step(boards: Boards, rim: RimStep, options: PatternOptions) -> StartSt
     return StartStep(cam0, mirror, central, tuple(warns), taylor)
 
 
+def generic_start_step(boards: Boards, rim: RimStep, options: PatternOptions, central):
+    """The generic start (:mod:`.any_start`) whatever Mei's ``central`` fit gives: the
+    other start where that fit's ``xi`` is at a hyperboloid's edge (:mod:`.calibrate`)."""
+    views = _full_views(boards.points, options)
+    R = NOMINAL_RIM_RADIUS if options.rim_radius is None else float(options.rim_radius)
+    central, gen, mirror, _, warns = _generic(
+        central, "", views, _obj(options), rim.fit, R, options
+    )
+    return StartStep(gen.camera, mirror, central, tuple(warns), gen.taylor)
+
+
 def _obj(options):
     return object_points(options.pattern_size, options.square)
 
