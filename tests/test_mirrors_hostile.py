@@ -245,13 +245,13 @@ def test_unknown_mirror_of_revolution_is_right_or_says_it_is_not(i):
     assert T._rays_within_their_uncertainty(fit) or T._says_it_is_wrong(fit), fit.report.warnings
 
 
-@pytest.mark.xfail(
-    reason="silently wrong on the any-mirror calibration (wt-any at fa951a1 and 6ee5267): "
-    "rays 1.44 / 2.48 deg off (median / worst) for 0.245 / 0.741 stated, the bound 0.124 / "
-    "0.153, cv2.omnidir 0.37 / 1.47 (bench_mirrors_hostile --only 'paraboloid, near')",
-    strict=True,
-)
-def test_unknown_paraboloid_behind_a_near_pinhole_is_right_or_says_it_is_not():
+def test_unknown_paraboloid_behind_a_near_pinhole_is_started_again_from_the_image_centre():
+    """The generic start's principal point is the Taylor centre, the image of the mirror's
+    axis, 32 px from the principal point on this misaligned rig: the fit from there ends at
+    0.35 px RMS, above the central Taylor model's 0.32, with its rays 1.44 deg off for 0.245
+    stated; the second start from the image centre fits to 0.199 px, and is taken."""
     fit = Fit("paraboloid", "near-pinhole", seed=0)
     assert fit.refused is None, fit.refused
-    assert T._rays_within_their_uncertainty(fit) or T._says_it_is_wrong(fit)
+    assert fit.warned("started again from the principal point at the image centre")
+    assert fit.warned("taken")
+    T._assert_rays_within_their_uncertainty(fit)

@@ -76,6 +76,7 @@ from .heldout import HeldOut, cross_validate
 from .lens_model import AUTO_CANDIDATES, AUTO_FOLDS, LensChoice, choose
 from .report import PatternReport
 from .report_warnings import ONE_SIDED
+from .second_start import second_start_step
 from .steps import (
     CENTRAL_RMS_MAX,
     LENS_PLANE_UNKNOWN,
@@ -327,6 +328,8 @@ def _fit(
         options.lens_z,
     )
     rounds = rounds_step(inputs.greys, boards, start, rim, model, options, progress)
+    if options.mirror is None and aspheric:  # a fit worse than its central start, again
+        rounds = second_start_step(rounds, start, rim, model, options, inputs.greys, progress)
     if options.mirror is None and not model.fit_shape:
         say("shape check: is the central fit's mirror shape consistent with the corners?")
         rounds = shape_check_step(rounds, start, rim, model, options)
