@@ -72,6 +72,7 @@ from .adjustment import AdjustmentModel
 from .board_pose import object_points
 from .family import family_step
 from .fit_steps import SHAPE_REJECT_CHI2, report_step, rounds_step, shape_check_step
+from .fold_rays import fold_check
 from .heldout import HeldOut, cross_validate
 from .lens_model import AUTO_CANDIDATES, AUTO_FOLDS, LensChoice, choose
 from .report import PatternReport
@@ -345,7 +346,8 @@ def _fit(
             lens=lens.points,
             heldout=0,
         )
-        held = _heldout_step(report, rerun, options.heldout)
+        held, folds = _heldout_step(report, rerun, options.heldout)
+        report = fold_check(report, camera, folds, options.image_size)[0]  # rays' uncertainty
     found = {i: how for i, how in enumerate(rounds.boards.found_by) if how is not None}
     report = dataclasses.replace(
         report,
@@ -387,10 +389,11 @@ def _auto_lens(
     return camera, dataclasses.replace(report, lens_choice=LensChoice(chosen, figures, k))
 
 
-def _heldout_step(report: PatternReport, options: PatternOptions, k: int) -> HeldOut:
+def _heldout_step(report: PatternReport, options: PatternOptions, k: int) -> tuple[HeldOut, list]:
     """The ``k``-fold held-out check of the views used (:func:`.heldout.cross_validate`), the
     rig on each fold's training views calibrated with ``options``, its warnings (said once,
-    for the whole fit) silenced."""
+    for the whole fit) silenced; and the folds' cameras (for :func:`.fold_rays.fold_check`)."""
+    cameras = []
     views = {
         i: np.asarray(report.image_points[i], np.float64).reshape(-1, 2) for i in report.view_rms
     }
@@ -401,7 +404,8 @@ def _heldout_step(report: PatternReport, options: PatternOptions, k: int) -> Hel
         with _warnings.catch_warnings():
             _warnings.simplefilter("ignore")
             camera, _ = _calibrate(options, inputs)
+        cameras.append(camera)
         return camera
 
     obj = object_points(options.pattern_size, options.square)
-    return cross_validate(fit, views, obj, options.image_size, k)
+    return cross_validate(fit, views, obj, options.image_size, k), cameras
