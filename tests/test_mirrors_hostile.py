@@ -255,3 +255,19 @@ def test_unknown_paraboloid_behind_a_near_pinhole_is_started_again_from_the_imag
     assert fit.warned("started again from the principal point at the image centre")
     assert fit.warned("taken")
     T._assert_rays_within_their_uncertainty(fit)
+
+
+@pytest.mark.xfail(
+    reason="silently wrong without the held-out check: rays 10.96 / 15.68 deg off (median / "
+    "worst) for 1.18 / 1.49 stated; a fit as good (the cost 1.4 times the residual variance "
+    "higher) lies 1.3 deg from the truth, and the Jacobian at the estimate says 4 times more "
+    "about the mirror's axis than at the truth, so no local quantity shows it; every start "
+    "tried (the Taylor or the image centre, f 180 to 262 px, a conic) ends there. With "
+    "heldout=3 the folds' jackknife states 4.32 / 6.80 deg and warns (fold_rays.py; "
+    "bench_mirrors_hostile --only 'prolate ellipsoid, wide' --heldout 3)",
+    strict=True,
+)
+def test_unknown_prolate_ellipsoid_behind_a_wide_angle_lens_is_right_or_says_it_is_not():
+    fit = Fit("prolate ellipsoid", "wide-angle", seed=0)
+    assert fit.refused is None, fit.refused
+    assert T._rays_within_their_uncertainty(fit) or T._says_it_is_wrong(fit)
