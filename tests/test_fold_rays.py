@@ -9,6 +9,7 @@ import numpy as np
 import pytest
 
 from omnicam.chessboard.fold_rays import fold_check, jackknife_ray_std, rejection_ratio
+from omnicam.chessboard.report import FOLDS_STATED
 
 SIZE = (320, 240)
 
@@ -61,14 +62,15 @@ def test_rejection_ratio_is_chi_square_at_p_0_001():
     assert rejection_ratio(5) < rejection_ratio(3)  # more folds, a tighter test
 
 
-def test_folds_far_beyond_the_stated_uncertainty_replace_it_with_a_warning():
+def test_folds_far_beyond_the_stated_uncertainty_replace_it_with_a_note():
     folds = [_turned(2.0, a) for a in ([1, 0, 0], [0, 1, 0], [1, 1, 0])]
     report, found = fold_check(_Report((0.3, 0.5)), _Pinhole(), folds, SIZE)
     assert found.rejected
     assert report.ray_std_deg == pytest.approx((2 * math.sqrt(2.0), 2 * math.sqrt(2.0)))
     (w,) = report.warnings
-    assert "held-out check's 3 folds predict viewing directions 2.83 deg" in w
-    assert "add views" in w
+    assert w.startswith(FOLDS_STATED)
+    assert "3 folds' (a delete-d jackknife of their calibrations: 2.828 deg" in w
+    assert "linearised 0.300 deg" in w
 
 
 def test_folds_within_chance_of_the_stated_uncertainty_leave_the_report_as_it_is():
@@ -84,3 +86,21 @@ def test_folds_within_chance_of_the_stated_uncertainty_leave_the_report_as_it_is
 def test_fewer_than_two_folds_check_nothing():
     given = _Report((0.1, 0.2))
     assert fold_check(given, _Pinhole(), [_turned(5.0, [1, 0, 0])], SIZE) == (given, None)
+
+
+def test_the_folds_note_is_a_note_not_an_alarm():
+    """The stated uncertainty is then the data's own figure: stated, not doubted."""
+    from omnicam.chessboard.report import PatternReport
+
+    folds = [_turned(2.0, a) for a in ([1, 0, 0], [0, 1, 0], [1, 1, 0])]
+    fields = dict.fromkeys(
+        ("rms", "view_rms", "corners_used", "board_poses", "image_points", "reprojected"), None
+    )
+    fields.update(rim_points=None, rim_rms=0.1, std={}, dropped={}, nfev=1, camera=None)
+    given = PatternReport(
+        **fields, warnings=("something else",), start=None, ray_std_deg=(0.3, 0.5)
+    )
+    report, _ = fold_check(given, _Pinhole(), folds, SIZE)
+    (note,) = report.notes
+    assert note.startswith(FOLDS_STATED)
+    assert report.alarms == ("something else",)

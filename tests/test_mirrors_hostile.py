@@ -263,7 +263,7 @@ def test_unknown_paraboloid_behind_a_near_pinhole_is_started_again_from_the_imag
     "higher) lies 1.3 deg from the truth, and the Jacobian at the estimate says 4 times more "
     "about the mirror's axis than at the truth, so no local quantity shows it; every start "
     "tried (the Taylor or the image centre, f 180 to 262 px, a conic) ends there. With "
-    "heldout=3 the folds' jackknife states 4.32 / 6.80 deg and warns (fold_rays.py; "
+    "heldout=3 the folds' jackknife states 4.32 / 6.80 deg, and is right (fold_rays.py; "
     "bench_mirrors_hostile --only 'prolate ellipsoid, wide' --heldout 3)",
     strict=True,
 )

@@ -28,6 +28,8 @@ import math
 import numpy as np
 from scipy.stats import chi2
 
+from .report import FOLDS_STATED
+
 __all__ = ["FoldRays", "P_REJECT", "fold_check", "jackknife_ray_std", "rejection_ratio"]
 
 #: The probability with which a linearised uncertainty that holds is rejected.
@@ -85,8 +87,8 @@ def rejection_ratio(k: int) -> float:
 
 def fold_check(report, camera, fold_cameras, image_size):
     """``report`` with the folds' check of its rays' uncertainty (module docstring): its
-    ``ray_std_deg`` the jackknife's and a warning where the folds reject the linearised one;
-    ``(report, FoldRays or None)``."""
+    ``ray_std_deg`` the jackknife's and a note (:data:`.report.FOLDS_STATED`) where the folds
+    reject the linearised one; ``(report, FoldRays or None)``."""
     k = len(fold_cameras)
     jk = jackknife_ray_std(camera, fold_cameras, image_size)
     lin_med, lin_max = report.ray_std_deg
@@ -97,12 +99,11 @@ def fold_check(report, camera, fold_cameras, image_size):
     if not rejected:
         return report, found
     msg = (
-        f"the calibrations of the held-out check's {k} folds predict viewing directions "
-        f"{jk[0]:.2f} deg from this one's (jackknife, median over the mirror's image; worst "
-        f"{jk[1]:.2f} deg), more than the linearised {lin_med:.3f} deg allows (p = "
-        f"{P_REJECT:g}): these views do not determine the rays as the adjustment's Jacobian "
-        f"says (a fit as good lies far along a flat valley), and the stated uncertainty is the "
-        f"folds'; add views nearer the mirror's rim and around it, or give K or the mirror"
+        f"{FOLDS_STATED} {k} folds' (a delete-d jackknife of their calibrations: {jk[0]:.3f} "
+        f"deg, median over the mirror's image; worst {jk[1]:.3f} deg), above the adjustment's "
+        f"linearised {lin_med:.3f} deg beyond chance (p = {P_REJECT:g}): a fit as good lies "
+        f"elsewhere along a flat valley, or the model misfits these views; more views, nearer "
+        f"the mirror's rim and around it, narrow it"
     )
     ray = (max(jk[0], lin_med), max(jk[1], lin_max))
     return dataclasses.replace(report, ray_std_deg=ray, warnings=(*report.warnings, msg)), found
