@@ -264,7 +264,8 @@ def test_unknown_paraboloid_behind_a_near_pinhole_is_started_again_from_the_imag
     "about the mirror's axis than at the truth, so no local quantity shows it; every start "
     "tried (the Taylor or the image centre, f 180 to 262 px, a conic) ends there. With "
     "heldout=3 the folds' jackknife states 4.32 / 6.80 deg, and is right (fold_rays.py; "
-    "bench_mirrors_hostile --only 'prolate ellipsoid, wide' --heldout 3)",
+    "bench_mirrors_hostile --only 'prolate ellipsoid, wide' --heldout 3), but seeds 1 and 2 "
+    "are silently wrong even so (their folds land in the same valley)",
     strict=True,
 )
 def test_unknown_prolate_ellipsoid_behind_a_wide_angle_lens_is_right_or_says_it_is_not():
