@@ -1,7 +1,7 @@
 """calibrate_pattern(mirror=None) on misaligned mirrors of revolution other than the hyperboloid,
 rendered by code that shares nothing with the estimator (issue 28, item 9).
 
-    python benchmarks/bench_mirrors_hostile.py [--only TEXT] [--seeds N]
+    python benchmarks/bench_mirrors_hostile.py [--only TEXT] [--seeds N] [--heldout K]
 
 Cases (tests/test_mirrors_hostile.py): {sphere, paraboloid, prolate ellipsoid, equiangular 3, 5,
 7} x {near-pinhole (1024x768, k1 -0.05), wide-angle (1280x1080, f 180 px, k1 -0.27, k2 0.06)},
@@ -17,6 +17,8 @@ them; "ratio", omnicam's median over the better central model's (the issue's tar
 the bound allows it); the verdict: right (within 3 times the stated uncertainty, median against
 median and worst against worst), said wrong, silently wrong, or refused (the message).
 ``--seeds N`` runs each case over N draws of boards and noise and ends with the medians.
+``--heldout K`` calibrates with the K-fold held-out check, whose folds' calibrations check the
+rays' stated uncertainty (:mod:`omnicam.chessboard.fold_rays`), at K + 1 times the cost.
 """
 
 import argparse
@@ -91,13 +93,13 @@ def _safe(f, fit):
         return f"failed: {str(ex)[:40]}"
 
 
-def one(mirror_label, lens_label, seed):
+def one(mirror_label, lens_label, seed, heldout=0):
     """A row's cells, and ``(omnicam median, stated median, bound median, better central)``."""
     t = time.perf_counter()
     rim_px = M.rig(mirror_label, lens_label).rim_centre_and_radius()[1]
     head = f"| {mirror_label}, {lens_label} | {seed} | {rim_px:.0f} |"
     try:
-        fit = M.Fit(mirror_label, lens_label, seed=seed)
+        fit = M.Fit(mirror_label, lens_label, seed=seed, heldout=heldout)
     except RuntimeError as e:  # (the model found no board placement)
         print(f"{head} | | | | | | | no boards: {e} | |")
         return None
@@ -133,6 +135,7 @@ def main(argv=None):
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--only", default=None, help="only the cases whose label holds this text")
     ap.add_argument("--seeds", type=int, default=1, help="each case over N draws (seeds 0..N-1)")
+    ap.add_argument("--heldout", type=int, default=0, help="with the K-fold held-out check")
     args = ap.parse_args(argv)
     print(
         "| case | seed | rim px | rays omnicam deg | stated deg | bound deg | "
@@ -142,7 +145,7 @@ def main(argv=None):
     for mirror_label, lens_label in M.CASES:
         if args.only is not None and args.only not in f"{mirror_label}, {lens_label}":
             continue
-        got = [one(mirror_label, lens_label, s) for s in range(args.seeds)]
+        got = [one(mirror_label, lens_label, s, args.heldout) for s in range(args.seeds)]
         got = [g for g in got if g is not None]
         if args.seeds > 1 and got:
             m = np.nanmedian(np.array(got), axis=0)

@@ -245,13 +245,30 @@ def test_unknown_mirror_of_revolution_is_right_or_says_it_is_not(i):
     assert T._rays_within_their_uncertainty(fit) or T._says_it_is_wrong(fit), fit.report.warnings
 
 
+def test_unknown_paraboloid_behind_a_near_pinhole_is_started_again_from_the_image_centre():
+    """The generic start's principal point is the Taylor centre, the image of the mirror's
+    axis, 32 px from the principal point on this misaligned rig: the fit from there ends at
+    0.35 px RMS, above the central Taylor model's 0.32, with its rays 1.44 deg off for 0.245
+    stated; the second start from the image centre fits to 0.199 px, and is taken."""
+    fit = Fit("paraboloid", "near-pinhole", seed=0)
+    assert fit.refused is None, fit.refused
+    assert fit.warned("started again from the principal point at the image centre")
+    assert fit.warned("taken")
+    T._assert_rays_within_their_uncertainty(fit)
+
+
 @pytest.mark.xfail(
-    reason="silently wrong on the any-mirror calibration (wt-any at fa951a1 and 6ee5267): "
-    "rays 1.44 / 2.48 deg off (median / worst) for 0.245 / 0.741 stated, the bound 0.124 / "
-    "0.153, cv2.omnidir 0.37 / 1.47 (bench_mirrors_hostile --only 'paraboloid, near')",
+    reason="silently wrong without the held-out check: rays 10.96 / 15.68 deg off (median / "
+    "worst) for 1.18 / 1.49 stated; a fit as good (the cost 1.4 times the residual variance "
+    "higher) lies 1.3 deg from the truth, and the Jacobian at the estimate says 4 times more "
+    "about the mirror's axis than at the truth, so no local quantity shows it; every start "
+    "tried (the Taylor or the image centre, f 180 to 262 px, a conic) ends there. With "
+    "heldout=3 the folds' jackknife states 4.32 / 6.80 deg, and is right (fold_rays.py; "
+    "bench_mirrors_hostile --only 'prolate ellipsoid, wide' --heldout 3), but seeds 1 and 2 "
+    "are silently wrong even so (their folds land in the same valley)",
     strict=True,
 )
-def test_unknown_paraboloid_behind_a_near_pinhole_is_right_or_says_it_is_not():
-    fit = Fit("paraboloid", "near-pinhole", seed=0)
+def test_unknown_prolate_ellipsoid_behind_a_wide_angle_lens_is_right_or_says_it_is_not():
+    fit = Fit("prolate ellipsoid", "wide-angle", seed=0)
     assert fit.refused is None, fit.refused
     assert T._rays_within_their_uncertainty(fit) or T._says_it_is_wrong(fit)

@@ -74,10 +74,12 @@ from .adjustment import AdjustmentModel
 from .board_pose import object_points
 from .family import chi2_limit, family_step, hyperboloid_term_check
 from .fit_steps import SHAPE_REJECT_CHI2, report_step, rounds_step, shape_check_step, shape_free
+from .fold_rays import fold_check
 from .heldout import HeldOut, cross_validate
 from .lens_model import AUTO_CANDIDATES, AUTO_FOLDS, LensChoice, choose
 from .report import PatternReport
 from .report_warnings import ONE_SIDED
+from .second_start import second_start_step
 from .steps import (
     CENTRAL_RMS_MAX,
     LENS_PLANE_UNKNOWN,
@@ -331,6 +333,8 @@ def _fit(
         options.lens_z,
     )
     rounds = rounds_step(inputs.greys, boards, start, rim, model, options, progress)
+    if options.mirror is None and aspheric:  # a fit worse than its central start, again
+        rounds = second_start_step(rounds, start, rim, model, options, inputs.greys, progress)
     if options.mirror is None and not model.fit_shape:
         say("shape check: is the central fit's mirror shape consistent with the corners?")
         rounds = shape_check_step(rounds, start, rim, model, options)
@@ -350,7 +354,8 @@ def _fit(
             lens=lens.points,
             heldout=0,
         )
-        held = _heldout_step(report, rerun, options.heldout)
+        held, folds = _heldout_step(report, rerun, options.heldout)
+        report = fold_check(report, camera, folds, options.image_size)[0]  # rays' uncertainty
     found = {i: how for i, how in enumerate(rounds.boards.found_by) if how is not None}
     report = dataclasses.replace(
         report,
@@ -442,10 +447,11 @@ def _auto_lens(
     return camera, dataclasses.replace(report, lens_choice=LensChoice(chosen, figures, k))
 
 
-def _heldout_step(report: PatternReport, options: PatternOptions, k: int) -> HeldOut:
+def _heldout_step(report: PatternReport, options: PatternOptions, k: int) -> tuple[HeldOut, list]:
     """The ``k``-fold held-out check of the views used (:func:`.heldout.cross_validate`), the
     rig on each fold's training views calibrated with ``options``, its warnings (said once,
-    for the whole fit) silenced."""
+    for the whole fit) silenced; and the folds' cameras (for :func:`.fold_rays.fold_check`)."""
+    cameras = []
     views = {
         i: np.asarray(report.image_points[i], np.float64).reshape(-1, 2) for i in report.view_rms
     }
@@ -456,7 +462,8 @@ def _heldout_step(report: PatternReport, options: PatternOptions, k: int) -> Hel
         with _warnings.catch_warnings():
             _warnings.simplefilter("ignore")
             camera, _ = _calibrate(options, inputs)
+        cameras.append(camera)
         return camera
 
     obj = object_points(options.pattern_size, options.square)
-    return cross_validate(fit, views, obj, options.image_size, k)
+    return cross_validate(fit, views, obj, options.image_size, k), cameras

@@ -29,6 +29,9 @@ ONE_SIDED = "all boards are on one side of the mirror (an azimuth gap over 180 d
 #: (its scale without a rim radius; its shape, which trades against fx): notes, not alarms.
 _SCALE_ASSUMED = "the mirror's scale is assumed"
 _SHAPE_HELD = "the mirror's shape is the central fit's"
+#: The start of the note that the rays' stated uncertainty is the held-out check's folds'
+#: (:func:`.fold_rays.fold_check`): the data's own figure, stated, not doubted.
+FOLDS_STATED = "the viewing directions' uncertainty is the held-out check's"
 _BY_NATURE = (
     _SCALE_ASSUMED,
     _SHAPE_HELD,
@@ -168,11 +171,13 @@ class PatternReport:
     @property
     def notes(self) -> tuple[str, ...]:
         """What the data cannot fix by nature (with the mirror unknown: its scale, its shape
-        and ``fx``, which trades against the shape): stated, not doubted (:meth:`verdict`
+        and ``fx``, which trades against the shape), and that the rays' uncertainty is the
+        held-out check's folds' (:data:`FOLDS_STATED`): stated, not doubted (:meth:`verdict`
         records them as ``notes``)."""
+        folds = tuple(w for w in self.warnings if w.startswith(FOLDS_STATED))
         if not self.mirror_unknown:
-            return ()
-        return tuple(w for w in self.warnings if w.startswith(_BY_NATURE))
+            return folds
+        return tuple(w for w in self.warnings if w.startswith(_BY_NATURE)) + folds
 
     @property
     def alarms(self) -> tuple[str, ...]:
