@@ -493,12 +493,12 @@ class BundleAdjustment:
         ``dz/dr J``, so the minimum is the robust one exactly.
 
         With the mirror's shape fixed, or ``accelerate=False``: MINPACK's Levenberg-Marquardt
-        (``scipy.optimize.least_squares(method="lm")``). With it free (``accelerate=None``,
-        the default, or True), the fit follows the
-        valley where the focal length, the camera's distance, the shape and the distortion
-        trade (:mod:`.geodesic_lm`): Levenberg-Marquardt with geodesic acceleration, in the
-        coordinates :meth:`_solver_coordinates` gives (the distortion in pixel units, which
-        the valley bends less). (The trust-region solvers of ``least_squares`` with the
+        (``scipy.optimize.least_squares(method="lm")``). With it free (``accelerate`` None,
+        the default, or True) the fit follows the valley where the focal length, the
+        camera's distance, the shape and the distortion trade: Levenberg-Marquardt with
+        geodesic acceleration (:mod:`.geodesic_lm`), in the coordinates
+        :meth:`_solver_coordinates` gives (the distortion in pixel units, which the valley
+        bends less). (The trust-region solvers of ``least_squares`` with the
         ``soft_l1`` loss, with ``jac_sparsity`` or this Jacobian, exact or ``lsmr`` steps,
         stopped at their 100 evaluations still descending along the valley; MINPACK's
         reaches KaidanOmni's minimum in 338, this one in 109:
@@ -510,7 +510,8 @@ class BundleAdjustment:
         x0 = np.asarray(x0, np.float64)
         free = np.ones(len(x0), bool)
         free[[k for k, n in enumerate(self.names) if n in self.fixed]] = False
-        to_x, chain = self._solver_coordinates(x0)
+        accelerated = self.fit_shape if accelerate is None else accelerate
+        to_x, chain = self._solver_coordinates(x0, accelerated)
         y0 = to_x(x0, inverse=True)
 
         def full(yf):
@@ -533,7 +534,7 @@ class BundleAdjustment:
             x = full(yf)
             return chain(self.jacobian(x), x)[:, free] * last["z"][1][:, None]
 
-        if self.fit_shape if accelerate is None else accelerate:
+        if accelerated:
             n_max = max_nfev if max_nfev is not None else 100 * (int(free.sum()) + 1)
             sol = geodesic_lm(fun, jac, y0[free], n_max, tol)
         else:
@@ -553,18 +554,18 @@ class BundleAdjustment:
         meter.done(2.0 * sol.cost)
         return sol
 
-    def _solver_coordinates(self, x0):
+    def _solver_coordinates(self, x0, accelerated):
         """``(to_x, chain)``: the coordinates ``y`` the solver works in and back, and the chain
         rule of a Jacobian in ``x`` to one in ``y``.
 
-        With the shape free, each distortion coefficient is held in pixel units at the start's
-        focal length ``f0``: ``k_j = kappa_j (fx / f0)^p_j`` with ``p_j`` the power of ``r``
-        it multiplies relative to the pinhole's (:data:`_D_POWERS`), so a step of ``fx`` at
-        fixed ``kappa`` keeps the image's radial profile in pixels, which the valley's walk
-        to a shorter ``f`` otherwise bends with ``k1, k2`` tens of times their value
-        (KaidanOmni: 36 Jacobians instead of 54). With the shape held: ``y = x``."""
+        For the accelerated solver, each free distortion coefficient is held in pixel units at
+        the start's focal length ``f0``: ``k_j = kappa_j (fx / f0)^p_j`` with ``p_j`` the power
+        of ``r`` it multiplies relative to the pinhole's (:data:`_D_POWERS`), so a step of
+        ``fx`` at fixed ``kappa`` keeps the image's radial profile in pixels, which the
+        valley's walk to a shorter ``f`` otherwise bends with ``k1, k2`` tens of times their
+        value (KaidanOmni: 36 Jacobians instead of 54). For MINPACK's: ``y = x``."""
         powers = np.zeros(len(x0))
-        if self.fit_shape:  # (a coefficient held stays at its value in x)
+        if accelerated:  # (a coefficient held stays at its value in x)
             for k, name in enumerate(self.names):
                 powers[k] = 0.0 if name in self.fixed else _D_POWERS.get(name, 0.0)
         if not powers.any():
