@@ -70,7 +70,8 @@ def _term_chi2(adj2, x2, n_params, f_scale):
 
     c0 = cost(x2)
     sigma2 = c0 / max(rows.stop - n_params, 1)
-    short = adj2.solve(x2, f_scale=f_scale, max_nfev=_TERM_CHECK_NFEV)
+    # (MINPACK's steps, as the shape check's: :func:`.fit_steps._held_shape_chi2`)
+    short = adj2.solve(x2, f_scale=f_scale, max_nfev=_TERM_CHECK_NFEV, accelerate=False)
     return (c0 - cost(short.x)) / sigma2, short
 
 

@@ -203,9 +203,12 @@ def _adjust(cam0, mirror, corners, rim_px, model, f_scale, view_ids, x_boards, x
         # not first wander along the valley where a shift of the principal point (or
         # tangential distortion) trades against a tilt of the mirror; only a start for
         # stage 2, which converges to 1e-10 on its own: its last evaluations would lower the
-        # cost by fractions of a millionth
+        # cost by fractions of a millionth. By MINPACK's steps even with the shape free: where
+        # stage 2 starts decides which of the valley's minima it reaches (KaidanOmni's has
+        # them at f = 504, 672 and 4400 px), and MINPACK's 20 evaluations start it towards
+        # the lowest, where the accelerated solver's stopped at 19 or converged do not
         adj.fixed = {"cx", "cy", "skew", *D_NAMES}
-        x0 = adj.solve(x0, f_scale=f_scale, max_nfev=20, tol=_STAGE1_TOL).x
+        x0 = adj.solve(x0, f_scale=f_scale, max_nfev=20, tol=_STAGE1_TOL, accelerate=False).x
         adj.fixed = set()
     # with the mirror's shape free the fit follows a long, flat valley (a, b trade against
     # f and the camera's axial position; only the rig's non-centrality tells them apart),
@@ -331,7 +334,9 @@ def _held_shape_chi2(fit: AdjustmentStep, image_size, f_scale):
 
     cost = boards_cost(x2)
     sigma2 = cost / max(boards_rows.stop - len(sol.x), 1)
-    short = adj2.solve(x2, f_scale=f_scale, max_nfev=_SHAPE_CHECK_NFEV)
+    # MINPACK's steps: the test's threshold was set by their gain (its first step is nearly
+    # Gauss-Newton's, the accelerated solver's first ones are damped)
+    short = adj2.solve(x2, f_scale=f_scale, max_nfev=_SHAPE_CHECK_NFEV, accelerate=False)
     return (cost - boards_cost(short.x)) / sigma2, adj2, short, camera
 
 

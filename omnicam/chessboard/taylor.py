@@ -159,13 +159,38 @@ def _choose_signs(M) -> FloatArray:
     return sg
 
 
-def _pose(h, r3, sign, t3) -> tuple[FloatArray, FloatArray]:
-    """``(rvec, tvec)`` of a view: ``r1, r2`` completed and projected onto a rotation."""
-    r1 = np.r_[h[0], h[2], sign * r3[0]]
-    r2 = np.r_[h[1], h[3], sign * r3[1]]
-    U, _, Wt = np.linalg.svd(np.c_[r1, r2, np.cross(r1, r2)])
-    R = U @ np.diag([1, 1, np.linalg.det(U @ Wt)]) @ Wt
-    return cv2.Rodrigues(R)[0].ravel(), np.r_[h[4], h[5], t3]
+def _rotations(views, signs) -> FloatArray:
+    """The views' rotations ``(V, 3, 3)``: ``r1, r2`` of each (:func:`_view_rows`, ``r3``
+    signed by ``signs``) completed and projected onto a rotation, all at once."""
+    H = np.array([h for h, _ in views])
+    R3 = np.array([r3 for _, r3 in views]) * np.asarray(signs, np.float64)[:, None]
+    r1 = np.stack([H[:, 0], H[:, 2], R3[:, 0]], axis=1)
+    r2 = np.stack([H[:, 1], H[:, 3], R3[:, 1]], axis=1)
+    U, _, Wt = np.linalg.svd(np.stack([r1, r2, np.cross(r1, r2)], axis=2))
+    U[:, :, 2] *= np.linalg.det(U @ Wt)[:, None]  # U diag(1, 1, det) Wt: a rotation
+    return U @ Wt
+
+
+def _linear(points, obj, centre, degree, scale) -> tuple[FloatArray, FloatArray, FloatArray]:
+    """:func:`linear_init` with the poses as rotations ``(V, 3, 3)`` and translations
+    ``(V, 3)``: ``(th, Rs, ts)``."""
+    ss = [(p - centre) / scale for p in points]
+    views = [_view_rows(s, obj) for s in ss]
+    N = 0.0
+    G, parts = [], []
+    for s, (h, r3) in zip(ss, views):
+        part, Nj, gj = _view_system(s, obj, h, r3, degree)
+        N = N + Nj
+        G.append(gj)
+        parts.append(part)
+    Gm = np.array(G).T
+    sg = _choose_signs(Gm.T @ np.linalg.solve(N, Gm))
+    b = np.linalg.solve(N, Gm @ sg)
+    t3 = np.array([a @ (g * y - A @ b) / (a @ a) for (A, a, y), g in zip(parts, sg)])
+    if b[0] > 0:  # gauge: a0 < 0
+        b, t3, sg = -b, -t3, -sg
+    ts = np.stack([[h[4], h[5], tz] for (h, _), tz in zip(views, t3)])
+    return np.r_[centre, 1.0, 0.0, 0.0, b], _rotations(views, sg), ts
 
 
 def linear_init(points, obj, centre, degree, scale) -> tuple[FloatArray, list]:
@@ -190,23 +215,8 @@ def linear_init(points, obj, centre, degree, scale) -> tuple[FloatArray, list]:
         ``[xc, yc, c, d, e, b0, b2, ..., bN]``.
     poses : list of (rvec, tvec)
     """
-    ss = [(p - centre) / scale for p in points]
-    views = [_view_rows(s, obj) for s in ss]
-    N = 0.0
-    G, parts = [], []
-    for s, (h, r3) in zip(ss, views):
-        part, Nj, gj = _view_system(s, obj, h, r3, degree)
-        N = N + Nj
-        G.append(gj)
-        parts.append(part)
-    Gm = np.array(G).T
-    sg = _choose_signs(Gm.T @ np.linalg.solve(N, Gm))
-    b = np.linalg.solve(N, Gm @ sg)
-    t3 = np.array([a @ (g * y - A @ b) / (a @ a) for (A, a, y), g in zip(parts, sg)])
-    if b[0] > 0:  # gauge: a0 < 0
-        b, t3, sg = -b, -t3, -sg
-    poses = [_pose(h, r3, g, tz) for (h, r3), g, tz in zip(views, sg, t3)]
-    return np.r_[centre, 1.0, 0.0, 0.0, b], poses
+    th, Rs, ts = _linear(points, obj, centre, degree, scale)
+    return th, [(cv2.Rodrigues(R)[0].ravel(), t) for R, t in zip(Rs, ts)]
 
 
 # -- the joint refinement (Urban et al. 2015) -------------------------------------------------
@@ -266,6 +276,15 @@ def refine(th, poses, points, obj, scale, qmax, loss="linear") -> tuple[FloatArr
     return _full(sol.x[:ni]), _unpack_poses(sol.x, ni, len(points))
 
 
+def _rms_of_rotations(th, Rs, ts, points, obj, scale, qmax) -> float:
+    """:func:`_rms` of the poses as rotations ``Rs`` (V, 3, 3) and translations ``ts`` (V, 3)."""
+    X = (np.einsum("vij,nj->vni", Rs, obj) + ts[:, None, :]).reshape(-1, 3)
+    with np.errstate(all="ignore"):
+        r = _camera_to_pixels(th, X, scale, qmax) - np.vstack(points)
+    r = np.where(np.isfinite(r), r, _UNSEEN_PX)
+    return float(np.sqrt(np.mean(np.sum(r**2, 1))))
+
+
 def _rms(th, poses, points, obj, scale, qmax) -> float:
     r = _residuals(_pack(th, poses), len(th) - 1, points, obj, scale, qmax).reshape(-1, 2)
     return float(np.sqrt(np.mean(np.sum(r**2, 1))))
@@ -275,7 +294,9 @@ def find_centre(points, obj, image_size, degree, scale, qmax) -> FloatArray:
     """The toolbox's centre search (Scaramuzza et al. 2006, section 4.2): the linear
     calibration at each centre of a grid (:data:`CENTRE_GRID` points a side, half-width
     :data:`CENTRE_SPAN` of the shorter side, about the image centre), keep the one of least
-    reprojection error, shrink the grid around it (:data:`CENTRE_LEVELS` times)."""
+    reprojection error, shrink the grid around it (:data:`CENTRE_LEVELS` times). (Each
+    candidate's poses stay rotation matrices, all views at once: 150 candidates of
+    KaidanOmni's 16 views cost 0.6 s instead of 2."""
     half = CENTRE_GRID // 2
     data = (points, obj, scale, qmax)
     best = np.array(image_size, np.float64) / 2
@@ -283,7 +304,7 @@ def find_centre(points, obj, image_size, degree, scale, qmax) -> FloatArray:
     for _ in range(CENTRE_LEVELS):
         offsets = range(-half, half + 1)
         cands = [best + step * np.r_[i, j] for i in offsets for j in offsets]
-        errs = [_rms(*linear_init(points, obj, c, degree, scale), *data) for c in cands]
+        errs = [_rms_of_rotations(*_linear(points, obj, c, degree, scale), *data) for c in cands]
         best = cands[int(np.argmin(errs))]
         step /= half + 1
     return best
