@@ -67,7 +67,7 @@ __all__ = [
 #: can be off by several px. On OCamCalib's MiniOmni the rims of single images differ by up to
 #: 11 px in centre and their 2 % eccentricities point every way; the adjustment took one
 #: image's for a 9 deg tilt and, the mirror near a sphere, followed it off to a camera 40 mm off
-#: the axis. Pooled, the rim's centre lies within 1 px of the corners' Taylor centre.
+#: the axis. Pooled, its centre lies 1.7 px from the corners' Taylor centre.
 RIM_POOL_IMAGES = 6
 #: How far (a fraction of the first rim's mean radius) another image's rim may differ from the
 #: first's in size and centre to be pooled with it.
