@@ -336,6 +336,36 @@ def test_a_detected_rim_that_leaves_corners_outside_is_rejected_and_a_larger_one
     assert posture_error(cam, RIG)[0] < 1e-4
 
 
+def _disc(centre, axes, angle_deg):
+    """A bright mirror of elliptic outline on a dark holder, drawn by OpenCV (anti-aliased)."""
+    image = np.full((480, 640), 50, np.uint8)
+    box = (tuple(map(float, centre)), (2.0 * axes[0], 2.0 * axes[1]), float(angle_deg))
+    cv2.ellipse(image, box, 190, -1, cv2.LINE_AA)
+    return cv2.GaussianBlur(image, (0, 0), 1.0)
+
+
+def test_the_rims_of_several_images_are_pooled():
+    """A rigid rig shows one rim; each image's detection can be off by px (MiniOmni's single
+    rims differ by up to 11 px in centre, their 2 % eccentricities pointing every way, which
+    the adjustment took for a tilt). Four images whose outlines are a circle of radius 190 px
+    moved 3 px and stretched 2 % each a different way: the rim is their pooled fit, the
+    circle, not the first image's ellipse."""
+    from omnicam.chessboard import steps as pattern
+
+    truth = np.array([320.0, 240.0])
+    images = []
+    for k in range(4):
+        shift = 3.0 * np.array([math.cos(0.5 * math.pi * k), math.sin(0.5 * math.pi * k)])
+        images.append(_disc(truth + shift, (190.0 * 1.01, 190.0 * 0.99), 45.0 * k))
+    greys = [pattern._grey_image(im, i) for i, im in enumerate(images)]
+    first = pattern.detect_rim(greys[0].edges)
+    assert np.linalg.norm(first.center - truth) > 2.5 and first.axes[0] / first.axes[1] > 1.015
+    rim = pattern.rim_step(greys, None, (640, 480))
+    assert rim.image == 0 and len(rim.seen) > 3 * len(first.points)
+    assert np.linalg.norm(rim.fit.center - truth) < 0.3
+    assert rim.fit.axes[0] / rim.fit.axes[1] < 1.002
+
+
 def test_adjustment_jacobian_is_the_derivative_of_its_residuals():
     """Each column differenced where its parameter acts (K and D on the traced coordinates, the
     rim at its fixed foot points, the boards in groups) is the derivative of the residuals."""

@@ -10,8 +10,9 @@ The steps (:mod:`.steps`, :mod:`.fit_steps`):
 1. **the boards** (:func:`.steps.raw_detection_step` -> :class:`.steps.Boards`), by OpenCV's
    detectors on every raw image, which need no camera (:func:`.detect.detect_pattern`);
 2. **the rim** (eqs. 20-22; :func:`.steps.rim_step` -> :class:`.steps.RimStep`):
-   :func:`omnicam.calibration.rim.detect_rim` on the first image where it is found (or the
-   given ``boundary_points``); every corner must lie inside it, or a larger one is sought;
+   :func:`omnicam.calibration.rim.detect_rim` on the first image where it is found, pooled
+   with the rims of its size in the next few images (or the given ``boundary_points``); every
+   corner must lie inside it, or a larger one is sought;
 3. **the camera's reflection** (:func:`.steps.reflection_step` -> :class:`.steps.LensStep`):
    its outline pooled over the images, used only with its plane ``lens_z`` known;
 4. **a start without an initial-value problem** (:func:`.steps.start_step` ->
