@@ -57,12 +57,13 @@ def _first_rim(images, corners):
     return rim_step(greys, None, (images[0].shape[1], images[0].shape[0]), corners).seen
 
 
-def _against_ocamcalib(folder, dets):
+def _against_ocamcalib(folder, paths, dets):
     """With OCamCalib's VMRImagePts.mat in the folder (``gridInfo.x{j}``: 2 x N, row 0 the
-    column, 1-based), the distance of each board's corners to OCamCalib's, as a set (the
-    orders of the two tools differ)."""
+    column, 1-based) and the images VMRImage0..9, the distance of each board's corners to
+    OCamCalib's, as a set (the orders of the two tools differ)."""
     mat = os.path.join(folder, "VMRImagePts.mat")
-    if not os.path.exists(mat):
+    vmr = [f"VMRImage{j}.jpg" for j in range(10)]
+    if not os.path.exists(mat) or [os.path.basename(p) for p in paths] != vmr:
         return
     from scipy.io import loadmat
 
@@ -123,7 +124,7 @@ def main(argv=None):
     t_det = time.perf_counter() - t
     found = [i for i, d in enumerate(dets) if d is not None]
     print(f"raw detection: {len(found)} of {len(images)} boards, {t_det:.2f} s in all")
-    _against_ocamcalib(a.folder, dets)
+    _against_ocamcalib(a.folder, paths, dets)
     corners = [dets[i].corners.reshape(-1, 2).astype(np.float64) for i in found]
     obj = object_points(pattern, a.square)
     rim_points = _first_rim(images, corners)
