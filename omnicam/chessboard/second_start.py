@@ -79,7 +79,10 @@ def second_start_step(
     except ValueError:
         alt = None
     alt_rms = math.nan if alt is None else corner_rms(alt.fit)
-    taken = alt is not None and _mean_cost(alt.fit) < _mean_cost(rounds.fit)
+    best = rounds
+    if alt is not None and _mean_cost(alt.fit) < _mean_cost(rounds.fit):
+        best = alt
+    taken = best is alt
     note = (
         f"the adjustment from the Taylor model's centre ended at {rms:.3f} px RMS, above the "
         f"central Taylor model's {taylor.rms:.3f} px (a non-central rig fits at least as well "
@@ -92,6 +95,5 @@ def second_start_step(
             "camera calibrated alone) or the mirror as a start"
         )
     )
-    best = alt if taken else rounds
     fit = dataclasses.replace(best.fit, warnings=(*best.fit.warnings, note))
     return dataclasses.replace(best, fit=fit)

@@ -407,7 +407,8 @@ def _detected_rim(greys, corners) -> RimStep:
     """The rim of the first image that shows one (a rim that leaves corners outside rejected, a
     larger one sought, :func:`_image_rim`), pooled with the rims of its size found in the next
     images (:func:`_same_rim`), up to :data:`RIM_POOL_IMAGES` in all (:func:`_pooled_rim`)."""
-    warns, errors = [], []
+    warns: list[str] = []
+    errors: list[str] = []
     for i, grey in enumerate(greys):
         first = _image_rim(grey, i, corners, warns, errors)
         if first is not None:
