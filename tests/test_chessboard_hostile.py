@@ -279,22 +279,6 @@ def test_unknown_hyperbolic_mirror_keeps_its_family_by_the_likelihood_ratio_test
         assert "not above" in fit.report.family
 
 
-def test_where_the_test_rejects_the_hyperboloid_the_fit_goes_on_as_the_asphere_holding_it(
-    monkeypatch,
-):
-    """The branch the hyperbolic renders do not take, forced (every gain above the limit):
-    the conic with a term, which holds the hyperboloid, carried on; its rays still right."""
-    import omnicam.chessboard.family as family
-
-    monkeypatch.setattr(family, "chi2_limit", lambda dof: -math.inf)
-    monkeypatch.setattr(family, "MAX_TERMS", 1)
-    fit = Fit(_hyperbolic(*MIRRORS[0]), seed=0)
-    assert isinstance(fit.camera.mirror, omnicam.AsphericMirror)
-    assert len(fit.camera.mirror.alpha) == 1
-    assert "the central fit's hyperboloid does not hold" in fit.report.family
-    _assert_rays_within_their_uncertainty(fit)
-
-
 # -- 2. small boards covering little of the mirror ---------------------------------------------
 # (a mirror whose central start is accepted, so the case tells what small boards do)
 SMALL_PATTERN, SMALL_SQUARE = (7, 6), 20.0

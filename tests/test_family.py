@@ -70,8 +70,8 @@ def _ray_errors_deg(cam, fit):
 @pytest.mark.slow
 def test_a_mirror_at_a_hyperboloids_edge_that_is_none_is_fitted_from_the_generic_start_too():
     """The hyperboloid's start ends in a minimum of its own (RMS 1.8 times the noise floor,
-    the rays 5 times their stated uncertainty); the generic start's asphere fits at the
-    floor, and the test takes it."""
+    the rays 5 times their stated uncertainty), where the test of a term already rejects the
+    hyperboloid; the generic start's asphere fits at the floor, and the test takes it."""
     cam, fit, report = _fit(1.0)
     assert report.central.xi >= 1.0
     assert isinstance(fit.mirror, omnicam.AsphericMirror) and fit.mirror.alpha
