@@ -25,7 +25,7 @@ import numpy as np
 from ..asphere import MAX_ALPHA, AsphericMirror
 from ..mirror import HyperbolicMirror
 from .adjustment import AdjustmentModel, BundleAdjustment, robust_residuals
-from .fit_steps import AdjustmentStep, ResidualGroups, Rounds
+from .fit_steps import AdjustmentStep, ResidualGroups, Rounds, carried_on
 
 __all__ = ["MAX_TERMS", "TERM_ADD_CHI2", "chi2_limit", "family_step", "hyperboloid_term_check"]
 
@@ -75,15 +75,6 @@ def _term_chi2(adj2, x2, n_params, f_scale):
     return (c0 - cost(short.x)) / sigma2, short
 
 
-def _carried_on(fit: AdjustmentStep, adj2, short, f_scale) -> AdjustmentStep:
-    """``fit`` replaced by the adjustment ``adj2`` carried on to convergence from its short
-    refinement ``short``."""
-    sol2 = adj2.solve(short.x, f_scale=f_scale, max_nfev=400)
-    r = adj2.corner_residuals(sol2.x).reshape(len(fit.used), -1)
-    vr = {i: float(np.sqrt(np.mean(r[k] ** 2) * 2)) for k, i in enumerate(fit.used)}
-    return dataclasses.replace(fit, adj=adj2, sol=sol2, view_rms=vr)
-
-
 def hyperboloid_term_check(rounds: Rounds, options) -> tuple[Rounds, str]:
     """A hyperboloid's fit (the central start's family) tested against the conic with one
     polynomial term by the likelihood-ratio test of :func:`family_step`, its degrees of
@@ -105,7 +96,7 @@ def hyperboloid_term_check(rounds: Rounds, options) -> tuple[Rounds, str]:
     if not chi2 > chi2_limit(dof):
         held = test.format("would lower")
         return rounds, f"the mirror's family: a hyperboloid, as the central fit's ({held})"
-    fit = _carried_on(fit, adj2, short, f_scale)
+    fit = carried_on(fit, adj2, short.x, f_scale)
     origin = f"the central fit's hyperboloid does not hold: {test.format('lowers')}; alpha4 added"
     return family_step(dataclasses.replace(rounds, fit=fit), options, origin)
 
@@ -134,7 +125,7 @@ def family_step(rounds: Rounds, options, origin: str = "") -> tuple[Rounds, str]
             said.append(f"{name} would lower the cost by {chi2:.2f} times it: not added")
             break
         said.append(f"{name} lowers the cost by {chi2:.0f} times it: added")
-        fit = _carried_on(fit, adj2, short, f_scale)
+        fit = carried_on(fit, adj2, short.x, f_scale)
     n = len(fit.adj.mirror.alpha)
     what = "a conic" if n == 0 else f"a conic with {n} polynomial term(s)"
     note = (

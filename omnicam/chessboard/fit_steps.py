@@ -37,7 +37,9 @@ __all__ = [
     "ResidualGroups",
     "Rounds",
     "adjustment_step",
+    "carried_on",
     "corner_step",
+    "mean_cost",
     "report_step",
     "rounds_step",
     "shape_check_step",
@@ -297,9 +299,16 @@ def rounds_step(
 
 
 # -- 8. a shape held from the central fit, checked ----------------------------------------------
-def _mean_cost(sol) -> float:
+def mean_cost(sol) -> float:
     """The robust cost per residual of a solution (fits of different views compared)."""
     return 2.0 * float(sol.cost) / max(len(sol.fun), 1)
+
+
+def carried_on(fit: AdjustmentStep, adj2, x, f_scale) -> AdjustmentStep:
+    """``fit`` replaced by the adjustment ``adj2`` solved to convergence from ``x`` (a short
+    refinement's end, in a likelihood-ratio test that took it), its views' RMS anew."""
+    sol2 = adj2.solve(x, f_scale=f_scale, max_nfev=400)
+    return dataclasses.replace(fit, adj=adj2, sol=sol2, view_rms=_view_rms(adj2, sol2.x, fit.used))
 
 
 def shape_free(adj, x, camera, board_poses):
@@ -364,9 +373,9 @@ def shape_check_step(rounds: Rounds, start: StartStep, rim: RimStep, model, opti
         f"were estimated"
     )
     _warnings.warn(msg, RuntimeWarning, stacklevel=2)
-    sol2 = adj2.solve(short.x, f_scale=f_scale, max_nfev=400)
-    vr = _view_rms(adj2, sol2.x, fit.used)
-    held = dataclasses.replace(fit, adj=adj2, sol=sol2, view_rms=vr, warnings=(*fit.warnings, msg))
+    held = carried_on(fit, adj2, short.x, f_scale)
+    sol2 = held.sol
+    held = dataclasses.replace(held, warnings=(*fit.warnings, msg))
     with _warnings.catch_warnings(record=True) as caught:  # said only if it is taken
         _warnings.simplefilter("always")
         try:
@@ -377,7 +386,7 @@ def shape_check_step(rounds: Rounds, start: StartStep, rim: RimStep, model, opti
             alt = adjustment_step(start.camera, start.mirror, alt_corners, rim.seen, free, options)
         except ValueError:
             return dataclasses.replace(rounds, fit=held)
-    if not _mean_cost(alt.sol) < _mean_cost(sol2):
+    if not mean_cost(alt.sol) < mean_cost(sol2):
         return dataclasses.replace(rounds, fit=held)
     for w in caught:
         _warnings.warn(w.message, w.category, stacklevel=2)

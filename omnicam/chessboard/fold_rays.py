@@ -4,7 +4,7 @@ The report's ray uncertainty (:func:`.adjustment.ray_uncertainty`) is linearised
 estimate. Where the adjustment's cost has a long, flat or curved valley, the Jacobian there can
 say the rays are well determined while a fit as good lies far along the valley:
 ``benchmarks/bench_mirrors_hostile.py``'s prolate ellipsoid behind the wide-angle lens states
-1.18 deg (median) with its rays 10.96 deg off, and the adjustment started at the truth ends
+1.36 deg (median) with its rays 10.73 deg off, and the adjustment started at the truth ends
 1.3 deg from it with a cost only 1.4 times the residual variance higher (the information
 bound at the truth is 1.9 deg, the Jacobian there says 4 times less about the mirror's axis
 than at the estimate). No local quantity shows it; the calibrations of the held-out check's

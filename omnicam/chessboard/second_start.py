@@ -22,7 +22,7 @@ import math
 
 import numpy as np
 
-from .fit_steps import AdjustmentStep, Rounds, rounds_step
+from .fit_steps import AdjustmentStep, Rounds, mean_cost, rounds_step
 from .steps import PatternOptions, RimStep, StartStep
 
 __all__ = ["second_start_step"]
@@ -32,11 +32,6 @@ def corner_rms(fit: AdjustmentStep) -> float:
     """The corners' RMS reprojection error of an adjustment (px), as the report gives it."""
     r = fit.adj.corner_residuals(fit.sol.x)
     return float(np.sqrt(np.mean(r**2) * 2))
-
-
-def _mean_cost(fit: AdjustmentStep) -> float:
-    """The robust cost per residual (fits of the same views from different starts compared)."""
-    return 2.0 * float(fit.sol.cost) / max(len(fit.sol.fun), 1)
 
 
 def centred_start(start: StartStep, image_size) -> StartStep:
@@ -80,7 +75,7 @@ def second_start_step(
         alt = None
     alt_rms = math.nan if alt is None else corner_rms(alt.fit)
     best = rounds
-    if alt is not None and _mean_cost(alt.fit) < _mean_cost(rounds.fit):
+    if alt is not None and mean_cost(alt.fit.sol) < mean_cost(rounds.fit.sol):
         best = alt
     taken = best is alt
     note = (
