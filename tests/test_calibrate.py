@@ -86,6 +86,20 @@ def test_distorted_rim_points_give_the_posture(D, refine):
     assert chose_true_candidate(report, truth) and report.warnings == []
 
 
+def test_rim_posture_is_the_posture_calibrate_finds_without_its_report():
+    # the chessboard route's start: the same camera as calibrate(lens=None), no uncertainty
+    from omnicam.calibration import rim_posture
+
+    truth = synthetic.misaligned_rig(4.0, 100.0, (-2.0, 1.0, 2.0)).replace(D=[-0.05, 0.01, 0, 0])
+    rng = np.random.default_rng(5)
+    rim = truth.rim_image_points(360) + rng.normal(0.0, 0.3, (360, 2))
+    cam, _ = calibrate(truth.K, truth.mirror, boundary_points=rim, D=truth.D, lens=None)
+    start = rim_posture(truth.K, truth.mirror, rim, D=truth.D, image_size=(1024, 768))
+    assert np.array_equal(start.rvec, cam.rvec) and np.array_equal(start.tvec, cam.tvec)
+    assert np.array_equal(start.K, cam.K) and np.array_equal(start.D, cam.D)
+    assert start.image_size == (1024, 768)
+
+
 def test_rim_clipped_by_the_frame_gives_the_posture():
     # real rims are often cut by the top and bottom of the sensor: only 2 arcs remain
     rng = np.random.default_rng(9)

@@ -567,8 +567,9 @@ def _twin(K, mirror, cand, rim):
     return best.rvec, best.tvec
 
 
-def refinement_step(K, mirror, cand, rim, lines_xn, cue, circle, refine=True):
-    """Refine on the rim and every cue that agrees with it; see :class:`Refinement`.
+def refinement_step(K, mirror, cand, rim, lines_xn, cue, circle, refine=True, uncertainty=True):
+    """Refine on the rim and every cue that agrees with it; see :class:`Refinement`
+    (its ``uncertainty`` None without ``uncertainty``: a start, whose report nobody reads).
 
     A cue joins only if the joint fit keeps the rim at its own noise level: with ``sigma^2``
     the rim's a posteriori variance alone (``2 cost / (N - 5)``, at least ``SIGMA_FLOOR``^2,
@@ -599,6 +600,17 @@ def refinement_step(K, mirror, cand, rim, lines_xn, cue, circle, refine=True):
     rim_sigma = trials.kept.rim_rms if trials.kept is not None else rim.fit.rms
     known = cue.r is not None or cue.z is not None  # else z trades with the tilt (above)
     use_refl = "reflection" in trials.accepted or (not refine and spec is not None and known)
+    if not uncertainty:  # (the profile below is most of the step's time)
+        return Refinement(
+            np.asarray(rvec, np.float64),
+            np.asarray(tvec, np.float64),
+            trials.kept,
+            tuple(trials.accepted),
+            tuple(trials.rejected),
+            None,
+            final_circle,
+            tuple(trials.skipped),
+        )
     unc = profile_uncertainty(
         K,
         mirror,

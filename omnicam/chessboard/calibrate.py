@@ -26,7 +26,7 @@ The steps (:mod:`.steps`, :mod:`.fit_steps`):
    whose polynomial terms a likelihood-ratio test may extend (:mod:`.family`).
    With a mirror and without ``K``, the aligned rig's focal length from the rim's size
    (:func:`omnicam.calibration.plausibility.focal_from_rim`) and the principal point at the
-   image centre; the posture from the rim by :func:`omnicam.calibration.calibrate` (Chen's
+   image centre; the posture from the rim by :func:`omnicam.calibration.rim_posture` (Chen's
    method, eqs. 23-42); then the boards not found yet, in the unwarped views of the start
    camera (:func:`.steps.redetect`);
 5. **the corners** (:func:`.fit_steps.corner_step` -> :class:`.fit_steps.CornerStep`):

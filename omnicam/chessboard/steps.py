@@ -21,7 +21,7 @@ import numpy as np
 from .._typing import FloatArray
 from .._validate import float_array, positive_number, validate_D, validate_image_size, validate_K
 from ..asphere import AsphericMirror
-from ..calibration import calibrate
+from ..calibration import rim_posture
 from ..calibration.ellipse import conic_distance
 from ..calibration.inputs import edge_image
 from ..calibration.plausibility import focal_from_rim, rim_radius_px
@@ -740,15 +740,7 @@ def _chen_start(K, mirror, rim: RimStep, D, image_size) -> MisalignedCatadioptri
     else:
         K0 = validate_K(K)
     try:
-        cam0, _ = calibrate(
-            K0,
-            mirror,
-            boundary_points=rim.seen,
-            D=D,
-            image_size=image_size,
-            refine=True,
-            lens=None,
-        )
+        cam0 = rim_posture(K0, mirror, rim.seen, D=D, image_size=image_size)
     except ValueError as e:
         raise ValueError(f"the posture could not be started from the rim: {e}") from None
     return cam0
