@@ -11,6 +11,7 @@ from omnicam.calibration.ellipse import (
     direct_ellipse,
     ellipse_from_conic,
     hartley_normalization,
+    orthogonal_residuals,
     ransac_conic,
 )
 
@@ -81,3 +82,26 @@ def test_ransac_conic_separates_a_rim_from_holder_arms_and_clutter():
     assert mask[:1500].mean() > 0.99
     # about 1.5 % of the clutter and arm points lie within 2 px of the rim by chance
     assert mask[1500:].mean() < 0.03
+
+
+@pytest.mark.parametrize("axes", [(240.0, 180.0), (150.0, 149.0), (300.0, 40.0)])
+def test_orthogonal_residuals_are_the_nearest_points_of_the_ellipse_with_outer_normals(axes):
+    """Against a dense sampling of the ellipse (no Newton): the distance to the nearest point,
+    positive outside; the foot on the ellipse; the normal along the point's offset from it."""
+    centre, theta = np.array([512.0, 384.0]), 0.4
+    _, R = ellipse_points(centre, axes, theta, np.zeros(1))
+    S = R @ np.diag(axes) @ R.T  # the symmetric S of centre + S (cos t, sin t)
+    rng = np.random.default_rng(7)
+    t = rng.uniform(0.0, 2 * np.pi, 400)
+    pts = ellipse_points(centre, axes, theta, t)[0] + rng.normal(0.0, 8.0, (400, 2))
+    d, u, n = orthogonal_residuals(pts, centre, S)
+    dense = ellipse_points(centre, axes, theta, np.linspace(0, 2 * np.pi, 200001))[0]
+    nearest = np.array([np.min(np.hypot(*(dense - p).T)) for p in pts])
+    q = (pts - centre) @ R  # in the axes' frame: outside where (x / a)^2 + (y / b)^2 > 1
+    outside = (q[:, 0] / axes[0]) ** 2 + (q[:, 1] / axes[1]) ** 2 > 1
+    assert np.abs(np.abs(d) - nearest).max() < 1e-3 * max(axes) / 200
+    assert np.array_equal(d > 0, outside)
+    foot = centre + u @ S.T
+    assert np.abs(np.hypot(*u.T) - 1).max() < 1e-12
+    assert np.abs(pts - foot - d[:, None] * n).max() < 1e-9
+    assert np.abs(np.hypot(*n.T) - 1).max() < 1e-12

@@ -12,6 +12,8 @@
   cell classes (``classify_cells``).
 * :mod:`~omnicam._kernels.fill` -- the table's entries from the classified cells
   (``fill_rows``), float or CV_16SC2 fixed point.
+* :mod:`~omnicam._kernels.ellipse` -- points' orthogonal distances to an ellipse
+  (``ellipse_feet``), for the rim's and the reflection's fits.
 
 Only arithmetic on prepared float64 arrays lives here; validation, shapes and the public API
 are in :mod:`omnicam.raytrace`, :mod:`omnicam.views` and :mod:`omnicam.camera`. The slow,
