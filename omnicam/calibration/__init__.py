@@ -175,16 +175,8 @@ def rim_posture(
     route's, :func:`omnicam.calibrate_pattern`), whose uncertainty, warnings and plausibility
     nobody reads. The camera is :func:`calibrate`'s with ``lens=None``, at a fifth of the cost
     (the report's profile uncertainty is the rest)."""
-    options = ImageOptions(
-        K=K,
-        mirror=mirror,
-        boundary_points=boundary_points,
-        D=D,
-        image_size=image_size,
-        lens=None,
-        check_plausibility=False,
-    ).validated(None)
-    o = options
+    o = ImageOptions(K, mirror, boundary_points, D=D, image_size=image_size, lens=None)
+    o = o.validated(None)
     ref = _posture(o, None, uncertainty=False)[-1]
     return MisalignedCatadioptricCamera(
         cast(FloatArray, o.K), o.mirror, ref.rvec, ref.tvec, D=o.D, image_size=o.image_size

@@ -597,20 +597,30 @@ def refinement_step(K, mirror, cand, rim, lines_xn, cue, circle, refine=True, un
     # the candidates (chen) and refine_posture (gauge_rotation) already return the gauge
     R = cv2.Rodrigues(np.asarray(rvec, np.float64).reshape(3, 1))[0]
     final_circle = _final_circle(K, mirror, R, tvec, cue, trials)
-    rim_sigma = trials.kept.rim_rms if trials.kept is not None else rim.fit.rms
     known = cue.r is not None or cue.z is not None  # else z trades with the tilt (above)
     use_refl = "reflection" in trials.accepted or (not refine and spec is not None and known)
-    if not uncertainty:  # (the profile below is most of the step's time)
-        return Refinement(
-            np.asarray(rvec, np.float64),
-            np.asarray(tvec, np.float64),
-            trials.kept,
-            tuple(trials.accepted),
-            tuple(trials.rejected),
-            None,
-            final_circle,
-            tuple(trials.skipped),
-        )
+    unc = (
+        None
+        if not uncertainty
+        else _uncertainty(K, mirror, cand, rim, rvec, tvec, spec, final_circle, use_refl, trials)
+    )
+    return Refinement(
+        np.asarray(rvec, np.float64),
+        np.asarray(tvec, np.float64),
+        trials.kept,
+        tuple(trials.accepted),
+        tuple(trials.rejected),
+        unc,
+        final_circle,
+        tuple(trials.skipped),
+    )
+
+
+def _uncertainty(K, mirror, cand, rim, rvec, tvec, spec, final_circle, use_refl, trials):
+    """The refined posture's a posteriori uncertainty (:class:`Refinement`), with the bias
+    the cues' trials measured."""
+    rim_px = rim.points
+    rim_sigma = trials.kept.rim_rms if trials.kept is not None else rim.fit.rms
     unc = profile_uncertainty(
         K,
         mirror,
@@ -626,16 +636,7 @@ def refinement_step(K, mirror, cand, rim, lines_xn, cue, circle, refine=True, un
     bias_cov = trials.bias_cov
     if bias_cov is not None and unc.cov is not None and np.any(bias_cov):
         unc = unc.with_cov(unc.cov + bias_cov, tvec)
-    return Refinement(
-        np.asarray(rvec, np.float64),
-        np.asarray(tvec, np.float64),
-        trials.kept,
-        tuple(trials.accepted),
-        tuple(trials.rejected),
-        unc,
-        final_circle,
-        tuple(trials.skipped),
-    )
+    return unc
 
 
 # -- 6. warnings -------------------------------------------------------------------------------
