@@ -23,6 +23,9 @@
    offset beyond the limits, a ``K`` that does not fit the image or the rim, ``a`` and ``b``
    that fit better swapped, large cue residuals) is named in the warnings.
 
+:func:`rim_posture` is steps 0-5 alone on rim points, with no uncertainty: the chessboard
+route's start (:func:`omnicam.calibrate_pattern`).
+
 :class:`~.errors.EstimationError` (a ``ValueError``) means valid input from which the posture
 cannot be estimated (no rim, no physical posture); a plain ``ValueError`` means bad input.
 """
