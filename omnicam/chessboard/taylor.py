@@ -193,7 +193,9 @@ def _linear(points, obj, centre, degree, scale) -> tuple[FloatArray, FloatArray,
     return _linear_at(points, obj, np.asarray(centre, np.float64)[None], degree, scale)[0]
 
 
-def _linear_at(points, obj, centres, degree, scale) -> list:
+def _linear_at(
+    points, obj, centres, degree, scale
+) -> list[tuple[FloatArray, FloatArray, FloatArray]]:
     """:func:`_linear` at each of the ``centres`` ``(C, 2)``, their views' linear systems
     built all at once: a list of ``(th, Rs, ts)``."""
     pts = np.asarray(points, np.float64)  # (V, N, 2): one board
@@ -327,7 +329,7 @@ def find_centre(points, obj, image_size, degree, scale, qmax) -> FloatArray:
         offsets = range(-half, half + 1)
         cands = np.array([best + step * np.r_[i, j] for i in offsets for j in offsets])
         fits = _linear_at(points, obj, cands, degree, scale)
-        errs = [_rms_of_rotations(*fit, *data) for fit in fits]
+        errs = [_rms_of_rotations(th, Rs, ts, *data) for th, Rs, ts in fits]
         best = cands[int(np.argmin(errs))]
         step /= half + 1
     return best
