@@ -101,8 +101,6 @@ _SHAPES_KEPT = 64
 
 #: Parameters that act after the mirror (the pinhole and its distortion).
 _AFTER_MIRROR = frozenset(("fx", "fy", "cx", "cy", "skew", *D_NAMES))
-#: ``K``'s entries: the pixels are linear in them, so their columns are exact without a step
-_K_NAMES = ("fx", "fy", "cx", "cy", "skew")
 
 
 def rim_normalized(R, t, mirror, phi) -> FloatArray:
@@ -443,8 +441,7 @@ class BundleAdjustment:
 
         - ``K`` and ``D`` act after the mirror: their columns only turn the normalised
           coordinates of the corners (:meth:`normalized_corners`, traced once) and of the rim
-          into pixels again; ``K``'s, in which the pixels are linear, are those distorted
-          coordinates themselves (:func:`_k_columns`).
+          into pixels again.
         - The rim: at the foot points the distance moves by ``-n . dc/dp`` (the rim image's
           point ``c`` at fixed ``phi``, :func:`rim_foot_normals`), one projection of the rim
           circle per step instead of a foot search.
@@ -459,17 +456,11 @@ class BundleAdjustment:
         xn, phi, _, nrm = self.traced(x)
         xr = rim_normalized(R, tvec, mirror, phi)
         pts = self.board_points(self.boards(x))  # (the posture's steps do not move them)
-        distorted = None  # the corners' and the rim's distorted normalised coordinates
         for k in [i for i, name in enumerate(self.names) if name not in self.fixed]:
             xp, xm, span = self.steps_within_the_family(x, k, h[k])
             if self.lens_px is not None:
                 J[nc + nr :, k] = (self.lens_residuals(xp) - self.lens_residuals(xm)) / span
             if self.names[k] == "lens_z":  # the corners and the rim do not see its plane
-                continue
-            if self.names[k] in _K_NAMES:
-                if distorted is None:
-                    distorted = to_pixels(np.concatenate([xn, xr]), np.eye(3), D)
-                J[:nc, k], J[nc : nc + nr, k] = _k_columns(self.names[k], distorted, nrm)
                 continue
             after = self.names[k] in _AFTER_MIRROR
             cp, rp = self.imaged(xp, phi, pts, (xn, xr) if after else None)
@@ -597,23 +588,6 @@ class BundleAdjustment:
             return Jy
 
         return to_x, chain
-
-
-def _k_columns(name, distorted, rim_normals) -> tuple[FloatArray, FloatArray]:
-    """The Jacobian's columns of ``K``'s entry ``name`` (:data:`_K_NAMES`): the corners'
-    rows and the rim's, from the corners' then the rim points' ``distorted`` normalised
-    coordinates ``(x_d, y_d)`` (``u = fx x_d + skew y_d + cx``, ``v = fy y_d + cy``, eq. 6),
-    zero for a corner the rig cannot see (its residual is a constant) and ``-n . dc`` for a
-    rim point of normal ``n`` (:meth:`BundleAdjustment.jacobian`)."""
-    d = np.zeros_like(distorted)
-    axis, coordinate = {"fx": (0, 0), "fy": (1, 1), "skew": (0, 1)}.get(name, (None, None))
-    if axis is not None:
-        d[:, axis] = distorted[:, coordinate]
-    else:  # cx, cy
-        d[:, 0 if name == "cx" else 1] = 1.0
-    d[~np.isfinite(distorted).all(axis=1)] = 0.0
-    n = len(distorted) - len(rim_normals)
-    return d[:n].ravel(), -np.einsum("ij,ij->i", rim_normals, d[n:])
 
 
 def robust_residuals(r, f_scale) -> tuple[FloatArray, FloatArray]:
