@@ -245,6 +245,17 @@ def test_unknown_mirror_of_revolution_is_right_or_says_it_is_not(i):
     assert T._rays_within_their_uncertainty(fit) or T._says_it_is_wrong(fit), fit.report.warnings
 
 
+def test_a_central_fit_with_negative_xi_starts_the_generic_asphere():
+    """Mei's model gives xi = -0.32 on these boards (no hyperboloid has xi <= 0): the rig is
+    started from the Taylor model, not refused with 'xi must be in (0, 1) for a hyperbolic
+    mirror' (what the hyperbolic start said)."""
+    fit = Fit("equiangular 7", "wide-angle", seed=2)
+    assert fit.refused is None, fit.refused
+    assert fit.report.central.xi < 0
+    assert fit.warned("which no hyperboloid has (0 to 1)")
+    T._assert_rays_within_their_uncertainty(fit)
+
+
 def test_unknown_paraboloid_behind_a_near_pinhole_is_started_again_from_the_image_centre():
     """The generic start's principal point is the Taylor centre, the image of the mirror's
     axis, 32 px from the principal point on this misaligned rig: the fit from there ends at

@@ -646,7 +646,7 @@ def _central_start(image_points, rim_fit, options):
     central, D_c = _radial_choice(central, views, obj, image_size, options)
     rim_radius = options.rim_radius
     R = NOMINAL_RIM_RADIUS if rim_radius is None else float(rim_radius)
-    if central is None or not central.xi < XI_NOT_HYPERBOLIC:
+    if central is None or not 0.0 < central.xi < XI_NOT_HYPERBOLIC:  # (no hyperboloid)
         return _generic(central, error, views, obj, rim_fit, R, options)
     xi = central.xi
     warns = []
@@ -673,12 +673,13 @@ def _scale_assumed(R, shape):
 
 def _generic(central, error, views, obj, rim_fit, R, options):
     """The generic start (:mod:`.any_start`) where Mei's model gives no hyperboloid
-    (``central`` None, or ``xi >= XI_NOT_HYPERBOLIC``): ``(central, GenericStart, mirror,
-    None, warnings)``, the :class:`.any_start.GenericStart` in ``K``'s place."""
+    (``central`` None, ``xi <= 0`` or ``xi >= XI_NOT_HYPERBOLIC``): ``(central,
+    GenericStart, mirror, None, warnings)``, the :class:`.any_start.GenericStart` in ``K``'s
+    place."""
     why = (
         f"Mei's central model fails ({error})"
         if central is None
-        else f"Mei's central model gives xi = {central.xi:.2f}, which no hyperboloid has (< 1)"
+        else f"Mei's central model gives xi = {central.xi:.2f}, which no hyperboloid has (0 to 1)"
     )
     if len(views) < 3:  # no central model of any kind is fitted from fewer boards
         raise ValueError(
