@@ -332,10 +332,11 @@ class Refinement:
         ``(cue, why)``: the rim's chi-square rise when the cue joined, or its own residual.
     skipped_cues : tuple of (str, str)
         ``(cue, why)``: cues not tried in the refinement (not a disagreement).
-    uncertainty : Uncertainty
+    uncertainty : Uncertainty or None
         A posteriori (:func:`.refine.profile_uncertainty`): rows weighted by their observed RMS
         and its correlation; first order, widened to the cost's own region where that reaches
-        farther (near alignment), bounded by the chosen posture's twin.
+        farther (near alignment), bounded by the chosen posture's twin. None for a start
+        (:func:`refinement_step` with ``uncertainty=False``).
     circle : ReflectionCircle or None
         The reflection's circle under the final posture (when the cue was given).
     """
