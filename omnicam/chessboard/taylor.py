@@ -99,63 +99,46 @@ def _camera_to_pixels(th, X, scale, qmax) -> FloatArray:
 
 # -- the linear calibration (Scaramuzza et al. 2006, section 4) -------------------------------
 def _view_rows(s, obj) -> tuple[FloatArray, FloatArray]:
-    """The views' ``h = (r11, r12, r21, r22, t1, t2)`` ``(..., V, 6)`` and their ``(r31,
-    r32)`` ``(..., V, 2)`` up to a common sign per view, from the third row of ``s x P = 0``:
-    ``u P2 - v P1 = 0`` (eq. 8); ``s`` ``(..., V, N, 2)``, every view's points of the board
-    ``obj`` (leading axes: centre candidates).
+    """One view's ``h = (r11, r12, r21, r22, t1, t2)`` and its ``(r31, r32)`` up to a common
+    sign, from the third row of ``s x P = 0``: ``u P2 - v P1 = 0`` (eq. 8).
 
     The scale is fixed by ``|r1| = |r2| = 1``, ``r1 . r2 = 0`` (which give ``r31^2`` as the
     positive root of a quadratic), the sign by the board lying on the side of its image points.
     """
-    u, v = s[..., 0], s[..., 1]
+    u, v = s.T
     X, Y = obj[:, 0], obj[:, 1]
-    M = np.stack([-v * X, -v * Y, u * X, u * Y, -v, u], axis=-1)
-    h = np.linalg.svd(M, full_matrices=False)[2][..., -1, :]
-    r11, r12, r21, r22 = h[..., 0], h[..., 1], h[..., 2], h[..., 3]
+    h = np.linalg.svd(np.c_[-v * X, -v * Y, u * X, u * Y, -v, u])[2][-1]
+    r11, r12, r21, r22 = h[:4]
     C = -(r11 * r12 + r21 * r22)
     B = r12**2 + r22**2 - r11**2 - r21**2
     x = (B + np.sqrt(B * B + 4 * C * C)) / 2  # r31^2
-    tilted = x > 1e-12 * (B * B + 1)
-    root = np.sqrt(np.where(tilted, x, 1.0))
-    with np.errstate(invalid="ignore"):  # (B > 0 there only for a degenerate view)
-        r3 = np.where(
-            tilted[..., None],
-            np.stack([root, C / root], axis=-1),
-            np.stack([np.zeros_like(B), np.sqrt(-B)], axis=-1),
-        )
+    if x > 1e-12 * (B * B + 1):
+        r3 = np.array([np.sqrt(x), C / np.sqrt(x)])
+    else:
+        r3 = np.array([0.0, np.sqrt(-B)])
     lam = 1 / np.sqrt(r11**2 + r21**2 + x)
-    h, r3 = h * lam[..., None], r3 * lam[..., None]
-    P1 = h[..., 0:1] * X + h[..., 1:2] * Y + h[..., 4:5]
-    P2 = h[..., 2:3] * X + h[..., 3:4] * Y + h[..., 5:6]
-    flip = np.sum(u * P1 + v * P2, axis=-1) < 0
-    h[flip] = -h[flip]
+    h, r3 = h * lam, r3 * lam
+    if np.sum(u * (h[0] * X + h[1] * Y + h[4]) + v * (h[2] * X + h[3] * Y + h[5])) < 0:
+        h = -h
     return h, r3
 
 
 def _view_system(s, obj, h, r3, degree):
-    """The views' rows of the second linear step (eq. 12-14): ``v (W + t3) - F P2 = 0`` and
-    ``F P1 - u (W + t3) = 0`` with ``W = r31 X + r32 Y``, as ``A b + a t3 = y`` per view;
-    returns ``(A, a, y)`` (``(..., V, 2N, D)``, ``(..., V, 2N)``, ``(..., V, 2N)``) and the
-    normal-equation pieces with each view's ``t3`` eliminated (``(..., V, D, D)``, ``(..., V,
-    D)``)."""
+    """One view's rows of the second linear step (eq. 12-14): ``v (W + t3) - F P2 = 0`` and
+    ``F P1 - u (W + t3) = 0`` with ``W = r31 X + r32 Y``, as ``A b + a t3 = y``; returns
+    ``(A, a, y)`` and the normal-equation pieces with ``t3`` eliminated."""
     X, Y = obj[:, 0], obj[:, 1]
-    P1 = h[..., 0:1] * X + h[..., 1:2] * Y + h[..., 4:5]
-    P2 = h[..., 2:3] * X + h[..., 3:4] * Y + h[..., 5:6]
-    W = r3[..., 0:1] * X + r3[..., 1:2] * Y
-    q = np.hypot(s[..., 0], s[..., 1])
-    Bq = np.stack([np.ones_like(q)] + [q**k for k in range(2, degree + 1)], axis=-1)
-    A = np.concatenate([-P2[..., None] * Bq, P1[..., None] * Bq], axis=-2)
-    a = np.concatenate([s[..., 1], -s[..., 0]], axis=-1)
-    y = np.concatenate([-s[..., 1] * W, s[..., 0] * W], axis=-1)
-    aa = np.einsum("...n,...n->...", a, a)
-    aA = np.einsum("...n,...nd->...d", a, A)
-    Ap = A - a[..., :, None] * aA[..., None, :] / aa[..., None, None]
-    yp = y - a * (np.einsum("...n,...n->...", a, y) / aa)[..., None]
-    return (
-        (A, a, y),
-        np.einsum("...nd,...ne->...de", Ap, Ap),
-        np.einsum("...nd,...n->...d", Ap, yp),
-    )
+    P1 = h[0] * X + h[1] * Y + h[4]
+    P2 = h[2] * X + h[3] * Y + h[5]
+    W = r3[0] * X + r3[1] * Y
+    q = np.hypot(*s.T)
+    Bq = np.stack([np.ones_like(q)] + [q**k for k in range(2, degree + 1)], axis=1)
+    A = np.r_[-P2[:, None] * Bq, P1[:, None] * Bq]
+    a = np.r_[s[:, 1], -s[:, 0]]
+    y = np.r_[-s[:, 1] * W, s[:, 0] * W]
+    Ap = A - np.outer(a, a @ A) / (a @ a)
+    yp = y - a * (a @ y) / (a @ a)
+    return (A, a, y), Ap.T @ Ap, Ap.T @ yp
 
 
 def _choose_signs(M) -> FloatArray:
@@ -176,10 +159,11 @@ def _choose_signs(M) -> FloatArray:
     return sg
 
 
-def _rotations(H, R3, signs) -> FloatArray:
-    """The views' rotations ``(V, 3, 3)``: ``r1, r2`` of each (:func:`_view_rows`' ``H`` and
-    ``R3``, ``r3`` signed by ``signs``) completed and projected onto a rotation, all at once."""
-    R3 = R3 * np.asarray(signs, np.float64)[:, None]
+def _rotations(views, signs) -> FloatArray:
+    """The views' rotations ``(V, 3, 3)``: ``r1, r2`` of each (:func:`_view_rows`, ``r3``
+    signed by ``signs``) completed and projected onto a rotation, all at once."""
+    H = np.array([h for h, _ in views])
+    R3 = np.array([r3 for _, r3 in views]) * np.asarray(signs, np.float64)[:, None]
     r1 = np.stack([H[:, 0], H[:, 2], R3[:, 0]], axis=1)
     r2 = np.stack([H[:, 1], H[:, 3], R3[:, 1]], axis=1)
     U, _, Wt = np.linalg.svd(np.stack([r1, r2, np.cross(r1, r2)], axis=2))
@@ -190,31 +174,23 @@ def _rotations(H, R3, signs) -> FloatArray:
 def _linear(points, obj, centre, degree, scale) -> tuple[FloatArray, FloatArray, FloatArray]:
     """:func:`linear_init` with the poses as rotations ``(V, 3, 3)`` and translations
     ``(V, 3)``: ``(th, Rs, ts)``."""
-    return _linear_at(points, obj, np.asarray(centre, np.float64)[None], degree, scale)[0]
-
-
-def _linear_at(
-    points, obj, centres, degree, scale
-) -> list[tuple[FloatArray, FloatArray, FloatArray]]:
-    """:func:`_linear` at each of the ``centres`` ``(C, 2)``, their views' linear systems
-    built all at once: a list of ``(th, Rs, ts)``."""
-    pts = np.asarray(points, np.float64)  # (V, N, 2): one board
-    ss = (pts[None] - centres[:, None, None, :]) / scale
-    Hs, R3s = _view_rows(ss, obj)
-    (As, a_s, ys), Nss, Gss = _view_system(ss, obj, Hs, R3s, degree)
-    out = []
-    for centre, H, R3, A, a, y, Ns, Gs in zip(centres, Hs, R3s, As, a_s, ys, Nss, Gss):
-        N = Ns.sum(axis=0)
-        Gm = Gs.T
-        sg = _choose_signs(Gm.T @ np.linalg.solve(N, Gm))
-        b = np.linalg.solve(N, Gm @ sg)
-        res = sg[:, None] * y - np.einsum("vnd,d->vn", A, b)
-        t3 = np.einsum("vn,vn->v", a, res) / np.einsum("vn,vn->v", a, a)
-        if b[0] > 0:  # gauge: a0 < 0
-            b, t3, sg = -b, -t3, -sg
-        ts = np.column_stack([H[:, 4], H[:, 5], t3])
-        out.append((np.r_[centre, 1.0, 0.0, 0.0, b], _rotations(H, R3, sg), ts))
-    return out
+    ss = [(p - centre) / scale for p in points]
+    views = [_view_rows(s, obj) for s in ss]
+    N = 0.0
+    G, parts = [], []
+    for s, (h, r3) in zip(ss, views):
+        part, Nj, gj = _view_system(s, obj, h, r3, degree)
+        N = N + Nj
+        G.append(gj)
+        parts.append(part)
+    Gm = np.array(G).T
+    sg = _choose_signs(Gm.T @ np.linalg.solve(N, Gm))
+    b = np.linalg.solve(N, Gm @ sg)
+    t3 = np.array([a @ (g * y - A @ b) / (a @ a) for (A, a, y), g in zip(parts, sg)])
+    if b[0] > 0:  # gauge: a0 < 0
+        b, t3, sg = -b, -t3, -sg
+    ts = np.stack([[h[4], h[5], tz] for (h, _), tz in zip(views, t3)])
+    return np.r_[centre, 1.0, 0.0, 0.0, b], _rotations(views, sg), ts
 
 
 def linear_init(points, obj, centre, degree, scale) -> tuple[FloatArray, list]:
@@ -318,18 +294,17 @@ def find_centre(points, obj, image_size, degree, scale, qmax) -> FloatArray:
     """The toolbox's centre search (Scaramuzza et al. 2006, section 4.2): the linear
     calibration at each centre of a grid (:data:`CENTRE_GRID` points a side, half-width
     :data:`CENTRE_SPAN` of the shorter side, about the image centre), keep the one of least
-    reprojection error, shrink the grid around it (:data:`CENTRE_LEVELS` times); a level's
-    candidates and views are set up at once (:func:`_linear_at`), each candidate's poses kept
-    as rotation matrices."""
+    reprojection error, shrink the grid around it (:data:`CENTRE_LEVELS` times). (Each
+    candidate's poses stay rotation matrices, all views at once: 150 candidates of
+    KaidanOmni's 16 views cost 0.6 s instead of 2."""
     half = CENTRE_GRID // 2
     data = (points, obj, scale, qmax)
     best = np.array(image_size, np.float64) / 2
     step = CENTRE_SPAN * min(image_size) / half
     for _ in range(CENTRE_LEVELS):
         offsets = range(-half, half + 1)
-        cands = np.array([best + step * np.r_[i, j] for i in offsets for j in offsets])
-        fits = _linear_at(points, obj, cands, degree, scale)
-        errs = [_rms_of_rotations(th, Rs, ts, *data) for th, Rs, ts in fits]
+        cands = [best + step * np.r_[i, j] for i in offsets for j in offsets]
+        errs = [_rms_of_rotations(*_linear(points, obj, c, degree, scale), *data) for c in cands]
         best = cands[int(np.argmin(errs))]
         step /= half + 1
     return best
