@@ -294,9 +294,9 @@ def find_centre(points, obj, image_size, degree, scale, qmax) -> FloatArray:
     """The toolbox's centre search (Scaramuzza et al. 2006, section 4.2): the linear
     calibration at each centre of a grid (:data:`CENTRE_GRID` points a side, half-width
     :data:`CENTRE_SPAN` of the shorter side, about the image centre), keep the one of least
-    reprojection error, shrink the grid around it (:data:`CENTRE_LEVELS` times). (Each
-    candidate's poses stay rotation matrices, all views at once: 150 candidates of
-    KaidanOmni's 16 views cost 0.6 s instead of 2."""
+    reprojection error, shrink the grid around it (:data:`CENTRE_LEVELS` times); each
+    candidate's poses stay rotation matrices, all views at once (150 candidates of
+    KaidanOmni's 16 views cost 0.6 s instead of 2)."""
     half = CENTRE_GRID // 2
     data = (points, obj, scale, qmax)
     best = np.array(image_size, np.float64) / 2

@@ -21,9 +21,9 @@ all boards on one side of the mirror) exits 1 without a file, as one from one im
 (``--force`` writes it anyway, and its verdict says so).
 
 A mirror given (``--mirror`` for a hyperboloid, or any mirror of :mod:`.mirror_args`) is a start
-and sets the scale: a hyperboloid's ``a, b`` are held unless ``--refine-mirror-shape``, every
-other mirror's shape is estimated from it (its data sheet's ``R``, ``k`` and terms start the
-adjustment; its rim's radius is held). Without one the mirror is estimated from the boards.
+and sets the scale (its rim's radius is held): its shape (a hyperboloid's ``a, b``, an
+asphere's ``R``, ``k`` and terms) is held unless ``--refine-mirror-shape``, which estimates it
+from the data sheet's values. Without one the mirror is estimated from the boards.
 
 ``--corners FILE`` gives the corners found by another tool, in OpenCV's order (row by row of
 ``COLSxROWS`` inner corners): JSON, an object ``{"image file name": [[x, y], ...] or null}`` or a
@@ -121,8 +121,8 @@ def add_arguments(parser):
     p.add_argument(
         "--refine-mirror-shape",
         action="store_true",
-        help="with --chessboard and --mirror: also estimate the hyperboloid's a and b (RIM "
-        "fixes the scale); any other mirror's shape is always estimated",
+        help="with --chessboard and a mirror given: also estimate its shape (a hyperboloid's "
+        "a and b, an asphere's R, k and terms; its rim's radius fixes the scale)",
     )
 
 
