@@ -75,6 +75,7 @@ from .adjustment import AdjustmentModel
 from .board_pose import object_points
 from .family import chi2_limit, family_step, hyperboloid_term_check
 from .fit_steps import SHAPE_REJECT_CHI2, report_step, rounds_step, shape_check_step, shape_free
+from .focal_starts import Fitted, focal_starts_step
 from .fold_rays import fold_check
 from .heldout import HeldOut, cross_validate
 from .lens_model import AUTO_CANDIDATES, AUTO_FOLDS, LensChoice, choose
@@ -347,6 +348,18 @@ def _fit(
         rounds, family = hyperboloid_term_check(rounds, options)
         rounds, family, start = _other_start(options, prepared, rounds, family, model, progress)
     camera, report = report_step(rounds, start, lens.note, options)
+    if options.mirror is None and aspheric and options.K is None:  # other minima along f
+
+        def fit_from(other: StartStep) -> Fitted:
+            other = dataclasses.replace(other, warnings=start.warnings)  # (the start's story)
+            alt = rounds_step((), rounds.boards, other, rim, model, options, progress)
+            alt, alt_family = family_step(alt, options)
+            return Fitted(alt, alt_family, other, *report_step(alt, other, lens.note, options))
+
+        first = Fitted(rounds, family, start, camera, report)
+        fitted = focal_starts_step(first, fit_from, rim, options)
+        rounds, family, start = fitted.rounds, fitted.family, fitted.start
+        camera, report = fitted.camera, fitted.report
     held = None
     if options.heldout:  # the same calibration on each fold's views, with these rim points
         rerun = dataclasses.replace(

@@ -30,7 +30,15 @@ from scipy.stats import chi2
 
 from .report import FOLDS_STATED
 
-__all__ = ["FoldRays", "P_REJECT", "fold_check", "jackknife_ray_std", "rejection_ratio"]
+__all__ = [
+    "FoldRays",
+    "P_REJECT",
+    "angles_deg",
+    "fold_check",
+    "image_grid",
+    "jackknife_ray_std",
+    "rejection_ratio",
+]
 
 #: The probability with which a linearised uncertainty that holds is rejected.
 P_REJECT = 1e-3
@@ -47,10 +55,16 @@ class FoldRays:
     rejected: bool
 
 
-def _grid(image_size) -> np.ndarray:
+def image_grid(image_size) -> np.ndarray:
+    """A grid of :data:`_GRID` by :data:`_GRID` pixels over the image, ``(N, 2)``."""
     w, h = (int(v) for v in image_size)
     u, v = np.meshgrid(np.linspace(0, w - 1, _GRID), np.linspace(0, h - 1, _GRID))
     return np.stack([u.ravel(), v.ravel()], axis=1)
+
+
+def angles_deg(d, d0) -> np.ndarray:
+    """The angles (deg) between unit rays ``d`` and ``d0``, ``(N, 3)`` each."""
+    return np.degrees(np.arccos(np.clip(np.sum(d * d0, axis=1), -1.0, 1.0)))
 
 
 def jackknife_ray_std(camera, fold_cameras, image_size) -> tuple[float, float]:
@@ -61,7 +75,7 @@ def jackknife_ray_std(camera, fold_cameras, image_size) -> tuple[float, float]:
     k = len(fold_cameras)
     if k < 2:
         return math.nan, math.nan
-    px = _grid(image_size)
+    px = image_grid(image_size)
     d0 = camera.unproject(px)[1]
     seen = np.isfinite(d0).all(axis=1)
     px, d0 = px[seen], d0[seen]
@@ -69,8 +83,7 @@ def jackknife_ray_std(camera, fold_cameras, image_size) -> tuple[float, float]:
     for cam in fold_cameras:
         d = cam.unproject(px)[1]
         ok = np.isfinite(d).all(axis=1)
-        theta = np.arccos(np.clip(np.sum(d[ok] * d0[ok], axis=1), -1.0, 1.0))
-        sq[ok] += theta**2
+        sq[ok] += np.radians(angles_deg(d[ok], d0[ok])) ** 2
         n[ok] += 1
     use = n >= 2
     if not use.any():

@@ -32,6 +32,9 @@ _SHAPE_HELD = "the mirror's shape is the central fit's"
 #: The start of the note that the rays' stated uncertainty is the held-out check's folds'
 #: (:func:`.fold_rays.fold_check`): the data's own figure, stated, not doubted.
 FOLDS_STATED = "the viewing directions' uncertainty is the held-out check's"
+#: The start of the note that the rays' stated uncertainty is the spread of the fits as good
+#: from other starts (:func:`.focal_starts.focal_starts_step`): stated, not doubted.
+STARTS_STATED = "the viewing directions' uncertainty is the spread of the fits from other starts"
 _BY_NATURE = (
     _SCALE_ASSUMED,
     _SHAPE_HELD,
@@ -172,9 +175,10 @@ class PatternReport:
     def notes(self) -> tuple[str, ...]:
         """What the data cannot fix by nature (with the mirror unknown: its scale, its shape
         and ``fx``, which trades against the shape), and that the rays' uncertainty is the
-        held-out check's folds' (:data:`FOLDS_STATED`): stated, not doubted (:meth:`verdict`
-        records them as ``notes``)."""
-        folds = tuple(w for w in self.warnings if w.startswith(FOLDS_STATED))
+        held-out check's folds' (:data:`FOLDS_STATED`) or the other starts' fits'
+        (:data:`STARTS_STATED`): stated, not doubted (:meth:`verdict` records them as
+        ``notes``)."""
+        folds = tuple(w for w in self.warnings if w.startswith((FOLDS_STATED, STARTS_STATED)))
         if not self.mirror_unknown:
             return folds
         return tuple(w for w in self.warnings if w.startswith(_BY_NATURE)) + folds

@@ -1,0 +1,145 @@
+"""Starts along the focal length: the generic route's other minima, and the rays' spread over
+them stated.
+
+The generic start (:mod:`.any_start`) takes the focal length that makes the rim subtend
+:data:`.central_start.RIM_HALF_ANGLE_DEG` (20 deg): no central model tells it. Where the views
+determine the rays weakly (behind a wide-angle lens, the rim at 35-50 deg), the adjustment's cost
+has several minima along the focal length, the lens's distortion and the mirror's shape, as
+good as each other for the data and degrees apart in the rays. The uncertainty linearised at
+the one the start leads to says nothing of the others: on ``benchmarks/bench_mirrors_hostile.py``
+behind the wide-angle lens, 5 of 18 fits stated 1.3-1.9 deg with their rays 4.2-12.5 deg off.
+
+So where the linearised uncertainty of the rays exceeds :data:`RAYS_WEAK_DEG` (median over the
+mirror's image), the same steps (the rounds of adjustment, the family's terms, the report) are
+run again from the generic start with the rim at each of :data:`RIM_ANGLES_DEG` instead
+(:func:`focal_starts_step`). The fit of the lowest robust cost is taken; the fits whose cost is
+within :func:`.family.chi2_limit` of it (the globals' count of degrees of freedom: as good for
+these views) are the others the data allow, and the rays' stated uncertainty is at least their
+spread: the largest angle between their rays and the taken fit's, median and worst over the
+mirror's image. The report says so in a note (:data:`.report.STARTS_STATED`). Each start costs
+about one more fit, only on rigs whose rays the views determine to worse than
+:data:`RAYS_WEAK_DEG`.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+from collections.abc import Callable
+
+import numpy as np
+
+from .._progress import say
+from ..calibration.plausibility import rim_radius_px
+from ..camera import MisalignedCatadioptricCamera
+from .central_start import RIM_HALF_ANGLE_DEG
+from .family import chi2_limit
+from .fit_steps import Rounds, mean_cost
+from .fold_rays import angles_deg, image_grid
+from .report import STARTS_STATED, PatternReport
+from .steps import PatternOptions, RimStep, StartStep, generic_start_step
+
+__all__ = ["RAYS_WEAK_DEG", "RIM_ANGLES_DEG", "Fitted", "focal_starts_step"]
+
+#: The rim's half-angle from the camera (deg) at which the other starts put it: from a long lens
+#: (10) to a wide-angle one (50); the default start's is 20.
+RIM_ANGLES_DEG = (10.0, 35.0, 50.0)
+#: A linearised ray uncertainty (median, deg) above this: the rays weakly determined, the
+#: other starts run (near-pinhole renders state 0.13-0.38 deg, wide-angle ones 1.0-3.4).
+RAYS_WEAK_DEG = 0.5
+
+
+@dataclasses.dataclass(frozen=True)
+class Fitted:
+    """One start's fit: its rounds, the family's sentence, the start, the camera and report."""
+
+    rounds: Rounds
+    family: str
+    start: StartStep
+    camera: MisalignedCatadioptricCamera
+    report: PatternReport
+
+
+def _global_dof(fit) -> int:
+    """The free global parameters of an adjustment (the boards' poses not counted)."""
+    return sum(1 for n in fit.adj.names if n not in fit.adj.fixed)
+
+
+def _chi2(fit, best) -> float:
+    """How much worse ``fit``'s robust cost is than ``best``'s, in ``best``'s residual
+    variances (``2 (cost - cost_best) / sigma^2``)."""
+    sol = best.sol
+    dof = max(len(sol.fun) - len(sol.x), 1)
+    sigma2 = 2.0 * float(sol.cost) / dof
+    return 2.0 * (float(fit.sol.cost) - float(sol.cost)) / sigma2
+
+
+def _spread_deg(camera, others, image_size) -> tuple[float, float]:
+    """The largest angle (deg) between ``camera``'s rays and each of ``others``', over the
+    image grid's pixels that ``camera`` sees: ``(median, worst)``; 0 without others."""
+    px = image_grid(image_size)
+    d0 = camera.unproject(px)[1]
+    seen = np.isfinite(d0).all(axis=1)
+    px, d0 = px[seen], d0[seen]
+    worst = np.zeros(len(px))
+    for cam in others:
+        worst = np.fmax(worst, angles_deg(cam.unproject(px)[1], d0))
+    if not len(worst):
+        return 0.0, 0.0
+    return float(np.median(worst)), float(np.max(worst))
+
+
+def focal_starts_step(
+    first: Fitted,
+    fit_from: Callable[[StartStep], Fitted],
+    rim: RimStep,
+    options: PatternOptions,
+) -> Fitted:
+    """``first`` (the generic start's fit) where its rays are determined to
+    :data:`RAYS_WEAK_DEG` or better; else the fit of the lowest robust cost over it and the
+    starts with the rim at :data:`RIM_ANGLES_DEG` (``fit_from(start)`` runs the steps from a
+    start; one that fails is left out), its rays' uncertainty at least the spread of the fits
+    as good (module docstring), with a note."""
+    if not first.report.ray_std_deg[0] > RAYS_WEAK_DEG:
+        return first
+    say(f"the rays weakly determined: the rig fitted from {len(RIM_ANGLES_DEG)} other starts")
+    angle_of = {id(first): RIM_HALF_ANGLE_DEG}
+    fits = [first]
+    for angle in RIM_ANGLES_DEG:
+        try:
+            fits.append(fit_from(_start_at(first, rim, options, angle)))
+        except ValueError:
+            continue
+        angle_of[id(fits[-1])] = angle
+    used = list(first.rounds.fit.used)
+    fits = [f for f in fits if list(f.rounds.fit.used) == used]  # (the same residuals)
+    best = min(fits, key=lambda f: mean_cost(f.rounds.fit.sol))
+    limit = chi2_limit(_global_dof(best.rounds.fit))
+    kept = [f for f in fits if f is not best and _chi2(f.rounds.fit, best.rounds.fit) <= limit]
+    spread = _spread_deg(best.camera, [f.camera for f in kept], options.image_size)
+    lin = best.report.ray_std_deg
+    ray = (max(lin[0], spread[0]), max(lin[1], spread[1]))
+    note = (
+        f"{STARTS_STATED} ({ray[0]:.3f} deg, median over the mirror's image; worst "
+        f"{ray[1]:.3f} deg): the linearised uncertainty ({lin[0]:.3f} deg) says the views "
+        f"determine the rays weakly, so the rig was fitted from {len(fits) - 1} other start(s) "
+        f"(the rim at {', '.join(f'{a:g}' for a in RIM_ANGLES_DEG)} deg from the camera) and "
+        f"the fit of the lowest cost taken (from {angle_of[id(best)]:g} deg); {len(kept)} "
+        f"other fit(s) end within chi-square {limit:.1f} of it, their "
+        f"rays up to {spread[0]:.3f} deg (median; worst {spread[1]:.3f} deg) from its: give K "
+        f"(the camera calibrated alone) or the mirror to narrow it"
+    )
+    report = dataclasses.replace(
+        best.report, ray_std_deg=ray, warnings=(*best.report.warnings, note)
+    )
+    return dataclasses.replace(best, report=report)
+
+
+def _start_at(first: Fitted, rim: RimStep, options: PatternOptions, angle: float) -> StartStep:
+    """The generic start with the rim at ``angle`` deg from the camera (its focal length
+    ``rho_rim / tan(angle)``, the principal point the Taylor model's centre)."""
+    start = first.start
+    K = np.array(start.camera.K, np.float64)
+    K[0, 0] = K[1, 1] = rim_radius_px(rim.fit) / math.tan(math.radians(angle))
+    given = dataclasses.replace(options, K=K)
+    return generic_start_step(first.rounds.boards, rim, given, start.central)

@@ -1,0 +1,103 @@
+"""Starts along the focal length (omnicam.chessboard.focal_starts): where the views determine the
+rays weakly, the rig is fitted from other starts, the fit of the lowest cost taken, and the
+rays' stated uncertainty is at least the spread of the fits as good."""
+
+import dataclasses
+import math
+import types
+
+import numpy as np
+import pytest
+
+import omnicam.chessboard.focal_starts as fs
+from omnicam.chessboard.report import STARTS_STATED
+
+SIZE = (320, 240)
+N_RESIDUALS = 1000
+GLOBALS = ("fx", "fy", "cx", "cy", "k1", "k2", "R", "k")
+
+
+class _Pinhole:
+    """A camera whose rays are a pinhole's, each turned by ``deg`` towards the x axis."""
+
+    def __init__(self, deg=0.0):
+        self.a = math.radians(deg)
+
+    def unproject(self, px):
+        d = np.column_stack([px[:, 0] - 160.0, px[:, 1] - 120.0, np.full(len(px), 200.0)])
+        d /= np.linalg.norm(d, axis=1, keepdims=True)
+        e = np.array([1.0, 0.0, 0.0]) - d[:, :1] * d  # the x axis, square to each ray
+        e /= np.linalg.norm(e, axis=1, keepdims=True)
+        return np.zeros_like(d), math.cos(self.a) * d + math.sin(self.a) * e
+
+
+@dataclasses.dataclass(frozen=True)
+class _Report:
+    ray_std_deg: tuple
+    warnings: tuple = ()
+
+
+def _fitted(chi2=0.0, deg=0.0, ray=(1.0, 2.0), used=(0, 1, 2)):
+    """A fit whose robust cost is ``chi2`` residual variances (of a fit of cost 1000 over
+    1000 residuals) above that fit's, its rays turned by ``deg``."""
+    sol = types.SimpleNamespace(
+        cost=N_RESIDUALS / 2.0 * (1.0 + chi2 / N_RESIDUALS),
+        fun=np.zeros(N_RESIDUALS),
+        x=np.zeros(len(GLOBALS)),
+    )
+    adj = types.SimpleNamespace(names=GLOBALS, fixed=set())
+    fit = types.SimpleNamespace(sol=sol, adj=adj, used=list(used))
+    rounds = types.SimpleNamespace(fit=fit, boards=None)
+    return fs.Fitted(rounds, "", None, _Pinhole(deg), _Report(ray))
+
+
+def _options():
+    return types.SimpleNamespace(image_size=SIZE)
+
+
+def _run(first, others, monkeypatch):
+    """``focal_starts_step`` with the other starts' fits ``others`` (an exception: that start
+    fails), and the starts it asked for."""
+    asked = []
+    monkeypatch.setattr(fs, "_start_at", lambda first, rim, options, angle: angle)
+
+    def fit_from(angle):
+        asked.append(angle)
+        got = others[len(asked) - 1]
+        if isinstance(got, Exception):
+            raise got
+        return got
+
+    return fs.focal_starts_step(first, fit_from, None, _options()), asked
+
+
+def test_rays_determined_well_enough_are_not_fitted_again(monkeypatch):
+    first = _fitted(ray=(fs.RAYS_WEAK_DEG, 1.0))
+    out, asked = _run(first, [], monkeypatch)
+    assert out is first and asked == []
+
+
+def test_weak_rays_are_fitted_from_every_other_start_and_the_lowest_cost_taken(monkeypatch):
+    first = _fitted(chi2=5.0)
+    better = _fitted(chi2=0.0, deg=2.0, ray=(0.9, 1.5))
+    out, asked = _run(first, [_fitted(chi2=400.0), better, _fitted(chi2=900.0)], monkeypatch)
+    assert asked == list(fs.RIM_ANGLES_DEG)
+    assert out.camera is better.camera
+    assert out.report.warnings[-1].startswith(STARTS_STATED)
+
+
+def test_a_fit_as_good_elsewhere_widens_the_stated_uncertainty_to_its_spread(monkeypatch):
+    """The first fit's rays 3 deg from the best's, its cost within chi-square (8 dof, p =
+    0.001: 26.1) of it: stated 3 deg, not the linearised 1."""
+    first = _fitted(chi2=20.0, deg=3.0)
+    out, _ = _run(first, [_fitted(chi2=0.0), ValueError("x"), ValueError("y")], monkeypatch)
+    assert out.report.ray_std_deg == pytest.approx((3.0, 3.0), abs=1e-6)
+
+
+def test_a_fit_worse_beyond_chance_or_on_other_views_does_not_widen_it(monkeypatch):
+    first = _fitted(chi2=0.0)
+    others = [_fitted(chi2=30.0, deg=5.0), _fitted(chi2=-50.0, deg=9.0, used=(0, 1)), ValueError()]
+    out, _ = _run(first, others, monkeypatch)
+    assert out.camera is first.camera
+    assert out.report.ray_std_deg == pytest.approx((1.0, 2.0))
+    assert "0 other fit(s) end within chi-square 26.1" in out.report.warnings[-1]
