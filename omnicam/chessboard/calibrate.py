@@ -42,6 +42,9 @@ The steps (:mod:`.steps`, :mod:`.fit_steps`):
    (:func:`.fit_steps.shape_check_step`); the mirror's family tested by the data: the
    hyperboloid against the conic with a polynomial term, an asphere's terms one more at a
    time (likelihood-ratio tests, :mod:`.family`; the report's ``family`` says which and why);
+   where the generic fit's rays are weakly determined, the same steps from other starts along
+   the focal length, the lowest cost taken and the spread of the fits as good stated
+   (:mod:`.focal_starts`);
 9. a :class:`.report.PatternReport` (:func:`.fit_steps.report_step`): RMS overall and per
    view, poses, standard deviations of the parameters and of the viewing directions, the
    single-image route's plausibility checks, warnings (:mod:`.report_warnings`, one policy
