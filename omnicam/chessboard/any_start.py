@@ -47,14 +47,18 @@ class GenericStart:
     warnings: tuple[str, ...]
 
 
-def generic_start(views, obj, image_size, rim_fit, rim_radius, K=None) -> GenericStart:
+def generic_start(
+    views, obj, image_size, rim_fit, rim_radius, K=None, taylor: TaylorFit | None = None
+) -> GenericStart:
     """The aligned aspheric rig the corners' Taylor model implies (module docstring).
 
     ``views``: each view's ``(N, 2)`` corners (3 or more); ``rim_fit``: the rim's ellipse
     (its mean radius is the rim's image); ``rim_radius``: the scale; ``K``: a given camera
-    matrix (its focal length fixes ``f``, its principal point is kept). ``ValueError`` when the
-    Taylor model makes no mirror."""
-    taylor = fit_taylor(views, obj, image_size)
+    matrix (its focal length fixes ``f``, its principal point is kept); ``taylor``: the
+    views' Taylor model, if fitted already. ``ValueError`` when the Taylor model makes no
+    mirror."""
+    if taylor is None:
+        taylor = fit_taylor(views, obj, image_size)
     f = None
     if K is not None:
         K = validate_K(K)

@@ -142,4 +142,4 @@ def _start_at(first: Fitted, rim: RimStep, options: PatternOptions, angle: float
     K = np.array(start.camera.K, np.float64)
     K[0, 0] = K[1, 1] = rim_radius_px(rim.fit) / math.tan(math.radians(angle))
     given = dataclasses.replace(options, K=K)
-    return generic_start_step(first.rounds.boards, rim, given, start.central)
+    return generic_start_step(first.rounds.boards, rim, given, start.central, start.taylor)

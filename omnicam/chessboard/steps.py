@@ -599,13 +599,17 @@ def start_step(boards: Boards, rim: RimStep, options: PatternOptions) -> StartSt
     return StartStep(cam0, mirror, central, tuple(warns), taylor)
 
 
-def generic_start_step(boards: Boards, rim: RimStep, options: PatternOptions, central):
+def generic_start_step(
+    boards: Boards, rim: RimStep, options: PatternOptions, central, taylor=None
+) -> StartStep:
     """The generic start (:mod:`.any_start`) whatever Mei's ``central`` fit gives: the
-    other start where that fit's ``xi`` is at a hyperboloid's edge (:mod:`.calibrate`)."""
+    other start where that fit's ``xi`` is at a hyperboloid's edge (:mod:`.calibrate`), or
+    from another focal length (:mod:`.focal_starts`, with the Taylor model ``taylor`` of the
+    first start)."""
     views = _full_views(boards.points, options)
     R = NOMINAL_RIM_RADIUS if options.rim_radius is None else float(options.rim_radius)
     central, gen, mirror, _, warns = _generic(
-        central, "", views, _obj(options), rim.fit, R, options
+        central, "", views, _obj(options), rim.fit, R, options, taylor
     )
     return StartStep(gen.camera, mirror, central, tuple(warns), gen.taylor)
 
@@ -671,7 +675,7 @@ def _scale_assumed(R, shape):
     )
 
 
-def _generic(central, error, views, obj, rim_fit, R, options):
+def _generic(central, error, views, obj, rim_fit, R, options, taylor=None):
     """The generic start (:mod:`.any_start`) where Mei's model gives no hyperboloid
     (``central`` None, ``xi <= 0`` or ``xi >= XI_NOT_HYPERBOLIC``): ``(central,
     GenericStart, mirror, None, warnings)``, the :class:`.any_start.GenericStart` in ``K``'s
@@ -688,7 +692,7 @@ def _generic(central, error, views, obj, rim_fit, R, options):
             f"or give the mirror (a, b, rim_radius) as a start"
         )
     try:
-        gen = generic_start(views, obj, options.image_size, rim_fit, R, options.K)
+        gen = generic_start(views, obj, options.image_size, rim_fit, R, options.K, taylor)
     except ValueError as e:
         raise ValueError(
             f"the rig could not be started without a mirror: {why}, and the Taylor model's "
