@@ -355,7 +355,8 @@ def _fit(
 
         def fit_from(other: StartStep) -> Fitted:
             other = dataclasses.replace(other, warnings=start.warnings)  # (the start's story)
-            alt = rounds_step((), rounds.boards, other, rim, model, options, progress)
+            same = dataclasses.replace(options, drop_outlier_views=False)  # (costs compared)
+            alt = rounds_step((), rounds.boards, other, rim, model, same, progress)
             alt, alt_family = family_step(alt, options)
             return Fitted(alt, alt_family, other, *report_step(alt, other, lens.note, options))
 
