@@ -356,9 +356,11 @@ def _fit(
         def fit_from(other: StartStep) -> Fitted:
             other = dataclasses.replace(other, warnings=start.warnings)  # (the start's story)
             same = dataclasses.replace(options, drop_outlier_views=False)  # (costs compared)
-            alt = rounds_step((), rounds.boards, other, rim, model, same, progress)
-            alt, alt_family = family_step(alt, options)
-            return Fitted(alt, alt_family, other, *report_step(alt, other, lens.note, options))
+            with _warnings.catch_warnings():  # (a fit not taken says nothing)
+                _warnings.simplefilter("ignore")
+                alt = rounds_step((), rounds.boards, other, rim, model, same, progress)
+                alt, alt_family = family_step(alt, options)
+                return Fitted(alt, alt_family, other, *report_step(alt, other, lens.note, same))
 
         first = Fitted(rounds, family, start, camera, report)
         fitted = focal_starts_step(first, fit_from, rim, options)

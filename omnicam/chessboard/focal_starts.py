@@ -12,13 +12,15 @@ behind the wide-angle lens, 5 of 18 fits stated 1.3-1.9 deg with their rays 4.2-
 So where the linearised uncertainty of the rays exceeds :data:`RAYS_WEAK_DEG` (median over the
 mirror's image), the same steps (the rounds of adjustment, the family's terms, the report) are
 run again from the generic start with the rim at each of :data:`RIM_ANGLES_DEG` instead
-(:func:`focal_starts_step`). The fit of the lowest robust cost is taken; the fits whose cost is
+(:func:`focal_starts_step`), on the first fit's views (none dropped, so that the costs
+compare). The fit of the lowest robust cost is taken; the fits whose cost is
 within :func:`.family.chi2_limit` of it (the globals' count of degrees of freedom: as good for
 these views) are the others the data allow, and the rays' stated uncertainty is at least their
 spread: the largest angle between their rays and the taken fit's, median and worst over the
 mirror's image. The report says so in a note (:data:`.report.STARTS_STATED`). Each start costs
 about one more fit, only on rigs whose rays the views determine to worse than
-:data:`RAYS_WEAK_DEG`.
+:data:`RAYS_WEAK_DEG`. Where every start ends in the same valley the statement is the
+linearised one, and the rays can still be off by more (docs/benchmarks.md: 2 of those 18).
 """
 
 from __future__ import annotations
