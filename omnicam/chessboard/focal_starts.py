@@ -128,8 +128,7 @@ def focal_starts_step(
         f"(the rim at {', '.join(f'{a:g}' for a in RIM_ANGLES_DEG)} deg from the camera) and "
         f"the fit of the lowest cost taken (from {angle_of[id(best)]:g} deg); {len(kept)} "
         f"other fit(s) end within chi-square {limit:.1f} of it, their "
-        f"rays up to {spread[0]:.3f} deg (median; worst {spread[1]:.3f} deg) from its: the "
-        f"mirror's data sheet (its shape then held) narrows it"
+        f"rays up to {spread[0]:.3f} deg (median; worst {spread[1]:.3f} deg) from its"
     )
     report = dataclasses.replace(
         best.report, ray_std_deg=ray, warnings=(*best.report.warnings, note)
