@@ -352,13 +352,18 @@ def _fit(
         rounds, family, start = _other_start(options, prepared, rounds, family, model, progress)
     camera, report = report_step(rounds, start, lens.note, options)
     if options.mirror is None and aspheric and options.K is None:  # other minima along f
+        used = set(rounds.fit.used)  # the other starts see these views, none dropped
+        on_used = Boards(
+            tuple(p if i in used else None for i, p in enumerate(rounds.boards.points)),
+            rounds.boards.found_by,
+        )
 
         def fit_from(other: StartStep) -> Fitted:
             other = dataclasses.replace(other, warnings=start.warnings)  # (the start's story)
             same = dataclasses.replace(options, drop_outlier_views=False)  # (costs compared)
             with _warnings.catch_warnings():  # (a fit not taken says nothing)
                 _warnings.simplefilter("ignore")
-                alt = rounds_step((), rounds.boards, other, rim, model, same, progress)
+                alt = rounds_step((), on_used, other, rim, model, same, progress)
                 alt, alt_family = family_step(alt, options)
                 return Fitted(alt, alt_family, other, *report_step(alt, other, lens.note, same))
 
