@@ -78,7 +78,7 @@ from .adjustment import AdjustmentModel
 from .board_pose import object_points
 from .family import chi2_limit, family_step, hyperboloid_term_check
 from .fit_steps import SHAPE_REJECT_CHI2, report_step, rounds_step, shape_check_step, shape_free
-from .focal_starts import Fitted, focal_starts_step
+from .focal_starts import Fitted, fitter, focal_starts_step
 from .fold_rays import fold_check
 from .heldout import HeldOut, cross_validate
 from .lens_model import AUTO_CANDIDATES, AUTO_FOLDS, LensChoice, choose
@@ -352,22 +352,8 @@ def _fit(
         rounds, family, start = _other_start(options, prepared, rounds, family, model, progress)
     camera, report = report_step(rounds, start, lens.note, options)
     if options.mirror is None and aspheric and options.K is None:  # other minima along f
-        used = set(rounds.fit.used)  # the other starts see these views, none dropped
-        on_used = Boards(
-            tuple(p if i in used else None for i, p in enumerate(rounds.boards.points)),
-            rounds.boards.found_by,
-        )
-
-        def fit_from(other: StartStep) -> Fitted:
-            other = dataclasses.replace(other, warnings=start.warnings)  # (the start's story)
-            same = dataclasses.replace(options, drop_outlier_views=False)  # (costs compared)
-            with _warnings.catch_warnings():  # (a fit not taken says nothing)
-                _warnings.simplefilter("ignore")
-                alt = rounds_step((), on_used, other, rim, model, same, progress)
-                alt, alt_family = family_step(alt, options)
-                return Fitted(alt, alt_family, other, *report_step(alt, other, lens.note, same))
-
         first = Fitted(rounds, family, start, camera, report)
+        fit_from = fitter(first, rim, model, options, lens.note, progress)
         fitted = focal_starts_step(first, fit_from, rim, options)
         rounds, family, start = fitted.rounds, fitted.family, fitted.start
         camera, report = fitted.camera, fitted.report

@@ -27,6 +27,7 @@ from __future__ import annotations
 
 import dataclasses
 import math
+import warnings
 from collections.abc import Callable
 
 import numpy as np
@@ -35,13 +36,13 @@ from .._progress import say
 from ..calibration.plausibility import rim_radius_px
 from ..camera import MisalignedCatadioptricCamera
 from .central_start import RIM_HALF_ANGLE_DEG
-from .family import chi2_limit
-from .fit_steps import Rounds, mean_cost
-from .fold_rays import angles_deg, image_grid
+from .family import chi2_limit, family_step
+from .fit_steps import Rounds, mean_cost, report_step, rounds_step
+from .fold_rays import grid_angles_deg
 from .report import STARTS_STATED, PatternReport
-from .steps import PatternOptions, RimStep, StartStep, generic_start_step
+from .steps import Boards, PatternOptions, RimStep, StartStep, generic_start_step
 
-__all__ = ["RAYS_WEAK_DEG", "RIM_ANGLES_DEG", "Fitted", "focal_starts_step"]
+__all__ = ["RAYS_WEAK_DEG", "RIM_ANGLES_DEG", "Fitted", "fitter", "focal_starts_step"]
 
 #: The rim's half-angle from the camera (deg) at which the other starts put it: from a long lens
 #: (10) to a wide-angle one (50); the default start's is 20.
@@ -79,15 +80,10 @@ def _chi2(fit, best) -> float:
 def _spread_deg(camera, others, image_size) -> tuple[float, float]:
     """The largest angle (deg) between ``camera``'s rays and each of ``others``', over the
     image grid's pixels that ``camera`` sees: ``(median, worst)``; 0 without others."""
-    px = image_grid(image_size)
-    d0 = camera.unproject(px)[1]
-    seen = np.isfinite(d0).all(axis=1)
-    px, d0 = px[seen], d0[seen]
-    worst = np.zeros(len(px))
-    for cam in others:
-        worst = np.fmax(worst, angles_deg(cam.unproject(px)[1], d0))
-    if not len(worst):
+    a = grid_angles_deg(camera, others, image_size)
+    if not a.shape[1]:
         return 0.0, 0.0
+    worst = np.max(np.where(np.isfinite(a), a, 0.0), axis=0, initial=0.0)
     return float(np.median(worst)), float(np.max(worst))
 
 
@@ -134,6 +130,31 @@ def focal_starts_step(
         best.report, ray_std_deg=ray, warnings=(*best.report.warnings, note)
     )
     return dataclasses.replace(best, report=report)
+
+
+def fitter(
+    first: Fitted, rim: RimStep, model, options: PatternOptions, lens_note, progress=None
+) -> Callable[[StartStep], Fitted]:
+    """``fit_from(start)`` for :func:`focal_starts_step`: the steps after the start (the
+    rounds of adjustment, the family's terms, the report) on exactly ``first``'s views, none
+    dropped (so that the costs compare), silent (a fit not taken says nothing), the start's
+    warnings ``first``'s (the story the report tells of its start)."""
+    used = set(first.rounds.fit.used)
+    boards = first.rounds.boards
+    on_used = Boards(
+        tuple(p if i in used else None for i, p in enumerate(boards.points)), boards.found_by
+    )
+    same = dataclasses.replace(options, drop_outlier_views=False)
+
+    def fit_from(other: StartStep) -> Fitted:
+        other = dataclasses.replace(other, warnings=first.start.warnings)
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore")
+            alt = rounds_step((), on_used, other, rim, model, same, progress)
+            alt, family = family_step(alt, options)
+            return Fitted(alt, family, other, *report_step(alt, other, lens_note, same))
+
+    return fit_from
 
 
 def _start_at(first: Fitted, rim: RimStep, options: PatternOptions, angle: float) -> StartStep:

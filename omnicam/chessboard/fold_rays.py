@@ -33,9 +33,8 @@ from .report import FOLDS_STATED
 __all__ = [
     "FoldRays",
     "P_REJECT",
-    "angles_deg",
     "fold_check",
-    "image_grid",
+    "grid_angles_deg",
     "jackknife_ray_std",
     "rejection_ratio",
 ]
@@ -55,16 +54,26 @@ class FoldRays:
     rejected: bool
 
 
-def image_grid(image_size) -> np.ndarray:
-    """A grid of :data:`_GRID` by :data:`_GRID` pixels over the image, ``(N, 2)``."""
+def _grid(image_size) -> np.ndarray:
     w, h = (int(v) for v in image_size)
     u, v = np.meshgrid(np.linspace(0, w - 1, _GRID), np.linspace(0, h - 1, _GRID))
     return np.stack([u.ravel(), v.ravel()], axis=1)
 
 
-def angles_deg(d, d0) -> np.ndarray:
-    """The angles (deg) between unit rays ``d`` and ``d0``, ``(N, 3)`` each."""
-    return np.degrees(np.arccos(np.clip(np.sum(d * d0, axis=1), -1.0, 1.0)))
+def grid_angles_deg(camera, others, image_size) -> np.ndarray:
+    """The angles (deg) between the rays of each camera of ``others`` and ``camera``'s, over
+    the pixels of an image grid that ``camera`` sees: ``(len(others), N)``, NaN where that
+    camera sees nothing."""
+    px = _grid(image_size)
+    d0 = camera.unproject(px)[1]
+    seen = np.isfinite(d0).all(axis=1)
+    px, d0 = px[seen], d0[seen]
+    out = np.full((len(others), len(px)), np.nan)
+    for s, cam in enumerate(others):
+        d = cam.unproject(px)[1]
+        ok = np.isfinite(d).all(axis=1)
+        out[s, ok] = np.degrees(np.arccos(np.clip(np.sum(d[ok] * d0[ok], axis=1), -1.0, 1.0)))
+    return out
 
 
 def jackknife_ray_std(camera, fold_cameras, image_size) -> tuple[float, float]:
@@ -75,16 +84,9 @@ def jackknife_ray_std(camera, fold_cameras, image_size) -> tuple[float, float]:
     k = len(fold_cameras)
     if k < 2:
         return math.nan, math.nan
-    px = image_grid(image_size)
-    d0 = camera.unproject(px)[1]
-    seen = np.isfinite(d0).all(axis=1)
-    px, d0 = px[seen], d0[seen]
-    sq, n = np.zeros(len(px)), np.zeros(len(px))
-    for cam in fold_cameras:
-        d = cam.unproject(px)[1]
-        ok = np.isfinite(d).all(axis=1)
-        sq[ok] += np.radians(angles_deg(d[ok], d0[ok])) ** 2
-        n[ok] += 1
+    theta = np.radians(grid_angles_deg(camera, fold_cameras, image_size))
+    ok = np.isfinite(theta)
+    sq, n = (np.where(ok, theta, 0.0) ** 2).sum(axis=0), ok.sum(axis=0)
     use = n >= 2
     if not use.any():
         return math.nan, math.nan
