@@ -22,7 +22,7 @@ import revolution_rig as rr
 import test_chessboard_hostile as T
 
 import omnicam
-from omnicam.chessboard.focal_starts import RAYS_WEAK_DEG
+from omnicam.chessboard.other_starts import RAYS_WEAK_DEG
 from omnicam.chessboard.report import STARTS_STATED
 
 #: (lens label) -> (image size, k1, k2, focal length or None: the rim fills 0.85 of the image)
@@ -292,21 +292,14 @@ def test_unknown_paraboloid_behind_a_wide_angle_lens_states_the_spread_of_other_
     T._assert_rays_within_their_uncertainty(fit)
 
 
-@pytest.mark.xfail(
-    reason="silently wrong without the held-out check: rays 10.73 / 15.58 deg off (median / "
-    "worst) for 1.36 / 1.56 stated; a fit as good (the cost 1.4 times the residual variance "
-    "higher) lies 1.3 deg from the truth, and the Jacobian at the estimate says 4 times more "
-    "about the mirror's axis than at the truth, so no local quantity shows it; every start "
-    "tried (the Taylor or the image centre, f 180 to 262 px, a conic, the focal_starts.py "
-    "starts: from 10 deg the same fit, from 35 and 50 deg worse beyond chance) ends there. With "
-    "heldout=3 the folds' jackknife states 4.33 / 6.86 deg, and is right (fold_rays.py; "
-    "bench_mirrors_hostile --only 'prolate ellipsoid, wide' --heldout 3), but seeds 1 and 2 "
-    "are silently wrong even so (their folds land in the same valley). A wrong minimum, not "
-    "an information limit: with 0.001 px of noise (--noise 0.001) the rays stay 11.7 deg off "
-    "at 9 times the noise's RMS, also from the true K, D or rim radius (docs/benchmarks.md)",
-    strict=True,
-)
-def test_unknown_prolate_ellipsoid_behind_a_wide_angle_lens_is_right_or_says_it_is_not():
+def test_unknown_prolate_ellipsoid_behind_a_wide_angle_lens_states_the_spread_of_turned_starts():
+    """Every start along the focal length ends with the rays 10.73 / 15.58 deg off (median /
+    worst) for 1.36 / 1.56 deg stated: a wrong minimum, not an information limit (with 0.001 px
+    of noise they stay 11.7 deg off; docs/benchmarks.md). Started again with its mirror turned
+    about its centre of curvature, a fit as good for these views ends degrees from it, and
+    what is stated is their spread."""
     fit = Fit("prolate ellipsoid", "wide-angle", seed=0)
     assert fit.refused is None, fit.refused
-    assert T._rays_within_their_uncertainty(fit) or T._says_it_is_wrong(fit)
+    assert fit.warned(STARTS_STATED)
+    assert fit.report.ray_std_deg[0] > 3.0 * 1.36  # (more than the linearised figure says)
+    T._assert_rays_within_their_uncertainty(fit)

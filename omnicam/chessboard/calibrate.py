@@ -42,9 +42,9 @@ The steps (:mod:`.steps`, :mod:`.fit_steps`):
    (:func:`.fit_steps.shape_check_step`); the mirror's family tested by the data: the
    hyperboloid against the conic with a polynomial term, an asphere's terms one more at a
    time (likelihood-ratio tests, :mod:`.family`; the report's ``family`` says which and why);
-   where the generic fit's rays are weakly determined, the same steps from other starts along
-   the focal length, the lowest cost taken and the spread of the fits as good stated
-   (:mod:`.focal_starts`);
+   where the generic fit's rays are weakly determined, the same steps from other starts (along
+   the focal length, the mirror turned), the lowest cost taken and the spread of the fits as
+   good stated (:mod:`.other_starts`);
 9. a :class:`.report.PatternReport` (:func:`.fit_steps.report_step`): RMS overall and per
    view, poses, standard deviations of the parameters and of the viewing directions, the
    single-image route's plausibility checks, warnings (:mod:`.report_warnings`, one policy
@@ -78,7 +78,7 @@ from .adjustment import AdjustmentModel
 from .board_pose import object_points
 from .family import chi2_limit, family_step, hyperboloid_term_check
 from .fit_steps import SHAPE_REJECT_CHI2, report_step, rounds_step, shape_check_step, shape_free
-from .focal_starts import Fitted, fitter, focal_starts_step
+from .other_starts import Fitted, fitter, other_starts_step
 from .fold_rays import fold_check
 from .heldout import HeldOut, cross_validate
 from .lens_model import AUTO_CANDIDATES, AUTO_FOLDS, LensChoice, choose
@@ -351,10 +351,10 @@ def _fit(
         rounds, family = hyperboloid_term_check(rounds, options)
         rounds, family, start = _other_start(options, prepared, rounds, family, model, progress)
     camera, report = report_step(rounds, start, lens.note, options)
-    if options.mirror is None and aspheric and options.K is None:  # other minima along f
+    if options.mirror is None and aspheric and options.K is None:  # other minima: f, the tilt
         first = Fitted(rounds, family, start, camera, report)
         fit_from = fitter(first, rim, model, options, lens.note, progress)
-        fitted = focal_starts_step(first, fit_from, rim, options)
+        fitted = other_starts_step(first, fit_from, rim, options)
         rounds, family, start = fitted.rounds, fitted.family, fitted.start
         camera, report = fitted.camera, fitted.report
     held = None

@@ -33,7 +33,7 @@ _SHAPE_HELD = "the mirror's shape is the central fit's"
 #: (:func:`.fold_rays.fold_check`): the data's own figure, stated, not doubted.
 FOLDS_STATED = "the viewing directions' uncertainty is the held-out check's"
 #: The start of the note that the rays' stated uncertainty is the spread of the fits as good
-#: from other starts (:func:`.focal_starts.focal_starts_step`): stated, not doubted.
+#: from other starts (:func:`.other_starts.other_starts_step`): stated, not doubted.
 STARTS_STATED = "the viewing directions' uncertainty is the spread of the fits from other starts"
 _BY_NATURE = (
     _SCALE_ASSUMED,

@@ -604,7 +604,7 @@ def generic_start_step(
 ) -> StartStep:
     """The generic start (:mod:`.any_start`) whatever Mei's ``central`` fit gives: the
     other start where that fit's ``xi`` is at a hyperboloid's edge (:mod:`.calibrate`), or
-    from another focal length (:mod:`.focal_starts`, with the Taylor model ``taylor`` of the
+    from another focal length (:mod:`.other_starts`, with the Taylor model ``taylor`` of the
     first start)."""
     views = _full_views(boards.points, options)
     R = NOMINAL_RIM_RADIUS if options.rim_radius is None else float(options.rim_radius)
