@@ -78,10 +78,10 @@ from .adjustment import AdjustmentModel
 from .board_pose import object_points
 from .family import chi2_limit, family_step, hyperboloid_term_check
 from .fit_steps import SHAPE_REJECT_CHI2, report_step, rounds_step, shape_check_step, shape_free
-from .other_starts import Fitted, fitter, other_starts_step
 from .fold_rays import fold_check
 from .heldout import HeldOut, cross_validate
 from .lens_model import AUTO_CANDIDATES, AUTO_FOLDS, LensChoice, choose
+from .other_starts import Fitted, fitter, other_starts_step
 from .report import PatternReport
 from .report_warnings import ONE_SIDED
 from .second_start import second_start_step
