@@ -131,6 +131,27 @@ def test_a_fit_worse_beyond_chance_or_on_other_views_does_not_widen_it(monkeypat
     assert "0 other fit(s) end within chi-square 26.1" in out.report.warnings[-1]
 
 
+def test_a_first_fit_that_is_no_rig_is_replaced_by_the_other_starts(monkeypatch):
+    """The first start's adjustment ran off to a rig that cannot be: the other starts are
+    fitted all the same, and the lowest of theirs is taken, the note saying why."""
+    first = fs.NoRig(_fitted().rounds, "", None, ValueError("the camera centre is above it"))
+    other = _fitted(chi2=0.0)
+    out, asked = _run(first, [ValueError(), other], monkeypatch)
+    assert out.camera is other.camera
+    assert len(asked) == len(STARTS)
+    assert (
+        "the first start's fit was refused (the camera centre is above it)"
+        in (out.report.warnings[-1])
+    )
+
+
+def test_where_no_start_ends_at_a_rig_the_first_refusal_is_raised(monkeypatch):
+    refusal = ValueError("the camera centre is above it")
+    first = fs.NoRig(_fitted().rounds, "", None, refusal)
+    with pytest.raises(ValueError, match="the camera centre is above it"):
+        _run(first, [], monkeypatch)
+
+
 def test_a_sphere_turned_about_its_centre_images_every_point_where_it_did():
     """The turn of the other starts is a symmetry of the sphere: a scene point, held still,
     is seen at the same pixel (within 1e-6 px) by the rig with its sphere turned 15 deg."""

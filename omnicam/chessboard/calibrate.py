@@ -42,9 +42,9 @@ The steps (:mod:`.steps`, :mod:`.fit_steps`):
    (:func:`.fit_steps.shape_check_step`); the mirror's family tested by the data: the
    hyperboloid against the conic with a polynomial term, an asphere's terms one more at a
    time (likelihood-ratio tests, :mod:`.family`; the report's ``family`` says which and why);
-   where the generic fit's rays are weakly determined, the same steps from other starts (along
-   the focal length, the mirror turned), the lowest cost taken and the spread of the fits as
-   good stated (:mod:`.other_starts`);
+   where the generic fit's rays are weakly determined (or it ran off to a rig that cannot
+   be), the same steps from other starts (along the focal length, the mirror turned), the
+   lowest cost taken and the spread of the fits as good stated (:mod:`.other_starts`);
 9. a :class:`.report.PatternReport` (:func:`.fit_steps.report_step`): RMS overall and per
    view, poses, standard deviations of the parameters and of the viewing directions, the
    single-image route's plausibility checks, warnings (:mod:`.report_warnings`, one policy
@@ -81,7 +81,7 @@ from .fit_steps import SHAPE_REJECT_CHI2, report_step, rounds_step, shape_check_
 from .fold_rays import fold_check
 from .heldout import HeldOut, cross_validate
 from .lens_model import AUTO_CANDIDATES, AUTO_FOLDS, LensChoice, choose
-from .other_starts import Fitted, fitter, other_starts_step
+from .other_starts import first_fit, fitter, other_starts_step
 from .report import PatternReport
 from .report_warnings import ONE_SIDED
 from .second_start import second_start_step
@@ -350,13 +350,14 @@ def _fit(
     elif options.mirror is None:  # does the hyperboloid hold, or do the corners ask for more?
         rounds, family = hyperboloid_term_check(rounds, options)
         rounds, family, start = _other_start(options, prepared, rounds, family, model, progress)
-    camera, report = report_step(rounds, start, lens.note, options)
     if options.mirror is None and aspheric and options.K is None:  # other minima: f, the tilt
-        first = Fitted(rounds, family, start, camera, report)
+        first = first_fit(rounds, family, start, lens.note, options)
         fit_from = fitter(first, rim, model, options, lens.note, progress)
         fitted = other_starts_step(first, fit_from, rim, options)
         rounds, family, start = fitted.rounds, fitted.family, fitted.start
         camera, report = fitted.camera, fitted.report
+    else:
+        camera, report = report_step(rounds, start, lens.note, options)
     held = None
     if options.heldout:  # the same calibration on each fold's views, with these rim points
         rerun = dataclasses.replace(

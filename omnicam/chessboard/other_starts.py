@@ -19,15 +19,17 @@ run again, on the first fit's views (none dropped, so that the costs compare), f
 
 - the generic start with the rim at each of :data:`RIM_ANGLES_DEG` instead (:func:`_start_at`);
 - then the fit of the lowest cost so far with its mirror turned about its centre of curvature
-  by each of :data:`TURN_DEG` towards four sides (:func:`turned_camera`).
+  by each of :data:`TURN_DEG` towards four sides (:func:`turned_about_centre`).
 
-The fit of the lowest robust cost is taken; the fits whose cost is within
-:func:`.family.chi2_limit` of it (the globals' count of degrees of freedom: as good for these
-views) are the others the data allow, and the rays' stated uncertainty is at least their
-spread: the largest angle between their rays and the taken fit's, median and worst over the
-mirror's image. The report says so in a note (:data:`.report.STARTS_STATED`). Each start costs
-about one more fit (3 + 4 per turn), only on rigs whose rays the views determine to worse than
-:data:`RAYS_WEAK_DEG`.
+A first fit that ran off along its valley to a rig that cannot be (:class:`NoRig`, which the
+report step refuses) is fitted from the other starts all the same, and refused only where none
+of them ends at a rig either. The fit of the lowest robust cost is taken; the fits whose cost
+is within :func:`.family.chi2_limit` of it (the globals' count of degrees of freedom: as good
+for these views) are the others the data allow, and the rays' stated uncertainty is at least
+their spread: the largest angle between their rays and the taken fit's, median and worst over
+the mirror's image. The report says so in a note (:data:`.report.STARTS_STATED`). Each start
+costs about one more fit (3, and 4 per turn), only on rigs whose rays the views determine to
+worse than :data:`RAYS_WEAK_DEG` or whose first fit is no rig.
 """
 
 from __future__ import annotations
@@ -52,10 +54,12 @@ from .report import STARTS_STATED, PatternReport
 from .steps import Boards, PatternOptions, RimStep, StartStep, generic_start_step
 
 __all__ = [
+    "NoRig",
     "RAYS_WEAK_DEG",
     "RIM_ANGLES_DEG",
     "TURN_DEG",
     "Fitted",
+    "first_fit",
     "fitter",
     "other_starts_step",
     "turned_about_centre",
@@ -85,6 +89,26 @@ class Fitted:
     report: PatternReport
 
 
+@dataclasses.dataclass(frozen=True)
+class NoRig:
+    """A start's fit that ended at a rig that cannot be: its rounds, the family's sentence,
+    the start, and the report step's refusal."""
+
+    rounds: Rounds
+    family: str
+    start: StartStep
+    error: ValueError
+
+
+def first_fit(rounds: Rounds, family: str, start: StartStep, lens_note, options) -> Fitted | NoRig:
+    """The generic start's fit with its camera and report, or :class:`NoRig` where the report
+    step refuses it (the adjustment ran off along its valley: the other starts may not)."""
+    try:
+        return Fitted(rounds, family, start, *report_step(rounds, start, lens_note, options))
+    except ValueError as e:
+        return NoRig(rounds, family, start, e)
+
+
 def _global_dof(fit) -> int:
     """The free global parameters of an adjustment (the boards' poses not counted)."""
     return sum(1 for n in fit.adj.names if n not in fit.adj.fixed)
@@ -110,7 +134,7 @@ def _spread_deg(camera, others, image_size) -> tuple[float, float]:
 
 
 def other_starts_step(
-    first: Fitted,
+    first: Fitted | NoRig,
     fit_from: Callable[[StartStep], Fitted],
     rim: RimStep,
     options: PatternOptions,
@@ -119,8 +143,9 @@ def other_starts_step(
     :data:`RAYS_WEAK_DEG` or better; else the fit of the lowest robust cost over it and the
     other starts (module docstring; ``fit_from(start)`` runs the steps from a start, one that
     fails is left out), its rays' uncertainty at least the spread of the fits as good, with a
-    note."""
-    if not first.report.ray_std_deg[0] > RAYS_WEAK_DEG:
+    note. A ``first`` that is :class:`NoRig` is not among them; where no other start ends at a
+    rig either, its refusal is raised."""
+    if isinstance(first, Fitted) and not first.report.ray_std_deg[0] > RAYS_WEAK_DEG:
         return first
     n_turns = len(TURN_DEG) * len(_SIDES)
     say(
@@ -128,7 +153,8 @@ def other_starts_step(
         "other starts"
     )
     used = list(first.rounds.fit.used)
-    fits, origin = [first], {id(first): f"the rim at {RIM_HALF_ANGLE_DEG:g} deg"}
+    fits = [first] if isinstance(first, Fitted) else []
+    origin = {id(first): f"the rim at {RIM_HALF_ANGLE_DEG:g} deg"}
 
     def attempt(what: str, make: Callable[..., StartStep], *args) -> None:
         try:
@@ -141,6 +167,9 @@ def other_starts_step(
 
     for angle in RIM_ANGLES_DEG:
         attempt(f"the rim at {angle:g} deg", _start_at, first, rim, options, angle)
+    if not fits:  # (no rig to turn)
+        assert isinstance(first, NoRig)
+        raise first.error
     lowest = _lowest(fits)
     for deg in TURN_DEG:
         for side in _SIDES:
@@ -151,11 +180,16 @@ def other_starts_step(
     spread = _spread_deg(best.camera, [f.camera for f in kept], options.image_size)
     lin = best.report.ray_std_deg
     ray = (max(lin[0], spread[0]), max(lin[1], spread[1]))
+    why = (
+        f"the linearised uncertainty ({first.report.ray_std_deg[0]:.3f} deg) says the views "
+        "determine the rays weakly"
+        if isinstance(first, Fitted)
+        else f"the first start's fit was refused ({first.error})"
+    )
     note = (
         f"{STARTS_STATED} ({ray[0]:.3f} deg, median over the mirror's image; worst "
-        f"{ray[1]:.3f} deg): the linearised uncertainty ({first.report.ray_std_deg[0]:.3f} "
-        f"deg) says the views determine the rays weakly, so the rig was fitted from "
-        f"{len(fits) - 1} other start(s) (the rim at "
+        f"{ray[1]:.3f} deg): {why}, so the rig was fitted from "
+        f"{len(fits) - isinstance(first, Fitted)} other start(s) (the rim at "
         f"{', '.join(f'{a:g}' for a in RIM_ANGLES_DEG)} deg from the camera; the mirror turned "
         f"{' and '.join(f'{d:g}' for d in TURN_DEG)} deg four ways about its centre of "
         f"curvature) and the fit of the lowest cost taken (from {origin[id(best)]}); "
@@ -174,7 +208,7 @@ def _lowest(fits: list[Fitted]) -> Fitted:
 
 
 def fitter(
-    first: Fitted, rim: RimStep, model, options: PatternOptions, lens_note, progress=None
+    first: Fitted | NoRig, rim: RimStep, model, options: PatternOptions, lens_note, progress=None
 ) -> Callable[[StartStep], Fitted]:
     """``fit_from(start)`` for :func:`other_starts_step`: the steps after the start (the
     rounds of adjustment, the family's terms, the report) on exactly ``first``'s views, none
@@ -198,7 +232,9 @@ def fitter(
     return fit_from
 
 
-def _start_at(first: Fitted, rim: RimStep, options: PatternOptions, angle: float) -> StartStep:
+def _start_at(
+    first: Fitted | NoRig, rim: RimStep, options: PatternOptions, angle: float
+) -> StartStep:
     """The generic start with the rim at ``angle`` deg from the camera (its focal length
     ``rho_rim / tan(angle)``, the principal point the Taylor model's centre)."""
     start = first.start
