@@ -100,7 +100,9 @@ class NoRig:
     error: ValueError
 
 
-def first_fit(rounds: Rounds, family: str, start: StartStep, lens_note, options) -> Fitted | NoRig:
+def first_fit(
+    rounds: Rounds, family: str, start: StartStep, lens_note, options: PatternOptions
+) -> Fitted | NoRig:
     """The generic start's fit with its camera and report, or :class:`NoRig` where the report
     step refuses it (the adjustment ran off along its valley: the other starts may not)."""
     try:
@@ -149,8 +151,8 @@ def other_starts_step(
         return first
     n_turns = len(TURN_DEG) * len(_SIDES)
     say(
-        f"the rays weakly determined: the rig fitted from {len(RIM_ANGLES_DEG) + n_turns} "
-        "other starts"
+        f"{'the rays weakly determined' if isinstance(first, Fitted) else 'no rig'}: the rig "
+        f"fitted from {len(RIM_ANGLES_DEG) + n_turns} other starts"
     )
     used = list(first.rounds.fit.used)
     fits = [first] if isinstance(first, Fitted) else []
