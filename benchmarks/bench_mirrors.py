@@ -27,7 +27,13 @@ sys.path.insert(0, os.path.join(HERE, "..", "tests"))
 
 from asphere_rigs import MIRRORS, rig  # noqa: E402
 
-from omnicam import K_from_fov, rotation_from_ypr, synthetic, views  # noqa: E402
+from omnicam import (  # noqa: E402
+    K_from_fov,
+    MisalignedCatadioptricCamera,
+    rotation_from_ypr,
+    synthetic,
+    views,
+)
 
 PERSP = (1024, 768)
 PANO = (2048, 512)
@@ -41,9 +47,13 @@ def omnidir_params():
 
 def rigs():
     hyperbolic = synthetic.misaligned_rig()
+    h = hyperbolic  # the same surface written as an even asphere: the general camera's class
+    as_asphere = MisalignedCatadioptricCamera(
+        h.K, h.mirror.as_asphere(), h.rvec, h.tvec, D=h.D, image_size=h.image_size
+    )
     out = {
         "hyperboloid (HyperbolicMirror)": hyperbolic,
-        "hyperboloid as asphere": hyperbolic.replace(mirror=hyperbolic.mirror.as_asphere()),
+        "hyperboloid as asphere": as_asphere,
     }
     for name in MIRRORS:
         out[name] = rig(name)
