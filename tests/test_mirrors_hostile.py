@@ -283,8 +283,8 @@ def test_unknown_paraboloid_behind_a_near_pinhole_is_started_again_from_the_imag
 def test_unknown_paraboloid_behind_a_wide_angle_lens_states_the_spread_of_other_starts():
     """The generic start's fit states 1.29 / 2.57 deg (linearised) with its rays 4.17 / 7.27
     deg off: the views determine the rays weakly (above RAYS_WEAK_DEG), so the rig is fitted
-    from the other starts too, and fits as good as the one taken, with
-    rays degrees from its, widen what is stated."""
+    from the other starts too, and fits as good as the one taken, with rays degrees from its,
+    widen what is stated."""
     fit = Fit("paraboloid", "wide-angle", seed=2)
     assert fit.refused is None, fit.refused
     assert fit.warned(STARTS_STATED)

@@ -11,7 +11,7 @@ import numpy as np
 import pytest
 from asphere_rigs import rig
 
-import omnicam.chessboard.other_starts as fs
+import omnicam.chessboard.other_starts as starts
 from omnicam.chessboard.report import STARTS_STATED
 
 SIZE = (320, 240)
@@ -50,7 +50,7 @@ def _fitted(chi2=0.0, deg=0.0, ray=(1.0, 2.0), used=(0, 1, 2)):
     adj = types.SimpleNamespace(names=GLOBALS, fixed=set())
     fit = types.SimpleNamespace(sol=sol, adj=adj, used=list(used))
     rounds = types.SimpleNamespace(fit=fit, boards=None)
-    return fs.Fitted(rounds, "", None, _Pinhole(deg), _Report(ray))
+    return starts.Fitted(rounds, "", None, _Pinhole(deg), _Report(ray))
 
 
 def _options():
@@ -58,7 +58,7 @@ def _options():
 
 
 #: The starts asked for, in order: the rim's angles, then the turns (deg, side).
-STARTS = [*fs.RIM_ANGLES_DEG, *((d, s) for d in fs.TURN_DEG for s in fs._SIDES)]
+STARTS = [*starts.RIM_ANGLES_DEG, *((d, s) for d in starts.TURN_DEG for s in starts._SIDES)]
 
 
 def _run(first, others, monkeypatch, turned_from=None):
@@ -66,14 +66,14 @@ def _run(first, others, monkeypatch, turned_from=None):
     fails; the rest fail too), and the starts it asked for; the fits the turns start from are
     appended to ``turned_from``."""
     asked = []
-    monkeypatch.setattr(fs, "_start_at", lambda first, rim, options, angle: angle)
+    monkeypatch.setattr(starts, "_start_at", lambda first, rim, options, angle: angle)
 
     def turned(fit, deg, side):
         if turned_from is not None:
             turned_from.append(fit)
         return deg, side
 
-    monkeypatch.setattr(fs, "_turned_start", turned)
+    monkeypatch.setattr(starts, "_turned_start", turned)
 
     def fit_from(start):
         asked.append(start)
@@ -82,11 +82,11 @@ def _run(first, others, monkeypatch, turned_from=None):
             raise got
         return got
 
-    return fs.other_starts_step(first, fit_from, None, _options()), asked
+    return starts.other_starts_step(first, fit_from, None, _options()), asked
 
 
 def test_rays_determined_well_enough_are_not_fitted_again(monkeypatch):
-    first = _fitted(ray=(fs.RAYS_WEAK_DEG, 1.0))
+    first = _fitted(ray=(starts.RAYS_WEAK_DEG, 1.0))
     out, asked = _run(first, [], monkeypatch)
     assert out is first and asked == []
 
@@ -111,7 +111,7 @@ def test_the_mirror_is_turned_from_the_lowest_cost_along_the_focal_length(monkey
     out, _ = _run(_fitted(chi2=30.0), others, monkeypatch, turned_from)
     assert turned_from and all(f is along_f for f in turned_from)
     assert out.camera is turned.camera
-    assert f"(from the mirror turned {fs.TURN_DEG[0]:g} deg)" in out.report.warnings[-1]
+    assert f"(from the mirror turned {starts.TURN_DEG[0]:g} deg)" in out.report.warnings[-1]
 
 
 def test_a_fit_as_good_elsewhere_widens_the_stated_uncertainty_to_its_spread(monkeypatch):
@@ -134,20 +134,18 @@ def test_a_fit_worse_beyond_chance_or_on_other_views_does_not_widen_it(monkeypat
 def test_a_first_fit_that_is_no_rig_is_replaced_by_the_other_starts(monkeypatch):
     """The first start's adjustment ran off to a rig that cannot be: the other starts are
     fitted all the same, and the lowest of theirs is taken, the note saying why."""
-    first = fs.NoRig(_fitted().rounds, "", None, ValueError("the camera centre is above it"))
+    first = starts.NoRig(_fitted().rounds, "", None, ValueError("the camera centre is above it"))
     other = _fitted(chi2=0.0)
     out, asked = _run(first, [ValueError(), other], monkeypatch)
     assert out.camera is other.camera
     assert len(asked) == len(STARTS)
-    assert (
-        "the first start's fit was refused (the camera centre is above it)"
-        in (out.report.warnings[-1])
-    )
+    said = out.report.warnings[-1]
+    assert "the first start's fit was refused (the camera centre is above it)" in said
 
 
 def test_where_no_start_ends_at_a_rig_the_first_refusal_is_raised(monkeypatch):
     refusal = ValueError("the camera centre is above it")
-    first = fs.NoRig(_fitted().rounds, "", None, refusal)
+    first = starts.NoRig(_fitted().rounds, "", None, refusal)
     with pytest.raises(ValueError, match="the camera centre is above it"):
         _run(first, [], monkeypatch)
 
@@ -157,7 +155,7 @@ def test_a_sphere_turned_about_its_centre_images_every_point_where_it_did():
     is seen at the same pixel (within 1e-6 px) by the rig with its sphere turned 15 deg."""
     camera = rig("sphere")
     rvec = np.radians([15.0, -6.0, 3.0])
-    turned = fs.turned_about_centre(camera, rvec)
+    turned = starts.turned_about_centre(camera, rvec)
     Q = cv2.Rodrigues(rvec)[0]
     C = np.array([0.0, 0.0, camera.mirror.vertex_z + camera.mirror.R])
     rng = np.random.default_rng(0)
